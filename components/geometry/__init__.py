@@ -1,0 +1,130 @@
+"""PSVS geometry and the target model: eq. (1)-(13) of Pachidis et al. as a pure
+numpy/scipy library (no I/O). Lengths in mm, image coordinates in px, angles in degrees
+where a person reads them; transforms are 4x4 arrays named ``a_T_b``.
+
+See ``README.md`` in this folder for the function -> equation table.
+"""
+
+from .calibration import (
+    TipCalibration,
+    calibrate_tip_paper,
+    calibrate_tip_pivot,
+    world_point_from_samples,
+)
+from .distortion import (
+    distort_normalised,
+    distort_pixels,
+    normalise_pixels,
+    pixels_from_normalised,
+    undistort_normalised,
+    undistort_pixels,
+)
+from .error_model import (
+    monte_carlo_pose_x,
+    point_covariance_mm2,
+    point_sigma_mm,
+    pose_covariance,
+    pose_sigma,
+    wrap_angle_deg,
+)
+from .errors import GeometryError
+from .psvs import (
+    TRIANGULATION_METHODS,
+    PinholeCamera,
+    PsvsParams,
+    intrinsic_matrix,
+    project,
+    project_pinhole,
+    projection_jacobian,
+    psvs_m_l_mm,
+    refraction_angle_deg,
+    triangulate,
+    triangulate_eq2,
+    triangulate_eq4,
+    triangulate_lsq,
+    virtual_camera_centres_mm,
+)
+from .target import (
+    Labelling,
+    TargetModel,
+    estimate_camera_T_tob,
+    isosceles_source_positions_mm,
+    label_sources,
+    tip_pose,
+    tob_frame_from_points,
+    tob_T_tip_on_w_axis,
+)
+from .transforms import (
+    chain_world_T_tob,
+    check_rigid,
+    compose,
+    invert_transform,
+    make_transform,
+    position_quaternion_from_transform,
+    rotation_from_ypr_deg,
+    transform_from_position_quaternion,
+    transform_from_x,
+    transform_points,
+    x_from_transform,
+    ypr_deg_from_rotation,
+)
+
+__all__ = [
+    "GeometryError",
+    # psvs (eq. 1-6)
+    "PinholeCamera",
+    "PsvsParams",
+    "TRIANGULATION_METHODS",
+    "intrinsic_matrix",
+    "project",
+    "project_pinhole",
+    "projection_jacobian",
+    "psvs_m_l_mm",
+    "refraction_angle_deg",
+    "triangulate",
+    "triangulate_eq2",
+    "triangulate_eq4",
+    "triangulate_lsq",
+    "virtual_camera_centres_mm",
+    # distortion
+    "distort_normalised",
+    "distort_pixels",
+    "normalise_pixels",
+    "pixels_from_normalised",
+    "undistort_normalised",
+    "undistort_pixels",
+    # target (eq. 7-9)
+    "Labelling",
+    "TargetModel",
+    "estimate_camera_T_tob",
+    "isosceles_source_positions_mm",
+    "label_sources",
+    "tip_pose",
+    "tob_frame_from_points",
+    "tob_T_tip_on_w_axis",
+    # transforms, chains, X
+    "chain_world_T_tob",
+    "check_rigid",
+    "compose",
+    "invert_transform",
+    "make_transform",
+    "position_quaternion_from_transform",
+    "rotation_from_ypr_deg",
+    "transform_from_position_quaternion",
+    "transform_from_x",
+    "transform_points",
+    "x_from_transform",
+    "ypr_deg_from_rotation",
+    # calibration (eq. 10-13)
+    "TipCalibration",
+    "calibrate_tip_paper",
+    "calibrate_tip_pivot",
+    "world_point_from_samples",
+    # error model
+    "monte_carlo_pose_x",
+    "point_covariance_mm2",
+    "point_sigma_mm",
+    "pose_covariance",
+    "pose_sigma",
+    "wrap_angle_deg",
+]

@@ -1,0 +1,184 @@
+"""Homogeneous transforms, the paper's chains and its six-vector X (Section 4, steps 8-10).
+
+Conventions (DESIGN.md):
+
+* A transform is a 4x4 numpy array named ``a_T_b``: the pose of frame ``b`` in frame ``a``,
+  so ``a_p = a_T_b @ b_p`` and chains read like the paper,
+  ``world_T_tob = world_T_flange @ flange_T_camera @ camera_T_tob``.
+* Translations inside this library are in **millimetres** (the paper's unit). Messages use
+  metres and quaternions; :func:`transform_from_position_quaternion` and
+  :func:`position_quaternion_from_transform` convert at that boundary.
+* Yaw, pitch, roll (psi, theta, phi) are Z-Y-X: ``R = Rz(psi) @ Ry(theta) @ Rx(phi)``,
+  computed only through :class:`scipy.spatial.transform.Rotation` (``"ZYX"``, intrinsic).
+* The six-vector is ``X = (x, y, z, psi, theta, phi)`` in mm and degrees.
+
+Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .errors import GeometryError
+
+__all__ = [
+    "make_transform",
+    "invert_transform",
+    "compose",
+    "chain_world_T_tob",
+    "transform_points",
+    "check_rigid",
+    "rotation_from_ypr_deg",
+    "ypr_deg_from_rotation",
+    "x_from_transform",
+    "transform_from_x",
+    "transform_from_position_quaternion",
+    "position_quaternion_from_transform",
+]
+
+EULER_SEQUENCE = "ZYX"  # intrinsic: R = Rz(psi) Ry(theta) Rx(phi)
+
+
+def make_transform(rotation: np.ndarray, translation_mm: np.ndarray) -> np.ndarray:
+    """Eq. (8)/(9) form ``[[R, t], [0, 1]]`` from a rotation (..., 3, 3) and a translation
+    (..., 3) in mm. Returns (..., 4, 4)."""
+    rotation = np.asarray(rotation, dtype=float)
+    translation_mm = np.asarray(translation_mm, dtype=float)
+    if rotation.shape[-2:] != (3, 3) or translation_mm.shape[-1:] != (3,):
+        raise ValueError(
+            f"make_transform needs rotation (..., 3, 3) and translation (..., 3), got "
+            f"{rotation.shape} and {translation_mm.shape}"
+        )
+    batch = np.broadcast_shapes(rotation.shape[:-2], translation_mm.shape[:-1])
+    out = np.zeros(batch + (4, 4))
+    out[..., :3, :3] = rotation
+    out[..., :3, 3] = translation_mm
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def _as_transform(a_T_b: np.ndarray, name: str = "transform") -> np.ndarray:
+    a_T_b = np.asarray(a_T_b, dtype=float)
+    if a_T_b.shape[-2:] != (4, 4):
+        raise ValueError(f"{name} must have shape (..., 4, 4), got {a_T_b.shape}")
+    return a_T_b
+
+
+def invert_transform(a_T_b: np.ndarray) -> np.ndarray:
+    """Return ``b_T_a`` for a rigid ``a_T_b`` (..., 4, 4), using ``R^T`` (no general
+    matrix inverse)."""
+    a_T_b = _as_transform(a_T_b)
+    rotation_t = np.swapaxes(a_T_b[..., :3, :3], -1, -2)
+    translation = -np.einsum("...ij,...j->...i", rotation_t, a_T_b[..., :3, 3])
+    return make_transform(rotation_t, translation)
+
+
+def compose(*transforms: np.ndarray) -> np.ndarray:
+    """Product of a chain, left to right: ``compose(a_T_b, b_T_c) == a_T_b @ b_T_c``.
+    Stacks broadcast."""
+    if not transforms:
+        raise ValueError("compose needs at least one transform")
+    out = _as_transform(transforms[0])
+    for t in transforms[1:]:
+        out = out @ _as_transform(t)
+    return out
+
+
+def chain_world_T_tob(
+    world_T_flange: np.ndarray, flange_T_camera: np.ndarray, camera_T_tob: np.ndarray
+) -> np.ndarray:
+    """Section 4, step 8: ``world_T_tob = world_T_flange @ flange_T_camera @ camera_T_tob``
+    (the paper's ``W T_G = W T_F . F T_C . C T_G``). All (..., 4, 4), translations in mm."""
+    return compose(world_T_flange, flange_T_camera, camera_T_tob)
+
+
+def transform_points(a_T_b: np.ndarray, b_p_mm: np.ndarray) -> np.ndarray:
+    """Map points (..., 3) given in frame ``b`` into frame ``a``: ``a_p = R b_p + t``."""
+    a_T_b = _as_transform(a_T_b)
+    b_p_mm = np.asarray(b_p_mm, dtype=float)
+    return np.einsum("...ij,...j->...i", a_T_b[..., :3, :3], b_p_mm) + a_T_b[..., :3, 3]
+
+
+def check_rigid(a_T_b: np.ndarray, tol: float = 1e-6, name: str = "transform") -> None:
+    """Raise :class:`GeometryError` unless ``a_T_b`` is a proper rigid transform: finite,
+    orthonormal rotation with determinant +1 (within ``tol``), last row ``[0, 0, 0, 1]``."""
+    a_T_b = _as_transform(a_T_b, name)
+    if not np.all(np.isfinite(a_T_b)):
+        raise GeometryError(f"{name} contains non-finite values")
+    rot = a_T_b[..., :3, :3]
+    ortho = np.max(np.abs(np.swapaxes(rot, -1, -2) @ rot - np.eye(3)))
+    if ortho > tol:
+        raise GeometryError(f"{name}: rotation is not orthonormal (max |R^T R - I| = {ortho:.3g})")
+    det = np.linalg.det(rot)
+    if np.any(np.abs(det - 1.0) > tol):
+        raise GeometryError(f"{name}: rotation is a reflection or scaled (det = {np.min(det):.6g})")
+    bottom = np.max(np.abs(a_T_b[..., 3, :] - np.array([0.0, 0.0, 0.0, 1.0])))
+    if bottom > tol:
+        raise GeometryError(f"{name}: last row is not [0, 0, 0, 1]")
+
+
+def rotation_from_ypr_deg(ypr_deg: np.ndarray) -> np.ndarray:
+    """Yaw, pitch, roll (..., 3) = (psi, theta, phi) in degrees -> rotation (..., 3, 3),
+    ``R = Rz(psi) Ry(theta) Rx(phi)`` (scipy ``from_euler("ZYX", ...)``)."""
+    ypr_deg = np.asarray(ypr_deg, dtype=float)
+    if ypr_deg.shape[-1:] != (3,):
+        raise ValueError(f"ypr_deg must have shape (..., 3), got {ypr_deg.shape}")
+    flat = ypr_deg.reshape(-1, 3)
+    mats = Rotation.from_euler(EULER_SEQUENCE, flat, degrees=True).as_matrix()
+    return mats.reshape(ypr_deg.shape[:-1] + (3, 3))
+
+
+def ypr_deg_from_rotation(rotation: np.ndarray) -> np.ndarray:
+    """Rotation (..., 3, 3) -> yaw, pitch, roll (..., 3) in degrees, Z-Y-X (inverse of
+    :func:`rotation_from_ypr_deg`). psi, phi in (-180, 180], theta in [-90, 90]; at
+    theta = +-90 deg (gimbal lock) scipy picks one of the equivalent triples."""
+    rotation = np.asarray(rotation, dtype=float)
+    if rotation.shape[-2:] != (3, 3):
+        raise ValueError(f"rotation must have shape (..., 3, 3), got {rotation.shape}")
+    flat = rotation.reshape(-1, 3, 3)
+    ypr = Rotation.from_matrix(flat).as_euler(EULER_SEQUENCE, degrees=True)
+    return ypr.reshape(rotation.shape[:-2] + (3,))
+
+
+def x_from_transform(a_T_b: np.ndarray) -> np.ndarray:
+    """Section 4, steps 9-10: the six-vector ``X = (x, y, z, psi, theta, phi)`` (..., 6)
+    of frame ``b`` in frame ``a``, in mm and degrees (Z-Y-X yaw, pitch, roll)."""
+    a_T_b = _as_transform(a_T_b)
+    return np.concatenate([a_T_b[..., :3, 3], ypr_deg_from_rotation(a_T_b[..., :3, :3])], axis=-1)
+
+
+def transform_from_x(x_mm_deg: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`x_from_transform`: (..., 6) in mm and degrees -> (..., 4, 4)."""
+    x_mm_deg = np.asarray(x_mm_deg, dtype=float)
+    if x_mm_deg.shape[-1:] != (6,):
+        raise ValueError(f"X must have shape (..., 6), got {x_mm_deg.shape}")
+    return make_transform(rotation_from_ypr_deg(x_mm_deg[..., 3:]), x_mm_deg[..., :3])
+
+
+def transform_from_position_quaternion(
+    position_m: np.ndarray, quaternion_xyzw: np.ndarray
+) -> np.ndarray:
+    """Message boundary: position (..., 3) in **metres** and unit quaternion (..., 4) in
+    (x, y, z, w) order -> 4x4 transform with translation in **mm**. The quaternion is
+    normalised; a zero quaternion raises :class:`GeometryError`."""
+    position_m = np.asarray(position_m, dtype=float)
+    q = np.asarray(quaternion_xyzw, dtype=float)
+    if q.shape[-1:] != (4,) or position_m.shape[-1:] != (3,):
+        raise ValueError(
+            f"need position (..., 3) and quaternion (..., 4), got {position_m.shape}, {q.shape}"
+        )
+    norms = np.linalg.norm(q, axis=-1)
+    if np.any(~np.isfinite(norms)) or np.any(norms < 1e-12):
+        raise GeometryError("quaternion is zero or not finite")
+    mats = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
+    return make_transform(mats, position_m * 1000.0)
+
+
+def position_quaternion_from_transform(a_T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Message boundary: 4x4 transform (translation in mm) -> (position (..., 3) in
+    **metres**, quaternion (..., 4) in (x, y, z, w) order with w >= 0)."""
+    a_T_b = _as_transform(a_T_b)
+    rot = a_T_b[..., :3, :3]
+    q = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat(canonical=True)
+    return a_T_b[..., :3, 3] / 1000.0, q.reshape(rot.shape[:-2] + (4,))
