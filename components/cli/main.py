@@ -1,0 +1,174 @@
+"""The ``humanpt`` command line.  ``humanpt --help`` lists the verbs; each has ``--help``."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from humanpt import __version__
+from humanpt.runtime.config import ConfigError
+from humanpt.runtime.recording import RecordingError
+from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
+
+EPILOG = """\
+examples:
+  humanpt up --profile selftest --duration 5     router + two components, recorded under runs/
+  humanpt router --listen tcp/0.0.0.0:7447        the Zenoh router of an installation
+  humanpt topics                                  what is being published now
+  humanpt echo ponger/pong --count 3              print decoded messages
+  humanpt replay runs/<run> --component ponger    re-run a component on its recorded inputs
+  humanpt bench runtime                           latency and recording throughput
+"""
+
+
+def _add_common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", "-c", metavar="FILE", help="TOML config file (default: built-in defaults)")
+    p.add_argument("--cell", help="cell name (one robot with its sensors); overrides [runtime] cell")
+    p.add_argument("--connect", action="append", metavar="ENDPOINT",
+                   help="router endpoint, e.g. tcp/192.168.1.10:7447 (repeatable); overrides [runtime] connect")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="humanpt", description="humanpt: teach a welding robot its path by showing it "
+        "(pseudo stereo visual servo middleware over Zenoh, recorded to MCAP).",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--version", action="version", version=f"humanpt {__version__}")
+    ap.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    sub = ap.add_subparsers(dest="verb", metavar="VERB")
+
+    p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
+                       description="Run the Zenoh router that joins the machines of an installation. "
+                       "Components connect to it as clients.")
+    _add_common(p)
+    p.add_argument("--listen", action="append", metavar="ENDPOINT",
+                   help="endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable; default [runtime] listen)")
+
+    p = sub.add_parser("up", help="start the router and a set of components as child processes",
+                       description="Start a profile: the router (if the profile has one) and its components, "
+                       "each a child process, recording to one run directory. Ctrl-C stops all cleanly; the "
+                       "exit status is non-zero if a child died.",
+                       epilog="profiles:\n" + "\n".join(f"  {k:10s} {v['doc']} ({', '.join(v['components'])})"
+                                                      for k, v in PROFILES.items()),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    _add_common(p)
+    p.add_argument("--profile", "-p", default=None, help="a profile (see below) or a name under [profiles] "
+                   "in the config; default: every available component plus the router")
+    p.add_argument("--components", help="comma-separated components instead of a profile")
+    p.add_argument("--no-router", action="store_true", help="do not start a router (one runs elsewhere)")
+    p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<profile>)")
+    p.add_argument("--duration", type=float, help="stop everything after this many seconds")
+
+    for name in sorted(COMPONENTS):
+        p = sub.add_parser(name, help=f"run the {name} component alone",
+                           description=f"Run the {name} component alone, as a client of the router.")
+        _add_common(p)
+        p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<name>)")
+        p.add_argument("--duration", type=float, help="stop after this many seconds")
+        p.set_defaults(component=name)
+
+    p = sub.add_parser("topics", help="list live topics (or the topic table) and running components",
+                       description="Listen for a while and print every topic seen with its type, publisher, "
+                       "message count and rate, and the components whose liveliness tokens are up.")
+    _add_common(p)
+    p.add_argument("--duration", type=float, default=2.0, help="seconds to listen (default 2)")
+    p.add_argument("--table", action="store_true", help="print the static topic table and exit (no network)")
+
+    p = sub.add_parser("echo", help="print decoded messages of a topic",
+                       description="Subscribe to KEY and print each message decoded (like ros2 topic echo). "
+                       "KEY is a short topic (perception/tob), a full key (humanpt/cell0/perception/tob) "
+                       "or a wildcard (humanpt/cell0/**).")
+    _add_common(p)
+    p.add_argument("key")
+    p.add_argument("--count", "-n", type=int, help="stop after N messages")
+    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--full", action="store_true", help="print image bytes too (default: summarised)")
+
+    p = sub.add_parser("param", help="show or set a running component's live parameters",
+                       description="Without KEY=VALUE: print the component's live parameters and counters. "
+                       "With KEY=VALUE (VALUE is JSON; a bare word is taken as a string): set them.")
+    _add_common(p)
+    p.add_argument("component")
+    p.add_argument("assignments", nargs="*", metavar="KEY=VALUE")
+    p.add_argument("--timeout", type=float, default=5.0)
+
+    p = sub.add_parser("replay", help="re-run a component on its recorded inputs and compare outputs",
+                       description="Rebuild the component from its recording (core class and config), feed it "
+                       "every recorded input and say whether its outputs match the recorded ones exactly, "
+                       "showing the first divergence when they do not. Exit status 1 on a mismatch.")
+    p.add_argument("run", help="a run directory (with --component) or one component's .mcap file")
+    p.add_argument("--component", help="component name (default: every recording in the run)")
+
+    p = sub.add_parser("runs", help="work with recorded runs (list, merge)")
+    rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
+    q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
+                        description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
+                        "(topics as full Zenoh keys, time order), for Foxglove or rerun.")
+    q.add_argument("run_dir")
+    q.add_argument("out")
+    q = rsub.add_parser("list", help="list runs and their recordings")
+    q.add_argument("dir", nargs="?", default="runs")
+
+    p = sub.add_parser("config", help="print the effective configuration, or check a file",
+                       description="Print every section with its values (defaults where the file is silent); "
+                       "with --check only validate and say OK.")
+    p.add_argument("--config", "-c", metavar="FILE")
+    p.add_argument("--check", action="store_true")
+
+    p = sub.add_parser("bench", help="benchmarks that print a table (not asserted)")
+    bsub = p.add_subparsers(dest="bench_verb", metavar="WHAT")
+    q = bsub.add_parser("runtime", help="round-trip latency through the router; MCAP write throughput",
+                        description="Round-trip latency p50/p99 through a loopback router for a 200-byte "
+                        "message and a 640x480 mono8 image, and MCAP write throughput with the default "
+                        "compression.")
+    q.add_argument("--n", type=int, default=300, help="round trips per payload (default 300)")
+    q.add_argument("--seconds", type=float, default=3.0, help="seconds of MCAP writing per case (default 3)")
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = build_parser()
+    args = ap.parse_args(argv)
+    level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
+    logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
+    if not args.verb:
+        ap.print_help()
+        return 2
+    try:
+        return _dispatch(ap, args)
+    except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError) as e:
+        print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+def _dispatch(ap: argparse.ArgumentParser, args) -> int:
+    from humanpt.cli import commands
+
+    if getattr(args, "component", None) and args.verb == args.component:
+        return commands.run_component(args)
+    fn = {
+        "router": commands.router, "up": commands.up, "topics": commands.topics_cmd, "echo": commands.echo,
+        "param": commands.param, "replay": commands.replay, "config": commands.config,
+    }.get(args.verb)
+    if fn is not None:
+        return fn(args)
+    if args.verb == "runs":
+        if args.runs_verb == "merge":
+            return commands.runs_merge(args)
+        if args.runs_verb == "list":
+            return commands.runs_list(args)
+        ap.parse_args(["runs", "--help"])
+    if args.verb == "bench":
+        if args.bench_verb == "runtime":
+            from humanpt.cli.bench import bench_runtime
+            return bench_runtime(args)
+        ap.parse_args(["bench", "--help"])
+    ap.print_help()
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""Zenoh session configuration and the key expressions humanpt uses beside topics."""
+
+from __future__ import annotations
+
+import json
+
+import zenoh
+from humanpt.runtime.config import RuntimeConfig
+from humanpt.schemas.topics import KEY_PREFIX
+
+
+def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[str, ...] | None = None,
+                 connect: tuple[str, ...] | None = None) -> zenoh.Config:
+    """A Zenoh config from the ``[runtime]`` section (client of the router by default).
+
+    Multicast scouting is off unless ``multicast_scouting = true``: endpoints are explicit.
+    """
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode or rt.mode))
+    eps = rt.connect if connect is None else connect
+    if eps:
+        conf.insert_json5("connect/endpoints", json.dumps(list(eps)))
+    if listen is not None:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    conf.insert_json5("scouting/multicast/enabled", json.dumps(rt.multicast_scouting))
+    # A client waits this long for the router (it may still be starting), then fails clearly.
+    conf.insert_json5("connect/timeout_ms", json.dumps(int(rt.connect_timeout_s * 1000)))
+    return conf
+
+
+def liveliness_key(cell: str, component: str) -> str:
+    """The liveliness token of a running component."""
+    return f"{KEY_PREFIX}/{cell}/{component}"
+
+
+def params_key(cell: str, component: str) -> str:
+    """The parameter queryable of a running component."""
+    return f"{KEY_PREFIX}/{cell}/{component}/params"

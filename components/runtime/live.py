@@ -1,0 +1,223 @@
+"""The live shell: a core on a Zenoh session.
+
+* inputs arrive from Zenoh subscribers (one per input topic) and from the tick timer;
+  they are queued and fed to the core one at a time from one thread, in arrival order,
+  with ``t_ns`` = the wall-clock time at which the core is given the input;
+* outputs are published on ``humanpt/<cell>/<topic>``;
+* a liveliness token ``humanpt/<cell>/<component>`` says the component is up;
+* a queryable ``humanpt/<cell>/<component>/params`` serves the live parameters and sets
+  them (payload ``{"set": {"key": value}}``); a change reaches the core as a ``param``
+  input, so it is recorded and replays;
+* everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``;
+* a payload that fails to decode is dropped with a log line and a counter (and kept raw
+  in the recording); the component lives on.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import queue
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import humanpt
+import zenoh
+from google.protobuf.message import DecodeError
+from humanpt.runtime.bus import liveliness_key, params_key, zenoh_config
+from humanpt.runtime.config import RuntimeConfig, to_table
+from humanpt.runtime.core import Core
+from humanpt.runtime.recording import IN, OUT, Recorder
+from humanpt.runtime.registry import class_path
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas import topics
+from humanpt.schemas.convert import header
+
+log = logging.getLogger("humanpt.live")
+
+
+@dataclass
+class Counters:
+    consumed: int = 0
+    produced: int = 0
+    dropped: int = 0
+    core_errors: int = 0
+    by_reason: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class _ParamRequest:
+    key: str
+    value_json: str
+    done: threading.Event = field(default_factory=threading.Event)
+    result: dict | None = None
+
+
+class LiveShell:
+    """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
+
+    def __init__(self, core: Core, rt: RuntimeConfig, *, run_dir: str | Path | None = None,
+                 zconf: zenoh.Config | None = None):
+        self.core = core
+        self.rt = rt
+        self.cell = rt.cell
+        self.run_dir = Path(run_dir) if run_dir is not None else None
+        self.zconf = zconf or zenoh_config(rt)
+        self.counters = Counters()
+        self.stop = threading.Event()
+        self.ready = threading.Event()
+        self._q: queue.Queue = queue.Queue()
+        self._pubs: dict[str, zenoh.Publisher] = {}
+        self.recorder: Recorder | None = None
+
+    # -- Zenoh callbacks (Zenoh threads): only enqueue -----------------------------------
+    def _on_sample(self, short: str):
+        def cb(sample: zenoh.Sample) -> None:
+            self._q.put(("bus", short, sample.payload.to_bytes()))
+        return cb
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        try:
+            body = json.loads(query.payload.to_bytes()) if query.payload is not None else {}
+            sets = body.get("set", {}) if isinstance(body, dict) else {}
+            if not isinstance(sets, dict):
+                raise ValueError('"set" must be an object of key: value')
+        except (ValueError, UnicodeDecodeError) as e:
+            query.reply(query.key_expr, json.dumps({"ok": False, "error": f"bad request: {e}"}))
+            return
+        results = []
+        for key, value in sets.items():
+            req = _ParamRequest(str(key), json.dumps(value))
+            self._q.put(("param", "param", req))
+            if not req.done.wait(5.0):
+                results.append({"key": key, "ok": False, "text": "the component did not answer in 5 s"})
+            else:
+                results.append(req.result)
+        reply = {"ok": all(r["ok"] for r in results), "component": self.core.name, "results": results,
+                 "params": self.core.params(), "counters": self.counters.__dict__}
+        query.reply(query.key_expr, json.dumps(reply, default=str))
+
+    def _tick_loop(self) -> None:
+        next_t = time.monotonic()
+        while not self.stop.is_set():
+            period = self.core.tick_period_ns()
+            if not period:
+                return
+            next_t += period / 1e9
+            delay = next_t - time.monotonic()
+            if delay < -period / 1e9:  # fell behind by more than a period: skip, do not burst
+                next_t = time.monotonic()
+                delay = 0.0
+            if self.stop.wait(max(delay, 0.0)):
+                return
+            self._q.put(("tick", "tick", None))
+
+    # -- the one worker thread -----------------------------------------------------------
+    def _feed(self, t_ns: int, topic: str, msg, data: bytes | None = None) -> list:
+        if self.recorder:
+            self.recorder.write(IN, t_ns, topic, msg, data)
+        self.counters.consumed += 1
+        try:
+            outs = self.core.step(t_ns, topic, msg)
+        except Exception as e:  # noqa: BLE001 - last resort: a core bug must not kill the process
+            self.counters.core_errors += 1
+            log.exception("%s: core raised on %s", self.core.name, topic)
+            self._publish_raw(f"{self.core.name}/events", pb.Event(
+                header=header(t_ns), severity=pb.SEVERITY_ERROR, source=self.core.name, code="core_error",
+                text=f"{type(e).__name__}: {e}"))
+            return []
+        for out_topic, out in outs:
+            payload = out.SerializeToString()
+            if self.recorder:
+                self.recorder.write(OUT, t_ns, out_topic, out, payload)
+            self._publish(out_topic, payload)
+            self.counters.produced += 1
+        return outs
+
+    def _publish(self, short: str, payload: bytes) -> None:
+        pub = self._pubs.get(short)
+        if pub is None:
+            pub = self._pubs[short] = self._session.declare_publisher(f"{topics.KEY_PREFIX}/{self.cell}/{short}")
+        pub.put(payload)
+
+    def _publish_raw(self, short: str, msg) -> None:
+        try:
+            self._publish(short, msg.SerializeToString())
+        except Exception:  # noqa: BLE001
+            log.exception("could not publish on %s", short)
+
+    def _drop(self, t_ns: int, short: str, payload: bytes, reason: str) -> None:
+        c = self.counters
+        c.dropped += 1
+        c.by_reason[reason] = c.by_reason.get(reason, 0) + 1
+        if c.dropped <= 10 or c.dropped % 1000 == 0:
+            log.warning("%s: dropped a message on %s (%d bytes): %s [dropped so far: %d]",
+                        self.core.name, short, len(payload), reason, c.dropped)
+        if self.recorder:
+            self.recorder.write_dropped(t_ns, short, payload)
+
+    def _handle(self, kind: str, short: str, item) -> None:
+        t_ns = time.time_ns()
+        if kind == "bus":
+            cls = topics.message_type(short)
+            msg = cls()
+            try:
+                msg.ParseFromString(item)
+            except (DecodeError, ValueError, RuntimeError) as e:
+                self._drop(t_ns, short, item, f"does not decode as {cls.DESCRIPTOR.full_name}: {e}")
+                return
+            self._feed(t_ns, short, msg, item)
+        elif kind == "tick":
+            self._feed(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=self.core.tick_period_ns() or 0))
+        elif kind == "param":
+            req: _ParamRequest = item
+            msg = pb.ParamSet(header=header(t_ns), component=self.core.name, key=req.key, value_json=req.value_json)
+            outs = self._feed(t_ns, "param", msg)
+            codes = [o.code for _, o in outs if isinstance(o, pb.Event)]
+            texts = [o.text for _, o in outs if isinstance(o, pb.Event)]
+            req.result = {"key": req.key, "ok": "param_changed" in codes, "text": "; ".join(texts)}
+            req.done.set()
+
+    def run(self) -> Counters:
+        """Open the session, serve until :attr:`stop` is set, then close everything."""
+        name = self.core.name
+        if self.run_dir is not None and self.rt.record:
+            self.recorder = Recorder(
+                self.run_dir / f"{name}.mcap",
+                {"component": name, "core": class_path(type(self.core)), "config": to_table(self.core.config),
+                 "version": humanpt.__version__, "start_time_ns": time.time_ns(), "shell": "live",
+                 "cell": self.cell, "host": socket.gethostname(), "pid": os.getpid()},
+                chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s)
+        try:
+            with zenoh.open(self.zconf) as session:
+                self._session = session
+                subs = [session.declare_subscriber(topics.TOPICS[s].key(self.cell), self._on_sample(s))
+                        for s in self.core.inputs]
+                token = session.liveliness().declare_token(liveliness_key(self.cell, name))
+                qbl = session.declare_queryable(params_key(self.cell, name), self._on_query)
+                ticker = threading.Thread(target=self._tick_loop, name=f"{name}-tick", daemon=True)
+                ticker.start()
+                self.ready.set()
+                log.info("%s up in cell %s (inputs: %s)", name, self.cell, ", ".join(self.core.inputs) or "none")
+                while not self.stop.is_set():
+                    try:
+                        kind, short, item = self._q.get(timeout=0.1)
+                    except queue.Empty:
+                        continue
+                    self._handle(kind, short, item)
+                ticker.join(timeout=1.0)
+                qbl.undeclare()
+                token.undeclare()
+                for s in subs:
+                    s.undeclare()
+                for p in self._pubs.values():
+                    p.undeclare()
+                self._pubs.clear()
+        finally:
+            if self.recorder:
+                self.recorder.close()
+        return self.counters

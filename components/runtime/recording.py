@@ -1,0 +1,275 @@
+"""Recording a component's run to MCAP, and reading it back (even when truncated).
+
+A component's recording ``<run dir>/<component>.mcap`` holds, in the order the core saw
+them, every input it consumed (channel metadata ``direction=in``, log time = the time
+given to the core) and every output it produced (``direction=out``, log time = the
+time of the step that produced it).  Inputs that failed to decode are kept raw on a
+``direction=dropped`` channel, so nothing is lost.  Schemas are registered as protobuf
+FileDescriptorSets so Foxglove and rerun open the files.  A metadata record
+``humanpt.run`` holds the component, its core class, its config, the version and the
+start time; replay builds the core from it.
+
+The stream is flushed to the file whenever a chunk is finalised, and the writer is flushed every ``flush_interval_s`` of
+wall time and whenever a chunk fills, so a crash loses at most the chunk in progress.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from google.protobuf.message import DecodeError, Message
+from humanpt.schemas import topics
+from mcap.exceptions import McapError
+from mcap.records import Channel, Metadata, Schema
+from mcap.records import Message as McapMessage
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+from mcap_protobuf.schema import register_schema
+
+RUN_METADATA = "humanpt.run"
+IN, OUT, DROPPED = "in", "out", "dropped"
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be read: missing, not MCAP, not a humanpt recording, or
+    written by an incompatible schema version.  The message says which."""
+
+
+class Recorder:
+    """Writes one component's inputs and outputs to an MCAP file.
+
+    Not thread-safe: the shell calls it from its one worker thread.
+    """
+
+    def __init__(self, path: str | Path, metadata: dict[str, Any], *, chunk_size: int = 256 * 1024,
+                 flush_interval_s: float = 1.0, compression: str = "zstd"):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
+        self._writer.start(profile="humanpt", library="humanpt")
+        meta = {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in metadata.items()}
+        meta.setdefault("schema_version", str(topics.SCHEMA_VERSION))
+        self._writer.add_metadata(RUN_METADATA, meta)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._raw_schema: int | None = None
+        self._count = 0
+        self._flush_interval_s = flush_interval_s
+        self._last_flush = time.monotonic()
+        self._stream_pos = self._file.tell()
+        self.bytes_written = 0
+        self._closed = False
+
+    def _channel(self, direction: str, topic: str, msg_type: type[Message] | None) -> int:
+        key = (direction, topic)
+        cid = self._channels.get(key)
+        if cid is None:
+            if msg_type is None:
+                if self._raw_schema is None:
+                    self._raw_schema = self._writer.register_schema(name="raw", encoding="", data=b"")
+                sid, enc = self._raw_schema, "raw"
+            else:
+                full = msg_type.DESCRIPTOR.full_name
+                if full not in self._schemas:
+                    self._schemas[full] = register_schema(self._writer, msg_type)
+                sid, enc = self._schemas[full], "protobuf"
+            cid = self._writer.register_channel(topic=topic, message_encoding=enc, schema_id=sid,
+                                                metadata={"direction": direction})
+            self._channels[key] = cid
+        return cid
+
+    def write(self, direction: str, t_ns: int, topic: str, msg: Message, data: bytes | None = None) -> None:
+        """Record one input (``IN``) or output (``OUT``) at time ``t_ns``.
+
+        ``data`` may pass the already serialised bytes of ``msg`` to save work.
+        """
+        payload = msg.SerializeToString() if data is None else data
+        self._add(self._channel(direction, topic, type(msg)), t_ns, payload)
+
+    def write_dropped(self, t_ns: int, topic: str, payload: bytes) -> None:
+        """Record an input that failed to decode, raw."""
+        self._add(self._channel(DROPPED, topic, None), t_ns, payload)
+
+    def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
+        self._writer.add_message(channel_id=channel_id, log_time=int(t_ns), data=payload,
+                                 publish_time=int(t_ns), sequence=self._count)
+        self._count += 1
+        self.bytes_written += len(payload)
+        pos = self._file.tell()
+        if pos != self._stream_pos:
+            # A chunk was finalised into the stream buffer: put it in the file now.
+            self._file.flush()
+            self._stream_pos = pos
+        now = time.monotonic()
+        if now - self._last_flush >= self._flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """End the chunk in progress and put it in the file."""
+        self._writer.flush()
+        self._stream_pos = self._file.tell()
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Write the summary and close the file (idempotent)."""
+        if not self._closed:
+            self._closed = True
+            self._writer.finish()
+            self._file.flush()
+            self._file.close()
+
+    def __enter__(self) -> Recorder:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass
+class Entry:
+    """One recorded message."""
+
+    index: int
+    direction: str  # IN, OUT or DROPPED
+    t_ns: int
+    topic: str
+    data: bytes
+    schema: str  # full protobuf type name, or "raw"
+
+    def decode(self) -> Message:
+        """The message, decoded with this build's schema for its topic."""
+        cls = topics.message_type(self.topic)
+        if cls.DESCRIPTOR.full_name != self.schema:
+            raise RecordingError(f"topic {self.topic!r} was recorded as {self.schema}, "
+                                 f"this version reads it as {cls.DESCRIPTOR.full_name}")
+        msg = cls()
+        try:
+            msg.ParseFromString(self.data)
+        except DecodeError as e:
+            raise RecordingError(f"message {self.index} on {self.topic!r} does not decode: {e}") from e
+        return msg
+
+
+@dataclass
+class Recording:
+    """A component recording read back: metadata, entries in file order, truncation."""
+
+    path: Path
+    metadata: dict[str, str]
+    entries: list[Entry] = field(default_factory=list)
+    truncated: str | None = None  # why reading stopped early, None when complete
+
+    @property
+    def component(self) -> str:
+        return self.metadata.get("component", "")
+
+    @property
+    def inputs(self) -> list[Entry]:
+        return [e for e in self.entries if e.direction == IN]
+
+    @property
+    def outputs(self) -> list[Entry]:
+        return [e for e in self.entries if e.direction == OUT]
+
+    def config(self) -> dict[str, Any]:
+        return json.loads(self.metadata.get("config", "{}"))
+
+
+def iter_records(path: Path) -> Iterator[Any]:
+    """MCAP records of ``path`` in file order; stops (raising McapError/EOFError) at damage."""
+    with open(path, "rb") as f:
+        yield from StreamReader(f, skip_magic=False, emit_chunks=False, validate_crcs=True).records
+
+
+def _check_file(p: Path) -> None:
+    if not p.exists():
+        raise RecordingError(f"{p}: no such file")
+    if p.is_dir():
+        raise RecordingError(f"{p}: is a directory, not an MCAP recording")
+    with open(p, "rb") as f:
+        magic = f.read(8)
+    if magic != MAGIC:
+        raise RecordingError(f"{p}: not an MCAP file (it does not start with the MCAP magic)")
+
+
+MAGIC = b"\x89MCAP0\r\n"
+_DAMAGE = (McapError, EOFError, KeyError, ValueError, OSError)
+
+
+def iter_entries(path: str | Path, notes: list[str] | None = None,
+                 metadata: dict[str, str] | None = None) -> Iterator[Entry]:
+    """Messages of a recording in file order, one at a time (constant memory).
+
+    Stops quietly at damage (a truncated file) and appends why to ``notes``; fills
+    ``metadata`` with the ``humanpt.run`` record when given.
+    """
+    p = Path(path)
+    _check_file(p)
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str, int]] = {}
+    n = 0
+    try:
+        for r in iter_records(p):
+            if isinstance(r, Schema):
+                schemas[r.id] = r.name
+            elif isinstance(r, Channel):
+                channels[r.id] = (r.topic, r.metadata.get("direction", OUT), r.schema_id)
+            elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
+                metadata.update(r.metadata)
+            elif isinstance(r, McapMessage):
+                topic, direction, sid = channels[r.channel_id]
+                yield Entry(n, direction, r.log_time, topic, r.data, schemas.get(sid, "raw"))
+                n += 1
+    except _DAMAGE as e:
+        if notes is not None:
+            notes.append(f"{p}: truncated or damaged after {n} messages ({type(e).__name__}{': ' + str(e) if str(e) else ''})")
+
+
+def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
+    """(the ``humanpt.run`` metadata, whether the file was closed properly)."""
+    p = Path(path)
+    _check_file(p)
+    meta: dict[str, str] = {}
+    try:
+        for r in iter_records(p):
+            if isinstance(r, Metadata) and r.name == RUN_METADATA:
+                meta = dict(r.metadata)
+                break
+    except _DAMAGE:
+        pass
+    with open(p, "rb") as f:
+        f.seek(-8, 2)
+        complete = f.read(8) == MAGIC
+    if not meta:
+        raise RecordingError(f"{p}: not a humanpt recording: no {RUN_METADATA!r} metadata")
+    return meta, complete
+
+
+def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
+    """Read a whole recording in file order.
+
+    A truncated or damaged file reads up to the damage and sets ``truncated``.  A missing
+    file, a file that is not MCAP, a recording without humanpt metadata or one written by
+    a newer or incompatible schema version raises :class:`RecordingError` saying which.
+    """
+    p = Path(path)
+    notes: list[str] = []
+    meta: dict[str, str] = {}
+    entries = list(iter_entries(p, notes, meta))
+    rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None)
+    if require_humanpt:
+        if not rec.metadata:
+            why = f" ({rec.truncated})" if rec.truncated else ""
+            raise RecordingError(f"{p}: not a humanpt recording: no {RUN_METADATA!r} metadata{why}")
+        version = rec.metadata.get("schema_version", "?")
+        if version != str(topics.SCHEMA_VERSION):
+            raise RecordingError(f"{p}: written with schema version {version}; this humanpt "
+                                 f"reads schema version {topics.SCHEMA_VERSION}")
+    return rec

@@ -1,0 +1,51 @@
+"""Which components exist: name -> core class, imported lazily."""
+
+from __future__ import annotations
+
+import importlib
+
+from humanpt.runtime.core import Core
+
+# name -> "module:Class".  A component appears here once its core exists.
+COMPONENTS: dict[str, str] = {
+    "pinger": "humanpt.runtime.selftest:PingerCore",
+    "ponger": "humanpt.runtime.selftest:PongerCore",
+}
+
+# The paper's two machines.  Single-machine use needs no profile ("all").
+PROFILES: dict[str, dict] = {
+    "server": {"router": True, "components": ("alter_gateway",),
+               "doc": "router + ALTER gateway, beside the robot controller's serial port"},
+    "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz"),
+               "doc": "vision and control, connecting to the server's router"},
+    "selftest": {"router": True, "components": ("pinger", "ponger"),
+                 "doc": "router + two self-test components exchanging pings"},
+}
+
+
+class UnknownComponentError(KeyError):
+    def __str__(self) -> str:
+        return self.args[0]
+
+
+def import_path(path: str) -> type:
+    """Import ``"module:Attr"``."""
+    module, _, attr = path.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def core_class(name: str) -> type[Core]:
+    """The core class of component ``name``."""
+    if name not in COMPONENTS:
+        raise UnknownComponentError(
+            f"no component {name!r} in this version; available: {', '.join(sorted(COMPONENTS))}")
+    return import_path(COMPONENTS[name])
+
+
+def config_types() -> dict[str, type]:
+    """Component name -> config dataclass, for validating a whole config file."""
+    return {name: core_class(name).config_type for name in COMPONENTS}
+
+
+def class_path(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"

@@ -1,0 +1,163 @@
+"""The replay shell: re-run a component on its recorded inputs and compare outputs.
+
+The core is rebuilt from the recording's metadata (core class and config), fed every
+recorded input in order with the time it was given, and its outputs are compared byte
+for byte with the recorded ones.  The first divergence is reported with the fields that
+differ.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from google.protobuf import text_format
+from google.protobuf.message import Message
+from humanpt.runtime.config import build
+from humanpt.runtime.core import Core
+from humanpt.runtime.recording import Recording, RecordingError, read
+from humanpt.runtime.registry import import_path
+from humanpt.schemas import topics
+
+
+def build_core(rec: Recording) -> Core:
+    """A fresh core of the recorded class and config."""
+    path = rec.metadata.get("core")
+    if not path:
+        raise RecordingError(f"{rec.path}: the recording does not name its core class")
+    try:
+        cls = import_path(path)
+    except (ImportError, AttributeError) as e:
+        raise RecordingError(f"{rec.path}: core class {path!r} is not available in this version: {e}") from e
+    cfg = build(cls.config_type, rec.config(), source=f"{rec.path} (recorded config)", section=rec.component)
+    return cls(cfg)
+
+
+def diff_messages(a: Message, b: Message, prefix: str = "") -> list[str]:
+    """Fields that differ between two messages of the same type: ``path: a != b (by d)``."""
+    out: list[str] = []
+    if type(a) is not type(b):
+        return [f"{prefix or '<message>'}: type {type(a).__name__} != {type(b).__name__}"]
+    for fd in a.DESCRIPTOR.fields:
+        name = f"{prefix}{fd.name}"
+        va, vb = getattr(a, fd.name), getattr(b, fd.name)
+        if fd.label == fd.LABEL_REPEATED:
+            la, lb = list(va), list(vb)
+            if len(la) != len(lb):
+                out.append(f"{name}: {len(la)} items != {len(lb)} items")
+                continue
+            for i, (x, y) in enumerate(zip(la, lb, strict=True)):
+                out += _diff_value(fd, x, y, f"{name}[{i}]")
+        else:
+            out += _diff_value(fd, va, vb, name)
+    return out
+
+
+def _diff_value(fd, x, y, name: str) -> list[str]:
+    if fd.type == fd.TYPE_MESSAGE:
+        return diff_messages(x, y, name + ".")
+    if x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y)):
+        return []
+    if isinstance(x, (int, float)) and not isinstance(x, bool):
+        return [f"{name}: {x!r} != {y!r} (by {y - x:+.6g})"]
+    if isinstance(x, bytes):
+        return [f"{name}: {len(x)} bytes != {len(y)} bytes"]
+    return [f"{name}: {x!r} != {y!r}"]
+
+
+@dataclass
+class Divergence:
+    index: int  # position in the output stream
+    recorded: tuple[int, str, bytes] | None  # (t_ns, topic, data)
+    replayed: tuple[int, str, bytes] | None
+    fields: list[str] = field(default_factory=list)
+
+    def describe(self) -> str:
+        lines = [f"first divergence at output #{self.index}:"]
+        for label, item in (("recorded", self.recorded), ("replayed", self.replayed)):
+            if item is None:
+                lines.append(f"  {label}: (no message)")
+                continue
+            t, topic, data = item
+            lines.append(f"  {label}: t_ns={t} topic={topic} ({len(data)} bytes)")
+        if self.fields:
+            lines.append("  fields that differ (recorded != replayed):")
+            lines += [f"    {f}" for f in self.fields[:20]]
+            if len(self.fields) > 20:
+                lines.append(f"    ... and {len(self.fields) - 20} more")
+        return "\n".join(lines)
+
+
+@dataclass
+class ReplayResult:
+    path: Path
+    component: str
+    inputs: int
+    recorded_outputs: int
+    replayed_outputs: int
+    divergence: Divergence | None
+    truncated: str | None
+
+    @property
+    def match(self) -> bool:
+        return self.divergence is None
+
+    def report(self) -> str:
+        head = (f"{self.path}: component {self.component}: {self.inputs} inputs replayed, "
+                f"{self.recorded_outputs} outputs recorded, {self.replayed_outputs} replayed")
+        trunc = f"\n  the recording is truncated ({self.truncated}); compared up to the truncation" \
+            if self.truncated else ""
+        if self.match:
+            return f"{head}{trunc}\n  MATCH: every output is identical"
+        return f"{head}{trunc}\n  MISMATCH\n{self.divergence.describe()}"
+
+
+def _decode(topic: str, data: bytes) -> Message | None:
+    try:
+        msg = topics.message_type(topic)()
+        msg.ParseFromString(data)
+        return msg
+    except Exception:  # noqa: BLE001 - a diff is best effort
+        return None
+
+
+def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_core) -> ReplayResult:
+    """Replay one component recording; see the module docstring."""
+    rec = read(path)
+    core = core_factory(rec)
+    replayed: list[tuple[int, str, bytes]] = []
+    for e in rec.inputs:
+        for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
+            replayed.append((e.t_ns, topic, msg.SerializeToString()))
+    recorded = [(e.t_ns, e.topic, e.data) for e in rec.outputs]
+    if rec.truncated:
+        # The lost chunk held the tail of both streams: compare what both have.
+        replayed_cmp = replayed[:len(recorded)]
+    else:
+        replayed_cmp = replayed
+    div = None
+    for i in range(max(len(recorded), len(replayed_cmp))):
+        r = recorded[i] if i < len(recorded) else None
+        p = replayed_cmp[i] if i < len(replayed_cmp) else None
+        if r != p:
+            fields: list[str] = []
+            if r and p:
+                if r[1] != p[1]:
+                    fields.append(f"topic: {r[1]!r} != {p[1]!r}")
+                if r[0] != p[0]:
+                    fields.append(f"t_ns: {r[0]} != {p[0]} (by {p[0] - r[0]:+d})")
+                if r[1] == p[1]:
+                    a, b = _decode(r[1], r[2]), _decode(p[1], p[2])
+                    if a is not None and b is not None:
+                        fields += diff_messages(a, b)
+            div = Divergence(i, r, p, fields)
+            break
+    return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div, rec.truncated)
+
+
+def message_text(topic: str, data: bytes) -> str:
+    """One-line text of a recorded message, for people."""
+    msg = _decode(topic, data)
+    return "<undecodable>" if msg is None else text_format.MessageToString(msg, as_one_line=True)[:500]

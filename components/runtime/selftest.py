@@ -1,0 +1,59 @@
+"""Two tiny components that exercise the runtime end to end (``humanpt up --profile selftest``).
+
+``pinger`` publishes a Tick on ``pinger/ping`` every ``period_ms``; ``ponger`` answers each
+ping with an Event on ``ponger/pong`` that carries the ping's sequence number.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from humanpt.runtime.config import live
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+
+
+@dataclass(frozen=True)
+class PingerConfig:
+    period_ms: float = live(100.0, "ping period")
+    payload_note: str = "ping"
+
+    def __post_init__(self):
+        if not 1.0 <= self.period_ms <= 60_000.0:
+            raise ValueError(f"period_ms must be within 1 and 60000, got {self.period_ms}")
+
+
+class PingerCore(Core):
+    name = "pinger"
+    config_type = PingerConfig
+    inputs = ()
+
+    def tick_period_ns(self) -> int | None:
+        return int(self.config.period_ms * 1e6)
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic != "tick":
+            return []
+        return [("pinger/ping", pb.Tick(header=self.next_header("pinger/ping", t_ns, self.config.payload_note),
+                                        period_ns=self.tick_period_ns()))]
+
+
+@dataclass(frozen=True)
+class PongerConfig:
+    prefix: str = live("pong", "text before the ping's sequence number")
+
+
+class PongerCore(Core):
+    name = "ponger"
+    config_type = PongerConfig
+    inputs = ("pinger/ping",)
+
+    def __init__(self, config: PongerConfig):
+        super().__init__(config)
+        self.pings = 0
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        self.pings += 1
+        text = f"{self.config.prefix} {msg.header.seq} (#{self.pings})"
+        return [("ponger/pong", pb.Event(header=self.next_header("ponger/pong", msg.header.stamp_ns),
+                                       severity=pb.SEVERITY_DEBUG, source=self.name, code="pong", text=text))]

@@ -1,0 +1,129 @@
+"""numpy <-> message helpers.
+
+Messages carry metres, radians and unit quaternions (x, y, z, w); these helpers move
+4x4 homogeneous transforms, vectors and images in and out of them.  They validate what
+they read and raise :class:`MessageError` (a ``ValueError``) with a clear text.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from humanpt.schemas import humanpt_pb2 as pb
+from scipy.spatial.transform import Rotation
+
+
+class MessageError(ValueError):
+    """A message that decodes but does not make sense (bad image size, zero quaternion...)."""
+
+
+def header(stamp_ns: int, seq: int = 0, frame_id: str = "") -> pb.Header:
+    """A message header: stamp of the data (ns), per-topic sequence, frame id."""
+    return pb.Header(stamp_ns=int(stamp_ns), seq=int(seq), frame_id=frame_id)
+
+
+def vector3(v) -> pb.Vector3:
+    """(3,) array-like -> Vector3 (units as given)."""
+    x, y, z = (float(c) for c in np.asarray(v, dtype=float).reshape(3))
+    return pb.Vector3(x=x, y=y, z=z)
+
+
+def from_vector3(m: pb.Vector3) -> np.ndarray:
+    """Vector3 -> (3,) float array."""
+    return np.array([m.x, m.y, m.z], dtype=float)
+
+
+def pose(a_T_b: np.ndarray) -> pb.Pose:
+    """4x4 homogeneous transform (translation in metres) -> Pose.
+
+    Raises MessageError when the rotation part is not a rotation (det != 1 or not
+    orthonormal to 1e-6).
+    """
+    T = np.asarray(a_T_b, dtype=float)
+    if T.shape != (4, 4):
+        raise MessageError(f"a transform must be 4x4, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise MessageError("the rotation part of the transform is not a proper rotation")
+    qx, qy, qz, qw = Rotation.from_matrix(R).as_quat()
+    return pb.Pose(translation=vector3(T[:3, 3]), rotation=pb.Quaternion(x=qx, y=qy, z=qz, w=qw))
+
+
+def from_pose(m: pb.Pose) -> np.ndarray:
+    """Pose -> 4x4 homogeneous transform (translation in metres).
+
+    An unset rotation (all zero) is the identity; a non-unit quaternion is normalised;
+    a non-finite one raises MessageError.
+    """
+    q = np.array([m.rotation.x, m.rotation.y, m.rotation.z, m.rotation.w], dtype=float)
+    t = from_vector3(m.translation)
+    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
+        raise MessageError("pose holds a non-finite number")
+    T = np.eye(4)
+    if np.any(q != 0.0):
+        T[:3, :3] = Rotation.from_quat(q).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+_ENCODINGS = {"mono8": (1, np.uint8), "rgb8": (3, np.uint8), "bgr8": (3, np.uint8), "mono16": (1, np.uint16)}
+
+
+def image(pixels: np.ndarray, stamp_ns: int, frame_id: str = "camera", encoding: str | None = None) -> RawImage:
+    """(H, W) or (H, W, 3) array -> foxglove.RawImage (stamp = capture time, ns)."""
+    a = np.ascontiguousarray(pixels)
+    if encoding is None:
+        encoding = {(2, np.dtype(np.uint8)): "mono8", (3, np.dtype(np.uint8)): "rgb8",
+                    (2, np.dtype(np.uint16)): "mono16"}.get((a.ndim, a.dtype))
+        if encoding is None:
+            raise MessageError(f"no image encoding for an array of shape {a.shape} and dtype {a.dtype}")
+    channels, dtype = _ENCODINGS[encoding]
+    h, w = a.shape[:2]
+    msg = RawImage(width=w, height=h, encoding=encoding, step=w * channels * np.dtype(dtype).itemsize,
+                   data=a.astype(dtype, copy=False).tobytes(), frame_id=frame_id)
+    msg.timestamp.FromNanoseconds(int(stamp_ns))
+    return msg
+
+
+def from_image(m: RawImage) -> np.ndarray:
+    """foxglove.RawImage -> (H, W) or (H, W, C) array (a view on the message bytes).
+
+    Raises MessageError for an unknown encoding, an empty image or a size that does not
+    match width x height x step.
+    """
+    if m.encoding not in _ENCODINGS:
+        raise MessageError(f"unsupported image encoding {m.encoding!r} (have {sorted(_ENCODINGS)})")
+    channels, dtype = _ENCODINGS[m.encoding]
+    itemsize = np.dtype(dtype).itemsize
+    if m.width == 0 or m.height == 0:
+        raise MessageError("empty image (width or height is 0)")
+    row = m.width * channels * itemsize
+    if m.step < row or len(m.data) != m.step * m.height:
+        raise MessageError(
+            f"image data is {len(m.data)} bytes; {m.width}x{m.height} {m.encoding} with step {m.step} "
+            f"needs {m.step * m.height}")
+    a = np.frombuffer(m.data, dtype=np.uint8).reshape(m.height, m.step)[:, :row]
+    a = a.view(dtype) if itemsize > 1 else a
+    shape = (m.height, m.width) if channels == 1 else (m.height, m.width, channels)
+    return a.reshape(shape)
+
+
+def image_stamp_ns(m: RawImage) -> int:
+    """Capture stamp of a RawImage in ns."""
+    return m.timestamp.ToNanoseconds()
+
+
+def covariance(P: np.ndarray) -> tuple[list[float], int]:
+    """(n, n) covariance -> (row-major list, n)."""
+    P = np.asarray(P, dtype=float)
+    if P.ndim != 2 or P.shape[0] != P.shape[1]:
+        raise MessageError(f"covariance must be square, got {P.shape}")
+    return P.ravel().tolist(), P.shape[0]
+
+
+def from_covariance(values, dim: int) -> np.ndarray:
+    """Row-major list and dimension -> (dim, dim) array."""
+    a = np.asarray(values, dtype=float)
+    if a.size != dim * dim:
+        raise MessageError(f"covariance has {a.size} values, expected {dim}x{dim}")
+    return a.reshape(dim, dim)

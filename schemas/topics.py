@@ -1,0 +1,103 @@
+"""The one topic table: short name -> key expression -> message type -> publisher.
+
+Key expressions are ``humanpt/<cell>/<component>/<topic>``; a *short name* is the
+``<component>/<topic>`` part, which is what cores use.  Local inputs that never cross
+the network (``tick``, ``param``) have no slash.
+
+Bump :data:`SCHEMA_VERSION` on any change that makes old recordings decode differently
+(a renumbered field, a changed meaning); adding fields or topics does not need it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from google.protobuf.message import Message
+from humanpt.schemas import humanpt_pb2 as pb
+
+SCHEMA_VERSION = 1
+KEY_PREFIX = "humanpt"
+
+
+@dataclass(frozen=True)
+class Topic:
+    """One row of the topic table."""
+
+    short: str  # "<component>/<topic>"
+    type: type[Message]
+    publisher: str
+    doc: str
+
+    def key(self, cell: str) -> str:
+        """The Zenoh key expression of this topic in ``cell``."""
+        return f"{KEY_PREFIX}/{cell}/{self.short}"
+
+
+_ROWS = [
+    Topic("camera/image", RawImage, "camera", "complex image (mono8), stamp = capture"),
+    Topic("perception/tob", pb.TobMeasurement, "perception", "2D centres, pairs, 3D points, camera_T_tob"),
+    Topic("pose_filter/tob_state", pb.TobState, "pose_filter", "filtered world_T_tob, velocity, covariance"),
+    Topic("controller/command", pb.FlangeCommand, "controller", "per-cycle flange correction"),
+    Topic("controller/status", pb.ControllerStatus, "controller", "mode, visible sources, error"),
+    Topic("controller/path", pb.PathPoint, "controller", "recorded path points"),
+    Topic("alter_gateway/robot_state", pb.RobotState, "alter_gateway", "world_T_flange per ALTER cycle"),
+    Topic("operator/truth", pb.Truth, "operator", "twin: true world_T_tob (and tip)"),
+    Topic("sim_robot/truth", pb.Truth, "sim_robot", "twin: true world_T_flange"),
+    Topic("console/command", pb.Command, "console", "operator commands (record, save, hold, ...)"),
+    Topic("pinger/ping", pb.Tick, "pinger", "runtime self-test: a tick per period"),
+    Topic("ponger/pong", pb.Event, "ponger", "runtime self-test: an event per ping"),
+]
+# Every component may publish events on "<component>/events".
+EVENT_PUBLISHERS = (
+    "camera",
+    "perception",
+    "pose_filter",
+    "controller",
+    "alter_gateway",
+    "sim_robot",
+    "sim_camera",
+    "operator",
+    "viz",
+    "pinger",
+    "ponger",
+)
+_ROWS += [Topic(f"{c}/events", pb.Event, c, "events: safety actions, drops, mode changes") for c in EVENT_PUBLISHERS]
+
+# Local inputs: delivered by a shell to its own core, recorded, never published.
+LOCAL_TOPICS: dict[str, type[Message]] = {
+    "tick": pb.Tick,
+    "param": pb.ParamSet,
+    "serial_rx": pb.SerialChunk,
+}
+
+TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}
+
+
+class UnknownTopicError(KeyError):
+    """A topic that is in neither the topic table nor the local topics."""
+
+
+def message_type(short: str) -> type[Message]:
+    """Message class of a short topic name (table or local)."""
+    if short in TOPICS:
+        return TOPICS[short].type
+    if short in LOCAL_TOPICS:
+        return LOCAL_TOPICS[short]
+    raise UnknownTopicError(f"unknown topic {short!r}; see humanpt topics --table")
+
+
+def short_from_key(key: str) -> tuple[str, str]:
+    """Split a key expression ``humanpt/<cell>/<short>`` into (cell, short)."""
+    parts = key.split("/")
+    if len(parts) < 4 or parts[0] != KEY_PREFIX:
+        raise UnknownTopicError(f"{key!r} is not a humanpt key (humanpt/<cell>/<component>/<topic>)")
+    return parts[1], "/".join(parts[2:])
+
+
+def all_types() -> list[type[Message]]:
+    """Every message class that can appear on a topic (for schema registration)."""
+    seen: dict[str, type[Message]] = {}
+    for cls in [t.type for t in _ROWS] + list(LOCAL_TOPICS.values()):
+        seen.setdefault(cls.DESCRIPTOR.full_name, cls)
+    return list(seen.values())
