@@ -114,7 +114,16 @@ def undistort_normalised(
         xy = xy - step
         if np.all(np.abs(step) <= tol * np.maximum(1.0, np.abs(xy))):
             break
-    residual = np.abs(distort_normalised(xy, d) - target)
+    f, (j00, j01, j10, j11) = _distort_with_jacobian(xy, d)
+    residual = np.abs(f - target)
+    r2 = np.sum(xy * xy, axis=-1)
+    radial = 1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))
+    folded = (radial <= 0) | (j00 * j11 - j01 * j10 <= 0)
+    if np.any(folded & np.isfinite(r2)):
+        raise GeometryError(
+            "undistortion found only a folded-over solution: the point lies beyond the "
+            "region where the distortion model is invertible"
+        )
     if not np.all(np.isfinite(xy)) or np.any(residual > 1e-12):
         worst = np.nanmax(residual) if np.any(np.isfinite(residual)) else float("nan")
         raise GeometryError(
@@ -128,6 +137,8 @@ def undistort_normalised(
 def distort_pixels(uv_ideal_px: np.ndarray, camera_matrix: np.ndarray, dist_coeffs) -> np.ndarray:
     """Ideal (pinhole) pixels (..., 2) -> observed (distorted) pixels, around
     ``camera_matrix`` (eq. (1), with skew). Equals ``cv2.projectPoints`` for c = 0."""
+    if not np.any(as_dist_coeffs(dist_coeffs)):
+        return np.array(uv_ideal_px, dtype=float)
     xy = normalise_pixels(uv_ideal_px, camera_matrix)
     return pixels_from_normalised(distort_normalised(xy, dist_coeffs), camera_matrix)
 
@@ -137,5 +148,7 @@ def undistort_pixels(
 ) -> np.ndarray:
     """Observed pixels (..., 2) -> ideal pixels; equals
     ``cv2.undistortPoints(..., P=camera_matrix)`` iterated to convergence."""
+    if not np.any(as_dist_coeffs(dist_coeffs)):
+        return np.array(uv_observed_px, dtype=float)
     xy = normalise_pixels(uv_observed_px, camera_matrix)
     return pixels_from_normalised(undistort_normalised(xy, dist_coeffs), camera_matrix)
