@@ -5,7 +5,6 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from geometry_strategies import finite
 from humanpt.geometry import (
     GeometryError,
     PsvsParams,
@@ -18,6 +17,8 @@ from humanpt.geometry import (
 )
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from .geometry_strategies import finite
 
 K = np.array([[1000.0, 0.0, 320.0], [0.0, 1010.0, 240.0], [0.0, 0.0, 1.0]])
 D = np.array([-0.21, 0.08, 0.0012, -0.0008, -0.01])

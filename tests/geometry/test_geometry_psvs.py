@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from geometry_strategies import psvs_params, scene_points
 from humanpt.geometry import (
     GeometryError,
     PinholeCamera,
@@ -24,6 +23,8 @@ from humanpt.geometry import (
     virtual_camera_centres_mm,
 )
 from hypothesis import given, settings
+
+from .geometry_strategies import psvs_params, scene_points
 
 # --------------------------------------------------------------------- eq. (5), (6), (3), (1)
 

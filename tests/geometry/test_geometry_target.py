@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from geometry_strategies import finite, target_models, tob_poses
 from humanpt.geometry import (
     GeometryError,
     TargetModel,
@@ -20,6 +19,8 @@ from humanpt.geometry import (
 )
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+from .geometry_strategies import finite, target_models, tob_poses
 
 
 def _assert_proper_frame(a_T_b):

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from geometry_strategies import finite, rigid_transforms
 from humanpt.geometry import (
     GeometryError,
     chain_world_T_tob,
@@ -22,6 +21,8 @@ from humanpt.geometry import (
 )
 from hypothesis import given, settings
 from scipy.spatial.transform import Rotation
+
+from .geometry_strategies import finite, rigid_transforms
 
 
 def test_ypr_is_rz_ry_rx():
