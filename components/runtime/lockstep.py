@@ -43,7 +43,7 @@ class Lockstep:
     """
 
     def __init__(self, cores: list[Core], *, start_ns: int = 0, latency_ns: int = 0,
-                 run_dir: str | Path | None = None, keep_outputs: bool = True):
+                 run_dir: str | Path | None = None, keep_outputs: bool = True, chunk_size: int = 256 * 1024):
         names = [c.name for c in cores]
         if len(set(names)) != len(names):
             raise ValueError(f"two cores share a name: {names}")
@@ -67,7 +67,7 @@ class Lockstep:
                 self.recorders[c.name] = Recorder(Path(run_dir) / f"{c.name}.mcap", {
                     "component": c.name, "core": class_path(type(c)), "config": to_table(c.config),
                     "version": humanpt.__version__, "start_time_ns": start_ns, "shell": "lockstep",
-                    "wall_start_time_ns": time.time_ns()})
+                    "wall_start_time_ns": time.time_ns()}, chunk_size=chunk_size)
 
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:
         heapq.heappush(self._heap, (t_ns, self._order, core_index, topic, data))

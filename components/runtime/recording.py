@@ -200,7 +200,8 @@ def _check_file(p: Path) -> None:
 
 
 MAGIC = b"\x89MCAP0\r\n"
-_DAMAGE = (McapError, EOFError, KeyError, ValueError, OSError)
+# Whatever a damaged file makes the MCAP reader raise (struct.error, zstd errors, ...): stop there.
+_DAMAGE = (McapError, EOFError, Exception)
 
 
 def iter_entries(path: str | Path, notes: list[str] | None = None,

@@ -43,7 +43,7 @@ def diff_messages(a: Message, b: Message, prefix: str = "") -> list[str]:
     for fd in a.DESCRIPTOR.fields:
         name = f"{prefix}{fd.name}"
         va, vb = getattr(a, fd.name), getattr(b, fd.name)
-        if fd.label == fd.LABEL_REPEATED:
+        if fd.is_repeated:
             la, lb = list(va), list(vb)
             if len(la) != len(lb):
                 out.append(f"{name}: {len(la)} items != {len(lb)} items")

@@ -1,0 +1,110 @@
+"""``humanpt bench ...``: benchmarks that print a table.  Nothing here is asserted."""
+
+from __future__ import annotations
+
+import socket
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from humanpt.runtime.config import RuntimeConfig
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def percentile_ms(samples_ns: list[int], q: float) -> float:
+    return float(np.percentile(np.asarray(samples_ns, dtype=float), q)) / 1e6
+
+
+def synthetic_image(seed: int = 0, width: int = 640, height: int = 480) -> np.ndarray:
+    """A dark frame with six bright discs and sensor noise, like a PSVS complex image."""
+    rng = np.random.default_rng(seed)
+    img = rng.normal(12, 2.0, (height, width))
+    yy, xx = np.mgrid[0:height, 0:width]
+    for u, v in rng.uniform((40, 40), (width - 40, height - 40), size=(6, 2)):
+        img[(xx - u) ** 2 + (yy - v) ** 2 <= 36] = 230
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def round_trips(payload: bytes, n: int, port: int) -> list[int]:
+    """Round-trip times (ns) of ``payload`` client A -> router -> client B -> router -> A."""
+    import zenoh
+    from humanpt.runtime.bus import zenoh_config
+
+    rt = RuntimeConfig(connect=(f"tcp/127.0.0.1:{port}",), listen=(f"tcp/127.0.0.1:{port}",))
+    router_conf = zenoh_config(rt, mode="router", listen=rt.listen, connect=())
+    rtts: list[int] = []
+    got = threading.Event()
+    with zenoh.open(router_conf), zenoh.open(zenoh_config(rt)) as a, zenoh.open(zenoh_config(rt)) as b:
+        pong_pub = b.declare_publisher("bench/pong")
+        b_sub = b.declare_subscriber("bench/ping", lambda s: pong_pub.put(s.payload.to_bytes()))
+        a_sub = a.declare_subscriber("bench/pong", lambda s: got.set())
+        ping_pub = a.declare_publisher("bench/ping")
+        time.sleep(0.3)  # let declarations reach the router
+        for i in range(n + 10):
+            got.clear()
+            t0 = time.perf_counter_ns()
+            ping_pub.put(payload)
+            if not got.wait(2.0):
+                continue
+            if i >= 10:  # warm-up
+                rtts.append(time.perf_counter_ns() - t0)
+        a_sub.undeclare()
+        b_sub.undeclare()
+    return rtts
+
+
+def mcap_throughput(msg_factory, seconds: float, compression: str = "zstd") -> tuple[float, float, int]:
+    """(payload MB/s, messages/s, file bytes) writing messages for ``seconds`` with the Recorder."""
+    from humanpt.runtime.recording import OUT, Recorder
+
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "bench.mcap"
+        rec = Recorder(path, {"component": "bench"}, compression=compression)
+        n = 0
+        t0 = time.perf_counter()
+        while time.perf_counter() - t0 < seconds:
+            msg = msg_factory(n)
+            rec.write(OUT, n * 1_000_000, "camera/image" if hasattr(msg, "encoding") else "ponger/pong", msg)
+            n += 1
+        rec.close()
+        dt = time.perf_counter() - t0
+        return rec.bytes_written / dt / 1e6, n / dt, path.stat().st_size
+
+
+def bench_runtime(args) -> int:
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas.convert import header, image
+
+    print("humanpt bench runtime (loopback, router and both clients in one process; medians of noisy "
+          "shared machines: compare ratios)", flush=True)
+    rows = []
+    small = bytes(range(200))
+    img = synthetic_image()
+    img_payload = image(img, 0).SerializeToString()
+    for label, payload in (("200-byte message", small), (f"640x480 mono8 image ({len(img_payload)} B)", img_payload)):
+        rtts = round_trips(payload, args.n, _free_port())
+        if not rtts:
+            rows.append((f"round trip, {label}", "no replies", "", ""))
+            continue
+        rows.append((f"round trip, {label}", f"{percentile_ms(rtts, 50):.3f} ms", f"{percentile_ms(rtts, 99):.3f} ms",
+                     f"n={len(rtts)}"))
+        print(f"  measured {label}", flush=True)
+    imgs = [image(synthetic_image(seed=s), s) for s in range(8)]
+    mbps, rate, size = mcap_throughput(lambda n: imgs[n % len(imgs)], args.seconds)
+    rows.append(("MCAP write, images (zstd)", f"{mbps:.1f} MB/s", f"{rate:.0f} msg/s",
+                 f"file/payload {size / max(1, rate * args.seconds * len(img_payload)):.2f}"))
+    ev = pb.Event(header=header(1, 2, "world"), severity=2, source="bench", code="x", text="y" * 150)
+    mbps, rate, size = mcap_throughput(lambda n: ev, args.seconds)
+    rows.append(("MCAP write, 200-byte events (zstd)", f"{mbps:.1f} MB/s", f"{rate:.0f} msg/s", ""))
+    w = max(len(r[0]) for r in rows)
+    print(f"\n{'case':{w}s}  {'p50 / rate':>12s}  {'p99 / msgs':>12s}  note")
+    for r in rows:
+        print(f"{r[0]:{w}s}  {r[1]:>12s}  {r[2]:>12s}  {r[3]}")
+    return 0

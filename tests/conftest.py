@@ -1,0 +1,104 @@
+"""Shared fixtures: a real Zenoh router on a free loopback port, config files, CLI runs."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def write_config(path: Path, port: int, extra: str = "", cell: str = "test") -> Path:
+    path.write_text(
+        f'[runtime]\ncell = "{cell}"\nconnect = ["tcp/127.0.0.1:{port}"]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
+        f'run_dir = "{path.parent / "runs"}"\nconnect_timeout_s = 5.0\n{extra}')
+    return path
+
+
+def humanpt_cmd(*args: str) -> list[str]:
+    return [sys.executable, "-m", "humanpt.cli.main", *args]
+
+
+def run_cli(*args: str, timeout: float = 60, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(humanpt_cmd(*args), capture_output=True, text=True, timeout=timeout, cwd=kw.pop("cwd", ROOT),
+                          **kw)
+
+
+def wait_port(port: int, timeout: float = 15.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            with socket.create_connection(("127.0.0.1", port), timeout=0.2):
+                return
+        except OSError:
+            time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on port {port}")
+
+
+class Procs:
+    """Child processes that are stopped (TERM, then KILL) at the end of a test."""
+
+    def __init__(self):
+        self.procs: list[subprocess.Popen] = []
+
+    def start(self, *args: str, **kw) -> subprocess.Popen:
+        p = subprocess.Popen(humanpt_cmd(*args), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                             cwd=kw.pop("cwd", ROOT), **kw)
+        self.procs.append(p)
+        return p
+
+    def stop(self, p: subprocess.Popen, timeout: float = 15.0) -> str:
+        if p.poll() is None:
+            p.send_signal(signal.SIGTERM)
+        try:
+            out, _ = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, _ = p.communicate()
+        return out or ""
+
+    def stop_all(self):
+        for p in reversed(self.procs):
+            self.stop(p)
+
+
+@pytest.fixture
+def procs():
+    ps = Procs()
+    yield ps
+    ps.stop_all()
+
+
+@pytest.fixture
+def router(tmp_path, procs):
+    """A real router (``humanpt router``) on a free port; yields (port, config path)."""
+    port = free_port()
+    cfg = write_config(tmp_path / "humanpt.toml", port)
+    procs.start("router", "--config", str(cfg))
+    wait_port(port)
+    return port, cfg
+
+
+def zenoh_client(port: int):
+    import zenoh
+    from humanpt.runtime.bus import zenoh_config
+    from humanpt.runtime.config import RuntimeConfig
+
+    rt = RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",))
+    return zenoh.open(zenoh_config(rt))
+
+
+os.environ.setdefault("PYTHONUNBUFFERED", "1")

@@ -1,0 +1,167 @@
+"""Live, on loopback, in separate processes: a real router and components over Zenoh."""
+
+from __future__ import annotations
+
+import json
+import queue
+import signal
+import time
+
+import pytest
+import zenoh
+from humanpt.runtime.replay import replay
+from humanpt.schemas import humanpt_pb2 as pb
+
+from tests.conftest import free_port, run_cli, wait_port, write_config, zenoh_client
+
+pytestmark = pytest.mark.timeout(120)
+
+
+def _collect(q: queue.Queue, n: int, timeout: float = 20.0) -> list:
+    out, deadline = [], time.monotonic() + timeout
+    while len(out) < n and time.monotonic() < deadline:
+        try:
+            out.append(q.get(timeout=0.2))
+        except queue.Empty:
+            pass
+    return out
+
+
+def _pongs(session) -> tuple[queue.Queue, object]:
+    q: queue.Queue = queue.Queue()
+    sub = session.declare_subscriber("humanpt/test/ponger/pong",
+                                     lambda s: q.put(pb.Event.FromString(s.payload.to_bytes())))
+    return q, sub
+
+
+def test_components_exchange_messages_and_liveliness_follows_the_process(router, procs, tmp_path):
+    port, cfg = router
+    run_dir = tmp_path / "run"
+    with zenoh_client(port) as s:
+        alive: queue.Queue = queue.Queue()
+        live_sub = s.liveliness().declare_subscriber("humanpt/test/*", lambda smp: alive.put(
+            (str(smp.key_expr), str(smp.kind))), history=True)
+        q, sub = _pongs(s)
+        pinger = procs.start("pinger", "--config", str(cfg), "--run-dir", str(run_dir))
+        ponger = procs.start("ponger", "--config", str(cfg), "--run-dir", str(run_dir))
+        pongs = _collect(q, 5)
+        assert len(pongs) == 5, "no pongs: the components did not exchange messages"
+        assert all(p.code == "pong" and p.source == "ponger" for p in pongs)
+        seqs = [int(p.text.split()[1]) for p in pongs]
+        assert seqs == sorted(seqs)
+        events = _collect(alive, 2)
+        assert {(k, kind) for k, kind in events} == {("humanpt/test/pinger", str(zenoh.SampleKind.PUT)),
+                                                     ("humanpt/test/ponger", str(zenoh.SampleKind.PUT))}
+        ponger.send_signal(signal.SIGKILL)  # no clean exit: the token must still vanish
+        gone = _collect(alive, 1, timeout=30)
+        assert gone == [("humanpt/test/ponger", str(zenoh.SampleKind.DELETE))]
+        sub.undeclare()
+        live_sub.undeclare()
+    procs.stop(pinger)
+
+
+def test_malformed_payload_is_dropped_counted_and_the_component_lives_on(router, procs, tmp_path):
+    port, cfg = router
+    run_dir = tmp_path / "run"
+    ponger = procs.start("ponger", "--config", str(cfg), "--run-dir", str(run_dir))
+    with zenoh_client(port) as s:
+        q, sub = _pongs(s)
+        time.sleep(1.5)  # let the ponger come up
+        pub = s.declare_publisher("humanpt/test/pinger/ping")
+        pub.put(b"\xff\xff\xff garbage")
+        pub.put(pb.Tick(header=pb.Header(seq=41, stamp_ns=5)).SerializeToString())
+        got = _collect(q, 1)
+        assert got and got[0].text.startswith("pong 41"), "the ponger did not survive the bad payload"
+        replies = list(s.get("humanpt/test/ponger/params", timeout=5.0))
+        body = json.loads(replies[0].ok.payload.to_bytes())
+        assert body["counters"]["dropped"] == 1 and body["counters"]["consumed"] == 1
+        pub.undeclare()
+        sub.undeclare()
+    out = procs.stop(ponger)
+    assert "dropped a message on pinger/ping" in out and "does not decode as humanpt.Tick" in out
+    assert ponger.returncode == 0
+    from humanpt.runtime.recording import read
+
+    rec = read(run_dir / "ponger.mcap")
+    dropped = [e for e in rec.entries if e.direction == "dropped"]
+    assert [e.data for e in dropped] == [b"\xff\xff\xff garbage"]  # kept, raw
+    assert replay(run_dir / "ponger.mcap").match
+
+
+def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(router, procs, tmp_path):
+    port, cfg = router
+    run_dir = tmp_path / "run"
+    pinger = procs.start("pinger", "--config", str(cfg), "--run-dir", str(run_dir))
+    ponger = procs.start("ponger", "--config", str(cfg), "--run-dir", str(run_dir))
+    with zenoh_client(port) as s:
+        q, sub = _pongs(s)
+        assert len(_collect(q, 3)) == 3
+        r = run_cli("param", "ponger", "prefix=PONG", "--config", str(cfg))
+        assert r.returncode == 0, r.stderr
+        assert '"prefix": "PONG"' in r.stdout
+        r = run_cli("param", "pinger", "period_ms=-5", "--config", str(cfg))
+        assert r.returncode == 1 and "REJECTED" in r.stdout and "period_ms must be within" in r.stdout
+        while not q.empty():
+            q.get()
+        later = _collect(q, 3)
+        assert later and all(p.text.startswith("PONG ") for p in later[1:])
+        sub.undeclare()
+    procs.stop(ponger)
+    procs.stop(pinger)
+    r = run_cli("replay", str(run_dir))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.count("MATCH: every output is identical") == 2
+    from humanpt.runtime.recording import read
+
+    params = [e.decode() for e in read(run_dir / "ponger.mcap").inputs if e.topic == "param"]
+    assert [(p.key, p.value_json) for p in params] == [("prefix", '"PONG"')]
+
+
+def test_param_for_an_absent_component_says_so(router):
+    port, cfg = router
+    r = run_cli("param", "ponger", "--config", str(cfg), "--timeout", "1")
+    assert r.returncode == 1 and "no component 'ponger' answered" in r.stderr
+
+
+def test_up_runs_a_profile_and_merge_and_topics_work(tmp_path):
+    port = free_port()
+    cfg = write_config(tmp_path / "h.toml", port)
+    run_dir = tmp_path / "up"
+    r = run_cli("up", "--profile", "selftest", "--config", str(cfg), "--run-dir", str(run_dir),
+                "--duration", "4", timeout=90)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"recording to {run_dir}/" in r.stdout
+    assert {p.name for p in run_dir.glob("*.mcap")} == {"pinger.mcap", "ponger.mcap"}
+    out = tmp_path / "merged.mcap"
+    r = run_cli("runs", "merge", str(run_dir), str(out))
+    assert r.returncode == 0, r.stderr
+    from mcap.reader import make_reader
+
+    with open(out, "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    assert topics == {"humanpt/test/pinger/ping", "humanpt/test/ponger/pong"}
+
+
+def test_up_exits_non_zero_when_a_child_dies(tmp_path):
+    port = free_port()
+    cfg = write_config(tmp_path / "h.toml", port, extra="")
+    cfg.write_text(cfg.read_text().replace("connect_timeout_s = 5.0", "connect_timeout_s = 0.5"))
+    r = run_cli("up", "--profile", "selftest", "--no-router", "--config", str(cfg), "--duration", "20",
+                "--run-dir", str(tmp_path / "run"), timeout=90)
+    assert r.returncode == 1
+    assert "stopped because a child died" in r.stderr
+
+
+def test_topics_and_echo_show_live_traffic(router, procs, tmp_path):
+    port, cfg = router
+    procs.start("pinger", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
+    wait_port(port)
+    time.sleep(1.5)
+    r = run_cli("topics", "--config", str(cfg), "--duration", "1.5")
+    assert r.returncode == 0, r.stderr
+    assert "components up: pinger" in r.stdout
+    assert "humanpt/test/pinger/ping" in r.stdout and "humanpt.Tick" in r.stdout
+    r = run_cli("echo", "pinger/ping", "--config", str(cfg), "--count", "2", "--duration", "10")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.count("--- humanpt/test/pinger/ping (humanpt.Tick)") == 2
+    assert "period_ns: 100000000" in r.stdout

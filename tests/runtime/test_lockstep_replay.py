@@ -1,0 +1,83 @@
+"""Lock-step determinism and replay: run A == run B; replay of a run reproduces it; a
+perturbed core is caught with the divergence named."""
+
+from __future__ import annotations
+
+from humanpt.runtime.lockstep import Lockstep
+from humanpt.runtime.recording import read
+from humanpt.runtime.replay import build_core, replay
+from humanpt.runtime.selftest import PingerConfig, PingerCore, PongerConfig, PongerCore
+from humanpt.schemas import humanpt_pb2 as pb
+
+
+def _run(run_dir=None, end_s=2.0, chunk_size=256 * 1024):
+    with Lockstep([PingerCore(PingerConfig(period_ms=20)), PongerCore(PongerConfig())], run_dir=run_dir,
+                  chunk_size=chunk_size) as ls:
+        ls.set_param(500_000_000, "ponger", "prefix", '"PONG"')
+        ls.set_param(700_000_000, "pinger", "period_ms", "10")
+        ls.set_param(800_000_000, "pinger", "period_ms", "-3")  # rejected, as an event
+        ls.run_until(int(end_s * 1e9))
+    return ls
+
+
+def test_same_run_twice_is_byte_identical():
+    a, b = _run(), _run()
+    assert a.digest() == b.digest()
+    assert [o.data for o in a.outputs] == [o.data for o in b.outputs]
+    assert len(a.outputs) > 150
+
+
+def test_params_change_behaviour_and_bad_ones_are_rejected():
+    ls = _run()
+    pongs = [pb.Event.FromString(o.data).text for o in ls.outputs if o.topic == "ponger/pong"]
+    assert pongs[0].startswith("pong ") and pongs[-1].startswith("PONG ")
+    events = [pb.Event.FromString(o.data) for o in ls.outputs if o.topic.endswith("/events")]
+    assert [e.code for e in events] == ["param_changed", "param_changed", "param_rejected"]
+    assert "period_ms must be within" in events[-1].text
+    pings = [o.t_ns for o in ls.outputs if o.topic == "pinger/ping"]
+    gaps = {b - a for a, b in zip(pings, pings[1:], strict=False)}
+    assert gaps == {20_000_000, 10_000_000}
+
+
+def test_lockstep_recordings_replay_exactly(tmp_path):
+    _run(tmp_path)
+    for comp in ("pinger", "ponger"):
+        res = replay(tmp_path / f"{comp}.mcap")
+        assert res.match, res.report()
+        assert res.recorded_outputs == res.replayed_outputs > 0
+
+
+class _Perturbed(PongerCore):
+    def on_input(self, t_ns, topic, msg):
+        outs = super().on_input(t_ns, topic, msg)
+        if self.pings == 42:
+            outs[0][1].header.stamp_ns += 7
+        return outs
+
+
+def test_a_perturbed_core_is_caught_with_the_field_named(tmp_path):
+    _run(tmp_path)
+
+    def factory(rec):
+        core = build_core(rec)
+        return _Perturbed(core.config)
+
+    res = replay(tmp_path / "ponger.mcap", core_factory=factory)
+    assert not res.match
+    report = res.report()
+    assert "MISMATCH" in report and "header.stamp_ns" in report and "(by +7)" in report
+    div = res.divergence
+    assert div.recorded[1] == "ponger/pong"
+    # The divergence is at the 42nd pong (outputs before it include the param events).
+    recorded = read(tmp_path / "ponger.mcap").outputs
+    assert recorded[div.index].decode().text.endswith("(#42)")
+
+
+def test_truncated_recording_replays_up_to_the_truncation(tmp_path):
+    _run(tmp_path, end_s=20.0, chunk_size=2048)
+    data = (tmp_path / "ponger.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    res = replay(cut)
+    assert res.truncated and res.match, res.report()
+    assert 0 < res.recorded_outputs < len(read(tmp_path / "ponger.mcap").outputs)

@@ -1,0 +1,123 @@
+"""Recording: MCAP with schemas and metadata; truncated files read to the truncation; a crash
+loses at most the last chunk; replay on missing or foreign files says so."""
+
+from __future__ import annotations
+
+import random
+import subprocess
+import sys
+import textwrap
+
+import pytest
+from humanpt.runtime.recording import IN, OUT, Recorder, RecordingError, read, read_metadata
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from tests.conftest import ROOT, run_cli
+
+
+def _write(path, n, chunk_size=4096, close=True):
+    rec = Recorder(path, {"component": "ponger", "core": "humanpt.runtime.selftest:PongerCore",
+                          "config": {"prefix": "pong"}}, chunk_size=chunk_size)
+    rng = random.Random(5)  # incompressible-ish text, so chunks are spread through the file
+    for i in range(n):
+        rec.write(IN, i * 1000, "pinger/ping", pb.Tick(header=header(i * 1000, i), period_ns=1000))
+        text = "".join(rng.choice("0123456789abcdef") for _ in range(40))
+        rec.write(OUT, i * 1000, "ponger/pong", pb.Event(header=header(i * 1000, i), text=text))
+    if close:
+        rec.close()
+    return rec
+
+
+def test_recording_reads_back_with_schemas_and_metadata(tmp_path):
+    p = tmp_path / "ponger.mcap"
+    _write(p, 50)
+    rec = read(p)
+    assert rec.truncated is None and rec.component == "ponger"
+    assert [e.direction for e in rec.entries[:4]] == [IN, OUT, IN, OUT]
+    assert rec.inputs[7].decode().header.seq == 7
+    assert rec.config() == {"prefix": "pong"}
+    # Any MCAP reader sees protobuf schemas (what Foxglove and rerun use to decode).
+    with open(p, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert {s.name for s in summary.schemas.values()} == {"humanpt.Tick", "humanpt.Event"}
+    assert all(s.encoding == "protobuf" for s in summary.schemas.values())
+    assert summary.statistics.message_count == 100
+
+
+@pytest.mark.parametrize("fraction", [0.2, 0.5, 0.8])
+def test_truncated_file_reads_up_to_the_truncation(tmp_path, fraction):
+    p = tmp_path / "full.mcap"
+    _write(p, 400)
+    full = read(p).entries
+    data = p.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * fraction)])
+    rec = read(cut)
+    assert rec.truncated
+    assert 0 < len(rec.entries) < len(full)
+    assert [(e.topic, e.data) for e in rec.entries] == [(e.topic, e.data) for e in full[: len(rec.entries)]]
+
+
+def test_file_missing_its_last_bytes_reads_every_message(tmp_path):
+    p = tmp_path / "full.mcap"
+    _write(p, 100)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(p.read_bytes()[:-1])
+    rec = read(cut)
+    assert rec.truncated and len(rec.entries) == 200
+
+
+def test_crash_loses_at_most_the_last_chunk(tmp_path):
+    """A writer killed without closing (os._exit) leaves a file that reads all finished chunks."""
+    p = tmp_path / "crash.mcap"
+    script = textwrap.dedent(f"""
+        import os, sys
+        sys.path.insert(0, {str(ROOT)!r})
+        from tests.runtime.test_recording import _write
+        _write({str(p)!r}, 300, chunk_size=4096, close=False)
+        os._exit(1)
+    """)
+    subprocess.run([sys.executable, "-c", script], check=False, timeout=60)
+    rec = read(p)
+    assert rec.truncated
+    # One chunk of 4 KiB holds about 4096 / 70 B ~ 60 messages: at most that is lost.
+    assert len(rec.entries) >= 600 - 80, len(rec.entries)
+
+
+def test_missing_and_foreign_files_say_so(tmp_path):
+    with pytest.raises(RecordingError, match="no such file"):
+        read(tmp_path / "nope.mcap")
+    txt = tmp_path / "notes.mcap"
+    txt.write_text("hello")
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        read(txt)
+    foreign = tmp_path / "foreign.mcap"
+    with open(foreign, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    with pytest.raises(RecordingError, match="not a humanpt recording"):
+        read(foreign)
+    with pytest.raises(RecordingError, match="not a humanpt recording"):
+        read_metadata(foreign)
+
+
+def test_schema_version_mismatch_is_named(tmp_path):
+    p = tmp_path / "old.mcap"
+    Recorder(p, {"component": "ponger", "schema_version": "0"}).close()
+    with pytest.raises(RecordingError, match="written with schema version 0"):
+        read(p)
+
+
+def test_cli_replay_errors_are_clear(tmp_path):
+    r = run_cli("replay", str(tmp_path / "missing"))
+    assert r.returncode == 2 and "no such run directory or file" in r.stderr
+    (tmp_path / "run").mkdir()
+    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    assert r.returncode == 2 and "no recording of component 'ponger'" in r.stderr
+    (tmp_path / "run" / "ponger.mcap").write_text("not mcap")
+    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr
