@@ -45,6 +45,7 @@ __all__ = [
     "project_pinhole",
     "projection_jacobian",
     "project",
+    "in_image",
     "triangulate_eq4",
     "triangulate_eq2",
     "triangulate_lsq",
@@ -186,8 +187,9 @@ class PsvsParams:
     Defaults: a 640 x 480 camera, a_u = a_v = 1000 px, no skew, (u0, v0) = (320, 240),
     baseline b = 90 mm, and m, l from a 1 mm, 45 deg, n = 1.5 beam splitter (eq. (5), (6)),
     no distortion. Eq. (3): both virtual cameras share a_u, a_v (and the skew); their image
-    centres ``u0_right, v0_right, u0_left, v0_left`` default to the real camera's (u0, v0),
-    which is also the centre of the lens distortion.
+    centres ``u0_right, v0_right, u0_left, v0_left`` (None: the real camera's u0, v0, which
+    are also the centre of the lens distortion) are resolved in ``right_camera`` /
+    ``left_camera``, so ``dataclasses.replace(params, u0=...)`` moves all of them.
 
     Fields: ``image_size_px`` (width, height); ``a_u, a_v, skew, u0, v0`` in px;
     ``baseline_mm``, ``m_mm``, ``l_mm`` in mm; ``dist_coeffs`` OpenCV (k1, k2, p1, p2, k3).
@@ -231,21 +233,35 @@ class PsvsParams:
                     f"PsvsParams.{name} = {getattr(self, name)} mm is not a refraction shift "
                     f"(must be well below b/2 = {self.baseline_mm / 2} mm)"
                 )
-        for name, default in (
-            ("u0_right", self.u0),
-            ("v0_right", self.v0),
-            ("u0_left", self.u0),
-            ("v0_left", self.v0),
-        ):
+        for name in ("u0_right", "v0_right", "u0_left", "v0_left"):
             value = getattr(self, name)
-            object.__setattr__(self, name, default if value is None else _finite(name, value))
+            if value is not None:
+                object.__setattr__(self, name, _finite(name, value))
         object.__setattr__(
             self, "dist_coeffs", tuple(float(x) for x in as_dist_coeffs(self.dist_coeffs))
         )
         right_c, left_c = virtual_camera_centres_mm(self.baseline_mm, self.m_mm, self.l_mm)
+
+        def pick(value, default):
+            return default if value is None else value
+
         cams = (
-            PinholeCamera(self.a_u, self.a_v, self.u0_right, self.v0_right, right_c, self.skew),
-            PinholeCamera(self.a_u, self.a_v, self.u0_left, self.v0_left, left_c, self.skew),
+            PinholeCamera(
+                self.a_u,
+                self.a_v,
+                pick(self.u0_right, self.u0),
+                pick(self.v0_right, self.v0),
+                right_c,
+                self.skew,
+            ),
+            PinholeCamera(
+                self.a_u,
+                self.a_v,
+                pick(self.u0_left, self.u0),
+                pick(self.v0_left, self.v0),
+                left_c,
+                self.skew,
+            ),
         )
         object.__setattr__(self, "_cameras", cams)
 
@@ -283,6 +299,21 @@ class PsvsParams:
     @property
     def has_distortion(self) -> bool:
         return any(self.dist_coeffs)
+
+
+def in_image(params: PsvsParams, uv_px: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
+    """Boolean mask (...,): pixels (..., 2) inside the complex image, at least
+    ``margin_px`` from its border (pixel centres at integers, the image spans
+    [-0.5, size - 0.5])."""
+    uv = np.asarray(uv_px, dtype=float)
+    width, height = params.image_size_px
+    lo = -0.5 + margin_px
+    return (
+        (uv[..., 0] >= lo)
+        & (uv[..., 0] <= width - 0.5 - margin_px)
+        & (uv[..., 1] >= lo)
+        & (uv[..., 1] <= height - 0.5 - margin_px)
+    )
 
 
 # --------------------------------------------------------------------------- forward model

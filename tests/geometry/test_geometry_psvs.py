@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -10,6 +11,7 @@ from humanpt.geometry import (
     GeometryError,
     PinholeCamera,
     PsvsParams,
+    in_image,
     intrinsic_matrix,
     project,
     project_pinhole,
@@ -86,9 +88,24 @@ def test_default_params_match_the_brief():
     assert (p.a_u, p.a_v, p.u0, p.v0, p.skew, p.baseline_mm) == (1000, 1000, 320, 240, 0, 90)
     assert (round(p.m_mm, 3), round(p.l_mm, 3)) == (0.329, 0.378)
     assert p.dist_coeffs == (0.0,) * 5
-    assert (p.u0_right, p.v0_right, p.u0_left, p.v0_left) == (320, 240, 320, 240)
+    assert (p.right_camera.u0, p.right_camera.v0) == (320, 240)
+    assert (p.left_camera.u0, p.left_camera.v0) == (320, 240)
     assert p == PsvsParams.from_mirror()
     hash(p)  # frozen and hashable
+
+
+def test_replace_moves_shared_image_centre_but_keeps_overrides():
+    p = dataclasses.replace(PsvsParams(u0_left=322.0), u0=330.0, a_u=1200.0)
+    assert p.right_camera.u0 == 330.0 and p.left_camera.u0 == 322.0
+    assert p.right_camera.a_u == p.left_camera.a_u == 1200.0
+    np.testing.assert_allclose(p.real_camera_matrix[0], [1200.0, 0.0, 330.0])
+
+
+def test_in_image():
+    p = PsvsParams()
+    uv = np.array([[0.0, 0.0], [639.4, 479.4], [-1.0, 10.0], [100.0, 480.0], [5.0, 5.0]])
+    np.testing.assert_array_equal(in_image(p, uv), [True, True, False, False, True])
+    np.testing.assert_array_equal(in_image(p, uv, margin_px=10.0), [False] * 5)
 
 
 def test_from_mirror_sets_m_l_and_keeps_other_fields():
@@ -130,11 +147,12 @@ def test_four_distortion_coefficients_are_padded():
 def _eq4_literal(p: PsvsParams, ur, vr, ul, vl):
     """Eq. (4) typed from the paper, line by line (c = 0)."""
     a_u, a_v, b, m, l = p.a_u, p.a_v, p.baseline_mm, p.m_mm, p.l_mm
-    z = (a_u * (b + m) + l * (ul - p.u0_left)) / ((ul - p.u0_left) - (ur - p.u0_right)) - b / 2
-    x_r = 1 / a_u * (z + b / 2) * (ur - p.u0_right) + b / 2
-    x_l = 1 / a_u * (z + b / 2 - l) * (ul - p.u0_left) - b / 2 - m
-    y_r = 1 / a_v * (z + b / 2) * (vr - p.v0_right)
-    y_l = 1 / a_v * (z + b / 2 - l) * (vl - p.v0_left)
+    u0_r, v0_r, u0_l, v0_l = p.right_camera.u0, p.right_camera.v0, p.u0_left, p.v0_left
+    z = (a_u * (b + m) + l * (ul - u0_l)) / ((ul - u0_l) - (ur - u0_r)) - b / 2
+    x_r = 1 / a_u * (z + b / 2) * (ur - u0_r) + b / 2
+    x_l = 1 / a_u * (z + b / 2 - l) * (ul - u0_l) - b / 2 - m
+    y_r = 1 / a_v * (z + b / 2) * (vr - v0_r)
+    y_l = 1 / a_v * (z + b / 2 - l) * (vl - v0_l)
     return z, x_r, x_l, y_r, y_l
 
 
