@@ -195,3 +195,34 @@ def test_frame_fields_are_validated():
         ControlFrame(99)  # type: ignore[arg-type]
     assert nak(0, NakReason.HEADER_CRC).nak_reason is NakReason.HEADER_CRC
     assert ack(0).nak_reason is None
+
+
+def test_protocol_md_examples_are_what_the_encoders_produce():
+    from humanpt.alter.messages import (
+        ControllerStatus,
+        Correction,
+        CorrectionFlags,
+        StatusBits,
+        encode_correction,
+        encode_status,
+    )
+
+    def hx(s: str) -> bytes:
+        return bytes.fromhex(s.replace("|", " "))
+
+    assert encode_frame(strt()) == hx("05 06 c0 00 00 01 75 95")
+    assert encode_frame(stack()) == hx("05 07 c0 00 00 01 48 55")
+    assert encode_frame(ack(5)) == hx("05 01 00 05 00 01 ec 54")
+    assert encode_frame(nak(4, NakReason.DATA_CRC)) == hx("05 02 02 04 00 01 f8 2c")
+    assert encode_frame(rep(5)) == hx("05 03 00 00 05 01 86 c5")
+    status = ControllerStatus(
+        1000, StatusBits.ALTER_ACTIVE | StatusBits.ARM_POWER, 65000, 19000, 72500, 0, 0, 18000
+    )
+    assert encode_frame(DataFrame(5, 4, encode_status(status))) == hx(
+        "81 1f 00 04 05 01 08 82 | 53 e8 03 00 00 09 00 e8 fd 00 00 38 4a 00 00 34 1b 01 00"
+        "00 00 00 00 00 00 00 00 50 46 00 00 | 4b fc"
+    )
+    corr = Correction(1000, CorrectionFlags(0), 120, -35, 0, 0, 0, 10)
+    assert encode_frame(DataFrame(5, 5, encode_correction(corr))) == hx(
+        "81 13 00 05 05 01 49 43 | 43 e8 03 00 00 00 00 78 00 dd ff 00 00 00 00 00 00 0a 00 | 62 48"
+    )
