@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import pytest
-from alter_testkit import CYCLE_NS, correction_for, handshake, status_for, tx_bytes
 from humanpt.alter import (
     ALTER_CYCLE_NS,
     ControllerEndpoint,
@@ -17,6 +16,8 @@ from humanpt.alter.budget import (
     STATUS_FRAME_BYTES,
     byte_time_ns,
 )
+
+from tests.alter.alter_testkit import CYCLE_NS, correction_for, handshake, status_for, tx_bytes
 
 
 def test_bytes_per_cycle():

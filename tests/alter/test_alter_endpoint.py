@@ -3,16 +3,6 @@
 from __future__ import annotations
 
 import pytest
-from alter_testkit import (
-    CYCLE_NS,
-    correction_for,
-    handshake,
-    non_tx,
-    record_clean_session,
-    replay_controller,
-    status_for,
-    tx_bytes,
-)
 from humanpt.alter import (
     ControllerConfig,
     ControllerEndpoint,
@@ -26,6 +16,17 @@ from humanpt.alter import (
 )
 from humanpt.alter.ddcmp import DataFrame, encode_frame
 from humanpt.alter.messages import encode_correction, encode_status
+
+from tests.alter.alter_testkit import (
+    CYCLE_NS,
+    correction_for,
+    handshake,
+    non_tx,
+    record_clean_session,
+    replay_controller,
+    status_for,
+    tx_bytes,
+)
 
 
 def connected(config: ControllerConfig | None = None) -> tuple[HostEndpoint, ControllerEndpoint]:

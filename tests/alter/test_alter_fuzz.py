@@ -6,15 +6,6 @@ from __future__ import annotations
 import random
 from functools import cache
 
-from alter_testkit import (
-    apply_mutations,
-    handshake,
-    record_clean_session,
-    replay_controller,
-    reslot,
-    status_for,
-    tx_bytes,
-)
 from humanpt.alter import (
     ControllerEndpoint,
     CorrectionReceived,
@@ -29,6 +20,16 @@ from humanpt.alter import (
 from humanpt.alter.ddcmp import CRC_BYTES, HEADER_BYTES
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+
+from tests.alter.alter_testkit import (
+    apply_mutations,
+    handshake,
+    record_clean_session,
+    replay_controller,
+    reslot,
+    status_for,
+    tx_bytes,
+)
 
 FUZZ = settings(
     max_examples=200,

@@ -5,7 +5,6 @@ from __future__ import annotations
 import random
 
 import pytest
-from alter_testkit import MS, handshake, tx_bytes
 from humanpt.alter import (
     Acknowledged,
     DataFrame,
@@ -26,6 +25,8 @@ from humanpt.alter import (
     encode_frame,
 )
 from humanpt.alter.ddcmp import ControlType, ack, rep, strt
+
+from tests.alter.alter_testkit import MS, handshake, tx_bytes
 
 
 def frames_of(events) -> list:
