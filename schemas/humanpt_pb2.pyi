@@ -318,3 +318,13 @@ class Command(_message.Message):
     verb: str
     args_json: str
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., component: _Optional[str] = ..., verb: _Optional[str] = ..., args_json: _Optional[str] = ...) -> None: ...
+
+class Liveliness(_message.Message):
+    __slots__ = ("header", "component", "alive")
+    HEADER_FIELD_NUMBER: _ClassVar[int]
+    COMPONENT_FIELD_NUMBER: _ClassVar[int]
+    ALIVE_FIELD_NUMBER: _ClassVar[int]
+    header: Header
+    component: str
+    alive: bool
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., component: _Optional[str] = ..., alive: _Optional[bool] = ...) -> None: ...

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.message import Message
+
 from humanpt.schemas import humanpt_pb2 as pb
 
 SCHEMA_VERSION = 1
@@ -68,7 +69,9 @@ _ROWS += [Topic(f"{c}/events", pb.Event, c, "events: safety actions, drops, mode
 LOCAL_TOPICS: dict[str, type[Message]] = {
     "tick": pb.Tick,
     "param": pb.ParamSet,
-    "serial_rx": pb.SerialChunk,
+    "serial_rx": pb.SerialChunk,  # bytes read from the component's serial port
+    "serial_tx": pb.SerialChunk,  # output: bytes the shell writes to the serial port
+    "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
 }
 
 TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}

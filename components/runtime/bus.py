@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import zenoh
+
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.schemas.topics import KEY_PREFIX
 

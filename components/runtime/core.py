@@ -16,6 +16,7 @@ from collections import defaultdict
 from typing import Any, ClassVar
 
 from google.protobuf.message import Message
+
 from humanpt.runtime.config import ConfigError, live_keys, replace_live, to_table
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
@@ -29,12 +30,16 @@ class Core:
     Subclasses set ``name`` (the component name, first part of its topics),
     ``config_type`` (a frozen dataclass), ``inputs`` (short topic names it consumes,
     besides ``tick`` and ``param``) and implement :meth:`on_input`.  A core that wants
-    timer ticks returns a period from :meth:`tick_period_ns`.
+    timer ticks returns a period from :meth:`tick_period_ns`; one that must know whether
+    other components are up names them in ``watch`` and gets ``liveliness`` inputs.
+    Outputs on local topics (``serial_tx``) go to the shell's adapters, not the bus.
     """
 
     name: ClassVar[str] = ""
     config_type: ClassVar[type] = type(None)
     inputs: ClassVar[tuple[str, ...]] = ()
+    # Components whose liveliness this core is told about (``liveliness`` inputs).
+    watch: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, config: Any):
         if not isinstance(config, self.config_type):

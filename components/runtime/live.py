@@ -10,7 +10,11 @@
   input, so it is recorded and replays;
 * everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``;
 * a payload that fails to decode is dropped with a log line and a counter (and kept raw
-  in the recording); the component lives on.
+  in the recording); the component lives on;
+* the liveliness of the components named in ``core.watch`` reaches the core as
+  ``liveliness`` inputs;
+* adapters bridge local I/O: an adapter puts local inputs (``serial_rx``) into the same
+  queue and receives the core's outputs on its local topics (``serial_tx``).
 """
 
 from __future__ import annotations
@@ -22,12 +26,15 @@ import queue
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
-import humanpt
 import zenoh
 from google.protobuf.message import DecodeError
+
+import humanpt
 from humanpt.runtime.bus import liveliness_key, params_key, zenoh_config
 from humanpt.runtime.config import RuntimeConfig, to_table
 from humanpt.runtime.core import Core
@@ -57,12 +64,30 @@ class _ParamRequest:
     result: dict | None = None
 
 
+class Adapter(Protocol):
+    """Local I/O of a live shell (a serial port...).
+
+    ``start(put)`` begins delivering local inputs with ``put(topic, message)`` (from any
+    thread); ``write(topic, message)`` receives the core's outputs on ``topics_out``.
+    """
+
+    topics_out: tuple[str, ...]
+
+    def start(self, put: Callable[[str, object], None]) -> None: ...
+
+    def write(self, topic: str, msg) -> None: ...
+
+    def close(self) -> None: ...
+
+
 class LiveShell:
     """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
 
     def __init__(self, core: Core, rt: RuntimeConfig, *, run_dir: str | Path | None = None,
-                 zconf: zenoh.Config | None = None):
+                 zconf: zenoh.Config | None = None, adapters: list[Adapter] | None = None):
         self.core = core
+        self.adapters = list(adapters or [])
+        self._local_out = {t: a for a in self.adapters for t in a.topics_out}
         self.rt = rt
         self.cell = rt.cell
         self.run_dir = Path(run_dir) if run_dir is not None else None
@@ -101,6 +126,14 @@ class LiveShell:
                  "params": self.core.params(), "counters": self.counters.__dict__}
         query.reply(query.key_expr, json.dumps(reply, default=str))
 
+    def _on_liveliness(self, component: str):
+        def cb(sample: zenoh.Sample) -> None:
+            self._q.put(("liveliness", component, sample.kind == zenoh.SampleKind.PUT))
+        return cb
+
+    def _put_local(self, topic: str, msg) -> None:
+        self._q.put(("local", topic, msg))
+
     def _tick_loop(self) -> None:
         next_t = time.monotonic()
         while not self.stop.is_set():
@@ -134,7 +167,14 @@ class LiveShell:
             payload = out.SerializeToString()
             if self.recorder:
                 self.recorder.write(OUT, t_ns, out_topic, out, payload)
-            self._publish(out_topic, payload)
+            adapter = self._local_out.get(out_topic)
+            if adapter is not None:
+                try:
+                    adapter.write(out_topic, out)
+                except Exception:  # noqa: BLE001 - a failing port must not stop the core
+                    log.exception("%s: adapter could not write %s", self.core.name, out_topic)
+            elif "/" in out_topic:
+                self._publish(out_topic, payload)
             self.counters.produced += 1
         return outs
 
@@ -171,6 +211,10 @@ class LiveShell:
                 self._drop(t_ns, short, item, f"does not decode as {cls.DESCRIPTOR.full_name}: {e}")
                 return
             self._feed(t_ns, short, msg, item)
+        elif kind == "local":
+            self._feed(t_ns, short, item)
+        elif kind == "liveliness":
+            self._feed(t_ns, "liveliness", pb.Liveliness(header=header(t_ns), component=short, alive=item))
         elif kind == "tick":
             self._feed(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=self.core.tick_period_ns() or 0))
         elif kind == "param":
@@ -198,6 +242,11 @@ class LiveShell:
                 subs = [session.declare_subscriber(topics.TOPICS[s].key(self.cell), self._on_sample(s))
                         for s in self.core.inputs]
                 token = session.liveliness().declare_token(liveliness_key(self.cell, name))
+                watchers = [session.liveliness().declare_subscriber(liveliness_key(self.cell, w),
+                                                                    self._on_liveliness(w), history=True)
+                            for w in self.core.watch]
+                for a in self.adapters:
+                    a.start(self._put_local)
                 qbl = session.declare_queryable(params_key(self.cell, name), self._on_query)
                 ticker = threading.Thread(target=self._tick_loop, name=f"{name}-tick", daemon=True)
                 ticker.start()
@@ -212,12 +261,19 @@ class LiveShell:
                 ticker.join(timeout=1.0)
                 qbl.undeclare()
                 token.undeclare()
+                for w in watchers:
+                    w.undeclare()
                 for s in subs:
                     s.undeclare()
                 for p in self._pubs.values():
                     p.undeclare()
                 self._pubs.clear()
         finally:
+            for a in self.adapters:
+                try:
+                    a.close()
+                except Exception:  # noqa: BLE001
+                    log.exception("closing an adapter")
             if self.recorder:
                 self.recorder.close()
         return self.counters

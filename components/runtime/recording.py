@@ -23,13 +23,14 @@ from pathlib import Path
 from typing import Any
 
 from google.protobuf.message import DecodeError, Message
-from humanpt.schemas import topics
 from mcap.exceptions import McapError
 from mcap.records import Channel, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
+
+from humanpt.schemas import topics
 
 RUN_METADATA = "humanpt.run"
 IN, OUT, DROPPED = "in", "out", "dropped"

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from google.protobuf import text_format
 from google.protobuf.message import Message
+
 from humanpt.runtime.config import build
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import Recording, RecordingError, read

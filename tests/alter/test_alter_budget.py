@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from humanpt.alter import (
     ALTER_CYCLE_NS,
     ControllerEndpoint,
@@ -16,7 +17,6 @@ from humanpt.alter.budget import (
     STATUS_FRAME_BYTES,
     byte_time_ns,
 )
-
 from tests.alter.alter_testkit import CYCLE_NS, correction_for, handshake, status_for, tx_bytes
 
 

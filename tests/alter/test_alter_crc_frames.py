@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from humanpt.alter.crc import crc16, crc16_bitwise, crc16_bytes
 from humanpt.alter.ddcmp import (
     ENQ,
@@ -23,8 +26,6 @@ from humanpt.alter.ddcmp import (
     stack,
     strt,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 FAST = settings(max_examples=150, deadline=None, derandomize=True)
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from humanpt.alter import (
     ControllerConfig,
     ControllerEndpoint,
@@ -16,7 +17,6 @@ from humanpt.alter import (
 )
 from humanpt.alter.ddcmp import DataFrame, encode_frame
 from humanpt.alter.messages import encode_correction, encode_status
-
 from tests.alter.alter_testkit import (
     CYCLE_NS,
     correction_for,

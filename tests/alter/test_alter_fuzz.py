@@ -6,6 +6,9 @@ from __future__ import annotations
 import random
 from functools import cache
 
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 from humanpt.alter import (
     ControllerEndpoint,
     CorrectionReceived,
@@ -18,9 +21,6 @@ from humanpt.alter import (
     encode_frame,
 )
 from humanpt.alter.ddcmp import CRC_BYTES, HEADER_BYTES
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
-
 from tests.alter.alter_testkit import (
     apply_mutations,
     handshake,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import random
 
 import pytest
+
 from humanpt.alter import (
     Acknowledged,
     DataFrame,
@@ -25,7 +26,6 @@ from humanpt.alter import (
     encode_frame,
 )
 from humanpt.alter.ddcmp import ControlType, ack, rep, strt
-
 from tests.alter.alter_testkit import MS, handshake, tx_bytes
 
 

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
 from humanpt.alter.budget import ALTER_CYCLE_NS
 from humanpt.alter.messages import (
     CORRECTION_PAYLOAD_BYTES,
@@ -20,9 +24,6 @@ from humanpt.alter.messages import (
     encode_correction,
     encode_status,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
 FAST = settings(max_examples=150, deadline=None, derandomize=True)
 

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from humanpt.geometry import PsvsParams, TargetModel, transform_from_x
 from hypothesis import strategies as st
+
+from humanpt.geometry import PsvsParams, TargetModel, transform_from_x
 
 
 def finite(lo: float, hi: float):

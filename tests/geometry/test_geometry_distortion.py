@@ -5,6 +5,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from humanpt.geometry import (
     GeometryError,
     PsvsParams,
@@ -15,8 +18,6 @@ from humanpt.geometry import (
     undistort_normalised,
     undistort_pixels,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from .geometry_strategies import finite
 

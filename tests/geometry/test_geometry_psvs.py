@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+
 from humanpt.geometry import (
     GeometryError,
     PinholeCamera,
@@ -24,7 +26,6 @@ from humanpt.geometry import (
     triangulate_lsq,
     virtual_camera_centres_mm,
 )
-from hypothesis import given, settings
 
 from .geometry_strategies import psvs_params, scene_points
 

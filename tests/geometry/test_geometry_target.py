@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
 from humanpt.geometry import (
     GeometryError,
     TargetModel,
@@ -17,8 +20,6 @@ from humanpt.geometry import (
     transform_from_x,
     transform_points,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
 
 from .geometry_strategies import finite, target_models, tob_poses
 

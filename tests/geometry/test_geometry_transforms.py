@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from scipy.spatial.transform import Rotation
+
 from humanpt.geometry import (
     GeometryError,
     chain_world_T_tob,
@@ -19,8 +22,6 @@ from humanpt.geometry import (
     x_from_transform,
     ypr_deg_from_rotation,
 )
-from hypothesis import given, settings
-from scipy.spatial.transform import Rotation
 
 from .geometry_strategies import finite, rigid_transforms
 

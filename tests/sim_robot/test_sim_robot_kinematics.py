@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
 from humanpt.sim_robot.kinematics import (
     PUMA_JOINT_LIMITS_DEG,
     PumaKinematics,
@@ -11,9 +15,6 @@ from humanpt.sim_robot.kinematics import (
     RobotModelConfig,
     UnreachableError,
 )
-from hypothesis import given, settings
-from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
 FAST = settings(max_examples=120, deadline=None, derandomize=True)
 MODELS = [PumaModel.PUMA_762, PumaModel.PUMA_560]
