@@ -94,6 +94,7 @@ def router(tmp_path, procs):
 
 def zenoh_client(port: int):
     import zenoh
+
     from humanpt.runtime.bus import zenoh_config
     from humanpt.runtime.config import RuntimeConfig
 

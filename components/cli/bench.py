@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 from humanpt.runtime.config import RuntimeConfig
 
 
@@ -35,6 +36,7 @@ def synthetic_image(seed: int = 0, width: int = 640, height: int = 480) -> np.nd
 def round_trips(payload: bytes, n: int, port: int) -> list[int]:
     """Round-trip times (ns) of ``payload`` client A -> router -> client B -> router -> A."""
     import zenoh
+
     from humanpt.runtime.bus import zenoh_config
 
     rt = RuntimeConfig(connect=(f"tcp/127.0.0.1:{port}",), listen=(f"tcp/127.0.0.1:{port}",))

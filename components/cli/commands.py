@@ -380,9 +380,10 @@ def replay(args) -> int:
 
 
 def runs_merge(args) -> int:
-    from humanpt.runtime.recording import RecordingError, iter_entries, read_metadata
     from mcap.writer import Writer
     from mcap_protobuf.schema import register_schema
+
+    from humanpt.runtime.recording import RecordingError, iter_entries, read_metadata
 
     run_dir = Path(args.run_dir)
     files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from humanpt.cli.main import build_parser, main
 from humanpt.runtime.registry import COMPONENTS
 

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import pytest
+
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
 from humanpt.runtime.selftest import PingerConfig

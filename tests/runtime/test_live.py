@@ -9,9 +9,9 @@ import time
 
 import pytest
 import zenoh
+
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
-
 from tests.conftest import free_port, run_cli, wait_port, write_config, zenoh_client
 
 pytestmark = pytest.mark.timeout(120)

@@ -9,12 +9,12 @@ import sys
 import textwrap
 
 import pytest
-from humanpt.runtime.recording import IN, OUT, Recorder, RecordingError, read, read_metadata
-from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import header
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from humanpt.runtime.recording import IN, OUT, Recorder, RecordingError, read, read_metadata
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
 from tests.conftest import ROOT, run_cli
 
 

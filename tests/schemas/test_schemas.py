@@ -8,12 +8,12 @@ import sys
 import numpy as np
 import pytest
 from google.protobuf import descriptor_pb2
-from humanpt.schemas import convert, topics
-from humanpt.schemas import humanpt_pb2 as pb
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
+from humanpt.schemas import convert, topics
+from humanpt.schemas import humanpt_pb2 as pb
 from tests.conftest import ROOT
 
 
