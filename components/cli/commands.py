@@ -21,6 +21,7 @@ from humanpt.runtime.registry import (
     COMPONENTS,
     PROFILES,
     UnknownComponentError,
+    adapters_for,
     config_types,
     core_class,
 )
@@ -103,7 +104,12 @@ def run_component(args) -> int:
     cls = core_class(name)
     core = cls(cfg.component(name, cls.config_type))
     run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
-    shell = LiveShell(core, cfg.runtime, run_dir=run_dir)
+    try:
+        adapters = adapters_for(name, core.config)
+    except Exception as e:  # a serial port that does not open, say: name it and stop
+        print(f"humanpt {name}: {e}", file=sys.stderr)
+        return 1
+    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters)
     stop_on_signals(shell.stop)
     if args.duration:
         threading.Timer(args.duration, shell.stop.set).start()

@@ -12,6 +12,11 @@ COMPONENTS: dict[str, str] = {
     "ponger": "humanpt.runtime.selftest:PongerCore",
 }
 
+# name -> "module:function": builds the live shell's adapters (serial ports...) from the
+# component's config: ``function(config) -> list[Adapter]``.  Components without local I/O
+# are not listed.
+ADAPTERS: dict[str, str] = {}
+
 # The paper's two machines.  Single-machine use needs no profile ("all").
 PROFILES: dict[str, dict] = {
     "server": {"router": True, "components": ("alter_gateway",),
@@ -40,6 +45,12 @@ def core_class(name: str) -> type[Core]:
         raise UnknownComponentError(
             f"no component {name!r} in this version; available: {', '.join(sorted(COMPONENTS))}")
     return import_path(COMPONENTS[name])
+
+
+def adapters_for(name: str, config) -> list:
+    """The live-shell adapters of component ``name`` (empty for most components)."""
+    path = ADAPTERS.get(name)
+    return import_path(path)(config) if path else []
 
 
 def config_types() -> dict[str, type]:
