@@ -192,7 +192,7 @@ class FlangeCommand(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., cycle: _Optional[int] = ..., d_translation_m: _Optional[_Union[Vector3, _Mapping]] = ..., d_rotation_rad: _Optional[_Union[Vector3, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., request_alter_off: _Optional[bool] = ...) -> None: ...
 
 class TobState(_message.Message):
-    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns")
+    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
     LINEAR_VELOCITY_M_S_FIELD_NUMBER: _ClassVar[int]
@@ -202,6 +202,8 @@ class TobState(_message.Message):
     STATUS_FIELD_NUMBER: _ClassVar[int]
     GATED_OUTLIERS_FIELD_NUMBER: _ClassVar[int]
     MEASUREMENT_STAMP_NS_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_FIELD_NUMBER: _ClassVar[int]
+    MEASUREMENTS_FIELD_NUMBER: _ClassVar[int]
     header: Header
     world_T_tob: Pose
     linear_velocity_m_s: Vector3
@@ -211,10 +213,12 @@ class TobState(_message.Message):
     status: TobStatus
     gated_outliers: int
     measurement_stamp_ns: int
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ...) -> None: ...
+    cycle: int
+    measurements: int
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ...) -> None: ...
 
 class ControllerStatus(_message.Message):
-    __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples")
+    __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples", "cycle", "saturated", "world_T_desired")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     MODE_FIELD_NUMBER: _ClassVar[int]
     VISIBLE_FIELD_NUMBER: _ClassVar[int]
@@ -224,6 +228,9 @@ class ControllerStatus(_message.Message):
     RECORDING_FIELD_NUMBER: _ClassVar[int]
     PATH_POINTS_FIELD_NUMBER: _ClassVar[int]
     CALIBRATION_SAMPLES_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_FIELD_NUMBER: _ClassVar[int]
+    SATURATED_FIELD_NUMBER: _ClassVar[int]
+    WORLD_T_DESIRED_FIELD_NUMBER: _ClassVar[int]
     header: Header
     mode: ControlMode
     visible: int
@@ -233,7 +240,10 @@ class ControllerStatus(_message.Message):
     recording: bool
     path_points: int
     calibration_samples: int
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., visible: _Optional[int] = ..., error_translation_m: _Optional[float] = ..., error_rotation_rad: _Optional[float] = ..., cycle_misses: _Optional[int] = ..., recording: _Optional[bool] = ..., path_points: _Optional[int] = ..., calibration_samples: _Optional[int] = ...) -> None: ...
+    cycle: int
+    saturated: bool
+    world_T_desired: Pose
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., visible: _Optional[int] = ..., error_translation_m: _Optional[float] = ..., error_rotation_rad: _Optional[float] = ..., cycle_misses: _Optional[int] = ..., recording: _Optional[bool] = ..., path_points: _Optional[int] = ..., calibration_samples: _Optional[int] = ..., cycle: _Optional[int] = ..., saturated: _Optional[bool] = ..., world_T_desired: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
 
 class PathPoint(_message.Message):
     __slots__ = ("header", "index", "world_T_tob", "has_tip", "world_T_tip")
