@@ -105,7 +105,7 @@ def run_component(args) -> int:
     core = cls(cfg.component(name, cls.config_type))
     run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
     try:
-        adapters = adapters_for(name, core.config)
+        adapters = adapters_for(name, core.config, run_dir=run_dir)
     except Exception as e:  # a serial port that does not open, say: name it and stop
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1

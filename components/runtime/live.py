@@ -173,7 +173,7 @@ class LiveShell:
                     adapter.write(out_topic, out)
                 except Exception:  # noqa: BLE001 - a failing port must not stop the core
                     log.exception("%s: adapter could not write %s", self.core.name, out_topic)
-            elif "/" in out_topic:
+            if "/" in out_topic:  # bus topics are published even when an adapter also takes them
                 self._publish(out_topic, payload)
             self.counters.produced += 1
         return outs

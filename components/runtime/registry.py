@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import inspect
 
 from humanpt.runtime.core import Core
 
@@ -47,10 +48,18 @@ def core_class(name: str) -> type[Core]:
     return import_path(COMPONENTS[name])
 
 
-def adapters_for(name: str, config) -> list:
-    """The live-shell adapters of component ``name`` (empty for most components)."""
+def adapters_for(name: str, config, run_dir=None) -> list:
+    """The live-shell adapters of component ``name`` (empty for most components).
+
+    A factory that takes a ``run_dir`` keyword gets the run directory (to write files
+    beside the recordings)."""
     path = ADAPTERS.get(name)
-    return import_path(path)(config) if path else []
+    if not path:
+        return []
+    factory = import_path(path)
+    if "run_dir" in inspect.signature(factory).parameters:
+        return factory(config, run_dir=run_dir)
+    return factory(config)
 
 
 def config_types() -> dict[str, type]:
