@@ -5,6 +5,11 @@ scheduled, so a run is fully deterministic.  Every message is serialised and par
 the way, as on the network, so each subscriber gets its own copy.  With a run directory
 each core is recorded exactly as the live shell records it, so lock-step recordings
 replay with ``humanpt replay`` too.
+
+Serial lines (:meth:`Lockstep.connect_serial`) carry one core's ``serial_tx`` bytes to
+another core's ``serial_rx`` with the line's timing: a chunk of n bytes occupies the line
+for n x bits-per-byte / baud seconds (8N1: 10 bits), chunks queue one after another, and
+each arrives whole when its last byte has.
 """
 
 from __future__ import annotations
@@ -35,6 +40,28 @@ class Delivered:
     data: bytes
 
 
+@dataclass
+class SerialLine:
+    """One direction of a serial line between two cores (see :meth:`Lockstep.connect_serial`).
+
+    Set ``enabled = False`` to cut it (bytes written meanwhile are lost; bytes already on
+    the wire still arrive).
+    """
+
+    src: str
+    dst: str
+    baud: int
+    bits_per_byte: int = 10
+    enabled: bool = True
+    free_at_ns: int = 0
+    bytes_carried: int = 0
+    bytes_lost: int = 0
+
+    def wire_time_ns(self, n_bytes: int) -> int:
+        """Time on the wire of ``n_bytes`` (ns, rounded up)."""
+        return -(-n_bytes * self.bits_per_byte * 1_000_000_000 // self.baud)
+
+
 class Lockstep:
     """Run cores on virtual time.
 
@@ -56,6 +83,7 @@ class Lockstep:
         self._heap: list[tuple[int, int, int, str, bytes]] = []
         self._order = 0
         self._subs: dict[str, list[int]] = {}
+        self._lines: dict[int, list[tuple[SerialLine, int]]] = {}  # src index -> (line, dst index)
         for i, c in enumerate(cores):
             for t in c.inputs:
                 self._subs.setdefault(t, []).append(i)
@@ -72,6 +100,35 @@ class Lockstep:
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:
         heapq.heappush(self._heap, (t_ns, self._order, core_index, topic, data))
         self._order += 1
+
+    def connect_serial(self, a: str, b: str, baud: int = 38_400, *, both_ways: bool = True,
+                       bits_per_byte: int = 10) -> list[SerialLine]:
+        """Wire core ``a``'s ``serial_tx`` to core ``b``'s ``serial_rx`` (and back, unless
+        ``both_ways`` is False) at ``baud`` with ``bits_per_byte`` per byte (8N1: 10)."""
+        if baud <= 0 or bits_per_byte <= 0:
+            raise ValueError("baud and bits_per_byte must be > 0")
+        names = [c.name for c in self.cores]
+        ia, ib = names.index(a), names.index(b)
+        pairs = [(a, ia, b, ib)] + ([(b, ib, a, ia)] if both_ways else [])
+        lines = []
+        for src, isrc, dst, idst in pairs:
+            line = SerialLine(src, dst, baud, bits_per_byte, free_at_ns=self.now_ns)
+            self._lines.setdefault(isrc, []).append((line, idst))
+            lines.append(line)
+        return lines
+
+    def _transmit(self, t_ns: int, src: int, msg) -> None:
+        for line, dst in self._lines.get(src, ()):
+            n = len(msg.data)
+            if not line.enabled:
+                line.bytes_lost += n
+                continue
+            start = max(t_ns, line.free_at_ns)
+            end = start + line.wire_time_ns(n)
+            line.free_at_ns = end
+            line.bytes_carried += n
+            chunk = pb.SerialChunk(header=header(end, frame_id=f"{line.src}->{line.dst}"), data=msg.data)
+            self._push(end, dst, "serial_rx", chunk.SerializeToString())
 
     def inject(self, t_ns: int, component: str, topic: str, msg) -> None:
         """Schedule an input (e.g. a ``param`` change) for one component."""
@@ -109,6 +166,8 @@ class Lockstep:
                     self.outputs.append(Delivered(t_ns, core.name, out_topic, payload))
                 for j in self._subs.get(out_topic, ()):
                     self._push(t_ns + self.latency_ns, j, out_topic, payload)
+                if out_topic == "serial_tx" and idx in self._lines:
+                    self._transmit(t_ns, idx, out)
         self.now_ns = max(self.now_ns, end_ns)
 
     def digest(self) -> str:

@@ -11,12 +11,17 @@ from humanpt.runtime.core import Core
 COMPONENTS: dict[str, str] = {
     "pinger": "humanpt.runtime.selftest:PingerCore",
     "ponger": "humanpt.runtime.selftest:PongerCore",
+    "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
+    "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
 }
 
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
 # component's config: ``function(config) -> list[Adapter]``.  Components without local I/O
 # are not listed.
-ADAPTERS: dict[str, str] = {}
+ADAPTERS: dict[str, str] = {
+    "alter_gateway": "humanpt.alter_gateway.shell:adapters",
+    "sim_robot": "humanpt.sim_robot.shell:adapters",
+}
 
 # The paper's two machines.  Single-machine use needs no profile ("all").
 PROFILES: dict[str, dict] = {

@@ -1,6 +1,7 @@
 """sim_robot: a simulated Puma controller at the far end of the ALTER serial link.
 
-So far only the pure kinematics (``humanpt.sim_robot.kinematics``): standard-DH Puma
-761/762 and 560 models, forward and analytic inverse kinematics with joint limits.
-The process shell (serial pty, 28 ms cycle, ALTER world/tool mode) comes later.
+``kinematics``: standard-DH Puma 761/762 and 560 models (forward, analytic inverse with
+joint limits, Jacobian). ``core.SimRobotCore`` (pure): its own 28 ms cycle, STATUS out,
+corrections in (world or tool mode), faults on unreachable corrections, truth out.
+``shell.PtyAdapter``: the master side of a pty pair whose slave the gateway opens.
 """

@@ -1,0 +1,7 @@
+"""alter_gateway: the host end of the ALTER serial link and the last line of safety.
+
+``core.AlterGatewayCore`` (pure) turns the controller's per-cycle STATUS into
+``alter_gateway/robot_state`` and answers each with a clamped, enveloped, fresh-or-zero
+CORRECTION; ``shell.adapters`` binds it to a serial port; ``harness`` runs cores on
+threads without Zenoh (benches, tests). See README.md.
+"""

@@ -1,0 +1,137 @@
+"""alter_gateway configuration (the ``[alter_gateway]`` section)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from humanpt.runtime.config import live
+
+SUPPORTED_BAUDS = (19_200, 38_400)
+# int16 wire units: 327.67 mm or 327.67 deg per cycle at most (messages.py).
+_WIRE_MAX_PER_CYCLE = 327.67
+
+
+@dataclass(frozen=True)
+class AlterGatewayConfig:
+    """The ALTER gateway: serial port, cycle, safety limits and watchdogs.
+
+    Lengths in mm, angles in degrees (what a person edits); the envelope is an
+    axis-aligned box in the world frame. ``world_T_base_mm_deg`` places the robot base
+    (the controller's "world" for ALTER) in the world: x, y, z mm, yaw, pitch, roll deg
+    (Z-Y-X); identity by default, as in the paper (world frame at the robot base).
+    """
+
+    # Serial device (/dev/ttyS0) or pyserial URL; the default is sim_robot's pty link.
+    port: str = "/tmp/humanpt-alter"
+    baud: int = 38_400
+    cycle_period_ms: float = 28.0
+    # Gateway timer: link timers, reply deadline, silence watchdog are checked this often.
+    tick_ms: float = 2.0
+    # Per-cycle limits = speed x cycle period (100 mm/s, 60 deg/s -> 2.8 mm, 1.68 deg).
+    max_speed_mm_s: float = live(100.0, "translation limit, mm/s (clamped by norm)")
+    max_angular_speed_deg_s: float = live(60.0, "rotation limit, deg/s (clamped by angle)")
+    envelope_min_mm: tuple[float, float, float] = live(
+        (-1600.0, -1600.0, -1400.0), "workspace box, world frame, lower corner (mm)"
+    )
+    envelope_max_mm: tuple[float, float, float] = live(
+        (1600.0, 1600.0, 1600.0), "workspace box, world frame, upper corner (mm)"
+    )
+    # A command older than this many cycles is stale: the gateway sends zero (HOLD).
+    stale_cycles: int = live(3, "cycles a command may be reused before it is stale")
+    # This many consecutive missed cycles (no fresh command, correction late at the robot,
+    # statuses lost) raise a fault: HOLD, and ALTER off if alter_off_on_fault.
+    fault_after_missed: int = live(10, "consecutive missed cycles that raise a fault")
+    alter_off_on_fault: bool = True
+    # After a STATUS, wait at most this long for the command of its cycle before answering
+    # with the freshest one (38 400 baud leaves ~9.8 ms of host slack in a 28 ms cycle).
+    reply_deadline_ms: float = 6.0
+    # No STATUS for this many cycles while the link is up: link_down event (silence).
+    status_timeout_cycles: int = 3
+    # Subtracted from the receive time to stamp robot_state (the pose's sample time);
+    # 0: stamp = receive time. On a real 38 400 baud line a STATUS takes 10.7 ms.
+    status_delay_ms: float = 0.0
+    world_T_base_mm_deg: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    # Repeated safety events of one code are rate-limited to one per interval.
+    event_interval_ms: float = 1000.0
+
+    def __post_init__(self) -> None:
+        if not self.port:
+            raise ValueError("port must name a serial device or a pyserial URL")
+        if self.baud not in SUPPORTED_BAUDS:
+            raise ValueError(
+                f"baud must be one of {SUPPORTED_BAUDS} (the ALTER board), got {self.baud}"
+            )
+        if not 1.0 <= self.cycle_period_ms <= 1000.0:
+            raise ValueError(
+                f"cycle_period_ms must be within 1 and 1000, got {self.cycle_period_ms}"
+            )
+        if not 0.1 <= self.tick_ms <= self.cycle_period_ms:
+            raise ValueError(f"tick_ms must be within 0.1 and cycle_period_ms, got {self.tick_ms}")
+        if not 0.0 < self.reply_deadline_ms < self.cycle_period_ms:
+            raise ValueError(
+                f"reply_deadline_ms must be > 0 and shorter than the cycle, got {self.reply_deadline_ms}"
+            )
+        cycle_s = self.cycle_period_ms / 1000.0
+        for name, value in (
+            ("max_speed_mm_s", self.max_speed_mm_s),
+            ("max_angular_speed_deg_s", self.max_angular_speed_deg_s),
+        ):
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be > 0, got {value}")
+            if value * cycle_s > _WIRE_MAX_PER_CYCLE:
+                raise ValueError(
+                    f"{name} = {value} exceeds the wire range ({_WIRE_MAX_PER_CYCLE} per cycle)"
+                )
+        lo, hi = np.asarray(self.envelope_min_mm, float), np.asarray(self.envelope_max_mm, float)
+        if (
+            lo.shape != (3,)
+            or hi.shape != (3,)
+            or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)))
+        ):
+            raise ValueError("envelope_min_mm and envelope_max_mm need three finite values each")
+        if np.any(lo >= hi):
+            raise ValueError(
+                f"envelope_min_mm {self.envelope_min_mm} must be below envelope_max_mm "
+                f"{self.envelope_max_mm} on every axis"
+            )
+        if not 0 <= self.stale_cycles <= 100:
+            raise ValueError(f"stale_cycles must be within 0 and 100, got {self.stale_cycles}")
+        if not 1 <= self.fault_after_missed <= 10_000:
+            raise ValueError(
+                f"fault_after_missed must be within 1 and 10000, got {self.fault_after_missed}"
+            )
+        if not 1 <= self.status_timeout_cycles <= 1000:
+            raise ValueError(
+                f"status_timeout_cycles must be within 1 and 1000, got {self.status_timeout_cycles}"
+            )
+        if not 0.0 <= self.status_delay_ms < self.cycle_period_ms:
+            raise ValueError(
+                f"status_delay_ms must be within 0 and the cycle, got {self.status_delay_ms}"
+            )
+        if len(self.world_T_base_mm_deg) != 6 or not np.all(np.isfinite(self.world_T_base_mm_deg)):
+            raise ValueError(
+                "world_T_base_mm_deg needs six finite values (x, y, z mm, yaw, pitch, roll deg)"
+            )
+        if self.event_interval_ms < 0:
+            raise ValueError(f"event_interval_ms must be >= 0, got {self.event_interval_ms}")
+
+    # -- derived, in the units the core uses ------------------------------------------
+    @property
+    def cycle_period_ns(self) -> int:
+        return round(self.cycle_period_ms * 1e6)
+
+    @property
+    def tick_period_ns(self) -> int:
+        return round(self.tick_ms * 1e6)
+
+    @property
+    def max_step_mm(self) -> float:
+        """Per-cycle translation limit (norm), mm."""
+        return self.max_speed_mm_s * self.cycle_period_ms / 1000.0
+
+    @property
+    def max_step_deg(self) -> float:
+        """Per-cycle rotation limit (angle), degrees."""
+        return self.max_angular_speed_deg_s * self.cycle_period_ms / 1000.0

@@ -1,0 +1,657 @@
+"""alter_gateway core (pure): the host end of the ALTER link and the last line of safety.
+
+Per controller cycle k (the controller sends STATUS k every ``cycle_period_ms``):
+
+1. STATUS k arrives (``serial_rx``): publish ``alter_gateway/robot_state`` (world_T_flange
+   from the status' fixed-point pose, stamp = receive time - ``status_delay_ms``) and
+   account for the previous cycle (missed or not).
+2. Answer with a CORRECTION echoing k, built from the controller's command for cycle k
+   (``controller/command``, FlangeCommand.cycle == k). If it is not there yet, wait for
+   it until ``reply_deadline_ms`` after the STATUS; then answer with the freshest command
+   no older than ``stale_cycles`` (velocity hold: per-cycle steps repeat), else zero.
+3. Every correction is clamped (translation by norm to ``max_speed_mm_s`` x cycle,
+   rotation by angle to ``max_angular_speed_deg_s`` x cycle), cut to keep the flange in
+   the workspace box, converted to the controller's ALTER frame (world/base or tool, from
+   the TOOL_MODE status bit) and quantised (0.01 mm, 0.01 deg) within the limits.
+
+Zero (HOLD) instead: no usable command (stale), the controller's liveliness token is gone,
+the command says HOLD/IDLE or asks ALTER off, the robot reports FAULT, or the gateway is
+faulted. ``fault_after_missed`` consecutive missed cycles (no fresh command at the
+deadline, the robot reporting CORRECTION_MISSED, statuses lost on the line) raise a
+latched fault: HOLD, plus ALTER_OFF if ``alter_off_on_fault``. The fault clears when the
+controller re-activates ALTER (the ALTER_ACTIVE bit rises again: a new ALTER session) or
+on ``console/command`` {component: alter_gateway, verb: reset_fault}. The miss watchdog
+arms with the first fresh command, and disarms while the controller is gone (then the
+gateway just holds and waits). Every such action is an event on ``alter_gateway/events``,
+rate-limited per code to one per ``event_interval_ms``.
+
+Frames: ``world`` (the cell), ``base`` (the robot base = the controller's ALTER world,
+placed by ``world_T_base_mm_deg``), ``tool`` (the flange). A FlangeCommand's
+header.frame_id says whether its step is in ``world`` (default) or ``tool``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from humanpt.alter import (
+    ControllerStatus,
+    Correction,
+    CorrectionFlags,
+    FrameError,
+    HostConfig,
+    HostEndpoint,
+    LinkConfig,
+    LinkDown,
+    LinkUp,
+    MessageRejected,
+    RepSent,
+    SendRejected,
+    StatusBits,
+    StatusReceived,
+    Transmit,
+)
+from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.alter_gateway.limiter import EventLimiter, suffix
+from humanpt.alter_gateway.safety import (
+    clamp_norm,
+    clip_to_envelope,
+    quantize,
+    rotation_angle_deg,
+)
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_vector3, pose
+
+_CYCLE_MOD = 1 << 32
+# Commands further ahead than this (cycles) are refused: the controller's cycle count is off.
+MAX_LEAD_CYCLES = 64
+# Command modes that mean "do not move".
+_ZERO_MODES = (pb.CONTROL_MODE_HOLD, pb.CONTROL_MODE_IDLE)
+
+ROBOT_STATE = "alter_gateway/robot_state"
+EVENTS = "alter_gateway/events"
+
+
+def cycles_after(a: int, b: int) -> int:
+    """a - b in uint32 cycle arithmetic, signed."""
+    d = (a - b) % _CYCLE_MOD
+    return d - _CYCLE_MOD if d >= _CYCLE_MOD // 2 else d
+
+
+@dataclass(frozen=True)
+class Command:
+    """A parsed FlangeCommand: per-cycle step in ``frame`` (mm, rotation vector rad)."""
+
+    cycle: int
+    frame: str  # "world" or "tool"
+    dp_mm: np.ndarray
+    rv_rad: np.ndarray
+    zero: bool  # HOLD / IDLE mode or ALTER off requested: no motion
+    alter_off: bool
+
+
+@dataclass(frozen=True)
+class Sent:
+    """One correction the gateway sent (for benches and tests; not an output)."""
+
+    t_ns: int
+    cycle: int
+    correction: Correction
+    source: str  # "fresh", "reused", "stale", "gone", "fault", "robot_fault", "hold"
+    command_cycle: int | None
+
+
+class AlterGatewayCore(Core):
+    name = "alter_gateway"
+    config_type = AlterGatewayConfig
+    inputs = ("controller/command", "console/command")
+    watch = ("controller",)
+
+    def __init__(self, config: AlterGatewayConfig):
+        super().__init__(config)
+        cycle_ns = config.cycle_period_ns
+        self._host = HostEndpoint(HostConfig(LinkConfig(rep_timeout_ns=3 * cycle_ns)))
+        self._limiter = EventLimiter(round(config.event_interval_ms * 1e6))
+        self._world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
+        self._started = False
+        self._commands: dict[int, Command] = {}
+        self._status: ControllerStatus | None = None
+        self._status_t_ns: int | None = None  # when the last STATUS arrived
+        self._pending: tuple[int, int] | None = None  # (cycle, deadline_ns) awaiting an answer
+        self._prev_cycle: int | None = None  # last STATUS cycle of this link session
+        self._prev_fresh: bool | None = (
+            None  # was it answered with its own command? None: not answered
+        )
+        self._missed = 0  # consecutive missed cycles
+        self._armed = False  # the miss watchdog: armed by a fresh command
+        self._fault: str | None = None  # latched fault reason
+        self._controller_gone = False
+        self._stale = False  # in a stale episode (sending zero for want of a command)
+        self._silent = False  # in a silence episode (link up, no STATUS)
+        self._link_down = False
+        self._tx = bytearray()
+        self.sent: deque[Sent] = deque(maxlen=100_000)
+        self.counters: dict[str, int] = dict.fromkeys(
+            (
+                "statuses",
+                "fresh",
+                "reused",
+                "zero",
+                "clamped",
+                "envelope",
+                "deadline_missed",
+                "robot_missed",
+                "status_lost",
+                "commands",
+                "commands_dropped",
+                "link_errors",
+                "link_down",
+                "faults",
+                "reps",
+            ),
+            0,
+        )
+
+    # -- contract ---------------------------------------------------------------------------
+    def tick_period_ns(self) -> int | None:
+        return self.config.tick_period_ns
+
+    @property
+    def fault(self) -> str | None:
+        return self._fault
+
+    @property
+    def missed_cycles(self) -> int:
+        return self._missed
+
+    @property
+    def link_running(self) -> bool:
+        return self._host.link.is_running
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        outs: list[Output] = []
+        if not self._started:
+            self._started = True
+            self._link(self._host.start(t_ns), t_ns, outs)
+        if topic == "tick":
+            self._on_tick(t_ns, outs)
+        elif topic == "serial_rx":
+            rx_ns = msg.header.stamp_ns or t_ns
+            self._link(self._host.receive(bytes(msg.data), t_ns), rx_ns, outs)
+        elif topic == "controller/command":
+            self._on_command(t_ns, msg, outs)
+        elif topic == "liveliness":
+            self._on_liveliness(t_ns, msg, outs)
+        elif topic == "console/command":
+            self._on_console(t_ns, msg, outs)
+        if self._tx:
+            outs.append(
+                (
+                    "serial_tx",
+                    pb.SerialChunk(
+                        header=self.next_header("serial_tx", t_ns, "alter"),
+                        data=bytes(self._tx),
+                        outgoing=True,
+                    ),
+                )
+            )
+            self._tx.clear()
+        return outs
+
+    # -- events -------------------------------------------------------------------------------
+    def _ev(
+        self,
+        outs: list[Output],
+        t_ns: int,
+        severity: int,
+        code: str,
+        text: str,
+        limited: bool = True,
+    ) -> None:
+        if limited:
+            held = self._limiter.allow(code, t_ns)
+            if held is None:
+                return
+            text += suffix(held)
+        outs.append(self.event(t_ns, severity, code, text))
+
+    # -- link -------------------------------------------------------------------------------
+    def _link(self, events, t_ns: int, outs: list[Output]) -> None:
+        """Act on the endpoint's events; ``t_ns`` is when the bytes arrived."""
+        for e in events:
+            if isinstance(e, Transmit):
+                self._tx += e.data
+            elif isinstance(e, StatusReceived):
+                self._on_status(e.status, t_ns, outs)
+            elif isinstance(e, LinkUp):
+                self._new_session()
+                if self._link_down:
+                    self._link_down = False
+                    self._ev(
+                        outs,
+                        t_ns,
+                        pb.SEVERITY_INFO,
+                        "link_up",
+                        "ALTER link up (DDCMP start-up done)",
+                        limited=False,
+                    )
+            elif isinstance(e, LinkDown):
+                self.counters["link_down"] += 1
+                self._link_down = True
+                self._new_session()
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_ERROR,
+                    "link_down",
+                    f"ALTER link down: {e.reason} ({e.unacked} corrections unacknowledged); "
+                    "the robot gets no corrections (holds) until it is back",
+                    limited=False,
+                )
+            elif isinstance(e, FrameError | MessageRejected):
+                self.counters["link_errors"] += 1
+                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "link_error", f"ALTER link: {e}")
+            elif isinstance(e, SendRejected):
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "send_rejected",
+                    f"correction not sent: {e.why}",
+                )
+            elif isinstance(e, RepSent):
+                self.counters["reps"] += 1
+
+    def _new_session(self) -> None:
+        """A link (re)start: cycle numbers and held commands of the old session are void."""
+        self._pending = None
+        self._prev_cycle = None
+        self._prev_fresh = None
+        self._commands.clear()
+        self._status = None
+        self._status_t_ns = None
+        self._silent = False
+        self._missed = 0
+
+    def _on_tick(self, t_ns: int, outs: list[Output]) -> None:
+        self._link(self._host.poll(t_ns), t_ns, outs)
+        if self._pending is not None and t_ns >= self._pending[1]:
+            cycle = self._pending[0]
+            self.counters["deadline_missed"] += 1
+            if self._armed and not self._controller_gone and self._fault is None:
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "deadline_missed",
+                    f"no command for cycle {cycle} within {self.config.reply_deadline_ms} ms of its status",
+                )
+            self._answer(cycle, t_ns, outs)
+        timeout_ns = self.config.status_timeout_cycles * self.config.cycle_period_ns
+        if (
+            self._host.link.is_running
+            and self._status_t_ns is not None
+            and not self._silent
+            and t_ns - self._status_t_ns > timeout_ns
+        ):
+            self._silent = True
+            self._pending = None
+            self.counters["link_down"] += 1
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_ERROR,
+                "link_down",
+                f"no STATUS from the controller for {(t_ns - self._status_t_ns) / 1e6:.0f} ms; "
+                "the robot gets no corrections (holds)",
+                limited=False,
+            )
+
+    # -- controller side ----------------------------------------------------------------------
+    def _on_command(self, t_ns: int, msg: pb.FlangeCommand, outs: list[Output]) -> None:
+        self.counters["commands"] += 1
+        if self._controller_gone:
+            self.counters["commands_dropped"] += 1
+            return  # its token is gone: nothing from it moves the robot until it is back
+        frame = msg.header.frame_id or "world"
+        dp_mm = from_vector3(msg.d_translation_m) * 1000.0
+        rv_rad = from_vector3(msg.d_rotation_rad)
+        if frame not in ("world", "tool") or not (
+            np.all(np.isfinite(dp_mm)) and np.all(np.isfinite(rv_rad))
+        ):
+            self.counters["commands_dropped"] += 1
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "bad_command",
+                f"command for cycle {msg.cycle} dropped: frame {frame!r}, step {dp_mm} mm, {rv_rad} rad "
+                "(need frame world or tool and finite values)",
+            )
+            return
+        ref = self._prev_cycle
+        if ref is not None:
+            lead = cycles_after(msg.cycle, ref)
+            if lead < -self.config.stale_cycles:
+                self.counters["commands_dropped"] += 1
+                return  # too old to ever be used
+            if lead > MAX_LEAD_CYCLES:
+                self.counters["commands_dropped"] += 1
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "bad_command",
+                    f"command for cycle {msg.cycle} is {lead} cycles ahead of the robot (cycle {ref}); dropped",
+                )
+                return
+        cmd = Command(
+            msg.cycle,
+            frame,
+            dp_mm,
+            rv_rad,
+            msg.mode in _ZERO_MODES or msg.request_alter_off,
+            msg.request_alter_off,
+        )
+        self._commands[msg.cycle] = cmd
+        if (
+            len(self._commands) > 2 * MAX_LEAD_CYCLES
+        ):  # bound the store (no status to prune against)
+            del self._commands[min(self._commands, key=lambda c: cycles_after(c, msg.cycle))]
+        if not self._armed and self._fault is None:
+            self._armed = True
+        if self._pending is not None and self._pending[0] == msg.cycle:
+            self._answer(msg.cycle, t_ns, outs)
+
+    def _on_liveliness(self, t_ns: int, msg: pb.Liveliness, outs: list[Output]) -> None:
+        if msg.component != "controller":
+            return
+        if not msg.alive and not self._controller_gone:
+            self._controller_gone = True
+            self._armed = False
+            self._commands.clear()
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "controller_gone",
+                "the controller's liveliness token is gone: holding the robot (zero corrections)",
+                limited=False,
+            )
+            if self._pending is not None:
+                self._answer(self._pending[0], t_ns, outs)
+        elif msg.alive and self._controller_gone:
+            self._controller_gone = False
+            self._missed = 0
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_INFO,
+                "controller_back",
+                "the controller is back; its commands move the robot again",
+                limited=False,
+            )
+
+    def _on_console(self, t_ns: int, msg: pb.Command, outs: list[Output]) -> None:
+        if msg.component != self.name:
+            return
+        if msg.verb == "reset_fault":
+            self._clear_fault(t_ns, "reset by console command", outs)
+        else:
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "bad_console_command",
+                f"unknown verb {msg.verb!r} (known: reset_fault)",
+            )
+
+    # -- robot side ---------------------------------------------------------------------------
+    def _on_status(self, status: ControllerStatus, rx_ns: int, outs: list[Output]) -> None:
+        cfg = self.config
+        k = status.cycle
+        self.counters["statuses"] += 1
+        prev_status = self._status
+        if self._silent:
+            self._silent = False
+            self._ev(
+                outs, rx_ns, pb.SEVERITY_INFO, "link_up", f"STATUS again (cycle {k})", limited=False
+            )
+        if self._pending is not None:  # a new STATUS overtook an unanswered one
+            self._prev_fresh = False
+            self._pending = None
+        # Account for the previous cycle (and any lost in between).
+        if (
+            self._prev_cycle is not None
+            and self._armed
+            and self._fault is None
+            and not self._controller_gone
+        ):
+            lost = cycles_after(k, self._prev_cycle) - 1
+            robot_missed = (
+                StatusBits.CORRECTION_MISSED in status.bits and self._prev_fresh is not None
+            )
+            missed = lost + (1 if (self._prev_fresh is False or robot_missed) else 0)
+            if lost > 0:
+                self.counters["status_lost"] += lost
+                self._ev(
+                    outs,
+                    rx_ns,
+                    pb.SEVERITY_WARNING,
+                    "status_lost",
+                    f"{lost} STATUS message(s) lost before cycle {k}",
+                )
+            if robot_missed:
+                self.counters["robot_missed"] += 1
+                self._ev(
+                    outs,
+                    rx_ns,
+                    pb.SEVERITY_WARNING,
+                    "robot_missed",
+                    f"the robot reports no correction in time for the cycle before {k}",
+                )
+            self._missed = self._missed + missed if missed else 0
+            if self._missed >= cfg.fault_after_missed:
+                self._raise_fault(
+                    rx_ns, f"{self._missed} consecutive missed cycles (at cycle {k})", outs
+                )
+        # Robot-side transitions.
+        was_active = prev_status is not None and StatusBits.ALTER_ACTIVE in prev_status.bits
+        if (
+            self._fault is not None
+            and StatusBits.ALTER_ACTIVE in status.bits
+            and prev_status is not None
+            and not was_active
+        ):
+            self._clear_fault(rx_ns, f"ALTER re-activated at the controller (cycle {k})", outs)
+        if StatusBits.FAULT in status.bits and (
+            prev_status is None or StatusBits.FAULT not in prev_status.bits
+        ):
+            self._ev(
+                outs,
+                rx_ns,
+                pb.SEVERITY_ERROR,
+                "robot_fault",
+                f"the controller reports FAULT at cycle {k}; holding",
+                limited=False,
+            )
+        self._status = status
+        self._status_t_ns = rx_ns
+        self._prev_cycle = k
+        self._prev_fresh = None
+        for c in [c for c in self._commands if cycles_after(c, k) < -cfg.stale_cycles]:
+            del self._commands[c]
+        outs.append(self._robot_state(status, rx_ns))
+        if k in self._commands or self._must_hold(status) is not None:
+            self._answer(k, rx_ns, outs)
+        else:
+            self._pending = (k, rx_ns + round(cfg.reply_deadline_ms * 1e6))
+
+    def _robot_state(self, status: ControllerStatus, rx_ns: int) -> Output:
+        world_T_flange = self._world_T_base @ status.base_T_flange_mm()
+        world_T_flange[:3, 3] /= 1000.0
+        b = status.bits
+        stamp = max(0, rx_ns - round(self.config.status_delay_ms * 1e6))
+        return ROBOT_STATE, pb.RobotState(
+            header=self.next_header(ROBOT_STATE, stamp, "world"),
+            world_T_flange=pose(world_T_flange),
+            status=pb.AlterStatus(
+                alter_active=StatusBits.ALTER_ACTIVE in b,
+                tool_mode=StatusBits.TOOL_MODE in b,
+                cumulative=StatusBits.CUMULATIVE in b,
+                arm_power=StatusBits.ARM_POWER in b,
+                fault=StatusBits.FAULT in b,
+            ),
+            cycle=status.cycle,
+            missed_cycles=self._missed,
+        )
+
+    def _must_hold(self, status: ControllerStatus) -> str | None:
+        """Why cycle ``status`` must get a zero correction regardless of commands, or None."""
+        if self._fault is not None:
+            return "fault"
+        if self._controller_gone:
+            return "gone"
+        if StatusBits.FAULT in status.bits:
+            return "robot_fault"
+        return None
+
+    # -- the answer -------------------------------------------------------------------------
+    def _answer(self, k: int, t_ns: int, outs: list[Output]) -> None:
+        """Send the correction for cycle ``k`` (the last STATUS) and close its wait."""
+        self._pending = None
+        status = self._status
+        if status is None or status.cycle != k:
+            return
+        cfg = self.config
+        hold = self._must_hold(status)
+        cmd = self._commands.get(k)
+        source = "fresh"
+        if hold is None and cmd is None:
+            older = [c for c in self._commands if -cfg.stale_cycles <= cycles_after(c, k) < 0]
+            if older:
+                cmd = self._commands[max(older, key=lambda c: cycles_after(c, k))]
+                source = "reused"
+            else:
+                source = "stale"
+        # A servo cycle is on time when its own command answered it; holding for a fault
+        # or an absent controller is not a servo cycle and is not counted (None).
+        self._prev_fresh = None if hold is not None else source == "fresh"
+        if source == "stale" and hold is None:
+            text = (
+                f"no command for cycle {k} or the {cfg.stale_cycles} before it: zero correction"
+                if self._armed
+                else f"no command from the controller yet (cycle {k}): zero correction"
+            )
+            if not self._stale:
+                self._limiter.reset("stale_command")
+            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "stale_command", text)
+            self._stale = True
+        elif self._stale and hold is None:
+            self._stale = False
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_INFO,
+                "command_resumed",
+                f"commands again from cycle {k}",
+                limited=False,
+            )
+        flags = CorrectionFlags(0)
+        if hold == "fault" and cfg.alter_off_on_fault:
+            flags |= CorrectionFlags.ALTER_OFF
+        if hold is not None or cmd is None or cmd.zero:
+            if cmd is not None and cmd.alter_off and hold is None:
+                flags |= CorrectionFlags.ALTER_OFF
+            correction = Correction.hold(k, flags)
+            source = hold or ("hold" if cmd is not None else "stale")
+        else:
+            correction = self._safe_correction(k, status, cmd, t_ns, outs)
+        self.counters[
+            "fresh" if source == "fresh" else "reused" if source == "reused" else "zero"
+        ] += 1
+        self.sent.append(Sent(t_ns, k, correction, source, cmd.cycle if cmd is not None else None))
+        self._link(self._host.send_correction(correction, t_ns), t_ns, outs)
+
+    def _safe_correction(
+        self, k: int, status: ControllerStatus, cmd: Command, t_ns: int, outs: list[Output]
+    ) -> Correction:
+        """Clamp, keep inside the envelope, change to the ALTER frame, quantise."""
+        cfg = self.config
+        base_T_flange = status.base_T_flange_mm()
+        world_R_base = self._world_T_base[:3, :3]
+        world_R_flange = world_R_base @ base_T_flange[:3, :3]
+        dp, rv = cmd.dp_mm, cmd.rv_rad
+        if cmd.frame == "tool":  # to world: a step about the flange origin
+            dp, rv = world_R_flange @ dp, world_R_flange @ rv
+        max_mm, max_deg = cfg.max_step_mm, cfg.max_step_deg
+        dp_c, t_clamped = clamp_norm(dp, max_mm)
+        rv_c, r_clamped = clamp_norm(rv, np.radians(max_deg))
+        if t_clamped or r_clamped:
+            self.counters["clamped"] += 1
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "clamped",
+                f"cycle {k}: step {np.linalg.norm(dp):.3f} mm / {rotation_angle_deg(rv):.3f} deg "
+                f"clamped to {max_mm:.3f} mm / {max_deg:.3f} deg per cycle "
+                f"({cfg.max_speed_mm_s:g} mm/s, {cfg.max_angular_speed_deg_s:g} deg/s)",
+            )
+        p_world = (self._world_T_base @ base_T_flange)[:3, 3]
+        dp_e, clipped = clip_to_envelope(
+            p_world, dp_c, np.asarray(cfg.envelope_min_mm), np.asarray(cfg.envelope_max_mm)
+        )
+        if clipped:
+            self.counters["envelope"] += 1
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "envelope",
+                f"cycle {k}: step to {np.round(p_world + dp_c, 2).tolist()} mm cut at the workspace "
+                f"envelope {list(cfg.envelope_min_mm)}..{list(cfg.envelope_max_mm)} mm",
+            )
+        # World -> the controller's ALTER frame.
+        dp_b, rv_b = world_R_base.T @ dp_e, world_R_base.T @ rv_c
+        if StatusBits.TOOL_MODE in status.bits:
+            R = base_T_flange[:3, :3]
+            dp_b, rv_b = R.T @ dp_b, R.T @ rv_b
+        return quantize(k, dp_b, rv_b, max_mm, max_deg)
+
+    # -- fault ----------------------------------------------------------------------------------
+    def _raise_fault(self, t_ns: int, reason: str, outs: list[Output]) -> None:
+        if self._fault is not None:
+            return
+        self._fault = reason
+        self._armed = False
+        self.counters["faults"] += 1
+        action = "HOLD and ALTER off requested" if self.config.alter_off_on_fault else "HOLD"
+        self._ev(
+            outs,
+            t_ns,
+            pb.SEVERITY_ERROR,
+            "fault",
+            f"gateway fault: {reason}; {action}",
+            limited=False,
+        )
+
+    def _clear_fault(self, t_ns: int, why: str, outs: list[Output]) -> None:
+        if self._fault is None:
+            return
+        self._ev(
+            outs,
+            t_ns,
+            pb.SEVERITY_INFO,
+            "fault_cleared",
+            f"gateway fault cleared: {why}",
+            limited=False,
+        )
+        self._fault = None
+        self._missed = 0
+        self._commands.clear()

@@ -1,0 +1,97 @@
+"""sim_robot configuration (the ``[sim_robot]`` section)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from humanpt.sim_robot.kinematics import PumaKinematics, RobotModelConfig, UnreachableError
+
+# Flange straight down in front of the robot, elbow up: (786.0, 190.0, -296.0) mm in the
+# base frame, yaw 0, pitch 0, roll 180 deg (puma762). Well inside every joint limit and
+# away from the wrist singularity (q5 = 25 deg).
+DEFAULT_START_JOINTS_DEG = (0.0, -35.0, 190.0, 0.0, 25.0, -180.0)
+
+
+@dataclass(frozen=True)
+class SimRobotConfig:
+    """A simulated Puma controller at the far end of the ALTER link.
+
+    The world frame is the robot base (as in the paper) unless ``world_T_base_mm_deg``
+    (x, y, z mm, yaw, pitch, roll deg, Z-Y-X) places the base elsewhere; ALTER's "world"
+    mode means the base frame, as on the real controller.
+    """
+
+    model: Literal["puma762", "puma560"] = "puma762"
+    cycle_period_ms: float = 28.0
+    # world: a correction moves the flange in the base frame, rotating about the flange
+    # origin; tool: the step is expressed in the flange frame.
+    alter_mode: Literal["world", "tool"] = "world"
+    start_joints_deg: tuple[float, float, float, float, float, float] = DEFAULT_START_JOINTS_DEG
+    # If given (six values), overrides start_joints_deg: base_T_flange as x, y, z mm, yaw,
+    # pitch, roll deg, solved by IK on the branch closest to start_joints_deg. Empty: unset.
+    start_pose_mm_deg: tuple[float, ...] = ()
+    world_T_base_mm_deg: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    # Symlink to the pty's slave side; the gateway opens this path as its port.
+    pty_link: str = "/tmp/humanpt-alter"
+    # Oldest correction (cycles behind the latest STATUS) the controller still applies.
+    max_correction_age_cycles: int = 2
+    # A correction needing a faster joint motion than this faults the controller (near a
+    # singularity the closest IK branch can jump).
+    max_joint_speed_deg_s: float = 250.0
+    alter_on_start: bool = True
+    event_interval_ms: float = 1000.0
+
+    def __post_init__(self) -> None:
+        if not 1.0 <= self.cycle_period_ms <= 1000.0:
+            raise ValueError(
+                f"cycle_period_ms must be within 1 and 1000, got {self.cycle_period_ms}"
+            )
+        if not 0 <= self.max_correction_age_cycles <= 100:
+            raise ValueError(
+                f"max_correction_age_cycles must be within 0 and 100, got {self.max_correction_age_cycles}"
+            )
+        if not self.max_joint_speed_deg_s > 0:
+            raise ValueError(f"max_joint_speed_deg_s must be > 0, got {self.max_joint_speed_deg_s}")
+        if not self.pty_link:
+            raise ValueError("pty_link must be a path")
+        if self.event_interval_ms < 0:
+            raise ValueError(f"event_interval_ms must be >= 0, got {self.event_interval_ms}")
+        for name in ("start_joints_deg", "world_T_base_mm_deg", "start_pose_mm_deg"):
+            value = getattr(self, name)
+            if name == "start_pose_mm_deg" and not value:
+                continue
+            if len(value) != 6 or not np.all(np.isfinite(value)):
+                raise ValueError(f"{name} needs six finite values, got {value!r}")
+        self.start_joints_rad()  # raises ValueError when the start is not reachable
+
+    @property
+    def cycle_period_ns(self) -> int:
+        return round(self.cycle_period_ms * 1e6)
+
+    def kinematics(self) -> PumaKinematics:
+        return PumaKinematics(RobotModelConfig(model=self.model))
+
+    def start_joints_rad(self) -> np.ndarray:
+        """(6,) the start joints (rad): start_joints_deg, or IK of start_pose_mm_deg."""
+        from humanpt.geometry.transforms import transform_from_x
+
+        kin = self.kinematics()
+        q0 = np.radians(np.asarray(self.start_joints_deg, dtype=float))
+        if not self.start_pose_mm_deg:
+            if not kin.within_limits(q0):
+                raise ValueError(
+                    f"start_joints_deg {self.start_joints_deg} are outside the joint limits "
+                    f"{kin.config.joint_limits_deg}"
+                )
+            return q0
+        try:
+            return kin.inverse(
+                transform_from_x(np.asarray(self.start_pose_mm_deg, dtype=float)), q0
+            )
+        except UnreachableError as e:
+            raise ValueError(
+                f"start_pose_mm_deg {self.start_pose_mm_deg} is not reachable: {e}"
+            ) from None

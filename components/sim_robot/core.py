@@ -1,0 +1,331 @@
+"""sim_robot core (pure): a simulated Puma controller at the far end of the ALTER link.
+
+Its own cycle (``tick`` every ``cycle_period_ms``, 28 ms as on the Puma). At each cycle
+boundary, in this order:
+
+1. apply the most recent valid correction received during the cycle (the controller end
+   of the codec delivers only in-sequence, fresh, never-repeated corrections): world mode
+   ``base_T_flange' = [dR R, p + dp]`` (a step about the flange origin, base frame);
+   tool mode ``base_T_flange' = base_T_flange @ [dR, dp]``; then inverse kinematics on the
+   branch closest to the current joints. An unreachable pose or a joint step faster than
+   ``max_joint_speed_deg_s`` faults the controller, as a real one would: FAULT set, ALTER
+   stopped, the arm stays where it is, an event. No correction at all: the arm stays put
+   and the next STATUS carries CORRECTION_MISSED;
+2. count the cycle and send STATUS (cycle, status bits, base_T_flange from forward
+   kinematics, quantised by the codec);
+3. publish ``sim_robot/truth`` (world_T_flange, exact, stamp = the cycle time).
+
+A HOLD correction does not move; ALTER_OFF leaves ALTER after the cycle. ALTER comes back
+(and a FAULT clears) with ``console/command`` {component: sim_robot, verb: alter_on}, as
+an operator would restart it at the controller; ``alter_off`` stops it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+
+from humanpt.alter import (
+    ControllerConfig,
+    ControllerEndpoint,
+    ControllerStatus,
+    Correction,
+    CorrectionFlags,
+    CorrectionReceived,
+    FrameError,
+    LinkConfig,
+    LinkDown,
+    LinkUp,
+    MessageRejected,
+    StatusBits,
+    Transmit,
+)
+from humanpt.alter_gateway.limiter import EventLimiter, suffix
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import pose
+from humanpt.sim_robot.config import SimRobotConfig
+from humanpt.sim_robot.kinematics import UnreachableError
+
+TRUTH = "sim_robot/truth"
+
+
+class SimRobotCore(Core):
+    name = "sim_robot"
+    config_type = SimRobotConfig
+    inputs = ("console/command",)
+
+    def __init__(self, config: SimRobotConfig):
+        super().__init__(config)
+        self.kin = config.kinematics()
+        self.q_rad = config.start_joints_rad()
+        self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
+        cycle_ns = config.cycle_period_ns
+        self._ctrl = ControllerEndpoint(
+            ControllerConfig(
+                link=LinkConfig(rep_timeout_ns=3 * cycle_ns),
+                max_correction_age_cycles=config.max_correction_age_cycles,
+            )
+        )
+        self._limiter = EventLimiter(round(config.event_interval_ms * 1e6))
+        self._started = False
+        self.cycle = 0  # the last cycle number issued (the first STATUS is cycle 1)
+        self.alter_active = config.alter_on_start
+        self.fault: str | None = None
+        self._pending: tuple[Correction, int] | None = None  # (correction, age at delivery)
+        self._sent_status = False  # a STATUS went out since the link came up
+        self._missed = False  # CORRECTION_MISSED for the next STATUS
+        self._tx = bytearray()
+        self.counters: dict[str, int] = dict.fromkeys(
+            (
+                "cycles",
+                "applied",
+                "applied_on_time",
+                "applied_late",
+                "missed",
+                "overwritten",
+                "rejected",
+                "ignored",
+                "link_down",
+                "faults",
+            ),
+            0,
+        )
+        # (cycle the correction was applied at, the correction) for tests and benches.
+        self.applied: deque[tuple[int, Correction]] = deque(maxlen=100_000)
+
+    def tick_period_ns(self) -> int | None:
+        return self.config.cycle_period_ns
+
+    # -- state ----------------------------------------------------------------------------
+    @property
+    def base_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) the flange in the robot base frame, mm (forward kinematics of q)."""
+        return self.kin.forward(self.q_rad)
+
+    @property
+    def world_T_flange_mm(self) -> np.ndarray:
+        return self.world_T_base @ self.base_T_flange_mm
+
+    @property
+    def link_running(self) -> bool:
+        return self._ctrl.link.is_running
+
+    def status_bits(self) -> StatusBits:
+        bits = StatusBits.ARM_POWER | StatusBits.CUMULATIVE
+        if self.alter_active:
+            bits |= StatusBits.ALTER_ACTIVE
+        if self.config.alter_mode == "tool":
+            bits |= StatusBits.TOOL_MODE
+        if self.fault is not None:
+            bits |= StatusBits.FAULT
+        if self._missed:
+            bits |= StatusBits.CORRECTION_MISSED
+        return bits
+
+    # -- inputs -----------------------------------------------------------------------------
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        outs: list[Output] = []
+        if topic == "tick":
+            self._on_cycle(t_ns, outs)
+        elif topic == "serial_rx":
+            if self._started:
+                self._link(self._ctrl.receive(bytes(msg.data), t_ns), t_ns, outs)
+        elif topic == "console/command":
+            self._on_console(t_ns, msg, outs)
+        if self._tx:
+            outs.append(
+                (
+                    "serial_tx",
+                    pb.SerialChunk(
+                        header=self.next_header("serial_tx", t_ns, "alter"),
+                        data=bytes(self._tx),
+                        outgoing=True,
+                    ),
+                )
+            )
+            self._tx.clear()
+        return outs
+
+    def _ev(
+        self,
+        outs: list[Output],
+        t_ns: int,
+        severity: int,
+        code: str,
+        text: str,
+        limited: bool = True,
+    ) -> None:
+        if limited:
+            held = self._limiter.allow(code, t_ns)
+            if held is None:
+                return
+            text += suffix(held)
+        outs.append(self.event(t_ns, severity, code, text))
+
+    def _link(self, events, t_ns: int, outs: list[Output]) -> None:
+        for e in events:
+            if isinstance(e, Transmit):
+                self._tx += e.data
+            elif isinstance(e, CorrectionReceived):
+                if self._pending is not None:
+                    self.counters["overwritten"] += 1  # two in one cycle: the most recent wins
+                self._pending = (e.correction, e.age_cycles)
+            elif isinstance(e, LinkUp):
+                self._sent_status = False
+                self._ev(outs, t_ns, pb.SEVERITY_INFO, "link_up", "ALTER link up", limited=False)
+            elif isinstance(e, LinkDown):
+                self.counters["link_down"] += 1
+                self._pending = None
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_ERROR,
+                    "link_down",
+                    f"ALTER link down: {e.reason}; holding position",
+                    limited=False,
+                )
+            elif isinstance(e, FrameError | MessageRejected):
+                self.counters["rejected"] += 1
+                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "link_error", f"ALTER link: {e}")
+
+    def _on_console(self, t_ns: int, msg: pb.Command, outs: list[Output]) -> None:
+        if msg.component != self.name:
+            return
+        if msg.verb == "alter_on":
+            was = self.fault
+            self.fault = None
+            self.alter_active = True
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_INFO,
+                "alter_on",
+                "ALTER on" + (f" (fault cleared: {was})" if was else ""),
+                limited=False,
+            )
+        elif msg.verb == "alter_off":
+            self.alter_active = False
+            self._ev(
+                outs, t_ns, pb.SEVERITY_INFO, "alter_off", "ALTER off (console)", limited=False
+            )
+        else:
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "bad_console_command",
+                f"unknown verb {msg.verb!r} (known: alter_on, alter_off)",
+            )
+
+    # -- the cycle --------------------------------------------------------------------------
+    def _on_cycle(self, t_ns: int, outs: list[Output]) -> None:
+        if not self._started:
+            self._started = True
+            self._link(self._ctrl.start(t_ns), t_ns, outs)
+        else:
+            self._link(self._ctrl.poll(t_ns), t_ns, outs)
+        self._apply_pending(t_ns, outs)
+        self.cycle = (self.cycle + 1) & 0xFFFFFFFF
+        self.counters["cycles"] += 1
+        status = ControllerStatus.from_pose(self.cycle, self.status_bits(), self.base_T_flange_mm)
+        events = self._ctrl.send_status(status, t_ns)  # counts as issued even if the link is down
+        self._link(events, t_ns, outs)
+        if self.link_running:
+            self._sent_status = True
+        world_T_flange = self.world_T_flange_mm
+        world_T_flange[:3, 3] /= 1000.0
+        outs.append(
+            (
+                TRUTH,
+                pb.Truth(
+                    header=self.next_header(TRUTH, t_ns, "world"),
+                    world_T_flange=pose(world_T_flange),
+                ),
+            )
+        )
+
+    def _apply_pending(self, t_ns: int, outs: list[Output]) -> None:
+        pending, self._pending = self._pending, None
+        self._missed = False
+        if pending is None:
+            if self.alter_active and self.fault is None and self.link_running and self._sent_status:
+                self._missed = True
+                self.counters["missed"] += 1
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "correction_missed",
+                    f"no correction in time for cycle {self.cycle}: holding position",
+                )
+            return
+        c, age = pending
+        if not self.alter_active or self.fault is not None:
+            if any(c.deltas):
+                self.counters["ignored"] += 1
+                self._ev(
+                    outs,
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "correction_ignored",
+                    f"correction for cycle {c.echo_cycle} ignored: ALTER is "
+                    + ("faulted" if self.fault else "off"),
+                )
+            return
+        if CorrectionFlags.HOLD not in c.flags:
+            self._move(c, t_ns, outs)
+        self.counters["applied"] += 1
+        self.counters["applied_on_time" if age == 0 else "applied_late"] += 1
+        if CorrectionFlags.ALTER_OFF in c.flags:
+            self.alter_active = False
+            self._ev(
+                outs,
+                t_ns,
+                pb.SEVERITY_WARNING,
+                "alter_off",
+                f"ALTER off at the host's request (correction for cycle {c.echo_cycle})",
+                limited=False,
+            )
+
+    def _move(self, c: Correction, t_ns: int, outs: list[Output]) -> None:
+        T = self.base_T_flange_mm
+        delta = c.delta_T_mm()
+        if self.config.alter_mode == "tool":
+            target = T @ delta
+        else:
+            target = np.eye(4)
+            target[:3, :3] = delta[:3, :3] @ T[:3, :3]
+            target[:3, 3] = T[:3, 3] + delta[:3, 3]
+        try:
+            q = self.kin.inverse(target, self.q_rad)
+        except UnreachableError as e:
+            self._fault(t_ns, f"correction for cycle {c.echo_cycle} is unreachable: {e}", outs)
+            return
+        step_deg = float(np.degrees(np.max(np.abs(q - self.q_rad))))
+        max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_period_ms / 1000.0
+        if step_deg > max_step_deg:
+            self._fault(
+                t_ns,
+                f"correction for cycle {c.echo_cycle} needs a joint step of {step_deg:.2f} deg "
+                f"(> {max_step_deg:.2f} deg per cycle; near a singularity?)",
+                outs,
+            )
+            return
+        self.q_rad = q
+        self.applied.append((self.cycle, c))
+
+    def _fault(self, t_ns: int, reason: str, outs: list[Output]) -> None:
+        self.fault = reason
+        self.alter_active = False
+        self.counters["faults"] += 1
+        self._ev(
+            outs,
+            t_ns,
+            pb.SEVERITY_ERROR,
+            "fault",
+            f"controller FAULT: {reason}; ALTER stopped",
+            limited=False,
+        )

@@ -1,0 +1,130 @@
+"""sim_robot's live-shell adapter: the master side of a pseudo-terminal pair.
+
+``humanpt sim_robot`` opens a pty pair (``os.openpty``, raw mode), points the symlink
+``pty_link`` (default ``/tmp/humanpt-alter``) at the slave side and serves the master side:
+bytes read become ``serial_rx`` inputs, ``serial_tx`` outputs are written. The gateway
+opens ``pty_link`` as its ``port`` (pyserial), exactly as it would open /dev/ttyS0.
+
+A pty has no baud rate: bytes cross at once. Writes never block the core: if nobody reads
+the slave and the pty buffer is full, bytes are dropped (counted), as on a line whose far
+end is unplugged.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Callable
+from pathlib import Path
+
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
+from humanpt.sim_robot.config import SimRobotConfig
+
+log = logging.getLogger("humanpt.sim_robot")
+
+
+class PtyAdapter:
+    """The master end of a fresh pty pair, with ``link`` -> the slave's device path."""
+
+    topics_out = ("serial_tx",)
+
+    def __init__(self, link: str | Path, *, poll_s: float = 0.05):
+        self.link = Path(link)
+        self.poll_s = poll_s
+        self.master_fd, self._slave_fd = os.openpty()
+        # Raw: no echo, no line discipline, 8-bit clean (the pty's termios is shared).
+        tty.setraw(self.master_fd)
+        tty.setraw(self._slave_fd)
+        os.set_blocking(self.master_fd, False)
+        self.slave_path = os.ttyname(self._slave_fd)
+        self._make_link()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.bytes_in = 0
+        self.bytes_out = 0
+        self.bytes_dropped = 0
+
+    def _make_link(self) -> None:
+        if self.link.exists() and not self.link.is_symlink():
+            raise FileExistsError(
+                f"pty_link {self.link} exists and is not a symlink; not replacing it"
+            )
+        self.link.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.link.with_name(f".{self.link.name}.{os.getpid()}")
+        if tmp.is_symlink():
+            tmp.unlink()
+        os.symlink(self.slave_path, tmp)
+        os.replace(tmp, self.link)  # atomic: a gateway never sees the link missing
+        log.info("sim_robot: serial pty %s, linked from %s", self.slave_path, self.link)
+
+    def start(self, put: Callable[[str, object], None]) -> None:
+        self._thread = threading.Thread(
+            target=self._read_loop, args=(put,), name="pty-rx", daemon=True
+        )
+        self._thread.start()
+
+    def _read_loop(self, put) -> None:
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self.master_fd], [], [], self.poll_s)
+                if not ready:
+                    continue
+                data = os.read(self.master_fd, 4096)
+            except BlockingIOError:
+                continue
+            except OSError as e:
+                if self._stop.is_set() or e.errno == errno.EBADF:
+                    return
+                log.error("pty read failed: %s", e)
+                self._stop.wait(self.poll_s)
+                continue
+            if data:
+                self.bytes_in += len(data)
+                put(
+                    "serial_rx",
+                    pb.SerialChunk(
+                        header=header(time.time_ns(), frame_id=str(self.link)), data=data
+                    ),
+                )
+
+    def write(self, topic: str, msg: pb.SerialChunk) -> None:
+        data = memoryview(msg.data)
+        while data:
+            try:
+                n = os.write(self.master_fd, data)
+            except BlockingIOError:
+                self.bytes_dropped += len(data)
+                return
+            except OSError as e:
+                if e.errno in (errno.EIO, errno.EBADF):
+                    self.bytes_dropped += len(data)
+                    return
+                raise
+            self.bytes_out += n
+            data = data[n:]
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        try:
+            if self.link.is_symlink() and os.readlink(self.link) == self.slave_path:
+                self.link.unlink()
+        except OSError:
+            pass
+        for fd in (self.master_fd, self._slave_fd):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+def adapters(config: SimRobotConfig) -> list[PtyAdapter]:
+    """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``."""
+    return [PtyAdapter(config.pty_link)]

@@ -1,0 +1,416 @@
+"""The gateway core alone, on scripted inputs: every safety rule, its zero correction and its event."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from humanpt.alter import ControllerEndpoint, CorrectionFlags, StatusBits
+from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.alter_gateway.core import AlterGatewayCore
+from humanpt.alter_gateway.safety import (
+    clamp_norm,
+    clip_to_envelope,
+    correction_angle_deg,
+    quantize,
+)
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.runtime.config import ConfigError, build
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose, header
+from tests.alter_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, Rig
+
+HOLD = CorrectionFlags.HOLD
+
+
+def _rig(**kw) -> Rig:
+    rig = Rig(**kw)
+    assert rig.gw.link_running and rig.robot.link.is_running
+    return rig
+
+
+# -- link start-up and the robot state ------------------------------------------------------
+
+
+def test_status_becomes_robot_state_with_receive_stamp_and_world_pose_in_metres():
+    rig = _rig(status_delay_ms=1.5)
+    rig.advance(10 * MS)
+    rig.status()
+    (state,) = rig.states()
+    assert state.cycle == 1 and state.missed_cycles == 0
+    assert state.header.stamp_ns == rig.t_ns - 1_500_000 and state.header.frame_id == "world"
+    assert state.status.alter_active and state.status.arm_power and not state.status.fault
+    T = from_pose(state.world_T_flange)
+    np.testing.assert_allclose(T[:3, 3], START_X[:3] / 1000.0, atol=1e-8)
+    np.testing.assert_allclose(T[:3, :3], transform_from_x(START_X)[:3, :3], atol=1e-6)
+
+
+def test_world_T_base_places_the_robot_state_and_rotates_world_commands_into_the_base():
+    rig = _rig(world_T_base_mm_deg=(100.0, -50.0, 700.0, 90.0, 0.0, 0.0))
+    rig.status()
+    T = from_pose(rig.states()[-1].world_T_flange)
+    expected = transform_from_x(np.array([100.0, -50.0, 700.0, 90, 0, 0])) @ transform_from_x(
+        START_X
+    )
+    np.testing.assert_allclose(T[:3, 3] * 1000, expected[:3, 3], atol=1e-5)
+    rig.command(dp_mm=(1.0, 0.0, 0.0))  # +x in the world is -y in a base turned 90 deg about z
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.0, -1.0, 0.0], atol=1e-9)
+
+
+def test_a_fresh_command_within_limits_is_sent_as_is_to_the_wire_resolution():
+    rig = _rig()
+    rig.status()
+    assert rig.corrections == []  # waits for the command of cycle 1
+    rig.command(dp_mm=(1.234, -0.5, 0.25), rv_deg=(0.1, -0.2, 0.3))
+    cycle, c = rig.corrections[-1]
+    assert cycle == 1 and c.flags == CorrectionFlags(0)
+    np.testing.assert_allclose(c.translation_mm, [1.23, -0.5, 0.25])
+    assert abs(correction_angle_deg(c) - np.linalg.norm([0.1, 0.2, 0.3])) < 0.02
+    assert rig.gw.sent[-1].source == "fresh"
+    assert "clamped" not in rig.codes()
+
+
+def test_clamping_is_by_norm_and_by_angle_keeping_the_direction():
+    rig = _rig()
+    rig.status()
+    rig.command(dp_mm=(30.0, 40.0, 0.0), rv_deg=(0.0, 0.0, 5.0))
+    c = rig.last_correction()
+    # 2.8 mm along (0.6, 0.8, 0): both axes scaled, not clipped per axis.
+    np.testing.assert_allclose(c.translation_mm, [1.68, 2.24, 0.0], atol=0.006)
+    assert np.linalg.norm(c.translation_mm) <= 2.8 + 1e-9
+    np.testing.assert_allclose(c.rotation_deg, [0.0, 0.0, 1.68], atol=0.006)
+    assert rig.codes() == ["clamped"]
+    assert "2.800 mm / 1.680 deg" in rig.events()[-1].text
+    # An oblique rotation keeps its axis.
+    rig.advance(CYCLE_NS)
+    rig.status()
+    rig.command(rv_deg=(3.0, 3.0, 3.0))
+    c = rig.last_correction()
+    assert correction_angle_deg(c) <= 1.68 + 1e-9
+    assert correction_angle_deg(c) > 1.6
+    r = c.rotation_deg
+    assert np.ptp(r) < 0.02
+
+
+def test_clamping_follows_live_limit_changes():
+    rig = _rig()
+    outs = rig.step(
+        "param",
+        pb.ParamSet(
+            header=header(0), component="alter_gateway", key="max_speed_mm_s", value_json="50"
+        ),
+    )
+    assert rig.codes(outs) == ["param_changed"]
+    rig.status()
+    rig.command(dp_mm=(10.0, 0.0, 0.0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.4, 0, 0])
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.lists(st.floats(-50, 50), min_size=3, max_size=3),
+    st.lists(st.floats(-0.5, 0.5), min_size=3, max_size=3),
+    st.lists(st.floats(-3000, 3000), min_size=3, max_size=3),
+)
+def test_quantised_steps_never_exceed_the_limits_nor_leave_the_box(dp, rv, p):
+    dp_c, _ = clamp_norm(np.array(dp), 2.8)
+    rv_c, _ = clamp_norm(np.array(rv), np.radians(1.68))
+    c = quantize(7, dp_c, rv_c, 2.8, 1.68)
+    assert np.linalg.norm(c.translation_mm) <= 2.8 + 1e-9
+    assert correction_angle_deg(c) <= 1.68 + 1e-9
+    lo, hi = np.array([-1000.0, -1000, -1000]), np.array([1000.0, 1000, 1000])
+    step, _ = clip_to_envelope(np.array(p), dp_c, lo, hi)
+    target = np.array(p) + step
+    assert np.all(target >= np.minimum(lo, p) - 1e-9) and np.all(target <= np.maximum(hi, p) + 1e-9)
+    assert np.linalg.norm(step) <= np.linalg.norm(dp_c) + 1e-9
+
+
+def test_envelope_cuts_the_step_and_a_flange_outside_may_only_come_back():
+    x, y, z = START_X[:3]
+    rig = _rig(
+        envelope_min_mm=(-2000.0, -2000.0, -2000.0), envelope_max_mm=(x + 1.0, 2000.0, 2000.0)
+    )
+    rig.status()
+    rig.command(dp_mm=(2.0, 0.5, 0.0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0.5, 0.0])
+    assert rig.codes() == ["envelope"]
+    # Now the box lies below the flange (z max under it): moving up is refused, down is fine.
+    rig = _rig(
+        envelope_min_mm=(-2000.0, -2000.0, -2000.0), envelope_max_mm=(2000.0, 2000.0, z - 10.0)
+    )
+    rig.status()
+    rig.command(dp_mm=(0.5, 0.0, 2.0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.5, 0.0, 0.0])
+    rig.advance(CYCLE_NS)
+    rig.status()
+    rig.command(dp_mm=(0.0, 0.0, -2.0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.0, 0.0, -2.0])
+
+
+def test_tool_mode_corrections_are_expressed_in_the_flange_frame():
+    rig = _rig()
+    rig.bits = ACTIVE | StatusBits.TOOL_MODE
+    rig.status()
+    rig.command(dp_mm=(0.0, 0.0, -1.0), rv_deg=(0.0, 0.0, 1.0))  # world: down, turn about world z
+    c = rig.last_correction()
+    # The flange points down (z_flange = -z_world, y_flange = -y_world): down is +z_tool.
+    np.testing.assert_allclose(c.translation_mm, [0.0, 0.0, 1.0], atol=1e-9)
+    np.testing.assert_allclose(c.rotation_deg, [0.0, 0.0, -1.0], atol=1e-9)
+    # A tool-frame command passes through unchanged in tool mode.
+    rig.advance(CYCLE_NS)
+    rig.status()
+    rig.command(dp_mm=(0.3, 0.2, 0.1), frame="tool")
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.3, 0.2, 0.1], atol=1e-9)
+
+
+# -- holding: stale commands, liveliness, HOLD modes ------------------------------------------
+
+
+def test_stale_command_is_reused_for_stale_cycles_then_zero_with_one_event():
+    rig = _rig()
+    for _ in range(3):
+        rig.cycle_with_command(dp_mm=(1.0, 0.0, 0.0))
+    for _ in range(6):  # the controller falls silent
+        rig.status()
+        rig.advance(CYCLE_NS)
+    sources = [s.source for s in rig.gw.sent]
+    assert sources == ["fresh"] * 3 + ["reused"] * 3 + ["stale"] * 3
+    for _, c in rig.corrections[3:6]:
+        np.testing.assert_allclose(c.translation_mm, [1.0, 0, 0])  # velocity hold
+    for _, c in rig.corrections[6:]:
+        assert c.deltas == (0,) * 6 and HOLD in c.flags
+    stale = [e for e in rig.events() if e.code == "stale_command"]
+    assert len(stale) == 1 and "no command for cycle 7" in stale[0].text  # rate-limited
+    assert rig.codes().count("deadline_missed") == 1  # rate-limited too
+    rig.cycle_with_command(dp_mm=(0.5, 0, 0))
+    assert rig.codes()[-1] == "command_resumed"
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.5, 0, 0])
+
+
+def test_before_any_command_the_gateway_holds_and_never_faults():
+    rig = _rig(fault_after_missed=3)
+    for _ in range(20):
+        rig.status()
+        rig.advance(CYCLE_NS)
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections) and len(rig.corrections) == 20
+    assert rig.gw.fault is None and "fault" not in rig.codes()
+    assert "no command from the controller yet" in rig.events()[0].text
+
+
+def test_liveliness_loss_gives_zero_at_once_even_with_commands_and_an_event():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.status()
+    outs = rig.liveliness(False)  # the pending cycle is answered at once, with zero
+    assert rig.codes(outs) == ["controller_gone"]
+    assert rig.last_correction().deltas == (0,) * 6
+    for _ in range(15):  # commands from a "gone" controller never move the robot
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections[1:])
+    assert {s.source for s in list(rig.gw.sent)[1:]} == {"gone"}
+    assert rig.gw.fault is None  # an absent controller is held, not faulted
+    assert rig.codes().count("controller_gone") == 1
+    rig.liveliness(True)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert rig.codes()[-1] == "controller_back"
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0, 0])
+
+
+def test_hold_and_idle_modes_and_alter_off_requests_send_zero():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0), mode=pb.CONTROL_MODE_HOLD)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0), mode=pb.CONTROL_MODE_IDLE)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0), alter_off=True)
+    flags = [c.flags for _, c in rig.corrections]
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections)
+    assert flags == [HOLD, HOLD, HOLD | CorrectionFlags.ALTER_OFF]
+
+
+# -- deadlines, missed cycles, fault ---------------------------------------------------------
+
+
+def test_a_late_command_misses_the_deadline_and_serves_the_next_cycle():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.status()
+    rig.advance(7 * MS)  # past the 6 ms deadline: answered with the previous step
+    assert rig.gw.sent[-1].source == "reused" and rig.codes() == ["deadline_missed"]
+    rig.command(dp_mm=(2.0, 0, 0))  # the late command for cycle 2 ...
+    rig.advance(CYCLE_NS - 7 * MS)
+    rig.status()
+    rig.advance(7 * MS)  # ... serves cycle 3 (velocity hold of the freshest)
+    assert rig.gw.sent[-1].source == "reused" and rig.gw.sent[-1].command_cycle == 2
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [2.0, 0, 0])
+    assert rig.states()[-1].missed_cycles == 1
+
+
+def test_consecutive_missed_cycles_raise_a_fault_with_hold_and_alter_off_until_alter_restarts():
+    rig = _rig(fault_after_missed=5)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    for _ in range(6):  # commands always 10 ms late: each cycle misses its deadline
+        rig.status()
+        rig.advance(10 * MS)
+        rig.command(dp_mm=(1.0, 0, 0))
+        rig.advance(CYCLE_NS - 10 * MS)
+    assert [s.missed_cycles for s in rig.states()] == [0, 0, 1, 2, 3, 4, 5]
+    assert "fault" in rig.codes() and rig.gw.fault is not None
+    fault = next(e for e in rig.events() if e.code == "fault")
+    assert fault.severity == pb.SEVERITY_ERROR and "5 consecutive missed cycles" in fault.text
+    c = rig.last_correction()
+    assert c.deltas == (0,) * 6 and c.flags == HOLD | CorrectionFlags.ALTER_OFF
+    for _ in range(3):  # fresh commands do not move a faulted gateway
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+        assert rig.last_correction().deltas == (0,) * 6
+    # The controller leaves ALTER, then the operator restarts it: a new session clears the fault.
+    rig.bits = StatusBits.ARM_POWER
+    rig.cycle_with_command()
+    rig.bits = ACTIVE
+    rig.status()
+    assert rig.codes()[-1] == "fault_cleared" and rig.gw.fault is None
+    rig.command(dp_mm=(1.0, 0, 0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0, 0])
+
+
+def test_a_console_reset_clears_a_fault_and_without_alter_off_only_hold_is_sent():
+    rig = _rig(fault_after_missed=2, alter_off_on_fault=False)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    for _ in range(3):
+        rig.status()
+        rig.advance(CYCLE_NS)
+    assert rig.gw.fault is not None and rig.last_correction().flags == HOLD
+    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault"))
+    assert rig.codes(outs) == ["fault_cleared"]
+    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="explode"))
+    assert rig.codes(outs) == ["bad_console_command"]
+
+
+def test_the_robot_reporting_missed_corrections_and_lost_statuses_count_as_missed_cycles():
+    rig = _rig(fault_after_missed=4)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.bits = ACTIVE | StatusBits.CORRECTION_MISSED
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert rig.states()[-1].missed_cycles == 1 and "robot_missed" in rig.codes()
+    rig.bits = ACTIVE
+    rig.status(cycle=rig.cycle + 3)  # two statuses lost on the line
+    assert rig.states()[-1].missed_cycles == 3 and "status_lost" in rig.codes()
+    rig.command(dp_mm=(1.0, 0, 0))
+    rig.advance(CYCLE_NS)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert rig.states()[-1].missed_cycles == 0  # an on-time cycle resets the count
+
+
+def test_a_robot_fault_is_reported_and_held_without_a_gateway_fault():
+    rig = _rig(fault_after_missed=2)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.bits = StatusBits.ARM_POWER | StatusBits.FAULT
+    for _ in range(5):
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert rig.codes().count("robot_fault") == 1
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections[1:])
+    assert rig.gw.fault is None
+
+
+# -- the link --------------------------------------------------------------------------------
+
+
+def test_silence_is_a_link_down_event_and_no_corrections_then_link_back():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    n = len(rig.corrections)
+    rig.robot_connected = False
+    outs = rig.advance(4 * CYCLE_NS)
+    assert rig.codes(outs) == ["link_down"]
+    assert "no STATUS" in rig.events(outs)[0].text
+    rig.robot_connected = True
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert rig.codes()[-1] == "link_up"
+    assert len(rig.corrections) == n + 1
+
+
+def test_a_peer_restart_is_link_down_then_up_with_a_new_session():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.robot = ControllerEndpoint()  # the controller restarts (a fresh link, STRT)
+    rig.cycle = 0
+    outs = []
+    for e in rig.robot.start(rig.t_ns):
+        outs += rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    codes = rig.codes(outs)
+    assert codes[0] == "link_down" and "peer restarted" in rig.events(outs)[0].text
+    assert codes[-1] == "link_up"
+    rig.status(cycle=1)  # a restarted controller may count from 1 again
+    rig.command(dp_mm=(0.7, 0, 0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.7, 0, 0])
+
+
+def test_unanswered_corrections_bring_the_link_down_by_rep_timeouts():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.status()
+    rig.robot_connected = False  # the correction goes nowhere, nothing comes back
+    rig.command(dp_mm=(1.0, 0, 0))
+    outs = rig.advance(20 * CYCLE_NS)
+    assert "link_down" in rig.codes(outs)
+    assert rig.gw.counters["reps"] >= 1
+
+
+# -- bad input ---------------------------------------------------------------------------------
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.binary(max_size=200))
+def test_garbage_on_the_line_never_raises_nor_moves_the_robot(data):
+    rig = _rig()
+    rig.status()
+    rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=data))
+    rig.advance(CYCLE_NS)
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections)
+
+
+def test_bad_commands_are_dropped_with_an_event():
+    rig = _rig()
+    rig.status()
+    rig.command(dp_mm=(float("nan"), 0, 0))
+    rig.command(dp_mm=(1.0, 0, 0), frame="camera")
+    rig.command(cycle=rig.cycle + 1000, dp_mm=(1.0, 0, 0))
+    assert rig.codes() == ["bad_command"]  # three drops, one report (rate-limited)
+    assert rig.gw.counters["commands_dropped"] == 3
+    rig.advance(CYCLE_NS)
+    assert rig.last_correction().deltas == (0,) * 6
+    rig.step("liveliness", pb.Liveliness(component="someone_else", alive=False))
+    rig.step("console/command", pb.Command(component="sim_robot", verb="alter_on"))
+
+
+# -- config ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "key,value,needle",
+    [
+        ("baud", 9600, "baud must be one of (19200, 38400)"),
+        ("max_speed_mm_s", -1.0, "max_speed_mm_s must be > 0"),
+        ("max_speed_mm_s", 20000.0, "exceeds the wire range"),
+        ("envelope_min_mm", [2000.0, 0.0, 0.0], "must be below envelope_max_mm"),
+        ("reply_deadline_ms", 30.0, "reply_deadline_ms"),
+        ("port", "", "port must name"),
+        ("world_T_base_mm_deg", [0.0] * 5, "expected 6 values"),
+        ("stale_cycles", -1, "stale_cycles"),
+    ],
+)
+def test_config_rejects_bad_values_naming_the_key(key, value, needle):
+    with pytest.raises(ConfigError) as e:
+        build(AlterGatewayConfig, {key: value}, source="x.toml", section="alter_gateway")
+    assert needle in str(e.value)
+
+
+def test_config_defaults_and_19200_baud():
+    cfg = AlterGatewayConfig(baud=19_200)
+    assert cfg.max_step_mm == pytest.approx(2.8) and cfg.max_step_deg == pytest.approx(1.68)
+    assert cfg.cycle_period_ns == CYCLE_NS
+    core = AlterGatewayCore(cfg)
+    assert core.tick_period_ns() == 2 * MS
+    assert dataclasses.asdict(cfg)["envelope_max_mm"] == (1600.0, 1600.0, 1600.0)
