@@ -11,6 +11,7 @@ from humanpt.runtime.core import Core
 COMPONENTS: dict[str, str] = {
     "pinger": "humanpt.runtime.selftest:PingerCore",
     "ponger": "humanpt.runtime.selftest:PongerCore",
+    "perception": "humanpt.perception.core:PerceptionCore",
     "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
     "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
 }

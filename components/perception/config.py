@@ -1,0 +1,212 @@
+"""Configuration of the perception component (section ``[perception]``).
+
+Live parameters (``humanpt param perception KEY=VALUE``, or a ``param`` input): ``method``,
+``threshold``, ``invert``, ``mask``, ``track_roi``. Everything else is fixed at start.
+
+Brightness is in DN (grey levels of an 8-bit image; a mono16 image is scaled to 8 bits
+first). Image coordinates are pixels of the complex image (u right, v down, pixel centres at
+integers). Lengths are mm.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+from humanpt.geometry import TRIANGULATION_METHODS, PsvsParams, TargetModel, psvs_m_l_mm
+from humanpt.runtime.config import live
+
+__all__ = ["PerceptionConfig", "PsvsConfig", "METHODS"]
+
+METHODS = ("weighted", "paper")
+
+_M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
+
+
+def _check(owner: str, name: str, value, *, positive=False, nonneg=False, integer=False):
+    if integer:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ValueError(f"{owner}.{name} must be an integer, got {value!r}")
+    elif isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise ValueError(f"{owner}.{name} must be a finite number, got {value!r}")
+    if positive and not value > 0:
+        raise ValueError(f"{owner}.{name} must be > 0, got {value}")
+    if nonneg and not value >= 0:
+        raise ValueError(f"{owner}.{name} must be >= 0, got {value}")
+
+
+@dataclass(frozen=True)
+class PsvsConfig:
+    """The PSVS geometry as config keys (``[perception.psvs]``), see
+    :class:`humanpt.geometry.PsvsParams`. Defaults: 640 x 480, a_u = a_v = 1000 px, centre
+    (320, 240), baseline 90 mm, m, l of a 1 mm beam splitter at 45 deg (eq. (5), (6)), no
+    distortion - the same keys and defaults as ``[sim_camera.psvs]``."""
+
+    image_width_px: int = 640
+    image_height_px: int = 480
+    a_u: float = 1000.0
+    a_v: float = 1000.0
+    skew: float = 0.0
+    u0: float = 320.0
+    v0: float = 240.0
+    baseline_mm: float = 90.0
+    m_mm: float = _M_MM
+    l_mm: float = _L_MM
+    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        self.params()  # PsvsParams validates every field and names it
+
+    def params(self) -> PsvsParams:
+        """The geometry library's :class:`PsvsParams`."""
+        return PsvsParams(
+            image_size_px=(self.image_width_px, self.image_height_px),
+            a_u=self.a_u,
+            a_v=self.a_v,
+            skew=self.skew,
+            u0=self.u0,
+            v0=self.v0,
+            baseline_mm=self.baseline_mm,
+            m_mm=self.m_mm,
+            l_mm=self.l_mm,
+            dist_coeffs=self.dist_coeffs,
+        )
+
+
+@dataclass(frozen=True)
+class PerceptionConfig:
+    """Perception: complex image -> tob measurement (README.md has the table).
+
+    Run-time parameters: ``method`` (``"weighted"``, the default method, or ``"paper"``, the
+    reference method of Section 4), ``threshold`` (T, DN), ``invert`` (the sources are darker
+    than the background: work on 255 - I), ``mask`` (rectangles ``[u, v, width, height]``
+    in px whose pixels are ignored), ``track_roi`` (search a region around the last
+    measurement first).
+
+    Geometry: ``psvs``, the target (isosceles, ``target_leg_mm``, ``target_base_mm``,
+    ``source_diameter_mm``, ``side_tolerance_mm``), the working depth range
+    ``min_depth_mm`` .. ``max_depth_mm`` (z of the sources in the camera frame) and the
+    ``triangulation`` of the weighted method (the paper method always uses eq. (4)).
+    """
+
+    method: Literal["weighted", "paper"] = live("weighted", "weighted (default) or paper")
+    threshold: float = live(60.0, "binarisation threshold T (DN)")
+    invert: bool = live(False, "sources darker than the background: use 255 - I")
+    mask: tuple[tuple[int, int, int, int], ...] = live(
+        (), "rectangles [u, v, width, height] (px) to ignore"
+    )
+    track_roi: bool = live(True, "search around the last measurement first")
+    roi_margin_px: int = 40
+    # geometry
+    psvs: PsvsConfig = field(default_factory=PsvsConfig)
+    target_leg_mm: float = 40.0
+    target_base_mm: float = 30.0
+    source_diameter_mm: float = 5.0
+    side_tolerance_mm: float = 3.0
+    min_depth_mm: float = 200.0
+    max_depth_mm: float = 2000.0
+    triangulation: Literal["eq4", "eq2", "lsq"] = "lsq"
+    # paper method
+    paper_cross_px: tuple[int, ...] = (9, 5)
+    paper_scanline_tol_px: float = 3.0
+    # weighted method: detection and shape checks
+    noise_k: float = 8.0
+    aperture_pad_px: float = 3.0
+    min_area_px: int = 4
+    max_area_px: int = 3000
+    max_elongation: float = 4.0
+    min_contrast_dn: float = 20.0
+    size_ratio_range: tuple[float, float] = (0.5, 1.8)
+    max_blobs: int = 24
+    # weighted method: correspondence
+    epipolar_tol_px: float = 2.0
+    epipolar_sigma_px: float = 0.05
+    side_sigma_mm: float = 0.5
+    max_area_ratio: float = 2.5
+    # bad images
+    max_saturated_fraction: float = 0.25
+
+    def __post_init__(self) -> None:
+        own = "perception"
+        if self.method not in METHODS:
+            raise ValueError(f"{own}.method must be one of {METHODS}, got {self.method!r}")
+        _check(own, "threshold", self.threshold, nonneg=True)
+        if self.threshold >= 255:
+            raise ValueError(f"{own}.threshold must be below 255 DN, got {self.threshold}")
+        if not isinstance(self.invert, bool) or not isinstance(self.track_roi, bool):
+            raise ValueError(f"{own}.invert and track_roi must be true or false")
+        object.__setattr__(self, "mask", tuple(tuple(r) for r in self.mask))
+        for rect in self.mask:
+            if len(rect) != 4 or not all(
+                isinstance(x, int) and not isinstance(x, bool) for x in rect
+            ):
+                raise ValueError(
+                    f"{own}.mask: a rectangle is [u, v, width, height] (integers), got {rect!r}"
+                )
+            if rect[2] <= 0 or rect[3] <= 0:
+                raise ValueError(
+                    f"{own}.mask: rectangle {list(rect)} has no area (width, height > 0)"
+                )
+        _check(own, "roi_margin_px", self.roi_margin_px, nonneg=True, integer=True)
+        if not isinstance(self.psvs, PsvsConfig):
+            raise ValueError(f"{own}.psvs must be a PsvsConfig, got {type(self.psvs).__name__}")
+        try:
+            self.target_model()
+        except ValueError as e:
+            raise ValueError(f"{own}: target: {e}") from None
+        _check(own, "min_depth_mm", self.min_depth_mm, positive=True)
+        _check(own, "max_depth_mm", self.max_depth_mm, positive=True)
+        if not self.min_depth_mm < self.max_depth_mm:
+            raise ValueError(f"{own}: min_depth_mm must be below max_depth_mm")
+        if self.triangulation not in TRIANGULATION_METHODS:
+            raise ValueError(f"{own}.triangulation must be one of {TRIANGULATION_METHODS}")
+        crosses = tuple(self.paper_cross_px)
+        if not crosses or any(
+            isinstance(c, bool) or not isinstance(c, int) or c < 3 or c % 2 == 0 for c in crosses
+        ):
+            raise ValueError(
+                f"{own}.paper_cross_px must be odd sizes >= 3 (e.g. [9, 5]), got {crosses}"
+            )
+        object.__setattr__(self, "paper_cross_px", crosses)
+        for name in (
+            "paper_scanline_tol_px",
+            "noise_k",
+            "aperture_pad_px",
+            "epipolar_tol_px",
+            "epipolar_sigma_px",
+            "side_sigma_mm",
+            "min_contrast_dn",
+        ):
+            _check(own, name, getattr(self, name), positive=name != "noise_k", nonneg=True)
+        for name in ("min_area_px", "max_area_px", "max_blobs"):
+            _check(own, name, getattr(self, name), positive=True, integer=True)
+        if self.min_area_px > self.max_area_px:
+            raise ValueError(f"{own}: min_area_px must not exceed max_area_px")
+        if self.max_blobs < 2 or self.max_blobs > 64:
+            raise ValueError(f"{own}.max_blobs must be within 2 and 64, got {self.max_blobs}")
+        _check(own, "max_elongation", self.max_elongation)
+        _check(own, "max_area_ratio", self.max_area_ratio)
+        if self.max_elongation < 1 or self.max_area_ratio < 1:
+            raise ValueError(f"{own}: max_elongation and max_area_ratio must be >= 1")
+        lo, hi = self.size_ratio_range
+        _check(own, "size_ratio_range", lo, positive=True)
+        _check(own, "size_ratio_range", hi, positive=True)
+        if not lo < 1 < hi:
+            raise ValueError(f"{own}.size_ratio_range must bracket 1, got {self.size_ratio_range}")
+        _check(own, "max_saturated_fraction", self.max_saturated_fraction, positive=True)
+        if self.max_saturated_fraction > 1:
+            raise ValueError(f"{own}.max_saturated_fraction must be in (0, 1]")
+
+    # -- derived ---------------------------------------------------------------------------
+    def params(self) -> PsvsParams:
+        return self.psvs.params()
+
+    def target_model(self) -> TargetModel:
+        return TargetModel.isosceles(
+            self.target_leg_mm,
+            self.target_base_mm,
+            self.source_diameter_mm,
+            None,
+            self.side_tolerance_mm,
+        )

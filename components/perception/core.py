@@ -1,0 +1,196 @@
+"""The perception core: ``camera/image`` -> ``perception/tob`` (+ ``perception/events``).
+
+Per image (Section 4, steps 1-7):
+
+1. decode and check the image (:func:`humanpt.perception.image.prepare`): a bad image
+   (undecodable, empty, unsupported encoding, not the calibrated size, saturated) gives a
+   LOST measurement and a warning event - one per run of bad images of the same kind, and
+   an ``image_ok`` event when good images return;
+2. while tracking (the last measurement was FULL and ``track_roi``), measure only a region
+   of interest around the last measurement's centres; if that does not give a FULL
+   measurement, measure the whole image in the same step (searching);
+3. publish a :class:`TobMeasurement`: every accepted centre, the pairs (ordered A, B, C
+   when FULL), the points in the camera frame (metres), ``camera_T_tob`` when FULL,
+   ``visible`` (sources paired), ``quality``, ``method``, ``status``;
+4. an info event ``tob_status`` whenever the status changes (full, position only, lost).
+
+The core never raises out of ``step``: an unexpected error while measuring gives a LOST
+measurement and an error event. It never reads the clock, so ``processing_s`` is 0 - a
+measured time would make replays differ; ``humanpt bench perception`` measures the time.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import image_stamp_ns, pose, vector3
+
+from .config import PerceptionConfig
+from .correspondence import FULL, LOST, POSITION_ONLY, Match, lost
+from .image import BadImage, prepare
+from .pipeline import Perception, Result
+
+__all__ = ["PerceptionCore", "measurement_message"]
+
+TOPIC = "perception/tob"
+_STATUS = {
+    FULL: pb.TOB_STATUS_FULL,
+    POSITION_ONLY: pb.TOB_STATUS_POSITION_ONLY,
+    LOST: pb.TOB_STATUS_LOST,
+}
+_METHOD = {"paper": pb.PERCEPTION_METHOD_PAPER, "weighted": pb.PERCEPTION_METHOD_WEIGHTED}
+
+
+def measurement_message(
+    header: pb.Header, method: str, uv_px: np.ndarray, match: Match
+) -> pb.TobMeasurement:
+    """A :class:`TobMeasurement` from centres (n, 2) px and a :class:`Match` (mm inside,
+    metres in the message)."""
+    m = pb.TobMeasurement(
+        header=header,
+        visible=match.visible,
+        quality=float(match.quality),
+        method=_METHOD[method],
+        status=_STATUS[match.status],
+        processing_s=0.0,
+    )
+    for u, v in np.asarray(uv_px, dtype=float).reshape(-1, 2):
+        m.centers_px.add(u=float(u), v=float(v))
+    for (right, left), res in zip(match.pairs, match.residual_px, strict=True):
+        m.pairs.add(right=int(right), left=int(left), residual_px=float(res))
+    for p in match.camera_p_mm:
+        m.points_camera_m.append(vector3(np.asarray(p) / 1000.0))
+    if match.camera_T_tob is not None:
+        t = np.array(match.camera_T_tob, dtype=float)
+        t[:3, 3] /= 1000.0
+        m.camera_T_tob.CopyFrom(pose(t))
+    return m
+
+
+class PerceptionCore(Core):
+    """Complex image -> tob measurement (module docstring)."""
+
+    name = "perception"
+    config_type = PerceptionConfig
+    inputs = ("camera/image",)
+
+    def __init__(self, config: PerceptionConfig):
+        super().__init__(config)
+        self.perception = Perception(config)
+        self._anchor: tuple[np.ndarray, np.ndarray] | None = None  # last FULL centres, sizes
+        self._bad_code: str | None = None
+        self._bad_count = 0
+        self._status: str | None = None
+        self.counters = {
+            "images": 0,
+            "bad_images": 0,
+            "roi_hits": 0,
+            "full_searches": 0,
+            "errors": 0,
+        }
+
+    def on_config_changed(self, old: PerceptionConfig, new: PerceptionConfig) -> None:
+        self.perception = Perception(new)
+        self._anchor = None  # search the whole image with the new settings
+
+    # -- input -------------------------------------------------------------------------
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic != "camera/image":
+            return []
+        self.counters["images"] += 1
+        outputs: list[Output] = []
+        c = self.perception.config
+        stamp = t_ns
+        try:
+            stamp = image_stamp_ns(msg) or t_ns
+            prepared = prepare(
+                msg,
+                self.perception.size_px,
+                c.invert,
+                self.perception.keep,
+                c.max_saturated_fraction,
+            )
+        except Exception as e:  # noqa: BLE001 - the core never raises on input
+            prepared = BadImage("bad_image", f"image could not be read: {type(e).__name__}: {e}")
+        if isinstance(prepared, BadImage):
+            self.counters["bad_images"] += 1
+            self._anchor = None
+            if prepared.code != self._bad_code:
+                outputs.append(
+                    self.event(
+                        t_ns,
+                        pb.SEVERITY_WARNING,
+                        prepared.code,
+                        f"perception: {prepared.text} (target reported lost)",
+                    )
+                )
+                self._bad_code = prepared.code
+            self._bad_count += 1
+            return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
+        if self._bad_code is not None:
+            outputs.append(
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_INFO,
+                    "image_ok",
+                    f"perception: images good again after {self._bad_count} bad ones",
+                )
+            )
+            self._bad_code, self._bad_count = None, 0
+        try:
+            result = self._measure(prepared.gray)
+        except Exception as e:  # noqa: BLE001 - the core never raises on input
+            self.counters["errors"] += 1
+            self._anchor = None
+            outputs.append(
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_ERROR,
+                    "perception_error",
+                    f"perception: measuring failed: {type(e).__name__}: {e}",
+                )
+            )
+            return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
+        return outputs + self._publish(t_ns, stamp, result.blobs.uv_px, result.match)
+
+    def _measure(self, gray: np.ndarray) -> Result:
+        p = self.perception
+        if p.config.track_roi and self._anchor is not None:
+            result = p.measure(gray, p.roi_around(*self._anchor))
+            if result.match.status == FULL:
+                self.counters["roi_hits"] += 1
+                self._remember(result)
+                return result
+        self.counters["full_searches"] += 1
+        result = p.measure(gray)
+        self._remember(result)
+        return result
+
+    def _remember(self, result: Result) -> None:
+        if result.match.status == FULL:
+            used = result.match.pairs.ravel()
+            self._anchor = (result.blobs.uv_px[used], result.blobs.size_px[used])
+        else:
+            self._anchor = None
+
+    def _publish(self, t_ns: int, stamp_ns: int, uv_px: np.ndarray, match: Match) -> list[Output]:
+        outputs: list[Output] = []
+        if match.status != self._status:
+            before = self._status or "none"
+            outputs.append(
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_INFO,
+                    "tob_status",
+                    f"perception: target {before} -> {match.status} "
+                    f"({match.visible} source(s) paired)",
+                )
+            )
+            self._status = match.status
+        header = self.next_header(TOPIC, stamp_ns, "camera")
+        outputs.insert(
+            0, (TOPIC, measurement_message(header, self.perception.config.method, uv_px, match))
+        )
+        return outputs

@@ -1,0 +1,108 @@
+"""One complex image -> blobs -> pairs, points, target frame, for either method.
+
+:class:`Perception` holds what follows from a :class:`PerceptionConfig` (PSVS parameters,
+target model, mask image, correspondence settings) and measures prepared images; the core
+(:mod:`humanpt.perception.core`) adds the message plumbing, the region of interest and
+the events. Benchmarks and tests use it directly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .blobs import Blobs, Region, clip_region, full_region
+from .config import PerceptionConfig
+from .correspondence import Match, MatchSettings, match_scan_line, match_scored
+from .image import mask_array
+from .paper import detect_paper
+from .weighted import detect_weighted
+
+__all__ = ["Perception", "Result"]
+
+
+@dataclass(frozen=True)
+class Result:
+    """``blobs`` (all accepted), ``match`` and the ``region`` searched (u0, v0, u1, v1)."""
+
+    blobs: Blobs
+    match: Match
+    region: Region
+
+
+class Perception:
+    """The measuring part of the component, for one configuration (immutable)."""
+
+    def __init__(self, config: PerceptionConfig):
+        self.config = config
+        self.params = config.params()
+        self.model = config.target_model()
+        self.size_px = self.params.image_size_px
+        self.keep = mask_array(config.mask, self.size_px)
+        self.settings = MatchSettings(
+            params=self.params,
+            model=self.model,
+            min_depth_mm=config.min_depth_mm,
+            max_depth_mm=config.max_depth_mm,
+            epipolar_tol_px=config.epipolar_tol_px,
+            epipolar_sigma_px=config.epipolar_sigma_px,
+            side_sigma_mm=config.side_sigma_mm,
+            max_area_ratio=config.max_area_ratio,
+            size_ratio_range=config.size_ratio_range,
+            triangulation=config.triangulation,
+        )
+        # The largest half-extent a source can have: at the nearest working depth, seen by
+        # the right camera, with the size tolerance.
+        self.max_radius_px = (
+            0.5
+            * config.size_ratio_range[1]
+            * self.params.a_u
+            * self.model.source_diameter_mm
+            / (config.min_depth_mm + self.params.baseline_mm / 2.0)
+            + 2.0
+        )
+
+    @property
+    def full_region(self) -> Region:
+        return full_region(*self.size_px)
+
+    def detect(self, gray: np.ndarray, region: Region) -> Blobs:
+        """The configured method's detector on ``region`` of a prepared image."""
+        c = self.config
+        if c.method == "paper":
+            return detect_paper(gray, c.threshold, c.paper_cross_px, region)
+        return detect_weighted(
+            gray,
+            region,
+            threshold=c.threshold,
+            noise_k=c.noise_k,
+            aperture_pad_px=c.aperture_pad_px,
+            min_area_px=c.min_area_px,
+            max_area_px=c.max_area_px,
+            max_radius_px=self.max_radius_px,
+            max_elongation=c.max_elongation,
+            min_contrast_dn=c.min_contrast_dn,
+            max_blobs=c.max_blobs,
+            keep=self.keep,
+        )
+
+    def match(self, blobs: Blobs) -> Match:
+        if self.config.method == "paper":
+            return match_scan_line(blobs, self.settings, self.config.paper_scanline_tol_px)
+        return match_scored(blobs, self.settings)
+
+    def measure(self, gray: np.ndarray, region: Region | None = None) -> Result:
+        """Detect and match in ``region`` (default: the whole image) of a prepared image
+        (see :func:`humanpt.perception.image.prepare`)."""
+        region = self.full_region if region is None else clip_region(region, *self.size_px)
+        blobs = self.detect(gray, region)
+        return Result(blobs, self.match(blobs), region)
+
+    def roi_around(self, uv_px: np.ndarray, blob_size_px: np.ndarray) -> Region:
+        """The region of interest around centres (k, 2): their bounding box grown by
+        ``roi_margin_px`` plus the largest blob's size."""
+        pad = self.config.roi_margin_px + float(np.max(blob_size_px, initial=0.0))
+        lo = np.floor(uv_px.min(axis=0) - pad).astype(int)
+        hi = np.ceil(uv_px.max(axis=0) + pad).astype(int) + 1
+        return clip_region((int(lo[0]), int(lo[1]), int(hi[0]), int(hi[1])), *self.size_px)
