@@ -45,6 +45,7 @@ _ROWS = [
     Topic("alter_gateway/robot_state", pb.RobotState, "alter_gateway", "world_T_flange per ALTER cycle"),
     Topic("operator/truth", pb.Truth, "operator", "twin: true world_T_tob (and tip)"),
     Topic("sim_robot/truth", pb.Truth, "sim_robot", "twin: true world_T_flange"),
+    Topic("sim_camera/truth", pb.Truth, "sim_camera", "twin: world_T_tob, world_T_flange at each image's capture"),
     Topic("console/command", pb.Command, "console", "operator commands (record, save, hold, ...)"),
     Topic("pinger/ping", pb.Tick, "pinger", "runtime self-test: a tick per period"),
     Topic("ponger/pong", pb.Event, "ponger", "runtime self-test: an event per ping"),
@@ -59,6 +60,7 @@ EVENT_PUBLISHERS = (
     "sim_robot",
     "sim_camera",
     "operator",
+    "standin_robot",
     "viz",
     "pinger",
     "ponger",
@@ -72,6 +74,7 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
     "serial_rx": pb.SerialChunk,  # bytes read from the component's serial port
     "serial_tx": pb.SerialChunk,  # output: bytes the shell writes to the serial port
     "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
+    "capture": RawImage,  # a frame grabbed by the camera's capture adapter (stamp = capture)
 }
 
 TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}

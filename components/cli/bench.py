@@ -110,3 +110,55 @@ def bench_runtime(args) -> int:
     for r in rows:
         print(f"{r[0]:{w}s}  {r[1]:>12s}  {r[2]:>12s}  {r[3]}")
     return 0
+
+
+def bench_render(args) -> int:
+    """Frames per second of the simulated PSVS camera at its default settings."""
+    from humanpt.geometry import camera_T_desired
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas.convert import header, pose
+    from humanpt.sim_camera import Renderer, SimCameraConfig, SimCameraCore
+
+    n = max(1, args.frames)
+    cfg = SimCameraConfig()
+    renderer = Renderer(cfg)
+    camera_T_tob = camera_T_desired(600.0)
+    for i in range(10):  # warm-up
+        renderer.render(camera_T_tob, frame_index=i)
+    stages = {"project": 0.0, "coverage + blur": 0.0, "sensor (noise, 8 bit)": 0.0}
+    t_all = time.perf_counter()
+    for i in range(n):
+        t0 = time.perf_counter()
+        blobs = renderer.blobs(renderer.discs(camera_T_tob))
+        t1 = time.perf_counter()
+        signal = renderer.signal(blobs)
+        t2 = time.perf_counter()
+        renderer.expose(signal, i)
+        t3 = time.perf_counter()
+        stages["project"] += t1 - t0
+        stages["coverage + blur"] += t2 - t1
+        stages["sensor (noise, 8 bit)"] += t3 - t2
+    total = time.perf_counter() - t_all
+    # The whole core: truth in, image message out (what the lock-step world runs).
+    core = SimCameraCore(cfg)
+    flange = np.eye(4)
+    tob = cfg.flange_T_camera @ camera_T_tob  # world = flange frame here
+    for topic, field, a_T_b in (("sim_robot/truth", "world_T_flange", flange), ("operator/truth", "world_T_tob", tob)):
+        m = a_T_b.copy()
+        m[:3, 3] /= 1000.0
+        msg = pb.Truth(header=header(0))
+        getattr(msg, field).CopyFrom(pose(m))
+        core.step(0, topic, msg)
+    period = cfg.tick_period_ns
+    t0 = time.perf_counter()
+    for i in range(n):
+        core.step((i + 1) * period, "tick", pb.Tick(header=header((i + 1) * period), period_ns=period))
+    core_total = time.perf_counter() - t0
+    print(f"humanpt bench render: {cfg.psvs.image_width_px}x{cfg.psvs.image_height_px}, 3 sources x 2 views at "
+          f"600 mm, blur {cfg.blur_sigma_px} px, shot + read noise; {n} frames per case")
+    print(f"\n{'case':34s} {'frames/s':>10s} {'ms/frame':>10s}")
+    print(f"{'render (renderer alone)':34s} {n / total:10.0f} {1e3 * total / n:10.3f}")
+    for name, t in stages.items():
+        print(f"{'  ' + name:34s} {'':>10s} {1e3 * t / n:10.3f}")
+    print(f"{'sim_camera core step (+ message)':34s} {n / core_total:10.0f} {1e3 * core_total / n:10.3f}")
+    return 0

@@ -19,6 +19,7 @@ examples:
   humanpt echo ponger/pong --count 3              print decoded messages
   humanpt replay runs/<run> --component ponger    re-run a component on its recorded inputs
   humanpt bench runtime                           latency and recording throughput
+  humanpt bench render                            frames per second of the simulated camera
 """
 
 
@@ -124,6 +125,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "compression.")
     q.add_argument("--n", type=int, default=300, help="round trips per payload (default 300)")
     q.add_argument("--seconds", type=float, default=3.0, help="seconds of MCAP writing per case (default 3)")
+    q = bsub.add_parser("render", help="frames per second of the simulated PSVS camera",
+                        description="Render complex images of the static target (Table 1 pose, 600 mm "
+                        "ahead) at the default sim_camera settings and print frames per second, with the "
+                        "time of each stage (projection, coverage and blur, sensor noise) and of the whole "
+                        "core step (render + message).")
+    q.add_argument("--frames", type=int, default=300, help="images per case (default 300)")
     return ap
 
 
@@ -165,6 +172,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "runtime":
             from humanpt.cli.bench import bench_runtime
             return bench_runtime(args)
+        if args.bench_verb == "render":
+            from humanpt.cli.bench import bench_render
+            return bench_render(args)
         ap.parse_args(["bench", "--help"])
     ap.print_help()
     return 2

@@ -45,6 +45,12 @@ from .psvs import (
     triangulate_lsq,
     virtual_camera_centres_mm,
 )
+from .rig import (
+    DEFAULT_DZ_MM,
+    DEFAULT_FLANGE_T_CAMERA_MM,
+    camera_T_desired,
+    viewing_world_T_flange,
+)
 from .target import (
     Labelling,
     TargetModel,
@@ -117,6 +123,11 @@ __all__ = [
     "transform_points",
     "x_from_transform",
     "ypr_deg_from_rotation",
+    # rig: default hand-eye, desired point D (Section 5)
+    "DEFAULT_DZ_MM",
+    "DEFAULT_FLANGE_T_CAMERA_MM",
+    "camera_T_desired",
+    "viewing_world_T_flange",
     # calibration (eq. 10-13)
     "TipCalibration",
     "calibrate_tip_paper",

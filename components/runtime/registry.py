@@ -11,6 +11,10 @@ from humanpt.runtime.core import Core
 COMPONENTS: dict[str, str] = {
     "pinger": "humanpt.runtime.selftest:PingerCore",
     "ponger": "humanpt.runtime.selftest:PongerCore",
+    "camera": "humanpt.camera.core:CameraCore",
+    "sim_camera": "humanpt.sim_camera.core:SimCameraCore",
+    "operator": "humanpt.operator.core:OperatorCore",
+    "standin_robot": "humanpt.twin.standin:StandInRobotCore",
     "perception": "humanpt.perception.core:PerceptionCore",
     "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
     "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
@@ -20,6 +24,7 @@ COMPONENTS: dict[str, str] = {
 # component's config: ``function(config) -> list[Adapter]``.  Components without local I/O
 # are not listed.
 ADAPTERS: dict[str, str] = {
+    "camera": "humanpt.camera.capture:capture_adapters",
     "alter_gateway": "humanpt.alter_gateway.shell:adapters",
     "sim_robot": "humanpt.sim_robot.shell:adapters",
 }
@@ -30,6 +35,8 @@ PROFILES: dict[str, dict] = {
                "doc": "router + ALTER gateway, beside the robot controller's serial port"},
     "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz"),
                "doc": "vision and control, connecting to the server's router"},
+    "twin": {"router": True, "components": ("operator", "standin_robot", "sim_camera"),
+             "doc": "router + the digital twin: operator, stand-in robot, simulated PSVS camera"},
     "selftest": {"router": True, "components": ("pinger", "ponger"),
                  "doc": "router + two self-test components exchanging pings"},
 }

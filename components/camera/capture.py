@@ -1,0 +1,147 @@
+"""Shell side of the real camera: OpenCV VideoCapture from a device index or a video file.
+
+:class:`CaptureAdapter` is a live-shell adapter (``humanpt.runtime.live``): a thread grabs
+frames, stamps each with the wall clock when the grab returns, and hands it to the core as
+a ``capture`` input (foxglove.RawImage, bgr8 or mono8). :func:`read_frames` is the same
+grabbing as a plain generator, for offline use and tests.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterator
+
+import cv2
+import numpy as np
+
+from humanpt.schemas.convert import image
+
+from .config import CameraConfig
+
+__all__ = ["CaptureAdapter", "capture_adapters", "capture_message", "open_capture", "read_frames"]
+
+log = logging.getLogger("humanpt.camera")
+
+
+def capture_message(frame: np.ndarray, stamp_ns: int, frame_id: str = "camera"):
+    """An OpenCV frame ((H, W, 3) BGR or (H, W) grey, uint8) -> foxglove.RawImage."""
+    encoding = "bgr8" if frame.ndim == 3 else "mono8"
+    return image(np.ascontiguousarray(frame), stamp_ns, frame_id, encoding)
+
+
+def open_capture(config: CameraConfig) -> cv2.VideoCapture:
+    """Open the configured source; raises OSError naming it when it does not open."""
+    index = config.device_index
+    cap = cv2.VideoCapture(index if index is not None else config.source)
+    if not cap.isOpened():
+        cap.release()
+        what = f"camera device {index}" if index is not None else f"video file {config.source!r}"
+        raise OSError(f"cannot open {what}")
+    if index is not None:
+        for prop, value in (
+            (cv2.CAP_PROP_FRAME_WIDTH, config.width_px),
+            (cv2.CAP_PROP_FRAME_HEIGHT, config.height_px),
+            (cv2.CAP_PROP_FPS, config.fps),
+        ):
+            if value:
+                cap.set(prop, value)
+    return cap
+
+
+def read_frames(
+    config: CameraConfig, clock: Callable[[], int] = time.time_ns, max_frames: int | None = None
+) -> Iterator[tuple[int, np.ndarray]]:
+    """(stamp ns, frame) for every frame of the source (no pacing, no looping), stamped by
+    ``clock`` when each grab returns."""
+    cap = open_capture(config)
+    try:
+        n = 0
+        while max_frames is None or n < max_frames:
+            ok, frame = cap.read()
+            stamp = clock()
+            if not ok:
+                return
+            n += 1
+            yield stamp, frame
+    finally:
+        cap.release()
+
+
+class CaptureAdapter:
+    """Grabs frames in a thread and ``put``\\ s them as ``capture`` inputs (see module)."""
+
+    topics_out: tuple[str, ...] = ()
+
+    def __init__(self, config: CameraConfig, clock: Callable[[], int] = time.time_ns):
+        self.config = config
+        self.clock = clock
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.frames = 0
+        self.errors = 0
+        self.finished = threading.Event()  # a file played to its end (no loop)
+
+    def start(self, put: Callable[[str, object], None]) -> None:
+        self._thread = threading.Thread(
+            target=self._loop, args=(put,), name="camera-capture", daemon=True
+        )
+        self._thread.start()
+
+    def write(self, topic: str, msg) -> None:  # the camera has no local outputs
+        pass
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    def _loop(self, put) -> None:
+        cfg = self.config
+        is_file = cfg.device_index is None
+        cap = None
+        next_due = 0.0
+        while not self._stop.is_set():
+            if cap is None:
+                try:
+                    cap = open_capture(cfg)
+                except OSError as e:
+                    self.errors += 1
+                    log.error("%s; retrying in %.1f s", e, cfg.reopen_s)
+                    self._stop.wait(cfg.reopen_s)
+                    continue
+                period = (
+                    1.0 / cap.get(cv2.CAP_PROP_FPS)
+                    if is_file and cap.get(cv2.CAP_PROP_FPS) > 0
+                    else 0.0
+                )
+                next_due = time.monotonic()
+            ok, frame = cap.read()
+            stamp = self.clock()
+            if not ok:
+                if is_file and cfg.loop and self.frames:
+                    cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+                    continue
+                cap.release()
+                cap = None
+                if is_file and not cfg.loop:
+                    log.info("video file %s: end after %d frames", cfg.source, self.frames)
+                    self.finished.set()
+                    return
+                self.errors += 1
+                log.error("camera %s: grab failed; reopening in %.1f s", cfg.source, cfg.reopen_s)
+                self._stop.wait(cfg.reopen_s)
+                continue
+            self.frames += 1
+            put("capture", capture_message(frame, stamp))
+            if is_file and cfg.pace and period:
+                next_due += period
+                self._stop.wait(max(0.0, next_due - time.monotonic()))
+        if cap is not None:
+            cap.release()
+
+
+def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
+    """The registry's adapter factory for the ``camera`` component."""
+    return [CaptureAdapter(config)]

@@ -1,0 +1,46 @@
+"""Configuration of the real camera (section ``[camera]``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class CameraConfig:
+    """A real camera through OpenCV's VideoCapture.
+
+    ``source``: a device index (``"0"``) or a video file path. ``width_px``/``height_px``/
+    ``fps`` are requested from a device (0: its default). A file is played at its own frame
+    rate when ``pace`` (else as fast as it decodes) and from the start again when ``loop``.
+    A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
+    to mono8 (the PSVS processing works on grey levels). Frames are stamped when the grab
+    returns (the capture time, minus the driver's latency).
+    """
+
+    source: str = "0"
+    width_px: int = 0
+    height_px: int = 0
+    fps: float = 0.0
+    pace: bool = True
+    loop: bool = False
+    mono: bool = True
+    reopen_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        if not self.source.strip():
+            raise ValueError("camera.source must be a device index or a video file path")
+        for name in ("width_px", "height_px"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 20000:
+                raise ValueError(f"camera.{name} must be an integer in [0, 20000], got {value!r}")
+        for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0)):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and lo <= value <= hi):
+                raise ValueError(f"camera.{name} must be within {lo} and {hi}, got {value}")
+
+    @property
+    def device_index(self) -> int | None:
+        """The device index when ``source`` is one, else None (a file)."""
+        text = self.source.strip()
+        return int(text) if text.isdigit() else None

@@ -1,0 +1,74 @@
+"""The real camera's core: captured frames in, ``camera/image`` out.
+
+The grabbing (OpenCV VideoCapture, a thread, the wall clock) lives in the shell's adapter
+(:mod:`humanpt.camera.capture`); it hands each frame to the core as a local ``capture``
+input (foxglove.RawImage, stamped at capture), so the recording holds every frame and the
+run replays. The core checks the frame, turns colour into mono8 (``mono``) and publishes
+it as ``camera/image`` - the same message the simulated camera publishes.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import MessageError, from_image, image, image_stamp_ns
+
+from .config import CameraConfig
+
+__all__ = ["CameraCore"]
+
+_TO_GREY = {"bgr8": cv2.COLOR_BGR2GRAY, "rgb8": cv2.COLOR_RGB2GRAY}
+
+
+class CameraCore(Core):
+    """Events: ``bad_frame`` (does not decode as an image), ``stale_frame`` (a stamp not
+    after the previous one: dropped)."""
+
+    name = "camera"
+    config_type = CameraConfig
+    inputs = ()  # frames arrive as the local input "capture"
+
+    def __init__(self, config: CameraConfig):
+        super().__init__(config)
+        self.last_stamp_ns: int | None = None
+        self.frames = 0
+        self.dropped = 0
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic != "capture":
+            return []
+        try:
+            pixels = from_image(msg)
+        except MessageError as e:
+            return self._drop(t_ns, "bad_frame", f"dropped a captured frame: {e}")
+        stamp = image_stamp_ns(msg)
+        if self.last_stamp_ns is not None and stamp <= self.last_stamp_ns:
+            return self._drop(
+                t_ns,
+                "stale_frame",
+                f"dropped a frame stamped {stamp} ns, not after the previous {self.last_stamp_ns} ns",
+            )
+        self.last_stamp_ns = stamp
+        encoding = msg.encoding
+        if self.config.mono and encoding in _TO_GREY:
+            pixels, encoding = (
+                cv2.cvtColor(np.ascontiguousarray(pixels), _TO_GREY[encoding]),
+                "mono8",
+            )
+        elif self.config.mono and encoding == "mono16":
+            pixels, encoding = (pixels >> 8).astype(np.uint8), "mono8"
+        self.frames += 1
+        return [("camera/image", image(pixels, stamp, "camera", encoding))]
+
+    def _drop(self, t_ns: int, code: str, text: str) -> list[Output]:
+        self.dropped += 1
+        if self.dropped <= 10 or self.dropped % 1000 == 0:
+            return [
+                self.event(
+                    t_ns, pb.SEVERITY_WARNING, code, f"{text} (dropped so far: {self.dropped})"
+                )
+            ]
+        return []

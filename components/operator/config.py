@@ -1,0 +1,77 @@
+"""Configuration of the operator (section ``[operator]``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from humanpt.runtime.config import live
+
+from .scenario import BUILTIN_SCENARIOS, Scenario, ScenarioError, builtin_scenario, parse_scenario
+
+
+@dataclass(frozen=True)
+class OperatorConfig:
+    """The simulated operator: which scenario, how fast, how often truth is published.
+
+    ``scenario`` names a built-in (static, arc, trapezium, freehand); ``scenario_file``, if
+    set, names a scenario file instead (format: ``README.md``). The file is read once, when
+    the config is built, into ``scenario_text`` - so a recording carries the scenario itself
+    and replays without the file. ``scenario_text`` may also be given inline.
+    ``speed_mm_s`` > 0 replaces a built-in's default speed; ``speed_scale`` (live) scales
+    the pace of any scenario (tremor stays at human frequencies). The target holds its start
+    pose for ``start_delay_s`` (so the servo can settle), then moves. Truth is published at
+    ``rate_hz``. ``seed`` shapes the freehand seam and its tremor.
+    """
+
+    scenario: Literal["static", "arc", "trapezium", "freehand"] = "static"
+    scenario_file: str = ""
+    scenario_text: str = ""
+    speed_mm_s: float = 0.0
+    speed_scale: float = live(1.0, "pace of the scenario (1 = as written)")
+    rate_hz: float = 100.0
+    start_delay_s: float = 2.0
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.scenario not in BUILTIN_SCENARIOS:
+            raise ValueError(
+                f"scenario must be one of {', '.join(BUILTIN_SCENARIOS)}, got {self.scenario!r}"
+            )
+        if self.scenario_file and not self.scenario_text:
+            # Shell side (config loading), not the core: read the file once, keep its text.
+            path = Path(self.scenario_file)
+            try:
+                text = path.read_text()
+            except OSError as e:
+                raise ValueError(
+                    f"scenario_file {self.scenario_file!r}: cannot read it: {e}"
+                ) from None
+            object.__setattr__(self, "scenario_text", text)
+        for name, lo, hi in (
+            ("speed_mm_s", 0.0, 1000.0),
+            ("speed_scale", 0.0, 100.0),
+            ("rate_hz", 1e-3, 10_000.0),
+            ("start_delay_s", 0.0, 1e6),
+        ):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and lo <= value <= hi):
+                raise ValueError(f"operator.{name} must be within {lo} and {hi}, got {value}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ValueError(f"operator.seed must be an integer >= 0, got {self.seed!r}")
+        try:
+            self.build_scenario()
+        except ScenarioError as e:
+            raise ValueError(str(e)) from None
+
+    def build_scenario(self) -> Scenario:
+        """The scenario this config describes (the file's text, else the built-in)."""
+        if self.scenario_text:
+            return parse_scenario(self.scenario_text, self.scenario_file or "scenario_text")
+        return builtin_scenario(self.scenario, self.speed_mm_s, self.seed)
+
+    @property
+    def tick_period_ns(self) -> int:
+        return round(1e9 / self.rate_hz)

@@ -1,0 +1,88 @@
+"""The operator as a component core: moves the target along a scenario and publishes the
+truth (world_T_tob, and world_T_tip with a driver) on ``operator/truth`` at a fixed rate."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import pose
+
+from .config import OperatorConfig
+from .scenario import Trajectory
+
+__all__ = ["OperatorCore"]
+
+
+def _metres(a_T_b_mm: np.ndarray) -> np.ndarray:
+    out = np.array(a_T_b_mm, dtype=float)
+    out[:3, 3] /= 1000.0
+    return out
+
+
+class OperatorCore(Core):
+    """On every tick: advance scenario time by the tick's duration x ``speed_scale`` (after
+    ``start_delay_s``), publish the pose there. Events: ``scenario_started``,
+    ``scenario_done`` (when the last segment ends; the target then holds still)."""
+
+    name = "operator"
+    config_type = OperatorConfig
+    inputs = ()
+
+    def __init__(self, config: OperatorConfig):
+        super().__init__(config)
+        self.scenario = config.build_scenario()
+        self.trajectory = Trajectory(self.scenario)
+        self.first_ns: int | None = None
+        self.last_ns = 0
+        self.scenario_t_s = 0.0
+        self.done = False
+
+    def tick_period_ns(self) -> int | None:
+        return self.config.tick_period_ns
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic != "tick":
+            return []
+        out: list[Output] = []
+        if self.first_ns is None:
+            self.first_ns = self.last_ns = t_ns
+            s = self.scenario
+            out.append(
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_INFO,
+                    "scenario_started",
+                    f"scenario {s.name}: {len(s.segments)} segments, "
+                    f"{self.trajectory.duration_s:.2f} s at pace 1, path {s.path}, "
+                    f"driver {'none' if s.driver_mm is None else s.driver_mm}",
+                )
+            )
+        dt_s = max(t_ns - self.last_ns, 0) / 1e9
+        self.last_ns = t_ns
+        elapsed_s = (t_ns - self.first_ns) / 1e9
+        moving_s = min(dt_s, max(elapsed_s - self.config.start_delay_s, 0.0))
+        self.scenario_t_s += moving_s * self.config.speed_scale
+        world_T_tob, world_T_tip = self.trajectory.pose(self.scenario_t_s, tremor_t_s=elapsed_s)
+        truth = pb.Truth(header=self.next_header("operator/truth", t_ns, "world"))
+        truth.world_T_tob.CopyFrom(pose(_metres(world_T_tob)))
+        if world_T_tip is not None:
+            truth.has_tip = True
+            truth.world_T_tip.CopyFrom(pose(_metres(world_T_tip)))
+        out.append(("operator/truth", truth))
+        if (
+            not self.done
+            and self.scenario_t_s >= self.trajectory.duration_s
+            and (self.trajectory.duration_s > 0 or elapsed_s >= self.config.start_delay_s)
+        ):
+            self.done = True
+            out.append(
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_INFO,
+                    "scenario_done",
+                    f"scenario {self.scenario.name} done after {elapsed_s:.3f} s; holding",
+                )
+            )
+        return out

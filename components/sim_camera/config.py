@@ -1,0 +1,217 @@
+"""Configuration of the simulated PSVS camera (section ``[sim_camera]``).
+
+Brightness is in DN (digital numbers of the 8-bit image). A source's radiance is given as
+the DN per millisecond of exposure that a fully covered pixel would collect with no beam
+splitter; each view then passes the beam splitter and mirrors with its own gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from humanpt.geometry import (
+    DEFAULT_FLANGE_T_CAMERA_MM,
+    PsvsParams,
+    TargetModel,
+    psvs_m_l_mm,
+    transform_from_x,
+    x_from_transform,
+)
+from humanpt.runtime.config import live
+
+_M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
+DEFAULT_FLANGE_T_CAMERA_MM_DEG: tuple[float, ...] = tuple(
+    float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM)
+)
+
+
+def _finite(owner: str, name: str, value: float, *, positive: bool = False, nonneg: bool = False):
+    if not math.isfinite(value):
+        raise ValueError(f"{owner}.{name} must be finite, got {value}")
+    if positive and not value > 0:
+        raise ValueError(f"{owner}.{name} must be > 0, got {value}")
+    if nonneg and not value >= 0:
+        raise ValueError(f"{owner}.{name} must be >= 0, got {value}")
+
+
+@dataclass(frozen=True)
+class PsvsConfig:
+    """The PSVS geometry as config keys (``[sim_camera.psvs]``); see
+    :class:`humanpt.geometry.PsvsParams`. Defaults: the issue's sensor - 640 x 480,
+    a_u = a_v = 1000 px, centre (320, 240), baseline 90 mm, m, l of a 1 mm beam splitter at
+    45 deg (eq. (5), (6)), no distortion."""
+
+    image_width_px: int = 640
+    image_height_px: int = 480
+    a_u: float = 1000.0
+    a_v: float = 1000.0
+    skew: float = 0.0
+    u0: float = 320.0
+    v0: float = 240.0
+    baseline_mm: float = 90.0
+    m_mm: float = _M_MM
+    l_mm: float = _L_MM
+    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        self.params()  # PsvsParams validates everything and names the field
+
+    def params(self) -> PsvsParams:
+        """The geometry library's :class:`PsvsParams`."""
+        return PsvsParams(
+            image_size_px=(self.image_width_px, self.image_height_px),
+            a_u=self.a_u,
+            a_v=self.a_v,
+            skew=self.skew,
+            u0=self.u0,
+            v0=self.v0,
+            baseline_mm=self.baseline_mm,
+            m_mm=self.m_mm,
+            l_mm=self.l_mm,
+            dist_coeffs=self.dist_coeffs,
+        )
+
+
+@dataclass(frozen=True)
+class SimCameraConfig:
+    """The simulated PSVS camera: sensor, target, optics, noise, clutter.
+
+    Geometry: ``psvs`` (the PSVS), ``flange_T_camera_mm_deg`` (hand-eye, X = x, y, z mm,
+    yaw, pitch, roll deg; default :data:`humanpt.geometry.DEFAULT_FLANGE_T_CAMERA_MM`),
+    the target (isosceles, ``target_leg_mm``, ``target_base_mm``, ``source_diameter_mm``).
+
+    Photometry (DN = grey levels): a fully covered pixel of a source collects
+    ``source_dn_per_ms * exposure_ms * view_gain_<view>`` DN above the background;
+    the background is ``black_level_dn + background_dn_per_ms * exposure_ms``. Optics blur
+    is a Gaussian of ``blur_sigma_px``. Noise: shot noise (Poisson on electrons,
+    ``gain_e_per_dn`` electrons per DN) and read noise (``read_noise_e``), a full well of
+    ``full_well_e``, then 8-bit quantisation and saturation at 255.
+
+    Clutter (all off by default): a mirror reflection of the sources in a shiny plane
+    fixed to the TOB (``reflection_gain`` > 0; plane ``n . p = d`` in the TOB frame, mm,
+    ``reflection_plane_tob``), a bright lamp (``lamp_position_mm`` in ``lamp_frame``), and
+    partial occlusion of some sources (``occluded_sources``: 0 = A, 1 = B, 2 = C; the part
+    beyond a straight edge at ``occlusion_angle_deg`` in the TOB plane, covering
+    ``occlusion_fraction`` of the disc, is hidden).
+
+    Timing: one image per ``1/fps`` s, rendered at the tick (capture) time from the truth
+    interpolated (or extrapolated by at most ``max_extrapolation_ms``) to it.
+    Randomness: ``np.random.default_rng([seed, frame_index])``.
+    """
+
+    fps: float = 30.0
+    seed: int = 0
+    psvs: PsvsConfig = field(default_factory=PsvsConfig)
+    flange_T_camera_mm_deg: tuple[float, float, float, float, float, float] = (
+        DEFAULT_FLANGE_T_CAMERA_MM_DEG
+    )
+    target_leg_mm: float = 40.0
+    target_base_mm: float = 30.0
+    source_diameter_mm: float = 5.0
+    # photometry
+    source_dn_per_ms: float = live(420.0, "radiance of a source (DN/ms, before the view gain)")
+    exposure_ms: float = live(1.0, "exposure time (ms)")
+    view_gain_right: float = 0.5
+    view_gain_left: float = 0.44
+    background_dn_per_ms: float = live(10.0, "ambient background (DN/ms)")
+    black_level_dn: float = 4.0
+    blur_sigma_px: float = 0.7
+    # sensor
+    noise: bool = True
+    gain_e_per_dn: float = 40.0
+    read_noise_e: float = 10.0
+    full_well_e: float = 12_000.0
+    # clutter
+    reflection_gain: float = live(0.0, "brightness of the mirror images (0: off)")
+    reflection_plane_tob: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 30.0)
+    reflection_blur_px: float = 1.5
+    lamp_position_mm: tuple[float, float, float] | None = None
+    lamp_frame: Literal["world", "camera"] = "world"
+    lamp_diameter_mm: float = 30.0
+    lamp_dn_per_ms: float = 300.0
+    occluded_sources: tuple[int, ...] = live((), "sources partly hidden (0=A, 1=B, 2=C)")
+    occlusion_fraction: float = live(0.5, "hidden fraction of each occluded source")
+    occlusion_angle_deg: float = live(0.0, "direction of the hidden side in the TOB plane")
+    # timing
+    max_extrapolation_ms: float = 50.0
+    near_mm: float = 10.0
+
+    def __post_init__(self) -> None:
+        own = "sim_camera"
+        _finite(own, "fps", self.fps, positive=True)
+        if self.fps > 10_000:
+            raise ValueError(f"{own}.fps must be at most 10000, got {self.fps}")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            raise ValueError(f"{own}.seed must be an integer >= 0, got {self.seed!r}")
+        if not isinstance(self.psvs, PsvsConfig):
+            raise ValueError(f"{own}.psvs must be a PsvsConfig, got {type(self.psvs).__name__}")
+        x = np.asarray(self.flange_T_camera_mm_deg, dtype=float)
+        if x.shape != (6,) or not np.all(np.isfinite(x)):
+            raise ValueError(f"{own}.flange_T_camera_mm_deg must be 6 finite numbers, got {x}")
+        try:
+            self.target_model()
+        except ValueError as e:
+            raise ValueError(f"{own}: target: {e}") from None
+        for name in ("source_dn_per_ms", "exposure_ms", "background_dn_per_ms", "black_level_dn"):
+            _finite(own, name, getattr(self, name), nonneg=True)
+        for name in ("view_gain_right", "view_gain_left"):
+            value = getattr(self, name)
+            _finite(own, name, value, nonneg=True)
+            if value > 1:
+                raise ValueError(f"{own}.{name} is a transmission in [0, 1], got {value}")
+        for name in ("blur_sigma_px", "read_noise_e", "reflection_gain", "reflection_blur_px"):
+            _finite(own, name, getattr(self, name), nonneg=True)
+        for name in ("gain_e_per_dn", "full_well_e", "lamp_diameter_mm", "near_mm"):
+            _finite(own, name, getattr(self, name), positive=True)
+        _finite(own, "lamp_dn_per_ms", self.lamp_dn_per_ms, nonneg=True)
+        _finite(own, "max_extrapolation_ms", self.max_extrapolation_ms, nonneg=True)
+        if self.blur_sigma_px > 20 or self.reflection_blur_px > 20:
+            raise ValueError(f"{own}: blur sigmas must be at most 20 px")
+        plane = np.asarray(self.reflection_plane_tob, dtype=float)
+        if (
+            plane.shape != (4,)
+            or not np.all(np.isfinite(plane))
+            or np.linalg.norm(plane[:3]) < 1e-9
+        ):
+            raise ValueError(
+                f"{own}.reflection_plane_tob must be (nx, ny, nz, d) with a non-zero normal, "
+                f"got {self.reflection_plane_tob}"
+            )
+        if self.lamp_position_mm is not None:
+            lamp = np.asarray(self.lamp_position_mm, dtype=float)
+            if lamp.shape != (3,) or not np.all(np.isfinite(lamp)):
+                raise ValueError(f"{own}.lamp_position_mm must be 3 finite numbers or absent")
+        bad = [i for i in self.occluded_sources if i not in (0, 1, 2)]
+        if bad or len(set(self.occluded_sources)) != len(self.occluded_sources):
+            raise ValueError(
+                f"{own}.occluded_sources must be distinct indices 0 (A), 1 (B), 2 (C), "
+                f"got {list(self.occluded_sources)}"
+            )
+        _finite(own, "occlusion_fraction", self.occlusion_fraction, nonneg=True)
+        if self.occlusion_fraction > 1:
+            raise ValueError(
+                f"{own}.occlusion_fraction must be in [0, 1], got {self.occlusion_fraction}"
+            )
+        _finite(own, "occlusion_angle_deg", self.occlusion_angle_deg)
+
+    # -- derived ---------------------------------------------------------------------------
+    def params(self) -> PsvsParams:
+        return self.psvs.params()
+
+    def target_model(self) -> TargetModel:
+        return TargetModel.isosceles(
+            self.target_leg_mm, self.target_base_mm, self.source_diameter_mm, None
+        )
+
+    @property
+    def flange_T_camera(self) -> np.ndarray:
+        """Hand-eye transform (4, 4), mm."""
+        return transform_from_x(np.asarray(self.flange_T_camera_mm_deg, dtype=float))
+
+    @property
+    def tick_period_ns(self) -> int:
+        return round(1e9 / self.fps)

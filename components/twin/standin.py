@@ -1,0 +1,163 @@
+"""A stand-in robot: integrates flange commands on the ALTER cycle.
+
+Until the simulated Puma controller (``sim_robot``, behind the ALTER link and the gateway)
+exists, this core plays robot and gateway at once: it consumes ``controller/command``
+(humanpt.FlangeCommand: per-cycle translation in m and rotation vector in rad, world frame)
+and on every cycle (28 ms) applies the latest command - clipped to the paper's step-
+controller limits, 100 mm/s and 60 deg/s - to the true flange pose, then publishes
+``alter_gateway/robot_state`` (what the gateway would report) and ``sim_robot/truth``
+(what the camera simulator needs). No kinematics, no joint limits, no latency.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from humanpt.geometry import (
+    DEFAULT_DZ_MM,
+    DEFAULT_FLANGE_T_CAMERA_MM,
+    transform_from_x,
+    viewing_world_T_flange,
+    x_from_transform,
+)
+from humanpt.operator.scenario import TABLE1_X_MM_DEG
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_vector3, pose
+
+__all__ = ["StandInRobotConfig", "StandInRobotCore", "DEFAULT_START_FLANGE_MM_DEG"]
+
+DEFAULT_START_FLANGE_MM_DEG: tuple[float, ...] = tuple(
+    float(v)
+    for v in x_from_transform(
+        viewing_world_T_flange(
+            transform_from_x(np.array(TABLE1_X_MM_DEG)), DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM
+        )
+    )
+)
+"""Where the flange starts by default: the static (Table 1) target 600 mm ahead of the
+camera on its optical axis, with the default hand-eye transform."""
+
+
+@dataclass(frozen=True)
+class StandInRobotConfig:
+    """``cycle_ms``: the ALTER cycle; ``start_flange_mm_deg``: X of world_T_flange at
+    start (mm, deg; None: :data:`DEFAULT_START_FLANGE_MM_DEG`); per-cycle steps are
+    clipped to ``max_speed_mm_s`` and ``max_rate_deg_s``."""
+
+    cycle_ms: float = 28.0
+    start_flange_mm_deg: tuple[float, float, float, float, float, float] | None = None
+    max_speed_mm_s: float = 100.0
+    max_rate_deg_s: float = 60.0
+
+    def __post_init__(self) -> None:
+        for name in ("cycle_ms", "max_speed_mm_s", "max_rate_deg_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"standin_robot.{name} must be finite and > 0, got {value}")
+        if self.start_flange_mm_deg is not None:
+            x = np.asarray(self.start_flange_mm_deg, dtype=float)
+            if x.shape != (6,) or not np.all(np.isfinite(x)):
+                raise ValueError(
+                    f"standin_robot.start_flange_mm_deg must be 6 finite numbers, got {x}"
+                )
+
+    @property
+    def start_world_T_flange(self) -> np.ndarray:
+        x = (
+            DEFAULT_START_FLANGE_MM_DEG
+            if self.start_flange_mm_deg is None
+            else self.start_flange_mm_deg
+        )
+        return transform_from_x(np.asarray(x, dtype=float))
+
+
+class StandInRobotCore(Core):
+    """See the module docstring. Events: ``bad_command`` (non-finite values, ignored),
+    ``step_clipped`` (a command beyond the limits, once per run of clipped cycles)."""
+
+    name = "standin_robot"
+    config_type = StandInRobotConfig
+    inputs = ("controller/command",)
+
+    def __init__(self, config: StandInRobotConfig):
+        super().__init__(config)
+        self.world_T_flange = config.start_world_T_flange  # mm
+        self.cycle = 0
+        self.pending: tuple[np.ndarray, np.ndarray] | None = None
+        self.missed = 0
+        self.clipping = False
+
+    def tick_period_ns(self) -> int | None:
+        return round(self.config.cycle_ms * 1e6)
+
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic == "controller/command":
+            d_t_mm = from_vector3(msg.d_translation_m) * 1000.0
+            d_r = from_vector3(msg.d_rotation_rad)
+            if not (np.all(np.isfinite(d_t_mm)) and np.all(np.isfinite(d_r))):
+                return [
+                    self.event(
+                        t_ns,
+                        pb.SEVERITY_WARNING,
+                        "bad_command",
+                        f"ignored a command with non-finite values (cycle {msg.cycle})",
+                    )
+                ]
+            self.pending = (d_t_mm, d_r)
+            return []
+        if topic == "tick":
+            return self._cycle(t_ns)
+        return []
+
+    def _cycle(self, t_ns: int) -> list[Output]:
+        out: list[Output] = []
+        if self.pending is None:
+            self.missed += 1
+        else:
+            d_t_mm, d_r = self.pending
+            self.pending = None
+            self.missed = 0
+            dt_s = self.config.cycle_ms / 1000.0
+            max_t = self.config.max_speed_mm_s * dt_s
+            max_r = math.radians(self.config.max_rate_deg_s) * dt_s
+            n_t, n_r = float(np.linalg.norm(d_t_mm)), float(np.linalg.norm(d_r))
+            clipped = n_t > max_t * (1 + 1e-9) or n_r > max_r * (1 + 1e-9)
+            if n_t > max_t:
+                d_t_mm = d_t_mm * (max_t / n_t)
+            if n_r > max_r:
+                d_r = d_r * (max_r / n_r)
+            if clipped and not self.clipping:
+                out.append(
+                    self.event(
+                        t_ns,
+                        pb.SEVERITY_WARNING,
+                        "step_clipped",
+                        f"command of {n_t:.3f} mm / {math.degrees(n_r):.3f} deg per cycle "
+                        f"clipped to {max_t:.3f} mm / {math.degrees(max_r):.3f} deg",
+                    )
+                )
+            self.clipping = clipped
+            new = np.eye(4)
+            new[:3, :3] = (
+                Rotation.from_rotvec(d_r) * Rotation.from_matrix(self.world_T_flange[:3, :3])
+            ).as_matrix()
+            new[:3, 3] = self.world_T_flange[:3, 3] + d_t_mm
+            self.world_T_flange = new
+        world_T_flange_m = self.world_T_flange.copy()
+        world_T_flange_m[:3, 3] /= 1000.0
+        state = pb.RobotState(
+            header=self.next_header("alter_gateway/robot_state", t_ns, "world"),
+            cycle=self.cycle,
+            missed_cycles=self.missed,
+            status=pb.AlterStatus(alter_active=True, arm_power=True),
+        )
+        state.world_T_flange.CopyFrom(pose(world_T_flange_m))
+        truth = pb.Truth(header=self.next_header("sim_robot/truth", t_ns, "world"))
+        truth.world_T_flange.CopyFrom(pose(world_T_flange_m))
+        self.cycle += 1
+        return [*out, ("alter_gateway/robot_state", state), ("sim_robot/truth", truth)]

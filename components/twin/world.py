@@ -1,0 +1,155 @@
+"""The lock-step world: operator + stand-in robot + sim_camera (+ your cores) on virtual
+time in one process, deterministically (:class:`humanpt.runtime.lockstep.Lockstep`)."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.geometry import DEFAULT_DZ_MM, viewing_world_T_flange, x_from_transform
+from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig, OperatorCore, Trajectory
+from humanpt.runtime.core import Core
+from humanpt.runtime.lockstep import Delivered, Lockstep
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
+from humanpt.sim_camera import SimCameraConfig, SimCameraCore
+
+from .standin import StandInRobotConfig, StandInRobotCore
+
+__all__ = ["TwinWorld", "build_world", "start_flange_for"]
+
+
+def start_flange_for(
+    operator: OperatorConfig,
+    dz_mm: float = DEFAULT_DZ_MM,
+    flange_T_camera: np.ndarray | None = None,
+) -> np.ndarray:
+    """world_T_flange (4, 4), mm, that puts the scenario's first target pose on the camera's
+    optical axis at ``dz_mm``, parallel to the camera (the paper's desired point D)."""
+    world_T_tob, _ = Trajectory(operator.build_scenario()).pose(0.0)
+    if flange_T_camera is None:
+        flange_T_camera = SimCameraConfig().flange_T_camera
+    return viewing_world_T_flange(world_T_tob, dz_mm, flange_T_camera)
+
+
+class TwinWorld:
+    """A built world: ``lockstep`` and its cores (``operator``, ``robot``, ``camera``,
+    ``extra``). Run it with :meth:`run_for` / :meth:`run_until`; read what happened with
+    :meth:`outputs`, :meth:`images`, :meth:`truths`."""
+
+    def __init__(
+        self,
+        lockstep: Lockstep,
+        operator: OperatorCore,
+        robot: StandInRobotCore,
+        camera: SimCameraCore,
+        extra: list[Core],
+    ):
+        self.lockstep = lockstep
+        self.operator = operator
+        self.robot = robot
+        self.camera = camera
+        self.extra = extra
+
+    @property
+    def now_ns(self) -> int:
+        return self.lockstep.now_ns
+
+    def run_until(self, t_ns: int) -> TwinWorld:
+        self.lockstep.run_until(int(t_ns))
+        return self
+
+    def run_for(self, seconds: float) -> TwinWorld:
+        return self.run_until(self.lockstep.now_ns + round(seconds * 1e9))
+
+    def digest(self) -> str:
+        return self.lockstep.digest()
+
+    def outputs(self, topic: str | None = None) -> list[Delivered]:
+        return [o for o in self.lockstep.outputs if topic is None or o.topic == topic]
+
+    def images(self) -> list[tuple[int, np.ndarray]]:
+        """(capture stamp ns, (H, W) uint8) of every camera image so far."""
+        from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+        out = []
+        for o in self.outputs("camera/image"):
+            msg = RawImage.FromString(o.data)
+            out.append((image_stamp_ns(msg), from_image(msg).copy()))
+        return out
+
+    def truths(self, topic: str = "sim_camera/truth") -> list[tuple[int, dict[str, np.ndarray]]]:
+        """(stamp ns, {field: (4, 4) in mm}) of a Truth topic (``operator/truth``,
+        ``sim_robot/truth`` or ``sim_camera/truth``, the truth at each image's capture)."""
+        out = []
+        for o in self.outputs(topic):
+            msg = pb.Truth.FromString(o.data)
+            poses = {}
+            for field in ("world_T_tob", "world_T_tip", "world_T_flange"):
+                if msg.HasField(field):
+                    a_T_b = from_pose(getattr(msg, field))
+                    a_T_b[:3, 3] *= 1000.0
+                    poses[field] = a_T_b
+            out.append((msg.header.stamp_ns, poses))
+        return out
+
+    def close(self) -> None:
+        self.lockstep.close()
+
+    def __enter__(self) -> TwinWorld:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def build_world(
+    scenario: str | OperatorConfig = "static",
+    *,
+    seed: int = 0,
+    sim_camera: SimCameraConfig | None = None,
+    robot: StandInRobotConfig | None = None,
+    extra_cores: list[Core] | tuple[Core, ...] = (),
+    dz_mm: float = DEFAULT_DZ_MM,
+    run_dir: str | Path | None = None,
+    keep_outputs: bool = True,
+    start_ns: int = 0,
+    latency_ns: int = 0,
+) -> TwinWorld:
+    """Assemble operator, stand-in robot and sim_camera (and ``extra_cores``, e.g. a
+    perception or a controller) into a :class:`Lockstep`.
+
+    ``scenario``: a built-in name, a scenario file path, or an :class:`OperatorConfig`.
+    ``seed`` goes into the operator's and the camera's configs (same seed, same bytes).
+    Without ``robot``, the flange starts where the camera sees the scenario's first pose
+    on its optical axis at ``dz_mm`` (:func:`start_flange_for`). With ``run_dir`` every core
+    is recorded there (``humanpt replay`` replays each).
+    """
+    if isinstance(scenario, OperatorConfig):
+        op_cfg = dataclasses.replace(scenario, seed=seed)
+    elif scenario in BUILTIN_SCENARIOS:
+        op_cfg = OperatorConfig(scenario=scenario, seed=seed)
+    else:
+        op_cfg = OperatorConfig(scenario_file=str(scenario), seed=seed)
+    cam_cfg = dataclasses.replace(sim_camera or SimCameraConfig(), seed=seed)
+    if robot is None:
+        start = start_flange_for(op_cfg, dz_mm, cam_cfg.flange_T_camera)
+        robot = StandInRobotConfig(
+            start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start))
+        )
+    operator, robot_core, camera = (
+        OperatorCore(op_cfg),
+        StandInRobotCore(robot),
+        SimCameraCore(cam_cfg),
+    )
+    extra = list(extra_cores)
+    ls = Lockstep(
+        [operator, robot_core, camera, *extra],
+        start_ns=start_ns,
+        latency_ns=latency_ns,
+        run_dir=run_dir,
+        keep_outputs=keep_outputs,
+    )
+    return TwinWorld(ls, operator, robot_core, camera, extra)

@@ -1,0 +1,128 @@
+"""The real-camera source, on a video file the test writes: frames stamped at capture come
+out as camera/image; bad and stale frames are dropped with events; the live component
+records and replays."""
+
+from __future__ import annotations
+
+import itertools
+import threading
+
+import cv2
+import numpy as np
+import pytest
+
+from humanpt.camera import CameraConfig, CameraCore, CaptureAdapter, capture_message, read_frames
+from humanpt.runtime.lockstep import Lockstep
+from humanpt.runtime.recording import read
+from humanpt.runtime.replay import replay
+from humanpt.schemas.convert import from_image, image_stamp_ns
+from tests.conftest import run_cli, write_config
+
+N_FRAMES = 12
+
+
+def _frame(i: int) -> np.ndarray:
+    """A dark 96 x 64 BGR frame with a bright square moving right."""
+    f = np.full((64, 96, 3), 20, np.uint8)
+    f[20:36, 5 + 5 * i : 21 + 5 * i] = (90, 200, 240)
+    return f
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> str:
+    path = tmp_path_factory.mktemp("video") / "moving.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 50.0, (96, 64))
+    assert writer.isOpened()
+    for i in range(N_FRAMES):
+        writer.write(_frame(i))
+    writer.release()
+    return str(path)
+
+
+def _clock(start_ns: int = 1_000_000_000, step_ns: int = 20_000_000):
+    counter = itertools.count()
+    return lambda: start_ns + step_ns * next(counter)
+
+
+def test_video_file_frames_become_camera_images_stamped_at_capture(video):
+    cfg = CameraConfig(source=video)
+    frames = list(read_frames(cfg, clock=_clock()))
+    assert len(frames) == N_FRAMES
+    ls = Lockstep([CameraCore(cfg)], start_ns=0)
+    for stamp, frame in frames:
+        ls.inject(stamp, "camera", "capture", capture_message(frame, stamp))
+    ls.run_until(10**12)
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+    images = [RawImage.FromString(o.data) for o in ls.outputs if o.topic == "camera/image"]
+    assert len(images) == N_FRAMES
+    assert [image_stamp_ns(m) for m in images] == [s for s, _ in frames]
+    for i, m in enumerate(images):
+        assert (m.encoding, m.width, m.height, m.frame_id) == ("mono8", 96, 64, "camera")
+        grey = cv2.cvtColor(_frame(i), cv2.COLOR_BGR2GRAY)
+        assert np.mean(np.abs(from_image(m).astype(int) - grey)) < 4.0  # MJPG is lossy, a little
+        cols = np.flatnonzero(from_image(m)[28] > 100)
+        assert abs(cols.mean() - (12.5 + 5 * i)) < 1.0  # the square moved as written
+
+
+def test_colour_is_kept_when_mono_is_off(video):
+    cfg = CameraConfig(source=video, mono=False)
+    stamp, frame = next(read_frames(cfg, clock=_clock()))
+    ((topic, msg),) = CameraCore(cfg).step(stamp, "capture", capture_message(frame, stamp))
+    assert (
+        topic == "camera/image" and msg.encoding == "bgr8" and from_image(msg).shape == (64, 96, 3)
+    )
+
+
+def test_bad_and_stale_frames_are_dropped_with_an_event():
+    core = CameraCore(CameraConfig(source="unused.avi"))
+    good = capture_message(np.zeros((4, 6), np.uint8), 100)
+    assert core.step(1, "capture", good)[0][0] == "camera/image"
+    stale = capture_message(np.zeros((4, 6), np.uint8), 100)
+    ((topic, ev),) = core.step(2, "capture", stale)
+    assert topic == "camera/events" and ev.code == "stale_frame"
+    broken = capture_message(np.zeros((4, 6), np.uint8), 200)
+    broken.data = broken.data[:-3]
+    ((topic, ev),) = core.step(3, "capture", broken)
+    assert ev.code == "bad_frame" and "needs" in ev.text
+    assert (
+        core.step(4, "capture", capture_message(np.zeros((4, 6), np.uint8), 300))[0][0]
+        == "camera/image"
+    )
+
+
+def test_capture_adapter_grabs_the_whole_file_in_a_thread(video):
+    got = []
+    adapter = CaptureAdapter(CameraConfig(source=video, pace=False), clock=_clock())
+    adapter.start(lambda topic, msg: got.append((topic, msg)))
+    assert adapter.finished.wait(10.0)
+    adapter.close()
+    assert [t for t, _ in got] == ["capture"] * N_FRAMES
+    stamps = [image_stamp_ns(m) for _, m in got]
+    assert stamps == sorted(stamps) and len(set(stamps)) == N_FRAMES
+    assert got[0][1].encoding == "bgr8"
+
+
+def test_a_source_that_does_not_open_is_retried_not_fatal(tmp_path):
+    adapter = CaptureAdapter(CameraConfig(source=str(tmp_path / "nope.avi"), reopen_s=0.05))
+    adapter.start(lambda topic, msg: None)
+    threading.Event().wait(0.3)
+    adapter.close()
+    assert adapter.errors >= 2 and adapter.frames == 0
+    with pytest.raises(ValueError, match="camera.width_px"):
+        CameraConfig(width_px=-1)
+
+
+@pytest.mark.timeout(120)
+def test_live_camera_component_publishes_records_and_replays(video, router, tmp_path):
+    port, cfg_path = router
+    cfg = write_config(tmp_path / "cam.toml", port, extra=f'[camera]\nsource = "{video}"\n')
+    run_dir = tmp_path / "run"
+    r = run_cli("camera", "--config", str(cfg), "--run-dir", str(run_dir), "--duration", "3")
+    assert r.returncode == 0, r.stderr
+    rec = read(run_dir / "camera.mcap")
+    outs = [e for e in rec.outputs if e.topic == "camera/image"]
+    ins = [e for e in rec.inputs if e.topic == "capture"]
+    assert len(ins) == N_FRAMES and len(outs) == N_FRAMES
+    res = replay(run_dir / "camera.mcap")
+    assert res.match, res.report()

@@ -1,0 +1,183 @@
+"""The lock-step world: the static scenario shows six blobs where the geometry says; runs
+are deterministic and replay; the stand-in robot integrates (and limits) commands."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from humanpt.geometry import (
+    DEFAULT_FLANGE_T_CAMERA_MM,
+    camera_T_desired,
+    invert_transform,
+    project,
+    transform_from_x,
+    x_from_transform,
+)
+from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig
+from humanpt.runtime.core import Core
+from humanpt.runtime.replay import replay
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose, header, vector3
+from humanpt.sim_camera import SimCameraConfig
+from humanpt.twin import (
+    DEFAULT_START_FLANGE_MM_DEG,
+    StandInRobotConfig,
+    build_world,
+    start_flange_for,
+)
+
+
+def _blob_centres(img: np.ndarray, threshold: float = 60.0) -> np.ndarray:
+    labels, n = ndimage.label(img > threshold)
+    w = img.astype(float) - 14.0  # background of the default sensor
+    rc = np.array(ndimage.center_of_mass(w, labels, range(1, n + 1)))
+    return rc[:, ::-1]  # (u, v)
+
+
+def test_static_scenario_shows_six_blobs_where_the_geometry_says():
+    world = build_world("static", seed=4).run_for(0.5)
+    images = world.images()
+    truths = world.truths("sim_camera/truth")
+    assert len(images) == 15 and len(truths) == 15  # 30 fps for 0.5 s; none at t = 0 (no truth yet)
+    assert [s for s, _ in images] == [t for t, _ in truths]
+    stamp, img = images[-1]
+    poses = truths[-1][1]
+    world_T_camera = poses["world_T_flange"] @ DEFAULT_FLANGE_T_CAMERA_MM
+    camera_T_tob = invert_transform(world_T_camera) @ poses["world_T_tob"]
+    np.testing.assert_allclose(
+        camera_T_tob, camera_T_desired(600.0), atol=1e-6
+    )  # the start pose: D
+    sources = (
+        world.camera.renderer.model.source_positions_mm @ camera_T_tob[:3, :3].T
+        + camera_T_tob[:3, 3]
+    )
+    uv_right, uv_left = project(SimCameraConfig().params(), sources)
+    expected = np.concatenate([uv_right, uv_left])
+    found = _blob_centres(img)
+    assert len(found) == 6
+    dist = np.linalg.norm(found[:, None, :] - expected[None, :, :], axis=2)
+    assert sorted(np.argmin(dist, axis=1).tolist()) == list(
+        range(6)
+    )  # one blob per source and view
+    assert np.max(np.min(dist, axis=1)) < 0.1  # px, with noise
+    # Pairs share a scan line (to the 0.014 px of the refraction shift l along the axis).
+    np.testing.assert_allclose(uv_right[:, 1], uv_left[:, 1], atol=0.02)
+
+
+def test_every_builtin_scenario_starts_in_view():
+    for name in BUILTIN_SCENARIOS:
+        world = build_world(name).run_for(0.1)
+        _, img = world.images()[-1]
+        assert len(_blob_centres(img, threshold=40)) == 6, name
+        start = start_flange_for(OperatorConfig(scenario=name))
+        np.testing.assert_allclose(world.robot.world_T_flange, start, atol=1e-6)
+
+
+def test_the_default_stand_in_start_pose_views_the_static_target():
+    world_T_flange = transform_from_x(np.array(DEFAULT_START_FLANGE_MM_DEG))
+    world_T_tob = transform_from_x(np.array((236.132, 1248.772, 85.284, -2.598, -0.883, -4.535)))
+    camera_T_tob = invert_transform(world_T_flange @ DEFAULT_FLANGE_T_CAMERA_MM) @ world_T_tob
+    np.testing.assert_allclose(camera_T_tob, camera_T_desired(600.0), atol=1e-9)
+    assert StandInRobotConfig().start_world_T_flange == pytest.approx(world_T_flange)
+
+
+def test_same_seed_same_run_and_recordings_replay_exactly(tmp_path):
+    def run(seed, run_dir=None):
+        world = build_world("freehand", seed=seed, run_dir=run_dir)
+        world.run_for(0.7)
+        world.close()
+        return world
+
+    a, b = run(7, tmp_path), run(7)
+    assert a.digest() == b.digest()
+    assert len(a.outputs("camera/image")) == 21
+    assert run(8).digest() != a.digest()
+    for comp in ("operator", "standin_robot", "sim_camera"):
+        res = replay(tmp_path / f"{comp}.mcap")
+        assert res.match, res.report()
+        assert res.recorded_outputs == res.replayed_outputs > 0
+
+
+class _Commander(Core):
+    """A scripted controller: a fixed flange command every ALTER cycle."""
+
+    name = "commander"
+    config_type = type(None)
+
+    def __init__(self, d_t_m, d_r_rad):
+        super().__init__(None)
+        self.d_t_m, self.d_r_rad = d_t_m, d_r_rad
+
+    def tick_period_ns(self):
+        return 28_000_000
+
+    def on_input(self, t_ns, topic, msg):
+        cmd = pb.FlangeCommand(
+            header=self.next_header("controller/command", t_ns, "world"),
+            cycle=0,
+            d_translation_m=vector3(self.d_t_m),
+            d_rotation_rad=vector3(self.d_r_rad),
+        )
+        return [("controller/command", cmd)]
+
+
+def _flange_track(world) -> np.ndarray:
+    states = [pb.RobotState.FromString(o.data) for o in world.outputs("alter_gateway/robot_state")]
+    out = []
+    for s in states:
+        t = from_pose(s.world_T_flange)
+        t[:3, 3] *= 1000
+        out.append(t)
+    return np.array(out)
+
+
+def test_stand_in_robot_integrates_commands_in_the_world_frame():
+    d_r = np.radians([0.0, 0.0, 0.5])  # 0.5 deg per cycle about world z
+    world = build_world("static", extra_cores=[_Commander([0.001, -0.002, 0.0], d_r)])
+    world.run_for(0.28)  # ten cycles after the first
+    track = _flange_track(world)
+    assert len(track) == 11
+    # The commander ticks after the robot at equal times, so cycle k applies command k - 1.
+    steps = np.diff(track[:, :3, 3], axis=0)
+    np.testing.assert_allclose(steps[1:], np.tile([1.0, -2.0, 0.0], (9, 1)), atol=1e-9)
+    yaw = np.array([x_from_transform(t)[3] for t in track])
+    np.testing.assert_allclose(np.diff(yaw)[1:], 0.5, atol=1e-9)
+    truth = world.truths("sim_robot/truth")
+    np.testing.assert_allclose(truth[-1][1]["world_T_flange"], track[-1], atol=1e-9)
+    states = [pb.RobotState.FromString(o.data) for o in world.outputs("alter_gateway/robot_state")]
+    assert [s.cycle for s in states] == list(range(11)) and states[0].missed_cycles == 1
+    assert states[-1].missed_cycles == 0 and states[-1].header.frame_id == "world"
+
+
+def test_stand_in_robot_clips_to_the_step_limits_and_rejects_nan():
+    world = build_world("static", extra_cores=[_Commander([0.05, 0.0, 0.0], [0.0, 0.0, 0.0])])
+    world.run_for(0.28)
+    steps = np.linalg.norm(np.diff(_flange_track(world)[:, :3, 3], axis=0), axis=1)
+    np.testing.assert_allclose(steps[1:], 100.0 * 0.028, atol=1e-9)  # 100 mm/s x 28 ms
+    events = [pb.Event.FromString(o.data) for o in world.outputs("standin_robot/events")]
+    assert [e.code for e in events] == ["step_clipped"]  # once, not every cycle
+    nan_world = build_world(
+        "static", extra_cores=[_Commander([math.nan, 0.0, 0.0], [0.0, 0.0, 0.0])]
+    )
+    nan_world.run_for(0.1)
+    assert {
+        pb.Event.FromString(o.data).code for o in nan_world.outputs("standin_robot/events")
+    } == {"bad_command"}
+    track = _flange_track(nan_world)
+    np.testing.assert_allclose(track, np.broadcast_to(track[0], track.shape))  # it never moved
+
+
+def test_param_and_injected_inputs_reach_the_world():
+    world = build_world("static", seed=1)
+    world.lockstep.set_param(200_000_000, "sim_camera", "occluded_sources", "[0, 1, 2]")
+    world.lockstep.set_param(200_000_000, "sim_camera", "occlusion_fraction", "1.0")
+    world.run_for(0.4)
+    images = world.images()
+    before = [img for t, img in images if t < 200_000_000]
+    after = [img for t, img in images if t > 200_000_000]
+    assert before[-1].max() > 100 and after[-1].max() < 25  # every source fully hidden
+    assert header(0).stamp_ns == 0
