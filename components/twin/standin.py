@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -24,20 +25,35 @@ from humanpt.geometry import (
     viewing_world_T_flange,
     x_from_transform,
 )
-from humanpt.operator.scenario import TABLE1_X_MM_DEG
+from humanpt.operator.scenario import BUILTIN_SCENARIOS, Scenario, Trajectory, builtin_scenario
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_vector3, pose
 
-__all__ = ["StandInRobotConfig", "StandInRobotCore", "DEFAULT_START_FLANGE_MM_DEG"]
+__all__ = [
+    "StandInRobotConfig",
+    "StandInRobotCore",
+    "DEFAULT_START_FLANGE_MM_DEG",
+    "viewing_start_flange",
+]
+
+
+def viewing_start_flange(
+    scenario: Scenario,
+    dz_mm: float = DEFAULT_DZ_MM,
+    flange_T_camera: np.ndarray = DEFAULT_FLANGE_T_CAMERA_MM,
+) -> np.ndarray:
+    """world_T_flange (4, 4), mm, that puts the scenario's first target pose (no tremor) on
+    the camera's optical axis at ``dz_mm``, parallel to the camera: the paper's desired
+    point D. A robot started there sees the target in its first image."""
+    trajectory = Trajectory(scenario)
+    path = trajectory.path_pose(0.0)
+    world_T_tob = path @ trajectory.tip_T_tob if scenario.path == "tip" else path
+    return viewing_world_T_flange(world_T_tob, dz_mm, flange_T_camera)
+
 
 DEFAULT_START_FLANGE_MM_DEG: tuple[float, ...] = tuple(
-    float(v)
-    for v in x_from_transform(
-        viewing_world_T_flange(
-            transform_from_x(np.array(TABLE1_X_MM_DEG)), DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM
-        )
-    )
+    float(v) for v in x_from_transform(viewing_start_flange(builtin_scenario("static")))
 )
 """Where the flange starts by default: the static (Table 1) target 600 mm ahead of the
 camera on its optical axis, with the default hand-eye transform."""
@@ -45,20 +61,28 @@ camera on its optical axis, with the default hand-eye transform."""
 
 @dataclass(frozen=True)
 class StandInRobotConfig:
-    """``cycle_ms``: the ALTER cycle; ``start_flange_mm_deg``: X of world_T_flange at
-    start (mm, deg; None: :data:`DEFAULT_START_FLANGE_MM_DEG`); per-cycle steps are
-    clipped to ``max_speed_mm_s`` and ``max_rate_deg_s``."""
+    """``cycle_ms``: the ALTER cycle. Start pose: ``start_flange_mm_deg`` (X of
+    world_T_flange, mm, deg) when given, else the pose from which the camera (default
+    hand-eye) sees the first target pose of the built-in scenario ``start_view`` at
+    ``start_dz_mm`` on its axis. Per-cycle steps are clipped to ``max_speed_mm_s`` and
+    ``max_rate_deg_s``."""
 
     cycle_ms: float = 28.0
     start_flange_mm_deg: tuple[float, float, float, float, float, float] | None = None
+    start_view: Literal["static", "arc", "trapezium", "freehand"] = "static"
+    start_dz_mm: float = DEFAULT_DZ_MM
     max_speed_mm_s: float = 100.0
     max_rate_deg_s: float = 60.0
 
     def __post_init__(self) -> None:
-        for name in ("cycle_ms", "max_speed_mm_s", "max_rate_deg_s"):
+        for name in ("cycle_ms", "max_speed_mm_s", "max_rate_deg_s", "start_dz_mm"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"standin_robot.{name} must be finite and > 0, got {value}")
+        if self.start_view not in BUILTIN_SCENARIOS:
+            raise ValueError(
+                f"standin_robot.start_view must be one of {', '.join(BUILTIN_SCENARIOS)}"
+            )
         if self.start_flange_mm_deg is not None:
             x = np.asarray(self.start_flange_mm_deg, dtype=float)
             if x.shape != (6,) or not np.all(np.isfinite(x)):
@@ -68,12 +92,10 @@ class StandInRobotConfig:
 
     @property
     def start_world_T_flange(self) -> np.ndarray:
-        x = (
-            DEFAULT_START_FLANGE_MM_DEG
-            if self.start_flange_mm_deg is None
-            else self.start_flange_mm_deg
-        )
-        return transform_from_x(np.asarray(x, dtype=float))
+        """The start pose (4, 4), mm."""
+        if self.start_flange_mm_deg is not None:
+            return transform_from_x(np.asarray(self.start_flange_mm_deg, dtype=float))
+        return viewing_start_flange(builtin_scenario(self.start_view), self.start_dz_mm)
 
 
 class StandInRobotCore(Core):

@@ -8,15 +8,15 @@ from pathlib import Path
 
 import numpy as np
 
-from humanpt.geometry import DEFAULT_DZ_MM, viewing_world_T_flange, x_from_transform
-from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig, OperatorCore, Trajectory
+from humanpt.geometry import DEFAULT_DZ_MM, x_from_transform
+from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig, OperatorCore
 from humanpt.runtime.core import Core
 from humanpt.runtime.lockstep import Delivered, Lockstep
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
 from humanpt.sim_camera import SimCameraConfig, SimCameraCore
 
-from .standin import StandInRobotConfig, StandInRobotCore
+from .standin import StandInRobotConfig, StandInRobotCore, viewing_start_flange
 
 __all__ = ["TwinWorld", "build_world", "start_flange_for"]
 
@@ -28,22 +28,21 @@ def start_flange_for(
 ) -> np.ndarray:
     """world_T_flange (4, 4), mm, that puts the scenario's first target pose on the camera's
     optical axis at ``dz_mm``, parallel to the camera (the paper's desired point D)."""
-    world_T_tob, _ = Trajectory(operator.build_scenario()).pose(0.0)
     if flange_T_camera is None:
         flange_T_camera = SimCameraConfig().flange_T_camera
-    return viewing_world_T_flange(world_T_tob, dz_mm, flange_T_camera)
+    return viewing_start_flange(operator.build_scenario(), dz_mm, flange_T_camera)
 
 
 class TwinWorld:
-    """A built world: ``lockstep`` and its cores (``operator``, ``robot``, ``camera``,
-    ``extra``). Run it with :meth:`run_for` / :meth:`run_until`; read what happened with
+    """A built world: ``lockstep`` and its cores (``operator``, ``robot`` - the stand-in,
+    None when other robot cores replace it - ``camera``, ``extra``). Run it with :meth:`run_for` / :meth:`run_until`; read what happened with
     :meth:`outputs`, :meth:`images`, :meth:`truths`."""
 
     def __init__(
         self,
         lockstep: Lockstep,
         operator: OperatorCore,
-        robot: StandInRobotCore,
+        robot: StandInRobotCore | None,
         camera: SimCameraCore,
         extra: list[Core],
     ):
@@ -111,6 +110,7 @@ def build_world(
     seed: int = 0,
     sim_camera: SimCameraConfig | None = None,
     robot: StandInRobotConfig | None = None,
+    robot_cores: list[Core] | tuple[Core, ...] | None = None,
     extra_cores: list[Core] | tuple[Core, ...] = (),
     dz_mm: float = DEFAULT_DZ_MM,
     run_dir: str | Path | None = None,
@@ -125,7 +125,9 @@ def build_world(
     ``seed`` goes into the operator's and the camera's configs (same seed, same bytes).
     Without ``robot``, the flange starts where the camera sees the scenario's first pose
     on its optical axis at ``dz_mm`` (:func:`start_flange_for`). With ``run_dir`` every core
-    is recorded there (``humanpt replay`` replays each).
+    is recorded there (``humanpt replay`` replays each). ``robot_cores`` replaces the
+    stand-in robot by other cores (e.g. ``sim_robot`` and ``alter_gateway``, wired with
+    ``world.lockstep.connect_serial``); one of them must publish ``sim_robot/truth``.
     """
     if isinstance(scenario, OperatorConfig):
         op_cfg = dataclasses.replace(scenario, seed=seed)
@@ -134,19 +136,19 @@ def build_world(
     else:
         op_cfg = OperatorConfig(scenario_file=str(scenario), seed=seed)
     cam_cfg = dataclasses.replace(sim_camera or SimCameraConfig(), seed=seed)
-    if robot is None:
-        start = start_flange_for(op_cfg, dz_mm, cam_cfg.flange_T_camera)
-        robot = StandInRobotConfig(
-            start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start))
-        )
-    operator, robot_core, camera = (
-        OperatorCore(op_cfg),
-        StandInRobotCore(robot),
-        SimCameraCore(cam_cfg),
-    )
+    robot_core = None
+    if robot_cores is None:
+        if robot is None:
+            start = start_flange_for(op_cfg, dz_mm, cam_cfg.flange_T_camera)
+            robot = StandInRobotConfig(
+                start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start))
+            )
+        robot_core = StandInRobotCore(robot)
+        robot_cores = [robot_core]
+    operator, camera = OperatorCore(op_cfg), SimCameraCore(cam_cfg)
     extra = list(extra_cores)
     ls = Lockstep(
-        [operator, robot_core, camera, *extra],
+        [operator, *robot_cores, camera, *extra],
         start_ns=start_ns,
         latency_ns=latency_ns,
         run_dir=run_dir,

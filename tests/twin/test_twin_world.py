@@ -181,3 +181,30 @@ def test_param_and_injected_inputs_reach_the_world():
     after = [img for t, img in images if t > 200_000_000]
     assert before[-1].max() > 100 and after[-1].max() < 25  # every source fully hidden
     assert header(0).stamp_ns == 0
+
+
+def test_stand_in_can_start_viewing_any_builtin_scenario_for_live_use():
+    from humanpt.operator import builtin_scenario
+    from humanpt.twin import viewing_start_flange
+
+    for name in BUILTIN_SCENARIOS:
+        cfg = StandInRobotConfig(start_view=name)
+        np.testing.assert_allclose(
+            cfg.start_world_T_flange, viewing_start_flange(builtin_scenario(name))
+        )
+        trajectory_start = build_world(name).robot.world_T_flange
+        np.testing.assert_allclose(cfg.start_world_T_flange, trajectory_start, atol=1e-6)
+    with pytest.raises(ValueError, match="start_view"):
+        StandInRobotConfig(start_view="zigzag")
+
+
+def test_other_robot_cores_can_replace_the_stand_in():
+    from humanpt.twin import StandInRobotCore
+
+    class _Fixed(StandInRobotCore):
+        name = "fixed_robot"
+
+    world = build_world("static", robot_cores=[_Fixed(StandInRobotConfig())])
+    assert world.robot is None
+    world.run_for(0.2)
+    assert len(world.images()) == 6
