@@ -162,3 +162,78 @@ def bench_render(args) -> int:
         print(f"{'  ' + name:34s} {'':>10s} {1e3 * t / n:10.3f}")
     print(f"{'sim_camera core step (+ message)':34s} {n / core_total:10.0f} {1e3 * core_total / n:10.3f}")
     return 0
+
+
+def bench_perception(args) -> int:
+    """Images per second of each perception method on 640x480 twin images, on one core; and
+    (unless ``--no-accuracy``) both methods' accuracy on twin images with ground truth."""
+    import os
+
+    import cv2
+
+    from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
+    from humanpt.perception.evaluate import cases_for, evaluate, format_table, random_cases
+    from humanpt.schemas.convert import image
+    from humanpt.sim_camera import Renderer
+
+    cv2.setNumThreads(1)
+    pinned = ""
+    if hasattr(os, "sched_setaffinity"):
+        try:
+            os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+            pinned = ", pinned to one CPU"
+        except OSError:
+            pass
+    n = max(1, args.images)
+    cases = random_cases(16, seed=1)
+    renderer = Renderer(cases[0].sim)
+    images = [renderer.render(c.camera_T_tob, frame_index=c.frame_index) for c in cases]
+    messages = [image(img, (k + 1) * 33_000_000) for k, img in enumerate(images)]
+
+    def timed(fn) -> tuple[float, float, float]:
+        for k in range(min(20, n)):  # warm-up
+            fn(k)
+        t = np.empty(n)
+        for k in range(n):
+            t0 = time.perf_counter_ns()
+            fn(k)
+            t[k] = time.perf_counter_ns() - t0
+        return 1e9 * n / t.sum(), float(np.percentile(t, 50)) / 1e6, float(np.percentile(t, 99)) / 1e6
+
+    rows = []
+    m = len(images)
+    for method in ("weighted", "paper"):
+        p = Perception(PerceptionConfig(method=method))
+        rois = []
+        for img in images:
+            r = p.measure(img)
+            rois.append(p.roi_around(r.blobs.uv_px, r.blobs.size_px))
+        rows.append((method, "search: whole image", *timed(lambda k, p=p: p.measure(images[k % m]))))
+        rows.append((method, "tracking: region of interest",
+                     *timed(lambda k, p=p, rois=rois: p.measure(images[k % m], rois[k % m]))))
+        # the whole core step on a sequence (decode, checks, ROI tracking, message); each
+        # image repeated 4 times so that the tracking region holds
+        core = PerceptionCore(PerceptionConfig(method=method))
+        rows.append((method, "core step (decode ... message)",
+                     *timed(lambda k, core=core: core.step(k, "camera/image", messages[(k // 4) % m]))))
+    print(f"humanpt bench perception: 640x480 twin images (random poses, 450-900 mm, default noise), "
+          f"{n} per case, cv2 threads 1{pinned}")
+    print(f"\n{'method':9s} {'case':32s} {'images/s':>9s} {'p50 ms':>8s} {'p99 ms':>8s}")
+    for method, case, rate, p50, p99 in rows:
+        print(f"{method:9s} {case:32s} {rate:9.0f} {p50:8.3f} {p99:8.3f}")
+    if not args.no_accuracy:
+        print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
+              "bound: geometry error model at the measured centre RMS):\n")
+        results = {name: evaluate(cases_for(name, args.accuracy_images, args.seed))
+                   for name in ("standard", "random", "clutter")}
+        print(format_table(results))
+    return 0
+
+
+def bench_alter(args) -> int:
+    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.alter_gateway.bench``)."""
+    from humanpt.alter_gateway.bench import bench_alter as run
+
+    periods = tuple(float(p) for p in args.periods.split(",") if p.strip())
+    run(args.duration, periods, args.search_seconds, "zenoh" if args.zenoh else "threads")
+    return 0

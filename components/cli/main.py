@@ -19,6 +19,7 @@ examples:
   humanpt echo ponger/pong --count 3              print decoded messages
   humanpt replay runs/<run> --component ponger    re-run a component on its recorded inputs
   humanpt bench runtime                           latency and recording throughput
+  humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
 """
 
@@ -131,6 +132,15 @@ def build_parser() -> argparse.ArgumentParser:
                         "time of each stage (projection, coverage and blur, sensor noise) and of the whole "
                         "core step (render + message).")
     q.add_argument("--frames", type=int, default=300, help="images per case (default 300)")
+    q = bsub.add_parser("perception", help="images per second of each perception method; their accuracy",
+                        description="Images per second of the weighted (default) and paper perception methods "
+                        "on 640x480 twin images on one core (whole-image search, region-of-interest tracking, "
+                        "the whole core step), then both methods' accuracy on twin images with ground truth "
+                        "(centre RMS, 3D and pose errors against the stereo bound, wrong correspondences).")
+    q.add_argument("--images", type=int, default=1000, help="timed images per case (default 1000)")
+    q.add_argument("--accuracy-images", type=int, default=200, help="images per accuracy set (default 200)")
+    q.add_argument("--seed", type=int, default=0, help="seed of the accuracy sets (default 0)")
+    q.add_argument("--no-accuracy", action="store_true", help="timing only")
     return ap
 
 
@@ -175,6 +185,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "render":
             from humanpt.cli.bench import bench_render
             return bench_render(args)
+        if args.bench_verb == "perception":
+            from humanpt.cli.bench import bench_perception
+            return bench_perception(args)
         ap.parse_args(["bench", "--help"])
     ap.print_help()
     return 2

@@ -106,7 +106,7 @@ class PerceptionConfig:
     side_tolerance_mm: float = 3.0
     min_depth_mm: float = 200.0
     max_depth_mm: float = 2000.0
-    triangulation: Literal["eq4", "eq2", "lsq"] = "lsq"
+    triangulation: Literal["eq4", "eq2", "lsq"] = "eq4"
     # paper method
     paper_cross_px: tuple[int, ...] = (9, 5)
     paper_scanline_tol_px: float = 3.0

@@ -73,6 +73,7 @@ __all__ = [
 FULL, POSITION_ONLY, LOST = "full", "position_only", "lost"
 _AREA_SIGMA = 0.3  # log area ratio of the two views of one source
 _PEAK_SIGMA = 0.5  # log brightness ratio to the brightest accepted blob
+_MAX_CANDIDATES = 40  # best candidate pairs kept: C(40, 3) = 9880 triples at most
 
 
 @dataclass(frozen=True)
@@ -88,7 +89,7 @@ class MatchSettings:
     side_sigma_mm: float = 0.5
     max_area_ratio: float = 2.5
     size_ratio_range: tuple[float, float] = (0.5, 1.8)
-    triangulation: str = "lsq"
+    triangulation: str = "eq4"
 
 
 @dataclass(frozen=True)
@@ -255,6 +256,9 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
         + (log_area / _AREA_SIGMA) ** 2
         + ((dim[ii] ** 2 + dim[jj] ** 2) / _PEAK_SIGMA**2)
     )
+    if len(chi2) > _MAX_CANDIDATES:
+        best = np.sort(np.argsort(chi2, kind="stable")[:_MAX_CANDIDATES])
+        ii, jj, p, res, chi2 = ii[best], jj[best], p[best], res[best], chi2[best]
     return ii, jj, np.abs(res), p, chi2
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from humanpt.geometry import PsvsParams, TargetModel, project, transform_points, triangulate_eq4
-from humanpt.perception import FULL, LOST, POSITION_ONLY, Perception, PerceptionConfig
+from humanpt.perception import FULL, LOST, POSITION_ONLY, Perception, PerceptionConfig, PsvsConfig
 from humanpt.perception.correspondence import epipolar_residual_px, eq4_points_mm
 from tests.perception.drawing import pose, scene
 
@@ -128,3 +128,30 @@ def test_nothing_in_view_is_lost():
     for method in ("weighted", "paper"):
         m = Perception(PerceptionConfig(method=method)).measure(img).match
         assert m.status == LOST and m.visible == 0
+
+
+def test_lens_distortion_is_removed_before_pairing_and_triangulation():
+    params = PsvsParams(dist_coeffs=(-0.2, 0.1, 0.001, -0.001, 0.0))
+    cfg = PerceptionConfig(psvs=PsvsConfig(dist_coeffs=params.dist_coeffs))
+    T = pose([40, 30, 560, 20, 10, 5])
+    img, uv_r, uv_l = scene(T, params=params, seed=4)
+    result = Perception(cfg).measure(img)
+    assert result.match.status == FULL and _is_right(result, uv_r, uv_l)
+    truth = transform_points(T, MODEL.source_positions_mm)
+    assert np.abs(result.match.camera_p_mm - truth).max() < 0.3
+    assert result.match.residual_px.max() < 0.1
+    # ignoring the distortion gives the wrong geometry
+    plain = Perception(PerceptionConfig()).measure(img).match
+    assert plain.status != FULL or np.abs(plain.camera_p_mm - truth).max() > 1.0
+
+
+def test_many_clutter_blobs_keep_the_search_bounded():
+    T = pose([0, 0, 600, 0, 0, 0])
+    rng = np.random.default_rng(8)
+    _, uv_r, _ = scene(T)
+    # twenty spots scattered over the sources' scan lines
+    spots = [(float(rng.uniform(20, 620)), float(uv_r[k % 3, 1] + rng.normal(0, 0.3)), 3.8, 190) for k in range(20)]
+    img, uv_r, uv_l = scene(T, extra_discs=spots, seed=9)
+    result = Perception(PerceptionConfig()).measure(img)
+    assert len(result.blobs) >= 20
+    assert result.match.visible >= 1  # whatever it picks, it answers (and quickly)
