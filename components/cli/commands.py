@@ -463,3 +463,21 @@ def config(args) -> int:
         for k, v in table.items():
             print(f"{k} = {json.dumps(v)}")
     return 0
+
+
+def path_cmd(args) -> int:
+    from humanpt.controller import pathfile
+
+    p = pathfile.read(args.input)
+    if args.path_verb == "smooth":
+        out = pathfile.Path6(p.index, p.stamp_ns, pathfile.smooth(p.x_g, p.stamp_ns, accel_sigma=args.accel,
+                                                                  meas_sigma=args.sigma),
+                             None if p.x_tip is None else pathfile.smooth(p.x_tip, p.stamp_ns,
+                                                                          accel_sigma=args.accel, meas_sigma=args.sigma))
+        pathfile.write(args.output, out)
+        print(f"humanpt path smooth: {len(p)} points -> {args.output}")
+        return 0
+    which = {"auto": "auto", "G": "G", "tip": "tip"}[args.point]
+    Path(args.output).write_text(pathfile.to_val2(p.points(which), args.name, args.speed))
+    print(f"humanpt path val: {len(p)} points -> {args.output}")
+    return 0

@@ -112,6 +112,27 @@ def build_parser() -> argparse.ArgumentParser:
     q = rsub.add_parser("list", help="list runs and their recordings")
     q.add_argument("dir", nargs="?", default="runs")
 
+    p = sub.add_parser("path", help="recorded paths: smooth (RTS) or export as a VAL II program",
+                       description="Work offline on path files written while recording (CSV in mm and degrees: "
+                       "<run dir>/paths/path-<n>.csv).")
+    psub = p.add_subparsers(dest="path_verb", metavar="ACTION")
+    q = psub.add_parser("smooth", help="Rauch-Tung-Striebel smoothing of a path file",
+                        description="Smooth every coordinate of G (and of the tip) with a constant-velocity "
+                        "Kalman filter forward and the RTS smoother backward; write a new path file.")
+    q.add_argument("input")
+    q.add_argument("output")
+    q.add_argument("--accel", type=float, default=200.0, help="process noise, mm/s^2 (deg/s^2) (default 200)")
+    q.add_argument("--sigma", type=float, default=0.3, help="measurement noise, mm (deg) (default 0.3)")
+    q = psub.add_parser("val", help="export a path as a VAL II program for the Puma",
+                        description="Write a VAL II program (.PROGRAM with SET/TRANS and MOVES) through the "
+                        "path's points: the driver tip's if recorded, else G's.")
+    q.add_argument("input")
+    q.add_argument("output")
+    q.add_argument("--name", default="path", help="program name (default path)")
+    q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
+                   help="which point's path (default: the tip when recorded)")
+    q.add_argument("--speed", type=float, default=20.0, help="SPEED in percent (default 20)")
+
     p = sub.add_parser("config", help="print the effective configuration, or check a file",
                        description="Print every section with its values (defaults where the file is silent); "
                        "with --check only validate and say OK.")
@@ -154,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return _dispatch(ap, args)
-    except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError) as e:
+    except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError, ValueError) as e:
         print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -178,6 +199,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.runs_verb == "list":
             return commands.runs_list(args)
         ap.parse_args(["runs", "--help"])
+    if args.verb == "path":
+        if args.path_verb in ("smooth", "val"):
+            return commands.path_cmd(args)
+        ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":
             from humanpt.cli.bench import bench_runtime

@@ -11,22 +11,25 @@ from humanpt.runtime.core import Core
 COMPONENTS: dict[str, str] = {
     "pinger": "humanpt.runtime.selftest:PingerCore",
     "ponger": "humanpt.runtime.selftest:PongerCore",
+    "perception": "humanpt.perception.core:PerceptionCore",
+    "pose_filter": "humanpt.pose_filter.core:PoseFilterCore",
+    "controller": "humanpt.controller.core:ControllerCore",
+    "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
+    "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
     "camera": "humanpt.camera.core:CameraCore",
     "sim_camera": "humanpt.sim_camera.core:SimCameraCore",
     "operator": "humanpt.operator.core:OperatorCore",
     "standin_robot": "humanpt.twin.standin:StandInRobotCore",
-    "perception": "humanpt.perception.core:PerceptionCore",
-    "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
-    "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
 }
 
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
 # component's config: ``function(config) -> list[Adapter]``.  Components without local I/O
 # are not listed.
 ADAPTERS: dict[str, str] = {
-    "camera": "humanpt.camera.capture:capture_adapters",
+    "controller": "humanpt.controller.shell:adapters",
     "alter_gateway": "humanpt.alter_gateway.shell:adapters",
     "sim_robot": "humanpt.sim_robot.shell:adapters",
+    "camera": "humanpt.camera.capture:capture_adapters",
 }
 
 # The paper's two machines.  Single-machine use needs no profile ("all").

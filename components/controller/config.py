@@ -1,0 +1,56 @@
+"""Controller configuration (the paper's GUI options are the live parameters)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+from humanpt.geometry.rig import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM
+from humanpt.geometry.transforms import x_from_transform
+from humanpt.runtime.config import live
+
+_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
+
+X6 = tuple[float, float, float, float, float, float]
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """``[controller]``: the visual servo, path recording, driver calibration, playback."""
+
+    law: Literal["thetau", "paper"] = live("thetau", "thetau (default) or the paper's Section 5 law")
+    dz_mm: float = live(DEFAULT_DZ_MM, "distance of the desired point D from the camera (GUI: dz offset)")
+    gain_translation_1_s: float = live(4.0, "K for translation")
+    gain_rotation_1_s: float = live(4.0, "K for rotation")
+    feed_forward: bool = live(True, "add the target's filtered velocity (thetau law)")
+    max_speed_mm_s: float = live(100.0, "translation speed limit (the paper's step controller)")
+    max_rotation_deg_s: float = live(60.0, "rotation speed limit")
+    cycle_period_ms: float = 28.0
+    lost_action: Literal["hold", "return"] = live("hold", "target lost: stop on current location, or return")
+    start_mode: Literal["track", "hold"] = "track"
+    recording_delay_cycles: int = live(10, "a path point every N cycles (GUI: recording delay)")
+    record_on_start: bool = False
+    tob_t_tip_mm: tuple[float, float, float] = live((0.0, 0.0, 60.0), "driver tip P in the TOB frame (eq. 9)")
+    has_driver: bool = live(False, "record the driver tip P as well as G")
+    calibration_samples: int = live(60, "N samples for the driver-tip calibration (GUI)")
+    calibration_min_spread_deg: float = 1.5
+    flange_T_camera_x: X6 = _FLANGE_T_CAMERA_X
+    flange_T_tool_x: X6 = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)
+    playback_speed_mm_s: float = live(20.0, "tool speed along a played-back path")
+    playback_max_lag_mm: float = 2.0
+
+    def __post_init__(self):
+        for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "cycle_period_ms", "playback_speed_mm_s",
+                     "playback_max_lag_mm"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("gain_translation_1_s", "gain_rotation_1_s"):
+            g = getattr(self, name)
+            # One cycle of delay in the loop: k * dt must stay well below 1 for stability.
+            if not 0 < g * self.cycle_period_ms * 1e-3 < 0.5:
+                raise ValueError(f"{name} = {g} must be > 0 and < {0.5 / (self.cycle_period_ms * 1e-3):.1f} "
+                                 f"at a {self.cycle_period_ms} ms cycle")
+        if self.recording_delay_cycles < 1:
+            raise ValueError("recording_delay_cycles must be >= 1")
+        if self.calibration_samples < 6:
+            raise ValueError("calibration_samples must be >= 6 (the pivot fit has 6 unknowns)")

@@ -1,0 +1,335 @@
+"""controller core: the pseudo stereo visual servo (paper §5), path recording, driver-tip
+calibration (§4.1) and playback.
+
+Once per ALTER cycle (on each ``pose_filter/tob_state``, which the filter publishes for
+every robot state) it computes the flange correction for that cycle and publishes it on
+``controller/command``, with a ``controller/status``.  Modes:
+
+* track: D (on the camera axis at dz) follows G; position-only when one or two sources
+  are seen; when the target is lost, hold ("stop on current location") or return to the
+  start pose, by the ``lost_action`` parameter;
+* hold, return: by command;
+* calibrate: track while collecting N poses of the TOB pivoting on its driver tip, then
+  solve the tip (least-squares pivot; and the paper's eq. 10-13 when P' is given);
+* playback: the tool tip follows a path (the one just recorded, or one given).
+
+Commands (``console/command``, verb and JSON args): track, hold, return, record_start,
+record_stop, save {"file"}, calibrate {"samples", "pivot_mm"}, playback {"points", "speed_mm_s"},
+stop.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
+point (G and, with a driver, the tip P) is published; the shell appends it to the path file.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+from humanpt.controller import law
+from humanpt.controller.config import ControllerConfig
+from humanpt.geometry.calibration import calibrate_tip_paper, calibrate_tip_pivot
+from humanpt.geometry.errors import GeometryError
+from humanpt.geometry.transforms import (
+    invert_transform,
+    make_transform,
+    transform_from_x,
+    x_from_transform,
+)
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose, vector3
+
+T_CMD, T_STATUS, T_PATH = "controller/command", "controller/status", "controller/path"
+
+
+def _m(T_mm: np.ndarray) -> np.ndarray:
+    T = np.array(T_mm, dtype=float)
+    T[:3, 3] *= 1e-3
+    return T
+
+
+def _mm(T_m: np.ndarray) -> np.ndarray:
+    T = np.array(T_m, dtype=float)
+    T[:3, 3] *= 1e3
+    return T
+
+
+class ControllerCore(Core):
+    name = "controller"
+    config_type = ControllerConfig
+    inputs = ("pose_filter/tob_state", "alter_gateway/robot_state", "console/command")
+
+    def __init__(self, config: ControllerConfig):
+        super().__init__(config)
+        self.mode = pb.CONTROL_MODE_TRACK if config.start_mode == "track" else pb.CONTROL_MODE_HOLD
+        self.robot: tuple[int, int, np.ndarray] | None = None  # (cycle, stamp_ns, world_T_flange m)
+        self.start_world_T_flange: np.ndarray | None = None
+        self.recording = config.record_on_start
+        self.path: list[pb.PathPoint] = []
+        self.path_index = 0
+        self.cycles_since_point = 0
+        self.cal_samples: list[tuple[np.ndarray, np.ndarray]] = []  # (world_T_tob m, world_T_flange m)
+        self.cal_target = 0
+        self.cal_pivot_mm: np.ndarray | None = None
+        self.playback: dict | None = None
+        self.saturated_cycles = 0
+        self._derive(config)
+
+    def _derive(self, c: ControllerConfig) -> None:
+        self.flange_T_camera = _m(transform_from_x(np.asarray(c.flange_T_camera_x)))
+        self.flange_T_desired = self.flange_T_camera @ make_transform(np.eye(3), np.array([0, 0, c.dz_mm * 1e-3]))
+        self.flange_T_tool = _m(transform_from_x(np.asarray(c.flange_T_tool_x)))
+        self.tob_T_tip = make_transform(np.eye(3), np.asarray(c.tob_t_tip_mm) * 1e-3)
+        self.dt = c.cycle_period_ms * 1e-3
+        self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
+        self.max_step_rad = np.radians(c.max_rotation_deg_s) * self.dt
+
+    def on_config_changed(self, old, new) -> None:
+        self._derive(new)
+
+    # -- inputs ------------------------------------------------------------------------------
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic == "alter_gateway/robot_state":
+            try:
+                T = from_pose(msg.world_T_flange)
+            except MessageError as e:
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
+            self.robot = (msg.cycle, msg.header.stamp_ns, T)
+            if self.start_world_T_flange is None:
+                self.start_world_T_flange = T.copy()
+            return []
+        if topic == "pose_filter/tob_state":
+            return self._cycle(t_ns, msg)
+        if topic == "console/command":
+            if msg.component not in ("", self.name):
+                return []
+            return self._command(t_ns, msg.verb, msg.args_json)
+        return []
+
+    # -- one ALTER cycle ----------------------------------------------------------------------
+    def _cycle(self, t_ns: int, st: pb.TobState) -> list[Output]:
+        if self.robot is None:
+            return []
+        cycle, stamp, world_T_flange = self.robot
+        c = self.config
+        outs: list[Output] = []
+        valid = st.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
+        world_T_tob = v_tob = w_tob = None
+        if valid:
+            try:
+                world_T_tob = from_pose(st.world_T_tob)
+                v_tob, w_tob = from_vector3(st.linear_velocity_m_s), from_vector3(st.angular_velocity_rad_s)
+            except MessageError as e:
+                outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "bad_tob_state", str(e)))
+                valid = False
+        zero = np.zeros(3)
+        step = law.Step(zero, zero, False, 0.0, 0.0)
+        mode = self.mode
+        desired = world_T_flange
+        if self.mode in (pb.CONTROL_MODE_TRACK, pb.CONTROL_MODE_CALIBRATE):
+            if not valid:
+                mode = pb.CONTROL_MODE_LOST
+                if c.lost_action == "return" and self.start_world_T_flange is not None:
+                    step, desired = self._goto(world_T_flange, self.start_world_T_flange)
+            else:
+                position_only = st.status == pb.TOB_STATUS_POSITION_ONLY
+                if position_only:
+                    mode = pb.CONTROL_MODE_POSITION_ONLY
+                step = self._servo(world_T_flange, world_T_tob, v_tob, w_tob, position_only)
+                desired = law.desired_flange(world_T_tob, self.flange_T_desired)
+                if self.mode == pb.CONTROL_MODE_CALIBRATE and not position_only:
+                    outs += self._calibration_sample(t_ns, world_T_tob, world_T_flange)
+        elif self.mode == pb.CONTROL_MODE_RETURN and self.start_world_T_flange is not None:
+            step, desired = self._goto(world_T_flange, self.start_world_T_flange)
+        elif self.mode == pb.CONTROL_MODE_PLAYBACK:
+            step, desired, done = self._playback_step(world_T_flange)
+            if done:
+                self.mode = pb.CONTROL_MODE_HOLD
+                outs.append(self.event(t_ns, pb.SEVERITY_INFO, "playback_done", "playback reached the path's end"))
+        if mode != getattr(self, "_last_mode", None):
+            outs.append(self.event(t_ns, pb.SEVERITY_INFO, "mode", f"mode {pb.ControlMode.Name(mode)}"))
+            self._last_mode = mode
+        self.saturated_cycles += int(step.saturated)
+        cmd = pb.FlangeCommand(header=self.next_header(T_CMD, stamp, "world"), cycle=cycle,
+                               d_translation_m=vector3(step.d_translation_m),
+                               d_rotation_rad=vector3(step.d_rotation_rad), mode=mode)
+        outs.append((T_CMD, cmd))
+        if self.recording and valid and st.status == pb.TOB_STATUS_FULL:
+            self.cycles_since_point += 1
+            if self.cycles_since_point >= c.recording_delay_cycles:
+                self.cycles_since_point = 0
+                outs.append(self._path_point(st.header.stamp_ns, world_T_tob))
+        status = pb.ControllerStatus(
+            header=self.next_header(T_STATUS, stamp, "world"), mode=mode,
+            visible=3 if st.status == pb.TOB_STATUS_FULL else (1 if st.status == pb.TOB_STATUS_POSITION_ONLY else 0),
+            error_translation_m=step.error_translation_m, error_rotation_rad=step.error_rotation_rad,
+            recording=self.recording, path_points=len(self.path), calibration_samples=len(self.cal_samples),
+            cycle=cycle, saturated=step.saturated, world_T_desired=pose(desired))
+        outs.append((T_STATUS, status))
+        return outs
+
+    def _servo(self, world_T_flange, world_T_tob, v_tob, w_tob, position_only) -> law.Step:
+        c = self.config
+        if c.law == "paper":
+            return law.paper_step(world_T_flange, world_T_tob, self.flange_T_desired, k_t=c.gain_translation_1_s,
+                                  k_r=c.gain_rotation_1_s, dt_s=self.dt, max_step_m=self.max_step_m,
+                                  max_step_rad=self.max_step_rad, position_only=position_only)
+        return law.thetau_step(world_T_flange, world_T_tob, self.flange_T_desired, v_tob_m_s=v_tob,
+                               w_tob_rad_s=w_tob, k_t=c.gain_translation_1_s, k_r=c.gain_rotation_1_s,
+                               dt_s=self.dt, max_step_m=self.max_step_m, max_step_rad=self.max_step_rad,
+                               feed_forward=c.feed_forward, position_only=position_only)
+
+    def _goto(self, world_T_flange, world_T_target, v_ff=None):
+        """A saturated step towards a flange pose (no vision)."""
+        c = self.config
+        e_t, e_r = law.pose_error(world_T_flange, world_T_target)
+        v = c.gain_translation_1_s * e_t + (v_ff if v_ff is not None else 0.0)
+        d_t, d_r, sat = law.saturate(v * self.dt, c.gain_rotation_1_s * e_r * self.dt, self.max_step_m,
+                                     self.max_step_rad)
+        return law.Step(d_t, d_r, sat, float(np.linalg.norm(e_t)), float(np.linalg.norm(e_r))), world_T_target
+
+    # -- recording ------------------------------------------------------------------------------
+    def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray) -> Output:
+        pt = pb.PathPoint(header=self.next_header(T_PATH, stamp_ns, "world"), index=self.path_index,
+                          world_T_tob=pose(world_T_tob), has_tip=self.config.has_driver)
+        if self.config.has_driver:
+            pt.world_T_tip.CopyFrom(pose(world_T_tob @ self.tob_T_tip))
+        self.path_index += 1
+        self.path.append(pt)
+        return T_PATH, pt
+
+    # -- calibration ----------------------------------------------------------------------------
+    def _calibration_sample(self, t_ns, world_T_tob, world_T_flange) -> list[Output]:
+        if len(self.cal_samples) >= self.cal_target:
+            return []
+        if self.cal_samples:
+            # Only keep poses that differ (a pivot fit needs rotation diversity).
+            last = self.cal_samples[-1][0]
+            angle = np.degrees(Rotation.from_matrix(world_T_tob[:3, :3] @ last[:3, :3].T).magnitude())
+            if angle < self.config.calibration_min_spread_deg:
+                return []
+        self.cal_samples.append((world_T_tob.copy(), world_T_flange.copy()))
+        if len(self.cal_samples) < self.cal_target:
+            return []
+        return self._finish_calibration(t_ns)
+
+    def _finish_calibration(self, t_ns) -> list[Output]:
+        tobs = np.array([_mm(a) for a, _ in self.cal_samples])
+        self.mode = pb.CONTROL_MODE_TRACK
+        try:
+            res = calibrate_tip_pivot(tobs)
+        except (GeometryError, ValueError) as e:
+            return [self.event(t_ns, pb.SEVERITY_ERROR, "calibration_failed", f"pivot calibration failed: {e}")]
+        tip = np.asarray(res.tob_t_tip_mm, dtype=float)
+        result = {"method": "pivot", "tob_t_tip_mm": tip.round(4).tolist(),
+                  "world_p_pivot_mm": np.asarray(res.world_p_pivot_mm).round(4).tolist(),
+                  "residual_rms_mm": round(float(res.residual_rms_mm), 5), "samples": len(tobs)}
+        outs = []
+        if self.cal_pivot_mm is not None:
+            flanges = np.array([_mm(f) for _, f in self.cal_samples])
+            cams = np.array([invert_transform(_mm(self.flange_T_camera)) @ invert_transform(f) @ t
+                             for f, t in zip(flanges, tobs, strict=True)])
+            try:
+                paper = calibrate_tip_paper(flanges, _mm(self.flange_T_camera), cams, self.cal_pivot_mm)
+                result["paper_tob_t_tip_mm"] = np.asarray(paper.tob_t_tip_mm).round(4).tolist()
+                result["paper_residual_rms_mm"] = round(float(paper.residual_rms_mm), 5)
+            except (GeometryError, ValueError) as e:
+                outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "calibration_paper_failed", str(e)))
+        import dataclasses
+
+        self.config = dataclasses.replace(self.config, tob_t_tip_mm=tuple(float(v) for v in tip), has_driver=True)
+        self._derive(self.config)
+        outs.append(self.event(t_ns, pb.SEVERITY_INFO, "calibration_done", json.dumps(result)))
+        return outs
+
+    # -- playback -------------------------------------------------------------------------------
+    def _start_playback(self, points_mm_deg: np.ndarray, speed_mm_s: float) -> None:
+        tips = np.array([_m(transform_from_x(p)) for p in points_mm_deg])
+        flanges = np.array([t @ invert_transform(self.flange_T_tool) for t in tips])
+        seg = np.linalg.norm(np.diff(tips[:, :3, 3], axis=0), axis=1)
+        self.playback = {"flanges": flanges, "tips": tips, "s": np.r_[0.0, np.cumsum(seg)], "pos": 0.0,
+                         "speed": speed_mm_s * 1e-3, "approach": True}
+
+    def _carrot(self, s: float) -> tuple[np.ndarray, np.ndarray]:
+        """The flange pose at arc length s (m) along the path, and the path's tool velocity."""
+        pb_ = self.playback
+        S, tips = pb_["s"], pb_["tips"]
+        if len(S) == 1 or s <= 0:
+            return pb_["flanges"][0], np.zeros(3)
+        i = int(np.clip(np.searchsorted(S, s) - 1, 0, len(S) - 2))
+        L = S[i + 1] - S[i]
+        a = 0.0 if L <= 0 else min(1.0, (s - S[i]) / L)
+        tip = np.eye(4)
+        tip[:3, 3] = tips[i, :3, 3] + a * (tips[i + 1, :3, 3] - tips[i, :3, 3])
+        tip[:3, :3] = Slerp([0, 1], Rotation.from_matrix([tips[i, :3, :3], tips[i + 1, :3, :3]]))(a).as_matrix()
+        v = (tips[i + 1, :3, 3] - tips[i, :3, 3]) / L * pb_["speed"] if L > 0 and s < S[-1] else np.zeros(3)
+        return tip @ invert_transform(self.flange_T_tool), v
+
+    def _playback_step(self, world_T_flange):
+        pb_ = self.playback
+        if pb_ is None:
+            return law.Step(np.zeros(3), np.zeros(3), False, 0.0, 0.0), world_T_flange, True
+        if pb_["approach"]:
+            # Go to the path's first point first, then start the carrot.
+            step, desired = self._goto(world_T_flange, pb_["flanges"][0])
+            if step.error_translation_m < 0.2e-3 and step.error_rotation_rad < np.radians(0.2):
+                pb_["approach"] = False
+            return step, desired, False
+        target, v = self._carrot(pb_["pos"])
+        step, desired = self._goto(world_T_flange, target, v_ff=v)
+        if step.error_translation_m < self.config.playback_max_lag_mm * 1e-3:
+            pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * self.dt)
+        done = pb_["pos"] >= pb_["s"][-1] and step.error_translation_m < 0.1e-3
+        return step, desired, done
+
+    # -- commands ---------------------------------------------------------------------------------
+    def _command(self, t_ns: int, verb: str, args_json: str) -> list[Output]:
+        try:
+            args = json.loads(args_json) if args_json else {}
+            if not isinstance(args, dict):
+                raise ValueError("arguments must be a JSON object")
+        except ValueError as e:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"{verb}: {e}")]
+        info = lambda code, text: [self.event(t_ns, pb.SEVERITY_INFO, code, text)]  # noqa: E731
+        if verb == "track":
+            self.mode = pb.CONTROL_MODE_TRACK
+            return info("command", "track")
+        if verb in ("hold", "stop"):
+            self.mode = pb.CONTROL_MODE_HOLD
+            self.playback = None
+            return info("command", "hold (stop on current location)")
+        if verb == "return":
+            self.mode = pb.CONTROL_MODE_RETURN
+            return info("command", "return to the start pose")
+        if verb == "record_start":
+            self.recording, self.path, self.path_index, self.cycles_since_point = True, [], 0, 0
+            return info("record_started", json.dumps({"has_tip": self.config.has_driver}))
+        if verb == "record_stop":
+            self.recording = False
+            return info("record_stopped", json.dumps({"points": len(self.path)}))
+        if verb == "save":
+            return info("save", json.dumps({"file": str(args.get("file", "")), "points": len(self.path)}))
+        if verb == "calibrate":
+            n = int(args.get("samples", self.config.calibration_samples))
+            if n < 6:
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", "calibrate: samples must be >= 6")]
+            self.cal_samples, self.cal_target = [], n
+            pivot = args.get("pivot_mm")
+            self.cal_pivot_mm = None if pivot is None else np.asarray(pivot, dtype=float).reshape(3)
+            self.mode = pb.CONTROL_MODE_CALIBRATE
+            return info("calibration_started", f"pivot the target on its driver tip: {n} samples")
+        if verb == "playback":
+            speed = float(args.get("speed_mm_s", self.config.playback_speed_mm_s))
+            if "points" in args:
+                pts = np.asarray(args["points"], dtype=float)
+            else:
+                pts = np.array([x_from_transform(_mm(from_pose(p.world_T_tip if p.has_tip else p.world_T_tob)))
+                                for p in self.path])
+            if pts.ndim != 2 or pts.shape[1] != 6 or len(pts) < 1 or not np.all(np.isfinite(pts)) or speed <= 0:
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
+                                   "playback: need points as N x 6 (mm, deg), or a recorded path, and speed > 0")]
+            self._start_playback(pts, speed)
+            self.mode = pb.CONTROL_MODE_PLAYBACK
+            return info("playback_started", f"{len(pts)} points at {speed:g} mm/s")
+        return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"unknown verb {verb!r}")]

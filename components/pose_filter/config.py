@@ -1,0 +1,50 @@
+"""Pose filter configuration."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from humanpt.geometry.rig import DEFAULT_FLANGE_T_CAMERA_MM
+from humanpt.geometry.transforms import x_from_transform
+from humanpt.runtime.config import live
+
+_DEFAULT_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
+
+
+@dataclass(frozen=True)
+class PoseFilterConfig:
+    """``[pose_filter]``: world_T_tob from measurements and robot states, Kalman-filtered."""
+
+    # Hand-eye F_T_C as X = (x, y, z mm, psi, theta, phi deg).
+    flange_T_camera_x: tuple[float, float, float, float, float, float] = _DEFAULT_FLANGE_T_CAMERA_X
+    # Measurement noise of a full pose and of a position-only measurement.
+    sigma_position_mm: float = live(0.3, "1-sigma noise of a measured position")
+    sigma_rotation_deg: float = live(0.8, "1-sigma noise of a measured orientation")
+    sigma_position_only_mm: float = live(1.5, "1-sigma noise of a position from one or two sources")
+    # Process noise: white acceleration (how hard the operator's hand can change speed).
+    accel_sigma_mm_s2: float = live(100.0, "white-acceleration noise of the target (hand)")
+    ang_accel_sigma_deg_s2: float = live(60.0)
+    # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.
+    gate_chi2_pose: float = live(22.46)
+    gate_chi2_position: float = live(16.27)
+    reset_after_rejects: int = live(5, "consecutive gated measurements before the filter restarts on them")
+    # Prediction to the ALTER cycle being commanded.
+    predict_ahead_ms: float = live(28.0, "how far past a robot state's stamp the state is predicted")
+    lost_after_ms: float = live(250.0, "no measurement for this long: status LOST")
+    # Robot poses at the image stamp: interpolate, or extrapolate at most this far.
+    max_extrapolation_ms: float = 60.0
+    robot_history: int = 64
+    # Target model used to place G from one or two visible sources (mm).
+    target_leg_mm: float = 40.0
+    target_base_mm: float = 30.0
+
+    def __post_init__(self):
+        for name in ("sigma_position_mm", "sigma_rotation_deg", "sigma_position_only_mm", "accel_sigma_mm_s2",
+                     "ang_accel_sigma_deg_s2", "gate_chi2_pose", "gate_chi2_position", "lost_after_ms",
+                     "target_leg_mm", "target_base_mm"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.predict_ahead_ms < 0 or self.max_extrapolation_ms < 0:
+            raise ValueError("predict_ahead_ms and max_extrapolation_ms must be >= 0")
+        if self.reset_after_rejects < 1 or self.robot_history < 2:
+            raise ValueError("reset_after_rejects must be >= 1 and robot_history >= 2")

@@ -1,0 +1,167 @@
+"""pose_filter core: tob measurements + robot states -> filtered world_T_tob per ALTER cycle.
+
+For each measurement (camera_T_tob at the image's capture stamp) the robot's flange pose
+at that stamp is interpolated from the robot states around it, giving
+``world_T_tob = world_T_flange @ flange_T_camera @ camera_T_tob`` (paper §4 step 8).  The
+Kalman filter (kalman.py) is advanced to the capture stamp and updated; a measurement
+whose Mahalanobis distance is beyond the gate is rejected and reported, and after
+``reset_after_rejects`` rejections in a row the filter restarts on the measurements
+(the target really moved).  Position-only measurements (one or two sources) update the
+position of G, placed from the visible sources and the predicted orientation.
+
+On every robot state (one per ALTER cycle) the state predicted to
+``stamp + predict_ahead_ms`` is published as ``pose_filter/tob_state`` for that cycle.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from humanpt.geometry.target import TargetModel
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.pose_filter.config import PoseFilterConfig
+from humanpt.pose_filter.kalman import PoseKalman
+from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
+from humanpt.runtime.core import Core, Output
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import MessageError, covariance, from_pose, from_vector3, pose, vector3
+
+TOPIC_STATE = "pose_filter/tob_state"
+
+
+class PoseFilterCore(Core):
+    name = "pose_filter"
+    config_type = PoseFilterConfig
+    inputs = ("perception/tob", "alter_gateway/robot_state")
+
+    def __init__(self, config: PoseFilterConfig):
+        super().__init__(config)
+        self.robot = RobotPoseBuffer(config.robot_history)
+        self._build(config)
+        self.kf = PoseKalman(self._accel, self._ang_accel)
+        self.rejects_in_a_row = 0
+        self.gated_total = 0
+        self.accepted = 0
+        self.last_measurement_ns: int | None = None
+        self.last_status = pb.TOB_STATUS_LOST
+        self._pending_reset: list[tuple[int, np.ndarray]] = []
+
+    def _build(self, c: PoseFilterConfig) -> None:
+        T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
+        T[:3, 3] *= 1e-3
+        self.flange_T_camera_m = T
+        self._accel = c.accel_sigma_mm_s2 * 1e-3
+        self._ang_accel = np.radians(c.ang_accel_sigma_deg_s2)
+        self.R_pose = np.diag([(c.sigma_position_mm * 1e-3) ** 2] * 3 + [np.radians(c.sigma_rotation_deg) ** 2] * 3)
+        self.R_position = np.eye(3) * (c.sigma_position_only_mm * 1e-3) ** 2
+        self.tob_p_sources_m = TargetModel.isosceles(c.target_leg_mm, c.target_base_mm).source_positions_mm * 1e-3
+
+    def on_config_changed(self, old, new) -> None:
+        self._build(new)
+        self.kf.accel_sigma, self.kf.ang_accel_sigma = self._accel, self._ang_accel
+
+    # ------------------------------------------------------------------------------------
+    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+        if topic == "alter_gateway/robot_state":
+            return self._on_robot_state(t_ns, msg)
+        if topic == "perception/tob":
+            return self._on_measurement(t_ns, msg)
+        return []
+
+    def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
+        try:
+            world_T_flange = from_pose(msg.world_T_flange)
+        except MessageError as e:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
+        self.robot.add(msg.header.stamp_ns, world_T_flange)
+        return [self._state(t_ns, msg.header.stamp_ns, msg.cycle)]
+
+    def _state(self, t_ns: int, robot_stamp_ns: int, cycle: int) -> Output:
+        c = self.config
+        target_ns = robot_stamp_ns + int(c.predict_ahead_ms * 1e6)
+        lost = (self.last_measurement_ns is None
+                or robot_stamp_ns - self.last_measurement_ns > c.lost_after_ms * 1e6)
+        status = pb.TOB_STATUS_LOST if lost or not self.kf.initialised else self.last_status
+        out = pb.TobState(header=self.next_header(TOPIC_STATE, target_ns, "world"), status=status,
+                          gated_outliers=self.gated_total, cycle=cycle, measurements=self.accepted)
+        if self.kf.initialised:
+            T, vel, P = self.kf.predicted(target_ns)
+            out.world_T_tob.CopyFrom(pose(T))
+            out.linear_velocity_m_s.CopyFrom(vector3(vel[:3]))
+            out.angular_velocity_rad_s.CopyFrom(vector3(vel[3:]))
+            values, dim = covariance(P)
+            out.covariance.extend(values)
+            out.covariance_dim = dim
+            out.measurement_stamp_ns = self.last_measurement_ns or 0
+        return TOPIC_STATE, out
+
+    def _on_measurement(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
+        c = self.config
+        if msg.status not in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
+            return []
+        stamp = msg.header.stamp_ns
+        world_T_flange = self.robot.at(stamp, int(c.max_extrapolation_ms * 1e6))
+        if world_T_flange is None:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "no_robot_pose",
+                               f"no robot state near the image stamp {stamp} ns; measurement dropped")]
+        world_T_camera = world_T_flange @ self.flange_T_camera_m
+        if self.kf.initialised and stamp < self.kf.t_ns:
+            return [self.event(t_ns, pb.SEVERITY_DEBUG, "out_of_order",
+                               f"measurement at {stamp} ns is older than the filter ({self.kf.t_ns} ns)")]
+        try:
+            if msg.status == pb.TOB_STATUS_FULL:
+                world_T_tob = world_T_camera @ from_pose(msg.camera_T_tob)
+                return self._update_full(t_ns, stamp, world_T_tob)
+            points = np.array([from_vector3(p) for p in msg.points_camera_m], dtype=float)
+            if points.size == 0 or not np.all(np.isfinite(points)):
+                return []
+            world_p = points @ world_T_camera[:3, :3].T + world_T_camera[:3, 3]
+            return self._update_position(t_ns, stamp, world_p)
+        except MessageError as e:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_measurement", str(e))]
+
+    def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray) -> list[Output]:
+        if not self.kf.initialised:
+            self.kf.reset(stamp, world_T_tob)
+            self._accepted(stamp, pb.TOB_STATUS_FULL)
+            return [self.event(t_ns, pb.SEVERITY_INFO, "filter_start", "filter started on a full pose")]
+        self.kf.predict_to(stamp)
+        gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
+        return self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
+
+    def _update_position(self, t_ns: int, stamp: int, world_p_m: np.ndarray) -> list[Output]:
+        if not self.kf.initialised:
+            return []  # a position alone cannot start an orientation
+        self.kf.predict_to(stamp)
+        T_pred, _, _ = self.kf.predicted(stamp)
+        # Match each visible source to the nearest predicted source; G = source - R @ offset.
+        world_sources = self.tob_p_sources_m @ T_pred[:3, :3].T + T_pred[:3, 3]
+        g = []
+        for p in world_p_m:
+            k = int(np.argmin(np.linalg.norm(world_sources - p, axis=1)))
+            g.append(p - T_pred[:3, :3] @ self.tob_p_sources_m[k])
+        gate = self.kf.update_position(np.mean(g, axis=0), self.R_position / len(g),
+                                       self.config.gate_chi2_position)
+        return self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
+
+    def _after_gate(self, t_ns, stamp, gate, status, world_T_tob) -> list[Output]:
+        if gate.accepted:
+            self._accepted(stamp, status)
+            return []
+        self.gated_total += 1
+        self.rejects_in_a_row += 1
+        outs = [self.event(t_ns, pb.SEVERITY_WARNING, "outlier",
+                           f"measurement at {stamp} ns gated out (Mahalanobis^2 {gate.mahalanobis2:.1f}); "
+                           f"{self.rejects_in_a_row} in a row")]
+        if self.rejects_in_a_row >= self.config.reset_after_rejects and world_T_tob is not None:
+            self.kf.reset(stamp, world_T_tob)
+            self._accepted(stamp, status)
+            outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "filter_reset",
+                                   "the target moved beyond the gate repeatedly: filter restarted on it"))
+        return outs
+
+    def _accepted(self, stamp: int, status: int) -> None:
+        self.rejects_in_a_row = 0
+        self.accepted += 1
+        self.last_measurement_ns = stamp
+        self.last_status = status

@@ -1,0 +1,53 @@
+"""The robot's pose at an image's capture stamp, from the robot states around it."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
+
+
+class RobotPoseBuffer:
+    """Recent (stamp_ns, world_T_flange (4, 4)) pairs, in stamp order."""
+
+    def __init__(self, maxlen: int = 64):
+        self._items: deque[tuple[int, np.ndarray]] = deque(maxlen=maxlen)
+
+    def add(self, stamp_ns: int, world_T_flange: np.ndarray) -> None:
+        if self._items and stamp_ns <= self._items[-1][0]:
+            return  # out of order or duplicate: keep the buffer monotonic
+        self._items.append((int(stamp_ns), np.asarray(world_T_flange, dtype=float)))
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    @property
+    def latest(self) -> tuple[int, np.ndarray] | None:
+        return self._items[-1] if self._items else None
+
+    def at(self, stamp_ns: int, max_extrapolation_ns: int) -> np.ndarray | None:
+        """world_T_flange at ``stamp_ns``: interpolated (linear + slerp) between the two
+        states around it, or extrapolated from the last two by at most
+        ``max_extrapolation_ns``; None when out of reach."""
+        items = self._items
+        if not items:
+            return None
+        if len(items) == 1:
+            t0, T0 = items[0]
+            return T0.copy() if abs(stamp_ns - t0) <= max_extrapolation_ns else None
+        if stamp_ns < items[0][0] - max_extrapolation_ns or stamp_ns > items[-1][0] + max_extrapolation_ns:
+            return None
+        stamps = [t for t, _ in items]
+        i = int(np.searchsorted(stamps, stamp_ns))
+        i = min(max(i, 1), len(items) - 1)
+        (t0, T0), (t1, T1) = items[i - 1], items[i]
+        s = (stamp_ns - t0) / (t1 - t0)
+        T = np.eye(4)
+        T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
+        if 0.0 <= s <= 1.0:
+            T[:3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix([T0[:3, :3], T1[:3, :3]]))(s).as_matrix()
+        else:  # extrapolate the relative rotation
+            dR = Rotation.from_matrix(T1[:3, :3] @ T0[:3, :3].T).as_rotvec()
+            T[:3, :3] = Rotation.from_rotvec(dR * s).as_matrix() @ T0[:3, :3]
+        return T

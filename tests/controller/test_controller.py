@@ -1,0 +1,248 @@
+"""controller core on scripted inputs, with a perfect robot that applies each command: both
+laws converge, the limits hold, lost/position-only/hold/return modes, recording, driver
+calibration and playback."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from humanpt.controller import law
+from humanpt.controller.config import ControllerConfig
+from humanpt.controller.core import ControllerCore
+from humanpt.geometry.rig import viewing_world_T_flange
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose, from_vector3, header, pose, vector3
+
+DT_NS = 28_000_000
+TARGET_X = (236.132, 1248.772, 85.284, -2.598, -0.883, -4.535)
+
+
+def T_m(x):
+    T = transform_from_x(np.asarray(x, dtype=float))
+    T[:3, 3] *= 1e-3
+    return T
+
+
+def T_mm(T):
+    T = np.array(T, dtype=float)
+    T[:3, 3] *= 1e3
+    return T
+
+
+def start_flange(target_x, offset_mm=(0, 0, 0), rot_deg=(0, 0, 0)):
+    F = viewing_world_T_flange(transform_from_x(np.asarray(target_x, dtype=float)))
+    F[:3, 3] += offset_mm
+    F[:3, :3] = Rotation.from_euler("ZYX", rot_deg, degrees=True).as_matrix() @ F[:3, :3]
+    F[:3, 3] *= 1e-3
+    return F
+
+
+class Rig:
+    """A perfect robot and a perfectly known target, cycle by cycle."""
+
+    def __init__(self, core, flange, tob_fn, status_fn=None):
+        self.core, self.flange, self.tob_fn = core, flange, tob_fn
+        self.status_fn = status_fn or (lambda k: pb.TOB_STATUS_FULL)
+        self.k = 0
+        self.outs: list[tuple[str, object]] = []
+        self.flanges = []
+
+    def command(self, verb, **args):
+        msg = pb.Command(header=header(self.k * DT_NS), component="controller", verb=verb,
+                         args_json=json.dumps(args))
+        self.outs += self.core.step(self.k * DT_NS, "console/command", msg)
+
+    def step(self, n=1):
+        for _ in range(n):
+            t = self.k * DT_NS
+            self.core.step(t, "alter_gateway/robot_state", pb.RobotState(
+                header=header(t, self.k, "world"), world_T_flange=pose(self.flange), cycle=self.k))
+            T, v, w = self.tob_fn(t)
+            st = pb.TobState(header=header(t, self.k, "world"), world_T_tob=pose(T), status=self.status_fn(self.k),
+                             linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k)
+            outs = self.core.step(t + 1, "pose_filter/tob_state", st)
+            self.outs += outs
+            cmd = [m for tp, m in outs if tp == "controller/command"][0]
+            self.flange = law.apply_step(self.flange, from_vector3(cmd.d_translation_m), from_vector3(cmd.d_rotation_rad))
+            self.flanges.append(self.flange.copy())
+            self.k += 1
+
+    def of(self, topic):
+        return [m for tp, m in self.outs if tp == topic]
+
+    def d_error(self, t_ns=None):
+        """(mm, deg) between D and G now."""
+        T, _, _ = self.tob_fn(self.k * DT_NS if t_ns is None else t_ns)
+        want = law.desired_flange(T, self.core.flange_T_desired)
+        e_t, e_r = law.pose_error(self.flange, want)
+        return np.linalg.norm(e_t) * 1e3, np.degrees(np.linalg.norm(e_r))
+
+
+def static(T):
+    return lambda t: (T, np.zeros(3), np.zeros(3))
+
+
+@pytest.mark.parametrize("which", ["thetau", "paper"])
+def test_static_target_converges_and_holds(which):
+    core = ControllerCore(ControllerConfig(law=which))
+    rig = Rig(core, start_flange(TARGET_X, (30, -20, 25), (4, -3, 5)), static(T_m(TARGET_X)))
+    rig.step(200)
+    e_mm, e_deg = rig.d_error()
+    assert e_mm < 0.05 and e_deg < 0.05, (e_mm, e_deg)
+    # Per-cycle limits held all along (100 mm/s, 60 deg/s at 28 ms).
+    for cmd in rig.of("controller/command"):
+        assert np.linalg.norm(from_vector3(cmd.d_translation_m)) <= 2.8e-3 + 1e-12
+        assert np.linalg.norm(from_vector3(cmd.d_rotation_rad)) <= np.radians(60) * 0.028 + 1e-12
+    assert any(s.saturated for s in rig.of("controller/status"))  # the 45 mm start error saturates
+
+
+def arc(t_ns, speed_deg_s=10.0):
+    """The paper's rotating base: centre (147.5, 1378.5, 448) mm, radius 246 mm."""
+    a = np.radians(50.0 - speed_deg_s * t_ns * 1e-9)
+    c = np.array([147.5, 1378.5, 448.0]) * 1e-3
+    p = c + 0.246 * np.array([np.cos(a), np.sin(a), 0.0])
+    v = 0.246 * np.radians(speed_deg_s) * np.array([np.sin(a), -np.cos(a), 0.0])
+    T = T_m((0, 0, 0, -2.6, -0.9, -4.5))
+    T[:3, 3] = p
+    return T, v, np.zeros(3)
+
+
+def test_feed_forward_removes_the_lag_on_a_moving_target():
+    lag = {}
+    for ff in (True, False):
+        core = ControllerCore(ControllerConfig(feed_forward=ff))
+        rig = Rig(core, start_flange(x_from_transform(T_mm(arc(0)[0]))), arc)
+        rig.step(150)
+        lag[ff] = rig.d_error()[0]
+    # Without feed-forward the lag is about speed / gain = 42.9 mm/s / 4 /s ~ 11 mm.
+    assert lag[False] > 5.0
+    assert lag[True] < 0.5, lag
+
+
+def test_lost_target_holds_within_one_cycle_or_returns():
+    core = ControllerCore(ControllerConfig())
+    lost_from = 50
+    rig = Rig(core, start_flange(TARGET_X, (20, 0, 0)), static(T_m(TARGET_X)),
+              status_fn=lambda k: pb.TOB_STATUS_FULL if k < lost_from else pb.TOB_STATUS_LOST)
+    rig.step(60)
+    cmds = rig.of("controller/command")
+    assert np.linalg.norm(from_vector3(cmds[lost_from - 1].d_translation_m)) > 0
+    for c in cmds[lost_from:]:
+        assert c.mode == pb.CONTROL_MODE_LOST
+        assert from_vector3(c.d_translation_m).tolist() == [0, 0, 0]
+        assert from_vector3(c.d_rotation_rad).tolist() == [0, 0, 0]
+    start = start_flange(TARGET_X, (20, 0, 0))
+    core = ControllerCore(ControllerConfig(lost_action="return"))
+    rig = Rig(core, start, static(T_m(TARGET_X)),
+              status_fn=lambda k: pb.TOB_STATUS_FULL if k < lost_from else pb.TOB_STATUS_LOST)
+    rig.step(lost_from + 200)
+    assert np.linalg.norm(rig.flange[:3, 3] - start[:3, 3]) < 1e-5  # back at the start pose
+
+
+def test_position_only_moves_without_rotating():
+    core = ControllerCore(ControllerConfig())
+    rig = Rig(core, start_flange(TARGET_X, (10, 5, 0), (3, 0, 0)), static(T_m(TARGET_X)),
+              status_fn=lambda k: pb.TOB_STATUS_POSITION_ONLY)
+    R0 = rig.flange[:3, :3].copy()
+    rig.step(150)
+    np.testing.assert_allclose(rig.flange[:3, :3], R0, atol=1e-12)
+    p_d = (rig.flange @ core.flange_T_desired)[:3, 3]
+    assert np.linalg.norm(p_d - T_m(TARGET_X)[:3, 3]) < 1e-5
+    assert {s.mode for s in rig.of("controller/status")} == {pb.CONTROL_MODE_POSITION_ONLY}
+
+
+def test_hold_and_track_commands_and_bad_commands():
+    core = ControllerCore(ControllerConfig())
+    rig = Rig(core, start_flange(TARGET_X, (20, 0, 0)), static(T_m(TARGET_X)))
+    rig.command("hold")
+    rig.step(5)
+    assert all(from_vector3(c.d_translation_m).tolist() == [0, 0, 0] for c in rig.of("controller/command"))
+    rig.command("track")
+    rig.step(1)
+    assert np.linalg.norm(from_vector3(rig.of("controller/command")[-1].d_translation_m)) > 0
+    rig.command("warp")
+    rig.outs += core.step(0, "console/command", pb.Command(verb="playback", args_json="[1, 2]"))
+    codes = [m.code for m in rig.of("controller/events")]
+    assert codes.count("bad_command") == 2
+
+
+def test_recording_every_n_cycles_with_the_tip():
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, has_driver=True))
+    rig = Rig(core, start_flange(TARGET_X), static(T_m(TARGET_X)))
+    rig.step(5)
+    rig.command("record_start")
+    rig.step(100)
+    rig.command("record_stop")
+    rig.step(30)
+    pts = rig.of("controller/path")
+    assert [p.index for p in pts] == list(range(10))
+    p = pts[0]
+    assert p.has_tip
+    tip = from_pose(p.world_T_tip)
+    np.testing.assert_allclose(tip[:3, 3], (T_m(TARGET_X) @ np.array([0, 0, 0.06, 1]))[:3], atol=1e-12)
+    assert json.loads([m for m in rig.of("controller/events") if m.code == "record_stopped"][0].text) == {"points": 10}
+
+
+def test_driver_calibration_recovers_the_tip():
+    tip_tob_m = np.array([0.004, -0.003, 0.075])
+    pivot_w = np.array([0.25, 1.25, 0.05])
+
+    def pivoting(t_ns):
+        s = t_ns * 1e-9
+        R = Rotation.from_euler("ZYX", [40 * np.sin(0.7 * s), 18 * np.sin(1.3 * s), 15 * np.cos(0.9 * s)],
+                                degrees=True).as_matrix()
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = pivot_w - R @ tip_tob_m  # the tip stays on the pivot point
+        return T, np.zeros(3), np.zeros(3)
+
+    core = ControllerCore(ControllerConfig(calibration_samples=40))
+    rig = Rig(core, start_flange(x_from_transform(T_mm(pivoting(0)[0]))), pivoting)
+    rig.command("calibrate", pivot_mm=(pivot_w * 1e3).tolist())
+    rig.step(600)
+    done = [m for m in rig.of("controller/events") if m.code == "calibration_done"]
+    assert done, [m.code for m in rig.of("controller/events")]
+    res = json.loads(done[0].text)
+    np.testing.assert_allclose(res["tob_t_tip_mm"], tip_tob_m * 1e3, atol=0.01)
+    np.testing.assert_allclose(res["world_p_pivot_mm"], pivot_w * 1e3, atol=0.01)
+    np.testing.assert_allclose(res["paper_tob_t_tip_mm"], tip_tob_m * 1e3, atol=0.01)
+    np.testing.assert_allclose(core.config.tob_t_tip_mm, tip_tob_m * 1e3, atol=0.01)
+    assert core.mode == pb.CONTROL_MODE_TRACK
+
+
+def test_playback_follows_the_recorded_path():
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=2, has_driver=True))
+    rig = Rig(core, start_flange(x_from_transform(T_mm(arc(0)[0]))), arc)
+    rig.step(20)
+    rig.command("record_start")
+    rig.step(300)
+    rig.command("record_stop")
+    path = [from_pose(p.world_T_tip)[:3, 3] for p in rig.of("controller/path")]
+    rig.command("playback", speed_mm_s=30.0)
+    tool_tips = []
+    for _ in range(1500):
+        rig.step(1)
+        if core.mode != pb.CONTROL_MODE_PLAYBACK:
+            break
+        if not core.playback["approach"]:
+            tool_tips.append((rig.flange @ core.flange_T_tool)[:3, 3])
+    assert "playback_done" in [m.code for m in rig.of("controller/events")]
+    path = np.array(path)
+    # Distance of each tool tip to the recorded polyline.
+    d = []
+    for p in tool_tips:
+        seg_a, seg_b = path[:-1], path[1:]
+        ab = seg_b - seg_a
+        s = np.clip(np.einsum("ij,ij->i", p - seg_a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+        d.append(np.min(np.linalg.norm(seg_a + s[:, None] * ab - p, axis=1)))
+    assert len(d) > 100 and max(d) * 1e3 < 0.5, max(d) * 1e3
+
+
+def test_config_rejects_unstable_gains():
+    with pytest.raises(ValueError, match="gain_translation_1_s"):
+        ControllerConfig(gain_translation_1_s=40.0)

@@ -1,0 +1,105 @@
+"""Path files: CSV round trip, clear errors with line numbers, RTS smoothing, VAL II export,
+and the shell's PathWriter that appends points as they come."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from humanpt.controller import pathfile
+from humanpt.controller.shell import PathWriter
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header, pose
+
+
+def _path(n=50, tip=True, seed=0):
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.normal(0, 1, (n, 6)), axis=0)
+    x[:, 3:] = (x[:, 3:] + 180) % 360 - 180
+    return pathfile.Path6(np.arange(n), np.arange(n, dtype=np.int64) * 280_000_000 + 7, x,
+                          x + 5 if tip else None)
+
+
+@pytest.mark.parametrize("tip", [True, False])
+def test_csv_round_trip(tmp_path, tip):
+    p = _path(tip=tip)
+    f = tmp_path / "p.csv"
+    pathfile.write(f, p)
+    q = pathfile.read(f)
+    np.testing.assert_array_equal(q.stamp_ns, p.stamp_ns)
+    np.testing.assert_allclose(q.x_g, p.x_g, atol=1e-6)
+    assert (q.x_tip is None) == (not tip)
+    assert q.points() is (q.x_tip if tip else q.x_g)
+
+
+def test_bad_files_name_the_line(tmp_path):
+    with pytest.raises(pathfile.PathFileError, match="no such path file"):
+        pathfile.read(tmp_path / "none.csv")
+    f = tmp_path / "p.csv"
+    f.write_text("a,b\n")
+    with pytest.raises(pathfile.PathFileError, match=r"p.csv:1: not a humanpt path header"):
+        pathfile.read(f)
+    f.write_text(",".join(pathfile.HEADER) + "\n0,1,1,2,3,4,5,6\n1,2,1,2,3,4,5\n")
+    with pytest.raises(pathfile.PathFileError, match=r"p.csv:3: 7 columns, expected 8"):
+        pathfile.read(f)
+    f.write_text(",".join(pathfile.HEADER) + "\n0,1,1,2,x,4,5,6\n")
+    with pytest.raises(pathfile.PathFileError, match=r"p.csv:2: could not convert"):
+        pathfile.read(f)
+
+
+def test_rts_smoothing_reduces_noise_and_keeps_angles_wrapped():
+    rng = np.random.default_rng(4)
+    t = np.arange(300) * 0.28
+    truth = np.column_stack([10 * t, 2 * t, np.full_like(t, 85.0), np.full_like(t, 179.5), 0 * t, 0 * t])
+    noisy = truth + rng.normal(0, 0.3, truth.shape)
+    noisy[:, 3:] = (noisy[:, 3:] + 180) % 360 - 180
+    sm = pathfile.smooth(noisy, (t * 1e9).astype(np.int64), accel_sigma=1.0, meas_sigma=0.3)
+    err_raw = np.abs(noisy[:, :3] - truth[:, :3]).mean()
+    err_sm = np.abs(sm[:, :3] - truth[:, :3]).mean()
+    assert err_sm < 0.5 * err_raw
+    yaw_err = np.abs((sm[:, 3] - 179.5 + 180) % 360 - 180).mean()
+    assert yaw_err < 0.2  # not averaged through 0 across the +-180 seam
+    assert np.all(np.abs(sm[:, 3:]) <= 180)
+
+
+def test_val2_export():
+    x = _path(5).x_g
+    text = pathfile.to_val2(x, "seam 1")
+    lines = text.splitlines()
+    assert lines[0] == ".PROGRAM seam_1()" and lines[-1] == ".END"
+    assert sum(line.strip().startswith("SET p") for line in lines) == 5
+    assert sum(line.strip().startswith("MOVES p") for line in lines) == 5
+    assert f"TRANS({x[0, 0]:.2f}, {x[0, 1]:.2f}, {x[0, 2]:.2f}" in text
+
+
+def test_path_writer_appends_as_points_arrive(tmp_path):
+    w = PathWriter(tmp_path / "paths")
+    w.start(lambda *a: None)
+    w.write("controller/events", pb.Event(code="record_started", text=json.dumps({"has_tip": True})))
+    T = np.eye(4)
+    T[:3, 3] = [0.1, 0.2, 0.3]
+    for i in range(3):
+        w.write("controller/path", pb.PathPoint(header=header(i * 10, i), index=i, world_T_tob=pose(T),
+                                                has_tip=True, world_T_tip=pose(T)))
+        # Readable at once (flushed): a crash loses nothing.
+        assert len(pathfile.read(tmp_path / "paths" / "path-1.csv")) == i + 1
+    w.write("controller/events", pb.Event(code="save", text=json.dumps({"file": str(tmp_path / "seam.csv")})))
+    w.close()
+    p = pathfile.read(tmp_path / "seam.csv")
+    np.testing.assert_allclose(p.x_g[0, :3], [100, 200, 300])
+    np.testing.assert_allclose(p.x_tip[2, :3], [100, 200, 300])
+
+
+def test_cli_path_verbs(tmp_path, capsys):
+    from humanpt.cli.main import main
+
+    f = tmp_path / "p.csv"
+    pathfile.write(f, _path(30))
+    assert main(["path", "smooth", str(f), str(tmp_path / "s.csv")]) == 0
+    assert len(pathfile.read(tmp_path / "s.csv")) == 30
+    assert main(["path", "val", str(f), str(tmp_path / "p.v2"), "--name", "seam"]) == 0
+    assert (tmp_path / "p.v2").read_text().startswith(".PROGRAM seam()")
+    assert main(["path", "val", str(tmp_path / "missing.csv"), str(tmp_path / "x.v2")]) == 2
+    assert "no such path file" in capsys.readouterr().err
