@@ -18,8 +18,9 @@ Zero (HOLD) instead: no usable command (stale), the controller's liveliness toke
 the command says HOLD/IDLE or asks ALTER off, the robot reports FAULT, or the gateway is
 faulted. ``fault_after_missed`` consecutive missed cycles (no fresh command at the
 deadline, the robot reporting CORRECTION_MISSED, statuses lost on the line) raise a
-latched fault: HOLD, plus ALTER_OFF if ``alter_off_on_fault``. The fault clears when the
-controller re-activates ALTER (the ALTER_ACTIVE bit rises again: a new ALTER session) or
+latched fault: HOLD, plus ALTER_OFF (if ``alter_off_on_fault``) until the controller shows
+ALTER off. The fault clears when the controller then re-activates ALTER (a new ALTER
+session, started by the operator at the controller) or
 on ``console/command`` {component: alter_gateway, verb: reset_fault}. The miss watchdog
 arms with the first fresh command, and disarms while the controller is gone (then the
 gateway just holds and waits). Every such action is an event on ``alter_gateway/events``,
@@ -130,6 +131,7 @@ class AlterGatewayCore(Core):
         self._missed = 0  # consecutive missed cycles
         self._armed = False  # the miss watchdog: armed by a fresh command
         self._fault: str | None = None  # latched fault reason
+        self._fault_alter_off_seen = False  # the controller showed ALTER off since the fault
         self._controller_gone = False
         self._stale = False  # in a stale episode (sending zero for want of a command)
         self._silent = False  # in a silence episode (link up, no STATUS)
@@ -460,15 +462,13 @@ class AlterGatewayCore(Core):
                 self._raise_fault(
                     rx_ns, f"{self._missed} consecutive missed cycles (at cycle {k})", outs
                 )
-        # Robot-side transitions.
-        was_active = prev_status is not None and StatusBits.ALTER_ACTIVE in prev_status.bits
-        if (
-            self._fault is not None
-            and StatusBits.ALTER_ACTIVE in status.bits
-            and prev_status is not None
-            and not was_active
-        ):
-            self._clear_fault(rx_ns, f"ALTER re-activated at the controller (cycle {k})", outs)
+        # Robot-side transitions. ALTER_OFF is requested until the controller shows ALTER
+        # off; ALTER on again after that is a new session started at the controller.
+        if self._fault is not None:
+            if StatusBits.ALTER_ACTIVE not in status.bits:
+                self._fault_alter_off_seen = True
+            elif self._fault_alter_off_seen:
+                self._clear_fault(rx_ns, f"ALTER re-activated at the controller (cycle {k})", outs)
         if StatusBits.FAULT in status.bits and (
             prev_status is None or StatusBits.FAULT not in prev_status.bits
         ):
@@ -563,7 +563,7 @@ class AlterGatewayCore(Core):
                 limited=False,
             )
         flags = CorrectionFlags(0)
-        if hold == "fault" and cfg.alter_off_on_fault:
+        if hold == "fault" and cfg.alter_off_on_fault and not self._fault_alter_off_seen:
             flags |= CorrectionFlags.ALTER_OFF
         if hold is not None or cmd is None or cmd.zero:
             if cmd is not None and cmd.alter_off and hold is None:
@@ -629,6 +629,7 @@ class AlterGatewayCore(Core):
         if self._fault is not None:
             return
         self._fault = reason
+        self._fault_alter_off_seen = False
         self._armed = False
         self.counters["faults"] += 1
         action = "HOLD and ALTER off requested" if self.config.alter_off_on_fault else "HOLD"

@@ -124,6 +124,7 @@ class ThreadShell:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self.errors = 0
+        self._stopped = False
         self.recorder = None
         if run_dir is not None:
             self.recorder = Recorder(
@@ -202,6 +203,10 @@ class ThreadShell:
                     self.on_output(out_topic, out)
 
     def stop(self) -> None:
+        """Stop the threads, close the adapters and the recording (idempotent)."""
+        if self._stopped:
+            return
+        self._stopped = True
         self._stop.set()
         for t in self._threads:
             t.join(timeout=2.0)

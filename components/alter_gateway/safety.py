@@ -68,22 +68,22 @@ def quantize(
 ) -> Correction:
     """A Correction for ``dp_mm`` (3,) and ``rv_rad`` (3,) (already clamped, in the
     controller's ALTER frame) whose *quantised* values still respect the limits: rounding
-    to 0.01 mm / 0.01 deg can add up to ~0.009 mm / deg, so a step at the limit is
-    shrunk by that much before rounding when it would otherwise poke out."""
-    dp = np.asarray(dp_mm, dtype=float)
-    rv = np.asarray(rv_rad, dtype=float)
-    for _ in range(4):
+    to 0.01 mm / 0.01 deg can add up to ~0.009 mm / deg, so a step at the limit that would
+    poke out after rounding is shrunk by the smallest margin (0.005, 0.01, 0.02, 0.04 mm or
+    deg) that keeps it in."""
+    dp0 = np.asarray(dp_mm, dtype=float)
+    rv0 = np.asarray(rv_rad, dtype=float)
+    dp, rv = dp0, rv0
+    for margin in (0.5, 1.0, 2.0, 4.0, None):
         c = Correction.from_mm_deg(echo_cycle, dp, wire_rotation_deg(rv), flags)
-        over_t = float(np.linalg.norm(c.translation_mm)) - max_step_mm
-        over_r = correction_angle_deg(c) - max_step_deg
-        if over_t <= 1e-9 and over_r <= 1e-9:
+        over_t = float(np.linalg.norm(c.translation_mm)) > max_step_mm + 1e-9
+        over_r = correction_angle_deg(c) > max_step_deg + 1e-9
+        if not (over_t or over_r):
             return c
-        if over_t > 1e-9:
-            n = float(np.linalg.norm(dp))
-            dp = dp * max(0.0, (max_step_mm - 2 * _QUANT_MM) / n)
-        if over_r > 1e-9:
-            n = rotation_angle_deg(rv)
-            rv = rv * max(0.0, (max_step_deg - 2 * _QUANT_DEG) / n)
-    return Correction.from_mm_deg(
-        echo_cycle, np.zeros(3), np.zeros(3), flags
-    )  # never reached in practice
+        if margin is None:
+            break
+        if over_t:
+            dp = dp0 * max(0.0, (max_step_mm - margin * _QUANT_MM) / float(np.linalg.norm(dp0)))
+        if over_r:
+            rv = rv0 * max(0.0, (max_step_deg - margin * _QUANT_DEG) / rotation_angle_deg(rv0))
+    return Correction.from_mm_deg(echo_cycle, np.zeros(3), np.zeros(3), flags)  # not reached

@@ -19,6 +19,7 @@ examples:
   humanpt echo ponger/pong --count 3              print decoded messages
   humanpt replay runs/<run> --component ponger    re-run a component on its recorded inputs
   humanpt bench runtime                           latency and recording throughput
+  humanpt bench alter                             ALTER link cycles on time, shortest cycle
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
 """
@@ -147,6 +148,16 @@ def build_parser() -> argparse.ArgumentParser:
                         "compression.")
     q.add_argument("--n", type=int, default=300, help="round trips per payload (default 300)")
     q.add_argument("--seconds", type=float, default=3.0, help="seconds of MCAP writing per case (default 3)")
+    q = bsub.add_parser("alter", help="ALTER link: cycles on time at 28 ms; shortest cycle without a miss",
+                        description="alter_gateway <-> sim_robot over a real pty in real time, with a scripted "
+                        "controller: cycles served on time (the controller's own command, applied within its "
+                        "cycle) over --duration at 28 ms, then short runs at each of --periods; prints a table "
+                        "and the shortest period sustained without a miss.")
+    q.add_argument("--duration", type=float, default=60.0, help="seconds at 28 ms (default 60)")
+    q.add_argument("--periods", default="28,16,8,4,2", help="cycle periods to try, ms (default 28,16,8,4,2)")
+    q.add_argument("--search-seconds", type=float, default=3.0, help="seconds per period tried (default 3)")
+    q.add_argument("--zenoh", action="store_true", help="sim_robot and alter_gateway as child processes through "
+                   "a router, this process the controller over Zenoh (default: threads of this process)")
     q = bsub.add_parser("render", help="frames per second of the simulated PSVS camera",
                         description="Render complex images of the static target (Table 1 pose, 600 mm "
                         "ahead) at the default sim_camera settings and print frames per second, with the "
@@ -207,6 +218,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "runtime":
             from humanpt.cli.bench import bench_runtime
             return bench_runtime(args)
+        if args.bench_verb == "alter":
+            from humanpt.cli.bench import bench_alter
+            return bench_alter(args)
         if args.bench_verb == "render":
             from humanpt.cli.bench import bench_render
             return bench_render(args)

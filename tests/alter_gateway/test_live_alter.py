@@ -1,0 +1,105 @@
+"""`humanpt sim_robot` and `humanpt alter_gateway` as separate processes over a real pty, with a
+real Zenoh router; this test is the controller (liveliness token + commands over Zenoh).
+
+Scripted commands move the robot; the controller's liveliness token vanishing holds it
+(zero corrections, an event); killing sim_robot is a lost link (an event). The gateway's
+live recording replays exactly.
+"""
+
+from __future__ import annotations
+
+import queue
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from humanpt.alter_gateway.harness import ScriptedControllerConfig, scripted_command
+from humanpt.runtime.bus import liveliness_key
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose
+from tests.conftest import run_cli, write_config, zenoh_client
+
+
+def _wait(pred, timeout_s: float, what: str):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if pred():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+
+
+@pytest.mark.timeout(90)
+def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
+    port, _ = router
+    link = tmp_path / "alter-pty"
+    cfg = write_config(
+        tmp_path / "alter.toml",
+        port,
+        extra=f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n',
+    )
+    run = tmp_path / "run"
+    # The gateway first: it waits for the port (sim_robot makes it).
+    gw = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    sim = procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
+    script = ScriptedControllerConfig()
+    states: list[pb.RobotState] = []
+    truths: list[np.ndarray] = []
+    events: queue.Queue = queue.Queue()
+    codes: list[str] = []
+    with zenoh_client(port) as s:
+        token = s.liveliness().declare_token(liveliness_key("test", "controller"))
+        pub = s.declare_publisher("humanpt/test/controller/command")
+
+        def on_state(sample):
+            st = pb.RobotState.FromString(sample.payload.to_bytes())
+            states.append(st)
+            pub.put(scripted_command(st, script, len(states)).SerializeToString())
+
+        def on_truth(sample):
+            T = from_pose(pb.Truth.FromString(sample.payload.to_bytes()).world_T_flange)
+            truths.append(T[:3, 3] * 1000.0)
+
+        subs = [
+            s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state),
+            s.declare_subscriber("humanpt/test/sim_robot/truth", on_truth),
+            s.declare_subscriber(
+                "humanpt/test/*/events",
+                lambda smp: events.put(pb.Event.FromString(smp.payload.to_bytes())),
+            ),
+        ]
+
+        def seen(code: str) -> bool:
+            while not events.empty():
+                e = events.get()
+                codes.append(f"{e.source}:{e.code}")
+            return code in codes
+
+        # 1. Scripted commands for 150 cycles: the robot follows.
+        _wait(lambda: len(states) >= 150, 30.0, "150 robot states")
+        on_time = sum(st.missed_cycles == 0 for st in states[-100:])
+        assert on_time >= 90, [st.missed_cycles for st in states[-100:]]
+        assert np.linalg.norm(truths[-1] - truths[0]) > 5.0
+        assert states[-1].status.alter_active and not states[-1].status.fault
+        # 2. The controller's liveliness token goes: zero corrections, an event.
+        token.undeclare()
+        _wait(lambda: seen("alter_gateway:controller_gone"), 3.0, "controller_gone")
+        time.sleep(0.1)
+        n = len(truths)
+        time.sleep(0.3)
+        assert len(truths) > n + 5
+        assert np.ptp(truths[n:], axis=0).max() < 1e-9  # held although commands keep coming
+        # 3. The robot end dies: a lost link.
+        sim.send_signal(signal.SIGKILL)
+        sim.wait(10)
+        _wait(lambda: seen("alter_gateway:link_down"), 3.0, "link_down")
+        for sub in subs:
+            sub.undeclare()
+    out = procs.stop(gw)
+    assert gw.returncode == 0, out
+    assert "core errors 0" in out
+    res = run_cli("replay", str(run), "--component", "alter_gateway")
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "MATCH" in res.stdout
