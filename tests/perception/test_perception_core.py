@@ -6,6 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from humanpt.geometry import TargetModel, transform_points
 from humanpt.perception import PerceptionConfig, PerceptionCore
@@ -229,3 +231,49 @@ def test_lockstep_runs_are_identical_and_replay_exactly(tmp_path):
     result = replay(tmp_path / "perception.mcap")
     assert result.match, result.report()
     assert result.replayed_outputs == result.recorded_outputs > 12
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    width=st.integers(0, 700),
+    height=st.integers(0, 500),
+    encoding=st.sampled_from(["mono8", "mono16", "rgb8", "bgr8", "yuv422", ""]),
+    step_extra=st.integers(-2, 3),
+    data_len=st.one_of(st.none(), st.integers(0, 2000)),
+)
+def test_fuzzed_raw_images_never_raise(width, height, encoding, step_extra, data_len):
+    channels = {"mono16": 2, "rgb8": 3, "bgr8": 3}.get(encoding, 1)
+    step = max(width * channels + step_extra, 0)
+    n = step * height if data_len is None else data_len
+    msg = RawImage(
+        width=width,
+        height=height,
+        encoding=encoding,
+        step=step,
+        data=bytes(i % 5 for i in range(n)),
+    )
+    outs = PerceptionCore(PerceptionConfig()).step(1, "camera/image", msg)
+    (m,) = _tobs(outs)
+    assert m.status == pb.TOB_STATUS_LOST
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    seed=st.integers(0, 2**31),
+    method=st.sampled_from(["weighted", "paper"]),
+    level=st.integers(0, 255),
+)
+def test_random_pictures_never_raise(seed, method, level):
+    rng = np.random.default_rng(seed)
+    img = np.full((480, 640), level, np.uint8)
+    for _ in range(int(rng.integers(0, 40))):  # random bright and dark rectangles and spots
+        u, v = int(rng.integers(0, 640)), int(rng.integers(0, 480))
+        img[v : v + int(rng.integers(1, 60)), u : u + int(rng.integers(1, 60))] = int(
+            rng.integers(0, 256)
+        )
+    img = np.clip(img + rng.normal(0, rng.uniform(0, 30), img.shape), 0, 255).astype(np.uint8)
+    core = PerceptionCore(PerceptionConfig(method=method))
+    for k in range(2):
+        (m,) = _tobs(core.step(k, "camera/image", image(img, k)))
+        assert m.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY, pb.TOB_STATUS_LOST)
+        assert 0.0 <= m.quality <= 1.0 and m.visible == len(m.pairs) == len(m.points_camera_m)

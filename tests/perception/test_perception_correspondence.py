@@ -150,7 +150,10 @@ def test_many_clutter_blobs_keep_the_search_bounded():
     rng = np.random.default_rng(8)
     _, uv_r, _ = scene(T)
     # twenty spots scattered over the sources' scan lines
-    spots = [(float(rng.uniform(20, 620)), float(uv_r[k % 3, 1] + rng.normal(0, 0.3)), 3.8, 190) for k in range(20)]
+    spots = [
+        (float(rng.uniform(20, 620)), float(uv_r[k % 3, 1] + rng.normal(0, 0.3)), 3.8, 190)
+        for k in range(20)
+    ]
     img, uv_r, uv_l = scene(T, extra_discs=spots, seed=9)
     result = Perception(PerceptionConfig()).measure(img)
     assert len(result.blobs) >= 20

@@ -73,7 +73,9 @@ def test_clutter_and_shared_scan_lines_wrong_correspondence_rates(clutter):
 def _world(run_dir=None, method="weighted"):
     core = PerceptionCore(PerceptionConfig(method=method))
     world = build_world("static", seed=3, extra_cores=[core], run_dir=run_dir)
-    world.lockstep.set_param(400_000_000, "perception", "method", '"paper"' if method == "weighted" else '"weighted"')
+    world.lockstep.set_param(
+        400_000_000, "perception", "method", '"paper"' if method == "weighted" else '"weighted"'
+    )
     world.run_for(0.8)
     world.close()
     return world, core
