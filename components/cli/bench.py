@@ -172,7 +172,14 @@ def bench_perception(args) -> int:
     import cv2
 
     from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
-    from humanpt.perception.evaluate import cases_for, evaluate, format_table, random_cases
+    from humanpt.perception.evaluate import (
+        SETS,
+        cases_for,
+        evaluate,
+        format_table,
+        random_cases,
+        range_cases,
+    )
     from humanpt.schemas.convert import image
     from humanpt.sim_camera import Renderer
 
@@ -224,8 +231,9 @@ def bench_perception(args) -> int:
     if not args.no_accuracy:
         print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
               "bound: geometry error model at the measured centre RMS):\n")
-        results = {name: evaluate(cases_for(name, args.accuracy_images, args.seed))
-                   for name in ("standard", "random", "clutter")}
+        results = {name: evaluate(cases_for(name, args.accuracy_images, args.seed)) for name in SETS if name != "range"}
+        for z in (250.0, 350.0, 1200.0, 1800.0):  # the ends of the working range, one row each
+            results[f"z={z:.0f}mm"] = evaluate(range_cases(args.accuracy_images // 4, args.seed, (z,)))
         print(format_table(results))
     return 0
 

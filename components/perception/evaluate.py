@@ -13,7 +13,8 @@ scene: every blob's projected centre, view and label, and ``camera_T_tob``. Thre
   angle within +-25 deg);
 * ``clutter``: the hard cases - the target's mirror image in a shiny plane fixed to it
   (dimmer, blurred), a bright lamp near the target, and poses with yaw near +-90 deg so
-  that two sources share a scan line (four blobs on one line).
+  that two sources share a scan line (four blobs on one line);
+* ``range``: random poses at the ends of the working range (250, 350, 1200, 1800 mm).
 
 Figures per method: image counts by status, wrong correspondences (an image with any
 reported pair that is not both views of one source - or, for a FULL measurement, not the
@@ -50,9 +51,20 @@ from .config import PerceptionConfig
 from .correspondence import FULL, LOST, POSITION_ONLY
 from .pipeline import Perception
 
-__all__ = ["Case", "Stats", "standard_cases", "random_cases", "clutter_cases", "evaluate", "format_table"]
+__all__ = [
+    "Case",
+    "Stats",
+    "SETS",
+    "standard_cases",
+    "random_cases",
+    "clutter_cases",
+    "range_cases",
+    "cases_for",
+    "evaluate",
+    "format_table",
+]
 
-SETS = ("standard", "random", "clutter")
+SETS = ("standard", "random", "clutter", "range")
 
 
 @dataclass(frozen=True)
@@ -136,7 +148,9 @@ def standard_cases(per_scenario: int = 25, seed: int = 0, lag_s: float = 0.1) ->
         for k, t in enumerate(times):
             world_T_tob, _ = traj.pose(float(t))
             seen, _ = traj.pose(max(float(t) - lag_s, 0.0))
-            jitter = transform_from_x(np.concatenate([rng.normal(0, 3.0, 3), rng.normal(0, 1.0, 3)]))
+            jitter = transform_from_x(
+                np.concatenate([rng.normal(0, 3.0, 3), rng.normal(0, 1.0, 3)])
+            )
             world_T_flange = viewing_world_T_flange(seen @ jitter, 600.0, flange_T_camera)
             world_T_camera = world_T_flange @ flange_T_camera
             cases.append(
@@ -182,7 +196,9 @@ def clutter_cases(n: int = 90, seed: int = 0) -> list[Case]:
             T = _random_pose(rng)
             side = rng.choice([-1, 1]) * rng.uniform(60, 160)
             lamp = T[:3, 3] + np.array([side, rng.uniform(-30, 30), 200.0])
-            sim = _sim_config(seed=seed, lamp_position_mm=tuple(float(v) for v in lamp), lamp_frame="camera")
+            sim = _sim_config(
+                seed=seed, lamp_position_mm=tuple(float(v) for v in lamp), lamp_frame="camera"
+            )
             name = "lamp"
         else:
             yaw = float(rng.choice([-90.0, 90.0]) + rng.uniform(-0.1, 0.1))
@@ -190,6 +206,22 @@ def clutter_cases(n: int = 90, seed: int = 0) -> list[Case]:
             sim = _sim_config(seed=seed, reflection_gain=0.25)
             name = "shared scan line"
         cases.append(Case(f"{name}#{k}", T, sim, k))
+    return cases
+
+
+def range_cases(
+    n: int = 160, seed: int = 0, depths_mm=(250.0, 350.0, 1200.0, 1800.0)
+) -> list[Case]:
+    """``n`` random poses split over the given depths (z of G, mm; x, y within +-5 % of z,
+    angles within +-25 deg), default sensor: the ends of the working range."""
+    rng = np.random.default_rng([seed, 4])
+    sim = _sim_config(seed=seed)
+    per = max(1, n // len(depths_mm))
+    cases = []
+    for z in depths_mm:
+        for k in range(per):
+            x = np.concatenate([rng.uniform(-0.05 * z, 0.05 * z, 2), [z], rng.uniform(-25, 25, 3)])
+            cases.append(Case(f"z={z:.0f}#{k}", transform_from_x(x), sim, len(cases)))
     return cases
 
 
@@ -201,6 +233,8 @@ def cases_for(name: str, n: int, seed: int = 0) -> list[Case]:
         return random_cases(n, seed)
     if name == "clutter":
         return clutter_cases(n, seed)
+    if name == "range":
+        return range_cases(n, seed)
     raise ValueError(f"no case set {name!r}; sets: {', '.join(SETS)}")
 
 
@@ -284,7 +318,9 @@ def _score(s: Stats, result, truth, true_points: np.ndarray, camera_T_tob: np.nd
     if m.status == FULL:
         s.point_err_mm.extend((m.camera_p_mm - true_points).tolist())
         s.true_points_mm.extend(true_points.tolist())
-        s.translation_err_mm.append(float(np.linalg.norm(m.camera_T_tob[:3, 3] - camera_T_tob[:3, 3])))
+        s.translation_err_mm.append(
+            float(np.linalg.norm(m.camera_T_tob[:3, 3] - camera_T_tob[:3, 3]))
+        )
         s.rotation_err_deg.append(_rotation_angle_deg(m.camera_T_tob, camera_T_tob))
         s.true_poses.append(camera_T_tob)
 
@@ -292,7 +328,7 @@ def _score(s: Stats, result, truth, true_points: np.ndarray, camera_T_tob: np.nd
 def format_table(results: dict[str, dict[str, Stats]]) -> str:
     """A text table of ``{set name: {method: Stats}}``."""
     head = (
-        f"{'set':9s} {'method':9s} {'images':>6s} {'full':>5s} {'pos.':>4s} {'lost':>4s} "
+        f"{'set':10s} {'method':9s} {'images':>6s} {'full':>5s} {'pos.':>4s} {'lost':>4s} "
         f"{'wrong':>6s} {'centre RMS':>10s} {'3D RMS x, y, z (mm)':>22s} {'bound x, y, z (mm)':>22s} "
         f"{'pose t, r (mm, deg)':>20s} {'bound t, r':>16s}"
     )
@@ -302,7 +338,7 @@ def format_table(results: dict[str, dict[str, Stats]]) -> str:
             rms = s.point_rms_mm
             bound = s.bound_mm if s.bound_mm is not None else np.full(3, math.nan)
             lines.append(
-                f"{set_name:9s} {method:9s} {s.images:6d} {s.full:5d} {s.position_only:4d} {s.lost:4d} "
+                f"{set_name:10s} {method:9s} {s.images:6d} {s.full:5d} {s.position_only:4d} {s.lost:4d} "
                 f"{100 * s.wrong_rate:5.1f}% {s.centre_rms_px:8.4f}px "
                 f"{rms[0]:7.4f} {rms[1]:7.4f} {rms[2]:6.3f} {bound[0]:7.4f} {bound[1]:7.4f} {bound[2]:6.3f} "
                 f"{s.translation_rms_mm:9.3f} {s.rotation_rms_deg:8.3f} "

@@ -10,7 +10,7 @@ reference method.
    hold no seed. The appendix says "a 9 x 9 or 5 x 5 template (the template used depends on
    the case)": shapes too small for the 9 x 9 cross are searched again with the next size
    of ``paper_cross_px`` (default 9, then 5) - with the default 5 mm sources a shape is only
-   ~8 px across at 600 mm, where the 9 x 9 cross alone misses about half of them.
+   ~8 px across at 600 mm, where the 9 x 9 cross alone seeds only ~20 % of them (twin).
 3. Propagation: each seed grows over its shape (its 8-connected component of the binary
    image, found by its contour and labelled in its bounding box), and the centre is the mean of the shape's
    pixel locations (step 4, "subpixel accuracy").
