@@ -550,7 +550,9 @@ class AlterGatewayCore(Core):
             )
             if not self._stale:
                 self._limiter.reset("stale_command")
-            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "stale_command", text)
+            # Waiting for a controller that never commanded is normal at start-up: INFO.
+            severity = pb.SEVERITY_WARNING if self._armed else pb.SEVERITY_INFO
+            self._ev(outs, t_ns, severity, "stale_command", text)
             self._stale = True
         elif self._stale and hold is None:
             self._stale = False

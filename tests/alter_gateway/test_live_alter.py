@@ -80,7 +80,7 @@ def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
         # 1. Scripted commands for 150 cycles: the robot follows.
         _wait(lambda: len(states) >= 150, 30.0, "150 robot states")
         on_time = sum(st.missed_cycles == 0 for st in states[-100:])
-        assert on_time >= 90, [st.missed_cycles for st in states[-100:]]
+        assert on_time >= 80, [st.missed_cycles for st in states[-100:]]
         assert np.linalg.norm(truths[-1] - truths[0]) > 5.0
         assert states[-1].status.alter_active and not states[-1].status.fault
         # 2. The controller's liveliness token goes: zero corrections, an event.

@@ -86,7 +86,8 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         run_dir=tmp_path,
     )
     assert link.is_symlink()
-    gw = AlterGatewayCore(AlterGatewayConfig(port=str(link)))
+    # 25 missed cycles to a fault: room for a slow machine in the silent-controller phase.
+    gw = AlterGatewayCore(AlterGatewayConfig(port=str(link), fault_after_missed=25))
     ctl = Controller()
     gw_shell = ThreadShell(
         gw, [SerialAdapter(str(link), 38_400)], on_output=ctl.on_gateway_output, run_dir=tmp_path
@@ -173,7 +174,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         # -- 4. late commands: missed deadlines, then a fault and ALTER off ---------------------
         ctl.mode = "late"
         wait_for(lambda: "deadline_missed" in ctl.codes(), 1.0, "deadline_missed")
-        wait_for(lambda: "fault" in ctl.codes(), 2.0, "the gateway's fault")
+        wait_for(lambda: "fault" in ctl.codes(), 3.0, "the gateway's fault")
         wait_for(
             lambda: any(e.code == "alter_off" for e in list(sim_events)),
             1.0,
