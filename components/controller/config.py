@@ -23,6 +23,10 @@ class ControllerConfig:
     gain_translation_1_s: float = live(4.0, "K for translation")
     gain_rotation_1_s: float = live(4.0, "K for rotation")
     feed_forward: bool = live(True, "add the target's filtered velocity (thetau law)")
+    # The thetau law compares the flange and the target at the same instant: the robot
+    # state's stamp plus this lead (the time until the command takes effect beyond one
+    # cycle); the feed-forward then moves the flange with the target over the cycle.
+    lead_ms: float = live(0.0, "extra look-ahead of the target pose for the thetau law")
     max_speed_mm_s: float = live(100.0, "translation speed limit (the paper's step controller)")
     max_rotation_deg_s: float = live(60.0, "rotation speed limit")
     cycle_period_ms: float = 28.0

@@ -123,6 +123,10 @@ class ControllerCore(Core):
             except MessageError as e:
                 outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "bad_tob_state", str(e)))
                 valid = False
+        if valid and c.law == "thetau" and c.feed_forward:
+            # The filter predicts ahead for the paper's law; with feed-forward the error is
+            # taken at the robot's instant (+ lead) and the velocity carries the next cycle.
+            world_T_tob = law.extrapolate(world_T_tob, v_tob, w_tob, (stamp + c.lead_ms * 1e6 - st.header.stamp_ns) * 1e-9)
         zero = np.zeros(3)
         step = law.Step(zero, zero, False, 0.0, 0.0)
         mode = self.mode

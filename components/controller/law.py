@@ -32,8 +32,8 @@ class Step:
     d_translation_m: np.ndarray  # (3,) world frame
     d_rotation_rad: np.ndarray  # (3,) rotation vector, world frame, about the flange origin
     saturated: bool
-    error_translation_m: float
-    error_rotation_rad: float
+    error_translation_m: float  # |G - D| (m)
+    error_rotation_rad: float  # angle between the TOB frame and D's (rad)
 
 
 def saturate(d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: float
@@ -53,6 +53,14 @@ def apply_step(world_T_flange: np.ndarray, d_t: np.ndarray, d_r: np.ndarray) -> 
     T = np.array(world_T_flange, dtype=float)
     T[:3, :3] = Rotation.from_rotvec(d_r).as_matrix() @ T[:3, :3]
     T[:3, 3] = T[:3, 3] + d_t
+    return T
+
+
+def extrapolate(world_T_tob: np.ndarray, v_m_s: np.ndarray, w_rad_s: np.ndarray, dt_s: float) -> np.ndarray:
+    """A pose moved at constant (world-frame) velocity for ``dt_s`` (may be negative)."""
+    T = np.array(world_T_tob, dtype=float)
+    T[:3, :3] = Rotation.from_rotvec(np.asarray(w_rad_s) * dt_s).as_matrix() @ T[:3, :3]
+    T[:3, 3] = T[:3, 3] + np.asarray(v_m_s) * dt_s
     return T
 
 
@@ -87,9 +95,10 @@ def thetau_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_de
         v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
         w = np.zeros(3)
         e_r = np.zeros(3)
-        e_t = world_T_tob[:3, 3] - world_p_d
     d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
-    return Step(d_t, d_r, sat, float(np.linalg.norm(e_t)), float(np.linalg.norm(e_r)))
+    # Report the error as the paper sees it: where D is with respect to G.
+    world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
+    return Step(d_t, d_r, sat, float(np.linalg.norm(world_T_tob[:3, 3] - world_p_d)), float(np.linalg.norm(e_r)))
 
 
 def paper_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_desired: np.ndarray, *,
