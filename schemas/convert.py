@@ -34,6 +34,48 @@ def from_vector3(m: pb.Vector3) -> np.ndarray:
     return np.array([m.x, m.y, m.z], dtype=float)
 
 
+def quat_from_matrix(R: np.ndarray) -> np.ndarray:
+    """(3, 3) rotation -> unit quaternion (x, y, z, w), w >= 0.
+
+    Same result as ``scipy.spatial.transform.Rotation.from_matrix(R).as_quat(canonical=True)``
+    (tested), without scipy's per-call overhead: this runs several thousand times per
+    simulated second on the message path.
+    """
+    m00, m01, m02 = R[0]
+    m10, m11, m12 = R[1]
+    m20, m21, m22 = R[2]
+    tr = m00 + m11 + m22
+    # Shepperd's method: divide by the largest of the four candidates for stability.
+    if tr >= m00 and tr >= m11 and tr >= m22:
+        w = 0.5 * np.sqrt(max(1.0 + tr, 0.0))
+        f = 0.25 / w
+        q = np.array([(m21 - m12) * f, (m02 - m20) * f, (m10 - m01) * f, w])
+    elif m00 >= m11 and m00 >= m22:
+        x = 0.5 * np.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
+        f = 0.25 / x
+        q = np.array([x, (m01 + m10) * f, (m02 + m20) * f, (m21 - m12) * f])
+    elif m11 >= m22:
+        y = 0.5 * np.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
+        f = 0.25 / y
+        q = np.array([(m01 + m10) * f, y, (m12 + m21) * f, (m02 - m20) * f])
+    else:
+        z = 0.5 * np.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
+        f = 0.25 / z
+        q = np.array([(m02 + m20) * f, (m12 + m21) * f, z, (m10 - m01) * f])
+    q /= np.linalg.norm(q)
+    return -q if q[3] < 0 else q
+
+
+def matrix_from_quat(q: np.ndarray) -> np.ndarray:
+    """Quaternion (x, y, z, w), normalised here -> (3, 3) rotation (as scipy's as_matrix)."""
+    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
 def pose(a_T_b: np.ndarray) -> pb.Pose:
     """4x4 homogeneous transform (translation in metres) -> Pose.
 
@@ -44,10 +86,12 @@ def pose(a_T_b: np.ndarray) -> pb.Pose:
     if T.shape != (4, 4):
         raise MessageError(f"a transform must be 4x4, got shape {T.shape}")
     R = T[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    if not np.abs(R @ R.T - np.eye(3)).max() < 1e-6 or np.linalg.det(R) < 0:
         raise MessageError("the rotation part of the transform is not a proper rotation")
-    qx, qy, qz, qw = Rotation.from_matrix(R).as_quat()
-    return pb.Pose(translation=vector3(T[:3, 3]), rotation=pb.Quaternion(x=qx, y=qy, z=qz, w=qw))
+    qx, qy, qz, qw = quat_from_matrix(R)
+    t = T[:3, 3]
+    return pb.Pose(translation=pb.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+                   rotation=pb.Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw)))
 
 
 def from_pose(m: pb.Pose) -> np.ndarray:
@@ -56,13 +100,14 @@ def from_pose(m: pb.Pose) -> np.ndarray:
     An unset rotation (all zero) is the identity; a non-unit quaternion is normalised;
     a non-finite one raises MessageError.
     """
-    q = np.array([m.rotation.x, m.rotation.y, m.rotation.z, m.rotation.w], dtype=float)
-    t = from_vector3(m.translation)
+    r, p = m.rotation, m.translation
+    q = np.array([r.x, r.y, r.z, r.w], dtype=float)
+    t = np.array([p.x, p.y, p.z], dtype=float)
     if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
         raise MessageError("pose holds a non-finite number")
     T = np.eye(4)
     if np.any(q != 0.0):
-        T[:3, :3] = Rotation.from_quat(q).as_matrix()
+        T[:3, :3] = matrix_from_quat(q)
     T[:3, 3] = t
     return T
 

@@ -16,15 +16,46 @@ from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.core import PerceptionCore
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.core import PoseFilterCore
-from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_pose
 from humanpt.sim_camera import SimCameraConfig
-from humanpt.sim_camera.core import interpolate_pose
 
+from . import evaluate
+from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "operator_config", "tracking_errors", "path_points", "truth_at"]
+__all__ = ["build_system", "operator_config", "puma_placement", "puma_cores", "tracking_errors", "path_points",
+           "truth_at"]
+
+
+def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") -> tuple[float, ...]:
+    """Where the twin mounts the simulated Puma: ``world_T_base`` (X, mm/deg) such that the
+    robot starts at ``world_T_flange_start_mm`` in its default, comfortable joint pose
+    (flange pointing along -z of the base, elbow up, far from singularities and limits).
+    A target seen from below (the paper's Table 1 angles) gives a ceiling-mounted robot."""
+    from humanpt.geometry.transforms import invert_transform
+    from humanpt.sim_robot.config import SimRobotConfig
+
+    base_T_flange = SimRobotConfig(model=model).kinematics().forward(SimRobotConfig(model=model).start_joints_rad())
+    world_T_base = np.asarray(world_T_flange_start_mm, dtype=float) @ invert_transform(base_T_flange)
+    return tuple(float(v) for v in x_from_transform(world_T_base))
+
+
+def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400):
+    """(sim_robot config, alter_gateway config) for a Puma 762 twin starting at the given
+    flange pose, with a workspace envelope of +-``envelope_mm`` around it."""
+    from humanpt.alter_gateway.config import AlterGatewayConfig
+    from humanpt.sim_robot.config import SimRobotConfig
+
+    base = puma_placement(world_T_flange_start_mm)
+    p = np.asarray(world_T_flange_start_mm)[:3, 3]
+    robot = SimRobotConfig(world_T_base_mm_deg=base)
+    # A STATUS frame (41 bytes, 8N1) takes this long on the line: the robot state is about
+    # the pose at the frame's start, not at its reception.
+    status_delay_ms = 41 * 10 / baud * 1e3
+    gateway = AlterGatewayConfig(world_T_base_mm_deg=base, baud=baud, status_delay_ms=status_delay_ms,
+                                 envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
+                                 envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
+    return robot, gateway
 
 
 def operator_config(scenario: str | OperatorConfig, seed: int = 0) -> OperatorConfig:
@@ -40,11 +71,13 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  perception: PerceptionConfig | None = None, pose_filter: PoseFilterConfig | None = None,
                  controller: ControllerConfig | None = None, sim_camera: SimCameraConfig | None = None,
                  start_offset_mm_deg=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), robot_cores=None,
-                 run_dir: str | Path | None = None, keep_outputs: bool = True) -> TwinWorld:
+                 robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True
+                 ) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
-    controller records the tip too."""
+    controller records the tip too.  ``robot``: ``standin`` (integrates commands) or
+    ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line)."""
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -52,66 +85,44 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     if driver is not None and not ctl.has_driver:
         ctl = dataclasses.replace(ctl, has_driver=True,
                                   tob_t_tip_mm=tuple(float(v) for v in driver))
-    robot = None
+    standin = None
+    wire = False
     if robot_cores is None:
-        start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
-        off = np.asarray(start_offset_mm_deg, dtype=float)
         from humanpt.geometry.transforms import transform_from_x
 
+        start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
+        off = np.asarray(start_offset_mm_deg, dtype=float)
         D = transform_from_x(np.r_[0.0, 0.0, 0.0, off[3:]])
         start = start.copy()
         start[:3, :3] = D[:3, :3] @ start[:3, :3]
         start[:3, 3] += off[:3]
-        robot = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))
+        if robot == "puma":
+            from humanpt.alter_gateway.core import AlterGatewayCore
+            from humanpt.sim_robot.core import SimRobotCore
+
+            # The robot is mounted so that it starts where the camera sees the target.
+            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(start_flange_for(
+                op, ctl.dz_mm, cam.flange_T_camera)))))
+            start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
+            rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
+            robot_cores = [SimRobotCore(rcfg), AlterGatewayCore(gcfg)]
+            wire = True
+        elif robot == "standin":
+            standin = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))
+        else:
+            raise ValueError(f"robot must be 'standin' or 'puma', got {robot!r}")
     cores = [PerceptionCore(perception or PerceptionConfig()), PoseFilterCore(pose_filter or PoseFilterConfig()),
              ControllerCore(ctl)]
-    return build_world(op, seed=seed, sim_camera=cam, robot=robot, robot_cores=robot_cores, extra_cores=cores,
-                       dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs)
-
-
-def truth_at(world: TwinWorld, stamps_ns, field: str = "world_T_tob", topic: str = "operator/truth") -> np.ndarray:
-    """(N, 4, 4) mm: a truth stream interpolated at the stamps."""
-    samples = world.truths(topic)
-    t = np.array([s for s, _ in samples], dtype=np.int64)
-    out = []
-    for ts in np.asarray(stamps_ns, dtype=np.int64):
-        i = int(np.clip(np.searchsorted(t, ts), 1, len(t) - 1))
-        (t0, a), (t1, b) = samples[i - 1], samples[i]
-        out.append(interpolate_pose(int(ts), t0, a[field], t1, b[field], 0))
-    return np.array(out)
+    world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
+                        dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs)
+    if wire:
+        world.lockstep.connect_serial("alter_gateway", "sim_robot", baud=robot_cores[1].config.baud)
+    return world
 
 
 def tracking_errors(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """True servo error per robot cycle: (stamps ns, |G - D| mm, angle(G, D) deg), from
-    the robot's true flange and the operator's true target."""
+    """True servo error per robot cycle of a built system (see evaluate.tracking_errors)."""
     ctl = next(c for c in world.extra if isinstance(c, ControllerCore))
     flange_T_desired_mm = ctl.flange_T_desired.copy()
     flange_T_desired_mm[:3, 3] *= 1e3
-    robot = world.truths("sim_robot/truth")
-    stamps = np.array([s for s, _ in robot], dtype=np.int64)
-    tobs = truth_at(world, stamps)
-    e_mm, e_deg = [], []
-    from scipy.spatial.transform import Rotation
-
-    for (_, r), G in zip(robot, tobs, strict=True):
-        D = r["world_T_flange"] @ flange_T_desired_mm
-        e_mm.append(np.linalg.norm(G[:3, 3] - D[:3, 3]))
-        e_deg.append(np.degrees(Rotation.from_matrix(G[:3, :3] @ D[:3, :3].T).magnitude()))
-    return stamps, np.array(e_mm), np.array(e_deg)
-
-
-def path_points(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """The recorded path: (stamps ns, X of G (N, 6) mm/deg, X of the tip or None)."""
-    pts = [pb.PathPoint.FromString(o.data) for o in world.outputs("controller/path")]
-    if not pts:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 6)), None
-
-    def X(p):
-        T = from_pose(p)
-        T[:3, 3] *= 1e3
-        return x_from_transform(T)
-
-    stamps = np.array([p.header.stamp_ns for p in pts], dtype=np.int64)
-    xg = np.array([X(p.world_T_tob) for p in pts])
-    xt = np.array([X(p.world_T_tip) for p in pts]) if pts[0].has_tip else None
-    return stamps, xg, xt
+    return evaluate.tracking_errors(world, flange_T_desired_mm)

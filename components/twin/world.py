@@ -12,8 +12,7 @@ from humanpt.geometry import DEFAULT_DZ_MM, x_from_transform
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig, OperatorCore
 from humanpt.runtime.core import Core
 from humanpt.runtime.lockstep import Delivered, Lockstep
-from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
+from humanpt.schemas.convert import from_image, image_stamp_ns
 from humanpt.sim_camera import SimCameraConfig, SimCameraCore
 
 from .standin import StandInRobotConfig, StandInRobotCore, viewing_start_flange
@@ -82,17 +81,9 @@ class TwinWorld:
     def truths(self, topic: str = "sim_camera/truth") -> list[tuple[int, dict[str, np.ndarray]]]:
         """(stamp ns, {field: (4, 4) in mm}) of a Truth topic (``operator/truth``,
         ``sim_robot/truth`` or ``sim_camera/truth``, the truth at each image's capture)."""
-        out = []
-        for o in self.outputs(topic):
-            msg = pb.Truth.FromString(o.data)
-            poses = {}
-            for field in ("world_T_tob", "world_T_tip", "world_T_flange"):
-                if msg.HasField(field):
-                    a_T_b = from_pose(getattr(msg, field))
-                    a_T_b[:3, 3] *= 1000.0
-                    poses[field] = a_T_b
-            out.append((msg.header.stamp_ns, poses))
-        return out
+        from .evaluate import truths_from
+
+        return truths_from(self.outputs(topic))
 
     def close(self) -> None:
         self.lockstep.close()

@@ -149,4 +149,4 @@ def test_driver_calibration_recovers_the_twins_tip():
     # The paper's method (eq. 10-13, P' given) too.
     assert np.linalg.norm(np.array(res["paper_tob_t_tip_mm"]) - [3.0, -2.0, 62.0]) < 0.2, res
     core = next(c for c in w.extra if isinstance(c, ControllerCore))
-    assert core.config.has_driver and np.allclose(core.config.tob_t_tip_mm, res["tob_t_tip_mm"])
+    assert core.config.has_driver and np.allclose(core.config.tob_t_tip_mm, res["tob_t_tip_mm"], atol=1e-3)

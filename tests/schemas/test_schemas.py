@@ -67,6 +67,15 @@ def test_pose_round_trip(rotvec, t):
     np.testing.assert_allclose(back, T, atol=1e-12)
 
 
+@settings(max_examples=200, deadline=None)
+@given(q=st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 1e-3))
+def test_fast_quaternion_conversions_agree_with_scipy(q):
+    R = Rotation.from_quat(q).as_matrix()
+    np.testing.assert_allclose(convert.quat_from_matrix(R), Rotation.from_matrix(R).as_quat(canonical=True),
+                               atol=1e-12)
+    np.testing.assert_allclose(convert.matrix_from_quat(np.asarray(q)), R, atol=1e-12)
+
+
 def test_pose_rejects_non_rotation_and_nan():
     T = np.eye(4)
     T[0, 0] = -1.0  # a reflection
