@@ -79,6 +79,21 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
 
 TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}
 
+# A core may hand a copy of a bus message to its own shell's adapters on the local topic
+# "show:<component>.<topic>" (no slash, so never published): viz's core forwards what its
+# rerun adapter is to log this way.  Such a topic has the type of the bus topic it copies.
+SHOW_PREFIX = "show:"
+
+
+def show_topic(short: str) -> str:
+    """The local topic carrying a copy of bus topic ``short`` to a shell's adapter."""
+    return SHOW_PREFIX + short.replace("/", ".")
+
+
+def shown_short(local: str) -> str:
+    """The bus topic a ``show:`` local topic copies (inverse of :func:`show_topic`)."""
+    return local[len(SHOW_PREFIX):].replace(".", "/")
+
 
 class UnknownTopicError(KeyError):
     """A topic that is in neither the topic table nor the local topics."""
@@ -90,6 +105,8 @@ def message_type(short: str) -> type[Message]:
         return TOPICS[short].type
     if short in LOCAL_TOPICS:
         return LOCAL_TOPICS[short]
+    if short.startswith(SHOW_PREFIX) and shown_short(short) in TOPICS:
+        return TOPICS[shown_short(short)].type
     raise UnknownTopicError(f"unknown topic {short!r}; see humanpt topics --table")
 
 

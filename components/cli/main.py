@@ -18,6 +18,8 @@ examples:
   humanpt topics                                  what is being published now
   humanpt echo ponger/pong --count 3              print decoded messages
   humanpt replay runs/<run> --component ponger    re-run a component on its recorded inputs
+  humanpt view runs/<run> --save run.rrd          a recorded run as a rerun .rrd (or spawn a viewer)
+  humanpt console status --follow                 the operator console: status, options, record, save
   humanpt bench runtime                           latency and recording throughput
   humanpt bench alter                             ALTER link cycles on time, shortest cycle
   humanpt bench perception                        perception images/s and accuracy
@@ -102,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
                        "showing the first divergence when they do not. Exit status 1 on a mismatch.")
     p.add_argument("run", help="a run directory (with --component) or one component's .mcap file")
     p.add_argument("--component", help="component name (default: every recording in the run)")
+
+    from humanpt.cli import console as console_cli
+    from humanpt.cli import view as view_cli
+
+    view_cli.add_parser(sub)
+    console_cli.add_parser(sub, _add_common)
 
     p = sub.add_parser("runs", help="work with recorded runs (list, merge)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
@@ -204,6 +212,14 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     }.get(args.verb)
     if fn is not None:
         return fn(args)
+    if args.verb == "view":
+        from humanpt.cli import view as view_cli
+
+        return view_cli.run(args)
+    if args.verb == "console":
+        from humanpt.cli import console as console_cli
+
+        return console_cli.run(args)
     if args.verb == "runs":
         if args.runs_verb == "merge":
             return commands.runs_merge(args)

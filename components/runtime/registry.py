@@ -20,6 +20,7 @@ COMPONENTS: dict[str, str] = {
     "sim_camera": "humanpt.sim_camera.core:SimCameraCore",
     "operator": "humanpt.operator.core:OperatorCore",
     "standin_robot": "humanpt.twin.standin:StandInRobotCore",
+    "viz": "humanpt.viz.core:VizCore",
 }
 
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
@@ -30,6 +31,7 @@ ADAPTERS: dict[str, str] = {
     "alter_gateway": "humanpt.alter_gateway.shell:adapters",
     "sim_robot": "humanpt.sim_robot.shell:adapters",
     "camera": "humanpt.camera.capture:capture_adapters",
+    "viz": "humanpt.viz.sink:adapters",
 }
 
 # The paper's two machines.  Single-machine use needs no profile ("all").

@@ -1,0 +1,642 @@
+"""``humanpt console``: the operator console, the paper's GUI (Fig. 5) as CLI verbs.
+
+The GUI's options are the owning components' live parameters, set through their params
+queryables (``humanpt/<cell>/<component>/params``), so every change reaches the core as a
+``param`` input and is in its recording.  Commands (record, save, calibrate, playback,
+hold/track/return) are published on ``console/command`` and confirmed by the controller's
+answering event.  The status is read from ``controller/status``,
+``alter_gateway/robot_state`` and ``perception/tob``.  Like every component it is a client
+of the router (``--connect`` for the other machine).  Without a verb it reads verbs from
+stdin, one per line (an interactive prompt on a terminal).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import queue
+import shlex
+import sys
+import threading
+import time
+
+from humanpt.runtime.bus import liveliness_key, params_key
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas import topics
+
+DESCRIPTION = """\
+The operator console: the options of the paper's GUI (Fig. 5) and its buttons, from either
+machine. Options (set NAME=VALUE) go to the live parameters of the components that own
+them; commands go to the controller on console/command and wait for its answer.
+Without a verb: read verbs from stdin, one per line ('help' lists them, 'quit' ends)."""
+
+# GUI option (Fig. 5) -> (component, live parameter, help).
+OPTIONS: dict[str, tuple[str, str, str]] = {
+    "threshold": (
+        "perception",
+        "threshold",
+        "binarisation threshold T, grey levels (paper §4 step 2)",
+    ),
+    "invert": (
+        "perception",
+        "invert",
+        "image inversion: the sources are darker than the background (step 3)",
+    ),
+    "method": ("perception", "method", "perception method: weighted (default) or paper"),
+    "delay": (
+        "controller",
+        "recording_delay_cycles",
+        "recording delay: a path point every N cycles (paper: 10)",
+    ),
+    "dz": (
+        "controller",
+        "dz_mm",
+        "dz offset: distance of the virtual point D from the camera, mm (paper: 600)",
+    ),
+    "stop-on-current-location": (
+        "controller",
+        "lost_action",
+        "target lost: true = stop on current location (hold), false = return to start",
+    ),
+    "calib-samples": (
+        "controller",
+        "calibration_samples",
+        "N calibration samples of the driver tip (§4.1)",
+    ),
+}
+ALIASES = {
+    "t": "threshold",
+    "inversion": "invert",
+    "inverse": "invert",
+    "recording-delay": "delay",
+    "dz-offset": "dz",
+    "dz-mm": "dz",
+    "stop": "stop-on-current-location",
+    "n": "calib-samples",
+    "samples": "calib-samples",
+    "calibration-samples": "calib-samples",
+}
+
+# Command verb -> the controller event codes that answer it ("bad_command" answers any).
+REPLIES = {
+    "track": ("command",),
+    "hold": ("command",),
+    "return": ("command",),
+    "record_start": ("record_started",),
+    "record_stop": ("record_stopped",),
+    "save": ("save",),
+    "calibrate": ("calibration_started",),
+    "playback": ("playback_started",),
+}
+
+STATUS_TOPICS = (
+    "controller/status",
+    "alter_gateway/robot_state",
+    "perception/tob",
+    "pose_filter/tob_state",
+)
+
+
+class ConsoleError(ValueError):
+    """A console request that cannot be made (bad option, nobody answering); exit status 1."""
+
+
+def _bool(text) -> bool:
+    if isinstance(text, bool):
+        return text
+    t = str(text).strip().lower()
+    if t in ("1", "true", "yes", "on", "y"):
+        return True
+    if t in ("0", "false", "no", "off", "n"):
+        return False
+    raise ConsoleError(f"{text!r} is not true or false")
+
+
+def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
+    """``NAME=VALUE`` (GUI names, or ``component.key`` for any live parameter) ->
+    {component: {live key: value}}, values typed as the components expect."""
+    out: dict[str, dict[str, object]] = {}
+    for a in assignments:
+        name, eq, value = a.partition("=")
+        if not eq or not name:
+            raise ConsoleError(f"{a!r} is not NAME=VALUE")
+        key = name.strip().lower().replace("_", "-")
+        key = ALIASES.get(key, key)
+        if key in OPTIONS:
+            comp, param, _ = OPTIONS[key]
+            try:
+                if key == "stop-on-current-location":
+                    typed: object = "hold" if _bool(value) else "return"
+                elif key == "invert":
+                    typed = _bool(value)
+                elif key in ("delay", "calib-samples"):
+                    typed = int(value)
+                elif key == "method":
+                    typed = value
+                else:
+                    typed = float(value)
+            except ValueError as e:
+                raise ConsoleError(f"{name}: {e}") from None
+        elif "." in name:  # component.key=JSON, any live parameter
+            comp, _, param = name.partition(".")
+            try:
+                typed = json.loads(value)
+            except json.JSONDecodeError:
+                typed = value
+        else:
+            raise ConsoleError(
+                f"unknown option {name!r}; options: {', '.join(OPTIONS)} "
+                "(or COMPONENT.KEY=VALUE for any live parameter)"
+            )
+        out.setdefault(comp, {})[param] = typed
+    return out
+
+
+def gui_values(params: dict[str, dict]) -> dict[str, object]:
+    """{component: live params} -> the GUI options' values."""
+    values = {}
+    for name, (comp, key, _) in OPTIONS.items():
+        if comp in params and key in params[comp]:
+            v = params[comp][key]
+            values[name] = (v == "hold") if name == "stop-on-current-location" else v
+    return values
+
+
+def _mode(m: int) -> str:
+    return (
+        pb.ControlMode.Name(m).removeprefix("CONTROL_MODE_")
+        if m in pb.ControlMode.values()
+        else str(m)
+    )
+
+
+def _tob_status(s: int) -> str:
+    return (
+        pb.TobStatus.Name(s).removeprefix("TOB_STATUS_") if s in pb.TobStatus.values() else str(s)
+    )
+
+
+class StatusBoard:
+    """The latest message of each status topic (filled from Zenoh callbacks)."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.latest: dict[str, object] = {}
+        self.counts: dict[str, int] = {}
+        self.changed = threading.Event()
+
+    def update(self, short: str, payload: bytes) -> None:
+        msg = topics.message_type(short)()
+        try:
+            msg.ParseFromString(payload)
+        except Exception:  # noqa: BLE001 - a bad payload is not the console's business
+            return
+        with self.lock:
+            self.latest[short] = msg
+            self.counts[short] = self.counts.get(short, 0) + 1
+        self.changed.set()
+
+    def get(self, short: str):
+        with self.lock:
+            return self.latest.get(short)
+
+    def line(self) -> str:
+        """One line: mode, visible sources, error, cycle misses, recording."""
+        st, rs, tob = (
+            self.get("controller/status"),
+            self.get("alter_gateway/robot_state"),
+            self.get("perception/tob"),
+        )
+        parts = []
+        if st is not None:
+            parts.append(f"mode {_mode(st.mode)}")
+        if tob is not None:
+            parts.append(f"visible {tob.visible} ({_tob_status(tob.status)}, q {tob.quality:.2f})")
+        elif st is not None:
+            parts.append(f"visible {st.visible}")
+        if st is not None:
+            parts.append(
+                f"error {st.error_translation_m * 1e3:.2f} mm {st.error_rotation_rad * 57.29577951308232:.2f} deg"
+                f"{' (saturated)' if st.saturated else ''}"
+            )
+        if rs is not None:
+            parts.append(f"misses {rs.missed_cycles} (cycle {rs.cycle})")
+        if st is not None:
+            parts.append(f"recording {'yes' if st.recording else 'no'}, {st.path_points} points")
+            if st.mode == pb.CONTROL_MODE_CALIBRATE or st.calibration_samples:
+                parts.append(f"calibration {st.calibration_samples} samples")
+        return "  ".join(parts) if parts else "(no status yet)"
+
+    def block(self, alive: list[str]) -> str:
+        """Several lines: everything the console knows."""
+        st, rs = self.get("controller/status"), self.get("alter_gateway/robot_state")
+        tob, state = self.get("perception/tob"), self.get("pose_filter/tob_state")
+        lines = [f"components up: {', '.join(alive) or 'none'}"]
+        if st is not None:
+            lines.append(
+                f"controller  mode {_mode(st.mode)}, visible sources {st.visible}, error |G-D| "
+                f"{st.error_translation_m * 1e3:.3f} mm, {st.error_rotation_rad * 57.29577951308232:.3f} deg"
+                f"{', saturated' if st.saturated else ''}"
+            )
+            lines.append(
+                f"            recording {'yes' if st.recording else 'no'}, path points {st.path_points}, "
+                f"calibration samples {st.calibration_samples}, cycle {st.cycle}"
+            )
+        else:
+            lines.append("controller  no status")
+        if rs is not None:
+            alter = "on" if rs.status.alter_active else "off"
+            lines.append(
+                f"robot       cycle {rs.cycle}, missed cycles {rs.missed_cycles}, ALTER {alter}"
+                f"{', FAULT' if rs.status.fault else ''}"
+            )
+        if tob is not None:
+            lines.append(
+                f"perception  {_tob_status(tob.status)}, visible sources {tob.visible}, "
+                f"quality {tob.quality:.2f}, blobs {len(tob.centers_px)}"
+            )
+        if state is not None:
+            lines.append(
+                f"pose filter {_tob_status(state.status)}, measurements {state.measurements}, "
+                f"gated outliers {state.gated_outliers}"
+            )
+        return "\n".join(lines)
+
+
+class Console:
+    """One Zenoh session (a client of the router) and the console's requests."""
+
+    def __init__(self, cfg, timeout_s: float = 5.0, out=sys.stdout):
+        import zenoh
+
+        from humanpt.runtime.bus import zenoh_config
+
+        self.cfg = cfg
+        self.cell = cfg.runtime.cell
+        self.timeout_s = timeout_s
+        self.out = out
+        self._seq = 0
+        try:
+            self.session = zenoh.open(zenoh_config(cfg.runtime))
+        except zenoh.ZError as e:
+            raise ConsoleError(
+                f"cannot reach the router at {', '.join(cfg.runtime.connect)}: {e} "
+                "(start one with `humanpt router`, or pass --connect ENDPOINT)"
+            ) from e
+        self._pub = self.session.declare_publisher(topics.TOPICS["console/command"].key(self.cell))
+
+    def close(self) -> None:
+        try:
+            self._pub.undeclare()
+        finally:
+            self.session.close()
+
+    def say(self, text: str) -> None:
+        print(text, file=self.out, flush=True)
+
+    # -- components ----------------------------------------------------------------------------
+    def alive(self) -> list[str]:
+        replies = self.session.liveliness().get(liveliness_key(self.cell, "*"), timeout=2.0)
+        return sorted(str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None)
+
+    def params(self, component: str, sets: dict | None = None) -> dict:
+        """Ask (and with ``sets``, set) a component's live parameters; its reply."""
+        replies = list(
+            self.session.get(
+                params_key(self.cell, component),
+                payload=json.dumps({"set": sets or {}}),
+                timeout=self.timeout_s + 5.0 * len(sets or {}),
+            )
+        )
+        bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
+        if not bodies:
+            raise ConsoleError(f"{component} did not answer in cell {self.cell} (is it running?)")
+        return bodies[0]
+
+    # -- verbs ------------------------------------------------------------------------------------
+    def set(self, assignments: list[str]) -> int:
+        if not assignments:
+            raise ConsoleError("set what? e.g. set threshold=70 invert=true delay=10 dz=600")
+        ok = True
+        for comp, sets in parse_options(assignments).items():
+            try:
+                body = self.params(comp, sets)
+            except ConsoleError as e:
+                self.say(f"REJECTED: {e}")
+                ok = False
+                continue
+            for r in body.get("results", []):
+                self.say(f"{'set' if r['ok'] else 'REJECTED'}: {r['text'] or r['key']}")
+                ok &= bool(r["ok"])
+        return 0 if ok else 1
+
+    def show(self) -> int:
+        params, missing = {}, []
+        for comp in sorted({c for c, _, _ in OPTIONS.values()}):
+            try:
+                params[comp] = self.params(comp)["params"]
+            except ConsoleError:
+                missing.append(comp)
+        for name, value in gui_values(params).items():
+            self.say(f"{name:26s} {json.dumps(value):10s} {OPTIONS[name][2]}")
+        for comp in missing:
+            self.say(f"({comp} did not answer: its options are not shown)")
+        return 0 if not missing else 1
+
+    def command(self, verb: str, args: dict | None = None, component: str = "controller") -> int:
+        """Publish a Command and wait for the component's answering event."""
+        events: queue.Queue = queue.Queue()
+        sub = self.session.declare_subscriber(
+            topics.TOPICS[f"{component}/events"].key(self.cell),
+            lambda s: events.put(s.payload.to_bytes()),
+        )
+        try:
+            deadline = time.monotonic() + self.timeout_s
+            while not self._pub.matching_status.matching:  # nobody would hear a command now
+                if time.monotonic() > deadline:
+                    raise ConsoleError(
+                        f"nobody listens to console/command in cell {self.cell} "
+                        f"(is the {component} running?)"
+                    )
+                time.sleep(0.05)
+            self._seq += 1
+            now = time.time_ns()
+            cmd = pb.Command(
+                header=pb.Header(stamp_ns=now, seq=self._seq),
+                component=component,
+                verb=verb,
+                args_json=json.dumps(args or {}),
+            )
+            self._pub.put(cmd.SerializeToString())
+            wanted = REPLIES.get(verb, ())
+            while True:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise ConsoleError(
+                        f"the {component} did not answer {verb!r} within {self.timeout_s:g} s "
+                        "(is it running?)"
+                    )
+                try:
+                    ev = pb.Event.FromString(events.get(timeout=left))
+                except queue.Empty:
+                    continue
+                if ev.code == "bad_command":
+                    self.say(f"REJECTED by the {component}: {ev.text}")
+                    return 1
+                if ev.code in wanted or not wanted:
+                    self.say(f"{component}: {ev.code}: {ev.text}")
+                    return 0
+        finally:
+            sub.undeclare()
+
+    def status(
+        self, follow: bool = False, interval_s: float = 0.5, duration_s: float | None = None
+    ) -> int:
+        board = StatusBoard()
+        subs = [
+            self.session.declare_subscriber(
+                topics.TOPICS[s].key(self.cell),
+                (lambda short: lambda smp: board.update(short, smp.payload.to_bytes()))(s),
+            )
+            for s in STATUS_TOPICS
+        ]
+        try:
+            if not follow:
+                deadline = time.monotonic() + self.timeout_s
+                while board.get("controller/status") is None and time.monotonic() < deadline:
+                    board.changed.wait(0.1)
+                    board.changed.clear()
+                # The other topics come at the same rate: give them a moment to fill in.
+                settle = min(deadline, time.monotonic() + 0.5)
+                while len(board.latest) < len(STATUS_TOPICS) and time.monotonic() < settle:
+                    time.sleep(0.05)
+                self.say(board.block(self.alive()))
+                if not board.latest:
+                    self.say(
+                        f"no status within {self.timeout_s:g} s (is the system running in cell {self.cell}?)"
+                    )
+                    return 1
+                return 0
+            end = time.monotonic() + duration_s if duration_s else None
+            try:
+                while end is None or time.monotonic() < end:
+                    time.sleep(interval_s)
+                    self.say(board.line())
+            except KeyboardInterrupt:
+                pass
+            return 0
+        finally:
+            for s in subs:
+                s.undeclare()
+
+
+# -- argument parsing ------------------------------------------------------------------------------------
+def _common_after_action(q: argparse.ArgumentParser) -> None:
+    """--config/--cell/--connect/--timeout after the action too (``console set X=1 --connect ...``);
+    SUPPRESS keeps a value given before the action."""
+    q.add_argument(
+        "--config", "-c", metavar="FILE", default=argparse.SUPPRESS, help="TOML config file"
+    )
+    q.add_argument("--cell", default=argparse.SUPPRESS, help="cell name; overrides [runtime] cell")
+    q.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        default=argparse.SUPPRESS,
+        help="router endpoint (repeatable); overrides [runtime] connect",
+    )
+    q.add_argument(
+        "--timeout", type=float, default=argparse.SUPPRESS, help="seconds to wait for an answer"
+    )
+
+
+def _add_actions(asub) -> None:
+    q = asub.add_parser(
+        "status",
+        help="mode, visible sources, error, cycle misses, recording",
+        description="Print the live status once (or a line every --interval with --follow): "
+        "controller mode, visible sources, |G-D| error (mm, deg), missed ALTER cycles, recording "
+        "and path points, from controller/status, alter_gateway/robot_state and perception/tob.",
+    )
+    q.add_argument(
+        "--follow", "-f", action="store_true", help="a line every --interval until Ctrl-C"
+    )
+    q.add_argument(
+        "--interval",
+        type=float,
+        default=0.5,
+        help="seconds between lines with --follow (default 0.5)",
+    )
+    q.add_argument("--duration", type=float, help="stop following after this many seconds")
+    q = asub.add_parser(
+        "show",
+        help="the GUI options' current values",
+        description="Ask perception and the controller for the current values of the GUI's options.",
+    )
+    q = asub.add_parser(
+        "set",
+        help="set GUI options: threshold, invert, delay, dz, stop-on-current-location, ...",
+        description="Set the paper's GUI options on the running components (their live "
+        "parameters; each change is recorded in the component's MCAP):\n"
+        + "\n".join(f"  {k:26s} {c}.{p}: {h}" for k, (c, p, h) in OPTIONS.items())
+        + "\nCOMPONENT.KEY=VALUE sets any other live parameter (VALUE is JSON).",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    q.add_argument("assignments", nargs="+", metavar="NAME=VALUE")
+    q = asub.add_parser(
+        "record",
+        help="start or stop recording the path",
+        description="Start recording the path (a new path file under the controller's run "
+        "directory, a point every `delay` cycles) or stop it.",
+    )
+    q.add_argument("action", choices=["start", "stop"])
+    q = asub.add_parser(
+        "save",
+        help="save the recorded path to a file (on the controller's machine)",
+        description="Copy the current path file (CSV, mm and degrees) to FILE. The controller "
+        "writes it, on its machine; a relative FILE is taken from the console's directory.",
+    )
+    q.add_argument("file", metavar="FILE")
+    q = asub.add_parser(
+        "calibrate",
+        help="calibrate the driver tip (N samples pivoting on it)",
+        description="Start the driver-tip calibration (paper §4.1): track while collecting N "
+        "distinct poses of the target pivoting on its tip. With --pivot (the point P' in world "
+        "mm, eq. 10-11) the paper's eq. 12-13 are solved as well.",
+    )
+    q.add_argument("--samples", type=int, help="N (default: the controller's calib-samples option)")
+    q.add_argument("--pivot", metavar="X,Y,Z", help="P' in the world frame, mm")
+    q = asub.add_parser(
+        "playback",
+        help="replay the recorded path (or a path file) with the tool",
+        description="The tool tip follows the path just recorded, or the path in FILE (a path "
+        "CSV written while recording, mm and degrees).",
+    )
+    q.add_argument("file", nargs="?", metavar="FILE.csv")
+    q.add_argument("--speed", type=float, help="tool speed, mm/s (default: the controller's)")
+    q.add_argument(
+        "--point",
+        choices=["auto", "G", "tip"],
+        default="auto",
+        help="which point of FILE (default: the tip when recorded)",
+    )
+    for verb, text in (
+        ("hold", "stop on the current location"),
+        ("track", "track the target (visual servo)"),
+        ("return", "return to the start pose"),
+    ):
+        asub.add_parser(verb, help=text, description=f"Controller command: {text}.")
+    for q in asub.choices.values():
+        _common_after_action(q)
+
+
+def add_parser(sub, add_common) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "console",
+        help="operator console: GUI options, record/save/calibrate/playback, live status",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="examples:\n  humanpt console status --follow\n"
+        "  humanpt console set threshold=70 invert=false delay=10 dz=600 stop-on-current-location=true\n"
+        "  humanpt console record start\n  humanpt console save ~/weld.csv\n"
+        "  humanpt console --connect tcp/192.168.1.10:7447      (from the other machine)",
+    )
+    add_common(p)
+    p.add_argument(
+        "--timeout", type=float, default=5.0, help="seconds to wait for an answer (default 5)"
+    )
+    _add_actions(p.add_subparsers(dest="console_verb", metavar="ACTION"))
+    return p
+
+
+def _do(con: Console, a) -> int:
+    v = a.console_verb
+    if v == "status":
+        return con.status(follow=a.follow, interval_s=a.interval, duration_s=a.duration)
+    if v == "show":
+        return con.show()
+    if v == "set":
+        return con.set(a.assignments)
+    if v == "record":
+        return con.command("record_start" if a.action == "start" else "record_stop")
+    if v == "save":
+        return con.command("save", {"file": os.path.abspath(os.path.expanduser(a.file))})
+    if v == "calibrate":
+        args: dict = {}
+        if a.samples is not None:
+            args["samples"] = a.samples
+        if a.pivot:
+            try:
+                args["pivot_mm"] = [float(x) for x in a.pivot.split(",")]
+            except ValueError:
+                raise ConsoleError(f"--pivot {a.pivot!r}: give X,Y,Z in mm") from None
+            if len(args["pivot_mm"]) != 3:
+                raise ConsoleError(f"--pivot {a.pivot!r}: give X,Y,Z in mm")
+        return con.command("calibrate", args)
+    if v == "playback":
+        args = {}
+        if a.speed is not None:
+            args["speed_mm_s"] = a.speed
+        if a.file:
+            from humanpt.controller import pathfile
+
+            args["points"] = pathfile.read(a.file).points(a.point).tolist()
+        return con.command("playback", args)
+    if v in ("hold", "track", "return"):
+        return con.command(v)
+    raise ConsoleError(f"unknown action {v!r}")
+
+
+def _interactive(con: Console, stream=sys.stdin) -> int:
+    ap = argparse.ArgumentParser(prog="", add_help=False, exit_on_error=False)
+    _add_actions(ap.add_subparsers(dest="console_verb", metavar="ACTION"))
+    tty = stream.isatty()
+    if tty:
+        con.say(
+            f"humanpt console, cell {con.cell}: {', '.join(con.alive()) or 'no components'} up. "
+            "'help' lists the verbs, 'quit' ends."
+        )
+    rc = 0
+    while True:
+        if tty:
+            print("humanpt> ", end="", flush=True, file=con.out)
+        line = stream.readline()
+        if not line:
+            return rc
+        words = shlex.split(line, comments=True)
+        if not words:
+            continue
+        if words[0] in ("quit", "exit"):
+            return rc
+        if words[0] in ("help", "?"):
+            con.say(ap.format_help().replace("usage: ", "verbs: ", 1))
+            continue
+        try:
+            a = ap.parse_args(words)
+            rc = _do(con, a) or rc
+        except SystemExit:  # argparse printed why (help of a verb, or a bad argument)
+            rc = 1
+        except (argparse.ArgumentError, ConsoleError, ValueError, OSError) as e:
+            con.say(f"error: {e}")
+            rc = 1
+
+
+def run(args) -> int:
+    from humanpt.cli.commands import load_cfg
+
+    cfg = load_cfg(args)
+    try:
+        con = Console(cfg, timeout_s=args.timeout)
+    except ConsoleError as e:
+        print(f"humanpt console: {e}", file=sys.stderr)
+        return 1
+    try:
+        if not args.console_verb:
+            return _interactive(con)
+        return _do(con, args)
+    except ConsoleError as e:
+        print(f"humanpt console: {e}", file=sys.stderr)
+        return 1
+    finally:
+        con.close()

@@ -1,0 +1,169 @@
+"""``humanpt view RUN_DIR``: a recorded run in rerun, with the live view's blueprint."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from pathlib import Path
+
+DESCRIPTION = """\
+Open a recorded run in rerun: every component recording's outputs, in time order,
+drawn like the live view (3D world with the flange, camera frustum, target, virtual
+point D, the recorded path and the twin's ground truth; the complex image with the
+detected centres, pairs and expected positions; plots of tracking error, command and
+loop latency; events). By default a viewer is spawned; --save writes an .rrd file
+headless (open it later with `rerun FILE.rrd`); --serve keeps a gRPC server up for a
+viewer on another machine (`rerun --connect rerun+http://HOST:PORT/proxy`) until Ctrl-C;
+--viewer URL sends to a viewer already running there. A progress line goes to stderr."""
+
+EXAMPLES = """\
+examples:
+  humanpt view runs/20261121-101500-twin                  spawn a viewer
+  humanpt view runs/20261121-101500-twin --save run.rrd   headless: write run.rrd
+  humanpt view runs/20261121-101500-twin --serve --port 9877
+"""
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser(
+        "view",
+        help="open a recorded run in rerun (or write an .rrd headless)",
+        description=DESCRIPTION,
+        epilog=EXAMPLES,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "run_dir", metavar="RUN_DIR", help="a run directory (component .mcap recordings)"
+    )
+    out = p.add_mutually_exclusive_group()
+    out.add_argument(
+        "--save",
+        metavar="FILE.rrd",
+        help="write an .rrd file instead of spawning a viewer (headless)",
+    )
+    out.add_argument(
+        "--serve",
+        action="store_true",
+        help="serve over gRPC until Ctrl-C (a viewer elsewhere connects)",
+    )
+    out.add_argument(
+        "--viewer",
+        metavar="URL",
+        help="send to a running viewer, e.g. rerun+http://HOST:9876/proxy",
+    )
+    p.add_argument(
+        "--port",
+        type=int,
+        default=9876,
+        help="gRPC port of the spawned viewer or of --serve (default 9876)",
+    )
+    p.add_argument(
+        "--image-every",
+        type=int,
+        default=1,
+        metavar="N",
+        help="show every Nth camera image (default 1)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
+    return p
+
+
+class Progress:
+    """A progress line on stderr: rewritten in place on a terminal, a line per 10 % otherwise."""
+
+    def __init__(self, stream=None, enabled: bool = True):
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = self.stream.isatty()
+        self._last_decile = -1
+        self._last_write = 0.0
+
+    def __call__(self, stats) -> None:
+        if not self.enabled:
+            return
+        done = stats.messages
+        if stats.total:
+            frac = min(1.0, done / stats.total)
+            bar = "#" * int(frac * 30)
+            text = f"humanpt view: [{bar:30s}] {frac * 100:3.0f} % {done}/{stats.total} messages, {stats.seconds:.1f} s"
+            decile = int(frac * 10)
+        else:
+            text = f"humanpt view: {done} messages, {stats.seconds:.1f} s"
+            decile = int(stats.seconds // 5)  # unknown total: a line every 5 s
+        if self.tty:
+            now = time.monotonic()
+            if now - self._last_write >= 0.2 or (stats.total and done >= stats.total):
+                self.stream.write("\r" + text)
+                self.stream.flush()
+                self._last_write = now
+        elif decile != self._last_decile:
+            self._last_decile = decile
+            self.stream.write(text + "\n")
+            self.stream.flush()
+
+    def end(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def run(args) -> int:
+    from humanpt.runtime.recording import RecordingError
+    from humanpt.viz.config import VizConfig
+    from humanpt.viz.convert import convert_run, run_files, viz_config_for_run
+    from humanpt.viz.sink import close_stream, has_display, open_stream
+
+    run_dir = Path(args.run_dir)
+    run_files(run_dir)  # fail early, naming the problem
+    if args.image_every < 1:
+        raise ValueError("--image-every must be >= 1")
+    if args.save:
+        mode = "save"
+    elif args.serve:
+        mode = "serve"
+    elif args.viewer:
+        mode = "connect"
+    else:
+        mode = "spawn"
+        if not has_display():
+            print(
+                "humanpt view: no display here (DISPLAY/WAYLAND_DISPLAY unset): use --save FILE.rrd, or --serve "
+                "for a viewer on another machine",
+                file=sys.stderr,
+            )
+            return 2
+    base = VizConfig(grpc_port=args.port, **({"connect_url": args.viewer} if args.viewer else {}))
+    cfg = viz_config_for_run(run_dir, base)
+    try:
+        rec, where = open_stream(cfg, mode=mode, rrd_path=args.save or "", name=run_dir.name)
+    except (RuntimeError, OSError, ValueError) as e:
+        raise RecordingError(f"cannot open the rerun {mode} sink: {e}") from e
+    progress = Progress(enabled=not args.no_progress)
+    try:
+        stats = convert_run(
+            run_dir, rec, config=cfg, image_every=args.image_every, progress=progress
+        )
+    finally:
+        progress.end()
+        if mode != "serve":
+            close_stream(rec)
+    for note in stats.notes:
+        print(f"humanpt view: warning: {note}", file=sys.stderr)
+    bad = sum(stats.errors.values())
+    rate = stats.messages / stats.seconds if stats.seconds > 0 else 0.0
+    print(
+        f"humanpt view: {stats.messages} messages from {stats.recordings} recordings ({stats.shown} shown"
+        f"{f', {bad} not drawable' if bad else ''}) in {stats.seconds:.1f} s ({rate:.0f}/s) -> {where}",
+        flush=True,
+    )
+    if mode == "serve":
+        from humanpt.cli.commands import stop_on_signals
+
+        stop = stop_on_signals(threading.Event())
+        print("humanpt view: serving until Ctrl-C", flush=True)
+        while not stop.wait(0.5):
+            pass
+        close_stream(rec, timeout_s=1.0)
+    return 0

@@ -1,0 +1,136 @@
+"""Configuration of the viz component (section ``[viz]``).
+
+Where the rerun data goes (``mode``), how much of the camera stream is shown, and the
+geometry the views need to draw what the messages do not carry: the hand-eye transform
+(where the camera frustum sits on the flange), the desired point D's distance, the PSVS
+(to project expected source positions into the complex image) and the target's shape.
+Defaults are the other components' defaults; ``humanpt view`` takes them from the run's
+recorded controller and perception configs instead.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from humanpt.geometry import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM, PsvsParams, TargetModel
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.perception.config import PsvsConfig
+from humanpt.runtime.config import live
+
+__all__ = ["VizConfig", "MODES"]
+
+MODES = ("spawn", "serve", "connect", "save")
+
+_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
+
+
+@dataclass(frozen=True)
+class VizConfig:
+    """``[viz]``: the live rerun view (README.md has the table).
+
+    ``mode``: ``spawn`` a local viewer (on a machine without a display: serve instead),
+    ``serve`` a gRPC server that viewers on other machines connect to
+    (``rerun --connect rerun+http://HOST:PORT/proxy``), ``connect`` to a viewer already
+    running at ``connect_url``, or ``save`` to an .rrd file headless. ``rrd_path``: the
+    file of ``save`` (empty: ``<run dir>/viz.rrd``); in the other modes a non-empty path
+    is written as well.
+    """
+
+    mode: Literal["spawn", "serve", "connect", "save"] = "spawn"
+    rrd_path: str = ""
+    grpc_port: int = 9876
+    bind_ip: str = "0.0.0.0"
+    connect_url: str = "rerun+http://127.0.0.1:9876/proxy"
+    server_memory_limit: str = "1GiB"
+    application_id: str = "humanpt"
+    # What the core forwards to the viewer (pure, replayable decimation).
+    # Every 2nd image by default: ~15 Hz of a 30 Hz camera is plenty to watch, and each shown
+    # image is recorded twice in viz.mcap (as input and as the forwarded copy).
+    image_every: int = live(2, "show every Nth camera image (1: all)")
+    # Geometry the views need (the messages carry poses, not the rig).
+    # D's distance at start; the view follows the controller's dz_mm changes (its events).
+    dz_mm: float = DEFAULT_DZ_MM
+    flange_T_camera_x: tuple[float, float, float, float, float, float] = _FLANGE_T_CAMERA_X
+    cycle_period_ms: float = 28.0
+    psvs: PsvsConfig = field(default_factory=PsvsConfig)
+    target_leg_mm: float = 40.0
+    target_base_mm: float = 30.0
+    source_diameter_mm: float = 5.0
+    # The recorded path is drawn as line strips of at most this many points each (a new
+    # strip starts when one is full, so a long path is not re-sent whole at every point).
+    path_strip_points: int = 200
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"viz.mode must be one of {MODES}, got {self.mode!r}")
+        if (
+            isinstance(self.grpc_port, bool)
+            or not isinstance(self.grpc_port, int)
+            or not 0 < self.grpc_port < 65536
+        ):
+            raise ValueError(f"viz.grpc_port must be a TCP port (1..65535), got {self.grpc_port!r}")
+        if not self.connect_url.startswith(("rerun://", "rerun+http://", "rerun+https://")):
+            raise ValueError(
+                f"viz.connect_url must be a rerun gRPC URL (rerun+http://HOST:PORT/proxy), "
+                f"got {self.connect_url!r}"
+            )
+        if (
+            isinstance(self.image_every, bool)
+            or not isinstance(self.image_every, int)
+            or self.image_every < 1
+        ):
+            raise ValueError(f"viz.image_every must be an integer >= 1, got {self.image_every!r}")
+        for name in (
+            "dz_mm",
+            "cycle_period_ms",
+            "target_leg_mm",
+            "target_base_mm",
+            "source_diameter_mm",
+        ):
+            v = getattr(self, name)
+            if (
+                isinstance(v, bool)
+                or not isinstance(v, int | float)
+                or not math.isfinite(v)
+                or v <= 0
+            ):
+                raise ValueError(f"viz.{name} must be a finite number > 0, got {v!r}")
+        if len(self.flange_T_camera_x) != 6 or not all(
+            math.isfinite(v) for v in self.flange_T_camera_x
+        ):
+            raise ValueError(
+                "viz.flange_T_camera_x must be six finite numbers (x, y, z mm, yaw, pitch, roll deg)"
+            )
+        if (
+            isinstance(self.path_strip_points, bool)
+            or not isinstance(self.path_strip_points, int)
+            or self.path_strip_points < 2
+        ):
+            raise ValueError(
+                f"viz.path_strip_points must be an integer >= 2, got {self.path_strip_points!r}"
+            )
+        if not isinstance(self.psvs, PsvsConfig):
+            raise ValueError(f"viz.psvs must be a PsvsConfig, got {type(self.psvs).__name__}")
+        try:
+            self.target_model()
+        except ValueError as e:
+            raise ValueError(f"viz: target: {e}") from None
+
+    # -- derived ---------------------------------------------------------------------------
+    def psvs_params(self) -> PsvsParams:
+        return self.psvs.params()
+
+    def target_model(self) -> TargetModel:
+        return TargetModel.isosceles(
+            self.target_leg_mm, self.target_base_mm, self.source_diameter_mm, None
+        )
+
+    def flange_T_camera_m(self) -> np.ndarray:
+        """(4, 4) hand-eye transform, translation in metres."""
+        T = transform_from_x(np.asarray(self.flange_T_camera_x, dtype=float))
+        T[:3, 3] *= 1e-3
+        return T

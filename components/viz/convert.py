@@ -1,0 +1,159 @@
+"""A recorded run -> rerun: the function behind ``humanpt view``.
+
+Every component recording's outputs (``direction=out``) are merged in time order (like
+``humanpt runs merge``, streaming: constant memory), passed through a :class:`VizCore`
+(the same choice of what to show as live) and logged with the same
+:class:`~humanpt.viz.logger.RerunLogger` and blueprint.  The view's geometry (d_z,
+hand-eye, PSVS, target) comes from the run's recorded controller and perception configs.
+"""
+
+from __future__ import annotations
+
+import heapq
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rerun as rr
+from mcap.reader import make_reader
+
+from humanpt.runtime.config import ConfigError, build, to_table
+from humanpt.runtime.recording import OUT, RecordingError, iter_entries, read_metadata
+from humanpt.schemas import topics
+from humanpt.viz.config import VizConfig
+from humanpt.viz.core import SHOWN_TOPICS, VizCore
+from humanpt.viz.logger import RerunLogger
+
+__all__ = ["ConvertStats", "convert_run", "run_files", "viz_config_for_run"]
+
+# Keys of the view's geometry taken from the run's own components.
+_FROM_RUN = {
+    "controller": ("dz_mm", "flange_T_camera_x", "cycle_period_ms"),
+    "perception": ("psvs", "target_leg_mm", "target_base_mm", "source_diameter_mm"),
+}
+
+
+@dataclass
+class ConvertStats:
+    recordings: int = 0
+    messages: int = 0  # outputs read
+    shown: int = 0  # given to the logger
+    total: int | None = None  # outputs expected (from the files' summaries), None if unknown
+    seconds: float = 0.0
+    counts: dict[str, int] = field(default_factory=dict)  # drawn, per topic
+    errors: dict[str, int] = field(default_factory=dict)  # could not be drawn, per topic
+    notes: list[str] = field(default_factory=list)  # truncated recordings
+
+
+def run_files(run_dir: str | Path) -> list[Path]:
+    """The component recordings of a run (viz's own is left out: its outputs are copies)."""
+    d = Path(run_dir)
+    if not d.is_dir():
+        raise RecordingError(f"{d}: no such run directory")
+    files = [f for f in sorted(d.glob("*.mcap")) if f.stem != "viz"]
+    if not files:
+        raise RecordingError(f"{d}: no component recordings (.mcap) here")
+    return files
+
+
+def viz_config_for_run(run_dir: str | Path, base: VizConfig | None = None) -> VizConfig:
+    """``base`` with the geometry of the run's recorded controller and perception configs."""
+    table = to_table(base or VizConfig())
+    for f in run_files(run_dir):
+        try:
+            meta, _ = read_metadata(f)
+        except RecordingError:
+            continue
+        keys = _FROM_RUN.get(meta.get("component", ""))
+        if not keys:
+            continue
+        import json
+
+        recorded = json.loads(meta.get("config", "{}"))
+        table.update({k: recorded[k] for k in keys if k in recorded})
+    try:
+        return build(VizConfig, table, source=f"{run_dir} (recorded configs)", section="viz")
+    except ConfigError:
+        return base or VizConfig()  # a run of an older layout: draw with the defaults
+
+
+def _expected_outputs(path: Path) -> int | None:
+    """Number of shown outputs in a closed recording (from its summary), None if unknown."""
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:  # noqa: BLE001 - an unfinished file has no summary
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    return sum(
+        n
+        for cid, n in summary.statistics.channel_message_counts.items()
+        if cid in summary.channels
+        and summary.channels[cid].metadata.get("direction") == OUT
+        and summary.channels[cid].topic in SHOWN_TOPICS
+    )
+
+
+def _merged_outputs(files: list[Path], notes: list[str]) -> Iterator[tuple[int, str, bytes]]:
+    streams = [
+        (
+            (e.t_ns, i, e.index, e.topic, e.data)
+            for e in iter_entries(f, notes)
+            if e.direction == OUT and e.topic in SHOWN_TOPICS
+        )
+        for i, f in enumerate(files)
+    ]
+    for t_ns, _, _, topic, data in heapq.merge(*streams):
+        yield t_ns, topic, data
+
+
+def convert_run(
+    run_dir: str | Path,
+    rec: rr.RecordingStream,
+    *,
+    config: VizConfig | None = None,
+    image_every: int = 1,
+    progress: Callable[[ConvertStats], None] | None = None,
+    progress_every: int = 2000,
+) -> ConvertStats:
+    """Log a recorded run to ``rec`` (whose sinks the caller set).
+
+    ``config``: the view's config (default: from the run, :func:`viz_config_for_run`);
+    ``image_every``: show every Nth image; ``progress(stats)`` is called every
+    ``progress_every`` messages and at the end.
+    """
+    files = run_files(run_dir)
+    cfg = config or viz_config_for_run(run_dir)
+    import dataclasses
+
+    cfg = dataclasses.replace(cfg, image_every=image_every)
+    core = VizCore(cfg)
+    logger = RerunLogger(rec, cfg, recorded_timeline=True)
+    rec.set_log_time_enabled(False)  # the conversion's wall clock means nothing here
+    stats = ConvertStats(recordings=len(files))
+    totals = [_expected_outputs(f) for f in files]
+    stats.total = None if any(t is None for t in totals) else sum(totals)
+    t0 = time.perf_counter()
+    for t_ns, topic, data in _merged_outputs(files, stats.notes):
+        stats.messages += 1
+        msg = topics.message_type(topic)()
+        try:
+            msg.ParseFromString(data)
+        except Exception:  # noqa: BLE001 - a message that does not decode is counted, not fatal
+            stats.errors[topic] = stats.errors.get(topic, 0) + 1
+            continue
+        for out_topic, out in core.step(t_ns, topic, msg):
+            logger.log(topics.shown_short(out_topic), out, t_ns)
+            stats.shown += 1
+        if progress is not None and stats.messages % progress_every == 0:
+            stats.seconds = time.perf_counter() - t0
+            progress(stats)
+    stats.seconds = time.perf_counter() - t0
+    stats.counts = dict(logger.counts)
+    for k, v in logger.errors.items():
+        stats.errors[k] = stats.errors.get(k, 0) + v
+    if progress is not None:
+        progress(stats)
+    return stats

@@ -1,0 +1,571 @@
+"""humanpt messages -> rerun log calls, on a given RecordingStream.
+
+The same :class:`RerunLogger` serves the live view (the viz shell's adapter) and
+``humanpt view`` (a recorded run), so both show the same entities under the same
+blueprint (``blueprint.py``).  It holds only what drawing needs across messages (the
+latest robot poses, the filter's latest state, the path so far); it never raises out of
+:meth:`RerunLogger.log` (a message it cannot draw is counted and skipped).
+
+Units: rerun's 3D world is in metres (as the messages); plots read mm, degrees and ms as
+the paper's figures do.  Timelines: ``stamp`` is the data's own stamp (image capture,
+ALTER cycle), so an image and its detections line up; a duration from the run's start for
+virtual-time (lock-step) runs, a wall-clock timestamp otherwise.  ``humanpt view`` adds
+``recorded`` (when the producing component made the message); the live view has rerun's
+own ``log_time`` (when viz received it).
+
+Entity paths (the blueprint's views are rooted at ``world``, ``image``, ``plots``, ``events``):
+
+=====================================  ================================================
+``world``                              robot base frame, z up (ViewCoordinates)
+``world/flange``                       world_T_flange (alter_gateway/robot_state), axes
+``world/flange/camera``                flange_T_camera (hand-eye), axes
+``world/flange/camera/psvs``           the PSVS camera frustum (Pinhole, to d_z)
+``world/flange/camera/desired``        the virtual point D (camera_T_desired(d_z)), axes
+``world/flange/camera/measured``       camera_T_tob of the last FULL measurement, axes
+``world/flange/camera/points``         triangulated source points (camera frame)
+``world/tob``                          filtered world_T_tob (pose_filter/tob_state), axes
+``world/tob/sources``                  the three light sources A, B, C (TOB frame)
+``world/desired_flange``               where the servo wants the flange (controller/status)
+``world/path/<n>/g/<k>``               recorded path n (G), strips of ``path_strip_points``
+``world/path/<n>/tip/<k>``             the driver tip P's path, when recorded
+``world/truth/tob``, ``.../sources``   twin: the true target (operator/truth)
+``world/truth/tip``                    twin: the true driver tip
+``world/truth/flange``                 twin: the true flange (sim_robot/truth)
+``image``                              the complex image (camera/image)
+``image/centers``                      every detected blob centre
+``image/pairs``                        right-left pairs (lines), labelled A, B, C when FULL
+``image/expected``                     the sources where the filter expected them
+``image/desired``                      the sources where they would be with G at D
+``image/truth``                        twin: the sources' true positions
+``plots/error/*``                      |G - D| (mm), angle (deg); ``true_*``: from the twin's truth
+``plots/command/*``                    commanded flange velocity (mm/s, deg/s per axis)
+``plots/latency/*``                    capture -> command, robot state -> command (ms)
+``plots/tracking/*``                   visible sources, perception quality, missed ALTER cycles
+``events/<component>``                 events (TextLog), console commands
+``status``                             controller mode, recording, path points (TextDocument)
+=====================================  ================================================
+"""
+
+from __future__ import annotations
+
+import bisect
+import json
+import logging
+import re
+from collections import deque
+
+import numpy as np
+import rerun as rr
+from scipy.spatial.transform import Rotation
+
+from humanpt.geometry import camera_T_desired, project
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
+from humanpt.viz.config import VizConfig
+
+log = logging.getLogger("humanpt.viz")
+
+__all__ = ["RerunLogger", "ENTITIES"]
+
+# Colours (RGB): measured orange, filtered/expected cyan, desired green, truth magenta.
+MEASURED_RGB = (255, 150, 30)
+FILTERED_RGB = (40, 200, 255)
+DESIRED_RGB = (60, 220, 90)
+TRUTH_RGB = (230, 60, 230)
+PATH_RGB = (255, 230, 40)
+TIP_RGB = (255, 90, 90)
+PAIR_RGB = ((255, 80, 80), (80, 255, 80), (90, 140, 255))
+
+ENTITIES = {
+    "flange": "world/flange",
+    "camera": "world/flange/camera",
+    "frustum": "world/flange/camera/psvs",
+    "desired": "world/flange/camera/desired",
+    "measured": "world/flange/camera/measured",
+    "points": "world/flange/camera/points",
+    "tob": "world/tob",
+    "sources": "world/tob/sources",
+    "desired_flange": "world/desired_flange",
+    "path": "world/path",
+    "truth_tob": "world/truth/tob",
+    "truth_tip": "world/truth/tip",
+    "truth_flange": "world/truth/flange",
+    "image": "image",
+    "centers": "image/centers",
+    "pairs": "image/pairs",
+    "expected": "image/expected",
+    "image_desired": "image/desired",
+    "image_truth": "image/truth",
+    "error_t": "plots/error/translation_mm",
+    "error_r": "plots/error/rotation_deg",
+    "true_error_t": "plots/error/true_translation_mm",
+    "true_error_r": "plots/error/true_rotation_deg",
+    "cmd_v": "plots/command/velocity_mm_s",
+    "cmd_w": "plots/command/angular_deg_s",
+    "lat_capture": "plots/latency/capture_to_command_ms",
+    "lat_state": "plots/latency/state_to_command_ms",
+    "visible": "plots/tracking/visible",
+    "quality": "plots/tracking/quality",
+    "misses": "plots/tracking/missed_cycles",
+    "status": "status",
+}
+
+_LEVELS = {
+    pb.SEVERITY_DEBUG: "DEBUG",
+    pb.SEVERITY_INFO: "INFO",
+    pb.SEVERITY_WARNING: "WARN",
+    pb.SEVERITY_ERROR: "ERROR",
+    pb.SEVERITY_FATAL: "CRITICAL",
+}
+_DZ_CHANGED = re.compile(r"\bdz_mm = ([-+0-9.eE]+)")
+_EPOCH_LIKE_NS = 10**18  # stamps after 2001: wall clock; before: virtual time from 0
+_LABELS = ("A", "B", "C")
+
+
+def _translation(p: pb.Pose) -> list[float]:
+    return [p.translation.x, p.translation.y, p.translation.z]
+
+
+def _transform(p: pb.Pose) -> rr.Transform3D:
+    q = [p.rotation.x, p.rotation.y, p.rotation.z, p.rotation.w]
+    if not any(q):  # an unset rotation is the identity (as schemas.convert reads it)
+        q = [0.0, 0.0, 0.0, 1.0]
+    return rr.Transform3D(translation=_translation(p), quaternion=q)
+
+
+class RerunLogger:
+    """Logs humanpt messages to ``rec`` (a ``rerun.RecordingStream``).
+
+    ``recorded_timeline``: also set the ``recorded`` timeline from each message's ``t_ns``
+    (``humanpt view``: when the producing component made it).  Call :meth:`log` with
+    every message, in time order; :attr:`counts` says how many per topic were drawn and
+    :attr:`errors` how many could not be.
+    """
+
+    def __init__(
+        self,
+        rec: rr.RecordingStream,
+        config: VizConfig | None = None,
+        *,
+        recorded_timeline: bool = False,
+    ):
+        self.rec = rec
+        self.config = config or VizConfig()
+        self.recorded_timeline = recorded_timeline
+        self.params = self.config.psvs_params()
+        self.sources_mm = self.config.target_model().source_positions_mm  # (3, 3) TOB frame
+        self.flange_T_camera = self.config.flange_T_camera_m()
+        self.dz_mm = float(self.config.dz_mm)
+        self.counts: dict[str, int] = {}
+        self.errors: dict[str, int] = {}
+        self._virtual: bool | None = None  # decided by the first stamp
+        self._robot: deque[tuple[int, np.ndarray]] = deque(
+            maxlen=256
+        )  # (stamp ns, world_T_flange m)
+        self._robot_stamps: deque[int] = deque(maxlen=256)
+        self._state: pb.TobState | None = None
+        self._state_by_cycle: dict[int, int] = {}  # ALTER cycle -> measurement stamp (ns)
+        self._shown_images: deque[int] = deque(maxlen=64)  # stamps of the images drawn
+        self._pending: dict[int, list] = {}  # image stamp -> overlays waiting for their image
+        self._path_n = 0
+        self._path_g: list[list[float]] = []
+        self._path_tip: list[list[float]] = []
+        self._last_index = -1
+        self._status_text = ""
+        self._static_done = False
+
+    # -- the one entry point ----------------------------------------------------------------
+    def log(self, topic: str, msg, t_ns: int | None = None) -> None:
+        """Draw one message of ``topic`` (a short bus topic, e.g. ``perception/tob``).
+        ``t_ns``: when it was made (view) or received (live), ns; used for latencies."""
+        handler = _HANDLERS.get(topic)
+        if handler is None:
+            if topic.endswith("/events"):
+                handler = RerunLogger._event
+            else:
+                return
+        try:
+            if not self._static_done:
+                self._log_static()
+            handler(self, topic, msg, t_ns)
+            self.counts[topic] = self.counts.get(topic, 0) + 1
+        except Exception as e:  # noqa: BLE001 - a view must never take its component down
+            n = self.errors[topic] = self.errors.get(topic, 0) + 1
+            if n == 1:
+                log.warning(
+                    "viz: cannot draw a message on %s: %s (further ones are counted)", topic, e
+                )
+
+    # -- time ------------------------------------------------------------------------------------
+    def _time(self, stamp_ns: int, t_ns: int | None) -> None:
+        first = self._virtual is None
+        if first:
+            self._virtual = stamp_ns < _EPOCH_LIKE_NS
+        stamp_ns = int(stamp_ns)
+        if self._virtual:
+            self.rec.set_time("stamp", duration=np.timedelta64(stamp_ns, "ns"))
+        else:
+            self.rec.set_time("stamp", timestamp=np.datetime64(stamp_ns, "ns"))
+        if self.recorded_timeline and t_ns is not None:
+            t_ns = int(t_ns)
+            if self._virtual:
+                self.rec.set_time("recorded", duration=np.timedelta64(t_ns, "ns"))
+            else:
+                self.rec.set_time("recorded", timestamp=np.datetime64(t_ns, "ns"))
+        if first:
+            self._log_desired()
+
+    # -- static scene -----------------------------------------------------------------------------
+    def _log_static(self) -> None:
+        self._static_done = True
+        rec, c = self.rec, self.config
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        F = self.flange_T_camera
+        rec.log(
+            ENTITIES["camera"],
+            rr.Transform3D(translation=F[:3, 3], mat3x3=F[:3, :3]),
+            rr.TransformAxes3D(0.03),
+            static=True,
+        )
+        K = self.params.real_camera_matrix
+        w, h = self.params.image_size_px
+        rec.log(
+            ENTITIES["frustum"],
+            rr.Pinhole(
+                image_from_camera=K,
+                resolution=[w, h],
+                camera_xyz=rr.ViewCoordinates.RDF,
+                image_plane_distance=self.dz_mm * 1e-3,
+                color=(180, 180, 180),
+            ),
+            static=True,
+        )
+        rec.log(ENTITIES["flange"], rr.TransformAxes3D(0.08), static=True)
+        rec.log(ENTITIES["tob"], rr.TransformAxes3D(0.04), static=True)
+        rec.log(ENTITIES["truth_tob"], rr.TransformAxes3D(0.03), static=True)
+        rec.log(ENTITIES["truth_flange"], rr.TransformAxes3D(0.05), static=True)
+        rec.log(ENTITIES["desired_flange"], rr.TransformAxes3D(0.05), static=True)
+        src_m = self.sources_mm * 1e-3
+        rec.log(
+            ENTITIES["sources"],
+            rr.Points3D(
+                src_m,
+                radii=c.source_diameter_mm * 0.5e-3,
+                colors=FILTERED_RGB,
+                labels=list(_LABELS),
+            ),
+            static=True,
+        )
+        rec.log(
+            f"{ENTITIES['truth_tob']}/sources",
+            rr.Points3D(src_m, radii=c.source_diameter_mm * 0.5e-3, colors=TRUTH_RGB),
+            static=True,
+        )
+        rec.log(
+            ENTITIES["desired"],
+            rr.Points3D([[0.0, 0.0, 0.0]], radii=0.004, colors=DESIRED_RGB, labels=["D"]),
+            rr.TransformAxes3D(0.03),
+            static=True,
+        )
+        series = {
+            "error_t": ("|G - D|", FILTERED_RGB),
+            "error_r": ("angle(G, D)", FILTERED_RGB),
+            "true_error_t": ("true |G - D|", TRUTH_RGB),
+            "true_error_r": ("true angle(G, D)", TRUTH_RGB),
+            "lat_capture": ("image capture -> command", MEASURED_RGB),
+            "lat_state": ("robot state -> command", FILTERED_RGB),
+            "visible": ("visible sources", DESIRED_RGB),
+            "quality": ("perception quality", MEASURED_RGB),
+            "misses": ("missed ALTER cycles", TIP_RGB),
+        }
+        for key, (name, rgb) in series.items():
+            rec.log(ENTITIES[key], rr.SeriesLines(names=name, colors=rgb), static=True)
+        xyz = [(230, 60, 60), (60, 200, 60), (60, 100, 230)]
+        rec.log(
+            ENTITIES["cmd_v"], rr.SeriesLines(names=["vx", "vy", "vz"], colors=xyz), static=True
+        )
+        rec.log(
+            ENTITIES["cmd_w"], rr.SeriesLines(names=["wx", "wy", "wz"], colors=xyz), static=True
+        )
+
+    def _log_desired(self) -> None:
+        """D on the camera axis at d_z, and where the sources would be in the image then."""
+        self.rec.log(ENTITIES["desired"], rr.Transform3D(translation=[0.0, 0.0, self.dz_mm * 1e-3]))
+        uv_r, uv_l = self._project(camera_T_desired(self.dz_mm))
+        self.rec.log(
+            ENTITIES["image_desired"],
+            rr.Points2D(np.vstack([uv_r, uv_l]), radii=2.0, colors=DESIRED_RGB),
+        )
+
+    # -- geometry helpers ---------------------------------------------------------------------------
+    def _project(self, camera_T_tob_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The sources of a target at ``camera_T_tob_mm`` in the complex image: (uv_R, uv_L), (3, 2) px."""
+        p = self.sources_mm @ camera_T_tob_mm[:3, :3].T + camera_T_tob_mm[:3, 3]
+        return project(self.params, p)
+
+    def _flange_at(self, stamp_ns: int) -> np.ndarray | None:
+        """The robot's world_T_flange (m) nearest to ``stamp_ns``."""
+        if not self._robot:
+            return None
+        i = bisect.bisect_left(self._robot_stamps, stamp_ns)
+        if i >= len(self._robot):
+            return self._robot[-1][1]
+        if i > 0 and stamp_ns - self._robot_stamps[i - 1] <= self._robot_stamps[i] - stamp_ns:
+            i -= 1
+        return self._robot[i][1]
+
+    def _camera_T_tob_mm(
+        self, world_T_flange_m: np.ndarray, world_T_tob_m: np.ndarray
+    ) -> np.ndarray:
+        T = np.linalg.inv(world_T_flange_m @ self.flange_T_camera) @ world_T_tob_m
+        T[:3, 3] *= 1e3
+        return T
+
+    # -- overlays on the complex image ------------------------------------------------------------
+    def _overlay(self, stamp_ns: int, items: list) -> None:
+        """Image overlays belong to their image: drawn at its stamp once it is shown (an
+        image the core did not forward gets none, so nothing is drawn over the wrong one)."""
+        if stamp_ns in self._shown_images:
+            for entity, archetype in items:
+                self.rec.log(entity, archetype)
+        else:
+            self._pending.setdefault(stamp_ns, []).extend(items)
+            while len(self._pending) > 16:
+                self._pending.pop(next(iter(self._pending)))
+
+    # -- handlers -------------------------------------------------------------------------------------
+    def _image(self, topic, msg, t_ns) -> None:
+        stamp = image_stamp_ns(msg)
+        pixels = from_image(msg)
+        self._time(stamp, t_ns)
+        if pixels.ndim == 2:
+            img = rr.Image(pixels, color_model="L")
+        else:
+            img = rr.Image(pixels, color_model="BGR" if msg.encoding == "bgr8" else "RGB")
+        self.rec.log(ENTITIES["image"], img)
+        self._shown_images.append(stamp)
+        for entity, archetype in self._pending.pop(stamp, []):
+            self.rec.log(entity, archetype)
+
+    def _tob(self, topic, msg: pb.TobMeasurement, t_ns) -> None:
+        stamp = msg.header.stamp_ns
+        self._time(stamp, t_ns)
+        centers = np.array([[c.u, c.v] for c in msg.centers_px], dtype=float).reshape(-1, 2)
+        full = msg.status == pb.TOB_STATUS_FULL
+        strips, labels, colors = [], [], []
+        for i, p in enumerate(msg.pairs):
+            if p.right < len(centers) and p.left < len(centers):
+                strips.append([centers[p.right], centers[p.left]])
+                labels.append(_LABELS[i] if full and i < 3 else str(i + 1))
+                colors.append(PAIR_RGB[i % 3])
+        items = [
+            (ENTITIES["centers"], rr.Points2D(centers, radii=3.0, colors=MEASURED_RGB)),
+            (ENTITIES["pairs"], rr.LineStrips2D(strips, colors=colors, labels=labels, radii=0.8)),
+        ]
+        expected = np.zeros((0, 2))
+        flange = self._flange_at(stamp)
+        if self._state is not None and flange is not None:
+            world_T_tob = self._state_at(stamp)
+            if world_T_tob is not None:
+                uv_r, uv_l = self._project(self._camera_T_tob_mm(flange, world_T_tob))
+                expected = np.vstack([uv_r, uv_l])
+        items.append((ENTITIES["expected"], rr.Points2D(expected, radii=4.0, colors=FILTERED_RGB)))
+        self._overlay(stamp, items)
+        # 3D: the measured frame and points, in the camera frame at the capture.
+        if full:
+            self.rec.log(
+                ENTITIES["measured"], _transform(msg.camera_T_tob), rr.TransformAxes3D(0.03)
+            )
+        else:  # no pose measured: no frame drawn
+            self.rec.log(ENTITIES["measured"], rr.Clear(recursive=False))
+        pts = np.array([[v.x, v.y, v.z] for v in msg.points_camera_m], dtype=float).reshape(-1, 3)
+        self.rec.log(
+            ENTITIES["points"],
+            rr.Points3D(
+                pts,
+                radii=0.003,
+                colors=MEASURED_RGB,
+                labels=list(_LABELS[: len(pts)]) if full else None,
+            ),
+        )
+        self.rec.log(ENTITIES["visible"], rr.Scalars(float(msg.visible)))
+        self.rec.log(ENTITIES["quality"], rr.Scalars(float(msg.quality)))
+
+    def _state_at(self, stamp_ns: int) -> np.ndarray | None:
+        """The filter's latest state moved to ``stamp_ns`` with its velocities (m)."""
+        st = self._state
+        if st.status not in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
+            return None
+        T = from_pose(st.world_T_tob)
+        dt = (stamp_ns - st.header.stamp_ns) * 1e-9
+        v = np.array([st.linear_velocity_m_s.x, st.linear_velocity_m_s.y, st.linear_velocity_m_s.z])
+        w = np.array(
+            [st.angular_velocity_rad_s.x, st.angular_velocity_rad_s.y, st.angular_velocity_rad_s.z]
+        )
+        T[:3, 3] += v * dt
+        T[:3, :3] = Rotation.from_rotvec(w * dt).as_matrix() @ T[:3, :3]
+        return T
+
+    def _tob_state(self, topic, msg: pb.TobState, t_ns) -> None:
+        self._state = msg
+        self._state_by_cycle[msg.cycle] = msg.measurement_stamp_ns
+        if len(self._state_by_cycle) > 128:
+            self._state_by_cycle.pop(next(iter(self._state_by_cycle)))
+        self._time(msg.header.stamp_ns, t_ns)
+        if msg.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
+            self.rec.log(ENTITIES["tob"], _transform(msg.world_T_tob))
+
+    def _robot_state(self, topic, msg: pb.RobotState, t_ns) -> None:
+        stamp = msg.header.stamp_ns
+        T = from_pose(msg.world_T_flange)
+        if self._robot_stamps and stamp < self._robot_stamps[-1]:
+            self._robot.clear()  # out of order (a restarted robot): start the buffer again
+            self._robot_stamps.clear()
+        self._robot.append((stamp, T))
+        self._robot_stamps.append(stamp)
+        self._time(stamp, t_ns)
+        self.rec.log(ENTITIES["flange"], _transform(msg.world_T_flange))
+        self.rec.log(ENTITIES["misses"], rr.Scalars(float(msg.missed_cycles)))
+
+    def _command(self, topic, msg: pb.FlangeCommand, t_ns) -> None:
+        stamp = msg.header.stamp_ns
+        self._time(stamp, t_ns)
+        per_s = 1e3 / self.config.cycle_period_ms
+        d_t = np.array([msg.d_translation_m.x, msg.d_translation_m.y, msg.d_translation_m.z])
+        d_r = np.array([msg.d_rotation_rad.x, msg.d_rotation_rad.y, msg.d_rotation_rad.z])
+        self.rec.log(ENTITIES["cmd_v"], rr.Scalars(d_t * 1e3 * per_s))
+        self.rec.log(ENTITIES["cmd_w"], rr.Scalars(np.degrees(d_r) * per_s))
+        if t_ns is not None:
+            self.rec.log(ENTITIES["lat_state"], rr.Scalars((int(t_ns) - stamp) * 1e-6))
+            captured = self._state_by_cycle.get(msg.cycle, 0)
+            if captured:
+                self.rec.log(ENTITIES["lat_capture"], rr.Scalars((int(t_ns) - captured) * 1e-6))
+
+    def _status(self, topic, msg: pb.ControllerStatus, t_ns) -> None:
+        self._time(msg.header.stamp_ns, t_ns)
+        self.rec.log(ENTITIES["error_t"], rr.Scalars(msg.error_translation_m * 1e3))
+        self.rec.log(ENTITIES["error_r"], rr.Scalars(float(np.degrees(msg.error_rotation_rad))))
+        if msg.HasField("world_T_desired"):
+            self.rec.log(ENTITIES["desired_flange"], _transform(msg.world_T_desired))
+        mode = pb.ControlMode.Name(msg.mode).removeprefix("CONTROL_MODE_")
+        text = (
+            f"## {mode}\n\n| | |\n|---|---|\n| visible sources | {msg.visible} |\n"
+            f"| recording | {'yes' if msg.recording else 'no'} |\n| path points | {msg.path_points} |\n"
+            f"| calibration samples | {msg.calibration_samples} |\n"
+            f"| saturated | {'yes' if msg.saturated else 'no'} |\n"
+        )
+        if text != self._status_text:  # a document per change, not per cycle
+            self._status_text = text
+            self.rec.log(
+                ENTITIES["status"], rr.TextDocument(text, media_type=rr.MediaType.MARKDOWN)
+            )
+
+    def _path(self, topic, msg: pb.PathPoint, t_ns) -> None:
+        if self._path_n == 0 or msg.index <= self._last_index:
+            self._path_n += 1
+            self._path_g, self._path_tip = [], []
+        self._last_index = msg.index
+        self._time(msg.header.stamp_ns, t_ns)
+        self._path_g.append(_translation(msg.world_T_tob))
+        self._log_strip("g", self._path_g, PATH_RGB)
+        if msg.has_tip:
+            self._path_tip.append(_translation(msg.world_T_tip))
+            self._log_strip("tip", self._path_tip, TIP_RGB)
+
+    def _log_strip(self, which: str, points: list, rgb) -> None:
+        n = self.config.path_strip_points
+        k = (len(points) - 1) // (n - 1)
+        # Strip k holds points k(n-1) .. k(n-1) + n - 1: consecutive strips share an end.
+        seg = points[k * (n - 1) :]
+        self.rec.log(
+            f"{ENTITIES['path']}/{self._path_n}/{which}/{k}",
+            rr.LineStrips3D([seg], colors=rgb, radii=0.0008),
+            rr.Points3D(seg, colors=rgb, radii=0.0015),
+        )
+
+    def _truth(self, topic, msg: pb.Truth, t_ns) -> None:
+        stamp = msg.header.stamp_ns
+        self._time(stamp, t_ns)
+        if topic == "operator/truth":
+            self.rec.log(ENTITIES["truth_tob"], _transform(msg.world_T_tob))
+            if msg.has_tip:
+                self.rec.log(
+                    ENTITIES["truth_tip"],
+                    rr.Points3D([_translation(msg.world_T_tip)], colors=TRUTH_RGB, radii=0.002),
+                )
+        elif topic == "sim_robot/truth":
+            self.rec.log(ENTITIES["truth_flange"], _transform(msg.world_T_flange))
+        elif (
+            topic == "sim_camera/truth"
+            and msg.HasField("world_T_flange")
+            and msg.HasField("world_T_tob")
+        ):
+            # At each image's capture: the true servo error and the sources' true pixels.
+            world_T_flange, world_T_tob = from_pose(msg.world_T_flange), from_pose(msg.world_T_tob)
+            desired = world_T_flange @ self.flange_T_camera @ _metres(camera_T_desired(self.dz_mm))
+            e_t = np.linalg.norm(world_T_tob[:3, 3] - desired[:3, 3]) * 1e3
+            e_r = np.degrees(
+                Rotation.from_matrix(world_T_tob[:3, :3] @ desired[:3, :3].T).magnitude()
+            )
+            self.rec.log(ENTITIES["true_error_t"], rr.Scalars(e_t))
+            self.rec.log(ENTITIES["true_error_r"], rr.Scalars(e_r))
+            uv_r, uv_l = self._project(self._camera_T_tob_mm(world_T_flange, world_T_tob))
+            self._overlay(
+                stamp,
+                [
+                    (
+                        ENTITIES["image_truth"],
+                        rr.Points2D(np.vstack([uv_r, uv_l]), radii=1.5, colors=TRUTH_RGB),
+                    )
+                ],
+            )
+
+    def _event(self, topic, msg: pb.Event, t_ns) -> None:
+        self._time(msg.header.stamp_ns or (t_ns or 0), t_ns)
+        source = msg.source or topic.split("/", 1)[0]
+        self.rec.log(
+            f"events/{source}",
+            rr.TextLog(
+                f"{source}: {msg.code}: {msg.text}", level=_LEVELS.get(msg.severity, "INFO")
+            ),
+        )
+        if source == "controller" and msg.code == "param_changed":
+            m = _DZ_CHANGED.search(msg.text)
+            if m:  # D moved: the 3D point and the desired pixels follow
+                self.dz_mm = float(m.group(1))
+                self._log_desired()
+
+    def _console(self, topic, msg: pb.Command, t_ns) -> None:
+        self._time(msg.header.stamp_ns or (t_ns or 0), t_ns)
+        args = f" {msg.args_json}" if msg.args_json and msg.args_json != "{}" else ""
+        if len(args) > 200:
+            args = (
+                f" ({len(json.loads(msg.args_json).get('points', []))} points...)"
+                if "points" in args
+                else " (...)"
+            )
+        self.rec.log(
+            "events/console",
+            rr.TextLog(f"console -> {msg.component or 'all'}: {msg.verb}{args}", level="INFO"),
+        )
+
+
+def _metres(T_mm: np.ndarray) -> np.ndarray:
+    T = np.array(T_mm, dtype=float)
+    T[:3, 3] *= 1e-3
+    return T
+
+
+_HANDLERS = {
+    "camera/image": RerunLogger._image,
+    "perception/tob": RerunLogger._tob,
+    "pose_filter/tob_state": RerunLogger._tob_state,
+    "alter_gateway/robot_state": RerunLogger._robot_state,
+    "controller/command": RerunLogger._command,
+    "controller/status": RerunLogger._status,
+    "controller/path": RerunLogger._path,
+    "operator/truth": RerunLogger._truth,
+    "sim_robot/truth": RerunLogger._truth,
+    "sim_camera/truth": RerunLogger._truth,
+    "console/command": RerunLogger._console,
+}

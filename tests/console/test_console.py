@@ -1,0 +1,230 @@
+"""The operator console against a real router and live components: GUI options change
+the components' live parameters (and the change is in their recordings), commands reach
+the controller, the status shows what is published."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from humanpt.cli.console import ConsoleError, StatusBoard, gui_values, parse_options
+from humanpt.runtime.recording import read
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header, pose
+from tests.conftest import run_cli, zenoh_client
+
+pytestmark = pytest.mark.timeout(150)
+
+
+def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    with zenoh_client(port) as s:
+        while time.monotonic() < deadline:
+            up = {
+                str(r.ok.key_expr).rsplit("/", 1)[-1]
+                for r in s.liveliness().get("humanpt/test/*", timeout=1.0)
+                if r.ok is not None
+            }
+            if set(names) <= up:
+                return
+            time.sleep(0.3)
+    raise TimeoutError(f"{names} did not all come up")
+
+
+def _params(rec, key: str) -> list:
+    return [
+        json.loads(e.decode().value_json)
+        for e in rec.inputs
+        if e.topic == "param" and e.decode().key == key
+    ]
+
+
+def test_options_map_to_the_owning_components_live_parameters():
+    got = parse_options(
+        [
+            "threshold=70",
+            "Inversion=yes",
+            "delay=5",
+            "dz=650",
+            "stop-on-current-location=false",
+            "N=30",
+            "perception.track_roi=false",
+            "calib_samples=40",
+        ]
+    )
+    assert got == {
+        "perception": {"threshold": 70.0, "invert": True, "track_roi": False},
+        "controller": {
+            "recording_delay_cycles": 5,
+            "dz_mm": 650.0,
+            "lost_action": "return",
+            "calibration_samples": 40,
+        },
+    }
+    assert parse_options(["stop=true"]) == {"controller": {"lost_action": "hold"}}
+    for bad in ("threshold", "warp=9", "invert=maybe", "delay=ten"):
+        with pytest.raises(ConsoleError):
+            parse_options([bad])
+    assert gui_values({"controller": {"lost_action": "hold", "dz_mm": 600.0}}) == {
+        "dz": 600.0,
+        "stop-on-current-location": True,
+    }
+
+
+def test_status_board_line_and_block():
+    b = StatusBoard()
+    assert b.line() == "(no status yet)"
+    st = pb.ControllerStatus(
+        mode=pb.CONTROL_MODE_POSITION_ONLY,
+        visible=2,
+        error_translation_m=0.0012,
+        error_rotation_rad=0.01,
+        recording=True,
+        path_points=7,
+    )
+    b.update("controller/status", st.SerializeToString())
+    b.update(
+        "alter_gateway/robot_state", pb.RobotState(cycle=42, missed_cycles=1).SerializeToString()
+    )
+    line = b.line()
+    assert (
+        "mode POSITION_ONLY" in line
+        and "error 1.20 mm 0.57 deg" in line
+        and "misses 1 (cycle 42)" in line
+    )
+    assert "recording yes, 7 points" in line
+    assert "controller  mode POSITION_ONLY" in b.block(["controller"])
+
+
+def test_console_sets_options_and_commands_live_components(router, procs, tmp_path):
+    port, cfg = router
+    run_dir = tmp_path / "run"
+    ctl = procs.start("controller", "--config", str(cfg), "--run-dir", str(run_dir))
+    per = procs.start("perception", "--config", str(cfg), "--run-dir", str(run_dir))
+    _wait_alive(port, ("controller", "perception"))
+
+    r = run_cli(
+        "console",
+        "set",
+        "threshold=70",
+        "invert=true",
+        "delay=5",
+        "dz=650",
+        "stop-on-current-location=false",
+        "calib-samples=30",
+        "--config",
+        str(cfg),
+        "--timeout",
+        "20",
+    )
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert r.stdout.count("set: ") == 6 and "threshold = 70.0" in r.stdout
+    r = run_cli("console", "--config", str(cfg), "set", "threshold=300")  # the component refuses it
+    assert r.returncode == 1 and "REJECTED" in r.stdout
+    r = run_cli("console", "show", "--config", str(cfg))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert (
+        "threshold" in r.stdout
+        and "70.0" in r.stdout
+        and "stop-on-current-location   false" in r.stdout
+    )
+
+    r = run_cli("console", "record", "start", "--config", str(cfg), "--timeout", "20")
+    assert r.returncode == 0 and "record_started" in r.stdout, r.stdout + r.stderr
+    r = run_cli(
+        "console", "playback", "--config", str(cfg), "--timeout", "20"
+    )  # nothing recorded yet
+    assert r.returncode == 1 and "REJECTED" in r.stdout, r.stdout + r.stderr
+    # Interactive: verbs from stdin, one session.
+    r = run_cli(
+        "console", "--config", str(cfg), "--timeout", "20", input="record stop\nhold\nquit\n"
+    )
+    assert (
+        r.returncode == 0
+        and "record_stopped" in r.stdout
+        and "hold (stop on current location)" in r.stdout
+    ), r.stdout + r.stderr
+
+    procs.stop(ctl)
+    procs.stop(per)
+    prec, crec = read(run_dir / "perception.mcap"), read(run_dir / "controller.mcap")
+    assert _params(prec, "threshold") == [70.0, 300.0] and _params(prec, "invert") == [True]
+    assert prec.config()["threshold"] == 60.0  # the recorded start config; the change is an input
+    assert _params(crec, "dz_mm") == [650.0] and _params(crec, "recording_delay_cycles") == [5]
+    assert _params(crec, "lost_action") == ["return"] and _params(crec, "calibration_samples") == [
+        30
+    ]
+    verbs = [e.decode().verb for e in crec.inputs if e.topic == "console/command"]
+    assert verbs == ["record_start", "playback", "record_stop", "hold"]
+    codes = [e.decode().code for e in crec.outputs if e.topic == "controller/events"]
+    assert "record_started" in codes and "record_stopped" in codes
+    assert sum(c == "param_changed" for c in codes) == 4
+
+
+def test_console_status_shows_what_is_published(router, tmp_path):
+    port, cfg = router
+    stop = threading.Event()
+
+    def publish():
+        with zenoh_client(port) as s:
+            st = s.declare_publisher("humanpt/test/controller/status")
+            rs = s.declare_publisher("humanpt/test/alter_gateway/robot_state")
+            i = 0
+            while not stop.is_set():
+                st.put(
+                    pb.ControllerStatus(
+                        header=header(i),
+                        mode=pb.CONTROL_MODE_TRACK,
+                        visible=3,
+                        error_translation_m=0.0004,
+                        recording=True,
+                        path_points=i,
+                        cycle=i,
+                    ).SerializeToString()
+                )
+                rs.put(
+                    pb.RobotState(
+                        header=header(i), world_T_flange=pose(np.eye(4)), cycle=i, missed_cycles=0
+                    ).SerializeToString()
+                )
+                i += 1
+                time.sleep(0.03)
+
+    th = threading.Thread(target=publish, daemon=True)
+    th.start()
+    try:
+        r = run_cli("console", "status", "--config", str(cfg), "--timeout", "20")
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert "controller  mode TRACK, visible sources 3, error |G-D| 0.400 mm" in r.stdout
+        assert "robot       cycle" in r.stdout
+        r = run_cli(
+            "console",
+            "status",
+            "--follow",
+            "--duration",
+            "1.5",
+            "--interval",
+            "0.3",
+            "--config",
+            str(cfg),
+        )
+        assert r.returncode == 0 and "mode TRACK" in r.stdout and "misses 0" in r.stdout, (
+            r.stdout + r.stderr
+        )
+    finally:
+        stop.set()
+        th.join(5)
+
+
+def test_console_says_when_nobody_answers(router):
+    port, cfg = router
+    r = run_cli("console", "record", "start", "--config", str(cfg), "--timeout", "1")
+    assert r.returncode == 1 and "is the controller running?" in r.stderr
+    r = run_cli("console", "set", "dz=500", "--config", str(cfg), "--timeout", "1")
+    assert r.returncode == 1 and "controller did not answer" in r.stdout
+    r = run_cli("console", "status", "--config", str(cfg), "--timeout", "1")
+    assert r.returncode == 1 and "no status within 1 s" in r.stdout
