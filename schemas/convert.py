@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from scipy.spatial.transform import Rotation
 
 from humanpt.schemas import humanpt_pb2 as pb
 

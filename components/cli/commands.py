@@ -481,3 +481,10 @@ def path_cmd(args) -> int:
     Path(args.output).write_text(pathfile.to_val2(p.points(which), args.name, args.speed))
     print(f"humanpt path val: {len(p)} points -> {args.output}")
     return 0
+
+
+def _free_port_default() -> int:
+    """A free TCP port on loopback (for a self-contained demo router)."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -13,6 +13,8 @@ from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
 
 EPILOG = """\
 examples:
+  humanpt demo                                    the whole system on the digital twin (live)
+  humanpt demo --lockstep --scenario trapezium    the same in one process on virtual time
   humanpt up --profile selftest --duration 5     router + two components, recorded under runs/
   humanpt router --listen tcp/0.0.0.0:7447        the Zenoh router of an installation
   humanpt topics                                  what is being published now
@@ -42,6 +44,25 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"humanpt {__version__}")
     ap.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
     sub = ap.add_subparsers(dest="verb", metavar="VERB")
+
+    p = sub.add_parser("demo", help="the whole system on the digital twin, with its accuracy against ground truth",
+                       description="Run the whole system on the digital twin: an operator moves the target along "
+                       "a scenario, the simulated PSVS camera sees it, perception, the pose filter and the visual "
+                       "servo track it, the simulated Puma (behind a pty, through the ALTER gateway) follows, and the "
+                       "path is recorded. Live by default (every component a process over Zenoh); --lockstep runs "
+                       "the same cores in one process on virtual time. Prints where the recordings and the path "
+                       "file are, and an accuracy table against ground truth.")
+    p.add_argument("--scenario", "-s", default="arc",
+                   help="static, arc, trapezium, freehand, or a scenario file (default arc)")
+    p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
+    p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
+    p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
+    p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
+    p.add_argument("--robot", choices=["puma", "standin"], default="puma",
+                   help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
+    p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
+    p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
@@ -206,6 +227,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
 
     if getattr(args, "component", None) and args.verb == args.component:
         return commands.run_component(args)
+    if args.verb == "demo":
+        from humanpt.cli.demo import demo
+
+        return demo(args)
     fn = {
         "router": commands.router, "up": commands.up, "topics": commands.topics_cmd, "echo": commands.echo,
         "param": commands.param, "replay": commands.replay, "config": commands.config,

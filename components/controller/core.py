@@ -163,7 +163,11 @@ class ControllerCore(Core):
             self.cycles_since_point += 1
             if self.cycles_since_point >= c.recording_delay_cycles:
                 self.cycles_since_point = 0
-                outs.append(self._path_point(st.header.stamp_ns, world_T_tob))
+                # The filter's estimate at its last measurement: no prediction in the path.
+                if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns:
+                    outs.append(self._path_point(st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)))
+                else:
+                    outs.append(self._path_point(st.header.stamp_ns, from_pose(st.world_T_tob)))
         status = pb.ControllerStatus(
             header=self.next_header(T_STATUS, stamp, "world"), mode=mode,
             visible=3 if st.status == pb.TOB_STATUS_FULL else (1 if st.status == pb.TOB_STATUS_POSITION_ONLY else 0),

@@ -23,7 +23,7 @@ class PoseFilterConfig:
     sigma_position_only_mm: float = live(1.5, "1-sigma noise of a position from one or two sources")
     # Process noise: white acceleration (how hard the operator's hand can change speed).
     accel_sigma_mm_s2: float = live(100.0, "white-acceleration noise of the target (hand)")
-    ang_accel_sigma_deg_s2: float = live(60.0)
+    ang_accel_sigma_deg_s2: float = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
     # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.
     gate_chi2_pose: float = live(22.46)
     gate_chi2_position: float = live(16.27)

@@ -93,6 +93,9 @@ class PoseFilterCore(Core):
             out.covariance.extend(values)
             out.covariance_dim = dim
             out.measurement_stamp_ns = self.last_measurement_ns or 0
+            if self.last_measurement_ns is not None:
+                T_meas, _, _ = self.kf.predicted(self.last_measurement_ns)
+                out.world_T_tob_at_measurement.CopyFrom(pose(T_meas))
         return TOPIC_STATE, out
 
     def _on_measurement(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:

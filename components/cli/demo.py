@@ -1,0 +1,254 @@
+"""``humanpt demo``: the whole system on the digital twin, and its accuracy against ground truth.
+
+Live (default): the router, sim_robot behind a pty, alter_gateway, operator, sim_camera,
+perception, pose_filter and controller (and viz with ``--viewer``) as separate processes
+over Zenoh.  ``--lockstep``: the same cores in one process on virtual time.  Either way
+every component records its MCAP in the run directory, the path is written as CSV, and an
+accuracy table against ground truth is printed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.controller.config import ControllerConfig
+from humanpt.geometry.transforms import (
+    invert_transform,
+    make_transform,
+    transform_from_x,
+    x_from_transform,
+)
+from humanpt.runtime.config import to_table
+
+LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} to TOML")
+
+
+def write_toml(path: Path, sections: dict[str, dict]) -> None:
+    lines = ["# written by humanpt demo: the configuration of this run", ""]
+    for name, table in sections.items():
+        lines.append(f"[{name}]")
+        for k, v in table.items():
+            if v is None or (isinstance(v, (list, tuple)) and v and isinstance(v[0], dict)):
+                continue
+            if isinstance(v, dict):
+                continue
+            lines.append(f"{k} = {_toml_value(v)}")
+        lines.append("")
+    path.write_text("\n".join(lines))
+
+
+def scenario_duration_s(op) -> float:
+    from humanpt.operator.scenario import Trajectory
+
+    return Trajectory(op.build_scenario()).duration_s
+
+
+def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
+    return transform_from_x(np.asarray(ctl.flange_T_camera_x)) @ make_transform(np.eye(3), np.array([0, 0, ctl.dz_mm]))
+
+
+def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str) -> str:
+    """The accuracy table against ground truth, and where things are."""
+    from humanpt.twin import evaluate
+
+    start = evaluate.scenario_start_ns(src)
+    which, err, stamps = evaluate.path_truth_errors(src, after_ns=start)
+    t, e_mm, e_deg = evaluate.tracking_errors(src, flange_T_desired_mm(ctl))
+    moving = t >= start if start else np.ones_like(t, dtype=bool)
+    lines = [f"humanpt demo ({mode}): {sim_s:.1f} s of twin time in {wall_s:.1f} s of wall time "
+             f"({sim_s / max(wall_s, 1e-9):.1f}x real time)", ""]
+    lines.append(evaluate.format_stats(f"recorded path of {which} against ground truth", evaluate.Stats.of(err)))
+    if moving.any():
+        lines += ["", f"servo error |G - D| while the target moved: mean {e_mm[moving].mean():.3f} mm, "
+                  f"max {e_mm[moving].max():.3f} mm; angle mean {e_deg[moving].mean():.3f} deg, "
+                  f"max {e_deg[moving].max():.3f} deg"]
+    events = [__import__("humanpt.schemas.humanpt_pb2", fromlist=["Event"]).Event.FromString(o.data)
+              for o in src.outputs() if o.topic.endswith("/events")]
+    warn = [e for e in events if e.severity >= 3]
+    if warn:
+        lines += ["", f"{len(warn)} warnings/errors, e.g.: " + "; ".join(f"{e.source}: {e.code}" for e in warn[:5])]
+    paths = sorted((run_dir / "paths").glob("*.csv"))
+    lines += ["", f"recordings: {run_dir}/*.mcap  (humanpt replay {run_dir}; humanpt view {run_dir})"]
+    if paths:
+        lines.append(f"path file:  {paths[-1]}")
+    return "\n".join(lines)
+
+
+def run_lockstep(args, op, ctl, run_dir: Path) -> int:
+    from humanpt.controller import pathfile
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas.convert import header
+    from humanpt.twin.evaluate import path_points
+    from humanpt.twin.system import build_system
+
+    duration = args.duration or (op.start_delay_s + scenario_duration_s(op) + 1.5)
+    world = build_system(op, seed=args.seed, controller=ctl, robot=args.robot, run_dir=run_dir)
+    t0 = time.perf_counter()
+    # Record once the target starts to move (the servo has acquired it by then).
+    world.run_until(int(op.start_delay_s * 1e9))
+    world.lockstep.inject(world.now_ns, "controller", "console/command",
+                          pb.Command(header=header(world.now_ns), component="controller", verb="record_start"))
+    step_ns = int(max(1.0, duration / 20) * 1e9)
+    end_ns = round(duration * 1e9)
+    while world.now_ns < end_ns:
+        world.run_until(min(end_ns, world.now_ns + step_ns))
+        print(f"\r  {world.now_ns / 1e9:5.1f} / {duration:.1f} s", end="", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    wall = time.perf_counter() - t0
+    world.close()
+    stamps, xg, xt = path_points(world)
+    (run_dir / "paths").mkdir(exist_ok=True)
+    pathfile.write(run_dir / "paths" / "path-1.csv", pathfile.Path6(np.arange(len(stamps)), stamps, xg, xt))
+    print(report(world, ctl, run_dir, wall, duration, "lock-step"))
+    return 0
+
+
+def _wait_alive(cfg_path: Path, names: tuple[str, ...], timeout_s: float, procs) -> bool:
+    from humanpt.cli.commands import _open_session
+    from humanpt.runtime import config as cfgmod
+    from humanpt.runtime.bus import liveliness_key
+
+    cfg = cfgmod.load(cfg_path)
+    deadline = time.monotonic() + timeout_s
+    with _open_session(cfg) as s:
+        while time.monotonic() < deadline:
+            if any(p.poll() is not None for _, p in procs):
+                return False
+            alive = {str(r.ok.key_expr).rsplit("/", 1)[-1]
+                     for r in s.liveliness().get(liveliness_key(cfg.runtime.cell, "*")) if r.ok is not None}
+            if set(names) <= alive:
+                return True
+            time.sleep(0.3)
+    return False
+
+
+def run_live(args, op, ctl, run_dir: Path) -> int:
+    from humanpt.cli.commands import _free_port_default, _open_session
+    from humanpt.runtime import config as cfgmod
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas.convert import header
+    from humanpt.sim_camera import SimCameraConfig
+    from humanpt.twin.evaluate import RunOutputs
+    from humanpt.twin.system import puma_cores
+    from humanpt.twin.world import start_flange_for
+
+    port = args.port or _free_port_default()
+    cam = SimCameraConfig()
+    start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
+    robot, gateway = puma_cores(start)
+    pty = str(run_dir / "alter.pty")
+    start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
+    robot = dataclasses.replace(robot, pty_link=pty,
+                                start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
+    gateway = dataclasses.replace(gateway, port=pty)
+    # The operator waits until everything is up, then holds the start pose while the servo settles.
+    op = dataclasses.replace(op, start_delay_s=2.0)
+    cfg_path = run_dir / "humanpt.toml"
+    sections = {
+        "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
+                    "run_dir": str(run_dir), "connect_timeout_s": 30.0},
+        "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
+        "sim_camera": to_table(cam), "controller": to_table(ctl),
+    }
+    sections["sim_camera"].pop("psvs", None)
+    write_toml(cfg_path, sections)
+    cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
+    comps = list(LIVE_COMPONENTS) + (["viz"] if args.viewer else [])
+    base = [sys.executable, "-m", "humanpt.cli.main"]
+    procs: list[tuple[str, subprocess.Popen]] = []
+    log = open(run_dir / "processes.log", "w")  # noqa: SIM115 - closed below
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *a: stop.set())
+    duration = args.duration or (op.start_delay_s + scenario_duration_s(op) + 1.5)
+    failed = []
+    t0 = time.perf_counter()
+    try:
+        procs.append(("router", subprocess.Popen(base + ["router", "--config", str(cfg_path)], stdout=log,
+                                                 stderr=subprocess.STDOUT)))
+        time.sleep(0.5)
+        for name in comps:
+            procs.append((name, subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
+                                                 stdout=log, stderr=subprocess.STDOUT)))
+        print(f"humanpt demo: starting {', '.join(comps)} (log: {run_dir / 'processes.log'})", flush=True)
+        if not _wait_alive(cfg_path, tuple(comps), 60.0, procs):
+            failed.append("the components did not all come up within 60 s")
+            return 1
+        procs.append(("operator", subprocess.Popen(base + ["operator", "--config", str(cfg_path), "--run-dir",
+                                                           str(run_dir)], stdout=log, stderr=subprocess.STDOUT)))
+        t_start = time.monotonic()
+        cfg = cfgmod.load(cfg_path)
+        with _open_session(cfg) as s:
+            pub = s.declare_publisher("humanpt/demo/console/command")
+            recording = False
+            while not stop.wait(0.2):
+                el = time.monotonic() - t_start
+                print(f"\r  {el:5.1f} / {duration + 1.0:.1f} s", end="", file=sys.stderr, flush=True)
+                if not recording and el >= 1.0 + op.start_delay_s:
+                    pub.put(pb.Command(header=header(time.time_ns()), component="controller",
+                                       verb="record_start").SerializeToString())
+                    recording = True
+                if el >= duration + 1.0:
+                    break
+                dead = [(n, p.returncode) for n, p in procs if p.poll() is not None]
+                if dead:
+                    failed += [f"{n} exited with {rc}" for n, rc in dead]
+                    break
+            pub.undeclare()
+        print(file=sys.stderr)
+    finally:
+        for _, p in reversed(procs):
+            if p.poll() is None:
+                p.send_signal(signal.SIGTERM)
+        for _, p in reversed(procs):
+            try:
+                p.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        log.close()
+    wall = time.perf_counter() - t0
+    if failed:
+        print(f"humanpt demo: stopped early: {'; '.join(failed)} (see {run_dir / 'processes.log'})", file=sys.stderr)
+        return 1
+    print(report(RunOutputs(run_dir), ctl, run_dir, wall, duration, "live"))
+    return 0
+
+
+def demo(args) -> int:
+    from humanpt.cli.commands import run_stamp
+    from humanpt.twin.system import operator_config
+
+    op = operator_config(args.scenario, args.seed)
+    ctl = ControllerConfig(law=args.law)
+    driver = op.build_scenario().driver_mm
+    if driver is not None:
+        ctl = dataclasses.replace(ctl, has_driver=True, tob_t_tip_mm=tuple(float(v) for v in driver))
+    label = Path(args.scenario).stem if Path(args.scenario).suffix else args.scenario
+    run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{label}"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    print(f"humanpt demo: scenario {label}, {'lock-step' if args.lockstep else 'live'}, recording to {run_dir}/",
+          flush=True)
+    if args.lockstep:
+        return run_lockstep(args, op, ctl, run_dir)
+    return run_live(args, op, ctl, run_dir)
