@@ -590,7 +590,12 @@ def _do(con: Console, a) -> int:
 
 def _interactive(con: Console, stream=sys.stdin) -> int:
     ap = argparse.ArgumentParser(prog="", add_help=False, exit_on_error=False)
-    _add_actions(ap.add_subparsers(dest="console_verb", metavar="ACTION"))
+    asub = ap.add_subparsers(dest="console_verb", metavar="ACTION")
+    _add_actions(asub)
+    helps = {a.dest: a.help for a in asub._choices_actions}
+    verbs = "verbs ('VERB --help' for its options; 'quit' ends):\n" + "\n".join(
+        f"  {v:10s} {h}" for v, h in helps.items()
+    )
     tty = stream.isatty()
     if tty:
         con.say(
@@ -610,13 +615,13 @@ def _interactive(con: Console, stream=sys.stdin) -> int:
         if words[0] in ("quit", "exit"):
             return rc
         if words[0] in ("help", "?"):
-            con.say(ap.format_help().replace("usage: ", "verbs: ", 1))
+            con.say(verbs)
             continue
         try:
             a = ap.parse_args(words)
             rc = _do(con, a) or rc
-        except SystemExit:  # argparse printed why (help of a verb, or a bad argument)
-            rc = 1
+        except SystemExit as e:  # argparse printed a verb's help, or why an argument is bad
+            rc = rc if e.code == 0 else 1
         except (argparse.ArgumentError, ConsoleError, ValueError, OSError) as e:
             con.say(f"error: {e}")
             rc = 1

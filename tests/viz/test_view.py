@@ -263,3 +263,10 @@ def test_a_viewer_that_cannot_open_does_not_take_viz_down(caplog):
         assert a.logger is None and "is in use" in caplog.text
         a.write("show:controller.status", pb.ControllerStatus())  # nothing to draw on: ignored
         a.close()
+
+
+def test_view_without_a_display_says_to_save_or_serve(twin_run, monkeypatch, capsys):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    assert main(["view", str(twin_run[0])]) == 2
+    assert "use --save FILE.rrd, or --serve" in capsys.readouterr().err
