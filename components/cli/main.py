@@ -64,6 +64,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
 
+    p = sub.add_parser("experiment", help="the paper's Section 6 experiments on the twin, with its Tables 1-3",
+                       description="Reproduce the paper's experiments on the digital twin in lock-step: static "
+                       "(Table 1, Figure 7), arc (the rotating base, Table 2, Figure 8), trapezium (the needle "
+                       "along a trapezium's edges, Table 3, Figure 9). Prints ME, MAE, MaxE, SD of x, y, z, psi, "
+                       "theta, phi computed as the paper did and against ground truth, for the paper's perception "
+                       "method and the default one, beside the published tables; saves a figure as PNG.")
+    p.add_argument("name", choices=["static", "arc", "trapezium"])
+    p.add_argument("--method", choices=["both", "paper", "weighted"], default="both",
+                   help="perception method(s) (default both, side by side)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--robot", choices=["puma", "standin"], default="puma")
+    p.add_argument("--out", help="output directory (default runs/<time>-experiment-<name>)")
+    p.add_argument("--record", action="store_true", help="also record every component's MCAP")
+    p.add_argument("--no-plots", action="store_true")
+
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
                        "Components connect to it as clients.")
@@ -227,6 +242,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
 
     if getattr(args, "component", None) and args.verb == args.component:
         return commands.run_component(args)
+    if args.verb == "experiment":
+        from humanpt.cli.experiment import experiment
+
+        return experiment(args)
     if args.verb == "demo":
         from humanpt.cli.demo import demo
 

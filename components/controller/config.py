@@ -27,6 +27,12 @@ class ControllerConfig:
     # state's stamp plus this lead (the time until the command takes effect beyond one
     # cycle); the feed-forward then moves the flange with the target over the cycle.
     lead_ms: float = live(0.0, "extra look-ahead of the target pose for the thetau law")
+    # Below these errors (and a still target) the flange is left alone: chasing the
+    # measurement noise would only shake the camera (and the robot's quantised pose).
+    deadband_mm: float = live(0.1, "no correction while |G - D| is below this and the target is still")
+    deadband_deg: float = live(0.3, "no rotation while the angle error is below this and the target does not turn")
+    still_mm_s: float = live(1.0, "the target counts as still below this speed")
+    still_deg_s: float = live(0.5, "the target counts as not turning below this rate")
     max_speed_mm_s: float = live(100.0, "translation speed limit (the paper's step controller)")
     max_rotation_deg_s: float = live(60.0, "rotation speed limit")
     cycle_period_ms: float = 28.0

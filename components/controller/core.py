@@ -186,7 +186,9 @@ class ControllerCore(Core):
         return law.thetau_step(world_T_flange, world_T_tob, self.flange_T_desired, v_tob_m_s=v_tob,
                                w_tob_rad_s=w_tob, k_t=c.gain_translation_1_s, k_r=c.gain_rotation_1_s,
                                dt_s=self.dt, max_step_m=self.max_step_m, max_step_rad=self.max_step_rad,
-                               feed_forward=c.feed_forward, position_only=position_only)
+                               feed_forward=c.feed_forward, position_only=position_only,
+                               deadband_m=c.deadband_mm * 1e-3, deadband_rad=np.radians(c.deadband_deg),
+                               still_m_s=c.still_mm_s * 1e-3, still_rad_s=np.radians(c.still_deg_s))
 
     def _goto(self, world_T_flange, world_T_target, v_ff=None):
         """A saturated step towards a flange pose (no vision)."""

@@ -79,7 +79,8 @@ def pose_error(world_T_flange: np.ndarray, world_T_target: np.ndarray) -> tuple[
 def thetau_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_desired: np.ndarray, *,
                 v_tob_m_s: np.ndarray, w_tob_rad_s: np.ndarray, k_t: float, k_r: float, dt_s: float,
                 max_step_m: float, max_step_rad: float, feed_forward: bool = True,
-                position_only: bool = False) -> Step:
+                position_only: bool = False, deadband_m: float = 0.0, deadband_rad: float = 0.0,
+                still_m_s: float = 0.0, still_rad_s: float = 0.0) -> Step:
     """Default law; with ``position_only`` only the translation of D towards G is servoed."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     e_t, e_r = pose_error(world_T_flange, world_T_fd)
@@ -95,10 +96,17 @@ def thetau_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_de
         v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
         w = np.zeros(3)
         e_r = np.zeros(3)
-    d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
     # Report the error as the paper sees it: where D is with respect to G.
     world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
-    return Step(d_t, d_r, sat, float(np.linalg.norm(world_T_tob[:3, 3] - world_p_d)), float(np.linalg.norm(e_r)))
+    e_gd = float(np.linalg.norm(world_T_tob[:3, 3] - world_p_d))
+    # Deadbands: each part is left alone while its error is small and the target still.
+    if np.linalg.norm(e_r) < deadband_rad and np.linalg.norm(w_tob_rad_s) < still_rad_s:
+        w = np.zeros(3)
+        v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
+    if e_gd < deadband_m and np.linalg.norm(v_tob_m_s) < still_m_s and not np.any(w):
+        v = np.zeros(3)
+    d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
+    return Step(d_t, d_r, sat, e_gd, float(np.linalg.norm(e_r)))
 
 
 def paper_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_desired: np.ndarray, *,

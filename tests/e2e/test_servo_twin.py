@@ -134,12 +134,12 @@ line 236 1249 0 0 0 180
 def test_driver_calibration_recovers_the_twins_tip():
     op = OperatorConfig(scenario_text=PIVOT, start_delay_s=1.0)
     w = build_system(op, seed=7, controller=ControllerConfig(has_driver=False, tob_t_tip_mm=(0.0, 0.0, 60.0),
-                                                             calibration_samples=60))
+                                                             calibration_samples=80))
     w.run_for(2.0)
     cmd = pb.Command(header=header(w.now_ns), component="controller", verb="calibrate",
                      args_json=json.dumps({"pivot_mm": [236.0, 1249.0, 0.0]}))
     w.lockstep.inject(w.now_ns, "controller", "console/command", cmd)
-    w.run_for(30.0)  # the operator pivots slowly (10 deg/s) through +-20 deg
+    w.run_for(40.0)  # the operator pivots slowly (10 deg/s) through +-20 deg
     done = _events(w, "calibration_done")
     assert done, [e.code for e in _events(w)]
     res = json.loads(done[0].text)
