@@ -44,6 +44,48 @@ def _toml_value(v) -> str:
     raise TypeError(f"cannot write {v!r} to TOML")
 
 
+def parse_overrides(items: list[str] | None) -> dict[str, dict]:
+    """``--set SECTION.KEY=VALUE`` items -> {section: {key: value}}; VALUE is a TOML value
+    (a bare word that is not TOML is taken as a string); ``SECTION.SUB.KEY`` nests a table
+    (e.g. ``sim_camera.psvs.image_width_px=320``)."""
+    import tomllib
+
+    out: dict[str, dict] = {}
+    for item in items or []:
+        key, sep, raw = item.partition("=")
+        parts = key.strip().split(".")
+        if not sep or len(parts) < 2 or not all(parts):
+            raise SystemExit(f"humanpt demo: --set {item!r}: expected SECTION.KEY=VALUE, e.g. sim_camera.fps=15")
+        try:
+            value = tomllib.loads(f"v = {raw}")["v"]
+        except tomllib.TOMLDecodeError:
+            value = raw
+        table = out.setdefault(parts[0], {})
+        for p in parts[1:-1]:
+            table = table.setdefault(p, {})
+        table[parts[-1]] = value
+    return out
+
+
+def _merged(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merged(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
+    return out
+
+
+def with_overrides(obj, overrides: dict[str, dict], section: str):
+    """``obj`` (a config dataclass) with ``overrides[section]`` applied, validated."""
+    from humanpt.runtime.config import ConfigError, build
+
+    if not overrides.get(section):
+        return obj
+    try:
+        return build(type(obj), _merged(to_table(obj), overrides[section]), source="--set", section=section)
+    except ConfigError as e:
+        raise SystemExit(f"humanpt demo: {e}") from None
+
+
 def write_toml(path: Path, sections: dict[str, dict]) -> None:
     lines = ["# written by humanpt demo: the configuration of this run", ""]
     for name, table in sections.items():
@@ -55,6 +97,11 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
                 continue
             lines.append(f"{k} = {_toml_value(v)}")
         lines.append("")
+        for k, v in table.items():
+            if isinstance(v, dict):  # a nested config table, e.g. [sim_camera.psvs]
+                lines.append(f"[{name}.{k}]")
+                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
+                lines.append("")
     path.write_text("\n".join(lines))
 
 
@@ -103,7 +150,15 @@ def run_lockstep(args, op, ctl, run_dir: Path) -> int:
     from humanpt.twin.system import build_system
 
     duration = args.duration or (op.start_delay_s + scenario_duration_s(op) + 1.5)
-    world = build_system(op, seed=args.seed, controller=ctl, robot=args.robot, run_dir=run_dir)
+    from humanpt.perception.config import PerceptionConfig
+    from humanpt.pose_filter.config import PoseFilterConfig
+    from humanpt.sim_camera import SimCameraConfig
+
+    over = parse_overrides(getattr(args, "set", None))
+    world = build_system(op, seed=args.seed, controller=ctl, robot=args.robot, run_dir=run_dir,
+                         sim_camera=with_overrides(SimCameraConfig(), over, "sim_camera"),
+                         perception=with_overrides(PerceptionConfig(), over, "perception"),
+                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"))
     t0 = time.perf_counter()
     # Record once the target starts to move (the servo has acquired it by then).
     world.run_until(int(op.start_delay_s * 1e9))
@@ -154,7 +209,8 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     from humanpt.twin.world import start_flange_for
 
     port = args.port or _free_port_default()
-    cam = SimCameraConfig()
+    over = parse_overrides(getattr(args, "set", None))
+    cam = with_overrides(SimCameraConfig(seed=args.seed), over, "sim_camera")
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
     robot, gateway = puma_cores(start)
     pty = str(run_dir / "alter.pty")
@@ -171,7 +227,16 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
         "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
     }
-    sections["sim_camera"].pop("psvs", None)
+    if "psvs" not in over.get("sim_camera", {}):
+        sections["sim_camera"].pop("psvs", None)
+    # Other components' overrides (validated): only the keys given, so the defaults stay theirs.
+    from humanpt.perception.config import PerceptionConfig
+    from humanpt.pose_filter.config import PoseFilterConfig
+
+    for name, cls in (("perception", PerceptionConfig), ("pose_filter", PoseFilterConfig)):
+        if over.get(name):
+            with_overrides(cls(), over, name)
+            sections[name] = over[name]
     write_toml(cfg_path, sections)
     cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
     comps = list(LIVE_COMPONENTS) + (["viz"] if args.viewer else [])
@@ -239,8 +304,20 @@ def demo(args) -> int:
     from humanpt.cli.commands import run_stamp
     from humanpt.twin.system import operator_config
 
-    op = operator_config(args.scenario, args.seed)
-    ctl = ControllerConfig(law=args.law)
+    over = parse_overrides(getattr(args, "set", None))
+    unknown = set(over) - {"operator", "sim_camera", "perception", "pose_filter", "controller"}
+    if unknown:
+        raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} (operator, sim_camera, "
+                         "perception, pose_filter, controller)")
+    op = with_overrides(operator_config(args.scenario, args.seed), over, "operator")
+    ctl = with_overrides(ControllerConfig(law=args.law), over, "controller")
+    from humanpt.perception.config import PerceptionConfig
+    from humanpt.pose_filter.config import PoseFilterConfig
+    from humanpt.sim_camera import SimCameraConfig
+
+    for name, cls in (("sim_camera", SimCameraConfig), ("perception", PerceptionConfig),
+                      ("pose_filter", PoseFilterConfig)):
+        with_overrides(cls(), over, name)  # a bad key or value fails here, before the run starts
     driver = op.build_scenario().driver_mm
     if driver is not None:
         ctl = dataclasses.replace(ctl, has_driver=True, tob_t_tip_mm=tuple(float(v) for v in driver))

@@ -63,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
+    p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                   help="override a config key of operator, sim_camera, perception, pose_filter or controller "
+                   "(VALUE in TOML; repeatable), e.g. --set sim_camera.fps=15 --set sim_camera.psvs.a_u=500")
 
     p = sub.add_parser("experiment", help="the paper's Section 6 experiments on the twin, with its Tables 1-3",
                        description="Reproduce the paper's experiments on the digital twin in lock-step: static "
