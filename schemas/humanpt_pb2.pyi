@@ -176,20 +176,22 @@ class RobotState(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_flange: _Optional[_Union[Pose, _Mapping]] = ..., joints_rad: _Optional[_Iterable[float]] = ..., status: _Optional[_Union[AlterStatus, _Mapping]] = ..., cycle: _Optional[int] = ..., missed_cycles: _Optional[int] = ...) -> None: ...
 
 class FlangeCommand(_message.Message):
-    __slots__ = ("header", "cycle", "d_translation_m", "d_rotation_rad", "mode", "request_alter_off")
+    __slots__ = ("header", "cycle", "d_translation_m", "d_rotation_rad", "mode", "request_alter_off", "measurement_stamp_ns")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     CYCLE_FIELD_NUMBER: _ClassVar[int]
     D_TRANSLATION_M_FIELD_NUMBER: _ClassVar[int]
     D_ROTATION_RAD_FIELD_NUMBER: _ClassVar[int]
     MODE_FIELD_NUMBER: _ClassVar[int]
     REQUEST_ALTER_OFF_FIELD_NUMBER: _ClassVar[int]
+    MEASUREMENT_STAMP_NS_FIELD_NUMBER: _ClassVar[int]
     header: Header
     cycle: int
     d_translation_m: Vector3
     d_rotation_rad: Vector3
     mode: ControlMode
     request_alter_off: bool
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., cycle: _Optional[int] = ..., d_translation_m: _Optional[_Union[Vector3, _Mapping]] = ..., d_rotation_rad: _Optional[_Union[Vector3, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., request_alter_off: _Optional[bool] = ...) -> None: ...
+    measurement_stamp_ns: int
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., cycle: _Optional[int] = ..., d_translation_m: _Optional[_Union[Vector3, _Mapping]] = ..., d_rotation_rad: _Optional[_Union[Vector3, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., request_alter_off: _Optional[bool] = ..., measurement_stamp_ns: _Optional[int] = ...) -> None: ...
 
 class TobState(_message.Message):
     __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements", "world_T_tob_at_measurement")

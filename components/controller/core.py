@@ -74,6 +74,7 @@ class ControllerCore(Core):
         self.cal_pivot_mm: np.ndarray | None = None
         self.playback: dict | None = None
         self.saturated_cycles = 0
+        self._last_cycle: int | None = None
         self._derive(config)
 
     def _derive(self, c: ControllerConfig) -> None:
@@ -157,9 +158,14 @@ class ControllerCore(Core):
         self.saturated_cycles += int(step.saturated)
         cmd = pb.FlangeCommand(header=self.next_header(T_CMD, stamp, "world"), cycle=cycle,
                                d_translation_m=vector3(step.d_translation_m),
-                               d_rotation_rad=vector3(step.d_rotation_rad), mode=mode)
+                               d_rotation_rad=vector3(step.d_rotation_rad), mode=mode,
+                               measurement_stamp_ns=st.measurement_stamp_ns)
         outs.append((T_CMD, cmd))
-        if self.recording and valid and st.status == pb.TOB_STATUS_FULL:
+        # The filter may send several states per cycle (a new image re-commands it): count
+        # cycles, not states, for the recording delay.
+        new_cycle = cycle != self._last_cycle
+        self._last_cycle = cycle
+        if self.recording and valid and st.status == pb.TOB_STATUS_FULL and new_cycle:
             self.cycles_since_point += 1
             if self.cycles_since_point >= c.recording_delay_cycles:
                 self.cycles_since_point = 0

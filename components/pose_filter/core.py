@@ -9,8 +9,9 @@ whose Mahalanobis distance is beyond the gate is rejected and reported, and afte
 (the target really moved).  Position-only measurements (one or two sources) update the
 position of G, placed from the visible sources and the predicted orientation.
 
-On every robot state (one per ALTER cycle) the state predicted to
-``stamp + predict_ahead_ms`` is published as ``pose_filter/tob_state`` for that cycle.
+On every robot state (one per ALTER cycle), and again after every accepted measurement,
+the state predicted to ``stamp + predict_ahead_ms`` of the latest robot state is published
+as ``pose_filter/tob_state`` for that cycle (the controller re-commands the cycle with it).
 """
 
 from __future__ import annotations
@@ -44,7 +45,8 @@ class PoseFilterCore(Core):
         self.accepted = 0
         self.last_measurement_ns: int | None = None
         self.last_status = pb.TOB_STATUS_LOST
-        self._pending_reset: list[tuple[int, np.ndarray]] = []
+        self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
+        self._fresh = False
 
     def _build(self, c: PoseFilterConfig) -> None:
         T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
@@ -65,7 +67,14 @@ class PoseFilterCore(Core):
         if topic == "alter_gateway/robot_state":
             return self._on_robot_state(t_ns, msg)
         if topic == "perception/tob":
-            return self._on_measurement(t_ns, msg)
+            self._fresh = False
+            outs = self._on_measurement(t_ns, msg)
+            if self._fresh and self._cycle is not None:
+                # A new measurement: the state for the current cycle again, at once, so the
+                # controller's command for the coming cycle uses it (image-to-command latency
+                # is processing time, not up to a cycle of waiting).
+                outs.append(self._state(t_ns, *self._cycle))
+            return outs
         return []
 
     def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
@@ -74,6 +83,7 @@ class PoseFilterCore(Core):
         except MessageError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
         self.robot.add(msg.header.stamp_ns, world_T_flange)
+        self._cycle = (msg.header.stamp_ns, msg.cycle)
         return [self._state(t_ns, msg.header.stamp_ns, msg.cycle)]
 
     def _state(self, t_ns: int, robot_stamp_ns: int, cycle: int) -> Output:
@@ -168,3 +178,4 @@ class PoseFilterCore(Core):
         self.accepted += 1
         self.last_measurement_ns = stamp
         self.last_status = status
+        self._fresh = True

@@ -122,11 +122,12 @@ class PoseKalman:
 
     def predicted(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(world_T_tob (4, 4) m, velocity (6,) [v m/s, w rad/s], covariance (12, 12)) at ``t_ns``,
-        without changing the filter."""
-        dt = max(0.0, (int(t_ns) - self.t_ns) * 1e-9)
+        without changing the filter; ``t_ns`` may be before the filter's time (a state for
+        an earlier cycle stamp), then the motion is run backwards."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
         F = transition(dt)
         x = F @ self.kf.x
-        P = F @ self.kf.P @ F.T + process_noise(dt, self.accel_sigma, self.ang_accel_sigma)
+        P = F @ self.kf.P @ F.T + process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
         T = np.eye(4)
         T[:3, :3] = Rotation.from_rotvec(x[3:6]).as_matrix() @ self.R_ref
         T[:3, 3] = x[0:3]

@@ -167,6 +167,9 @@ class RuntimeConfig:
     flush_interval_s: float = 1.0
     multicast_scouting: bool = False
     connect_timeout_s: float = 10.0
+    # Record on a writer thread of its own: off the core's path (lower latency), but a
+    # crash may then also lose the few messages still queued for it.
+    record_thread: bool = False
 
     def __post_init__(self):
         if not self.cell or "/" in self.cell or "*" in self.cell:

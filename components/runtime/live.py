@@ -235,7 +235,8 @@ class LiveShell:
                 {"component": name, "core": class_path(type(self.core)), "config": to_table(self.core.config),
                  "version": humanpt.__version__, "start_time_ns": time.time_ns(), "shell": "live",
                  "cell": self.cell, "host": socket.gethostname(), "pid": os.getpid()},
-                chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s)
+                chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s,
+                background=self.rt.record_thread)
         try:
             with zenoh.open(self.zconf) as session:
                 self._session = session

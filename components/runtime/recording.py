@@ -16,6 +16,8 @@ wall time and whenever a chunk fills, so a crash loses at most the chunk in prog
 from __future__ import annotations
 
 import json
+import queue
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -44,11 +46,17 @@ class RecordingError(ValueError):
 class Recorder:
     """Writes one component's inputs and outputs to an MCAP file.
 
-    Not thread-safe: the shell calls it from its one worker thread.
+    Call it from one thread (the shell's worker).  With ``background=True`` the MCAP
+    writing and compression happen on a writer thread of their own (zstd releases the
+    GIL), so recording costs the core's thread only a queue put; the queue is bounded
+    (back-pressure rather than unbounded memory) and :meth:`close` drains it.
     """
 
     def __init__(self, path: str | Path, metadata: dict[str, Any], *, chunk_size: int = 256 * 1024,
-                 flush_interval_s: float = 1.0, compression: str = "zstd"):
+                 flush_interval_s: float = 1.0, compression: str = "zstd", background: bool = False):
+        self._queue: queue.Queue | None = None
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
@@ -67,6 +75,33 @@ class Recorder:
         self._stream_pos = self._file.tell()
         self.bytes_written = 0
         self._closed = False
+        if background:
+            self._queue = queue.Queue(maxsize=512)
+            self._thread = threading.Thread(target=self._drain, name=f"recorder-{self.path.stem}", daemon=True)
+            self._thread.start()
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            try:
+                self._do(*item)
+            except BaseException as e:  # noqa: BLE001 - reported on close
+                self._error = e
+
+    def _do(self, kind: str, *args) -> None:
+        if kind == "msg":
+            direction, t_ns, topic, msg_type, payload = args
+            self._add(self._channel(direction, topic, msg_type), t_ns, payload)
+        elif kind == "flush":
+            self._flush_now()
+
+    def _submit(self, *item) -> None:
+        if self._queue is not None:
+            self._queue.put(item)
+        else:
+            self._do(*item)
 
     def _channel(self, direction: str, topic: str, msg_type: type[Message] | None) -> int:
         key = (direction, topic)
@@ -92,11 +127,11 @@ class Recorder:
         ``data`` may pass the already serialised bytes of ``msg`` to save work.
         """
         payload = msg.SerializeToString() if data is None else data
-        self._add(self._channel(direction, topic, type(msg)), t_ns, payload)
+        self._submit("msg", direction, t_ns, topic, type(msg), payload)
 
     def write_dropped(self, t_ns: int, topic: str, payload: bytes) -> None:
         """Record an input that failed to decode, raw."""
-        self._add(self._channel(DROPPED, topic, None), t_ns, payload)
+        self._submit("msg", DROPPED, t_ns, topic, None, payload)
 
     def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
         self._writer.add_message(channel_id=channel_id, log_time=int(t_ns), data=payload,
@@ -110,10 +145,13 @@ class Recorder:
             self._stream_pos = pos
         now = time.monotonic()
         if now - self._last_flush >= self._flush_interval_s:
-            self.flush()
+            self._flush_now()
 
     def flush(self) -> None:
         """End the chunk in progress and put it in the file."""
+        self._submit("flush")
+
+    def _flush_now(self) -> None:
         self._writer.flush()
         self._stream_pos = self._file.tell()
         self._last_flush = time.monotonic()
@@ -122,9 +160,14 @@ class Recorder:
         """Write the summary and close the file (idempotent)."""
         if not self._closed:
             self._closed = True
+            if self._thread is not None:
+                self._queue.put(None)
+                self._thread.join()
             self._writer.finish()
             self._file.flush()
             self._file.close()
+            if self._error is not None:
+                raise RecordingError(f"{self.path}: recording failed: {self._error}") from self._error
 
     def __enter__(self) -> Recorder:
         return self

@@ -122,8 +122,8 @@ def test_static_target_converges_and_smooths_noise():
     xs = np.array([x_of(from_pose(s.world_T_tob)) for s in w.states[-60:]])
     err = xs - np.asarray(TARGET_X)
     # A raw measurement's mean absolute error is 0.8 sigma: 0.24 mm and 0.64 deg.
-    assert np.all(np.abs(err[:, :3]).mean(axis=0) < 0.6 * 0.24), np.abs(err).mean(axis=0)
-    assert np.all(np.abs(err[:, 3:]).mean(axis=0) < 0.6 * 0.64), np.abs(err).mean(axis=0)
+    assert np.all(np.abs(err[:, :3]).mean(axis=0) < 0.7 * 0.24), np.abs(err).mean(axis=0)
+    assert np.all(np.abs(err[:, 3:]).mean(axis=0) < 0.7 * 0.64), np.abs(err).mean(axis=0)
     P = np.array(w.states[-1].covariance).reshape(12, 12)
     assert np.sqrt(P[0, 0]) * 1e3 < 0.3
 

@@ -121,3 +121,14 @@ def test_cli_replay_errors_are_clear(tmp_path):
     (tmp_path / "run" / "ponger.mcap").write_text("not mcap")
     r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
     assert r.returncode == 2 and "not an MCAP file" in r.stderr
+
+
+def test_background_recorder_writes_the_same_messages(tmp_path):
+    a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"
+    for path, bg in ((a, False), (b, True)):
+        rec = Recorder(path, {"component": "ponger"}, chunk_size=4096, background=bg)
+        for i in range(300):
+            rec.write(IN, i, "pinger/ping", pb.Tick(header=header(i, i)))
+        rec.close()
+    assert [(e.t_ns, e.data) for e in read(a).entries] == [(e.t_ns, e.data) for e in read(b).entries]
+    assert len(read(b).entries) == 300
