@@ -61,7 +61,8 @@ def against_known_path(x: np.ndarray, ideal: np.ndarray) -> np.ndarray:
     return err
 
 
-def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None):
+def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None, vectors: int = STATIC_VECTORS,
+            speed_scale: float = 1.0):
     """One experiment with one perception method: (path X (N, 6), errors as the paper did,
     errors against ground truth, which point, wall seconds, twin seconds)."""
     from humanpt.cli.demo import scenario_duration_s
@@ -76,9 +77,10 @@ def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None)
     if name == "static":
         # Record 106 vectors once the servo has settled on the still target.
         op = dataclasses.replace(op, start_delay_s=3.0)
-        record_from_s, duration = 3.0, 3.0 + STATIC_VECTORS * 10 * ctl.cycle_period_ms * 1e-3 + 0.2
+        record_from_s, duration = 3.0, 3.0 + vectors * 10 * ctl.cycle_period_ms * 1e-3 + 0.2
     else:
-        record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op)
+        op = dataclasses.replace(op, speed_scale=speed_scale)
+        record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
     world = build_system(op, seed=seed, perception=PerceptionConfig(method=method), controller=ctl, robot=robot,
                          run_dir=run_dir)
     t0 = time.perf_counter()
@@ -92,8 +94,8 @@ def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None)
     _, xg, xt = evaluate.path_points(world)
     x = xt if xt is not None else xg
     if name == "static":
-        x = x[:STATIC_VECTORS]
-        err_truth = err_truth[:STATIC_VECTORS]
+        x = x[:vectors]
+        err_truth = err_truth[:vectors]
         err_paper = x - x.mean(0)
         err_paper[:, 3:] = evaluate.wrap_deg(err_paper[:, 3:])
     else:
@@ -147,7 +149,8 @@ def experiment(args) -> int:
     results = {}
     for m in methods:
         run_dir = out / f"run-{m}" if args.record else None
-        x, ep, et, which, wall, dur = run_one(args.name, m, args.seed, args.robot, run_dir)
+        x, ep, et, which, wall, dur = run_one(args.name, m, args.seed, args.robot, run_dir, args.vectors,
+                                              args.speed_scale)
         results[m] = {"x": x, "paper": evaluate.Stats.of(ep), "truth": evaluate.Stats.of(et), "which": which,
                       "wall_s": wall, "twin_s": dur}
         print(f"  {m} perception: {len(x)} vectors of {which}, {dur:.1f} s of twin time in {wall:.1f} s", flush=True)

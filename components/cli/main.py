@@ -81,6 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="output directory (default runs/<time>-experiment-<name>)")
     p.add_argument("--record", action="store_true", help="also record every component's MCAP")
     p.add_argument("--no-plots", action="store_true")
+    p.add_argument("--vectors", type=int, default=106, help="static: vectors recorded (default 106, the paper's)")
+    p.add_argument("--speed-scale", type=float, default=1.0,
+                   help="arc/trapezium: pace of the operator (default 1; the paper's speeds)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
@@ -187,7 +190,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--config", "-c", metavar="FILE")
     p.add_argument("--check", action="store_true")
 
-    p = sub.add_parser("bench", help="benchmarks that print a table (not asserted)")
+    p = sub.add_parser("bench", help="benchmarks that print a table (not asserted)",
+                       description="Without WHAT: one table of perception images/s, lock-step speed, "
+                       "image-to-command latency and ALTER cycles on time in a live demo run, replay speed "
+                       "and MCAP write throughput. With WHAT: that component's detailed bench.")
+    p.add_argument("--live-seconds", type=float, default=30.0, help="length of the live demo run (default 30)")
+    p.add_argument("--lockstep-seconds", type=float, default=10.0, help="lock-step twin time (default 10)")
+    p.add_argument("--scenario", default="arc", help="scenario of the live run (default arc)")
     bsub = p.add_subparsers(dest="bench_verb", metavar="WHAT")
     q = bsub.add_parser("runtime", help="round-trip latency through the router; MCAP write throughput",
                         description="Round-trip latency p50/p99 through a loopback router for a 200-byte "
@@ -290,6 +299,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "perception":
             from humanpt.cli.bench import bench_perception
             return bench_perception(args)
+        if args.bench_verb is None:
+            from humanpt.cli.bench_all import bench_all
+
+            return bench_all(args)
         ap.parse_args(["bench", "--help"])
     ap.print_help()
     return 2

@@ -1,0 +1,138 @@
+"""``humanpt bench`` (no sub-verb): one table of the figures that matter, measured now.
+
+* perception: images/s of the default method's core step on 640x480 twin images, one core;
+* lock-step: the closed loop on virtual time, in x real time (with and without recording);
+* a live run of the whole system (``humanpt demo``, every component a process over Zenoh):
+  image-to-command latency (capture stamp to the controller's first command using it),
+  ALTER cycles answered on time (a command of that cycle within the gateway's deadline);
+* replay of that run's recordings, in x real time;
+* MCAP write throughput with the default compression.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _perception_rate(n: int = 300) -> float:
+    import cv2
+
+    from humanpt.perception import PerceptionConfig, PerceptionCore
+    from humanpt.perception.evaluate import random_cases
+    from humanpt.schemas.convert import image
+    from humanpt.sim_camera import Renderer
+
+    cv2.setNumThreads(1)
+    cases = random_cases(16, seed=1)
+    renderer = Renderer(cases[0].sim)
+    msgs = [image(renderer.render(c.camera_T_tob, frame_index=c.frame_index), (k + 1) * 33_000_000)
+            for k, c in enumerate(cases)]
+    core = PerceptionCore(PerceptionConfig())
+    for k in range(20):
+        core.step(k, "camera/image", msgs[(k // 4) % len(msgs)])
+    t0 = time.perf_counter()
+    for k in range(n):
+        core.step(k, "camera/image", msgs[(k // 4) % len(msgs)])
+    return n / (time.perf_counter() - t0)
+
+
+def _lockstep_speed(seconds: float, record: bool) -> float:
+    from humanpt.twin.system import build_system
+
+    with tempfile.TemporaryDirectory() as d:
+        world = build_system("arc", seed=0, robot="puma", run_dir=d if record else None, keep_outputs=False)
+        t0 = time.perf_counter()
+        world.run_for(seconds)
+        world.close()
+        return seconds / (time.perf_counter() - t0)
+
+
+def latency_and_cycles(run_dir: Path, deadline_ms: float = 6.0) -> dict:
+    """From a live run's recordings: image-to-command latencies (ms) and ALTER cycles on time."""
+    from humanpt.runtime.recording import iter_entries
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    lat = []
+    seen = set()
+    for e in iter_entries(run_dir / "controller.mcap"):
+        if e.direction == "out" and e.topic == "controller/command":
+            cmd = pb.FlangeCommand.FromString(e.data)
+            m = cmd.measurement_stamp_ns
+            if m and m not in seen:  # the first command that uses this image
+                seen.add(m)
+                lat.append((e.t_ns - m) / 1e6)
+    commands: dict[int, int] = {}
+    states: list[tuple[int, int, int]] = []
+    for e in iter_entries(run_dir / "alter_gateway.mcap"):
+        if e.direction == "in" and e.topic == "controller/command":
+            c = pb.FlangeCommand.FromString(e.data).cycle
+            commands.setdefault(c, e.t_ns)
+        elif e.direction == "out" and e.topic == "alter_gateway/robot_state":
+            st = pb.RobotState.FromString(e.data)
+            states.append((st.cycle, e.t_ns, st.missed_cycles))
+    # Judge the cycles after the servo started commanding (the first command).
+    first = min(commands) if commands else None
+    judged = [(c, t) for c, t, _ in states if first is not None and c >= first]
+    on_time = sum(1 for c, t in judged if c in commands and commands[c] - t <= deadline_ms * 1e6)
+    return {"latency_ms": np.array(lat), "cycles": len(judged), "on_time": on_time}
+
+
+def bench_all(args) -> int:
+    rows: list[tuple[str, str, str]] = []
+
+    def show(name, value, note=""):
+        rows.append((name, value, note))
+        print(f"  {name}: {value} {note}", file=sys.stderr, flush=True)
+
+    print("humanpt bench: measuring (a shared 2-core machine is noisy: compare ratios, not digits)",
+          file=sys.stderr, flush=True)
+    show("perception, default method (core step, 640x480, one core)", f"{_perception_rate():.0f} images/s",
+         "target >= 500")
+    show("lock-step closed loop, no recording", f"{_lockstep_speed(args.lockstep_seconds, False):.1f}x real time")
+    show("lock-step closed loop, recorded (humanpt demo --lockstep)",
+         f"{_lockstep_speed(args.lockstep_seconds, True):.1f}x real time", "target >= 10x")
+    with tempfile.TemporaryDirectory() as d:
+        run_dir = Path(d) / "live"
+        t0 = time.perf_counter()
+        r = subprocess.run([sys.executable, "-m", "humanpt.cli.main", "demo", "--scenario", args.scenario,
+                            "--duration", str(args.live_seconds), "--run-dir", str(run_dir)],
+                           capture_output=True, text=True, timeout=args.live_seconds * 4 + 180)
+        if r.returncode != 0:
+            print(r.stdout[-2000:], r.stderr[-2000:], file=sys.stderr)
+            show("live demo", "FAILED", f"exit {r.returncode}")
+        else:
+            res = latency_and_cycles(run_dir)
+            lat = res["latency_ms"]
+            if len(lat):
+                show("image-to-command latency through Zenoh, p50", f"{np.percentile(lat, 50):.2f} ms",
+                     f"(n = {len(lat)})")
+                show("image-to-command latency through Zenoh, p99", f"{np.percentile(lat, 99):.2f} ms",
+                     "target <= 10 ms")
+            show(f"ALTER cycles answered on time ({args.live_seconds:g} s live demo)",
+                 f"{res['on_time']} / {res['cycles']}", "target: all")
+            from humanpt.runtime.replay import replay
+
+            t1 = time.perf_counter()
+            ok = all(replay(f).match for f in sorted(run_dir.glob("*.mcap")))
+            dt = time.perf_counter() - t1
+            show("replay of every component of that run", f"{args.live_seconds / dt:.1f}x real time",
+                 "outputs identical" if ok else "MISMATCH")
+        wall = time.perf_counter() - t0
+    from humanpt.cli.bench import mcap_throughput, synthetic_image
+    from humanpt.schemas.convert import image
+
+    imgs = [image(synthetic_image(seed=s), s) for s in range(8)]
+    mbps, rate, _ = mcap_throughput(lambda n: imgs[n % len(imgs)], 2.0)
+    show("MCAP write, 640x480 images, zstd", f"{mbps:.0f} MB/s", f"({rate:.0f} images/s)")
+    w = max(len(r[0]) for r in rows)
+    print(f"\nhumanpt bench (live run {args.live_seconds:g} s of {args.scenario}, {wall:.0f} s wall)\n")
+    print(f"{'figure':{w}s}  {'value':>20s}  note")
+    for name, value, note in rows:
+        print(f"{name:{w}s}  {value:>20s}  {note}")
+    return 0

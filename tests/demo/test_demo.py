@@ -1,0 +1,67 @@
+"""The main job: humanpt demo (lock-step and live) and humanpt experiment, end to end."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from humanpt.cli.bench_all import latency_and_cycles
+from humanpt.controller import pathfile
+from humanpt.runtime.replay import replay
+from tests.conftest import free_port, run_cli
+
+pytestmark = pytest.mark.timeout(600)
+
+
+def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path):
+    run = tmp_path / "run"
+    r = run_cli("demo", "--lockstep", "--scenario", "arc", "--duration", "6", "--run-dir", str(run), timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "recorded path of G against ground truth" in r.stdout
+    assert {p.stem for p in run.glob("*.mcap")} >= {"operator", "sim_robot", "alter_gateway", "sim_camera",
+                                                      "perception", "pose_filter", "controller"}
+    path = pathfile.read(run / "paths" / "path-1.csv")
+    assert len(path) > 5
+    # The servo kept the target: the path follows the paper's arc (radius 246 mm).
+    radius = np.linalg.norm(path.x_g[:, :2] - [147.5, 1378.5], axis=1)
+    assert np.all(np.abs(radius - 246.0) < 1.0)
+    for comp in ("controller", "alter_gateway", "sim_robot"):
+        assert replay(run / f"{comp}.mcap").match
+
+
+def test_live_demo_runs_every_component_as_a_process(tmp_path):
+    run = tmp_path / "live"
+    r = run_cli("demo", "--scenario", "static", "--duration", "8", "--run-dir", str(run),
+                "--port", str(free_port()), timeout=400)
+    assert r.returncode == 0, r.stdout + r.stderr + (run / "processes.log").read_text()[-3000:]
+    assert "humanpt demo (live)" in r.stdout and "recorded path of G against ground truth" in r.stdout
+    assert (run / "humanpt.toml").is_file() and list((run / "paths").glob("path-*.csv"))
+    res = latency_and_cycles(run)
+    assert res["cycles"] > 100 and len(res["latency_ms"]) > 50
+    assert res["on_time"] > 0.8 * res["cycles"]  # a loaded CI machine: most, not all
+    assert np.all(res["latency_ms"] > 0)
+    r = run_cli("replay", str(run), timeout=300)
+    assert r.returncode == 0, r.stdout[-3000:]
+
+
+def test_experiment_prints_the_papers_table_beside_the_twins(tmp_path):
+    out = tmp_path / "exp"
+    r = run_cli("experiment", "static", "--vectors", "20", "--out", str(out), timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "SD  paper, Table 1 (published)" in r.stdout
+    assert "twin, default perception, vs ground truth" in r.stdout
+    res = json.loads((out / "results.json").read_text())
+    assert res["twin"]["weighted"]["n"] == 20
+    # The default perception is far better than the paper's on the same images.
+    assert np.mean(res["twin"]["weighted"]["truth_SD"][:3]) < np.mean(res["twin"]["paper"]["truth_SD"][:3])
+    assert (out / "figure-static.png").stat().st_size > 10_000
+
+
+def test_demo_rejects_a_bad_scenario_file(tmp_path):
+    bad = tmp_path / "bad.scn"
+    bad.write_text("start 1 2 3 0 0 0\nline 1 2\n")
+    r = run_cli("demo", "--lockstep", "--scenario", str(bad), "--run-dir", str(tmp_path / "r"))
+    assert r.returncode == 2
+    assert "bad.scn:2" in r.stderr
