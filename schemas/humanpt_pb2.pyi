@@ -194,7 +194,7 @@ class FlangeCommand(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., cycle: _Optional[int] = ..., d_translation_m: _Optional[_Union[Vector3, _Mapping]] = ..., d_rotation_rad: _Optional[_Union[Vector3, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., request_alter_off: _Optional[bool] = ..., measurement_stamp_ns: _Optional[int] = ...) -> None: ...
 
 class TobState(_message.Message):
-    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements", "world_T_tob_at_measurement")
+    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements", "world_T_tob_at_measurement", "after_measurement")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
     LINEAR_VELOCITY_M_S_FIELD_NUMBER: _ClassVar[int]
@@ -207,6 +207,7 @@ class TobState(_message.Message):
     CYCLE_FIELD_NUMBER: _ClassVar[int]
     MEASUREMENTS_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_AT_MEASUREMENT_FIELD_NUMBER: _ClassVar[int]
+    AFTER_MEASUREMENT_FIELD_NUMBER: _ClassVar[int]
     header: Header
     world_T_tob: Pose
     linear_velocity_m_s: Vector3
@@ -219,7 +220,8 @@ class TobState(_message.Message):
     cycle: int
     measurements: int
     world_T_tob_at_measurement: Pose
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ..., world_T_tob_at_measurement: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
+    after_measurement: bool
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ..., world_T_tob_at_measurement: _Optional[_Union[Pose, _Mapping]] = ..., after_measurement: _Optional[bool] = ...) -> None: ...
 
 class ControllerStatus(_message.Message):
     __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples", "cycle", "saturated", "world_T_desired")

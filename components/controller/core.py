@@ -75,6 +75,7 @@ class ControllerCore(Core):
         self.playback: dict | None = None
         self.saturated_cycles = 0
         self._last_cycle: int | None = None
+        self._sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # cycle -> the step last sent for it
         self._derive(config)
 
     def _derive(self, c: ControllerConfig) -> None:
@@ -114,6 +115,13 @@ class ControllerCore(Core):
             return []
         cycle, stamp, world_T_flange = self.robot
         c = self.config
+        if st.after_measurement and cycle in self._sent:
+            # A new image between two statuses: command the next cycle now, from where this
+            # cycle's command will have put the flange, so the gateway can answer that
+            # cycle's status at once with the freshest information.
+            d_t, d_r = self._sent[cycle]
+            world_T_flange = law.apply_step(world_T_flange, d_t, d_r)
+            cycle, stamp = cycle + 1, stamp + round(c.cycle_period_ms * 1e6)
         outs: list[Output] = []
         valid = st.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
         world_T_tob = v_tob = w_tob = None
@@ -161,6 +169,8 @@ class ControllerCore(Core):
                                d_rotation_rad=vector3(step.d_rotation_rad), mode=mode,
                                measurement_stamp_ns=st.measurement_stamp_ns)
         outs.append((T_CMD, cmd))
+        self._sent[cycle] = (step.d_translation_m, step.d_rotation_rad)
+        self._sent.pop(cycle - 3, None)
         # The filter may send several states per cycle (a new image re-commands it): count
         # cycles, not states, for the recording delay.
         new_cycle = cycle != self._last_cycle

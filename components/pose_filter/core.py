@@ -73,7 +73,9 @@ class PoseFilterCore(Core):
                 # A new measurement: the state for the current cycle again, at once, so the
                 # controller's command for the coming cycle uses it (image-to-command latency
                 # is processing time, not up to a cycle of waiting).
-                outs.append(self._state(t_ns, *self._cycle))
+                topic, st = self._state(t_ns, *self._cycle)
+                st.after_measurement = True
+                outs.append((topic, st))
             return outs
         return []
 

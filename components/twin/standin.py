@@ -110,7 +110,7 @@ class StandInRobotCore(Core):
         super().__init__(config)
         self.world_T_flange = config.start_world_T_flange  # mm
         self.cycle = 0
-        self.pending: tuple[np.ndarray, np.ndarray] | None = None
+        self.pending: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.missed = 0
         self.clipping = False
 
@@ -130,7 +130,10 @@ class StandInRobotCore(Core):
                         f"ignored a command with non-finite values (cycle {msg.cycle})",
                     )
                 ]
-            self.pending = (d_t_mm, d_r)
+            # Keyed by cycle, as a controller applies a correction: the command computed from
+            # state c moves the flange during the next cycle (published as state c + 1); one
+            # sent early for c + 1 (after a new image) waits its turn.
+            self.pending[int(msg.cycle)] = (d_t_mm, d_r)
             return []
         if topic == "tick":
             return self._cycle(t_ns)
@@ -138,11 +141,13 @@ class StandInRobotCore(Core):
 
     def _cycle(self, t_ns: int) -> list[Output]:
         out: list[Output] = []
-        if self.pending is None:
+        step = self.pending.pop(self.cycle - 1, None)
+        for c in [c for c in self.pending if c < self.cycle - 1]:
+            del self.pending[c]  # too late to apply
+        if step is None:
             self.missed += 1
         else:
-            d_t_mm, d_r = self.pending
-            self.pending = None
+            d_t_mm, d_r = step
             self.missed = 0
             dt_s = self.config.cycle_ms / 1000.0
             max_t = self.config.max_speed_mm_s * dt_s

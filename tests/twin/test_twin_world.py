@@ -111,6 +111,7 @@ class _Commander(Core):
     def __init__(self, d_t_m, d_r_rad):
         super().__init__(None)
         self.d_t_m, self.d_r_rad = d_t_m, d_r_rad
+        self.k = 0  # the robot's cycle: it ticks just before us at equal times
 
     def tick_period_ns(self):
         return 28_000_000
@@ -118,10 +119,11 @@ class _Commander(Core):
     def on_input(self, t_ns, topic, msg):
         cmd = pb.FlangeCommand(
             header=self.next_header("controller/command", t_ns, "world"),
-            cycle=0,
+            cycle=self.k,
             d_translation_m=vector3(self.d_t_m),
             d_rotation_rad=vector3(self.d_r_rad),
         )
+        self.k += 1
         return [("controller/command", cmd)]
 
 
