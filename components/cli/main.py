@@ -153,7 +153,7 @@ def build_parser() -> argparse.ArgumentParser:
     view_cli.add_parser(sub)
     console_cli.add_parser(sub, _add_common)
 
-    p = sub.add_parser("runs", help="work with recorded runs (list, merge)")
+    p = sub.add_parser("runs", help="work with recorded runs (list, merge, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
     q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
                         description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
@@ -162,6 +162,21 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("out")
     q = rsub.add_parser("list", help="list runs and their recordings")
     q.add_argument("dir", nargs="?", default="runs")
+    q = rsub.add_parser("rerecord", help="re-record the reference runs (recordings/) live; show what changed",
+                        description="Record every reference run of recordings/runs.toml live on the digital twin "
+                        "(humanpt demo) into a temporary directory; check that each new recording replays exactly; "
+                        "print, per run and component, what this build does to the old run's inputs (exact) and "
+                        "how the new live run compares with the old (per topic: messages added or removed, the "
+                        "largest difference per field); then replace the reference runs and the table in "
+                        "recordings/README.md, unless --dry-run. Exit 1 (nothing replaced) when a run fails.")
+    q.add_argument("--only", action="append", metavar="NAME", help="only this run (repeatable)")
+    q.add_argument("--dry-run", action="store_true", help="record and compare, but leave recordings/ unchanged")
+    q.add_argument("--dir", help="the reference runs' directory (default: recordings/ of the source tree)")
+    q.add_argument("--out", help="where the new runs are recorded (default: a temporary directory)")
+    q.add_argument("--fields", type=int, default=6, metavar="N",
+                   help="fields shown per changed topic (default 6; -1: all)")
+    q.add_argument("--timeout", type=float, default=180.0, metavar="S",
+                   help="seconds a run may take beyond its twin time (default 180)")
 
     p = sub.add_parser("path", help="recorded paths: smooth (RTS) or export as a VAL II program",
                        description="Work offline on path files written while recording (CSV in mm and degrees: "
@@ -281,6 +296,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             return commands.runs_merge(args)
         if args.runs_verb == "list":
             return commands.runs_list(args)
+        if args.runs_verb == "rerecord":
+            from humanpt.cli.rerecord import rerecord
+
+            return rerecord(args)
         ap.parse_args(["runs", "--help"])
     if args.verb == "path":
         if args.path_verb in ("smooth", "val"):
