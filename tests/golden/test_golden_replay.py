@@ -1,0 +1,203 @@
+"""Golden replay of the reference runs in recordings/.
+
+Every component of every reference run (found on disk, so a new run is picked up by
+itself) is replayed on its recorded inputs and must reproduce its recorded outputs exactly.
+No reference runs at all is a failure, not a pass.  A deliberately perturbed core (made
+here, in the test) is caught with the run, component, topic, message and field deltas
+named; a recording of another schema version is refused, naming the version.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from mcap.records import Channel, Metadata, Schema
+from mcap.records import Message as McapMessage
+from mcap.writer import Writer
+
+from humanpt.cli.rerecord import SPEC_FILE, load_specs
+from humanpt.runtime import golden
+from humanpt.runtime.recording import (
+    RUN_METADATA,
+    RecordingError,
+    iter_records,
+    read,
+    read_metadata,
+)
+from humanpt.schemas import topics
+from tests.conftest import ROOT
+from tests.golden.perturb import fresh_copy, perturbed_factory
+
+RECORDINGS = ROOT / "recordings"
+# What a live demo run records: every component of the closed loop on the twin.
+LIVE_COMPONENTS = {
+    "operator",
+    "sim_robot",
+    "alter_gateway",
+    "sim_camera",
+    "perception",
+    "pose_filter",
+    "controller",
+}
+REQUIRED_RUNS = {"static", "arc", "trapezium"}
+SIZE_BUDGET_BYTES = 8_000_000  # all reference runs together: keep the repository light
+
+
+def _reference_params():
+    try:
+        return [pytest.param(f, id=f.id) for f in golden.reference_files(RECORDINGS)]
+    except golden.GoldenError as e:
+        # Nothing to replay must fail, not pass silently with zero tests.
+        return [pytest.param(e, id="no-reference-runs")]
+
+
+@pytest.mark.parametrize("ref", _reference_params())
+def test_golden_replay(ref):
+    if isinstance(ref, golden.GoldenError):
+        pytest.fail(str(ref), pytrace=False)
+    result = golden.check_component(ref)
+    if not result.ok:
+        pytest.fail(result.message, pytrace=False)
+
+
+def test_reference_runs_are_complete_live_and_small():
+    specs = {s.name: s for s in load_specs(RECORDINGS / SPEC_FILE)}
+    assert REQUIRED_RUNS <= set(specs)
+    readme = (RECORDINGS / "README.md").read_text()
+    total = 0
+    for name, spec in specs.items():
+        run = RECORDINGS / name
+        assert run.is_dir(), (
+            f"{run}: reference run {name!r} of {SPEC_FILE} is not recorded; "
+            f"humanpt runs rerecord --only {name}"
+        )
+        assert {p.stem for p in run.glob("*.mcap")} >= LIVE_COMPONENTS
+        info = json.loads((run / "reference.json").read_text())
+        assert (
+            info["live"]
+            and info["seed"] == spec.seed
+            and info["command"].startswith("humanpt demo ")
+        )
+        assert info["overrides"] == list(spec.overrides), (
+            f"{name}: {SPEC_FILE} changed since it was recorded"
+        )
+        assert (run / "humanpt.toml").is_file()
+        for f in run.glob("*.mcap"):
+            meta, complete = read_metadata(f)
+            assert complete, f"{f}: not closed properly"
+            assert meta["shell"] == "live", f"{f}: recorded by the {meta['shell']} shell, not live"
+        assert f"| `{name}` |" in readme, f"recordings/README.md has no line for {name}"
+        total += sum(p.stat().st_size for p in run.rglob("*") if p.is_file())
+    assert total < SIZE_BUDGET_BYTES, f"reference runs weigh {total / 1e6:.1f} MB"
+
+
+def test_no_reference_runs_is_a_failure(tmp_path):
+    with pytest.raises(golden.GoldenError, match="no reference runs"):
+        golden.reference_files(tmp_path)
+    with pytest.raises(golden.GoldenError, match="no such directory"):
+        golden.reference_files(tmp_path / "missing")
+
+
+def _static(tmp_path: Path, component: str) -> Path:
+    """The static run's recording of ``component``, re-recorded offline with this build
+    (so these tests of the machinery do not depend on the build matching the reference)."""
+    path = RECORDINGS / "static" / f"{component}.mcap"
+    if not path.exists():
+        pytest.fail(
+            f"{path}: the static reference run is missing (humanpt runs rerecord --only static)"
+        )
+    return fresh_copy(path, tmp_path / "static" / f"{component}.mcap")
+
+
+def test_perturbed_core_fails_with_the_divergence_named(tmp_path):
+    path = _static(tmp_path, "pose_filter")
+    result = golden.check_component(
+        path,
+        perturbed_factory(
+            "pose_filter/tob_state", after=10, field="world_T_tob.translation.x", delta=1e-6
+        ),
+    )
+    assert not result.ok
+    msg = result.message
+    assert "reference run 'static', component 'pose_filter'" in msg
+    assert "first differing message: topic pose_filter/tob_state, message #10 on that topic" in msg
+    assert "world_T_tob.translation.x:" in msg and "(by +1e-06)" in msg
+    # The summary of the whole replay: every later state differs by the same nudge.
+    n = sum(1 for e in read(path).outputs if e.topic == "pose_filter/tob_state")
+    assert (
+        f"pose_filter/tob_state: {n} -> {n} messages, 0 added, 0 removed, {n - 10} differ (first at #10)"
+        in msg
+    )
+    assert "world_T_tob.translation.x: max |d| 1e-06" in msg
+    assert "humanpt runs rerecord" in msg
+    # The product's core, unperturbed, passes on the same file.
+    assert golden.check_component(path).ok
+
+
+def test_dropped_message_is_named_as_removed(tmp_path):
+    path = _static(tmp_path, "perception")
+    result = golden.check_component(path, perturbed_factory("perception/tob", after=5, drop=True))
+    assert not result.ok
+    assert "component 'perception'" in result.message
+    assert "topic perception/tob, message #5 on that topic" in result.message
+    assert "0 added, 1 removed" in result.message
+
+
+def test_changed_image_pixel_is_named_with_its_size(tmp_path):
+    path = _static(tmp_path, "sim_camera")
+    result = golden.check_component(path, perturbed_factory("camera/image", after=3, pixel=1000))
+    assert not result.ok
+    assert "topic camera/image, message #3 on that topic" in result.message
+    assert "data: max |d| (bytes as uint8) 1 " in result.message
+
+
+def rewrite_metadata(src: Path, dst: Path, **changes: str) -> None:
+    """Copy an MCAP recording, changing keys of its humanpt.run metadata."""
+    with open(dst, "wb") as out:
+        w = Writer(out)
+        w.start(profile="humanpt", library="test")
+        schemas, channels = {}, {}
+        for r in iter_records(src):
+            if isinstance(r, Schema):
+                schemas[r.id] = w.register_schema(r.name, r.encoding, r.data)
+            elif isinstance(r, Channel):
+                channels[r.id] = w.register_channel(
+                    r.topic, r.message_encoding, schemas.get(r.schema_id, 0), r.metadata
+                )
+            elif isinstance(r, Metadata):
+                w.add_metadata(
+                    r.name, {**r.metadata, **changes} if r.name == RUN_METADATA else r.metadata
+                )
+            elif isinstance(r, McapMessage):
+                w.add_message(
+                    channels[r.channel_id], r.log_time, r.data, r.publish_time, r.sequence
+                )
+        w.finish()
+
+
+@pytest.mark.parametrize(
+    "version", [str(topics.SCHEMA_VERSION - 1), str(topics.SCHEMA_VERSION + 1)]
+)
+def test_recording_of_another_schema_version_is_refused_naming_it(tmp_path, version):
+    src = _static(tmp_path / "fresh", "perception")
+    run = tmp_path / "static"
+    run.mkdir()
+    dst = run / "perception.mcap"
+    rewrite_metadata(src, dst, schema_version=version)
+    assert read_metadata(dst)[0]["schema_version"] == version
+    with pytest.raises(
+        RecordingError,
+        match=f"written with schema version {version}; this humanpt reads "
+        f"schema version {topics.SCHEMA_VERSION}",
+    ):
+        read(dst)
+    result = golden.check_component(dst)
+    assert not result.ok
+    assert "reference run 'static', component 'perception'" in result.message
+    assert f"written with schema version {version}" in result.message
+    assert "humanpt runs rerecord" in result.message
+    # The same copy with the current version replays: only the version made the difference.
+    rewrite_metadata(src, tmp_path / "same.mcap", schema_version=str(topics.SCHEMA_VERSION))
+    assert golden.check_component(tmp_path / "same.mcap").ok
