@@ -46,7 +46,7 @@ RERECORD_HINT = (
 )
 
 
-class GoldenError(RuntimeError):
+class GoldenError(ValueError):
     """The reference runs cannot be used (none found, or a run directory is malformed)."""
 
 

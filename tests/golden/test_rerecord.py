@@ -153,7 +153,7 @@ def _args(root: Path, **kw) -> argparse.Namespace:
         "dir": str(root),
         "only": ["static"],
         "dry_run": False,
-        "out": None,
+        "out": str(root.parent / "new-runs"),  # never a stray temporary directory
         "fields": 6,
         "timeout": 60.0,
     }
