@@ -174,8 +174,8 @@ def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str,
             raise cfgmod.ConfigError(f"unknown profile {args.profile!r}; known: "
                                      f"{', '.join(sorted(set(PROFILES) | set(cfg.profiles)))}")
     else:
-        label, with_router, comps = "all", True, tuple(c for c in COMPONENTS if c not in ("pinger", "ponger")) \
-            or ("pinger", "ponger")
+        prof = PROFILES["loop"]
+        label, with_router, comps = "loop", prof["router"], tuple(prof["components"])
     missing = [c for c in comps if c not in COMPONENTS]
     if missing:
         raise UnknownComponentError(f"profile {label!r} needs {', '.join(missing)}, not available in this "

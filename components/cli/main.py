@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
                        formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(p)
     p.add_argument("--profile", "-p", default=None, help="a profile (see below) or a name under [profiles] "
-                   "in the config; default: every available component plus the router")
+                   "in the config; default: loop")
     p.add_argument("--components", help="comma-separated components instead of a profile")
     p.add_argument("--no-router", action="store_true", help="do not start a router (one runs elsewhere)")
     p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<profile>)")

@@ -42,6 +42,10 @@ PROFILES: dict[str, dict] = {
                "doc": "vision and control, connecting to the server's router"},
     "twin": {"router": True, "components": ("operator", "standin_robot", "sim_camera"),
              "doc": "router + the digital twin: operator, stand-in robot, simulated PSVS camera"},
+    "loop": {"router": True, "components": ("operator", "standin_robot", "sim_camera", "perception", "pose_filter",
+                                            "controller"),
+             "doc": "router + the closed loop on the twin with a stand-in robot (the default of `up`; "
+                    "`humanpt demo` runs the simulated Puma behind the ALTER link)"},
     "selftest": {"router": True, "components": ("pinger", "ponger"),
                  "doc": "router + two self-test components exchanging pings"},
 }
