@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 from humanpt.geometry import TRIANGULATION_METHODS, PsvsParams, TargetModel, psvs_m_l_mm
+from humanpt.geometry.config import PsvsConfig
 from humanpt.runtime.config import live
 
 __all__ = ["PerceptionConfig", "PsvsConfig", "METHODS"]
@@ -34,44 +35,6 @@ def _check(owner: str, name: str, value, *, positive=False, nonneg=False, intege
         raise ValueError(f"{owner}.{name} must be > 0, got {value}")
     if nonneg and not value >= 0:
         raise ValueError(f"{owner}.{name} must be >= 0, got {value}")
-
-
-@dataclass(frozen=True)
-class PsvsConfig:
-    """The PSVS geometry as config keys (``[perception.psvs]``), see
-    :class:`humanpt.geometry.PsvsParams`. Defaults: 640 x 480, a_u = a_v = 1000 px, centre
-    (320, 240), baseline 90 mm, m, l of a 1 mm beam splitter at 45 deg (eq. (5), (6)), no
-    distortion - the same keys and defaults as ``[sim_camera.psvs]``."""
-
-    image_width_px: int = 640
-    image_height_px: int = 480
-    a_u: float = 1000.0
-    a_v: float = 1000.0
-    skew: float = 0.0
-    u0: float = 320.0
-    v0: float = 240.0
-    baseline_mm: float = 90.0
-    m_mm: float = _M_MM
-    l_mm: float = _L_MM
-    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
-
-    def __post_init__(self) -> None:
-        self.params()  # PsvsParams validates every field and names it
-
-    def params(self) -> PsvsParams:
-        """The geometry library's :class:`PsvsParams`."""
-        return PsvsParams(
-            image_size_px=(self.image_width_px, self.image_height_px),
-            a_u=self.a_u,
-            a_v=self.a_v,
-            skew=self.skew,
-            u0=self.u0,
-            v0=self.v0,
-            baseline_mm=self.baseline_mm,
-            m_mm=self.m_mm,
-            l_mm=self.l_mm,
-            dist_coeffs=self.dist_coeffs,
-        )
 
 
 @dataclass(frozen=True)

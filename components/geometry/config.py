@@ -1,0 +1,50 @@
+"""The PSVS geometry as configuration keys (``[sim_camera.psvs]``, ``[perception.psvs]``):
+one dataclass, so the simulated camera and perception always mean the same thing."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .psvs import PsvsParams, psvs_m_l_mm
+
+__all__ = ["PsvsConfig"]
+
+_M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
+
+
+@dataclass(frozen=True)
+class PsvsConfig:
+    """The PSVS geometry as config keys, see :class:`humanpt.geometry.PsvsParams`.
+
+    Defaults: the issue's sensor - 640 x 480, a_u = a_v = 1000 px, centre (320, 240),
+    baseline 90 mm, m, l of a 1 mm beam splitter at 45 deg (eq. (5), (6)), no distortion."""
+
+    image_width_px: int = 640
+    image_height_px: int = 480
+    a_u: float = 1000.0
+    a_v: float = 1000.0
+    skew: float = 0.0
+    u0: float = 320.0
+    v0: float = 240.0
+    baseline_mm: float = 90.0
+    m_mm: float = _M_MM
+    l_mm: float = _L_MM
+    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        self.params()  # PsvsParams validates every field and names it
+
+    def params(self) -> PsvsParams:
+        """The geometry library's :class:`PsvsParams`."""
+        return PsvsParams(
+            image_size_px=(self.image_width_px, self.image_height_px),
+            a_u=self.a_u,
+            a_v=self.a_v,
+            skew=self.skew,
+            u0=self.u0,
+            v0=self.v0,
+            baseline_mm=self.baseline_mm,
+            m_mm=self.m_mm,
+            l_mm=self.l_mm,
+            dist_coeffs=self.dist_coeffs,
+        )
