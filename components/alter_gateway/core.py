@@ -56,7 +56,7 @@ from humanpt.alter import (
     Transmit,
 )
 from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.limiter import EventLimiter, suffix
+from humanpt.alter_gateway.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.alter_gateway.safety import (
     clamp_norm,
     clip_to_envelope,
@@ -107,7 +107,7 @@ class Sent:
     command_cycle: int | None
 
 
-class AlterGatewayCore(Core):
+class AlterGatewayCore(SerialLinkCoreMixin, Core):
     name = "alter_gateway"
     config_type = AlterGatewayConfig
     inputs = ("controller/command", "console/command")
@@ -191,37 +191,10 @@ class AlterGatewayCore(Core):
             self._on_liveliness(t_ns, msg, outs)
         elif topic == "console/command":
             self._on_console(t_ns, msg, outs)
-        if self._tx:
-            outs.append(
-                (
-                    "serial_tx",
-                    pb.SerialChunk(
-                        header=self.next_header("serial_tx", t_ns, "alter"),
-                        data=bytes(self._tx),
-                        outgoing=True,
-                    ),
-                )
-            )
-            self._tx.clear()
+        self._flush_tx(t_ns, outs)
         return outs
 
     # -- events -------------------------------------------------------------------------------
-    def _ev(
-        self,
-        outs: list[Output],
-        t_ns: int,
-        severity: int,
-        code: str,
-        text: str,
-        limited: bool = True,
-    ) -> None:
-        if limited:
-            held = self._limiter.allow(code, t_ns)
-            if held is None:
-                return
-            text += suffix(held)
-        outs.append(self.event(t_ns, severity, code, text))
-
     # -- link -------------------------------------------------------------------------------
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
         """Act on the endpoint's events; ``t_ns`` is when the bytes arrived."""

@@ -31,3 +31,25 @@ class EventLimiter:
 
 def suffix(held: int) -> str:
     return f" (+{held} more since the last report)" if held else ""
+
+
+class SerialLinkCoreMixin:
+    """What both ends of the ALTER link share (alter_gateway and sim_robot cores): bytes to
+    send gathered in ``self._tx`` go out as one ``serial_tx`` chunk per step, and events are
+    rate-limited by ``self._limiter``."""
+
+    def _flush_tx(self, t_ns: int, outs: list) -> None:
+        if self._tx:
+            from humanpt.schemas import humanpt_pb2 as pb
+
+            outs.append(("serial_tx", pb.SerialChunk(header=self.next_header("serial_tx", t_ns, "alter"),
+                                                     data=bytes(self._tx), outgoing=True)))
+            self._tx.clear()
+
+    def _ev(self, outs: list, t_ns: int, severity: int, code: str, text: str, limited: bool = True) -> None:
+        if limited:
+            held = self._limiter.allow(code, t_ns)
+            if held is None:
+                return
+            text += suffix(held)
+        outs.append(self.event(t_ns, severity, code, text))

@@ -41,7 +41,7 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter_gateway.limiter import EventLimiter, suffix
+from humanpt.alter_gateway.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
@@ -52,7 +52,7 @@ from humanpt.sim_robot.kinematics import UnreachableError
 TRUTH = "sim_robot/truth"
 
 
-class SimRobotCore(Core):
+class SimRobotCore(SerialLinkCoreMixin, Core):
     name = "sim_robot"
     config_type = SimRobotConfig
     inputs = ("console/command",)
@@ -135,35 +135,8 @@ class SimRobotCore(Core):
                 self._link(self._ctrl.receive(bytes(msg.data), t_ns), t_ns, outs)
         elif topic == "console/command":
             self._on_console(t_ns, msg, outs)
-        if self._tx:
-            outs.append(
-                (
-                    "serial_tx",
-                    pb.SerialChunk(
-                        header=self.next_header("serial_tx", t_ns, "alter"),
-                        data=bytes(self._tx),
-                        outgoing=True,
-                    ),
-                )
-            )
-            self._tx.clear()
+        self._flush_tx(t_ns, outs)
         return outs
-
-    def _ev(
-        self,
-        outs: list[Output],
-        t_ns: int,
-        severity: int,
-        code: str,
-        text: str,
-        limited: bool = True,
-    ) -> None:
-        if limited:
-            held = self._limiter.allow(code, t_ns)
-            if held is None:
-                return
-            text += suffix(held)
-        outs.append(self.event(t_ns, severity, code, text))
 
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
         for e in events:
