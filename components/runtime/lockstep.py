@@ -69,8 +69,16 @@ class Lockstep:
     after everything already scheduled for that time).
     """
 
-    def __init__(self, cores: list[Core], *, start_ns: int = 0, latency_ns: int = 0,
-                 run_dir: str | Path | None = None, keep_outputs: bool = True, chunk_size: int = 256 * 1024):
+    def __init__(
+        self,
+        cores: list[Core],
+        *,
+        start_ns: int = 0,
+        latency_ns: int = 0,
+        run_dir: str | Path | None = None,
+        keep_outputs: bool = True,
+        chunk_size: int = 256 * 1024,
+    ):
         names = [c.name for c in cores]
         if len(set(names)) != len(names):
             raise ValueError(f"two cores share a name: {names}")
@@ -92,17 +100,28 @@ class Lockstep:
         self.recorders: dict[str, Recorder] = {}
         if run_dir is not None:
             for c in cores:
-                self.recorders[c.name] = Recorder(Path(run_dir) / f"{c.name}.mcap", {
-                    "component": c.name, "core": class_path(type(c)), "config": to_table(c.config),
-                    "version": humanpt.__version__, "start_time_ns": start_ns, "shell": "lockstep",
-                    "wall_start_time_ns": time.time_ns()}, chunk_size=chunk_size)
+                self.recorders[c.name] = Recorder(
+                    Path(run_dir) / f"{c.name}.mcap",
+                    {
+                        "component": c.name,
+                        "core": class_path(type(c)),
+                        "config": to_table(c.config),
+                        "version": humanpt.__version__,
+                        "start_time_ns": start_ns,
+                        "shell": "lockstep",
+                        "wall_start_time_ns": time.time_ns(),
+                    },
+                    chunk_size=chunk_size,
+                    pipeline=True,
+                )
 
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:
         heapq.heappush(self._heap, (t_ns, self._order, core_index, topic, data))
         self._order += 1
 
-    def connect_serial(self, a: str, b: str, baud: int = 38_400, *, both_ways: bool = True,
-                       bits_per_byte: int = 10) -> list[SerialLine]:
+    def connect_serial(
+        self, a: str, b: str, baud: int = 38_400, *, both_ways: bool = True, bits_per_byte: int = 10
+    ) -> list[SerialLine]:
         """Wire core ``a``'s ``serial_tx`` to core ``b``'s ``serial_rx`` (and back, unless
         ``both_ways`` is False) at ``baud`` with ``bits_per_byte`` per byte (8N1: 10)."""
         if baud <= 0 or bits_per_byte <= 0:
@@ -127,7 +146,9 @@ class Lockstep:
             end = start + line.wire_time_ns(n)
             line.free_at_ns = end
             line.bytes_carried += n
-            chunk = pb.SerialChunk(header=header(end, frame_id=f"{line.src}->{line.dst}"), data=msg.data)
+            chunk = pb.SerialChunk(
+                header=header(end, frame_id=f"{line.src}->{line.dst}"), data=msg.data
+            )
             self._push(end, dst, "serial_rx", chunk.SerializeToString())
 
     def inject(self, t_ns: int, component: str, topic: str, msg) -> None:
@@ -136,8 +157,12 @@ class Lockstep:
         self._push(t_ns, idx, topic, msg.SerializeToString())
 
     def set_param(self, t_ns: int, component: str, key: str, value_json: str) -> None:
-        self.inject(t_ns, component, "param", pb.ParamSet(header=header(t_ns), component=component, key=key,
-                                                          value_json=value_json))
+        self.inject(
+            t_ns,
+            component,
+            "param",
+            pb.ParamSet(header=header(t_ns), component=component, key=key, value_json=value_json),
+        )
 
     def run_until(self, end_ns: int) -> None:
         """Process every input scheduled at or before ``end_ns``."""

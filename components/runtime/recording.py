@@ -19,17 +19,20 @@ import json
 import queue
 import threading
 import time
+import zlib
 from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import zstandard
 from google.protobuf.message import DecodeError, Message
 from mcap.exceptions import McapError
-from mcap.records import Channel, Metadata, Schema
+from mcap.records import Channel, Chunk, ChunkIndex, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType, IndexType, Writer
 from mcap_protobuf.schema import register_schema
 
 from humanpt.schemas import topics
@@ -43,27 +46,175 @@ class RecordingError(ValueError):
     written by an incompatible schema version.  The message says which."""
 
 
+_local = threading.local()
+
+
+def _zstd_chunk(data: bytes) -> tuple[bytes, int]:
+    """(zstd of ``data`` as ``zstandard.compress`` makes it, crc32 of ``data``)."""
+    compressor = getattr(_local, "zstd", None)
+    if compressor is None:
+        compressor = _local.zstd = zstandard.ZstdCompressor()  # = zstandard.compress's, reused
+    return compressor.compress(data), zlib.crc32(data)
+
+
+_compressor: ThreadPoolExecutor | None = None
+_compressor_lock = threading.Lock()
+
+
+def _compressor_pool() -> ThreadPoolExecutor:
+    global _compressor
+    with _compressor_lock:
+        if _compressor is None:
+            _compressor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
+        return _compressor
+
+
+class PipelinedWriter(Writer):
+    """An MCAP writer (zstd chunks) that compresses each finished chunk on a helper thread
+    (zstd and crc32 release the GIL) while the caller carries on.
+
+    The file is byte for byte what :class:`mcap.writer.Writer` writes: a chunk goes into the
+    stream, with its message indexes, before anything written after it (the next chunk,
+    metadata, a flush, the summary).  Until then it is *pending*: :meth:`write_ready`
+    writes it once its compression is done.  Relies on the internals of mcap's Writer
+    (name-mangled attributes; checked against mcap 1.6).
+    """
+
+    def __init__(self, output, *, chunk_size: int):
+        super().__init__(output, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._pending: tuple[Future, int, int, int, dict] | None = None
+        self._pool = _compressor_pool()
+        self.chunks_written = 0
+
+    def _Writer__finalize_chunk(self) -> None:  # replaces Writer.__finalize_chunk
+        self._write_pending()
+        builder = self._Writer__chunk_builder
+        if not builder or builder.num_messages == 0:
+            return
+        self._Writer__statistics.chunk_count += 1
+        data = builder.end()
+        self._pending = (
+            self._pool.submit(_zstd_chunk, data),
+            len(data),
+            builder.message_start_time,
+            builder.message_end_time,
+            dict(builder.message_indices),
+        )
+        builder.reset()
+
+    def write_ready(self) -> None:
+        """Write the pending chunk if its compression is done."""
+        if self._pending is not None and self._pending[0].done():
+            self._write_pending()
+
+    def _write_pending(self) -> None:
+        if self._pending is None:
+            return
+        future, size, start, end, indices = self._pending
+        self._pending = None
+        compressed, crc = future.result()
+        chunk = Chunk(
+            compression="zstd",
+            data=compressed,
+            message_start_time=start,
+            message_end_time=end,
+            uncompressed_crc=crc if self._Writer__enable_crcs else 0,
+            uncompressed_size=size,
+        )
+        # From here on exactly as Writer.__finalize_chunk.
+        stream, records = self._Writer__stream, self._Writer__record_builder
+        self._Writer__flush()
+        chunk_start_offset = stream.tell()
+        chunk.write(records)
+        chunk_index = ChunkIndex(
+            message_start_time=start,
+            message_end_time=end,
+            chunk_start_offset=chunk_start_offset,
+            chunk_length=records.count,
+            message_index_offsets={},
+            message_index_length=0,
+            compression=chunk.compression,
+            compressed_size=len(compressed),
+            uncompressed_size=size,
+        )
+        self._Writer__flush()
+        message_index_start_offset = stream.tell()
+        if self._Writer__index_types & IndexType.MESSAGE:
+            for cid, index in indices.items():
+                chunk_index.message_index_offsets[cid] = message_index_start_offset + records.count
+                index.write(records)
+        chunk_index.message_index_length = records.count
+        self._Writer__flush()
+        self._Writer__chunk_indices.append(chunk_index)
+        self.chunks_written += 1
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        self._write_pending()
+        super().add_metadata(name, data)
+
+    def add_attachment(self, *args, **kwargs) -> None:
+        self._write_pending()
+        super().add_attachment(*args, **kwargs)
+
+    def flush(self) -> None:
+        self._Writer__finalize_chunk()
+        self._write_pending()
+        super().flush()
+
+    def finish(self) -> None:
+        self._Writer__finalize_chunk()
+        self._write_pending()
+        super().finish()
+
+
 class Recorder:
     """Writes one component's inputs and outputs to an MCAP file.
 
     Call it from one thread (the shell's worker).  With ``background=True`` the MCAP
     writing and compression happen on a writer thread of their own (zstd releases the
     GIL), so recording costs the core's thread only a queue put; the queue is bounded
-    (back-pressure rather than unbounded memory) and :meth:`close` drains it.
+    (back-pressure rather than unbounded memory) and :meth:`close` drains it.  With
+    ``pipeline=True`` (zstd only) the caller's thread does the MCAP writing but each
+    chunk's compression runs on a helper thread (:class:`PipelinedWriter`, same bytes);
+    a chunk reaches the file once compressed, so a crash may lose one more chunk.
     """
 
-    def __init__(self, path: str | Path, metadata: dict[str, Any], *, chunk_size: int = 256 * 1024,
-                 flush_interval_s: float = 1.0, compression: str = "zstd", background: bool = False):
+    def __init__(
+        self,
+        path: str | Path,
+        metadata: dict[str, Any],
+        *,
+        chunk_size: int = 256 * 1024,
+        flush_interval_s: float = 1.0,
+        compression: str = "zstd",
+        background: bool = False,
+        pipeline: bool = False,
+    ):
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
-        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}[compression]
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
+        comp = {
+            "zstd": CompressionType.ZSTD,
+            "lz4": CompressionType.LZ4,
+            "none": CompressionType.NONE,
+        }[compression]
+        if pipeline and comp == CompressionType.ZSTD:
+            self._pipelined: PipelinedWriter | None = PipelinedWriter(
+                self._file, chunk_size=chunk_size
+            )
+            self._writer: Writer = self._pipelined
+        else:
+            self._pipelined = None
+            self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
+        self._chunks_seen = 0
         self._writer.start(profile="humanpt", library="humanpt")
-        meta = {k: v if isinstance(v, str) else json.dumps(v, sort_keys=True) for k, v in metadata.items()}
+        meta = {
+            k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
+            for k, v in metadata.items()
+        }
         meta.setdefault("schema_version", str(topics.SCHEMA_VERSION))
         self._writer.add_metadata(RUN_METADATA, meta)
         self._schemas: dict[str, int] = {}
@@ -77,7 +228,9 @@ class Recorder:
         self._closed = False
         if background:
             self._queue = queue.Queue(maxsize=512)
-            self._thread = threading.Thread(target=self._drain, name=f"recorder-{self.path.stem}", daemon=True)
+            self._thread = threading.Thread(
+                target=self._drain, name=f"recorder-{self.path.stem}", daemon=True
+            )
             self._thread.start()
 
     def _drain(self) -> None:
@@ -109,19 +262,24 @@ class Recorder:
         if cid is None:
             if msg_type is None:
                 if self._raw_schema is None:
-                    self._raw_schema = self._writer.register_schema(name="raw", encoding="", data=b"")
+                    self._raw_schema = self._writer.register_schema(
+                        name="raw", encoding="", data=b""
+                    )
                 sid, enc = self._raw_schema, "raw"
             else:
                 full = msg_type.DESCRIPTOR.full_name
                 if full not in self._schemas:
                     self._schemas[full] = register_schema(self._writer, msg_type)
                 sid, enc = self._schemas[full], "protobuf"
-            cid = self._writer.register_channel(topic=topic, message_encoding=enc, schema_id=sid,
-                                                metadata={"direction": direction})
+            cid = self._writer.register_channel(
+                topic=topic, message_encoding=enc, schema_id=sid, metadata={"direction": direction}
+            )
             self._channels[key] = cid
         return cid
 
-    def write(self, direction: str, t_ns: int, topic: str, msg: Message, data: bytes | None = None) -> None:
+    def write(
+        self, direction: str, t_ns: int, topic: str, msg: Message, data: bytes | None = None
+    ) -> None:
         """Record one input (``IN``) or output (``OUT``) at time ``t_ns``.
 
         ``data`` may pass the already serialised bytes of ``msg`` to save work.
@@ -134,15 +292,27 @@ class Recorder:
         self._submit("msg", DROPPED, t_ns, topic, None, payload)
 
     def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
-        self._writer.add_message(channel_id=channel_id, log_time=int(t_ns), data=payload,
-                                 publish_time=int(t_ns), sequence=self._count)
+        self._writer.add_message(
+            channel_id=channel_id,
+            log_time=int(t_ns),
+            data=payload,
+            publish_time=int(t_ns),
+            sequence=self._count,
+        )
         self._count += 1
         self.bytes_written += len(payload)
-        pos = self._file.tell()
-        if pos != self._stream_pos:
-            # A chunk was finalised into the stream buffer: put it in the file now.
-            self._file.flush()
-            self._stream_pos = pos
+        if self._pipelined is not None:
+            self._pipelined.write_ready()
+            if self._pipelined.chunks_written != self._chunks_seen:
+                # A chunk went into the stream buffer: put it in the file now.
+                self._file.flush()
+                self._chunks_seen = self._pipelined.chunks_written
+        else:
+            pos = self._file.tell()
+            if pos != self._stream_pos:
+                # A chunk was finalised into the stream buffer: put it in the file now.
+                self._file.flush()
+                self._stream_pos = pos
         now = time.monotonic()
         if now - self._last_flush >= self._flush_interval_s:
             self._flush_now()
@@ -167,7 +337,9 @@ class Recorder:
             self._file.flush()
             self._file.close()
             if self._error is not None:
-                raise RecordingError(f"{self.path}: recording failed: {self._error}") from self._error
+                raise RecordingError(
+                    f"{self.path}: recording failed: {self._error}"
+                ) from self._error
 
     def __enter__(self) -> Recorder:
         return self
@@ -191,13 +363,17 @@ class Entry:
         """The message, decoded with this build's schema for its topic."""
         cls = topics.message_type(self.topic)
         if cls.DESCRIPTOR.full_name != self.schema:
-            raise RecordingError(f"topic {self.topic!r} was recorded as {self.schema}, "
-                                 f"this version reads it as {cls.DESCRIPTOR.full_name}")
+            raise RecordingError(
+                f"topic {self.topic!r} was recorded as {self.schema}, "
+                f"this version reads it as {cls.DESCRIPTOR.full_name}"
+            )
         msg = cls()
         try:
             msg.ParseFromString(self.data)
         except DecodeError as e:
-            raise RecordingError(f"message {self.index} on {self.topic!r} does not decode: {e}") from e
+            raise RecordingError(
+                f"message {self.index} on {self.topic!r} does not decode: {e}"
+            ) from e
         return msg
 
 
@@ -248,8 +424,9 @@ MAGIC = b"\x89MCAP0\r\n"
 _DAMAGE = (McapError, EOFError, Exception)
 
 
-def iter_entries(path: str | Path, notes: list[str] | None = None,
-                 metadata: dict[str, str] | None = None) -> Iterator[Entry]:
+def iter_entries(
+    path: str | Path, notes: list[str] | None = None, metadata: dict[str, str] | None = None
+) -> Iterator[Entry]:
     """Messages of a recording in file order, one at a time (constant memory).
 
     Stops quietly at damage (a truncated file) and appends why to ``notes``; fills
@@ -274,7 +451,9 @@ def iter_entries(path: str | Path, notes: list[str] | None = None,
                 n += 1
     except _DAMAGE as e:
         if notes is not None:
-            notes.append(f"{p}: truncated or damaged after {n} messages ({type(e).__name__}{': ' + str(e) if str(e) else ''})")
+            notes.append(
+                f"{p}: truncated or damaged after {n} messages ({type(e).__name__}{': ' + str(e) if str(e) else ''})"
+            )
 
 
 def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
@@ -315,6 +494,8 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
             raise RecordingError(f"{p}: not a humanpt recording: no {RUN_METADATA!r} metadata{why}")
         version = rec.metadata.get("schema_version", "?")
         if version != str(topics.SCHEMA_VERSION):
-            raise RecordingError(f"{p}: written with schema version {version}; this humanpt "
-                                 f"reads schema version {topics.SCHEMA_VERSION}")
+            raise RecordingError(
+                f"{p}: written with schema version {version}; this humanpt "
+                f"reads schema version {topics.SCHEMA_VERSION}"
+            )
     return rec
