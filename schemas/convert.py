@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from scipy.spatial.transform import _rotation_cy as _rot
 
 from humanpt.schemas import humanpt_pb2 as pb
 
@@ -68,11 +69,49 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
 def matrix_from_quat(q: np.ndarray) -> np.ndarray:
     """Quaternion (x, y, z, w), normalised here -> (3, 3) rotation (as scipy's as_matrix)."""
     x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+# Single rotations through scipy's compiled Rotation backend: exactly the numbers of the
+# scipy.spatial.transform.Rotation calls named in each docstring (tested), without the
+# array-API wrapping that costs more than the arithmetic on these hot paths.
+
+
+def _f64(a) -> np.ndarray:
+    return np.asarray(a, dtype=np.float64)
+
+
+def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
+    """``Rotation.from_matrix(R).as_rotvec()`` for one (3, 3) matrix."""
+    return _rot.as_rotvec(_rot.from_matrix(_f64(R))[None])[0]
+
+
+def matrix_from_rotvec(rotvec) -> np.ndarray:
+    """``Rotation.from_rotvec(rotvec).as_matrix()`` for one rotation vector (rad)."""
+    return _rot.as_matrix(_rot.from_rotvec(_f64(rotvec))[None])[0]
+
+
+def rotation_angle(R: np.ndarray) -> np.float64:
+    """``Rotation.from_matrix(R).magnitude()`` for one (3, 3) matrix (rad)."""
+    return _rot.magnitude(_rot.from_matrix(_f64(R))[None])[0]
+
+
+def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
+    """``(r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()`` with
+    ``r0, r1 = Rotation.from_matrix(R0), Rotation.from_matrix(R1)``: the rotation a
+    fraction ``s`` of the way along the geodesic from R0 to R1."""
+    q0 = _rot.from_matrix(_f64(R0))[None]
+    q1 = _rot.from_matrix(_f64(R1))[None]
+    rel = _rot.from_quat(_rot.compose_quat(_rot.inv(q0), q1), normalize=True, copy=False)
+    step = _rot.from_rotvec(_f64(s * _rot.as_rotvec(rel)[0]))[None]
+    q = _rot.from_quat(_rot.compose_quat(q0, step), normalize=True, copy=False)
+    return _rot.as_matrix(q)[0]
 
 
 def pose(a_T_b: np.ndarray) -> pb.Pose:
@@ -89,8 +128,10 @@ def pose(a_T_b: np.ndarray) -> pb.Pose:
         raise MessageError("the rotation part of the transform is not a proper rotation")
     qx, qy, qz, qw = quat_from_matrix(R)
     t = T[:3, 3]
-    return pb.Pose(translation=pb.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-                   rotation=pb.Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw)))
+    return pb.Pose(
+        translation=pb.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
+        rotation=pb.Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw)),
+    )
 
 
 def from_pose(m: pb.Pose) -> np.ndarray:
@@ -111,21 +152,39 @@ def from_pose(m: pb.Pose) -> np.ndarray:
     return T
 
 
-_ENCODINGS = {"mono8": (1, np.uint8), "rgb8": (3, np.uint8), "bgr8": (3, np.uint8), "mono16": (1, np.uint16)}
+_ENCODINGS = {
+    "mono8": (1, np.uint8),
+    "rgb8": (3, np.uint8),
+    "bgr8": (3, np.uint8),
+    "mono16": (1, np.uint16),
+}
 
 
-def image(pixels: np.ndarray, stamp_ns: int, frame_id: str = "camera", encoding: str | None = None) -> RawImage:
+def image(
+    pixels: np.ndarray, stamp_ns: int, frame_id: str = "camera", encoding: str | None = None
+) -> RawImage:
     """(H, W) or (H, W, 3) array -> foxglove.RawImage (stamp = capture time, ns)."""
     a = np.ascontiguousarray(pixels)
     if encoding is None:
-        encoding = {(2, np.dtype(np.uint8)): "mono8", (3, np.dtype(np.uint8)): "rgb8",
-                    (2, np.dtype(np.uint16)): "mono16"}.get((a.ndim, a.dtype))
+        encoding = {
+            (2, np.dtype(np.uint8)): "mono8",
+            (3, np.dtype(np.uint8)): "rgb8",
+            (2, np.dtype(np.uint16)): "mono16",
+        }.get((a.ndim, a.dtype))
         if encoding is None:
-            raise MessageError(f"no image encoding for an array of shape {a.shape} and dtype {a.dtype}")
+            raise MessageError(
+                f"no image encoding for an array of shape {a.shape} and dtype {a.dtype}"
+            )
     channels, dtype = _ENCODINGS[encoding]
     h, w = a.shape[:2]
-    msg = RawImage(width=w, height=h, encoding=encoding, step=w * channels * np.dtype(dtype).itemsize,
-                   data=a.astype(dtype, copy=False).tobytes(), frame_id=frame_id)
+    msg = RawImage(
+        width=w,
+        height=h,
+        encoding=encoding,
+        step=w * channels * np.dtype(dtype).itemsize,
+        data=a.astype(dtype, copy=False).tobytes(),
+        frame_id=frame_id,
+    )
     msg.timestamp.FromNanoseconds(int(stamp_ns))
     return msg
 
@@ -146,7 +205,8 @@ def from_image(m: RawImage) -> np.ndarray:
     if m.step < row or len(m.data) != m.step * m.height:
         raise MessageError(
             f"image data is {len(m.data)} bytes; {m.width}x{m.height} {m.encoding} with step {m.step} "
-            f"needs {m.step * m.height}")
+            f"needs {m.step * m.height}"
+        )
     a = np.frombuffer(m.data, dtype=np.uint8).reshape(m.height, m.step)[:, :row]
     a = a.view(dtype) if itemsize > 1 else a
     shape = (m.height, m.width) if channels == 1 else (m.height, m.width, channels)

@@ -22,9 +22,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humanpt.geometry.transforms import invert_transform, x_from_transform
+from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
 
 
 @dataclass(frozen=True)
@@ -36,8 +36,9 @@ class Step:
     error_rotation_rad: float  # angle between the TOB frame and D's (rad)
 
 
-def saturate(d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: float
-             ) -> tuple[np.ndarray, np.ndarray, bool]:
+def saturate(
+    d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: float
+) -> tuple[np.ndarray, np.ndarray, bool]:
     """Scale a step down to the per-cycle limits (by norm, keeping its direction)."""
     sat = False
     nt, nr = float(np.linalg.norm(d_t)), float(np.linalg.norm(d_r))
@@ -51,15 +52,17 @@ def saturate(d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: 
 def apply_step(world_T_flange: np.ndarray, d_t: np.ndarray, d_r: np.ndarray) -> np.ndarray:
     """The flange pose after a world-frame step about the flange origin."""
     T = np.array(world_T_flange, dtype=float)
-    T[:3, :3] = Rotation.from_rotvec(d_r).as_matrix() @ T[:3, :3]
+    T[:3, :3] = matrix_from_rotvec(d_r) @ T[:3, :3]
     T[:3, 3] = T[:3, 3] + d_t
     return T
 
 
-def extrapolate(world_T_tob: np.ndarray, v_m_s: np.ndarray, w_rad_s: np.ndarray, dt_s: float) -> np.ndarray:
+def extrapolate(
+    world_T_tob: np.ndarray, v_m_s: np.ndarray, w_rad_s: np.ndarray, dt_s: float
+) -> np.ndarray:
     """A pose moved at constant (world-frame) velocity for ``dt_s`` (may be negative)."""
     T = np.array(world_T_tob, dtype=float)
-    T[:3, :3] = Rotation.from_rotvec(np.asarray(w_rad_s) * dt_s).as_matrix() @ T[:3, :3]
+    T[:3, :3] = matrix_from_rotvec(np.asarray(w_rad_s) * dt_s) @ T[:3, :3]
     T[:3, 3] = T[:3, 3] + np.asarray(v_m_s) * dt_s
     return T
 
@@ -69,18 +72,34 @@ def desired_flange(world_T_tob: np.ndarray, flange_T_desired: np.ndarray) -> np.
     return world_T_tob @ invert_transform(flange_T_desired)
 
 
-def pose_error(world_T_flange: np.ndarray, world_T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def pose_error(
+    world_T_flange: np.ndarray, world_T_target: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """(translation error (3,) m, theta-u rotation error (3,) rad), world frame."""
     e_t = world_T_target[:3, 3] - world_T_flange[:3, 3]
-    e_r = Rotation.from_matrix(world_T_target[:3, :3] @ world_T_flange[:3, :3].T).as_rotvec()
+    e_r = rotvec_from_matrix(world_T_target[:3, :3] @ world_T_flange[:3, :3].T)
     return e_t, e_r
 
 
-def thetau_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_desired: np.ndarray, *,
-                v_tob_m_s: np.ndarray, w_tob_rad_s: np.ndarray, k_t: float, k_r: float, dt_s: float,
-                max_step_m: float, max_step_rad: float, feed_forward: bool = True,
-                position_only: bool = False, deadband_m: float = 0.0, deadband_rad: float = 0.0,
-                still_m_s: float = 0.0, still_rad_s: float = 0.0) -> Step:
+def thetau_step(
+    world_T_flange: np.ndarray,
+    world_T_tob: np.ndarray,
+    flange_T_desired: np.ndarray,
+    *,
+    v_tob_m_s: np.ndarray,
+    w_tob_rad_s: np.ndarray,
+    k_t: float,
+    k_r: float,
+    dt_s: float,
+    max_step_m: float,
+    max_step_rad: float,
+    feed_forward: bool = True,
+    position_only: bool = False,
+    deadband_m: float = 0.0,
+    deadband_rad: float = 0.0,
+    still_m_s: float = 0.0,
+    still_rad_s: float = 0.0,
+) -> Step:
     """Default law; with ``position_only`` only the translation of D towards G is servoed."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     e_t, e_r = pose_error(world_T_flange, world_T_fd)
@@ -109,9 +128,18 @@ def thetau_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_de
     return Step(d_t, d_r, sat, e_gd, float(np.linalg.norm(e_r)))
 
 
-def paper_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_desired: np.ndarray, *,
-               k_t: float, k_r: float, dt_s: float, max_step_m: float, max_step_rad: float,
-               position_only: bool = False) -> Step:
+def paper_step(
+    world_T_flange: np.ndarray,
+    world_T_tob: np.ndarray,
+    flange_T_desired: np.ndarray,
+    *,
+    k_t: float,
+    k_r: float,
+    dt_s: float,
+    max_step_m: float,
+    max_step_rad: float,
+    position_only: bool = False,
+) -> Step:
     """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame."""
     flange_T_tob = invert_transform(world_T_flange) @ world_T_tob
     x_fg = x_from_transform(_mm(flange_T_tob))
@@ -124,8 +152,12 @@ def paper_step(world_T_flange: np.ndarray, world_T_tob: np.ndarray, flange_T_des
     # (d psi, d theta, d phi) about (z, y, x) as a small rotation vector (x, y, z) [43].
     w_flange_rad_s = k_r * np.radians(e[[5, 4, 3]])
     R = world_T_flange[:3, :3]
-    d_t, d_r, sat = saturate(R @ v_flange_m_s * dt_s, R @ w_flange_rad_s * dt_s, max_step_m, max_step_rad)
-    return Step(d_t, d_r, sat, float(np.linalg.norm(e[:3])) * 1e-3, float(np.linalg.norm(np.radians(e[3:]))))
+    d_t, d_r, sat = saturate(
+        R @ v_flange_m_s * dt_s, R @ w_flange_rad_s * dt_s, max_step_m, max_step_rad
+    )
+    return Step(
+        d_t, d_r, sat, float(np.linalg.norm(e[:3])) * 1e-3, float(np.linalg.norm(np.radians(e[3:])))
+    )
 
 
 def _mm(T_m: np.ndarray) -> np.ndarray:

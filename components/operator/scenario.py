@@ -21,9 +21,9 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import make_transform, transform_from_x
+from humanpt.schemas.convert import matrix_from_rotvec, rotation_angle, slerp_matrix
 
 __all__ = [
     "ScenarioError",
@@ -439,14 +439,12 @@ class _Piece:
 
 
 def _rotation_angle_deg(r0: np.ndarray, r1: np.ndarray) -> float:
-    return math.degrees(Rotation.from_matrix(r0.T @ r1).magnitude())
+    return math.degrees(rotation_angle(r0.T @ r1))
 
 
 def _arc_pose(seg: Arc, start: np.ndarray, fraction: float) -> np.ndarray:
     axis = np.asarray(seg.axis, dtype=float)
-    rot = Rotation.from_rotvec(
-        axis / np.linalg.norm(axis) * math.radians(seg.angle_deg) * fraction
-    ).as_matrix()
+    rot = matrix_from_rotvec(axis / np.linalg.norm(axis) * math.radians(seg.angle_deg) * fraction)
     centre = np.asarray(seg.centre_mm, dtype=float)
     out = np.eye(4)
     out[:3, 3] = centre + rot @ (start[:3, 3] - centre)
@@ -523,9 +521,7 @@ class Trajectory:
             return _arc_pose(seg, piece.start, f)
         out = np.eye(4)
         out[:3, 3] = piece.start[:3, 3] + f * (piece.end[:3, 3] - piece.start[:3, 3])
-        r0 = Rotation.from_matrix(piece.start[:3, :3])
-        rel = (r0.inv() * Rotation.from_matrix(piece.end[:3, :3])).as_rotvec()
-        out[:3, :3] = (r0 * Rotation.from_rotvec(f * rel)).as_matrix()
+        out[:3, :3] = slerp_matrix(piece.start[:3, :3], piece.end[:3, :3], f)
         return out
 
     def pose(
@@ -536,7 +532,7 @@ class Trajectory:
         path = self.path_pose(t_s)
         if self.tremor is not None:
             d_p, d_r = self.tremor.offset(t_s if tremor_t_s is None else tremor_t_s)
-            path[:3, :3] = Rotation.from_rotvec(d_r).as_matrix() @ path[:3, :3]
+            path[:3, :3] = matrix_from_rotvec(d_r) @ path[:3, :3]
             path[:3, 3] += d_p
         if self.scenario.path == "tip":
             return path @ self.tip_T_tob, path

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
-from scipy.spatial.transform import Rotation
+
+from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
@@ -34,11 +35,15 @@ def transition(dt_s: float) -> np.ndarray:
     return F
 
 
-def process_noise(dt_s: float, accel_sigma_m_s2: float, ang_accel_sigma_rad_s2: float) -> np.ndarray:
+def process_noise(
+    dt_s: float, accel_sigma_m_s2: float, ang_accel_sigma_rad_s2: float
+) -> np.ndarray:
     """(12, 12) discrete white-noise acceleration: per axis q * [[dt^3/3, dt^2/2], [dt^2/2, dt]]."""
     Q = np.zeros((12, 12))
-    for pos, vel, q in ((slice(0, 3), slice(6, 9), accel_sigma_m_s2**2), (slice(3, 6), slice(9, 12),
-                                                                             ang_accel_sigma_rad_s2**2)):
+    for pos, vel, q in (
+        (slice(0, 3), slice(6, 9), accel_sigma_m_s2**2),
+        (slice(3, 6), slice(9, 12), ang_accel_sigma_rad_s2**2),
+    ):
         Q[pos, pos] = q * dt_s**3 / 3 * I3
         Q[pos, vel] = q * dt_s**2 / 2 * I3
         Q[vel, pos] = q * dt_s**2 / 2 * I3
@@ -57,9 +62,15 @@ class Gate:
 class PoseKalman:
     """Filter of world_T_tob; times in ns, poses as (4, 4) transforms in metres."""
 
-    def __init__(self, accel_sigma_m_s2: float, ang_accel_sigma_rad_s2: float,
-                 init_sigma_m: float = 0.01, init_sigma_rad: float = 0.05,
-                 init_sigma_v: float = 0.3, init_sigma_w: float = 1.0):
+    def __init__(
+        self,
+        accel_sigma_m_s2: float,
+        ang_accel_sigma_rad_s2: float,
+        init_sigma_m: float = 0.01,
+        init_sigma_rad: float = 0.05,
+        init_sigma_v: float = 0.3,
+        init_sigma_w: float = 1.0,
+    ):
         self.accel_sigma = accel_sigma_m_s2
         self.ang_accel_sigma = ang_accel_sigma_rad_s2
         self.init_sd = np.repeat([init_sigma_m, init_sigma_rad, init_sigma_v, init_sigma_w], 3)
@@ -91,7 +102,7 @@ class PoseKalman:
 
     def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
         x = self.kf.x if x is None else x
-        return Rotation.from_rotvec(x[3:6]).as_matrix() @ self.R_ref
+        return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
@@ -102,7 +113,7 @@ class PoseKalman:
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.kf.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
-        y[3:6] = Rotation.from_matrix(world_T_tob[:3, :3] @ self.rotation().T).as_rotvec()
+        y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation().T)
         return self._update(y, H_POSE, R_meas, gate_chi2)
 
     def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
@@ -129,6 +140,6 @@ class PoseKalman:
         x = F @ self.kf.x
         P = F @ self.kf.P @ F.T + process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_rotvec(x[3:6]).as_matrix() @ self.R_ref
+        T[:3, :3] = matrix_from_rotvec(x[3:6]) @ self.R_ref
         T[:3, 3] = x[0:3]
         return T, x[6:12].copy(), P

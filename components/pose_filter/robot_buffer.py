@@ -7,6 +7,8 @@ from collections import deque
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
+
 
 class RobotPoseBuffer:
     """Recent (stamp_ns, world_T_flange (4, 4)) pairs, in stamp order."""
@@ -36,7 +38,10 @@ class RobotPoseBuffer:
         if len(items) == 1:
             t0, T0 = items[0]
             return T0.copy() if abs(stamp_ns - t0) <= max_extrapolation_ns else None
-        if stamp_ns < items[0][0] - max_extrapolation_ns or stamp_ns > items[-1][0] + max_extrapolation_ns:
+        if (
+            stamp_ns < items[0][0] - max_extrapolation_ns
+            or stamp_ns > items[-1][0] + max_extrapolation_ns
+        ):
             return None
         stamps = [t for t, _ in items]
         i = int(np.searchsorted(stamps, stamp_ns))
@@ -46,8 +51,10 @@ class RobotPoseBuffer:
         T = np.eye(4)
         T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
         if 0.0 <= s <= 1.0:
-            T[:3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix([T0[:3, :3], T1[:3, :3]]))(s).as_matrix()
+            T[:3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix([T0[:3, :3], T1[:3, :3]]))(
+                s
+            ).as_matrix()
         else:  # extrapolate the relative rotation
-            dR = Rotation.from_matrix(T1[:3, :3] @ T0[:3, :3].T).as_rotvec()
-            T[:3, :3] = Rotation.from_rotvec(dR * s).as_matrix() @ T0[:3, :3]
+            dR = rotvec_from_matrix(T1[:3, :3] @ T0[:3, :3].T)
+            T[:3, :3] = matrix_from_rotvec(dR * s) @ T0[:3, :3]
         return T

@@ -10,12 +10,11 @@ stamp = capture, frame "camera") with the truth it used on ``sim_camera/truth``.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import compose, invert_transform
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import MessageError, from_pose, image, pose
+from humanpt.schemas.convert import MessageError, from_pose, image, pose, slerp_matrix
 
 from .config import SimCameraConfig
 from .render import Renderer
@@ -36,11 +35,8 @@ def interpolate_pose(
         return np.array(a_T_b1, dtype=float)
     s = (t_ns - t0_ns) / span
     s = min(max(s, -max_extra_ns / span), 1.0 + max_extra_ns / span)
-    r0 = Rotation.from_matrix(a_T_b0[:3, :3])
-    r1 = Rotation.from_matrix(a_T_b1[:3, :3])
-    rot = r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())
     out = np.eye(4)
-    out[:3, :3] = rot.as_matrix()
+    out[:3, :3] = slerp_matrix(a_T_b0[:3, :3], a_T_b1[:3, :3], s)
     out[:3, 3] = a_T_b0[:3, 3] + s * (a_T_b1[:3, 3] - a_T_b0[:3, 3])
     return out
 
