@@ -602,7 +602,7 @@ class Renderer:
         rng = np.random.default_rng([c.seed, int(frame_index)])
         shape = signal_dn.shape
         uniform = np.frombuffer(rng.bytes(2 * signal_dn.size), dtype=np.uint16)
-        frame = self._table[uniform]  # a new array: the background everywhere
+        frame = self._table.take(uniform)  # a new array: the background everywhere
         idx = np.flatnonzero(signal_dn.ravel() > 0)
         if idx.size:
             mean_e = (signal_dn.ravel()[idx].astype(np.float64) + self.sky_dn) * g
