@@ -186,7 +186,8 @@ class Lockstep:
                 payload = out.SerializeToString()
                 if rec:
                     rec.write(OUT, t_ns, out_topic, out, payload)
-                self._digest.update(f"{t_ns}|{core.name}|{out_topic}|".encode() + payload)
+                self._digest.update(f"{t_ns}|{core.name}|{out_topic}|".encode())
+                self._digest.update(payload)
                 if self.keep_outputs:
                     self.outputs.append(Delivered(t_ns, core.name, out_topic, payload))
                 for j in self._subs.get(out_topic, ()):
