@@ -9,7 +9,26 @@ from __future__ import annotations
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from scipy.spatial.transform import _rotation_cy as _rot
+from scipy.spatial.transform import Rotation
+
+try:  # scipy's compiled backend of Rotation (1.17): the same numbers without per-call overhead
+    from scipy.spatial.transform import _rotation_cy as _rot
+
+    _FAST = all(
+        hasattr(_rot, f)
+        for f in (
+            "as_rotvec",
+            "from_matrix",
+            "as_matrix",
+            "from_rotvec",
+            "magnitude",
+            "from_quat",
+            "compose_quat",
+            "inv",
+        )
+    )
+except ImportError:  # another scipy: fall back to the public API below
+    _rot, _FAST = None, False
 
 from humanpt.schemas import humanpt_pb2 as pb
 
@@ -87,31 +106,45 @@ def _f64(a) -> np.ndarray:
     return np.asarray(a, dtype=np.float64)
 
 
-def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
-    """``Rotation.from_matrix(R).as_rotvec()`` for one (3, 3) matrix."""
-    return _rot.as_rotvec(_rot.from_matrix(_f64(R))[None])[0]
+if _FAST:
 
+    def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
+        """``Rotation.from_matrix(R).as_rotvec()`` for one (3, 3) matrix."""
+        return _rot.as_rotvec(_rot.from_matrix(_f64(R))[None])[0]
 
-def matrix_from_rotvec(rotvec) -> np.ndarray:
-    """``Rotation.from_rotvec(rotvec).as_matrix()`` for one rotation vector (rad)."""
-    return _rot.as_matrix(_rot.from_rotvec(_f64(rotvec))[None])[0]
+    def matrix_from_rotvec(rotvec) -> np.ndarray:
+        """``Rotation.from_rotvec(rotvec).as_matrix()`` for one rotation vector (rad)."""
+        return _rot.as_matrix(_rot.from_rotvec(_f64(rotvec))[None])[0]
 
+    def rotation_angle(R: np.ndarray) -> np.float64:
+        """``Rotation.from_matrix(R).magnitude()`` for one (3, 3) matrix (rad)."""
+        return _rot.magnitude(_rot.from_matrix(_f64(R))[None])[0]
 
-def rotation_angle(R: np.ndarray) -> np.float64:
-    """``Rotation.from_matrix(R).magnitude()`` for one (3, 3) matrix (rad)."""
-    return _rot.magnitude(_rot.from_matrix(_f64(R))[None])[0]
+    def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
+        """``(r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()`` with
+        ``r0, r1 = Rotation.from_matrix(R0), Rotation.from_matrix(R1)``: the rotation a
+        fraction ``s`` of the way along the geodesic from R0 to R1."""
+        q0 = _rot.from_matrix(_f64(R0))[None]
+        q1 = _rot.from_matrix(_f64(R1))[None]
+        rel = _rot.from_quat(_rot.compose_quat(_rot.inv(q0), q1), normalize=True, copy=False)
+        step = _rot.from_rotvec(_f64(s * _rot.as_rotvec(rel)[0]))[None]
+        q = _rot.from_quat(_rot.compose_quat(q0, step), normalize=True, copy=False)
+        return _rot.as_matrix(q)[0]
 
+else:  # pragma: no cover - only on a scipy without the backend
 
-def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
-    """``(r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()`` with
-    ``r0, r1 = Rotation.from_matrix(R0), Rotation.from_matrix(R1)``: the rotation a
-    fraction ``s`` of the way along the geodesic from R0 to R1."""
-    q0 = _rot.from_matrix(_f64(R0))[None]
-    q1 = _rot.from_matrix(_f64(R1))[None]
-    rel = _rot.from_quat(_rot.compose_quat(_rot.inv(q0), q1), normalize=True, copy=False)
-    step = _rot.from_rotvec(_f64(s * _rot.as_rotvec(rel)[0]))[None]
-    q = _rot.from_quat(_rot.compose_quat(q0, step), normalize=True, copy=False)
-    return _rot.as_matrix(q)[0]
+    def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
+        return Rotation.from_matrix(_f64(R)).as_rotvec()
+
+    def matrix_from_rotvec(rotvec) -> np.ndarray:
+        return Rotation.from_rotvec(_f64(rotvec)).as_matrix()
+
+    def rotation_angle(R: np.ndarray) -> np.float64:
+        return np.float64(Rotation.from_matrix(_f64(R)).magnitude())
+
+    def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
+        r0, r1 = Rotation.from_matrix(_f64(R0)), Rotation.from_matrix(_f64(R1))
+        return (r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()
 
 
 def pose(a_T_b: np.ndarray) -> pb.Pose:

@@ -69,6 +69,18 @@ def _compressor_pool() -> ThreadPoolExecutor:
         return _compressor
 
 
+def _pipeline_ok() -> bool:
+    """PipelinedWriter overrides private methods of mcap's Writer as they are in mcap 1.6;
+    with another mcap the plain writer is used (same file, no helper thread)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        v = version("mcap")
+    except PackageNotFoundError:
+        return False
+    return v.startswith("1.6.") and hasattr(Writer, "_Writer__finalize_chunk")
+
+
 class PipelinedWriter(Writer):
     """An MCAP writer (zstd chunks) that compresses each finished chunk on a helper thread
     (zstd and crc32 release the GIL) while the caller carries on.
@@ -201,7 +213,7 @@ class Recorder:
             "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE,
         }[compression]
-        if pipeline and comp == CompressionType.ZSTD:
+        if pipeline and comp == CompressionType.ZSTD and _PIPELINE_OK:
             self._pipelined: PipelinedWriter | None = PipelinedWriter(
                 self._file, chunk_size=chunk_size
             )
@@ -499,3 +511,6 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
                 f"reads schema version {topics.SCHEMA_VERSION}"
             )
     return rec
+
+
+_PIPELINE_OK = _pipeline_ok()
