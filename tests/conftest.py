@@ -12,13 +12,12 @@ from pathlib import Path
 
 import pytest
 
+from humanpt.runtime.bus import free_tcp_port
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+free_port = free_tcp_port  # one helper for the product and the tests
 
 
 def write_config(path: Path, port: int, extra: str = "", cell: str = "test") -> Path:

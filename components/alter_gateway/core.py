@@ -194,7 +194,6 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._flush_tx(t_ns, outs)
         return outs
 
-    # -- events -------------------------------------------------------------------------------
     # -- link -------------------------------------------------------------------------------
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
         """Act on the endpoint's events; ``t_ns`` is when the bytes arrived."""

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import socket
 import tempfile
 import threading
 import time
@@ -10,13 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.runtime.bus import free_tcp_port
 from humanpt.runtime.config import RuntimeConfig
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def percentile_ms(samples_ns: list[int], q: float) -> float:
@@ -91,7 +85,7 @@ def bench_runtime(args) -> int:
     img = synthetic_image()
     img_payload = image(img, 0).SerializeToString()
     for label, payload in (("200-byte message", small), (f"640x480 mono8 image ({len(img_payload)} B)", img_payload)):
-        rtts = round_trips(payload, args.n, _free_port())
+        rtts = round_trips(payload, args.n, free_tcp_port())
         if not rtts:
             rows.append((f"round trip, {label}", "no replies", "", ""))
             continue

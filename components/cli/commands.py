@@ -482,9 +482,3 @@ def path_cmd(args) -> int:
     print(f"humanpt path val: {len(p)} points -> {args.output}")
     return 0
 
-
-def _free_port_default() -> int:
-    """A free TCP port on loopback (for a self-contained demo router)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]

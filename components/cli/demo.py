@@ -23,7 +23,6 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.geometry.transforms import (
     invert_transform,
-    make_transform,
     transform_from_x,
     x_from_transform,
 )
@@ -112,7 +111,11 @@ def scenario_duration_s(op) -> float:
 
 
 def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
-    return transform_from_x(np.asarray(ctl.flange_T_camera_x)) @ make_transform(np.eye(3), np.array([0, 0, ctl.dz_mm]))
+    from humanpt.controller.core import flange_T_desired_m
+
+    T = flange_T_desired_m(ctl)
+    T[:3, 3] *= 1e3
+    return T
 
 
 def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str) -> str:
@@ -133,8 +136,9 @@ def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: floa
         lines += ["", f"servo error |G - D| while the target moved: mean {e_mm[moving].mean():.3f} mm, "
                   f"max {e_mm[moving].max():.3f} mm; angle mean {e_deg[moving].mean():.3f} deg, "
                   f"max {e_deg[moving].max():.3f} deg"]
-    events = [__import__("humanpt.schemas.humanpt_pb2", fromlist=["Event"]).Event.FromString(o.data)
-              for o in src.outputs() if o.topic.endswith("/events")]
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    events = [pb.Event.FromString(o.data) for o in src.outputs() if o.topic.endswith("/events")]
     warn = [e for e in events if e.severity >= 3]
     if warn:
         lines += ["", f"{len(warn)} warnings/errors, e.g.: " + "; ".join(f"{e.source}: {e.code}" for e in warn[:5])]
@@ -202,8 +206,9 @@ def _wait_alive(cfg_path: Path, names: tuple[str, ...], timeout_s: float, procs)
 
 
 def run_live(args, op, ctl, run_dir: Path) -> int:
-    from humanpt.cli.commands import _free_port_default, _open_session
+    from humanpt.cli.commands import _open_session
     from humanpt.runtime import config as cfgmod
+    from humanpt.runtime.bus import free_tcp_port
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas.convert import header
     from humanpt.sim_camera import SimCameraConfig
@@ -211,7 +216,7 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     from humanpt.twin.system import puma_cores
     from humanpt.twin.world import start_flange_for
 
-    port = args.port or _free_port_default()
+    port = args.port or free_tcp_port()
     over = parse_overrides(getattr(args, "set", None))
     cam = with_overrides(SimCameraConfig(seed=args.seed), over, "sim_camera")
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)

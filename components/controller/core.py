@@ -21,6 +21,7 @@ point (G and, with a driver, the tip P) is published; the shell appends it to th
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -55,6 +56,13 @@ def _mm(T_m: np.ndarray) -> np.ndarray:
     return T
 
 
+def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
+    """The desired frame D in the flange frame (m): on the camera's optical axis at dz,
+    parallel to the camera (Section 5)."""
+    return _m(transform_from_x(np.asarray(c.flange_T_camera_x))) @ make_transform(
+        np.eye(3), np.array([0, 0, c.dz_mm * 1e-3]))
+
+
 class ControllerCore(Core):
     name = "controller"
     config_type = ControllerConfig
@@ -80,7 +88,7 @@ class ControllerCore(Core):
 
     def _derive(self, c: ControllerConfig) -> None:
         self.flange_T_camera = _m(transform_from_x(np.asarray(c.flange_T_camera_x)))
-        self.flange_T_desired = self.flange_T_camera @ make_transform(np.eye(3), np.array([0, 0, c.dz_mm * 1e-3]))
+        self.flange_T_desired = flange_T_desired_m(c)
         self.flange_T_tool = _m(transform_from_x(np.asarray(c.flange_T_tool_x)))
         self.tob_T_tip = make_transform(np.eye(3), np.asarray(c.tob_t_tip_mm) * 1e-3)
         self.dt = c.cycle_period_ms * 1e-3
@@ -262,8 +270,6 @@ class ControllerCore(Core):
                 result["paper_residual_rms_mm"] = round(float(paper.residual_rms_mm), 5)
             except (GeometryError, ValueError) as e:
                 outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "calibration_paper_failed", str(e)))
-        import dataclasses
-
         self.config = dataclasses.replace(self.config, tob_t_tip_mm=tuple(float(v) for v in tip), has_driver=True)
         self._derive(self.config)
         outs.append(self.event(t_ns, pb.SEVERITY_INFO, "calibration_done", json.dumps(result)))

@@ -29,6 +29,15 @@ def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[st
     return conf
 
 
+def free_tcp_port() -> int:
+    """A free TCP port on loopback (for a self-contained router: demo, bench, tests)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
 def liveliness_key(cell: str, component: str) -> str:
     """The liveliness token of a running component."""
     return f"{KEY_PREFIX}/{cell}/{component}"
