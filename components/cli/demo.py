@@ -232,7 +232,7 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     cfg_path = run_dir / "humanpt.toml"
     sections = {
         "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
-                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True},
+                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer"},
         "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
     }

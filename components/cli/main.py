@@ -255,6 +255,9 @@ def main(argv: list[str] | None = None) -> int:
     if not args.verb:
         ap.print_help()
         return 2
+    from humanpt.runtime.tuning import tune_process
+
+    tune_process()
     try:
         return _dispatch(ap, args)
     except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError, ValueError) as e:

@@ -36,6 +36,10 @@ class ControllerConfig:
     max_speed_mm_s: float = live(100.0, "translation speed limit (the paper's step controller)")
     max_rotation_deg_s: float = live(60.0, "rotation speed limit")
     cycle_period_ms: float = 28.0
+    # Command cycle k + 1 as soon as the state of cycle k is in (from where cycle k's step
+    # will have put the flange): the gateway then answers each STATUS at once instead of
+    # waiting on three bus hops within its reply deadline.
+    command_ahead: bool = live(True, "command each ALTER cycle one cycle ahead (no bus wait at the gateway)")
     lost_action: Literal["hold", "return"] = live("hold", "target lost: stop on current location, or return")
     start_mode: Literal["track", "hold"] = "track"
     recording_delay_cycles: int = live(10, "a path point every N cycles (GUI: recording delay)")

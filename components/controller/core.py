@@ -2,8 +2,11 @@
 calibration (§4.1) and playback.
 
 Once per ALTER cycle (on each ``pose_filter/tob_state``, which the filter publishes for
-every robot state) it computes the flange correction for that cycle and publishes it on
-``controller/command``, with a ``controller/status``.  Modes:
+every robot state) it computes the flange correction and publishes it on
+``controller/command``, with a ``controller/status``: by default (``command_ahead``) for
+the NEXT cycle, from where this cycle's step will have put the flange, so the gateway has
+each cycle's command before that cycle's STATUS arrives (a cycle with nothing sent for
+it, e.g. the first, is predicted with the gateway's velocity hold or zero).  Modes:
 
 * track: D (on the camera axis at dz) follows G; position-only when one or two sources
   are seen; when the target is lost, hold ("stop on current location") or return to the
@@ -123,13 +126,19 @@ class ControllerCore(Core):
             return []
         cycle, stamp, world_T_flange = self.robot
         c = self.config
-        if st.after_measurement and cycle in self._sent:
-            # A new image between two statuses: command the next cycle now, from where this
-            # cycle's command will have put the flange, so the gateway can answer that
-            # cycle's status at once with the freshest information.
-            d_t, d_r = self._sent[cycle]
-            world_T_flange = law.apply_step(world_T_flange, d_t, d_r)
+        ahead_s = 0.0
+        base = self._sent.get(cycle)
+        if base is None and c.command_ahead:
+            # Nothing sent for this cycle (the start, or this state came late): the gateway
+            # answers it with its velocity hold (the freshest older step), or zero.
+            base = self._sent.get(cycle - 1) or self._sent.get(cycle - 2) or (np.zeros(3), np.zeros(3))
+        if (st.after_measurement or c.command_ahead) and base is not None:
+            # Command the next cycle now, from where this cycle's step will have put the
+            # flange, so the gateway can answer that cycle's status at once (after a new
+            # image: with the freshest information).
+            world_T_flange = law.apply_step(world_T_flange, *base)
             cycle, stamp = cycle + 1, stamp + round(c.cycle_period_ms * 1e6)
+            ahead_s = c.cycle_period_ms * 1e-3
         outs: list[Output] = []
         valid = st.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
         world_T_tob = v_tob = w_tob = None
@@ -144,6 +153,9 @@ class ControllerCore(Core):
             # The filter predicts ahead for the paper's law; with feed-forward the error is
             # taken at the robot's instant (+ lead) and the velocity carries the next cycle.
             world_T_tob = law.extrapolate(world_T_tob, v_tob, w_tob, (stamp + c.lead_ms * 1e6 - st.header.stamp_ns) * 1e-9)
+        elif valid and ahead_s:
+            # The filter predicted to this cycle; the command is for the next one.
+            world_T_tob = law.extrapolate(world_T_tob, v_tob, w_tob, ahead_s)
         zero = np.zeros(3)
         step = law.Step(zero, zero, False, 0.0, 0.0)
         mode = self.mode

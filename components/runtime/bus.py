@@ -12,7 +12,8 @@ from humanpt.schemas.topics import KEY_PREFIX
 
 def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[str, ...] | None = None,
                  connect: tuple[str, ...] | None = None) -> zenoh.Config:
-    """A Zenoh config from the ``[runtime]`` section (client of the router by default).
+    """A Zenoh config from the ``[runtime]`` section (client of the router by default; a
+    peer listens on ``peer_listen`` so the others can link to it directly).
 
     Multicast scouting is off unless ``multicast_scouting = true``: endpoints are explicit.
     """
@@ -21,6 +22,8 @@ def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[st
     eps = rt.connect if connect is None else connect
     if eps:
         conf.insert_json5("connect/endpoints", json.dumps(list(eps)))
+    if listen is None and (mode or rt.mode) == "peer":
+        listen = rt.peer_listen
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(rt.multicast_scouting))

@@ -160,7 +160,10 @@ class RuntimeConfig:
     cell: str = "cell0"
     mode: Literal["client", "peer"] = "client"
     connect: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
-    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)
+    listen: tuple[str, ...] = ("tcp/127.0.0.1:7447",)  # the router's
+    # mode = "peer": components still meet at the router but then link to each other
+    # directly (one hop instead of two through the router), listening here (port 0: any).
+    peer_listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     run_dir: str = "runs"
     record: bool = True
     chunk_size: int = 256 * 1024

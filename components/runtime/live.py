@@ -151,22 +151,27 @@ class LiveShell:
 
     # -- the one worker thread -----------------------------------------------------------
     def _feed(self, t_ns: int, topic: str, msg, data: bytes | None = None) -> list:
-        if self.recorder:
-            self.recorder.write(IN, t_ns, topic, msg, data)
+        # Outputs go on the bus first and into the recording after: recording never adds
+        # to the latency of what the core produced.  The file keeps consumption order (the
+        # input, then its outputs).
+        if self.recorder and data is None:
+            data = msg.SerializeToString()  # as given, before the core sees it
         self.counters.consumed += 1
         try:
             outs = self.core.step(t_ns, topic, msg)
         except Exception as e:  # noqa: BLE001 - last resort: a core bug must not kill the process
+            if self.recorder:
+                self.recorder.write(IN, t_ns, topic, msg, data)
             self.counters.core_errors += 1
             log.exception("%s: core raised on %s", self.core.name, topic)
             self._publish_raw(f"{self.core.name}/events", pb.Event(
                 header=header(t_ns), severity=pb.SEVERITY_ERROR, source=self.core.name, code="core_error",
                 text=f"{type(e).__name__}: {e}"))
             return []
+        payloads = []
         for out_topic, out in outs:
             payload = out.SerializeToString()
-            if self.recorder:
-                self.recorder.write(OUT, t_ns, out_topic, out, payload)
+            payloads.append(payload)
             adapter = self._local_out.get(out_topic)
             if adapter is not None:
                 try:
@@ -176,6 +181,10 @@ class LiveShell:
             if "/" in out_topic:  # bus topics are published even when an adapter also takes them
                 self._publish(out_topic, payload)
             self.counters.produced += 1
+        if self.recorder:
+            self.recorder.write(IN, t_ns, topic, msg, data)
+            for (out_topic, out), payload in zip(outs, payloads, strict=True):
+                self.recorder.write(OUT, t_ns, out_topic, out, payload)
         return outs
 
     def _publish(self, short: str, payload: bytes) -> None:

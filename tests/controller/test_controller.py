@@ -51,6 +51,8 @@ class Rig:
         self.k = 0
         self.outs: list[tuple[str, object]] = []
         self.flanges = []
+        self.pending: dict[int, pb.FlangeCommand] = {}
+        self.answered: list[bool] = []
 
     def command(self, verb, **args):
         msg = pb.Command(header=header(self.k * DT_NS), component="controller", verb=verb,
@@ -67,8 +69,15 @@ class Rig:
                              linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k)
             outs = self.core.step(t + 1, "pose_filter/tob_state", st)
             self.outs += outs
-            cmd = [m for tp, m in outs if tp == "controller/command"][0]
-            self.flange = law.apply_step(self.flange, from_vector3(cmd.d_translation_m), from_vector3(cmd.d_rotation_rad))
+            for cmd in (m for tp, m in outs if tp == "controller/command"):
+                self.pending[cmd.cycle] = cmd
+            # As the gateway: cycle k is answered with the command for cycle k (commanded
+            # one cycle ahead by default), else the robot holds.
+            cmd = self.pending.pop(self.k, None)
+            self.answered.append(cmd is not None)
+            if cmd is not None:
+                self.flange = law.apply_step(self.flange, from_vector3(cmd.d_translation_m),
+                                             from_vector3(cmd.d_rotation_rad))
             self.flanges.append(self.flange.copy())
             self.k += 1
 
@@ -85,6 +94,21 @@ class Rig:
 
 def static(T):
     return lambda t: (T, np.zeros(3), np.zeros(3))
+
+
+@pytest.mark.parametrize("ahead", [True, False])
+def test_commands_each_cycle_one_ahead_from_the_predicted_flange(ahead):
+    """command_ahead: the state of cycle k commands cycle k + 1, from the flange pose that
+    cycle k's step leads to; every cycle then has its command in time."""
+    core = ControllerCore(ControllerConfig(command_ahead=ahead))
+    rig = Rig(core, start_flange(TARGET_X, (20, -10, 15), (3, -2, 4)), static(T_m(TARGET_X)))
+    rig.step(60)
+    cmds = rig.of("controller/command")
+    assert [c.cycle for c in cmds] == (list(range(1, 61)) if ahead else list(range(60)))
+    # Ahead, only the very first cycle goes unanswered (the robot holds it).
+    assert rig.answered == ([False] + [True] * 59 if ahead else [True] * 60)
+    e_mm, e_deg = rig.d_error()
+    assert e_mm < 0.1 and e_deg < 0.3, (e_mm, e_deg)
 
 
 @pytest.mark.parametrize("which", ["thetau", "paper"])

@@ -165,3 +165,33 @@ def test_topics_and_echo_show_live_traffic(router, procs, tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.count("--- humanpt/test/pinger/ping (humanpt.Tick)") == 2
     assert "period_ns: 100000000" in r.stdout
+
+
+def test_peer_mode_links_components_directly_and_they_still_talk(router, procs, tmp_path):
+    """mode = "peer": sessions meet at the router, then link to each other directly (one hop)."""
+    from humanpt.runtime.bus import zenoh_config
+    from humanpt.runtime.config import RuntimeConfig
+
+    port, _ = router
+    rt = RuntimeConfig(cell="test", mode="peer", connect=(f"tcp/127.0.0.1:{port}",))
+    with zenoh.open(zenoh_config(rt)) as a, zenoh.open(zenoh_config(rt)) as b:
+        deadline = time.monotonic() + 10.0
+        while str(b.info.zid()) not in {str(z) for z in a.info.peers_zid()} and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert str(b.info.zid()) in {str(z) for z in a.info.peers_zid()}, "the peers did not link directly"
+        q: queue.Queue = queue.Queue()
+        sub = b.declare_subscriber("humanpt/test/x", lambda s: q.put(s.payload.to_bytes()))
+        time.sleep(0.2)
+        a.put("humanpt/test/x", b"hello")
+        assert q.get(timeout=5.0) == b"hello"
+        sub.undeclare()
+    # The processes of a peer-mode config exchange messages as clients do.
+    cfg = write_config(tmp_path / "peer.toml", port, extra='mode = "peer"\n')
+    with zenoh_client(port) as s:
+        q2, sub2 = _pongs(s)
+        pinger = procs.start("pinger", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
+        ponger = procs.start("ponger", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
+        assert len(_collect(q2, 3)) == 3
+        sub2.undeclare()
+    procs.stop(ponger)
+    procs.stop(pinger)
