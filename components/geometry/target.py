@@ -58,6 +58,10 @@ def tob_frame_from_points(a_p_a_mm, a_p_b_mm, a_p_c_mm) -> np.ndarray:
     a = np.asarray(a_p_a_mm, dtype=float)
     b = np.asarray(a_p_b_mm, dtype=float)
     c = np.asarray(a_p_c_mm, dtype=float)
+    if a.shape == (3,) and b.shape == (3,) and c.shape == (3,):
+        frame = _tob_frame_single(a.tolist(), b.tolist(), c.tolist())
+        if frame is not None:
+            return frame
     if a.shape[-1:] != (3,) or b.shape[-1:] != (3,) or c.shape[-1:] != (3,):
         raise ValueError("source points must have shape (..., 3)")
     g = (a + b + c) / 3.0
@@ -86,6 +90,45 @@ def tob_frame_from_points(a_p_a_mm, a_p_b_mm, a_p_c_mm) -> np.ndarray:
         axis=-1,
     )
     return make_transform(rot, g)
+
+
+def _norm3(x: float, y: float, z: float) -> float:
+    """``np.linalg.norm`` of a 3-vector, the same number (squares summed in order)."""
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _tob_frame_single(a: list, b: list, c: list) -> np.ndarray | None:
+    """:func:`tob_frame_from_points` for one triangle in plain float arithmetic: the same
+    operations in the same order as the array code (so the same numbers), without numpy's
+    per-call overhead on 3-vectors. None when the array code has to decide (non-finite
+    input, coincident or collinear points: it raises with the message)."""
+    ax, ay, az = a
+    bx, by, bz = b
+    cx, cy, cz = c
+    gx, gy, gz = (ax + bx + cx) / 3.0, (ay + by + cy) / 3.0, (az + bz + cz) / 3.0
+    rax, ray, raz = ax - gx, ay - gy, az - gz
+    rbx, rby, rbz = bx - gx, by - gy, bz - gz
+    # w = r_b x r_a, u = -r_a, v = w x u (np.cross's operation order)
+    wx, wy, wz = rby * raz - rbz * ray, rbz * rax - rbx * raz, rbx * ray - rby * rax
+    ux, uy, uz = -rax, -ray, -raz
+    vx, vy, vz = wy * uz - wz * uy, wz * ux - wx * uz, wx * uy - wy * ux
+    n_a = _norm3(rax, ray, raz)
+    n_b = _norm3(rbx, rby, rbz)
+    n_w = _norm3(wx, wy, wz)
+    if not (math.isfinite(n_w) and n_a >= 1e-9 and n_b >= 1e-9):
+        return None
+    if not n_w / (n_a * n_b) >= COLLINEAR_SINE_TOL:
+        return None
+    n_u = _norm3(ux, uy, uz)
+    n_v = _norm3(vx, vy, vz)
+    return np.array(
+        [
+            [ux / n_u, vx / n_v, wx / n_w, gx],
+            [uy / n_u, vy / n_v, wy / n_w, gy],
+            [uz / n_u, vz / n_v, wz / n_w, gz],
+            [0.0, 0.0, 0.0, 1.0],
+        ]
+    )
 
 
 def tob_T_tip_on_w_axis(distance_mm: float) -> np.ndarray:
@@ -174,6 +217,7 @@ class TargetModel:
             object.__setattr__(self, name, value)
         pts = self.source_positions_mm
         sides = _sides(pts)
+        object.__setattr__(self, "_sides_mm", tuple(sides.tolist()))  # for label_sources
         if np.min(sides) <= self.source_diameter_mm:
             raise ValueError(
                 f"TargetModel: sides {np.round(sides, 3).tolist()} mm must exceed the source "
@@ -302,6 +346,9 @@ def label_sources(
     if not np.all(np.isfinite(p)):
         raise GeometryError("source points are not finite")
     tol = model.side_tolerance_mm if side_tolerance_mm is None else float(side_tolerance_mm)
+    lab = _label_single(model, p, viewpoint_mm, tol)
+    if lab is not None:
+        return lab
     sides = _sides(p)
     if np.min(sides) < 1e-9:
         raise GeometryError(f"two light sources coincide (sides {sides.tolist()} mm)")
@@ -343,6 +390,56 @@ def label_sources(
             f"(errors {best_err:.3f} and {candidates[1][0]:.3f} mm)"
         )
     return Labelling(tuple(int(i) for i in order), q, s, best_err)
+
+
+_PERMUTATIONS = tuple(itertools.permutations(range(3)))
+
+
+def _label_single(model: TargetModel, p: np.ndarray, viewpoint_mm, tol: float):
+    """:func:`label_sources` in plain float arithmetic (the array code's operations in the
+    same order, so the same numbers): the Labelling, or None when the array code has to
+    decide (it raises with the message)."""
+    pts = p.tolist()
+    vx, vy, vz = np.asarray(viewpoint_mm, dtype=float).reshape(3).tolist()
+    # side k joins point k and point k + 1; |p_i - p_j| == |p_j - p_i| exactly
+    d01 = _norm3(pts[0][0] - pts[1][0], pts[0][1] - pts[1][1], pts[0][2] - pts[1][2])
+    d12 = _norm3(pts[1][0] - pts[2][0], pts[1][1] - pts[2][1], pts[1][2] - pts[2][2])
+    d20 = _norm3(pts[2][0] - pts[0][0], pts[2][1] - pts[0][1], pts[2][2] - pts[0][2])
+    if not min(d01, d12, d20) >= 1e-9:
+        return None
+    dist = ((0.0, d01, d20), (d01, 0.0, d12), (d20, d12, 0.0))
+    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = pts
+    gx, gy, gz = (ax + bx + cx) / 3.0, (ay + by + cy) / 3.0, (az + bz + cz) / 3.0
+    ux, uy, uz = bx - ax, by - ay, bz - az
+    wx, wy, wz = cx - ax, cy - ay, cz - az
+    nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+    n_norm = _norm3(nx, ny, nz)
+    if not n_norm / (d01 * d20) >= COLLINEAR_SINE_TOL:
+        return None
+    lx, ly, lz = gx - vx, gy - vy, gz - vz
+    facing = (nx * lx + ny * ly + nz * lz) / (n_norm * _norm3(lx, ly, lz))
+    if not abs(facing) >= 1e-6:
+        return None
+    m0, m1, m2 = model._sides_mm
+    candidates = []
+    for order in _PERMUTATIONS:
+        i, j, k = order
+        qi, qj = pts[i], pts[j]
+        rx, ry, rz = qj[0] - gx, qj[1] - gy, qj[2] - gz  # q1 - g
+        sx, sy, sz = qi[0] - gx, qi[1] - gy, qi[2] - gz  # q0 - g
+        w0, w1, w2 = ry * sz - rz * sy, rz * sx - rx * sz, rx * sy - ry * sx
+        if w0 * lx + w1 * ly + w2 * lz <= 0:
+            continue
+        s = (dist[i][j], dist[j][k], dist[k][i])
+        err = max(abs(s[0] - m0), abs(s[1] - m1), abs(s[2] - m2))
+        candidates.append((err, order, s))
+    if not candidates:
+        return None
+    candidates.sort(key=lambda c: c[0])
+    best_err, order, s = candidates[0]
+    if not best_err <= tol or (len(candidates) > 1 and candidates[1][0] <= tol):
+        return None
+    return Labelling(order, p[list(order)], np.array(s), best_err)
 
 
 def estimate_camera_T_tob(

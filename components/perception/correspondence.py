@@ -278,7 +278,7 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
     n_pairs = len(ii)
     if n_pairs == 0:
         return lost()
-    model_sides = np.sort(s.model.sides_mm)
+    model_sides = np.sort(np.array(s.model._sides_mm))
     tol = s.model.side_tolerance_mm
     if n_pairs >= 3:
         combos = _combinations(n_pairs, 3)
@@ -310,6 +310,37 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
     return _finish(blobs, uv, ii[[best]], jj[[best]], s)
 
 
+def _eq4_rows(params: PsvsParams, uv: list, right, left) -> list | None:
+    """:func:`humanpt.geometry.triangulate_eq4` of the pairs (right[k], left[k]) of ideal
+    pixels ``uv`` (a list of (u, v)) in plain float arithmetic - its operations in the
+    same order, so the same numbers - as a list of (x, y, z); None where it raises."""
+    a_u, a_v, b, m, l = params.a_u, params.a_v, params.baseline_mm, params.m_mm, params.l_mm
+    cr, cl = params.right_camera, params.left_camera
+    zr, zl = cr.centre_mm[2], cl.centre_mm[2]
+    h = b / 2.0
+    num0 = a_u * (b + m)
+    rows = []
+    for i, j in zip(right, left, strict=True):
+        ur, vr = uv[i]
+        ul, vl = uv[j]
+        dv_r = vr - cr.v0
+        du_r = ur - cr.u0 - cr.skew * dv_r / cr.a_v
+        dv_l = vl - cl.v0
+        du_l = ul - cl.u0 - cl.skew * dv_l / cl.a_v
+        den = du_l - du_r
+        if not (math.isfinite(den) and abs(den) >= 1e-12):
+            return None
+        z = (num0 + l * du_l) / den - h
+        x_right = (z + h) * du_r / a_u + h
+        x_left = (z + h - l) * du_l / a_u - h - m
+        y_right = (z + h) * dv_r / a_v
+        y_left = (z + h - l) * dv_l / a_v
+        if not (z - zr > 0 and z - zl > 0):
+            return None
+        rows.append((0.5 * (x_right + x_left), 0.5 * (y_right + y_left), z))
+    return rows
+
+
 def _finish(
     blobs: Blobs,
     uv: np.ndarray,
@@ -319,39 +350,72 @@ def _finish(
     method: str | None = None,
 ) -> Match | None:
     """Triangulate the chosen pairs with the configured method, name A, B, C (three
-    pairs), build the frame and the quality. None when three pairs cannot be labelled."""
+    pairs), build the frame and the quality. None when three pairs cannot be labelled.
+
+    Plain float arithmetic on these few numbers, in the order of the array formulas it
+    replaces (:func:`epipolar_residual_px`, ``np.sum`` of three terms adds them in order),
+    so the same numbers without numpy's per-call overhead."""
     method = method or s.triangulation
-    try:
-        p = triangulate(s.params, uv[right], uv[left], method=method, undistort=False)
-    except GeometryError:
-        return None
-    res = np.abs(epipolar_residual_px(s.params, uv[right], uv[left], p[:, 2]))
-    pairs = np.stack([right, left], axis=1)
-    chi2 = float(np.sum((res / s.epipolar_sigma_px) ** 2))
-    if len(right) == 3:
+    uv_list = uv.tolist()
+    right_l, left_l = right.tolist(), left.tolist()
+    if method == "eq4":
+        pts = _eq4_rows(s.params, uv_list, right_l, left_l)
+        if pts is None:
+            return None
+    else:
         try:
-            lab = label_sources(s.model, p)
+            pts = triangulate(s.params, uv[right], uv[left], method=method, undistort=False)
         except GeometryError:
             return None
-        order = list(lab.order)
-        p, res, pairs = p[order], res[order], pairs[order]
-        side_err = lab.sides_mm - s.model.sides_mm
-        chi2 += float(np.sum((side_err / s.side_sigma_mm) ** 2))
+        pts = pts.tolist()
+    params = s.params
+    b, l = params.baseline_mm, params.l_mm
+    v0r, v0l = params.right_camera.v0, params.left_camera.v0
+    res = [
+        abs(uv_list[i][1] - v0r - (uv_list[j][1] - v0l) * (z + b / 2.0 - l) / (z + b / 2.0))
+        for (_, _, z), i, j in zip(pts, right_l, left_l, strict=True)
+    ]
+    if len(res) <= 3:  # np.sum adds up to three terms in order
+        chi2 = 0.0
+        for r in res:
+            t = r / s.epipolar_sigma_px
+            chi2 += t * t
+    else:
+        chi2 = float(np.sum((np.array(res) / s.epipolar_sigma_px) ** 2))
+    pairs = list(zip(right_l, left_l, strict=True))
+    if len(pts) == 3:
+        try:
+            lab = label_sources(s.model, np.array(pts))
+        except GeometryError:
+            return None
+        order = lab.order
+        p = lab.camera_p_abc_mm
+        res = [res[k] for k in order]
+        pairs = [pairs[k] for k in order]
+        sigma = s.side_sigma_mm
+        e0, e1, e2 = (a - m for a, m in zip(lab.sides_mm.tolist(), s.model._sides_mm, strict=True))
+        t0, t1, t2 = e0 / sigma, e1 / sigma, e2 / sigma
+        chi2 += t0 * t0 + t1 * t1 + t2 * t2
         try:
             frame = tob_frame_from_points(p[0], p[1], p[2])
         except GeometryError:
             return None
         quality = _p_value(chi2, 6)
-        return Match(pairs, res, p, frame, FULL, quality, float(np.max(np.abs(side_err))))
+        return Match(
+            np.array(pairs), np.array(res), p, frame, FULL, quality, max(abs(e0), abs(e1), abs(e2))
+        )
+    p = np.array(pts)
     side_error = math.nan
-    n_terms = len(right)
-    if len(right) == 2:
-        dist = float(np.linalg.norm(p[0] - p[1]))
-        side_error = float(np.min(np.abs(dist - s.model.sides_mm)))
+    n_terms = len(pts)
+    if len(pts) == 2:
+        (x0, y0, z0), (x1, y1, z1) = pts
+        dx, dy, dz = x0 - x1, y0 - y1, z0 - z1
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+        side_error = min(abs(dist - m) for m in s.model._sides_mm)
         chi2 += (side_error / s.side_sigma_mm) ** 2
         n_terms += 1
-    quality = len(right) / 3.0 * _p_value(chi2, n_terms)
-    return Match(pairs, res, p, None, POSITION_ONLY, quality, side_error)
+    quality = len(pts) / 3.0 * _p_value(chi2, n_terms)
+    return Match(np.array(pairs), np.array(res), p, None, POSITION_ONLY, quality, side_error)
 
 
 def match_scan_line(blobs: Blobs, s: MatchSettings, scan_line_tol_px: float) -> Match:

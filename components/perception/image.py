@@ -104,7 +104,8 @@ def prepare(
     gray = to_mono8(pixels, msg.encoding)
     if invert:
         gray = cv2.bitwise_not(gray)
-    saturated = cv2.countNonZero(cv2.compare(gray, 254, cv2.CMP_GT))
+    # (the maximum first: a frame without a full-scale pixel needs no count)
+    saturated = 0 if gray.max() < 255 else cv2.countNonZero(cv2.compare(gray, 254, cv2.CMP_GT))
     if saturated > max_saturated_fraction * gray.size:
         return BadImage(
             "saturated",
