@@ -7,6 +7,8 @@ they read and raise :class:`MessageError` (a ``ValueError``) with a clear text.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from scipy.spatial.transform import Rotation
@@ -44,7 +46,7 @@ def header(stamp_ns: int, seq: int = 0, frame_id: str = "") -> pb.Header:
 
 def vector3(v) -> pb.Vector3:
     """(3,) array-like -> Vector3 (units as given)."""
-    x, y, z = (float(c) for c in np.asarray(v, dtype=float).reshape(3))
+    x, y, z = np.asarray(v, dtype=float).reshape(3).tolist()
     return pb.Vector3(x=x, y=y, z=z)
 
 
@@ -53,48 +55,57 @@ def from_vector3(m: pb.Vector3) -> np.ndarray:
     return np.array([m.x, m.y, m.z], dtype=float)
 
 
+def _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float, float]:
+    """Shepperd's method on plain floats: (x, y, z, w), unit, w >= 0."""
+    tr = m00 + m11 + m22
+    # Divide by the largest of the four candidates for stability.
+    if tr >= m00 and tr >= m11 and tr >= m22:
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        f = 0.25 / w
+        x, y, z = (m21 - m12) * f, (m02 - m20) * f, (m10 - m01) * f
+    elif m00 >= m11 and m00 >= m22:
+        x = 0.5 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
+        f = 0.25 / x
+        y, z, w = (m01 + m10) * f, (m02 + m20) * f, (m21 - m12) * f
+    elif m11 >= m22:
+        y = 0.5 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
+        f = 0.25 / y
+        x, z, w = (m01 + m10) * f, (m12 + m21) * f, (m02 - m20) * f
+    else:
+        z = 0.5 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
+        f = 0.25 / z
+        x, y, w = (m02 + m20) * f, (m12 + m21) * f, (m10 - m01) * f
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0:
+        n = -n
+    return x / n, y / n, z / n, w / n
+
+
 def quat_from_matrix(R: np.ndarray) -> np.ndarray:
     """(3, 3) rotation -> unit quaternion (x, y, z, w), w >= 0.
 
     Same result as ``scipy.spatial.transform.Rotation.from_matrix(R).as_quat(canonical=True)``
-    (tested), without scipy's per-call overhead: this runs several thousand times per
-    simulated second on the message path.
+    (tested, to 1e-12), without scipy's per-call overhead: this runs several thousand times
+    per simulated second on the message path, so it works on plain floats.
     """
-    m00, m01, m02 = R[0]
-    m10, m11, m12 = R[1]
-    m20, m21, m22 = R[2]
-    tr = m00 + m11 + m22
-    # Shepperd's method: divide by the largest of the four candidates for stability.
-    if tr >= m00 and tr >= m11 and tr >= m22:
-        w = 0.5 * np.sqrt(max(1.0 + tr, 0.0))
-        f = 0.25 / w
-        q = np.array([(m21 - m12) * f, (m02 - m20) * f, (m10 - m01) * f, w])
-    elif m00 >= m11 and m00 >= m22:
-        x = 0.5 * np.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        f = 0.25 / x
-        q = np.array([x, (m01 + m10) * f, (m02 + m20) * f, (m21 - m12) * f])
-    elif m11 >= m22:
-        y = 0.5 * np.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        f = 0.25 / y
-        q = np.array([(m01 + m10) * f, y, (m12 + m21) * f, (m02 - m20) * f])
-    else:
-        z = 0.5 * np.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        f = 0.25 / z
-        q = np.array([(m02 + m20) * f, (m12 + m21) * f, z, (m10 - m01) * f])
-    q /= np.linalg.norm(q)
-    return -q if q[3] < 0 else q
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
+    return np.array(_quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22))
+
+
+def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[float]]:
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
 
 
 def matrix_from_quat(q: np.ndarray) -> np.ndarray:
     """Quaternion (x, y, z, w), normalised here -> (3, 3) rotation (as scipy's as_matrix)."""
-    x, y, z, w = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    x, y, z, w = (float(c) for c in q)
+    return np.array(_matrix_rows_from_quat(x, y, z, w))
 
 
 # Single rotations through scipy's compiled Rotation backend: exactly the numbers of the
@@ -156,14 +167,18 @@ def pose(a_T_b: np.ndarray) -> pb.Pose:
     T = np.asarray(a_T_b, dtype=float)
     if T.shape != (4, 4):
         raise MessageError(f"a transform must be 4x4, got shape {T.shape}")
-    R = T[:3, :3]
-    if not np.abs(R @ R.T - np.eye(3)).max() < 1e-6 or np.linalg.det(R) < 0:
+    (m00, m01, m02, tx), (m10, m11, m12, ty), (m20, m21, m22, tz), _ = T.tolist()
+    # R R^T = I (to 1e-6) and det R > 0, on plain floats (a NaN fails every comparison).
+    r0, r1, r2 = (m00, m01, m02), (m10, m11, m12), (m20, m21, m22)
+    ok = all(abs(a[0] * b[0] + a[1] * b[1] + a[2] * b[2] - (1.0 if i == j else 0.0)) < 1e-6
+             for i, a in enumerate((r0, r1, r2)) for j, b in enumerate((r0, r1, r2)) if j >= i)
+    det = m00 * (m11 * m22 - m12 * m21) - m01 * (m10 * m22 - m12 * m20) + m02 * (m10 * m21 - m11 * m20)
+    if not ok or not det >= 0:
         raise MessageError("the rotation part of the transform is not a proper rotation")
-    qx, qy, qz, qw = quat_from_matrix(R)
-    t = T[:3, 3]
+    qx, qy, qz, qw = _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
     return pb.Pose(
-        translation=pb.Vector3(x=float(t[0]), y=float(t[1]), z=float(t[2])),
-        rotation=pb.Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw)),
+        translation=pb.Vector3(x=tx, y=ty, z=tz),
+        rotation=pb.Quaternion(x=qx, y=qy, z=qz, w=qw),
     )
 
 
@@ -174,15 +189,19 @@ def from_pose(m: pb.Pose) -> np.ndarray:
     a non-finite one raises MessageError.
     """
     r, p = m.rotation, m.translation
-    q = np.array([r.x, r.y, r.z, r.w], dtype=float)
-    t = np.array([p.x, p.y, p.z], dtype=float)
-    if not (np.all(np.isfinite(q)) and np.all(np.isfinite(t))):
+    x, y, z, w = r.x, r.y, r.z, r.w
+    tx, ty, tz = p.x, p.y, p.z
+    if not all(map(math.isfinite, (x, y, z, w, tx, ty, tz))):
         raise MessageError("pose holds a non-finite number")
-    T = np.eye(4)
-    if np.any(q != 0.0):
-        T[:3, :3] = matrix_from_quat(q)
-    T[:3, 3] = t
-    return T
+    if x == 0.0 and y == 0.0 and z == 0.0 and w == 0.0:
+        rows = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    else:
+        rows = _matrix_rows_from_quat(x, y, z, w)
+    rows[0].append(tx)
+    rows[1].append(ty)
+    rows[2].append(tz)
+    rows.append([0.0, 0.0, 0.0, 1.0])
+    return np.array(rows)
 
 
 _ENCODINGS = {

@@ -19,12 +19,33 @@ with the rotation about the flange origin.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from humanpt.geometry.transforms import invert_transform, x_from_transform
+from humanpt.geometry.transforms import x_from_transform
 from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
+
+
+def norm3(v) -> float:
+    """|v| of a 3-vector (plain floats: numpy's norm costs more than the sum on a (3,))."""
+    x, y, z = v.tolist() if isinstance(v, np.ndarray) else v
+    return math.sqrt(x * x + y * y + z * z)
+
+
+def _inverse(a_T_b: np.ndarray) -> np.ndarray:
+    """b_T_a of one rigid (4, 4) transform."""
+    T = np.eye(4)
+    Rt = a_T_b[:3, :3].T
+    T[:3, :3] = Rt
+    T[:3, 3] = -(Rt @ a_T_b[:3, 3])
+    return T
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 @dataclass(frozen=True)
@@ -41,7 +62,7 @@ def saturate(
 ) -> tuple[np.ndarray, np.ndarray, bool]:
     """Scale a step down to the per-cycle limits (by norm, keeping its direction)."""
     sat = False
-    nt, nr = float(np.linalg.norm(d_t)), float(np.linalg.norm(d_r))
+    nt, nr = norm3(d_t), norm3(d_r)
     if nt > max_step_m:
         d_t, sat = d_t * (max_step_m / nt), True
     if nr > max_step_rad:
@@ -69,7 +90,7 @@ def extrapolate(
 
 def desired_flange(world_T_tob: np.ndarray, flange_T_desired: np.ndarray) -> np.ndarray:
     """The flange pose at which the desired frame D coincides with G."""
-    return world_T_tob @ invert_transform(flange_T_desired)
+    return world_T_tob @ _inverse(flange_T_desired)
 
 
 def pose_error(
@@ -107,7 +128,7 @@ def thetau_step(
     w = k_r * e_r
     if feed_forward:
         # The desired flange pose moves rigidly with the target.
-        v = v + v_tob_m_s + np.cross(w_tob_rad_s, world_T_fd[:3, 3] - world_T_tob[:3, 3])
+        v = v + v_tob_m_s + _cross(w_tob_rad_s, world_T_fd[:3, 3] - world_T_tob[:3, 3])
         w = w + w_tob_rad_s
     if position_only:
         # Keep the orientation; move so that D (not the flange origin) goes to G.
@@ -117,15 +138,15 @@ def thetau_step(
         e_r = np.zeros(3)
     # Report the error as the paper sees it: where D is with respect to G.
     world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
-    e_gd = float(np.linalg.norm(world_T_tob[:3, 3] - world_p_d))
+    e_gd = norm3(world_T_tob[:3, 3] - world_p_d)
     # Deadbands: each part is left alone while its error is small and the target still.
-    if np.linalg.norm(e_r) < deadband_rad and np.linalg.norm(w_tob_rad_s) < still_rad_s:
+    if norm3(e_r) < deadband_rad and norm3(w_tob_rad_s) < still_rad_s:
         w = np.zeros(3)
         v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
-    if e_gd < deadband_m and np.linalg.norm(v_tob_m_s) < still_m_s and not np.any(w):
+    if e_gd < deadband_m and norm3(v_tob_m_s) < still_m_s and not np.any(w):
         v = np.zeros(3)
     d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
-    return Step(d_t, d_r, sat, e_gd, float(np.linalg.norm(e_r)))
+    return Step(d_t, d_r, sat, e_gd, norm3(e_r))
 
 
 def paper_step(
@@ -141,7 +162,7 @@ def paper_step(
     position_only: bool = False,
 ) -> Step:
     """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame."""
-    flange_T_tob = invert_transform(world_T_flange) @ world_T_tob
+    flange_T_tob = _inverse(world_T_flange) @ world_T_tob
     x_fg = x_from_transform(_mm(flange_T_tob))
     x_fd = x_from_transform(_mm(flange_T_desired))
     e = x_fg - x_fd
