@@ -46,7 +46,9 @@ def _lockstep_speed(seconds: float, record: bool) -> float:
     from humanpt.twin.system import build_system
 
     with tempfile.TemporaryDirectory() as d:
-        world = build_system("arc", seed=0, robot="puma", run_dir=d if record else None, keep_outputs=False)
+        # As humanpt demo --lockstep runs it (no output digest).
+        world = build_system("arc", seed=0, robot="puma", run_dir=d if record else None, keep_outputs=False,
+                             digest=False)
         t0 = time.perf_counter()
         world.run_for(seconds)
         world.close()

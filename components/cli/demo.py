@@ -165,7 +165,7 @@ def run_lockstep(args, op, ctl, run_dir: Path) -> int:
     world = build_system(op, seed=args.seed, controller=ctl, robot=args.robot, run_dir=run_dir,
                          sim_camera=with_overrides(SimCameraConfig(), over, "sim_camera"),
                          perception=with_overrides(PerceptionConfig(), over, "perception"),
-                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"))
+                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"), digest=False)
     t0 = time.perf_counter()
     # Record once the target starts to move (the servo has acquired it by then).
     world.run_until(int(op.start_delay_s * 1e9))

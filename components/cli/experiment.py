@@ -82,7 +82,7 @@ def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None,
         op = dataclasses.replace(op, speed_scale=speed_scale)
         record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
     world = build_system(op, seed=seed, perception=PerceptionConfig(method=method), controller=ctl, robot=robot,
-                         run_dir=run_dir)
+                         run_dir=run_dir, digest=False)
     t0 = time.perf_counter()
     world.run_until(round(record_from_s * 1e9))
     world.lockstep.inject(world.now_ns, "controller", "console/command",

@@ -71,13 +71,14 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  perception: PerceptionConfig | None = None, pose_filter: PoseFilterConfig | None = None,
                  controller: ControllerConfig | None = None, sim_camera: SimCameraConfig | None = None,
                  start_offset_mm_deg=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), robot_cores=None,
-                 robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True
-                 ) -> TwinWorld:
+                 robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True,
+                 digest: bool = True) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
     controller records the tip too.  ``robot``: ``standin`` (integrates commands) or
-    ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line)."""
+    ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
+    ``digest=False``: no output hash (faster; for runs nobody compares)."""
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -114,7 +115,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     cores = [PerceptionCore(perception or PerceptionConfig()), PoseFilterCore(pose_filter or PoseFilterConfig()),
              ControllerCore(ctl)]
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
-                        dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs)
+                        dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
     if wire:
         world.lockstep.connect_serial("alter_gateway", "sim_robot", baud=robot_cores[1].config.baud)
     return world

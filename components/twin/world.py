@@ -108,6 +108,7 @@ def build_world(
     keep_outputs: bool = True,
     start_ns: int = 0,
     latency_ns: int = 0,
+    digest: bool = True,
 ) -> TwinWorld:
     """Assemble operator, stand-in robot and sim_camera (and ``extra_cores``, e.g. a
     perception or a controller) into a :class:`Lockstep`.
@@ -144,5 +145,6 @@ def build_world(
         latency_ns=latency_ns,
         run_dir=run_dir,
         keep_outputs=keep_outputs,
+        digest=digest,
     )
     return TwinWorld(ls, operator, robot_core, camera, extra)

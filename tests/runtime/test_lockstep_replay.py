@@ -3,6 +3,8 @@ perturbed core is caught with the divergence named."""
 
 from __future__ import annotations
 
+import pytest
+
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.recording import read
 from humanpt.runtime.replay import build_core, replay
@@ -81,3 +83,15 @@ def test_truncated_recording_replays_up_to_the_truncation(tmp_path):
     res = replay(cut)
     assert res.truncated and res.match, res.report()
     assert 0 < res.recorded_outputs < len(read(tmp_path / "ponger.mcap").outputs)
+
+
+def test_a_run_without_digest_says_so_and_runs_the_same():
+    def run(digest):
+        ls = Lockstep([PingerCore(PingerConfig(period_ms=20)), PongerCore(PongerConfig())], digest=digest)
+        ls.run_until(1_000_000_000)
+        return ls
+
+    plain, hashed = run(False), run(True)
+    assert [o.data for o in plain.outputs] == [o.data for o in hashed.outputs] and plain.outputs
+    with pytest.raises(RuntimeError, match="digest=False"):
+        plain.digest()
