@@ -22,12 +22,15 @@ limit (100 mm/s, 60 deg/s at 28 ms) is 280 units and 168 units, the range is +-3
 
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 from enum import IntFlag
+from functools import lru_cache
 
 import numpy as np
-from scipy.spatial.transform import Rotation
+
+from humanpt.alter.rotations import euler_zyx_deg_from_matrix, matrix_from_euler_zyx_deg
 
 MSG_STATUS = 0x53  # 'S'
 MSG_CORRECTION = 0x43  # 'C'
@@ -72,15 +75,18 @@ class MessageError(ValueError):
 
 
 def _check_int(name: str, value: int, lo: int, hi: int) -> None:
+    if type(value) is int and lo <= value <= hi:  # the common case, quickly
+        return
     if not isinstance(value, int | np.integer) or isinstance(value, bool) or not lo <= value <= hi:
         raise ValueError(f"{name} must be an int in [{lo}, {hi}], got {value!r}")
 
 
 def _to_units(value: float, unit: float, name: str, lo: int, hi: int) -> int:
     """Round to the nearest fixed-point unit (ties to even); raise when out of range."""
-    if not np.isfinite(value):
+    value = float(value)
+    if not math.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
-    units = round(float(value) / unit)
+    units = round(value / unit)
     if not lo <= units <= hi:
         raise ValueError(f"{name} = {value!r} is outside the wire range [{lo * unit}, {hi * unit}]")
     return units
@@ -124,8 +130,8 @@ class ControllerStatus:
         base_T_flange_mm = np.asarray(base_T_flange_mm, dtype=float)
         if base_T_flange_mm.shape != (4, 4):
             raise ValueError(f"base_T_flange_mm must be 4x4, got {base_T_flange_mm.shape}")
-        p = base_T_flange_mm[:3, 3]
-        ypr = Rotation.from_matrix(base_T_flange_mm[:3, :3]).as_euler("ZYX", degrees=True)
+        p = base_T_flange_mm[:3, 3].tolist()
+        ypr = euler_zyx_deg_from_matrix(base_T_flange_mm[:3, :3]).tolist()
         x, y, z = (
             _to_units(v, MM_PER_UNIT, n, INT32_MIN, INT32_MAX)
             for v, n in zip(p, "xyz", strict=True)
@@ -151,7 +157,7 @@ class ControllerStatus:
     def base_T_flange_mm(self) -> np.ndarray:
         """(4, 4) homogeneous pose of the flange in the base frame, translation in mm."""
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_euler("ZYX", self.ypr_deg, degrees=True).as_matrix()
+        T[:3, :3] = _rotation_cdeg(self.yaw_cdeg, self.pitch_cdeg, self.roll_cdeg)
         T[:3, 3] = self.position_mm
         return T
 
@@ -235,10 +241,25 @@ class Correction:
     def delta_T_mm(self) -> np.ndarray:
         """(4, 4) homogeneous delta: rotation dR, translation in mm."""
         T = np.eye(4)
-        drx, dry, drz = self.rotation_deg
-        T[:3, :3] = Rotation.from_euler("ZYX", [drz, dry, drx], degrees=True).as_matrix()
+        T[:3, :3] = _rotation_cdeg(self.drz_cdeg, self.dry_cdeg, self.drx_cdeg)
         T[:3, 3] = self.translation_mm
         return T
+
+
+@lru_cache(maxsize=4096)
+def _rotation_cdeg_cached(z_cdeg: int, y_cdeg: int, x_cdeg: int) -> np.ndarray:
+    R = matrix_from_euler_zyx_deg(np.array([z_cdeg, y_cdeg, x_cdeg], dtype=float) * DEG_PER_UNIT)
+    R.flags.writeable = False
+    return R
+
+
+def _rotation_cdeg(z_cdeg: int, y_cdeg: int, x_cdeg: int) -> np.ndarray:
+    """(3, 3) Rz(z) Ry(y) Rx(x) of wire angles [0.01 deg], as
+    ``Rotation.from_euler("ZYX", [z, y, x] * 0.01, degrees=True).as_matrix()``.
+
+    Cached (read-only arrays): a correction's small steps and a slowly turning flange
+    repeat the same few wire angles cycle after cycle."""
+    return _rotation_cdeg_cached(int(z_cdeg), int(y_cdeg), int(x_cdeg))
 
 
 # --- wire encoding ----------------------------------------------------------------------

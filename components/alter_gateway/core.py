@@ -33,6 +33,7 @@ header.frame_id says whether its step is in ``world`` (default) or ``tool``.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass
 
@@ -66,13 +67,22 @@ from humanpt.alter_gateway.safety import (
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_vector3, pose
+from humanpt.schemas.convert import pose
 
 _CYCLE_MOD = 1 << 32
 # Commands further ahead than this (cycles) are refused: the controller's cycle count is off.
 MAX_LEAD_CYCLES = 64
 # Command modes that mean "do not move".
 _ZERO_MODES = (pb.CONTROL_MODE_HOLD, pb.CONTROL_MODE_IDLE)
+
+# Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
+_ALTER_ACTIVE, _TOOL_MODE, _CUMULATIVE, _ARM_POWER, _FAULT = (
+    int(StatusBits.ALTER_ACTIVE),
+    int(StatusBits.TOOL_MODE),
+    int(StatusBits.CUMULATIVE),
+    int(StatusBits.ARM_POWER),
+    int(StatusBits.FAULT),
+)
 
 ROBOT_STATE = "alter_gateway/robot_state"
 EVENTS = "alter_gateway/events"
@@ -123,6 +133,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._commands: dict[int, Command] = {}
         self._status: ControllerStatus | None = None
         self._status_t_ns: int | None = None  # when the last STATUS arrived
+        # (status, its base_T_flange, world_T_flange): both read once per STATUS, mm.
+        self._status_pose: tuple[ControllerStatus, np.ndarray, np.ndarray] | None = None
         self._pending: tuple[int, int] | None = None  # (cycle, deadline_ns) awaiting an answer
         self._prev_cycle: int | None = None  # last STATUS cycle of this link session
         self._prev_fresh: bool | None = (
@@ -293,11 +305,10 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self.counters["commands_dropped"] += 1
             return  # its token is gone: nothing from it moves the robot until it is back
         frame = msg.header.frame_id or "world"
-        dp_mm = from_vector3(msg.d_translation_m) * 1000.0
-        rv_rad = from_vector3(msg.d_rotation_rad)
-        if frame not in ("world", "tool") or not (
-            np.all(np.isfinite(dp_mm)) and np.all(np.isfinite(rv_rad))
-        ):
+        dt, dr = msg.d_translation_m, msg.d_rotation_rad
+        step = (dt.x * 1000.0, dt.y * 1000.0, dt.z * 1000.0, dr.x, dr.y, dr.z)
+        dp_mm, rv_rad = np.array(step[:3]), np.array(step[3:])
+        if frame not in ("world", "tool") or not all(map(math.isfinite, step)):
             self.counters["commands_dropped"] += 1
             self._ev(
                 outs,
@@ -464,20 +475,27 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         else:
             self._pending = (k, rx_ns + round(cfg.reply_deadline_ms * 1e6))
 
+    def _pose(self, status: ControllerStatus) -> tuple[np.ndarray, np.ndarray]:
+        """(base_T_flange, world_T_flange) of a STATUS, mm; computed once. Do not modify."""
+        if self._status_pose is None or self._status_pose[0] is not status:
+            base_T_flange = status.base_T_flange_mm()
+            self._status_pose = (status, base_T_flange, self._world_T_base @ base_T_flange)
+        return self._status_pose[1:]
+
     def _robot_state(self, status: ControllerStatus, rx_ns: int) -> Output:
-        world_T_flange = self._world_T_base @ status.base_T_flange_mm()
+        world_T_flange = self._pose(status)[1].copy()
         world_T_flange[:3, 3] /= 1000.0
-        b = status.bits
+        b = int(status.bits)
         stamp = max(0, rx_ns - round(self.config.status_delay_ms * 1e6))
         return ROBOT_STATE, pb.RobotState(
             header=self.next_header(ROBOT_STATE, stamp, "world"),
             world_T_flange=pose(world_T_flange),
             status=pb.AlterStatus(
-                alter_active=StatusBits.ALTER_ACTIVE in b,
-                tool_mode=StatusBits.TOOL_MODE in b,
-                cumulative=StatusBits.CUMULATIVE in b,
-                arm_power=StatusBits.ARM_POWER in b,
-                fault=StatusBits.FAULT in b,
+                alter_active=bool(b & _ALTER_ACTIVE),
+                tool_mode=bool(b & _TOOL_MODE),
+                cumulative=bool(b & _CUMULATIVE),
+                arm_power=bool(b & _ARM_POWER),
+                fault=bool(b & _FAULT),
             ),
             cycle=status.cycle,
             missed_cycles=self._missed,
@@ -557,11 +575,11 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     ) -> Correction:
         """Clamp, keep inside the envelope, change to the ALTER frame, quantise."""
         cfg = self.config
-        base_T_flange = status.base_T_flange_mm()
+        base_T_flange, world_T_flange = self._pose(status)
         world_R_base = self._world_T_base[:3, :3]
-        world_R_flange = world_R_base @ base_T_flange[:3, :3]
         dp, rv = cmd.dp_mm, cmd.rv_rad
         if cmd.frame == "tool":  # to world: a step about the flange origin
+            world_R_flange = world_R_base @ base_T_flange[:3, :3]
             dp, rv = world_R_flange @ dp, world_R_flange @ rv
         max_mm, max_deg = cfg.max_step_mm, cfg.max_step_deg
         dp_c, t_clamped = clamp_norm(dp, max_mm)
@@ -577,7 +595,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 f"clamped to {max_mm:.3f} mm / {max_deg:.3f} deg per cycle "
                 f"({cfg.max_speed_mm_s:g} mm/s, {cfg.max_angular_speed_deg_s:g} deg/s)",
             )
-        p_world = (self._world_T_base @ base_T_flange)[:3, 3]
+        p_world = world_T_flange[:3, 3]
         dp_e, clipped = clip_to_envelope(
             p_world, dp_c, np.asarray(cfg.envelope_min_mm), np.asarray(cfg.envelope_max_mm)
         )

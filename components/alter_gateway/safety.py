@@ -7,20 +7,30 @@ frames are named (``world``, ``base`` = the controller's ALTER world, ``tool`` =
 
 from __future__ import annotations
 
+import math
+from functools import lru_cache
+
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humanpt.alter import Correction, CorrectionFlags
-from humanpt.alter.messages import NO_FLAGS
+from humanpt.alter.messages import DEG_PER_UNIT, NO_FLAGS
+from humanpt.alter.rotations import angle_from_euler_zyx_deg, euler_zyx_deg_from_rotvec
 
 _QUANT_MM = 0.01  # wire unit of translation
 _QUANT_DEG = 0.01  # wire unit of rotation
 
 
+def _norm(v: np.ndarray) -> float:
+    """``np.linalg.norm(v)`` of a float vector, as it computes it (sqrt of the dot product
+    of the raveled vector with itself), without its per-call overhead."""
+    x = v.ravel(order="K")
+    return math.sqrt(x.dot(x))
+
+
 def clamp_norm(v: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
     """(3,) ``v`` scaled down to norm ``limit`` if longer (direction kept); (v, clamped?)."""
     v = np.asarray(v, dtype=float)
-    n = float(np.linalg.norm(v))
+    n = _norm(v)
     if n <= limit:
         return v, False
     return v * (limit / n), True
@@ -34,6 +44,8 @@ def clip_to_envelope(
     (per axis the box is widened to include p). Returns (dp, clipped?)."""
     p = np.asarray(p_mm, dtype=float)
     target = p + np.asarray(dp_mm, dtype=float)
+    if all(a < t < b for a, t, b in zip(lo_mm, target.tolist(), hi_mm, strict=True)):
+        return target - p, False  # well inside: what the clip below gives, quicker
     lo = np.minimum(np.asarray(lo_mm, dtype=float), p)
     hi = np.maximum(np.asarray(hi_mm, dtype=float), p)
     clipped = np.clip(target, lo, hi)
@@ -46,16 +58,21 @@ def rotation_angle_deg(rv_rad: np.ndarray) -> float:
 
 def wire_rotation_deg(rv_rad: np.ndarray) -> np.ndarray:
     """Rotation vector -> the wire's (drx, dry, drz) degrees with dR = Rz(drz) Ry(dry) Rx(drx)."""
-    drz, dry, drx = Rotation.from_rotvec(np.asarray(rv_rad, dtype=float)).as_euler(
-        "ZYX", degrees=True
-    )
+    drz, dry, drx = euler_zyx_deg_from_rotvec(np.asarray(rv_rad, dtype=float))
     return np.array([drx, dry, drz])
 
 
 def correction_angle_deg(c: Correction) -> float:
     """Rotation angle of a (quantised) correction, degrees."""
-    drx, dry, drz = c.rotation_deg
-    return float(np.degrees(Rotation.from_euler("ZYX", [drz, dry, drx], degrees=True).magnitude()))
+    return _angle_deg_cdeg(c.drx_cdeg, c.dry_cdeg, c.drz_cdeg)
+
+
+@lru_cache(maxsize=4096)
+def _angle_deg_cdeg(drx_cdeg: int, dry_cdeg: int, drz_cdeg: int) -> float:
+    """Angle of Rz(drz) Ry(dry) Rx(drx), wire units in, degrees out. Cached: the
+    corrections of a steady motion repeat the same few wire values."""
+    drx, dry, drz = np.array([drx_cdeg, dry_cdeg, drz_cdeg], dtype=float) * DEG_PER_UNIT
+    return float(np.degrees(angle_from_euler_zyx_deg([drz, dry, drx])))
 
 
 def quantize(
@@ -76,14 +93,14 @@ def quantize(
     dp, rv = dp0, rv0
     for margin in (0.5, 1.0, 2.0, 4.0, None):
         c = Correction.from_mm_deg(echo_cycle, dp, wire_rotation_deg(rv), flags)
-        over_t = float(np.linalg.norm(c.translation_mm)) > max_step_mm + 1e-9
+        over_t = _norm(c.translation_mm) > max_step_mm + 1e-9
         over_r = correction_angle_deg(c) > max_step_deg + 1e-9
         if not (over_t or over_r):
             return c
         if margin is None:
             break
         if over_t:
-            dp = dp0 * max(0.0, (max_step_mm - margin * _QUANT_MM) / float(np.linalg.norm(dp0)))
+            dp = dp0 * max(0.0, (max_step_mm - margin * _QUANT_MM) / _norm(dp0))
         if over_r:
             rv = rv0 * max(0.0, (max_step_deg - margin * _QUANT_DEG) / rotation_angle_deg(rv0))
     return Correction.from_mm_deg(echo_cycle, np.zeros(3), np.zeros(3), flags)  # not reached

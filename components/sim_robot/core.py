@@ -22,6 +22,7 @@ an operator would restart it at the controller; ``alter_off`` stops it.
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -61,6 +62,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         super().__init__(config)
         self.kin = config.kinematics()
         self.q_rad = config.start_joints_rad()
+        self._fk: tuple[bytes, np.ndarray] | None = None  # (q_rad bytes, base_T_flange)
         self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         cycle_ns = config.cycle_period_ns
         self._ctrl = ControllerEndpoint(
@@ -103,11 +105,19 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     @property
     def base_T_flange_mm(self) -> np.ndarray:
         """(4, 4) the flange in the robot base frame, mm (forward kinematics of q)."""
-        return self.kin.forward(self.q_rad)
+        return self._base_T_flange().copy()
 
     @property
     def world_T_flange_mm(self) -> np.ndarray:
-        return self.world_T_base @ self.base_T_flange_mm
+        return self.world_T_base @ self._base_T_flange()
+
+    def _base_T_flange(self) -> np.ndarray:
+        """Forward kinematics of q, computed once per joint position (a cycle needs it up
+        to three times). Shared: do not modify."""
+        key = self.q_rad.tobytes()
+        if self._fk is None or self._fk[0] != key:
+            self._fk = (key, self.kin.forward(self.q_rad))
+        return self._fk[1]
 
     @property
     def link_running(self) -> bool:
@@ -203,7 +213,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         self._apply_pending(t_ns, outs)
         self.cycle = (self.cycle + 1) & 0xFFFFFFFF
         self.counters["cycles"] += 1
-        status = ControllerStatus.from_pose(self.cycle, self.status_bits(), self.base_T_flange_mm)
+        status = ControllerStatus.from_pose(self.cycle, self.status_bits(), self._base_T_flange())
         events = self._ctrl.send_status(status, t_ns)  # counts as issued even if the link is down
         self._link(events, t_ns, outs)
         if self.link_running:
@@ -264,7 +274,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             )
 
     def _move(self, c: Correction, t_ns: int, outs: list[Output]) -> None:
-        T = self.base_T_flange_mm
+        T = self._base_T_flange()
         delta = c.delta_T_mm()
         if self.config.alter_mode == "tool":
             target = T @ delta
@@ -277,7 +287,8 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         except UnreachableError as e:
             self._fault(t_ns, f"correction for cycle {c.echo_cycle} is unreachable: {e}", outs)
             return
-        step_deg = float(np.degrees(np.max(np.abs(q - self.q_rad))))
+        steps = [abs(a - b) for a, b in zip(q.tolist(), self.q_rad.tolist(), strict=True)]
+        step_deg = math.degrees(max(steps))
         max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_period_ms / 1000.0
         if step_deg > max_step_deg:
             self._fault(

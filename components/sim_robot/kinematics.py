@@ -1,6 +1,7 @@
 """Puma kinematics: standard (classic Paul) DH, forward, analytic inverse, Jacobian.
 
-Pure numpy. Lengths in mm, angles in radians unless a name says ``_deg``.
+numpy and plain floats (the same numbers, see below). Lengths in mm, angles in radians
+unless a name says ``_deg``.
 
 DH convention: standard/distal (Paul 1981; Fu, Gonzalez & Lee 1987, table 2.2), link
 transform ``A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i)``, joint i rotating about
@@ -33,6 +34,7 @@ shoulder-wrist line; FLIP when joint 5 is negative.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Literal
@@ -171,6 +173,30 @@ def _wrap(angle: float) -> float:
     return np.pi if a == -np.pi else a
 
 
+def _sum_sq(q: list[float], ref: list[float], start: float) -> float:
+    """start + the squared differences q - ref, added one by one."""
+    s = start
+    for a, b in zip(q, ref, strict=False):
+        s += (a - b) * (a - b)
+    return s
+
+
+def _near(sq: float) -> float:
+    """Sums of squares above this cannot be the smallest if ``sq`` is (a margin far above
+    the rounding differences between ways of summing six squares)."""
+    return sq * (1.0 + 1e-9) + 1e-300
+
+
+# Why the hot paths below mix plain floats and numpy: the simulated controller solves IK
+# every 28 ms cycle, and numpy's cost per call on 3-vectors dwarfs the arithmetic. Plain
+# float arithmetic (+ - * /, %, abs, sqrt, sin, cos, ceil, floor) gives the very numbers
+# numpy's element-wise ufuncs give, so scalars use it. Matrix products stay numpy matmuls
+# (BLAS fuses multiply-adds, which plain Python cannot reproduce) and arctan2, arccos,
+# hypot stay numpy ufuncs (numpy's SIMD versions may differ from libm's in the last bit),
+# several values per call where the inputs allow. tests/sim_robot check the results bit
+# for bit against the plain per-branch numpy formulation.
+
+
 class PumaKinematics:
     """Forward and inverse kinematics of one Puma model."""
 
@@ -184,21 +210,57 @@ class PumaKinematics:
         self.geometry = self.config.geometry
         self.dh = self.geometry.dh()
         self.limits_rad = self.config.joint_limits_rad
+        # Per-model constants of the hot paths (each the value the formula would compute).
+        g = self.geometry
+        self._limits = tuple((float(lo), float(hi)) for lo, hi in self.limits_rad)
+        self._links = tuple(
+            (float(np.cos(link.alpha_rad)), float(np.sin(link.alpha_rad)), link.a_mm, link.d_mm)
+            for link in self.dh
+        )
+        L3 = np.hypot(g.a3_mm, g.d4_mm)
+        self._L3 = float(L3)  # elbow -> wrist centre
+        self._phi = float(np.arctan2(g.d4_mm, g.a3_mm))
+        self._a2_sq, self._L3_sq = g.a2_mm**2, float(L3**2)
+        self._cos_den = float(2.0 * g.a2_mm * L3)  # law of cosines at the elbow
 
     # --- forward -------------------------------------------------------------------------
 
+    def _link_matrices(self, q: list[float]) -> list[list[list[float]]]:
+        """dh_transform of links 1..6 at q (floats), as nested lists."""
+        mats = []
+        for (ca, sa, a, d), theta in zip(self._links, q, strict=True):
+            ct, st = math.cos(theta), math.sin(theta)
+            mats.append(
+                [
+                    [ct, -st * ca, st * sa, a * ct],
+                    [st, ct * ca, -ct * sa, a * st],
+                    [0.0, sa, ca, d],
+                    [0.0, 0.0, 0.0, 1.0],
+                ]
+            )
+        return mats
+
+    def _rotation(self, i: int, theta: float) -> list[list[float]]:
+        """The rotation part of link i's dh_transform at theta."""
+        ca, sa, _, _ = self._links[i]
+        ct, st = math.cos(theta), math.sin(theta)
+        return [[ct, -st * ca, st * sa], [st, ct * ca, -ct * sa], [0.0, sa, ca]]
+
     def link_transforms(self, q_rad: np.ndarray) -> np.ndarray:
         """(7, 4, 4) base_T_link_i for i = 0..6 (i = 0 is the identity, 6 the flange)."""
-        q = self._check_q(q_rad)
+        A = np.array(self._link_matrices(self._check_q(q_rad).tolist()))
         out = np.empty((7, 4, 4))
         out[0] = np.eye(4)
-        for i, (link, theta) in enumerate(zip(self.dh, q, strict=True)):
-            out[i + 1] = out[i] @ dh_transform(link, theta)
+        for i in range(6):
+            out[i + 1] = out[i] @ A[i]
         return out
 
     def forward(self, q_rad: np.ndarray) -> np.ndarray:
         """(4, 4) base_T_flange for joint angles q_rad (6,), translation in mm."""
-        return self.link_transforms(q_rad)[6]
+        T = np.eye(4)
+        for A in np.array(self._link_matrices(self._check_q(q_rad).tolist())):
+            T = T @ A
+        return T
 
     def jacobian(self, q_rad: np.ndarray) -> np.ndarray:
         """(6, 6) geometric Jacobian in the base frame: rows vx, vy, vz [mm/rad] of the
@@ -220,19 +282,23 @@ class PumaKinematics:
         return bool(np.all(q >= lo - tol_rad) and np.all(q <= hi + tol_rad))
 
     def _fit_limits(
-        self, q: np.ndarray, q_ref: np.ndarray, tol_rad: float = 1e-9
-    ) -> np.ndarray | None:
-        """Per joint, the 2*pi-equivalent of q within the limits closest to q_ref (None if
+        self, q: list[float], q_ref: list[float], first: int = 0, tol_rad: float = 1e-9
+    ) -> list[float] | None:
+        """Per joint (joints first, first + 1, ... of q's length), the 2*pi-equivalent of
+        q within the limits closest to q_ref (the first of equally close ones; None if
         some joint has none). Why: joints 4 and 6 turn more than a full circle."""
-        out = np.empty(6)
-        for j in range(6):
-            lo, hi = self.limits_rad[j]
-            k_lo = np.ceil((lo - tol_rad - q[j]) / TWO_PI)
-            k_hi = np.floor((hi + tol_rad - q[j]) / TWO_PI)
+        out = []
+        for (lo, hi), v, ref in zip(self._limits[first:], q, q_ref[first:], strict=False):
+            k_lo = math.ceil((lo - tol_rad - v) / TWO_PI)
+            k_hi = math.floor((hi + tol_rad - v) / TWO_PI)
             if k_lo > k_hi:
                 return None
-            candidates = q[j] + TWO_PI * np.arange(k_lo, k_hi + 1)
-            out[j] = candidates[np.argmin(np.abs(candidates - q_ref[j]))]
+            best = v + TWO_PI * k_lo
+            for k in range(k_lo + 1, k_hi + 1):
+                candidate = v + TWO_PI * k
+                if abs(candidate - ref) < abs(best - ref):
+                    best = candidate
+            out.append(best)
         return out
 
     # --- inverse -------------------------------------------------------------------------
@@ -247,94 +313,165 @@ class PumaKinematics:
         returned with ``within_limits=False`` (angles wrapped to (-pi, pi]). Returns [] when
         the pose is out of reach.
         """
-        T = np.asarray(base_T_flange, dtype=float)
-        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
-            raise ValueError(f"base_T_flange must be a finite 4x4 array, got shape {T.shape}")
-        q_ref = np.zeros(6) if q_ref_rad is None else self._check_q(q_ref_rad)
-        g = self.geometry
-        R = T[:3, :3]
-        p_w = T[:3, 3] - g.d6_mm * R[:, 2]  # wrist centre
-        px, py, pz = p_w
-        r2 = px * px + py * py - g.d2_mm**2
-        if r2 < -self._REACH_EPS * max(1.0, g.d2_mm**2):
-            return []  # wrist centre inside the shoulder-offset cylinder
-        r = np.sqrt(max(r2, 0.0))
-        L3 = np.hypot(g.a3_mm, g.d4_mm)  # elbow -> wrist centre
-        phi = np.arctan2(g.d4_mm, g.a3_mm)
-        solutions = []
-        for arm, x2 in (("lefty", r), ("righty", -r)):
-            q1 = np.arctan2(py, px) - np.arctan2(g.d2_mm, x2)
-            X, Y = x2, -pz  # the wrist centre in the arm plane (frame-1 x, -z)
-            D = (X * X + Y * Y - g.a2_mm**2 - L3**2) / (2.0 * g.a2_mm * L3)
-            if abs(D) > 1.0 + self._REACH_EPS:
-                continue
-            D = float(np.clip(D, -1.0, 1.0))
-            for beta in (np.arccos(D), -np.arccos(D)):
-                q2 = np.arctan2(Y, X) - np.arctan2(L3 * np.sin(beta), g.a2_mm + L3 * np.cos(beta))
-                q3 = phi + beta
-                elbow = self._elbow_label(q2, x2, pz)
-                for wrist_q, wrist in self._wrist(R, q1, q2, q3, q_ref[3]):
-                    q = np.array([q1, q2, q3, *wrist_q])
-                    q = np.array([_wrap(v) for v in q])
-                    fitted = self._fit_limits(q, q_ref)
-                    solutions.append(
-                        IkSolution(
-                            q_rad=q if fitted is None else fitted,
-                            arm=arm,
-                            elbow=elbow,
-                            wrist=wrist,
-                            within_limits=fitted is not None,
-                        )
-                    )
-        return solutions
+        T = self._check_T(base_T_flange)
+        q_ref = [0.0] * 6 if q_ref_rad is None else self._check_q(q_ref_rad).tolist()
+        return [
+            IkSolution(
+                q_rad=np.array(q if fitted is None else fitted),
+                arm=arm,
+                elbow=elbow,
+                wrist=wrist,
+                within_limits=fitted is not None,
+            )
+            for q, arm, elbow, wrist, fitted in self._branches(T, q_ref)
+        ]
 
     def inverse(self, base_T_flange: np.ndarray, q_current_rad: np.ndarray) -> np.ndarray:
-        """(6,) the joint solution within limits closest (Euclidean) to q_current_rad.
+        """(6,) the joint solution within limits closest (Euclidean) to q_current_rad (the
+        first of equally close ones in inverse_all's order).
 
         Raises UnreachableError when the pose is out of reach or no branch is in limits.
         """
         q_now = self._check_q(q_current_rad)
-        solutions = self.inverse_all(base_T_flange, q_now)
-        if not solutions:
-            p = np.asarray(base_T_flange, dtype=float)[:3, 3]
-            raise UnreachableError(f"pose at {np.round(p, 3).tolist()} mm is out of reach")
-        valid = [s for s in solutions if s.within_limits]
-        if not valid:
-            configs = ", ".join("/".join(s.config) for s in solutions)
+        T = self._check_T(base_T_flange)
+        legs = self._legs(T)
+        if not legs:
+            raise UnreachableError(f"pose at {np.round(T[:3, 3], 3).tolist()} mm is out of reach")
+        now = q_now.tolist()
+        # Why not every branch: joints 1-3 alone put most legs (arm x elbow) far from the
+        # current joints; once a branch is found, legs whose joints 1-3 are already farther
+        # cannot hold the closest and their wrists are not solved. ``sq``: plain float
+        # sums of squared joint differences, joint by joint (never decreasing).
+        arm_fits = []  # (sum of squares over joints 1-3, leg index, joints 1-3)
+        for i, (_, _, q1, q2, q3) in enumerate(legs):
+            fit = self._fit_limits([_wrap(q1), _wrap(q2), _wrap(q3)], now)
+            if fit is not None:
+                arm_fits.append((_sum_sq(fit, now, 0.0), i, fit))
+        arm_fits.sort(key=lambda a: a[0])
+        found = []  # (branch index, fitted q, sum of squares)
+        best_sq = math.inf
+        for sq, i, fit in arm_fits:
+            if sq > _near(best_sq):
+                break
+            (wrists,) = self._wrists([legs[i]], T[:3, :3], now[3])
+            for w, ((q4, q5, q6), _) in enumerate(wrists):
+                wrist_fit = self._fit_limits([_wrap(q4), _wrap(q5), _wrap(q6)], now, 3)
+                if wrist_fit is not None:
+                    found.append((2 * i + w, fit + wrist_fit, _sum_sq(wrist_fit, now[3:], sq)))
+                    best_sq = min(best_sq, found[-1][2])
+        if not found:
+            configs = ", ".join(
+                f"{arm}/{elbow}/{wrist}" for arm, elbow, *_ in legs for wrist in ("noflip", "flip")
+            )
             raise UnreachableError(
                 f"no inverse-kinematics branch within the joint limits (tried {configs})"
             )
-        best = min(valid, key=lambda s: float(np.linalg.norm(s.q_rad - q_now)))
-        return best.q_rad.copy()
+        found.sort(key=lambda f: f[0])
+        # The closest by np.linalg.norm(q - q_now) (a dot product with fused multiply-adds,
+        # so the plain sums of squares may differ from it in the last bits: they only rule
+        # out the candidates clearly farther than the closest).
+        cut = _near(min(f[2] for f in found))
+        best, best_dist = None, math.inf
+        for _, q, sq in found:
+            if sq <= cut:
+                d = np.array(q) - q_now
+                dist = math.sqrt(d.dot(d))
+                if dist < best_dist:
+                    best, best_dist = q, dist
+        return np.array(best)
 
-    def _wrist(self, R: np.ndarray, q1: float, q2: float, q3: float, q4_ref: float):
-        """Joints 4-6 from R36 = Rz(q4) Ry(q5) Rz(q6) (what alpha4 = -90, alpha5 = +90 give)."""
-        R03 = np.eye(3)
-        for link, theta in zip(self.dh[:3], (q1, q2, q3), strict=True):
-            R03 = R03 @ dh_transform(link, theta)[:3, :3]
-        M = R03.T @ R
-        s5 = np.hypot(M[0, 2], M[1, 2])
-        if s5 < self.WRIST_SINGULAR_SIN:
-            # Joints 4 and 6 are coaxial: keep q4 where it is, q6 takes the rest.
-            if M[2, 2] > 0:  # q5 = 0: R36 = Rz(q4 + q6)
-                q5 = 0.0
-                q6 = np.arctan2(M[1, 0], M[0, 0]) - q4_ref
-            else:  # q5 = pi: R36 = Ry(pi) Rz(q6 - q4)
-                q5 = np.pi
-                q6 = np.arctan2(M[1, 0], M[1, 1]) + q4_ref
-            yield (q4_ref, q5, q6), "noflip"
-            yield (q4_ref + np.pi, -q5, q6 + np.pi), "flip"
-            return
-        q4 = np.arctan2(M[1, 2], M[0, 2])
-        q5 = np.arctan2(s5, M[2, 2])
-        q6 = np.arctan2(M[2, 1], -M[2, 0])
-        yield (q4, q5, q6), "noflip"
-        yield (q4 + np.pi, -q5, q6 + np.pi), "flip"
+    def _branches(
+        self, T: np.ndarray, q_ref: list[float]
+    ) -> list[tuple[list[float], str, str, str, list[float] | None]]:
+        """The analytic branches reaching T, in the order lefty/righty, elbow angle
+        +beta/-beta, noflip/flip: (q wrapped to (-pi, pi], arm, elbow, wrist, q fitted
+        into the limits or None)."""
+        legs = self._legs(T)
+        out = []
+        for (arm, elbow, q1, q2, q3), wrists in zip(
+            legs, self._wrists(legs, T[:3, :3], q_ref[3]) if legs else (), strict=True
+        ):
+            arm_q = [_wrap(q1), _wrap(q2), _wrap(q3)]
+            arm_fit = self._fit_limits(arm_q, q_ref)  # joints 1-3: the same for both wrists
+            for (q4, q5, q6), wrist in wrists:
+                wrist_q = [_wrap(q4), _wrap(q5), _wrap(q6)]
+                wrist_fit = None if arm_fit is None else self._fit_limits(wrist_q, q_ref, 3)
+                fitted = None if wrist_fit is None else arm_fit + wrist_fit
+                out.append((arm_q + wrist_q, arm, elbow, wrist, fitted))
+        return out
+
+    def _legs(self, T: np.ndarray) -> list[tuple[str, str, float, float, float]]:
+        """Joints 1-3 reaching T's wrist centre: (arm, elbow, q1, q2, q3) for lefty and
+        righty, each with elbow angle +beta and -beta (unwrapped); [] when out of reach."""
+        g = self.geometry
+        d2, a2, L3 = g.d2_mm, g.a2_mm, self._L3
+        (_, _, r02, x), (_, _, r12, y), (_, _, r22, z), _ = T.tolist()
+        px, py, pz = x - g.d6_mm * r02, y - g.d6_mm * r12, z - g.d6_mm * r22  # wrist centre
+        r2 = px * px + py * py - d2**2
+        if r2 < -self._REACH_EPS * max(1.0, d2**2):
+            return []  # wrist centre inside the shoulder-offset cylinder
+        r = math.sqrt(max(r2, 0.0))
+        # In the arm plane (frame-1 x, -z) the wrist centre is at X, Y = +-r, -pz: both arms
+        # have it at the same distance from the shoulder, hence the same elbow angles.
+        D = (r * r + pz * pz - self._a2_sq - self._L3_sq) / self._cos_den
+        if abs(D) > 1.0 + self._REACH_EPS:
+            return []
+        beta = float(np.arccos(min(max(D, -1.0), 1.0)))
+        betas = (beta, -beta)
+        # One arctan2 call: atan2(py, px), per arm atan2(d2, X) and atan2(Y, X), per elbow
+        # angle the elbow's offset angle.
+        at = np.arctan2(
+            [py, d2, d2, -pz, -pz, L3 * math.sin(beta), L3 * math.sin(-beta)],
+            [px, r, -r, r, -r, a2 + L3 * math.cos(beta), a2 + L3 * math.cos(-beta)],
+        ).tolist()
+        legs = []
+        for i, (arm, x2) in enumerate((("lefty", r), ("righty", -r))):
+            q1 = at[0] - at[1 + i]
+            for j, b in enumerate(betas):
+                q2 = at[3 + i] - at[5 + j]
+                legs.append((arm, self._elbow_label(q2, x2, pz), q1, q2, self._phi + b))
+        return legs
+
+    def _wrists(self, legs: list, R: np.ndarray, q4_ref: float) -> list[tuple]:
+        """Per leg, joints 4-6 (unwrapped) of its noflip and flip wrists reaching the
+        rotation R: ((q4, q5, q6), "noflip"), ((q4', q5', q6'), "flip").
+
+        From R36 = R03^T R = Rz(q4) Ry(q5) Rz(q6) (what alpha4 = -90, alpha5 = +90 give),
+        every leg in the same numpy calls."""
+        A = np.array([[self._rotation(k, leg[2 + k]) for k in range(3)] for leg in legs])
+        R03 = np.eye(3) @ A[:, 0] @ A[:, 1] @ A[:, 2]
+        M = R03.transpose(0, 2, 1) @ R
+        s5 = np.hypot(M[:, 0, 2], M[:, 1, 2])
+        n = len(legs)
+        w = np.arctan2(
+            np.concatenate((M[:, 1, 2], s5, M[:, 2, 1])),
+            np.concatenate((M[:, 0, 2], M[:, 2, 2], -M[:, 2, 0])),
+        ).tolist()
+        out = []
+        for i in range(n):
+            if s5[i] < self.WRIST_SINGULAR_SIN:
+                out.append(self._singular_wrist(M[i], q4_ref))
+            else:
+                q4, q5, q6 = w[i], w[n + i], w[2 * n + i]
+                out.append((((q4, q5, q6), "noflip"), ((q4 + np.pi, -q5, q6 + np.pi), "flip")))
+        return out
+
+    @staticmethod
+    def _singular_wrist(M: np.ndarray, q4_ref: float):
+        """Joints 4-6 at a wrist singularity (joints 4 and 6 coaxial): keep q4 where it
+        is, q6 takes the rest."""
+        if M[2, 2] > 0:  # q5 = 0: R36 = Rz(q4 + q6)
+            q5 = 0.0
+            q6 = float(np.arctan2(M[1, 0], M[0, 0])) - q4_ref
+        else:  # q5 = pi: R36 = Ry(pi) Rz(q6 - q4)
+            q5 = np.pi
+            q6 = float(np.arctan2(M[1, 0], M[1, 1])) + q4_ref
+        return (((q4_ref, q5, q6), "noflip"), ((q4_ref + np.pi, -q5, q6 + np.pi), "flip"))
 
     def _elbow_label(self, q2: float, x2: float, pz: float) -> Literal["above", "below"]:
         """ABOVE when the elbow lies above the shoulder -> wrist-centre line."""
-        g = self.geometry
-        e_h, e_z = g.a2_mm * np.cos(q2), -g.a2_mm * np.sin(q2)  # elbow in the arm plane
+        a2 = self.geometry.a2_mm
+        e_h, e_z = a2 * math.cos(q2), -a2 * math.sin(q2)  # elbow in the arm plane
         cross = x2 * e_z - pz * e_h
         side = 1.0 if x2 >= 0 else -1.0
         return "above" if cross * side > 0 else "below"
@@ -342,6 +479,13 @@ class PumaKinematics:
     @staticmethod
     def _check_q(q_rad: np.ndarray) -> np.ndarray:
         q = np.asarray(q_rad, dtype=float)
-        if q.shape != (6,) or not np.all(np.isfinite(q)):
+        if q.shape != (6,) or not np.isfinite(q).all():
             raise ValueError(f"joint angles must be a finite (6,) array, got {q_rad!r}")
         return q
+
+    @staticmethod
+    def _check_T(base_T_flange: np.ndarray) -> np.ndarray:
+        T = np.asarray(base_T_flange, dtype=float)
+        if T.shape != (4, 4) or not np.isfinite(T).all():
+            raise ValueError(f"base_T_flange must be a finite 4x4 array, got shape {T.shape}")
+        return T
