@@ -25,7 +25,7 @@ import numpy as np
 
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import image_stamp_ns, pose, quat_from_matrix
+from humanpt.schemas.convert import image_stamp_ns, pose
 
 from .config import PerceptionConfig
 from .correspondence import FULL, LOST, POSITION_ONLY, Match, lost
@@ -67,37 +67,8 @@ def measurement_message(
     if match.camera_T_tob is not None:
         t = np.array(match.camera_T_tob, dtype=float)
         t[:3, 3] /= 1000.0
-        m.camera_T_tob.CopyFrom(_pose(t))
+        m.camera_T_tob.CopyFrom(pose(t))
     return m
-
-
-def _pose(T: np.ndarray) -> pb.Pose:
-    """``convert.pose(T)``, the same message; its rotation check (orthonormal to 1e-6,
-    det > 0) is done here on plain floats with a margin, and only a transform that does not
-    clearly pass it goes through ``pose`` (which raises for it)."""
-    if T.shape != (4, 4):
-        return pose(T)
-    (r00, r01, r02, t0), (r10, r11, r12, t1), (r20, r21, r22, t2) = T[:3].tolist()
-    err = max(
-        abs(r00 * r00 + r01 * r01 + r02 * r02 - 1.0),
-        abs(r10 * r10 + r11 * r11 + r12 * r12 - 1.0),
-        abs(r20 * r20 + r21 * r21 + r22 * r22 - 1.0),
-        abs(r00 * r10 + r01 * r11 + r02 * r12),
-        abs(r00 * r20 + r01 * r21 + r02 * r22),
-        abs(r10 * r20 + r11 * r21 + r12 * r22),
-    )
-    det = (
-        r00 * (r11 * r22 - r12 * r21)
-        - r01 * (r10 * r22 - r12 * r20)
-        + r02 * (r10 * r21 - r11 * r20)
-    )
-    if not (err < 1e-7 and det > 0.5):
-        return pose(T)
-    qx, qy, qz, qw = quat_from_matrix(T[:3, :3])
-    return pb.Pose(
-        translation=pb.Vector3(x=t0, y=t1, z=t2),
-        rotation=pb.Quaternion(x=float(qx), y=float(qy), z=float(qz), w=float(qw)),
-    )
 
 
 class PerceptionCore(Core):

@@ -25,7 +25,7 @@ from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import MessageError, covariance, from_pose, from_vector3, pose, vector3
+from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
 TOPIC_STATE = "pose_filter/tob_state"
 
@@ -47,6 +47,7 @@ class PoseFilterCore(Core):
         self.last_status = pb.TOB_STATUS_LOST
         self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
         self._fresh = False
+        self._pose_at_measurement: tuple[tuple[int, int], pb.Pose] | None = None
 
     def _build(self, c: PoseFilterConfig) -> None:
         T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
@@ -99,16 +100,23 @@ class PoseFilterCore(Core):
         if self.kf.initialised:
             T, vel, P = self.kf.predicted(target_ns)
             out.world_T_tob.CopyFrom(pose(T))
-            out.linear_velocity_m_s.CopyFrom(vector3(vel[:3]))
-            out.angular_velocity_rad_s.CopyFrom(vector3(vel[3:]))
-            values, dim = covariance(P)
-            out.covariance.extend(values)
-            out.covariance_dim = dim
+            vx, vy, vz, wx, wy, wz = vel.tolist()
+            out.linear_velocity_m_s.CopyFrom(pb.Vector3(x=vx, y=vy, z=vz))
+            out.angular_velocity_rad_s.CopyFrom(pb.Vector3(x=wx, y=wy, z=wz))
+            out.covariance.extend(P.ravel().tolist())
+            out.covariance_dim = P.shape[0]
             out.measurement_stamp_ns = self.last_measurement_ns or 0
             if self.last_measurement_ns is not None:
-                T_meas, _, _ = self.kf.predicted(self.last_measurement_ns)
-                out.world_T_tob_at_measurement.CopyFrom(pose(T_meas))
+                out.world_T_tob_at_measurement.CopyFrom(self._pose_at(self.last_measurement_ns))
         return TOPIC_STATE, out
+
+    def _pose_at(self, stamp_ns: int) -> pb.Pose:
+        """The filter's pose at ``stamp_ns`` as a message, kept until the filter changes
+        (every robot state between two measurements asks for the same one)."""
+        key = (self.kf.version, stamp_ns)
+        if self._pose_at_measurement is None or self._pose_at_measurement[0] != key:
+            self._pose_at_measurement = (key, pose(self.kf.predicted_pose(stamp_ns)))
+        return self._pose_at_measurement[1]
 
     def _on_measurement(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
         c = self.config
@@ -148,7 +156,7 @@ class PoseFilterCore(Core):
         if not self.kf.initialised:
             return []  # a position alone cannot start an orientation
         self.kf.predict_to(stamp)
-        T_pred, _, _ = self.kf.predicted(stamp)
+        T_pred = self.kf.predicted_pose(stamp)
         # Match each visible source to the nearest predicted source; G = source - R @ offset.
         world_sources = self.tob_p_sources_m @ T_pred[:3, :3].T + T_pred[:3, 3]
         g = []

@@ -1,4 +1,4 @@
-"""Constant-velocity Kalman filter of a rigid pose (pure numpy + filterpy).
+"""Constant-velocity Kalman filter of a rigid pose (pure numpy).
 
 State (12,), world frame, SI units::
 
@@ -10,7 +10,9 @@ error state), so there is no Euler singularity and every rotation innovation is 
 rotation vector of ``R_meas @ R_pred.T``, wrapped into (-pi, pi] by construction.
 
 F, H and Q are built by hand (filterpy's ``kinematic_kf`` builds a wrong H): F is the
-constant-velocity transition, Q the discrete white-noise-acceleration model.
+constant-velocity transition, Q the discrete white-noise-acceleration model. The predict
+and update steps are filterpy's ``KalmanFilter.predict``/``update`` (Joseph form), the same
+numpy calls in the same order - so the same numbers - without its bookkeeping copies.
 """
 
 from __future__ import annotations
@@ -18,20 +20,39 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 
-from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
+from humanpt.pose_filter.fastmath import rotvec_of
+from humanpt.schemas.convert import matrix_from_rotvec
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
 H_POSITION = np.hstack([I3, np.zeros((3, 9))])  # measures p only
+I12 = np.eye(12)
+
+
+def _block_indices(blocks) -> tuple[np.ndarray, np.ndarray]:
+    """Flat indices into a (12, 12) array of the diagonal and of the off-diagonal entries of
+    the 3x3 blocks whose first entries are ``blocks`` [(row, col), ...], block by block."""
+    diag = [(r + i) * 12 + c + i for r, c in blocks for i in range(3)]
+    off = [(r + i) * 12 + c + j for r, c in blocks for i in range(3) for j in range(3) if i != j]
+    return np.array(diag), np.array(off)
+
+
+# F: the (p, v) and (r, w) blocks are dt * I3; Q: per group (position, rotation) the blocks
+# (pp, pv, vp, vv) are q * [dt^3/3, dt^2/2, dt^2/2, dt] * I3. Both are filled from these
+# indices with the numbers the products with I3 give (s on the diagonal, s * 0 off it).
+_F_DIAG, _F_OFF = _block_indices([(0, 6), (3, 9)])
+_Q_ALL = np.concatenate(
+    _block_indices([(0, 0), (0, 6), (6, 0), (6, 6), (3, 3), (3, 9), (9, 3), (9, 9)])
+)
 
 
 def transition(dt_s: float) -> np.ndarray:
     """(12, 12) constant-velocity transition over ``dt_s``."""
     F = np.eye(12)
-    F[0:3, 6:9] = dt_s * I3
-    F[3:6, 9:12] = dt_s * I3
+    flat = F.reshape(-1)
+    flat[_F_DIAG] = dt_s
+    flat[_F_OFF] = dt_s * 0.0
     return F
 
 
@@ -39,16 +60,15 @@ def process_noise(
     dt_s: float, accel_sigma_m_s2: float, ang_accel_sigma_rad_s2: float
 ) -> np.ndarray:
     """(12, 12) discrete white-noise acceleration: per axis q * [[dt^3/3, dt^2/2], [dt^2/2, dt]]."""
-    Q = np.zeros((12, 12))
-    for pos, vel, q in (
-        (slice(0, 3), slice(6, 9), accel_sigma_m_s2**2),
-        (slice(3, 6), slice(9, 12), ang_accel_sigma_rad_s2**2),
-    ):
-        Q[pos, pos] = q * dt_s**3 / 3 * I3
-        Q[pos, vel] = q * dt_s**2 / 2 * I3
-        Q[vel, pos] = q * dt_s**2 / 2 * I3
-        Q[vel, vel] = q * dt_s * I3
-    return Q
+    diag, off = [], []
+    for q in (accel_sigma_m_s2**2, ang_accel_sigma_rad_s2**2):
+        a, b, c = q * dt_s**3 / 3, q * dt_s**2 / 2, q * dt_s
+        for v in (a, b, b, c):
+            diag += [v] * 3
+            off += [v * 0.0] * 6
+    Q = np.zeros(144)
+    Q[_Q_ALL] = diag + off
+    return Q.reshape(12, 12)
 
 
 @dataclass(frozen=True)
@@ -60,7 +80,10 @@ class Gate:
 
 
 class PoseKalman:
-    """Filter of world_T_tob; times in ns, poses as (4, 4) transforms in metres."""
+    """Filter of world_T_tob; times in ns, poses as (4, 4) transforms in metres.
+
+    ``x`` (12,) and ``P`` (12, 12) are the state and its covariance; ``version`` counts the
+    changes of the state (for caches of things computed from it)."""
 
     def __init__(
         self,
@@ -74,9 +97,11 @@ class PoseKalman:
         self.accel_sigma = accel_sigma_m_s2
         self.ang_accel_sigma = ang_accel_sigma_rad_s2
         self.init_sd = np.repeat([init_sigma_m, init_sigma_rad, init_sigma_v, init_sigma_w], 3)
-        self.kf = KalmanFilter(dim_x=12, dim_z=6)
+        self.x = np.zeros(12)
+        self.P = np.eye(12)
         self.R_ref = np.eye(3)
         self.t_ns: int | None = None
+        self.version = 0
 
     @property
     def initialised(self) -> bool:
@@ -84,51 +109,63 @@ class PoseKalman:
 
     def reset(self, t_ns: int, world_T_tob: np.ndarray) -> None:
         """Start again at a measured pose with zero velocity."""
-        self.kf.x = np.zeros(12)
-        self.kf.x[0:3] = world_T_tob[:3, 3]
-        self.kf.P = np.diag(self.init_sd**2)
+        self.x = np.zeros(12)
+        self.x[0:3] = world_T_tob[:3, 3]
+        self.P = np.diag(self.init_sd**2)
         self.R_ref = world_T_tob[:3, :3].copy()
         self.t_ns = int(t_ns)
+        self.version += 1
 
     def predict_to(self, t_ns: int) -> None:
         """Advance the filter to ``t_ns`` (no-op for t_ns <= current time)."""
         dt = (int(t_ns) - self.t_ns) * 1e-9
         if dt <= 0:
             return
-        self.kf.F = transition(dt)
-        self.kf.Q = process_noise(dt, self.accel_sigma, self.ang_accel_sigma)
-        self.kf.predict()
+        F = transition(dt)
+        Q = process_noise(dt, self.accel_sigma, self.ang_accel_sigma)
+        # filterpy's predict (its fading-memory factor is 1.0: a product that changes nothing)
+        self.x = np.dot(F, self.x)
+        self.P = np.dot(np.dot(F, self.P), F.T) + Q
         self.t_ns = int(t_ns)
+        self.version += 1
 
     def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
-        x = self.kf.x if x is None else x
+        x = self.x if x is None else x
         return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
-        self.kf.x[3:6] = 0.0
+        self.x[3:6] = 0.0
 
     def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
         """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
         y = np.empty(6)
-        y[0:3] = world_T_tob[:3, 3] - self.kf.x[0:3]
+        y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
-        y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation().T)
+        y[3:6] = rotvec_of(world_T_tob[:3, :3] @ self.rotation().T)
         return self._update(y, H_POSE, R_meas, gate_chi2)
 
     def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
         """Update the position only; ``R_meas`` (3, 3) in m^2."""
-        y = np.asarray(world_p_m, dtype=float) - self.kf.x[0:3]
+        y = np.asarray(world_p_m, dtype=float) - self.x[0:3]
         return self._update(y, H_POSITION, R_meas, gate_chi2)
 
     def _update(self, y: np.ndarray, H: np.ndarray, R: np.ndarray, gate_chi2: float) -> Gate:
-        S = H @ self.kf.P @ H.T + R
+        S = H @ self.P @ H.T + R
         d2 = float(y @ np.linalg.solve(S, y))
         if d2 > gate_chi2:
             return Gate(False, d2)
-        z = H @ self.kf.x + y
-        self.kf.update(z, R=R, H=H)
+        z = H @ self.x + y
+        # filterpy's update (Joseph form), the same calls
+        x, P = self.x, self.P
+        y = z - np.dot(H, x)
+        PHT = np.dot(P, H.T)
+        K = np.dot(PHT, np.linalg.inv(np.dot(H, PHT) + R))
+        self.x = x + np.dot(K, y)
+        I_KH = I12 - np.dot(K, H)
+        self.P = np.dot(np.dot(I_KH, P), I_KH.T) + np.dot(np.dot(K, R), K.T)
         self._recentre()
+        self.version += 1
         return Gate(True, d2)
 
     def predicted(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -137,9 +174,17 @@ class PoseKalman:
         an earlier cycle stamp), then the motion is run backwards."""
         dt = (int(t_ns) - self.t_ns) * 1e-9
         F = transition(dt)
-        x = F @ self.kf.x
-        P = F @ self.kf.P @ F.T + process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
+        x = F @ self.x
+        P = F @ self.P @ F.T + process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
+        return self._transform(x), x[6:12].copy(), P
+
+    def predicted_pose(self, t_ns: int) -> np.ndarray:
+        """The world_T_tob of :meth:`predicted` alone."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
+        return self._transform(transition(dt) @ self.x)
+
+    def _transform(self, x: np.ndarray) -> np.ndarray:
         T = np.eye(4)
         T[:3, :3] = matrix_from_rotvec(x[3:6]) @ self.R_ref
         T[:3, 3] = x[0:3]
-        return T, x[6:12].copy(), P
+        return T

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from bisect import bisect_left
 from collections import deque
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
-from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
+from humanpt.pose_filter.fastmath import rotvec_of, slerp
+from humanpt.schemas.convert import matrix_from_rotvec
 
 
 class RobotPoseBuffer:
@@ -15,11 +16,13 @@ class RobotPoseBuffer:
 
     def __init__(self, maxlen: int = 64):
         self._items: deque[tuple[int, np.ndarray]] = deque(maxlen=maxlen)
+        self._stamps: deque[int] = deque(maxlen=maxlen)
 
     def add(self, stamp_ns: int, world_T_flange: np.ndarray) -> None:
         if self._items and stamp_ns <= self._items[-1][0]:
             return  # out of order or duplicate: keep the buffer monotonic
         self._items.append((int(stamp_ns), np.asarray(world_T_flange, dtype=float)))
+        self._stamps.append(int(stamp_ns))
 
     def __len__(self) -> int:
         return len(self._items)
@@ -43,18 +46,17 @@ class RobotPoseBuffer:
             or stamp_ns > items[-1][0] + max_extrapolation_ns
         ):
             return None
-        stamps = [t for t, _ in items]
-        i = int(np.searchsorted(stamps, stamp_ns))
+        i = bisect_left(self._stamps, stamp_ns)  # np.searchsorted's index
         i = min(max(i, 1), len(items) - 1)
         (t0, T0), (t1, T1) = items[i - 1], items[i]
         s = (stamp_ns - t0) / (t1 - t0)
         T = np.eye(4)
-        T[:3, 3] = T0[:3, 3] + s * (T1[:3, 3] - T0[:3, 3])
+        p0, p1 = T0[:3, 3].tolist(), T1[:3, 3].tolist()
+        T[:3, 3] = [a + s * (b - a) for a, b in zip(p0, p1, strict=True)]
         if 0.0 <= s <= 1.0:
-            T[:3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix([T0[:3, :3], T1[:3, :3]]))(
-                s
-            ).as_matrix()
+            # = Slerp([0, 1], Rotation.from_matrix([R0, R1]))(s).as_matrix()
+            T[:3, :3] = slerp(T0[:3, :3], T1[:3, :3], s)
         else:  # extrapolate the relative rotation
-            dR = rotvec_from_matrix(T1[:3, :3] @ T0[:3, :3].T)
+            dR = rotvec_of(T1[:3, :3] @ T0[:3, :3].T)
             T[:3, :3] = matrix_from_rotvec(dR * s) @ T0[:3, :3]
         return T
