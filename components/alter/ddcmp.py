@@ -320,7 +320,8 @@ class DdcmpDecoder:
                 continue
             flush_garbage()
             out.append(
-                DataFrame(
+                _checked(
+                    DataFrame,
                     num=num,
                     resp=resp,
                     payload=payload,
@@ -355,7 +356,8 @@ def _decode_control(head: bytes) -> ControlFrame | FrameError:
     problem = _control_field_problem(kind, subtype, rcvr, sndr)
     if problem:
         return FrameError(FrameErrorReason.HEADER_FORMAT, 1, problem)
-    return ControlFrame(
+    return _checked(
+        ControlFrame,
         kind=kind,
         subtype=subtype,
         rcvr=rcvr,
@@ -364,6 +366,15 @@ def _decode_control(head: bytes) -> ControlFrame | FrameError:
         qsync=bool(sub & QSYNC_SUBTYPE_BIT),
         select=bool(sub & SELECT_SUBTYPE_BIT),
     )
+
+
+def _checked(cls: type, **fields):
+    """A frame of fields the decoder has already validated (bytes unpacked from a header
+    whose CRC and field rules held), without __post_init__'s checks again: decoding runs
+    for every frame on the line."""
+    frame = object.__new__(cls)
+    frame.__dict__.update(fields)
+    return frame
 
 
 class FrameDecodeError(ValueError):

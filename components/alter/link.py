@@ -20,6 +20,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass
 from enum import Enum
+from functools import lru_cache
 
 from humanpt.alter.ddcmp import (
     DEFAULT_ADDRESS,
@@ -106,6 +107,13 @@ def _tx(*frames: DataFrame | ControlFrame) -> Transmit:
     return Transmit(b"".join(encode_frame(f) for f in frames))
 
 
+@lru_cache(maxsize=1024)
+def _control_tx(make, *args) -> Transmit:
+    """``_tx(make(*args))`` for a control-frame constructor (ack, nak, rep, strt, stack):
+    the same arguments give the same bytes, so each is built once (events are immutable)."""
+    return _tx(make(*args))
+
+
 class DdcmpLink:
     """One end of a DDCMP point-to-point link (both ends run the same machine)."""
 
@@ -161,7 +169,7 @@ class DdcmpLink:
         self._reset_sequence()
         self._state = LinkState.ISTRT
         self._timer_ns = now_ns + self.config.start_timeout_ns
-        return [_tx(strt(self.config.address))]
+        return [_control_tx(strt, self.config.address)]
 
     def stop(self) -> list[Event]:
         """Halt: the line is ignored until ``start``."""
@@ -213,10 +221,10 @@ class DdcmpLink:
             return events
         cfg = self.config
         if self._state is LinkState.ISTRT:
-            events.append(_tx(strt(cfg.address)))
+            events.append(_control_tx(strt, cfg.address))
             self._timer_ns = now_ns + cfg.start_timeout_ns
         elif self._state is LinkState.ASTRT:
-            events.append(_tx(stack(cfg.address)))
+            events.append(_control_tx(stack, cfg.address))
             self._timer_ns = now_ns + cfg.start_timeout_ns
         elif self._state is LinkState.RUNNING and self._outstanding:
             self._rep_count += 1
@@ -225,7 +233,7 @@ class DdcmpLink:
                 events.extend(self.start(now_ns))
             else:
                 events.append(RepSent(self._n, self._rep_count))
-                events.append(_tx(rep(self._n, cfg.address)))
+                events.append(_control_tx(rep, self._n, cfg.address))
                 self._timer_ns = now_ns + cfg.rep_timeout_ns
         else:
             self._timer_ns = None
@@ -250,7 +258,7 @@ class DdcmpLink:
 
     def _send_owed_ack(self, events: list[Event]) -> None:
         if self._ack_owed_since is not None and self._state is LinkState.RUNNING:
-            events.append(_tx(ack(self._r, self.config.address)))
+            events.append(_control_tx(ack, self._r, self.config.address))
         self._ack_owed_since = None
 
     def _go_running(self, events: list[Event]) -> None:
@@ -264,7 +272,7 @@ class DdcmpLink:
         if self._state is LinkState.RUNNING and reason is not None and not self._nak_sent:
             self._nak_sent = True
             self._ack_owed_since = None  # the NAK carries RESP = R too
-            events.append(_tx(nak(self._r, reason, self.config.address)))
+            events.append(_control_tx(nak, self._r, reason, self.config.address))
 
     def _process_resp(self, resp: int, now_ns: int, events: list[Event]) -> None:
         """Peer acknowledges up to ``resp``; ignore if not within (A, N]."""
@@ -310,16 +318,16 @@ class DdcmpLink:
             if kind is ControlType.STRT:
                 self._state = LinkState.ASTRT
                 self._timer_ns = now_ns + cfg.start_timeout_ns
-                events.append(_tx(stack(cfg.address)))
+                events.append(_control_tx(stack, cfg.address))
             elif kind is ControlType.STACK:
-                events.append(_tx(ack(0, cfg.address)))
+                events.append(_control_tx(ack, 0, cfg.address))
                 self._go_running(events)
             return
         if state is LinkState.ASTRT:
             if kind is ControlType.STRT:
-                events.append(_tx(stack(cfg.address)))
+                events.append(_control_tx(stack, cfg.address))
             elif kind is ControlType.STACK:
-                events.append(_tx(ack(0, cfg.address)))
+                events.append(_control_tx(ack, 0, cfg.address))
                 self._go_running(events)
             elif kind is ControlType.ACK and frame.rcvr == 0:
                 self._go_running(events)
@@ -340,15 +348,15 @@ class DdcmpLink:
         elif kind is ControlType.REP:
             self._ack_owed_since = None
             if frame.sndr == self._r:
-                events.append(_tx(ack(self._r, cfg.address)))
+                events.append(_control_tx(ack, self._r, cfg.address))
             else:
-                events.append(_tx(nak(self._r, NakReason.REP_RESPONSE, cfg.address)))
+                events.append(_control_tx(nak, self._r, NakReason.REP_RESPONSE, cfg.address))
         elif kind is ControlType.STRT:
             # The peer restarted: our sequence state is void. Answer and start again.
             events.append(LinkDown("peer restarted (STRT)", len(self._outstanding)))
             self._reset_sequence()
             self._state = LinkState.ASTRT
             self._timer_ns = now_ns + cfg.start_timeout_ns
-            events.append(_tx(stack(cfg.address)))
+            events.append(_control_tx(stack, cfg.address))
         elif kind is ControlType.STACK:
-            events.append(_tx(ack(self._r, cfg.address)))  # it missed our ACK(0)
+            events.append(_control_tx(ack, self._r, cfg.address))  # it missed our ACK(0)

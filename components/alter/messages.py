@@ -196,7 +196,14 @@ class Correction:
     @property
     def deltas(self) -> tuple[int, int, int, int, int, int]:
         """(dx, dy, dz [0.01 mm], drx, dry, drz [0.01 deg]) as wire integers."""
-        return tuple(getattr(self, n) for n in self._DELTAS)  # type: ignore[return-value]
+        return (
+            self.dx_10um,
+            self.dy_10um,
+            self.dz_10um,
+            self.drx_cdeg,
+            self.dry_cdeg,
+            self.drz_cdeg,
+        )
 
     @classmethod
     def hold(cls, echo_cycle: int, flags: CorrectionFlags = NO_FLAGS) -> Correction:
@@ -216,15 +223,15 @@ class Correction:
         Raises ValueError when a value does not fit int16 units; it never clips (clamping
         to the safety limits is the gateway's job, before this).
         """
-        d_mm = np.asarray(d_mm, dtype=float).reshape(3)
-        r_deg = np.asarray(r_deg, dtype=float).reshape(3)
+        d_mm = np.asarray(d_mm, dtype=float).reshape(3).tolist()
+        r_deg = np.asarray(r_deg, dtype=float).reshape(3).tolist()
         d = [
-            _to_units(v, MM_PER_UNIT, f"d{n}_mm", INT16_MIN, INT16_MAX)
-            for v, n in zip(d_mm, "xyz", strict=True)
+            _to_units(v, MM_PER_UNIT, n, INT16_MIN, INT16_MAX)
+            for v, n in zip(d_mm, ("dx_mm", "dy_mm", "dz_mm"), strict=True)
         ]
         r = [
-            _to_units(v, DEG_PER_UNIT, f"r{n}_deg", INT16_MIN, INT16_MAX)
-            for v, n in zip(r_deg, "xyz", strict=True)
+            _to_units(v, DEG_PER_UNIT, n, INT16_MIN, INT16_MAX)
+            for v, n in zip(r_deg, ("rx_deg", "ry_deg", "rz_deg"), strict=True)
         ]
         return cls(echo_cycle, flags, *d, *r)
 

@@ -265,7 +265,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._missed = 0
 
     def _on_tick(self, t_ns: int, outs: list[Output]) -> None:
-        self._link(self._host.poll(t_ns), t_ns, outs)
+        events = self._host.poll(t_ns)
+        if events:
+            self._link(events, t_ns, outs)
         if self._pending is not None and t_ns >= self._pending[1]:
             cycle = self._pending[0]
             self.counters["deadline_missed"] += 1
@@ -278,12 +280,12 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                     f"no command for cycle {cycle} within {self.config.reply_deadline_ms} ms of its status",
                 )
             self._answer(cycle, t_ns, outs)
-        timeout_ns = self.config.status_timeout_cycles * self.config.cycle_period_ns
         if (
-            self._host.link.is_running
-            and self._status_t_ns is not None
+            self._status_t_ns is not None
             and not self._silent
-            and t_ns - self._status_t_ns > timeout_ns
+            and t_ns - self._status_t_ns
+            > self.config.status_timeout_cycles * self.config.cycle_period_ns
+            and self._host.link.is_running
         ):
             self._silent = True
             self._pending = None
@@ -583,7 +585,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             dp, rv = world_R_flange @ dp, world_R_flange @ rv
         max_mm, max_deg = cfg.max_step_mm, cfg.max_step_deg
         dp_c, t_clamped = clamp_norm(dp, max_mm)
-        rv_c, r_clamped = clamp_norm(rv, np.radians(max_deg))
+        rv_c, r_clamped = clamp_norm(rv, math.radians(max_deg))
         if t_clamped or r_clamped:
             self.counters["clamped"] += 1
             self._ev(

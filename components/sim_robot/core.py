@@ -51,6 +51,18 @@ from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.kinematics import UnreachableError
 
 TRUTH = "sim_robot/truth"
+# Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
+_ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED = (
+    int(b)
+    for b in (
+        StatusBits.ARM_POWER,
+        StatusBits.CUMULATIVE,
+        StatusBits.ALTER_ACTIVE,
+        StatusBits.TOOL_MODE,
+        StatusBits.FAULT,
+        StatusBits.CORRECTION_MISSED,
+    )
+)
 
 
 class SimRobotCore(SerialLinkCoreMixin, Core):
@@ -124,16 +136,16 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         return self._ctrl.link.is_running
 
     def status_bits(self) -> StatusBits:
-        bits = StatusBits.ARM_POWER | StatusBits.CUMULATIVE
+        bits = _ARM_POWER | _CUMULATIVE
         if self.alter_active:
-            bits |= StatusBits.ALTER_ACTIVE
+            bits |= _ALTER_ACTIVE
         if self.config.alter_mode == "tool":
-            bits |= StatusBits.TOOL_MODE
+            bits |= _TOOL_MODE
         if self.fault is not None:
-            bits |= StatusBits.FAULT
+            bits |= _FAULT
         if self._missed:
-            bits |= StatusBits.CORRECTION_MISSED
-        return bits
+            bits |= _CORRECTION_MISSED
+        return StatusBits(bits)
 
     # -- inputs -----------------------------------------------------------------------------
     def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:

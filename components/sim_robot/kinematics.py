@@ -167,6 +167,10 @@ def dh_transform(link: DhLink, theta_rad: float) -> np.ndarray:
     )
 
 
+_EYE3 = np.eye(3)
+_EYE3.flags.writeable = False
+
+
 def _wrap(angle: float) -> float:
     """Angle in (-pi, pi]."""
     a = (angle + np.pi) % TWO_PI - np.pi
@@ -436,36 +440,38 @@ class PumaKinematics:
         """Per leg, joints 4-6 (unwrapped) of its noflip and flip wrists reaching the
         rotation R: ((q4, q5, q6), "noflip"), ((q4', q5', q6'), "flip").
 
-        From R36 = R03^T R = Rz(q4) Ry(q5) Rz(q6) (what alpha4 = -90, alpha5 = +90 give),
-        every leg in the same numpy calls."""
-        A = np.array([[self._rotation(k, leg[2 + k]) for k in range(3)] for leg in legs])
-        R03 = np.eye(3) @ A[:, 0] @ A[:, 1] @ A[:, 2]
-        M = R03.transpose(0, 2, 1) @ R
-        s5 = np.hypot(M[:, 0, 2], M[:, 1, 2])
-        n = len(legs)
+        From R36 = R03^T R = Rz(q4) Ry(q5) Rz(q6) (what alpha4 = -90, alpha5 = +90 give);
+        the legs share the hypot and arctan2 calls."""
+        Ms = []
+        for leg in legs:
+            A = np.array([self._rotation(k, leg[2 + k]) for k in range(3)])
+            R03 = _EYE3 @ A[0] @ A[1] @ A[2]
+            Ms.append((R03.T @ R).tolist())
+        s5 = np.hypot([M[0][2] for M in Ms], [M[1][2] for M in Ms]).tolist()
         w = np.arctan2(
-            np.concatenate((M[:, 1, 2], s5, M[:, 2, 1])),
-            np.concatenate((M[:, 0, 2], M[:, 2, 2], -M[:, 2, 0])),
+            [M[1][2] for M in Ms] + s5 + [M[2][1] for M in Ms],
+            [M[0][2] for M in Ms] + [M[2][2] for M in Ms] + [-M[2][0] for M in Ms],
         ).tolist()
+        n = len(legs)
         out = []
-        for i in range(n):
+        for i, M in enumerate(Ms):
             if s5[i] < self.WRIST_SINGULAR_SIN:
-                out.append(self._singular_wrist(M[i], q4_ref))
+                out.append(self._singular_wrist(M, q4_ref))
             else:
                 q4, q5, q6 = w[i], w[n + i], w[2 * n + i]
                 out.append((((q4, q5, q6), "noflip"), ((q4 + np.pi, -q5, q6 + np.pi), "flip")))
         return out
 
     @staticmethod
-    def _singular_wrist(M: np.ndarray, q4_ref: float):
+    def _singular_wrist(M: list[list[float]], q4_ref: float):
         """Joints 4-6 at a wrist singularity (joints 4 and 6 coaxial): keep q4 where it
         is, q6 takes the rest."""
-        if M[2, 2] > 0:  # q5 = 0: R36 = Rz(q4 + q6)
+        if M[2][2] > 0:  # q5 = 0: R36 = Rz(q4 + q6)
             q5 = 0.0
-            q6 = float(np.arctan2(M[1, 0], M[0, 0])) - q4_ref
+            q6 = float(np.arctan2(M[1][0], M[0][0])) - q4_ref
         else:  # q5 = pi: R36 = Ry(pi) Rz(q6 - q4)
             q5 = np.pi
-            q6 = float(np.arctan2(M[1, 0], M[1, 1])) + q4_ref
+            q6 = float(np.arctan2(M[1][0], M[1][1])) + q4_ref
         return (((q4_ref, q5, q6), "noflip"), ((q4_ref + np.pi, -q5, q6 + np.pi), "flip"))
 
     def _elbow_label(self, q2: float, x2: float, pz: float) -> Literal["above", "below"]:
