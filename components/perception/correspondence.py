@@ -274,6 +274,10 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
     if len(blobs) < 2:
         return lost()
     uv = ideal_pixels(s.params, blobs.uv_px)
+    if len(blobs) <= _SMALL_BLOBS:
+        small = _candidates_small(blobs, uv, s)
+        if small is not None and len(small[0]) <= _SMALL_PAIRS:
+            return _best_small(blobs, uv, s, *small)
     ii, jj, res, p, chi2 = _candidates(blobs, uv, s)
     n_pairs = len(ii)
     if n_pairs == 0:
@@ -308,6 +312,120 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
                 return _finish(blobs, uv, ii[best], jj[best], s)
     best = int(np.argmin(chi2))
     return _finish(blobs, uv, ii[[best]], jj[[best]], s)
+
+
+# A few blobs and candidate pairs (the usual image: the target's six views): the same
+# search on plain floats. Every number is computed by the operations of the array code in
+# the same order (sums of up to three terms in order, as np.sum does them; logarithms by
+# np.log), so the result is the same; anything else goes through the array code.
+_SMALL_BLOBS = 12
+_SMALL_PAIRS = 8
+
+
+def _candidates_small(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
+    """:func:`_candidates` as lists (ii, jj, |residual|, points, chi-square), or None when
+    the array code has to run (more than ``_MAX_CANDIDATES`` pairs, non-finite scores)."""
+    params = s.params
+    cr, cl = params.right_camera, params.left_camera
+    a_u, a_v, b, m, l = params.a_u, params.a_v, params.baseline_mm, params.m_mm, params.l_mm
+    d_lo, d_hi = disparity_range_px(params, s.min_depth_mm, s.max_depth_mm)
+    v_tol = 3 * s.epipolar_tol_px + 5
+    lo, hi = s.size_ratio_range
+    diameter = s.model.source_diameter_mm
+    pts = uv.tolist()
+    size = blobs.size_px.tolist()
+    # _offsets of every blob seen as a right and as a left view
+    off_r = [(u - cr.u0 - cr.skew * (v - cr.v0) / cr.a_v, v - cr.v0) for u, v in pts]
+    off_l = [(u - cl.u0 - cl.skew * (v - cl.v0) / cl.a_v, v - cl.v0) for u, v in pts]
+    kept = []
+    for i, (ui, vi) in enumerate(pts):
+        du_r, dv_r = off_r[i]
+        for j, (uj, vj) in enumerate(pts):
+            if i == j or not (d_lo <= uj - ui <= d_hi and abs(vj - vi) <= v_tol):
+                continue
+            du_l, dv_l = off_l[j]
+            if du_l - du_r == 0.0:
+                continue  # z not finite: the depth gate drops it
+            z = (a_u * (b + m) + l * du_l) / (du_l - du_r) - b / 2.0
+            if not (math.isfinite(z) and s.min_depth_mm <= z <= s.max_depth_mm):
+                continue
+            res = dv_r - dv_l * (z + b / 2.0 - l) / (z + b / 2.0)
+            if not abs(res) <= s.epipolar_tol_px:
+                continue
+            expected = a_u * diameter / (z + b / 2.0)
+            if not (lo <= size[i] / expected <= hi and lo <= size[j] / expected <= hi):
+                continue
+            x = (z + b / 2.0) * du_r / a_u + b / 2.0
+            y = 0.5 * ((z + b / 2.0) * dv_r + (z + b / 2.0 - l) * dv_l) / a_v
+            kept.append((i, j, res, (x, y, z)))
+    if len(kept) > _MAX_CANDIDATES:
+        return None
+    ii = [k[0] for k in kept]
+    jj = [k[1] for k in kept]
+    log_area = np.log(blobs.area_px[ii] / blobs.area_px[jj]).tolist()
+    peak = np.maximum(blobs.peak_dn, 1e-6)
+    dim = np.log(peak.max() / peak).tolist()
+    max_log = math.log(s.max_area_ratio)
+    out = ([], [], [], [], [])
+    for (i, j, res, p), la in zip(kept, log_area, strict=True):
+        if not abs(la) <= max_log:
+            continue
+        t, a = res / s.epipolar_sigma_px, la / _AREA_SIGMA
+        chi2 = t * t + a * a + (dim[i] * dim[i] + dim[j] * dim[j]) / _PEAK_SIGMA**2
+        if not math.isfinite(chi2):
+            return None
+        for lst, v in zip(out, (i, j, abs(res), p, chi2), strict=True):
+            lst.append(v)
+    return out
+
+
+def _dist(p: tuple, q: tuple) -> float:
+    dx, dy, dz = p[0] - q[0], p[1] - q[1], p[2] - q[2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+def _best_small(blobs: Blobs, uv: np.ndarray, s: MatchSettings, ii, jj, res, p, chi2) -> Match:
+    """:func:`match_scored` after :func:`_candidates_small` (the same choices: first best
+    in the order of the array code's combinations)."""
+    n_pairs = len(ii)
+    if n_pairs == 0:
+        return lost()
+    m0, m1, m2 = sorted(s.model._sides_mm)
+    tol, sigma = s.model.side_tolerance_mm, s.side_sigma_mm
+    if n_pairs >= 3:
+        best, best_total = None, math.inf
+        for a, b, c in itertools.combinations(range(n_pairs), 3):
+            if len({ii[a], ii[b], ii[c], jj[a], jj[b], jj[c]}) < 6:
+                continue
+            d0, d1, d2 = sorted((_dist(p[a], p[b]), _dist(p[b], p[c]), _dist(p[c], p[a])))
+            e0, e1, e2 = d0 - m0, d1 - m1, d2 - m2
+            if not max(abs(e0), abs(e1), abs(e2)) <= tol:
+                continue
+            t0, t1, t2 = e0 / sigma, e1 / sigma, e2 / sigma
+            total = chi2[a] + chi2[b] + chi2[c] + (t0 * t0 + t1 * t1 + t2 * t2)
+            if best is None or total < best_total:
+                best, best_total = (a, b, c), total
+        if best is not None:
+            result = _finish(blobs, uv, [ii[k] for k in best], [jj[k] for k in best], s)
+            if result is not None:
+                return result
+    if n_pairs >= 2:
+        best, best_total = None, math.inf
+        for a, b in itertools.combinations(range(n_pairs), 2):
+            if len({ii[a], ii[b], jj[a], jj[b]}) < 4:
+                continue
+            dist = _dist(p[a], p[b])
+            err = min(abs(dist - m0), abs(dist - m1), abs(dist - m2))
+            if not err <= tol:
+                continue
+            t = err / sigma
+            total = chi2[a] + chi2[b] + t * t
+            if best is None or total < best_total:
+                best, best_total = (a, b), total
+        if best is not None:
+            return _finish(blobs, uv, [ii[k] for k in best], [jj[k] for k in best], s)
+    best = min(range(n_pairs), key=chi2.__getitem__)
+    return _finish(blobs, uv, [ii[best]], [jj[best]], s)
 
 
 def _eq4_rows(params: PsvsParams, uv: list, right, left) -> list | None:
@@ -357,7 +475,7 @@ def _finish(
     so the same numbers without numpy's per-call overhead."""
     method = method or s.triangulation
     uv_list = uv.tolist()
-    right_l, left_l = right.tolist(), left.tolist()
+    right_l, left_l = np.asarray(right).tolist(), np.asarray(left).tolist()
     if method == "eq4":
         pts = _eq4_rows(s.params, uv_list, right_l, left_l)
         if pts is None:
