@@ -17,12 +17,12 @@ numpy calls in the same order - so the same numbers - without its bookkeeping co
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from humanpt.pose_filter.fastmath import rotvec_of
-from humanpt.schemas.convert import matrix_from_rotvec
+from humanpt.pose_filter.fastmath import matrix_of, rotvec_of
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
@@ -40,11 +40,10 @@ def _block_indices(blocks) -> tuple[np.ndarray, np.ndarray]:
 
 # F: the (p, v) and (r, w) blocks are dt * I3; Q: per group (position, rotation) the blocks
 # (pp, pv, vp, vv) are q * [dt^3/3, dt^2/2, dt^2/2, dt] * I3. Both are filled from these
-# indices with the numbers the products with I3 give (s on the diagonal, s * 0 off it).
+# indices with the numbers the products with I3 give: s on the diagonal, s * 0 off it
+# (which is the +0.0 already there unless s is negative, infinite or NaN).
 _F_DIAG, _F_OFF = _block_indices([(0, 6), (3, 9)])
-_Q_ALL = np.concatenate(
-    _block_indices([(0, 0), (0, 6), (6, 0), (6, 6), (3, 3), (3, 9), (9, 3), (9, 9)])
-)
+_Q_DIAG, _Q_OFF = _block_indices([(0, 0), (0, 6), (6, 0), (6, 6), (3, 3), (3, 9), (9, 3), (9, 9)])
 
 
 def transition(dt_s: float) -> np.ndarray:
@@ -52,7 +51,9 @@ def transition(dt_s: float) -> np.ndarray:
     F = np.eye(12)
     flat = F.reshape(-1)
     flat[_F_DIAG] = dt_s
-    flat[_F_OFF] = dt_s * 0.0
+    zero = dt_s * 0.0
+    if zero != 0.0 or math.copysign(1.0, zero) < 0.0:  # -0.0 or NaN: not np.eye's zeros
+        flat[_F_OFF] = zero
     return F
 
 
@@ -60,14 +61,15 @@ def process_noise(
     dt_s: float, accel_sigma_m_s2: float, ang_accel_sigma_rad_s2: float
 ) -> np.ndarray:
     """(12, 12) discrete white-noise acceleration: per axis q * [[dt^3/3, dt^2/2], [dt^2/2, dt]]."""
-    diag, off = [], []
+    diag = []
     for q in (accel_sigma_m_s2**2, ang_accel_sigma_rad_s2**2):
         a, b, c = q * dt_s**3 / 3, q * dt_s**2 / 2, q * dt_s
-        for v in (a, b, b, c):
-            diag += [v] * 3
-            off += [v * 0.0] * 6
+        diag += [a, a, a, b, b, b, b, b, b, c, c, c]
     Q = np.zeros(144)
-    Q[_Q_ALL] = diag + off
+    Q[_Q_DIAG] = diag
+    if not all(v >= 0.0 and v != math.inf and math.copysign(1.0, v) > 0.0 for v in diag[::3]):
+        # v * 0 off the block diagonals is -0.0 or NaN, not the zeros already there
+        Q[_Q_OFF] = [v * 0.0 for v in diag[::3] for _ in range(6)]
     return Q.reshape(12, 12)
 
 
@@ -131,7 +133,7 @@ class PoseKalman:
 
     def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
         x = self.x if x is None else x
-        return matrix_from_rotvec(x[3:6]) @ self.R_ref
+        return matrix_of(x[3:6]) @ self.R_ref
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
@@ -185,6 +187,6 @@ class PoseKalman:
 
     def _transform(self, x: np.ndarray) -> np.ndarray:
         T = np.eye(4)
-        T[:3, :3] = matrix_from_rotvec(x[3:6]) @ self.R_ref
+        T[:3, :3] = matrix_of(x[3:6]) @ self.R_ref
         T[:3, 3] = x[0:3]
         return T

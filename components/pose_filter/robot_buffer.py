@@ -7,8 +7,7 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.pose_filter.fastmath import rotvec_of, slerp
-from humanpt.schemas.convert import matrix_from_rotvec
+from humanpt.pose_filter.fastmath import matrix_of, quat_of, rotvec_of, slerp
 
 
 class RobotPoseBuffer:
@@ -17,12 +16,14 @@ class RobotPoseBuffer:
     def __init__(self, maxlen: int = 64):
         self._items: deque[tuple[int, np.ndarray]] = deque(maxlen=maxlen)
         self._stamps: deque[int] = deque(maxlen=maxlen)
+        self._quats: deque = deque(maxlen=maxlen)  # quat_of each rotation, once needed
 
     def add(self, stamp_ns: int, world_T_flange: np.ndarray) -> None:
         if self._items and stamp_ns <= self._items[-1][0]:
             return  # out of order or duplicate: keep the buffer monotonic
         self._items.append((int(stamp_ns), np.asarray(world_T_flange, dtype=float)))
         self._stamps.append(int(stamp_ns))
+        self._quats.append(None)
 
     def __len__(self) -> int:
         return len(self._items)
@@ -30,6 +31,12 @@ class RobotPoseBuffer:
     @property
     def latest(self) -> tuple[int, np.ndarray] | None:
         return self._items[-1] if self._items else None
+
+    def _quat(self, i: int):
+        q = self._quats[i]
+        if q is None:
+            q = self._quats[i] = quat_of(self._items[i][1][:3, :3])
+        return q
 
     def at(self, stamp_ns: int, max_extrapolation_ns: int) -> np.ndarray | None:
         """world_T_flange at ``stamp_ns``: interpolated (linear + slerp) between the two
@@ -55,8 +62,8 @@ class RobotPoseBuffer:
         T[:3, 3] = [a + s * (b - a) for a, b in zip(p0, p1, strict=True)]
         if 0.0 <= s <= 1.0:
             # = Slerp([0, 1], Rotation.from_matrix([R0, R1]))(s).as_matrix()
-            T[:3, :3] = slerp(T0[:3, :3], T1[:3, :3], s)
+            T[:3, :3] = slerp(T0[:3, :3], T1[:3, :3], s, self._quat(i - 1), self._quat(i))
         else:  # extrapolate the relative rotation
             dR = rotvec_of(T1[:3, :3] @ T0[:3, :3].T)
-            T[:3, :3] = matrix_from_rotvec(dR * s) @ T0[:3, :3]
+            T[:3, :3] = matrix_of(dR * s) @ T0[:3, :3]
         return T

@@ -38,6 +38,17 @@ def test_rotation_vector_and_slerp_match_scipy():
             assert _same(fastmath.slerp(R, R1, s), expected)
 
 
+def test_matrix_of_a_rotation_vector_matches_scipy():
+    rng = np.random.default_rng(3)
+    for k in range(3000):
+        v = rng.normal(0.0, [1e-9, 1e-4, 9e-4, 1e-3, 0.01, 0.3, 2.0, 10.0][k % 8], 3)
+        if k % 8 == 3:
+            v *= 1e-3 / np.linalg.norm(v)  # the series' edge
+        assert _same(fastmath.matrix_of(v), convert.matrix_from_rotvec(v))
+    for v in (np.zeros(3), np.array([np.nan, 0.0, 0.0]), np.array([np.inf, 0.0, 0.0])):
+        assert _same(fastmath.matrix_of(v), convert.matrix_from_rotvec(v))
+
+
 def test_transition_and_process_noise_are_the_block_products():
     I3 = np.eye(3)
     for dt in (0.033, 0.0, -0.02, 1e-9):
