@@ -9,12 +9,13 @@ stamp = capture, frame "camera") with the truth it used on ``sim_camera/truth``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from humanpt.geometry import compose, invert_transform
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import MessageError, from_pose, image, pose, slerp_matrix
+from humanpt.schemas.convert import MessageError, from_pose, image
 
 from .config import SimCameraConfig
 from .render import Renderer
@@ -36,9 +37,67 @@ def interpolate_pose(
     s = (t_ns - t0_ns) / span
     s = min(max(s, -max_extra_ns / span), 1.0 + max_extra_ns / span)
     out = np.eye(4)
-    out[:3, :3] = slerp_matrix(a_T_b0[:3, :3], a_T_b1[:3, :3], s)
+    out[:3, :3] = _slerp(a_T_b0[:3, :3].tolist(), a_T_b1[:3, :3].tolist(), s)
     out[:3, 3] = a_T_b0[:3, 3] + s * (a_T_b1[:3, 3] - a_T_b0[:3, 3])
     return out
+
+
+def _quaternion(m: list[list[float]]) -> tuple[float, float, float, float]:
+    """Rotation matrix (nested lists) -> unit quaternion (x, y, z, w), Shepperd's method."""
+    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = m
+    tr = m00 + m11 + m22
+    if tr >= m00 and tr >= m11 and tr >= m22:
+        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
+        f = 0.25 / w
+        q = ((m21 - m12) * f, (m02 - m20) * f, (m10 - m01) * f, w)
+    elif m00 >= m11 and m00 >= m22:
+        x = 0.5 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
+        f = 0.25 / x
+        q = (x, (m01 + m10) * f, (m02 + m20) * f, (m21 - m12) * f)
+    elif m11 >= m22:
+        y = 0.5 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
+        f = 0.25 / y
+        q = ((m01 + m10) * f, y, (m12 + m21) * f, (m02 - m20) * f)
+    else:
+        z = 0.5 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
+        f = 0.25 / z
+        q = ((m02 + m20) * f, (m12 + m21) * f, z, (m10 - m01) * f)
+    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+    return q[0] / n, q[1] / n, q[2] / n, q[3] / n
+
+
+def _slerp(r0: list[list[float]], r1: list[list[float]], s: float) -> list[list[float]]:
+    """The rotation a fraction ``s`` (any real: beyond [0, 1] it extrapolates) of the way
+    along the shortest geodesic from ``r0`` to ``r1``: ``r0 exp(s log(r0^T r1))`` (as
+    ``humanpt.schemas.convert.slerp_matrix``, to rounding; plain floats, this runs twice
+    per image)."""
+    x0, y0, z0, w0 = _quaternion(r0)
+    x1, y1, z1, w1 = _quaternion(r1)
+    # rel = conj(q0) q1, on the short way round
+    rw = w0 * w1 + x0 * x1 + y0 * y1 + z0 * z1
+    rx = w0 * x1 - w1 * x0 - (y0 * z1 - z0 * y1)
+    ry = w0 * y1 - w1 * y0 - (z0 * x1 - x0 * z1)
+    rz = w0 * z1 - w1 * z0 - (x0 * y1 - y0 * x1)
+    if rw < 0.0:
+        rw, rx, ry, rz = -rw, -rx, -ry, -rz
+    n = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if n > 0.0:
+        half = s * math.atan2(n, rw)  # s times half the relative angle
+        k = math.sin(half) / n
+        sx, sy, sz, sw = rx * k, ry * k, rz * k, math.cos(half)
+    else:
+        sx, sy, sz, sw = 0.0, 0.0, 0.0, 1.0
+    # q = q0 step
+    w = w0 * sw - (x0 * sx + y0 * sy + z0 * sz)
+    x = w0 * sx + sw * x0 + (y0 * sz - z0 * sy)
+    y = w0 * sy + sw * y0 + (z0 * sx - x0 * sz)
+    z = w0 * sz + sw * z0 + (x0 * sy - y0 * sx)
+    f = 2.0 / (w * w + x * x + y * y + z * z)
+    return [
+        [1.0 - f * (y * y + z * z), f * (x * y - z * w), f * (x * z + y * w)],
+        [f * (x * y + z * w), 1.0 - f * (x * x + z * z), f * (y * z - x * w)],
+        [f * (x * z - y * w), f * (y * z + x * w), 1.0 - f * (x * x + y * y)],
+    ]
 
 
 class PoseTrack:
@@ -135,20 +194,31 @@ class SimCameraCore(Core):
                 ]
             return []
         world_T_tob = self.tob.at(t_ns, extra_ns)
-        world_T_camera = compose(world_T_flange, self.flange_T_camera)
+        world_T_camera = world_T_flange @ self.flange_T_camera
         camera_T_tob = None
         if world_T_tob is not None:
-            camera_T_tob = compose(invert_transform(world_T_camera), world_T_tob)
+            # inv(world_T_camera) @ world_T_tob, rigid
+            r_t = world_T_camera[:3, :3].T
+            camera_T_tob = np.eye(4)
+            camera_T_tob[:3, :3] = r_t @ world_T_tob[:3, :3]
+            camera_T_tob[:3, 3] = r_t @ (world_T_tob[:3, 3] - world_T_camera[:3, 3])
         pixels = self.renderer.render(camera_T_tob, world_T_camera, self.frame_index)
         self.frame_index += 1
         truth = pb.Truth(header=self.next_header("sim_camera/truth", t_ns, "world"))
-        truth.world_T_flange.CopyFrom(pose(_metres(world_T_flange)))
+        _set_pose_m(truth.world_T_flange, world_T_flange)
         if world_T_tob is not None:
-            truth.world_T_tob.CopyFrom(pose(_metres(world_T_tob)))
+            _set_pose_m(truth.world_T_tob, world_T_tob)
         return [("camera/image", image(pixels, t_ns, "camera")), ("sim_camera/truth", truth)]
 
 
-def _metres(a_T_b_mm: np.ndarray) -> np.ndarray:
-    out = np.array(a_T_b_mm, dtype=float)
-    out[:3, 3] /= 1000.0
-    return out
+def _set_pose_m(msg: pb.Pose, a_T_b_mm: np.ndarray) -> None:
+    """Fill ``msg`` with a rigid transform given in mm, translation in metres: the message
+    ``humanpt.schemas.convert.pose`` gives (to rounding), without its checks - the poses
+    here are rotations by construction (from messages, interpolated)."""
+    x, y, z, w = _quaternion(a_T_b_mm[:3, :3].tolist())
+    if w < 0.0:
+        x, y, z, w = -x, -y, -z, -w
+    tx, ty, tz = a_T_b_mm[:3, 3].tolist()
+    t, q = msg.translation, msg.rotation
+    t.x, t.y, t.z = tx / 1000.0, ty / 1000.0, tz / 1000.0
+    q.x, q.y, q.z, q.w = x, y, z, w

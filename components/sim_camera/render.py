@@ -24,10 +24,14 @@ Pipeline (one image):
    (Poisson in electrons), read noise (Gaussian), full well, rounding to 8 bits, clipping
    at 255. Views are superimposed by adding their signals before the sensor.
 
-Speed: only small windows around each blob are rendered; the noise of the (uniform)
-background is drawn for the whole frame through a 65536-entry table of the exact
-quantised background distribution (one 16-bit random number per pixel); the pixels a
-blob touches get exact Poisson + Gaussian noise.
+Speed: only small windows around each blob are rendered (:meth:`Renderer.signal_pixels`:
+the nonzero pixels, no full frame); coverage runs in the window that holds the ellipse and
+computes exact areas only for the pixels its boundary crosses. The (uniform) background
+comes from a bank of independent draws of the exact quantised background distribution
+(:func:`background_table`), built once per seed: each frame copies the run at an offset
+drawn from its own generator, so every pixel has exactly that distribution and a pixel's
+background is new in every frame. The pixels a blob touches get exact Poisson + Gaussian
+noise.
 
 Units: mm in the camera frame, pixels of the complex image (centre of pixel (row i,
 column j) at (u, v) = (j, i)), DN (grey levels).
@@ -37,12 +41,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.special import ndtr
 from scipy.stats import poisson
 
-from humanpt.geometry import PsvsParams, distort_pixels, project_pinhole, projection_jacobian
+from humanpt.geometry import PsvsParams, distort_pixels
 
 from .config import SimCameraConfig
 
@@ -57,6 +62,9 @@ __all__ = [
 ]
 
 VIEWS = ("right", "left")
+# A source's axes in the TOB frame: e1 = u, e2 = v, lit normal -w.
+_TOB_AXES = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]]).T
+_TOB_AXES.flags.writeable = False
 _MAX_HALF_WINDOW_PX = 400  # a blob wider than 800 px (a source ~1 cm from the lens) is dropped
 
 
@@ -119,6 +127,8 @@ class Discs:
         parts = [p for p in parts if len(p)]
         if not parts:
             return Discs.make(np.zeros((0, 3)), np.eye(3), 1.0, 0.0)
+        if len(parts) == 1:
+            return parts[0]
         return Discs(*(np.concatenate([getattr(p, f) for p in parts]) for f in Discs._fields()))
 
     @staticmethod
@@ -217,6 +227,12 @@ def _distortion_jacobian(params: PsvsParams, uv_ideal: np.ndarray) -> np.ndarray
     return out
 
 
+def _no_blobs() -> Blobs:
+    z = np.zeros(0)
+    zi = np.zeros(0, dtype=int)
+    return Blobs(np.zeros((0, 2)), np.zeros((0, 2, 2)), z, z, z, np.zeros((0, 2)), zi, zi, zi)
+
+
 def project_discs(
     params: PsvsParams,
     discs: Discs,
@@ -227,126 +243,134 @@ def project_discs(
 ) -> Blobs:
     """Project every disc through both virtual cameras; keep the visible blobs (see the
     module docstring for what hides one). Blobs are ordered right view first, then left,
-    each in disc order."""
+    each in disc order. Both views in one vectorised pass (eq. (2) and its Jacobian
+    written out: the formulas of the geometry library's ``project_pinhole`` and
+    ``projection_jacobian``)."""
     width, height = params.image_size_px
-    parts = []
-    for view, camera in enumerate((params.right_camera, params.left_camera)):
-        if len(discs) == 0 or view_gains[view] <= 0:
-            continue
-        rel = discs.centre_mm - camera.centre
-        normal = discs.axes[:, :, 2]
-        to_camera = -rel / np.maximum(np.linalg.norm(rel, axis=1, keepdims=True), 1e-12)
-        facing = np.sum(normal * to_camera, axis=1)
-        ok = (rel[:, 2] > near_mm) & (facing > 1e-6) & (discs.dn_per_ms > 0)
-        ok &= discs.occlusion_h > -1.0
-        idx = np.flatnonzero(ok)
-        if idx.size == 0:
-            continue
-        p = discs.centre_mm[idx]
-        uv_ideal = project_pinhole(camera, p)
-        # Far outside the image the distortion polynomial is meaningless: drop those first.
-        near_image = (
-            (uv_ideal[:, 0] > -0.5 * width)
-            & (uv_ideal[:, 0] < 1.5 * width)
-            & (uv_ideal[:, 1] > -0.5 * height)
-            & (uv_ideal[:, 1] < 1.5 * height)
+    n = len(discs)
+    views = [v for v in (0, 1) if view_gains[v] > 0] if n else []
+    if not views:
+        return _no_blobs()
+    cams = [(params.right_camera, params.left_camera)[v] for v in views]
+    # (view, disc) pairs, view-major: rel (V, n, 3) from each optical centre.
+    rel = discs.centre_mm - np.array([c.centre_mm for c in cams])[:, None]
+    dist = np.sqrt(np.einsum("vni,vni->vn", rel, rel))
+    toward = -np.einsum("vni,ni->vn", rel, discs.axes[:, :, 2])  # lit normal . to-camera * dist
+    ok = (rel[:, :, 2] > near_mm) & (toward > 1e-6 * np.maximum(dist, 1e-12))
+    ok &= (discs.dn_per_ms > 0) & (discs.occlusion_h > -1.0)
+    keep = np.flatnonzero(ok)
+    if keep.size == 0:
+        return _no_blobs()
+    row, disc = np.divmod(keep, n)
+    rel = rel.reshape(-1, 3).take(keep, axis=0)
+    per_row = not (len(cams) == 1 or _same_intrinsics(cams[0], cams[1]))
+    if per_row:
+        a_u, a_v, u0, v0, skew = (
+            np.array([getattr(c, f) for c in cams])[row] for f in ("a_u", "a_v", "u0", "v0", "skew")
         )
-        idx, p, uv_ideal = idx[near_image], p[near_image], uv_ideal[near_image]
-        if idx.size == 0:
-            continue
-        j_pin = projection_jacobian(camera, p)  # (k, 2, 3) px/mm
-        plane = discs.axes[idx][:, :, :2] * discs.radius_mm[idx][:, None, None]  # (k, 3, 2)
-        jac = _distortion_jacobian(params, uv_ideal) @ (j_pin @ plane)
-        if params.has_distortion:
-            uv = distort_pixels(uv_ideal, params.real_camera_matrix, params.dist_coeffs)
-        else:
-            uv = uv_ideal
-        sigma = np.sqrt(blur_sigma_px**2 + discs.blur_px[idx] ** 2)
-        ext = np.sqrt(np.sum(jac**2, axis=2)) + 4.0 * sigma[:, None] + 2.0
-        in_image = (
-            (uv[:, 0] + ext[:, 0] > -0.5)
-            & (uv[:, 0] - ext[:, 0] < width - 0.5)
-            & (uv[:, 1] + ext[:, 1] > -0.5)
-            & (uv[:, 1] - ext[:, 1] < height - 0.5)
-            & (np.max(ext, axis=1) < _MAX_HALF_WINDOW_PX)
-            & (np.abs(np.linalg.det(jac)) > 1e-9)
-        )
+    else:
+        cam = cams[0]
+        a_u, a_v, u0, v0, skew = cam.a_u, cam.a_v, cam.u0, cam.v0, cam.skew
+    inv_z = 1.0 / rel[:, 2]
+    x = rel[:, 0] * inv_z
+    y = rel[:, 1] * inv_z
+    uv_ideal = np.empty((len(x), 2))
+    uv_ideal[:, 0] = u0 + a_u * x + skew * y
+    uv_ideal[:, 1] = v0 + a_v * y
+    # Far outside the image the distortion polynomial is meaningless: drop those first.
+    near_image = (
+        (uv_ideal > (-0.5 * width, -0.5 * height)) & (uv_ideal < (1.5 * width, 1.5 * height))
+    ).all(axis=1)
+    if not near_image.all():
+        sel = np.flatnonzero(near_image)
+        if sel.size == 0:
+            return _no_blobs()
+        inv_z, x, y, row, disc, uv_ideal = (a[sel] for a in (inv_z, x, y, row, disc, uv_ideal))
+        if per_row:
+            a_u, a_v, skew = a_u[sel], a_v[sel], skew[sel]
+    # d(u, v)/d(s, t): eq. (2)'s Jacobian d(u, v)/d(x, y, z) times the disc's in-plane axes
+    # P (columns e1, e2, in radii): du = (a_u (P_x - x P_z) + skew (P_y - y P_z)) / z,
+    # dv = a_v (P_y - y P_z) / z, with x = X/Z, y = Y/Z.
+    plane = discs.axes.take(disc, axis=0)[:, :, :2] * (discs.radius_mm.take(disc) * inv_z)[
+        :, None, None
+    ]  # (k, 3, 2), divided by z
+    along_x = plane[:, 0] - x[:, None] * plane[:, 2]
+    along_y = plane[:, 1] - y[:, None] * plane[:, 2]
+    jac = np.empty((len(x), 2, 2))
+    if per_row:
+        a_u, a_v, skew = a_u[:, None], a_v[:, None], skew[:, None]
+        jac[:, 0] = a_u * along_x + skew * along_y
+    elif skew == 0.0:
+        jac[:, 0] = a_u * along_x
+    else:
+        jac[:, 0] = a_u * along_x + skew * along_y
+    jac[:, 1] = a_v * along_y
+    if params.has_distortion:
+        jac = _distortion_jacobian(params, uv_ideal) @ jac
+        uv = distort_pixels(uv_ideal, params.real_camera_matrix, params.dist_coeffs)
+    else:
+        uv = uv_ideal
+    sigma = np.sqrt(blur_sigma_px**2 + discs.blur_px.take(disc) ** 2)
+    ext = np.sqrt((jac * jac).sum(axis=2)) + (4.0 * sigma + 2.0)[:, None]
+    det = jac[:, 0, 0] * jac[:, 1, 1] - jac[:, 0, 1] * jac[:, 1, 0]
+    in_image = ((uv + ext > -0.5) & (uv - ext < (width - 0.5, height - 0.5))).all(axis=1)
+    in_image &= (ext.max(axis=1) < _MAX_HALF_WINDOW_PX) & (np.abs(det) > 1e-9)
+    if not in_image.all():
         sel = np.flatnonzero(in_image)
         if sel.size == 0:
-            continue
-        d = idx[sel]
-        parts.append(
-            Blobs(
-                uv[sel],
-                jac[sel],
-                discs.dn_per_ms[d] * exposure_ms * view_gains[view],
-                sigma[sel],
-                discs.occlusion_h[d],
-                discs.occlusion_dir[d],
-                np.full(sel.size, view),
-                d,
-                discs.label[d],
-            )
-        )
-    if not parts:
-        z = np.zeros(0)
-        return Blobs(
-            np.zeros((0, 2)),
-            np.zeros((0, 2, 2)),
-            z,
-            z,
-            z,
-            np.zeros((0, 2)),
-            z.astype(int),
-            z.astype(int),
-            z.astype(int),
-        )
+            return _no_blobs()
+        uv, jac, sigma, row, disc = uv[sel], jac[sel], sigma[sel], row[sel], disc[sel]
+    view = np.array(views).take(row)
     return Blobs(
-        *(
-            np.concatenate([getattr(b, f) for b in parts])
-            for f in (
-                "centre_px",
-                "jac",
-                "dn",
-                "sigma_px",
-                "occlusion_h",
-                "occlusion_dir",
-                "view",
-                "disc",
-                "label",
-            )
-        )
+        uv,
+        jac,
+        discs.dn_per_ms.take(disc) * exposure_ms * np.asarray(view_gains, dtype=float).take(view),
+        sigma,
+        discs.occlusion_h.take(disc),
+        discs.occlusion_dir.take(disc, axis=0),
+        view,
+        disc,
+        discs.label.take(disc),
     )
+
+
+def _same_intrinsics(a, b) -> bool:
+    return (a.a_u, a.a_v, a.u0, a.v0, a.skew) == (b.a_u, b.a_v, b.u0, b.v0, b.skew)
 
 
 # --------------------------------------------------------------------------- exact coverage
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+def _edge_areas(ax, ay, rr, dx, dy, aa, inv_aa) -> np.ndarray:
+    """Signed area of (unit disc) intersected with the triangle (origin, a, a + d), for
+    arrays of segments from a = (ax, ay) along d = (dx, dy); ``rr = |a|^2``,
+    ``aa = |d|^2``, ``inv_aa = 1 / aa`` (any finite value where aa = 0). Summed over a
+    closed polygon's edges it gives the polygon's intersection with the unit disc (signed
+    by the polygon's orientation).
+
+    The segment meets the circle at p1 = a + t1 d and p2 = a + t2 d (t clipped to [0, 1]):
+    outside the circle the boundary is an arc - the sectors a -> p1 and p2 -> b - inside
+    it is the chord p1 -> p2. With X = a x d and B = a . d: a x p1 = t1 X,
+    a . p1 = rr + t1 B, p2 x b = (1 - t2) X, p2 . b = rr + B + t2 (B + aa),
+    p1 x p2 = (t2 - t1) X. Where the line misses the circle, t1 = t2 is the segment's point
+    nearest the origin and the two sectors add up to the whole sector a -> b; a zero-length
+    edge (aa = 0, hence X = B = 0) has no area."""
+    cross = ax * dy - ay * dx
+    dot = ax * dx + ay * dy
+    root = np.sqrt(np.maximum(dot * dot - aa * (rr - 1.0), 0.0))
+    t1 = np.clip((-dot - root) * inv_aa, 0.0, 1.0)
+    t2 = np.clip((root - dot) * inv_aa, 0.0, 1.0)
+    sector1 = np.arctan2(t1 * cross, rr + t1 * dot)
+    sector2 = np.arctan2((1.0 - t2) * cross, (rr + dot) + t2 * (dot + aa))
+    return 0.5 * (sector1 + sector2 + (t2 - t1) * cross)
 
 
 def _segment_circle_area(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Signed area of (unit disc) intersected with the triangle (origin, a, b); a, b
-    (..., 2). Summed over a closed polygon's edges it gives the polygon's intersection with
-    the unit disc (signed by the polygon's orientation)."""
-    d = b - a
-    aa = np.sum(d * d, axis=-1)
-    bb = np.sum(a * d, axis=-1)
-    cc = np.sum(a * a, axis=-1) - 1.0
-    disc = bb * bb - aa * cc
-    safe = np.where(aa > 0, aa, 1.0)
-    root = np.sqrt(np.maximum(disc, 0.0))
-    hit = disc > 0
-    t1 = np.where(hit, np.clip((-bb - root) / safe, 0.0, 1.0), 0.0)
-    t2 = np.where(hit, np.clip((-bb + root) / safe, 0.0, 1.0), 0.0)
-    p1 = a + t1[..., None] * d
-    p2 = a + t2[..., None] * d
-    # Outside the circle the boundary is an arc (sector), inside it is the chord.
-    sector1 = np.arctan2(_cross(a, p1), np.sum(a * p1, axis=-1))
-    sector2 = np.arctan2(_cross(p2, b), np.sum(p2 * b, axis=-1))
-    area = 0.5 * (sector1 + _cross(p1, p2) + sector2)
-    return np.where(aa > 0, area, 0.0)
+    """:func:`_edge_areas` of the segments a -> b, points (..., 2)."""
+    ax, ay = a[..., 0], a[..., 1]
+    dx, dy = b[..., 0] - ax, b[..., 1] - ay
+    aa = dx * dx + dy * dy
+    return _edge_areas(ax, ay, ax * ax + ay * ay, dx, dy, aa, 1.0 / np.where(aa > 0, aa, 1.0))
 
 
 def _clip_quads(quads: np.ndarray, direction: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -384,55 +408,124 @@ def coverage(blobs: Blobs, half: int) -> tuple[np.ndarray, np.ndarray]:
     the exact computation, which only runs on the edge pixels.
     """
     size = 2 * half + 1
-    origin = np.round(blobs.centre_px).astype(int) - half  # (m, 2) = (u0, v0)
-    jinv = np.linalg.inv(blobs.jac)  # (m, 2, 2): pixel offsets -> (s, t) radii
-    grid = np.arange(size + 1) - 0.5
-    du = origin[:, 0, None] + grid[None, :] - blobs.centre_px[:, 0, None]  # (m, K+1) columns
-    dv = origin[:, 1, None] + grid[None, :] - blobs.centre_px[:, 1, None]  # (m, K+1) rows
-    # Pixel corners in disc coordinates: (m, K+1 rows, K+1 cols, 2).
-    s = jinv[:, 0, 0, None, None] * du[:, None, :] + jinv[:, 0, 1, None, None] * dv[:, :, None]
-    t = jinv[:, 1, 0, None, None] * du[:, None, :] + jinv[:, 1, 1, None, None] * dv[:, :, None]
-    corners = np.stack([s, t], axis=-1)
-    quads = np.stack(
-        [corners[:, :-1, :-1], corners[:, :-1, 1:], corners[:, 1:, 1:], corners[:, 1:, :-1]],
-        axis=3,
-    )  # (m, K, K, 4, 2)
-    r2 = np.sum(quads * quads, axis=-1)  # (m, K, K, 4)
-    proj = np.einsum("mijkc,mc->mijk", quads, blobs.occlusion_dir)
-    h = blobs.occlusion_h[:, None, None, None]
-    all_in = np.all((r2 <= 1.0) & (proj <= h), axis=-1)
-    centre = quads.mean(axis=3)
-    circum = np.sqrt(np.max(np.sum((quads - centre[:, :, :, None]) ** 2, axis=-1), axis=-1))
-    far = np.sqrt(np.sum(centre * centre, axis=-1)) - circum > 1.0
-    hidden = np.all(proj > h, axis=-1)
-    cov = all_in.astype(float)
-    edge = ~all_in & ~far & ~hidden
-    if np.any(edge):
-        mi = np.nonzero(edge)[0]
-        q = quads[edge]  # (e, 4, 2)
-        poly = _clip_quads(q, blobs.occlusion_dir[mi], blobs.occlusion_h[mi])
-        area = np.sum(_segment_circle_area(poly, np.roll(poly, -1, axis=1)), axis=1)
-        pixel_area = np.abs(np.linalg.det(jinv))[mi]
-        cov[edge] = np.clip(np.abs(area) / pixel_area, 0.0, 1.0)
-    return cov, origin
+    n1 = size + 1  # corners per side
+    centre = blobs.centre_px
+    origin = np.round(centre).astype(int) - half  # (m, 2) = (u0, v0)
+    j = blobs.jac
+    det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
+    # J^-1 (pixel offsets -> (s, t) radii): rows (i00, i01, i10, i11), (4, m).
+    jinv = np.stack([j[:, 1, 1], -j[:, 0, 1], -j[:, 1, 0], j[:, 0, 0]]) / det
+    i00, i01, i10, i11 = jinv[:, :, None, None]
+    grid = np.arange(n1) - 0.5
+    offset = origin - centre
+    du = offset[:, 0, None, None] + grid  # (m, 1, K+1): corner columns
+    dv = offset[:, 1, None, None] + grid[:, None]  # (m, K+1, 1): corner rows
+    # Pixel corners in disc coordinates: (m, K+1 rows, K+1 cols).
+    s = i00 * du + i01 * dv
+    t = i10 * du + i11 * dv
+    rr = s * s + t * t
+    inside = rr <= 1.0
+    occluded = blobs.occlusion_h < 1.0  # h >= 1: the half plane holds the whole disc
+    if occluded.any():
+        od, oh = blobs.occlusion_dir, blobs.occlusion_h
+        inside &= od[:, 0, None, None] * s + od[:, 1, None, None] * t <= oh[:, None, None]
+    all_in = inside[:, :-1, :-1] & inside[:, :-1, 1:] & inside[:, 1:, 1:] & inside[:, 1:, :-1]
+    # Every pixel is the same parallelogram in disc coordinates: a pixel whose centre is
+    # farther than 1 + its circumradius from the disc's centre is surely outside.
+    sc = s[:, :-1, :-1] + s[:, 1:, 1:]  # twice the pixel centres
+    tc = t[:, :-1, :-1] + t[:, 1:, 1:]
+    diag = np.maximum((i00 + i01) ** 2 + (i10 + i11) ** 2, (i00 - i01) ** 2 + (i10 - i11) ** 2)
+    edge = sc * sc + tc * tc <= (2.0 + np.sqrt(diag)) ** 2  # 2 circumradius = sqrt(diag)
+    edge &= ~all_in
+    # Edge pixels by their first corner's flat index in the (m, K+1, K+1) corner grids.
+    grid_edge = np.zeros(s.shape, dtype=bool)
+    grid_edge[:, :-1, :-1] = edge
+    base = np.flatnonzero(grid_edge)
+    cov = np.zeros(s.shape)
+    cov[:, :-1, :-1] = all_in
+    if base.size:
+        mi = base // (n1 * n1)
+        # Corners of each edge pixel in order around it: (r, c), (r, c + 1), (r + 1, c + 1),
+        # (r + 1, c). Its edges run along +column, +row, -column, -row: the same vectors
+        # for every pixel of a blob.
+        here = base[:, None] + np.array([0, 1, n1 + 1, n1])
+        ax, ay = s.take(here), t.take(here)  # (e, 4)
+        dx = jinv[[0, 1, 0, 1]].T * _EDGE_SIGNS  # (m, 4)
+        dy = jinv[[2, 3, 2, 3]].T * _EDGE_SIGNS
+        aa = dx * dx + dy * dy
+        occ = occluded.take(mi)
+        if not occ.any():
+            area = _edge_areas(
+                ax,
+                ay,
+                rr.take(here),
+                dx.take(mi, axis=0),
+                dy.take(mi, axis=0),
+                aa.take(mi, axis=0),
+                (1.0 / aa).take(mi, axis=0),
+            ).sum(axis=1)
+        else:
+            area = np.empty(base.size)
+            p = np.flatnonzero(~occ)
+            k = mi[p]
+            area[p] = _edge_areas(
+                ax[p], ay[p], rr.take(here[p]), dx[k], dy[k], aa[k], 1.0 / aa[k]
+            ).sum(axis=1)
+            cut = np.flatnonzero(occ)
+            k = mi[cut]
+            poly = _clip_quads(
+                np.stack([ax[cut], ay[cut]], axis=-1),
+                blobs.occlusion_dir[k],
+                blobs.occlusion_h[k],
+            )
+            area[cut] = _segment_circle_area(poly, np.roll(poly, -1, axis=1)).sum(axis=1)
+        # Pixel area in disc coordinates: |det J^-1| = 1 / |det J|.
+        cov.put(base, np.clip(np.abs(area) * np.abs(det).take(mi), 0.0, 1.0))
+    return cov[:, :-1, :-1], origin
 
 
-def _blur_matrices(sigma: np.ndarray, size: int) -> np.ndarray:
-    """(m, K, K) banded matrices M with (M @ W @ M^T) = W convolved with a normalised,
-    symmetric sampled Gaussian of sigma (truncated at 4 sigma); identity for sigma = 0."""
-    k = np.arange(size)
-    diff = (k[:, None] - k[None, :]).astype(float)  # (K, K)
-    out = np.empty((len(sigma), size, size))
-    for i, s in enumerate(sigma):
-        if s <= 1e-6:
-            out[i] = np.eye(size)
-            continue
-        radius = math.ceil(4.0 * s)
+_EDGE_SIGNS = np.array([1.0, 1.0, -1.0, -1.0])
+
+
+@lru_cache(maxsize=256)
+def _blur_matrix(sigma: float, size: int) -> np.ndarray:
+    """(K, K) banded matrix M with (M @ W @ M^T) = W convolved with a normalised,
+    symmetric sampled Gaussian of sigma (truncated at 4 sigma); identity for sigma = 0.
+    Read-only (cached)."""
+    if sigma <= 1e-6:
+        g = np.eye(size)
+    else:
+        k = np.arange(size)
+        diff = (k[:, None] - k[None, :]).astype(float)  # (K, K)
+        radius = math.ceil(4.0 * sigma)
         taps = np.arange(-radius, radius + 1)
-        norm = np.sum(np.exp(-0.5 * (taps / s) ** 2))
-        g = np.exp(-0.5 * (diff / s) ** 2) / norm
+        norm = np.sum(np.exp(-0.5 * (taps / sigma) ** 2))
+        g = np.exp(-0.5 * (diff / sigma) ** 2) / norm
         g[np.abs(diff) > radius] = 0.0
-        out[i] = g
+    g.flags.writeable = False
+    return g
+
+
+def _blur(windows: np.ndarray, sigma: np.ndarray, size: int) -> np.ndarray:
+    """Each window (m, k, k) convolved with its own Gaussian (separable, normalised) into
+    a (m, size, size) window with the same centre (size - k even, >= 0): as if the input
+    were padded with zeros to that size."""
+    off = (size - windows.shape[1]) // 2
+    cut = np.s_[off : off + windows.shape[1]]
+    if np.all(sigma == sigma[0]):
+        g = _blur_matrix(float(sigma[0]), size)[:, cut]
+        return g @ windows @ g.T
+    g = np.stack([_blur_matrix(float(s), size)[:, cut] for s in sigma])
+    return g @ windows @ np.swapaxes(g, 1, 2)
+
+
+@lru_cache(maxsize=64)
+def _window_offsets(size: int, width: int) -> np.ndarray:
+    """(size, size) flat-index offsets of a window's pixels from its first, in an image
+    ``width`` pixels wide (read-only)."""
+    k = np.arange(size)
+    out = k[:, None] * width + k[None, :]
+    out.flags.writeable = False
     return out
 
 
@@ -464,6 +557,25 @@ def background_table(
     return np.searchsorted(cdf, u, side="right").clip(0, 255).astype(np.uint8)
 
 
+_BANK_OFFSETS = 1 << 20  # placements of the background bank (each frame draws one)
+_BANK_KEY = 0x62616E6B  # the bank's own random stream, apart from every [seed, frame_index]
+
+
+@lru_cache(maxsize=4)
+def _background_bank(seed: int, table: bytes, n_pixels: int) -> np.ndarray:
+    """``n_pixels + 2^20`` background grey levels (uint8, read-only), each an independent
+    draw of the distribution ``table`` holds (the inverse CDF of :func:`background_table`,
+    indexed with uniform 16-bit numbers). A frame's background is the ``n_pixels`` run
+    starting at a random offset: every pixel exactly that distribution, independent
+    within the frame; two frames share a pixel's value only when they drew the same offset
+    (probability 2^-20)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_BANK_KEY,)))
+    uniform = np.frombuffer(rng.bytes(2 * (n_pixels + _BANK_OFFSETS)), dtype=np.uint16)
+    bank = np.frombuffer(table, dtype=np.uint8).take(uniform)
+    bank.flags.writeable = False
+    return bank
+
+
 # --------------------------------------------------------------------------- renderer
 
 
@@ -486,12 +598,33 @@ class Renderer:
             c.black_level_dn,
             c.full_well_e,
         )
+        self._bank: np.ndarray | None = None  # built on the first noisy frame
+        e0 = np.minimum((np.zeros(1) + self.sky_dn) * c.gain_e_per_dn, c.full_well_e)
+        self._flat_dn = np.clip(np.rint(c.black_level_dn + e0 / c.gain_e_per_dn), 0, 255).astype(
+            np.uint8
+        )[0]  # the noise-free background grey level
         self._occ_h = occlusion_offset(c.occlusion_fraction)
         ang = math.radians(c.occlusion_angle_deg)
         self._occ_dir = np.array([math.cos(ang), math.sin(ang)])
         plane = np.asarray(c.reflection_plane_tob, dtype=float)
         norm = np.linalg.norm(plane[:3])
         self._mirror_n, self._mirror_d = plane[:3] / norm, plane[3] / norm
+        # The TOB's sources, but for where they are (positions and axes come per image).
+        self._tob_p = np.array(self.model.source_positions_mm, dtype=float)  # rows A, B, C
+        h = np.ones(3)
+        h[list(c.occluded_sources)] = self._occ_h
+        self._sources = Discs.make(
+            np.zeros((3, 3)),
+            np.eye(3),
+            self.model.source_diameter_mm / 2.0,
+            c.source_dn_per_ms,
+            0.0,
+            h,
+            self._occ_dir,
+            np.arange(3),
+        )
+        for f in Discs._fields():
+            getattr(self._sources, f).flags.writeable = False  # shared by every image
 
     # -- scene ---------------------------------------------------------------------------
     def discs(
@@ -504,23 +637,23 @@ class Renderer:
         parts = []
         if camera_T_tob is not None:
             camera_T_tob = np.asarray(camera_T_tob, dtype=float)
-            tob_p = self.model.source_positions_mm  # (3, 3) rows A, B, C
+            tob_p = self._tob_p  # (3, 3) rows A, B, C
             # Sources lie in the TOB plane; their lit face looks along -w (towards the camera
             # for a labellable view, see humanpt.geometry.target).
-            tob_axes = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]]).T
-            h = np.ones(3)
-            h[list(c.occluded_sources)] = self._occ_h
+            tob_axes = _TOB_AXES
+            h = self._sources.occlusion_h
             rot = camera_T_tob[:3, :3]
+            src = self._sources
             parts.append(
-                Discs.make(
+                Discs(
                     tob_p @ rot.T + camera_T_tob[:3, 3],
-                    rot @ tob_axes,
-                    self.model.source_diameter_mm / 2.0,
-                    c.source_dn_per_ms,
-                    0.0,
-                    h,
-                    self._occ_dir,
-                    np.arange(3),
+                    np.broadcast_to(rot @ tob_axes, (3, 3, 3)),
+                    src.radius_mm,
+                    src.dn_per_ms,
+                    src.blur_px,
+                    src.occlusion_h,
+                    src.occlusion_dir,
+                    src.label,
                 )
             )
             if c.reflection_gain > 0:
@@ -571,41 +704,106 @@ class Renderer:
         """Noise-free signal (H, W) float32 in DN above the background: every blob's
         coverage x brightness, blurred, views added."""
         width, height = self.params.image_size_px
-        out = np.zeros((height, width), dtype=np.float32)
+        out = np.zeros(height * width, dtype=np.float32)
+        idx, value = self.signal_pixels(blobs)
+        out[idx] = value
+        return out.reshape(height, width)
+
+    def signal_pixels(self, blobs: Blobs) -> tuple[np.ndarray, np.ndarray]:
+        """The nonzero pixels of :meth:`signal` without the full frame: flat indices
+        (row-major, ascending, int) and their values (float32, > 0)."""
+        width, height = self.params.image_size_px
         if len(blobs) == 0:
-            return out
-        ext = blobs.half_extent_px().max(axis=1) + 4.0 * blobs.sigma_px + 1.0
-        halves = 4 * np.ceil(ext / 4.0).astype(int)  # buckets of equal windows, batched
-        for half in np.unique(halves):
-            sel = np.flatnonzero(halves == half)
-            sub = Blobs(*(getattr(blobs, f)[sel] for f in Blobs.__dataclass_fields__))
-            cov, origin = coverage(sub, int(half))
-            size = cov.shape[1]
-            blur = _blur_matrices(sub.sigma_px, size)
-            img = blur @ cov @ np.swapaxes(blur, 1, 2) * sub.dn[:, None, None]
-            for k in range(len(sub)):
-                u0, v0 = origin[k]
-                r0, r1 = max(v0, 0), min(v0 + size, height)
-                c0, c1 = max(u0, 0), min(u0 + size, width)
-                if r0 < r1 and c0 < c1:
-                    out[r0:r1, c0:c1] += img[k, r0 - v0 : r1 - v0, c0 - u0 : c1 - u0]
-        return out
+            return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.float32)
+        ext = blobs.half_extent_px().max(axis=1)
+        # Windows: the blurred blob's, in buckets of equal sizes (batched); the coverage
+        # only in the smaller window that holds the ellipse.
+        halves = 4 * np.ceil((ext + 4.0 * blobs.sigma_px + 1.0) / 4.0).astype(int)
+        one_bucket = halves.min() == halves.max()
+        indices, values = [], []
+        for half in halves[:1] if one_bucket else np.unique(halves):
+            if one_bucket:
+                sub, sub_ext = blobs, ext
+            else:
+                sel = np.flatnonzero(halves == half)
+                sub = Blobs(*(getattr(blobs, f)[sel] for f in Blobs.__dataclass_fields__))
+                sub_ext = ext[sel]
+            size = 2 * int(half) + 1
+            cov_half = min(math.ceil(sub_ext.max() + 1.0), int(half))
+            cov, origin = coverage(sub, cov_half)
+            origin -= int(half) - cov_half
+            img = _blur(cov * sub.dn[:, None, None], sub.sigma_px, size)
+            flat = (origin[:, 1] * width + origin[:, 0])[:, None, None] + _window_offsets(
+                size, width
+            )
+            keep = img > 0
+            last = origin.max(axis=0) + size
+            if origin.min() < 0 or last[0] > width or last[1] > height:
+                # A window cut by the border keeps what is inside.
+                k = np.arange(size)
+                rows = origin[:, 1, None] + k  # (m, K)
+                cols = origin[:, 0, None] + k
+                keep &= ((rows >= 0) & (rows < height))[:, :, None]
+                keep &= ((cols >= 0) & (cols < width))[:, None, :]
+            indices.append(flat[keep])
+            values.append(img[keep])
+        idx = np.concatenate(indices) if len(indices) > 1 else indices[0]
+        value = np.concatenate(values) if len(values) > 1 else values[0]
+        order = np.argsort(idx, kind="stable")
+        idx, value = idx.take(order), value.take(order)
+        if idx.size > 1:
+            first = np.empty(idx.size, dtype=bool)
+            first[0] = True
+            np.not_equal(idx[1:], idx[:-1], out=first[1:])
+            if not first.all():  # overlapping windows: add the views (and clutter) up
+                starts = np.flatnonzero(first)
+                value = np.add.reduceat(value, starts)
+                idx = idx[starts]
+        value = value.astype(np.float32)
+        if not np.all(value > 0):
+            nz = np.flatnonzero(value > 0)
+            idx, value = idx[nz], value[nz]
+        return idx, value
 
     def expose(self, signal_dn: np.ndarray, frame_index: int) -> np.ndarray:
         """The sensor: background, shot and read noise, full well, 8-bit quantisation and
         saturation; (H, W) uint8. Noise from ``default_rng([seed, frame_index])``."""
         c = self.config
-        g = c.gain_e_per_dn
         if not c.noise:
+            g = c.gain_e_per_dn
             e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
             return np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+        flat = np.ravel(signal_dn)
+        idx = np.flatnonzero(flat > 0)
+        return self.expose_pixels(idx, flat[idx], frame_index, signal_dn.shape)
+
+    def expose_pixels(
+        self, idx: np.ndarray, signal_dn: np.ndarray, frame_index: int, shape: tuple[int, int]
+    ) -> np.ndarray:
+        """:meth:`expose` of a frame whose signal is ``signal_dn`` (> 0) at the flat
+        (row-major, ascending) indices ``idx`` and 0 elsewhere: the same image, without a
+        full-frame signal.
+
+        Noise: each frame's background is a run of :func:`_background_bank` (exact
+        background grey levels, independent pixels) at an offset drawn from
+        ``default_rng([seed, frame_index])``; the signal pixels get exact Poisson shot
+        noise and Gaussian read noise from the same generator."""
+        c = self.config
+        g = c.gain_e_per_dn
+        n = int(shape[0]) * int(shape[1])
+        if not c.noise:
+            frame = np.full(n, self._flat_dn, dtype=np.uint8)
+            if idx.size:
+                e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
+                frame[idx] = np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+            return frame.reshape(shape)
         rng = np.random.default_rng([c.seed, int(frame_index)])
-        shape = signal_dn.shape
-        uniform = np.frombuffer(rng.bytes(2 * signal_dn.size), dtype=np.uint16)
-        frame = self._table.take(uniform)  # a new array: the background everywhere
-        idx = np.flatnonzero(signal_dn.ravel() > 0)
+        if self._bank is None or self._bank.size != n + _BANK_OFFSETS:
+            self._bank = _background_bank(c.seed, self._table.tobytes(), n)
+        offset = int(rng.integers(_BANK_OFFSETS))
+        frame = self._bank[offset : offset + n].copy()  # the background everywhere
         if idx.size:
-            mean_e = (signal_dn.ravel()[idx].astype(np.float64) + self.sky_dn) * g
+            mean_e = (signal_dn.astype(np.float64) + self.sky_dn) * g
             e = np.minimum(rng.poisson(mean_e), c.full_well_e).astype(np.float64)
             if c.read_noise_e > 0:
                 e += rng.normal(0.0, c.read_noise_e, idx.size)
@@ -619,10 +817,11 @@ class Renderer:
         frame_index: int = 0,
     ) -> np.ndarray:
         """One complex image (H, W) uint8 of the target at ``camera_T_tob`` (mm; None: no
-        target in the scene)."""
-        return self.expose(
-            self.signal(self.blobs(self.discs(camera_T_tob, world_T_camera))), frame_index
-        )
+        target in the scene): ``expose(signal(blobs(discs(...))), frame_index)``, byte for
+        byte, computed on the blobs' pixels only."""
+        idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
+        width, height = self.params.image_size_px
+        return self.expose_pixels(idx, value, frame_index, (height, width))
 
 
 def intensity_centroid(image: np.ndarray, background: float = 0.0) -> np.ndarray:

@@ -11,7 +11,14 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanpt.geometry import camera_T_desired, in_image, project, transform_from_x
+from humanpt.geometry import (
+    camera_T_desired,
+    in_image,
+    project,
+    project_pinhole,
+    projection_jacobian,
+    transform_from_x,
+)
 from humanpt.sim_camera import (
     Blobs,
     Discs,
@@ -22,6 +29,7 @@ from humanpt.sim_camera import (
     intensity_centroid,
     occlusion_offset,
 )
+from humanpt.sim_camera import render as render_module
 
 DISTORTED = PsvsConfig(dist_coeffs=(-0.25, 0.12, 0.002, -0.001, 0.0))
 
@@ -287,3 +295,128 @@ def test_discs_can_be_rendered_without_a_target_model():
     b = r.blobs(d)
     assert len(b) == 2
     np.testing.assert_allclose(np.abs(np.linalg.det(b.jac)), (1000 * 5.0 / 845) ** 2, rtol=2e-3)
+
+
+# --------------------------------------------------------------------------- fast paths
+
+
+def _table_probabilities(r: Renderer) -> np.ndarray:
+    """P(grey = k), k = 0..255, of the background distribution the table holds."""
+    return np.bincount(r._table, minlength=256) / r._table.size
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [
+        SimCameraConfig(seed=4),
+        SimCameraConfig(seed=9, background_dn_per_ms=25.0, read_noise_e=30.0, gain_e_per_dn=10.0),
+    ],
+    ids=["default", "noisier"],
+)
+def test_background_grey_levels_have_the_exact_distribution(cfg):
+    """Chi-square of the background histogram (three frames, ~920k pixels) against the
+    distribution of background_table: the bank draws exactly it."""
+    r = Renderer(cfg)
+    values = np.concatenate([r.render(None, frame_index=f).ravel() for f in (0, 1, 57)])
+    observed = np.bincount(values, minlength=256)
+    expected = _table_probabilities(r) * values.size
+    assert observed[expected == 0].sum() == 0
+    used = expected >= 5
+    chi2 = np.sum((observed[used] - expected[used]) ** 2 / expected[used])
+    dof = np.count_nonzero(used) - 1
+    assert chi2 < dof + 5 * math.sqrt(2 * dof)
+
+
+def test_background_noise_is_new_in_every_frame_near_the_blobs():
+    """The same background pixels around the blobs, frame after frame: uncorrelated, and
+    a pixel's values over many frames follow the background distribution."""
+    r = Renderer(SimCameraConfig(seed=2))
+    camera_T_tob = camera_T_desired(600.0)
+    blobs = r.blobs(r.discs(camera_T_tob))
+    u, v = np.round(blobs.centre_px).astype(int).T
+    mask = np.zeros((480, 640), dtype=bool)
+    for uu, vv in zip(u, v, strict=True):
+        mask[max(vv - 30, 0) : vv + 31, max(uu - 30, 0) : uu + 31] = True
+    mask &= r.signal(blobs) == 0  # background pixels only
+    frames = np.array([r.render(camera_T_tob, frame_index=f)[mask] for f in range(40)], float)
+    n = mask.sum()
+    assert n > 10_000
+    corr = np.corrcoef(frames)
+    off_diagonal = corr[~np.eye(len(frames), dtype=bool)]
+    assert np.max(np.abs(off_diagonal)) < 5.0 / math.sqrt(n)
+    # Over the frames, each pixel varies as the background does (mean, variance).
+    p = _table_probabilities(r)
+    levels = np.arange(256)
+    mean = p @ levels
+    var = p @ (levels - mean) ** 2
+    per_pixel_var = frames.var(axis=0, ddof=1)
+    assert frames.mean() == pytest.approx(mean, abs=0.01)
+    assert per_pixel_var.mean() == pytest.approx(var, rel=0.03)
+    assert np.count_nonzero(frames.std(axis=0) == 0) < 0.01 * n  # no pixel frozen
+
+
+def test_noise_is_deterministic_per_seed_and_frame_whatever_was_rendered_before():
+    camera_T_tob = transform_from_x(np.array([-20.0, 10.0, 700.0, 5.0, 2.0, -3.0]))
+    a = Renderer(SimCameraConfig(seed=21)).render(camera_T_tob, frame_index=5)
+    render_module._background_bank.cache_clear()  # rebuilt from the seed alone
+    b = Renderer(SimCameraConfig(seed=21))
+    b.render(None, frame_index=99)
+    assert b.render(camera_T_tob, frame_index=5).tobytes() == a.tobytes()
+    other = Renderer(SimCameraConfig(seed=22)).render(None, frame_index=5)
+    assert np.mean(other != b.render(None, frame_index=5)) > 0.3
+
+
+@pytest.mark.parametrize("noise", [True, False], ids=["noise", "no noise"])
+def test_render_is_expose_of_the_signal_byte_for_byte(noise):
+    """render() works on the blobs' pixels only; it is exactly the documented pipeline,
+    also with clutter, occlusion, overlapping blobs and a blob cut by the border."""
+    cfg = SimCameraConfig(
+        noise=noise,
+        seed=3,
+        reflection_gain=0.4,
+        reflection_plane_tob=(1.0, 0.0, 0.0, 8.0),  # close: reflections overlap the sources
+        lamp_position_mm=(-150.0, -100.0, 1500.0),
+        lamp_frame="camera",
+        occluded_sources=(1,),
+        occlusion_fraction=0.3,
+        occlusion_angle_deg=30.0,
+        psvs=DISTORTED,
+    )
+    r = Renderer(cfg)
+    rng = np.random.default_rng(8)
+    poses = [camera_T_desired(600.0) @ transform_from_x([165.0, 0, 0, 0, 0, 0])]  # at the border
+    poses += [_random_camera_T_tob(rng) for _ in range(10)]
+    for i, camera_T_tob in enumerate(poses):
+        blobs = r.blobs(r.discs(camera_T_tob))
+        signal = r.signal(blobs)
+        idx, value = r.signal_pixels(blobs)
+        assert np.all(np.diff(idx) > 0) and np.all(value > 0)
+        np.testing.assert_array_equal(idx, np.flatnonzero(signal))
+        np.testing.assert_array_equal(value, signal.ravel()[idx])
+        expected = r.expose(signal, i)
+        np.testing.assert_array_equal(r.render(camera_T_tob, frame_index=i), expected)
+
+
+def test_blobs_follow_the_geometry_library():
+    """project_discs writes eq. (2) and its Jacobian out for both views at once: the same
+    centres and Jacobians as project_pinhole and projection_jacobian."""
+    r = Renderer(SimCameraConfig())
+    variants = (
+        r.params,
+        dataclasses.replace(r.params, skew=0.4),
+        dataclasses.replace(r.params, u0_left=300.0, v0_left=250.0, v0_right=235.0, skew=0.3),
+    )  # one principal point or one per view; with and without skew
+    rng = np.random.default_rng(4)
+    for i in range(60):
+        params = variants[i % 3]
+        discs = r.discs(_random_camera_T_tob(rng))
+        blobs = render_module.project_discs(params, discs, r.view_gains, 1.0, 0.7)
+        for k in range(len(blobs)):
+            camera = (params.right_camera, params.left_camera)[blobs.view[k]]
+            d = blobs.disc[k]
+            p = discs.centre_mm[d]
+            np.testing.assert_allclose(blobs.centre_px[k], project_pinhole(camera, p), atol=1e-9)
+            plane = discs.axes[d][:, :2] * discs.radius_mm[d]
+            np.testing.assert_allclose(
+                blobs.jac[k], projection_jacobian(camera, p) @ plane, rtol=1e-12, atol=1e-12
+            )
