@@ -120,14 +120,15 @@ def bench_render(args) -> int:
     for i in range(10):  # warm-up
         renderer.render(camera_T_tob, frame_index=i)
     stages = {"project": 0.0, "coverage + blur": 0.0, "sensor (noise, 8 bit)": 0.0}
+    shape = (cfg.psvs.image_height_px, cfg.psvs.image_width_px)
     t_all = time.perf_counter()
     for i in range(n):
         t0 = time.perf_counter()
         blobs = renderer.blobs(renderer.discs(camera_T_tob))
         t1 = time.perf_counter()
-        signal = renderer.signal(blobs)
+        idx, signal = renderer.signal_pixels(blobs)  # the stages render() runs
         t2 = time.perf_counter()
-        renderer.expose(signal, i)
+        renderer.expose_pixels(idx, signal, i, shape)
         t3 = time.perf_counter()
         stages["project"] += t1 - t0
         stages["coverage + blur"] += t2 - t1
