@@ -24,6 +24,19 @@ class PoseFilterConfig:
     # Process noise: white acceleration (how hard the operator's hand can change speed).
     accel_sigma_mm_s2: float = live(100.0, "white-acceleration noise of the target (hand)")
     ang_accel_sigma_deg_s2: float = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
+    # A still target (the operator holds it, or it stands on a fixture): once the filtered
+    # speed has stayed below still_mm_s / still_deg_s for still_after_ms, the filter assumes
+    # it stays put: a zero-velocity update with every measurement and the process noise x
+    # still_q_scale, so the estimate becomes a long average instead of wandering with
+    # velocity noise.  A measurement off the estimate by more than still_release_mm /
+    # still_release_deg, twice in a row, ends it (back to the full model at once).
+    still_detect: bool = live(True, "detect a still target and average it (zero-velocity updates)")
+    still_mm_s: float = live(2.0, "the target may count as still below this filtered speed")
+    still_deg_s: float = live(1.0, "... and below this filtered turn rate")
+    still_after_ms: float = live(300.0, "... for this long")
+    still_release_mm: float = live(0.3, "a still target moved: a measurement this far off (twice)")
+    still_release_deg: float = live(0.3, "... or turned this far")
+    still_q_scale: float = live(0.01, "process noise factor while still")
     # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.
     gate_chi2_pose: float = live(22.46)
     gate_chi2_position: float = live(16.27)
@@ -41,9 +54,13 @@ class PoseFilterConfig:
     def __post_init__(self):
         for name in ("sigma_position_mm", "sigma_rotation_deg", "sigma_position_only_mm", "accel_sigma_mm_s2",
                      "ang_accel_sigma_deg_s2", "gate_chi2_pose", "gate_chi2_position", "lost_after_ms",
+                     "still_mm_s", "still_deg_s", "still_after_ms", "still_release_mm", "still_release_deg",
+                     "still_q_scale",
                      "target_leg_mm", "target_base_mm"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.still_q_scale > 1:
+            raise ValueError(f"still_q_scale must be within (0, 1], got {self.still_q_scale}")
         if self.predict_ahead_ms < 0 or self.max_extrapolation_ms < 0:
             raise ValueError("predict_ahead_ms and max_extrapolation_ms must be >= 0")
         if self.reset_after_rejects < 1 or self.robot_history < 2:

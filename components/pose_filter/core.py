@@ -48,6 +48,9 @@ class PoseFilterCore(Core):
         self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
         self._fresh = False
         self._pose_at_measurement: tuple[tuple[int, int], pb.Pose] | None = None
+        self.still = False  # the target is held still: zero-velocity updates (see config)
+        self._slow_since_ns: int | None = None  # first measurement of the current slow run
+        self._off_in_a_row = 0  # measurements off a still estimate, in a row
 
     def _build(self, c: PoseFilterConfig) -> None:
         T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
@@ -57,6 +60,8 @@ class PoseFilterCore(Core):
         self._ang_accel = np.radians(c.ang_accel_sigma_deg_s2)
         self.R_pose = np.diag([(c.sigma_position_mm * 1e-3) ** 2] * 3 + [np.radians(c.sigma_rotation_deg) ** 2] * 3)
         self.R_position = np.eye(3) * (c.sigma_position_only_mm * 1e-3) ** 2
+        # Zero-velocity pseudo-measurement noise: a still target's speed is ~0 to this.
+        self.R_still = np.diag([(0.01e-3) ** 2] * 3 + [np.radians(0.01) ** 2] * 3)
         self.tob_p_sources_m = TargetModel.isosceles(c.target_leg_mm, c.target_base_mm).source_positions_mm * 1e-3
 
     def on_config_changed(self, old, new) -> None:
@@ -146,16 +151,83 @@ class PoseFilterCore(Core):
     def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray) -> list[Output]:
         if not self.kf.initialised:
             self.kf.reset(stamp, world_T_tob)
+            self._end_still()
             self._accepted(stamp, pb.TOB_STATUS_FULL)
             return [self.event(t_ns, pb.SEVERITY_INFO, "filter_start", "filter started on a full pose")]
         self.kf.predict_to(stamp)
+        outs = self._check_still_moved(t_ns, world_T_tob)
         gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
-        return self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
+        outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
+        if gate.accepted:
+            outs += self._still_update(t_ns, stamp)
+        return outs
+
+    # -- a still target ---------------------------------------------------------------
+    def _end_still(self) -> None:
+        self.still = False
+        self._slow_since_ns = None
+        self._off_in_a_row = 0
+
+    def _release(self) -> None:
+        c = self.config
+        self._end_still()
+        # It may have moved by up to twice the release distances before this measurement.
+        self.kf.open_velocity(2 * c.still_release_mm * 1e-3, np.radians(2 * c.still_release_deg))
+
+    def _check_still_moved(self, t_ns: int, world_T_tob: np.ndarray | None) -> list[Output]:
+        """While still: a measurement (``None``: a position-only one, which ends it) off the
+        estimate beyond the release distances twice in a row, or once beyond three times
+        them but inside the gate, means the target moves."""
+        if not self.still:
+            return []
+        c = self.config
+        off = far = True
+        if world_T_tob is not None:
+            T = self.kf.predicted_pose(self.kf.t_ns)
+            d_mm = float(np.linalg.norm(world_T_tob[:3, 3] - T[:3, 3])) * 1e3
+            cos = (np.trace(world_T_tob[:3, :3] @ T[:3, :3].T) - 1.0) / 2.0
+            d_deg = float(np.degrees(np.arccos(min(1.0, max(-1.0, cos)))))
+            off = d_mm > c.still_release_mm or d_deg > c.still_release_deg
+            # Far off yet within the gate (not a glitch): it moves, no need to wait a frame.
+            far = ((d_mm > 3 * c.still_release_mm or d_deg > 3 * c.still_release_deg)
+                   and self.kf.pose_distance2(world_T_tob, self.R_pose) <= c.gate_chi2_pose)
+        self._off_in_a_row = self._off_in_a_row + 1 if off else 0
+        # Else twice in a row: one stray measurement (a glitch, soon gated) does not end it.
+        if not far and self._off_in_a_row < 2:
+            return []
+        self._release()
+        return [self.event(t_ns, pb.SEVERITY_INFO, "target_moving", "the still target moves: full motion model")]
+
+    def _still_update(self, t_ns: int, stamp: int) -> list[Output]:
+        c = self.config
+        if not c.still_detect:
+            if self.still:
+                self._release()
+            return []
+        if self.still:
+            self.kf.update_zero_velocity(self.R_still)
+            return []
+        v = self.kf.x[6:12]
+        slow = (float(np.linalg.norm(v[:3])) * 1e3 < c.still_mm_s
+                and float(np.degrees(np.linalg.norm(v[3:]))) < c.still_deg_s)
+        if not slow:
+            self._slow_since_ns = None
+            return []
+        if self._slow_since_ns is None:
+            self._slow_since_ns = stamp
+        if stamp - self._slow_since_ns < c.still_after_ms * 1e6:
+            return []
+        self.still = True
+        self._off_in_a_row = 0
+        self.kf.q_scale = c.still_q_scale
+        self.kf.update_zero_velocity(self.R_still)
+        return [self.event(t_ns, pb.SEVERITY_INFO, "target_still", "the target is still: averaging it")]
 
     def _update_position(self, t_ns: int, stamp: int, world_p_m: np.ndarray) -> list[Output]:
         if not self.kf.initialised:
             return []  # a position alone cannot start an orientation
         self.kf.predict_to(stamp)
+        moved = self._check_still_moved(t_ns, None)
         T_pred = self.kf.predicted_pose(stamp)
         # Match each visible source to the nearest predicted source; G = source - R @ offset.
         world_sources = self.tob_p_sources_m @ T_pred[:3, :3].T + T_pred[:3, 3]
@@ -165,7 +237,7 @@ class PoseFilterCore(Core):
             g.append(p - T_pred[:3, :3] @ self.tob_p_sources_m[k])
         gate = self.kf.update_position(np.mean(g, axis=0), self.R_position / len(g),
                                        self.config.gate_chi2_position)
-        return self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
+        return moved + self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
 
     def _after_gate(self, t_ns, stamp, gate, status, world_T_tob) -> list[Output]:
         if gate.accepted:
@@ -178,6 +250,7 @@ class PoseFilterCore(Core):
                            f"{self.rejects_in_a_row} in a row")]
         if self.rejects_in_a_row >= self.config.reset_after_rejects and world_T_tob is not None:
             self.kf.reset(stamp, world_T_tob)
+            self._end_still()
             self._accepted(stamp, status)
             outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "filter_reset",
                                    "the target moved beyond the gate repeatedly: filter restarted on it"))

@@ -1,4 +1,4 @@
-"""Constant-velocity Kalman filter of a rigid pose (pure numpy).
+"""Constant-velocity Kalman filter of a rigid pose (filterpy's KalmanFilter).
 
 State (12,), world frame, SI units::
 
@@ -10,9 +10,11 @@ error state), so there is no Euler singularity and every rotation innovation is 
 rotation vector of ``R_meas @ R_pred.T``, wrapped into (-pi, pi] by construction.
 
 F, H and Q are built by hand (filterpy's ``kinematic_kf`` builds a wrong H): F is the
-constant-velocity transition, Q the discrete white-noise-acceleration model. The predict
-and update steps are filterpy's ``KalmanFilter.predict``/``update`` (Joseph form), the same
-numpy calls in the same order - so the same numbers - without its bookkeeping copies.
+constant-velocity transition, Q the discrete white-noise-acceleration model; filterpy's
+``KalmanFilter.predict``/``update`` (Joseph form) do the rest.
+
+A still target (see the core) gets zero-velocity pseudo-measurements and a process noise
+scaled by ``q_scale``; :meth:`PoseKalman.open_velocity` undoes both when it moves.
 """
 
 from __future__ import annotations
@@ -21,13 +23,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from filterpy.kalman import KalmanFilter
 
 from humanpt.pose_filter.fastmath import matrix_of, rotvec_of
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
 H_POSITION = np.hstack([I3, np.zeros((3, 9))])  # measures p only
-I12 = np.eye(12)
+H_VELOCITY = np.hstack([np.zeros((6, 6)), np.eye(6)])  # "measures" v and w (zero-velocity update)
 
 
 def _block_indices(blocks) -> tuple[np.ndarray, np.ndarray]:
@@ -84,8 +87,8 @@ class Gate:
 class PoseKalman:
     """Filter of world_T_tob; times in ns, poses as (4, 4) transforms in metres.
 
-    ``x`` (12,) and ``P`` (12, 12) are the state and its covariance; ``version`` counts the
-    changes of the state (for caches of things computed from it)."""
+    ``x`` (12,) and ``P`` (12, 12) are the state and its covariance (filterpy's); ``version``
+    counts the changes of the state (for caches of things computed from it)."""
 
     def __init__(
         self,
@@ -99,11 +102,19 @@ class PoseKalman:
         self.accel_sigma = accel_sigma_m_s2
         self.ang_accel_sigma = ang_accel_sigma_rad_s2
         self.init_sd = np.repeat([init_sigma_m, init_sigma_rad, init_sigma_v, init_sigma_w], 3)
-        self.x = np.zeros(12)
-        self.P = np.eye(12)
+        self.q_scale = 1.0  # process noise x this (a still target: << 1)
+        self.kf = KalmanFilter(dim_x=12, dim_z=6)
         self.R_ref = np.eye(3)
         self.t_ns: int | None = None
         self.version = 0
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.kf.x
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.kf.P
 
     @property
     def initialised(self) -> bool:
@@ -111,11 +122,12 @@ class PoseKalman:
 
     def reset(self, t_ns: int, world_T_tob: np.ndarray) -> None:
         """Start again at a measured pose with zero velocity."""
-        self.x = np.zeros(12)
-        self.x[0:3] = world_T_tob[:3, 3]
-        self.P = np.diag(self.init_sd**2)
+        self.kf.x = np.zeros(12)
+        self.kf.x[0:3] = world_T_tob[:3, 3]
+        self.kf.P = np.diag(self.init_sd**2)
         self.R_ref = world_T_tob[:3, :3].copy()
         self.t_ns = int(t_ns)
+        self.q_scale = 1.0
         self.version += 1
 
     def predict_to(self, t_ns: int) -> None:
@@ -123,11 +135,8 @@ class PoseKalman:
         dt = (int(t_ns) - self.t_ns) * 1e-9
         if dt <= 0:
             return
-        F = transition(dt)
         Q = process_noise(dt, self.accel_sigma, self.ang_accel_sigma)
-        # filterpy's predict (its fading-memory factor is 1.0: a product that changes nothing)
-        self.x = np.dot(F, self.x)
-        self.P = np.dot(np.dot(F, self.P), F.T) + Q
+        self.kf.predict(F=transition(dt), Q=Q * self.q_scale if self.q_scale != 1.0 else Q)
         self.t_ns = int(t_ns)
         self.version += 1
 
@@ -137,15 +146,24 @@ class PoseKalman:
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
-        self.x[3:6] = 0.0
+        self.kf.x[3:6] = 0.0
 
-    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
-        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
+    def _pose_innovation(self, world_T_tob: np.ndarray) -> np.ndarray:
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
         y[3:6] = rotvec_of(world_T_tob[:3, :3] @ self.rotation().T)
-        return self._update(y, H_POSE, R_meas, gate_chi2)
+        return y
+
+    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
+        return self._update(self._pose_innovation(world_T_tob), H_POSE, R_meas, gate_chi2)
+
+    def pose_distance2(self, world_T_tob: np.ndarray, R_meas: np.ndarray) -> float:
+        """The Mahalanobis distance^2 of a full pose from the prediction (no update)."""
+        y = self._pose_innovation(world_T_tob)
+        S = H_POSE @ self.P @ H_POSE.T + R_meas
+        return float(y @ np.linalg.solve(S, y))
 
     def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
         """Update the position only; ``R_meas`` (3, 3) in m^2."""
@@ -157,18 +175,26 @@ class PoseKalman:
         d2 = float(y @ np.linalg.solve(S, y))
         if d2 > gate_chi2:
             return Gate(False, d2)
-        z = H @ self.x + y
-        # filterpy's update (Joseph form), the same calls
-        x, P = self.x, self.P
-        y = z - np.dot(H, x)
-        PHT = np.dot(P, H.T)
-        K = np.dot(PHT, np.linalg.inv(np.dot(H, PHT) + R))
-        self.x = x + np.dot(K, y)
-        I_KH = I12 - np.dot(K, H)
-        self.P = np.dot(np.dot(I_KH, P), I_KH.T) + np.dot(np.dot(K, R), K.T)
+        self.kf.update(H @ self.x + y, R=R, H=H)
         self._recentre()
         self.version += 1
         return Gate(True, d2)
+
+    def update_zero_velocity(self, R_vel: np.ndarray) -> None:
+        """A zero-velocity pseudo-measurement (the target is still); ``R_vel`` (6, 6) in
+        (m/s)^2 and (rad/s)^2."""
+        self.kf.update(np.zeros(6), R=R_vel, H=H_VELOCITY)
+        self._recentre()
+        self.version += 1
+
+    def open_velocity(self, sigma_m: float, sigma_rad: float) -> None:
+        """The target moves again: back to the full process noise, an open velocity, and a
+        pose that may be ``sigma_m`` / ``sigma_rad`` further off than the filter thought."""
+        self.q_scale = 1.0
+        self.kf.P[0:3, 0:3] += sigma_m**2 * I3
+        self.kf.P[3:6, 3:6] += sigma_rad**2 * I3
+        self.kf.P[6:12, 6:12] += np.diag(self.init_sd[6:12] ** 2)
+        self.version += 1
 
     def predicted(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(world_T_tob (4, 4) m, velocity (6,) [v m/s, w rad/s], covariance (12, 12)) at ``t_ns``,
@@ -177,7 +203,7 @@ class PoseKalman:
         dt = (int(t_ns) - self.t_ns) * 1e-9
         F = transition(dt)
         x = F @ self.x
-        P = F @ self.P @ F.T + process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
+        P = F @ self.P @ F.T + self.q_scale * process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
         return self._transform(x), x[6:12].copy(), P
 
     def predicted_pose(self, t_ns: int) -> np.ndarray:
