@@ -103,20 +103,30 @@ def find_shapes(binary: np.ndarray, max_shapes: int = 256) -> Shapes:
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return Shapes(*(np.zeros(0, int) for _ in range(5)), np.zeros((0, 2)), ())
-    boxes = np.array([cv2.boundingRect(c) for c in contours], dtype=int).reshape(-1, 4)
+    boxes = [cv2.boundingRect(c) for c in contours]
     if len(contours) > max_shapes:
-        keep = np.sort(np.argsort(-(boxes[:, 2] * boxes[:, 3]), kind="stable")[:max_shapes])
+        b = np.array(boxes, dtype=int).reshape(-1, 4)
+        keep = np.sort(np.argsort(-(b[:, 2] * b[:, 3]), kind="stable")[:max_shapes])
         contours = [contours[i] for i in keep]
-        boxes = boxes[keep]
-    area = np.zeros(len(contours), int)
-    centroid = np.zeros((len(contours), 2))
-    masks = []
-    for i, (c, (x, y, w, h)) in enumerate(zip(contours, boxes, strict=True)):
+        boxes = [boxes[i] for i in keep]
+    area, centroid, masks = [], [], []
+    for c, (x, y, w, h) in zip(contours, boxes, strict=True):
         _, labels, stats, cents = cv2.connectedComponentsWithStats(
             binary[y : y + h, x : x + w], connectivity=8, ltype=cv2.CV_32S
         )
-        k = labels[c[0, 0, 1] - y, c[0, 0, 0] - x]  # the component of a contour pixel
-        area[i] = stats[k, cv2.CC_STAT_AREA]
-        centroid[i] = cents[k] + (x, y)
+        u, v = c[0, 0].tolist()
+        k = labels[v - y, u - x]  # the component of a contour pixel
+        area.append(stats[k, cv2.CC_STAT_AREA])
+        cu, cv = cents[k].tolist()
+        centroid.append((cu + x, cv + y))
         masks.append(labels == k)
-    return Shapes(boxes[:, 0], boxes[:, 1], boxes[:, 2], boxes[:, 3], area, centroid, tuple(masks))
+    b = np.array(boxes, dtype=int).reshape(-1, 4)
+    return Shapes(
+        b[:, 0],
+        b[:, 1],
+        b[:, 2],
+        b[:, 3],
+        np.array(area, dtype=int),
+        np.array(centroid, dtype=float).reshape(-1, 2),
+        tuple(masks),
+    )

@@ -94,60 +94,86 @@ def detect_weighted(
     shapes = find_shapes(binary)
     if len(shapes) == 0:
         return EMPTY
-    x, y, w, h, area = shapes.x, shapes.y, shapes.w, shapes.h, shapes.area
-    ok = (
-        (area >= min_area_px)
-        & (area <= max_area_px)
-        & (x > 0)
-        & (y > 0)
-        & (x + w < width)
-        & (y + h < height)
-        & (np.maximum(w, h) <= 2.0 * max_radius_px)
-    )
-    cand = np.flatnonzero(ok)
+    # (per-shape numbers as plain Python numbers: the same values and comparisons as the
+    # arrays, without numpy's per-call overhead on a handful of shapes)
+    x, y, w, h = shapes.x.tolist(), shapes.y.tolist(), shapes.w.tolist(), shapes.h.tolist()
+    area = shapes.area.tolist()
+    cand = [
+        i
+        for i in range(len(shapes))
+        if min_area_px <= area[i] <= max_area_px
+        and x[i] > 0
+        and y[i] > 0
+        and x[i] + w[i] < width
+        and y[i] + h[i] < height
+        and max(w[i], h[i]) <= 2.0 * max_radius_px
+    ]
     rejected = len(shapes) - len(cand)
     if len(cand) == 0:
         return Blobs(
             EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
         )
     if len(cand) > max_blobs:
-        order = np.argsort(-area[cand], kind="stable")[:max_blobs]
+        cand = np.array(cand)
+        order = np.argsort(-shapes.area[cand], kind="stable")[:max_blobs]
         rejected += len(cand) - max_blobs
-        cand = np.sort(cand[order])
-    shapes = shapes.take(cand)
-    cx = shapes.centroid[:, 0].copy()
-    cy = shapes.centroid[:, 1].copy()
-    r_ap = 0.5 * np.maximum(shapes.w, shapes.h) + aperture_pad_px  # (m,)
-    half = int(math.ceil(float(r_ap.max()) + _RING_PX + 1.0))
-    offsets = np.arange(-half, half + 1)
-    ys = np.rint(cy).astype(int)[:, None] + offsets  # (m, S)
-    xs = np.rint(cx).astype(int)[:, None] + offsets
-    ys_c = np.clip(ys, 0, height - 1)
-    xs_c = np.clip(xs, 0, width - 1)
-    rows, cols = ys_c[:, :, None], xs_c[:, None, :]
-    win = sub[rows, cols].astype(np.float64)  # (m, S, S)
+        cand = np.sort(cand[order]).tolist()
+    centroid = shapes.centroid[cand]  # (m, 2)
+    cx = centroid[:, 0].copy()
+    cy = centroid[:, 1].copy()
+    r_ap_l = [0.5 * max(w[i], h[i]) + aperture_pad_px for i in cand]
+    r_ap = np.array(r_ap_l)  # (m,)
+    half = int(math.ceil(max(r_ap_l) + _RING_PX + 1.0))
+    size_w = 2 * half + 1
+    # window corners: the rounded centre - half (np.rint and round both round half to even)
+    y0 = [round(v) - half for v in cy.tolist()]
+    x0 = [round(u) - half for u in cx.tolist()]
+    offsets = np.arange(size_w)
+    ys = np.array(y0)[:, None] + offsets  # (m, S)
+    xs = np.array(x0)[:, None] + offsets
+    inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
+    inside = inside and max(x0) + 2 * half < width
+    if inside:  # no window reaches out of the region: no clipping, every pixel valid
+        win = np.lib.stride_tricks.sliding_window_view(sub, (size_w, size_w))[y0, x0]
+        win = win.astype(np.float64)  # (m, S, S)
+        rows = cols = None
+    else:
+        ys_c = np.clip(ys, 0, height - 1)
+        xs_c = np.clip(xs, 0, width - 1)
+        rows, cols = ys_c[:, :, None], xs_c[:, None, :]
+        win = sub[rows, cols].astype(np.float64)  # (m, S, S)
     # Pixels of other shapes (above the level and not this shape's) are left out.
     own = np.zeros(win.shape, bool)
-    for i in range(len(shapes)):
-        oy = shapes.y[i] - ys[i, 0]
-        ox = shapes.x[i] - xs[i, 0]
-        m = shapes.masks[i]
+    for i, k in enumerate(cand):
+        oy = y[k] - y0[i]
+        ox = x[k] - x0[i]
+        mask = shapes.masks[k]
         sy0, sx0 = max(oy, 0), max(ox, 0)
-        sy1, sx1 = min(oy + m.shape[0], own.shape[1]), min(ox + m.shape[1], own.shape[2])
-        own[i, sy0:sy1, sx0:sx1] = m[sy0 - oy : sy1 - oy, sx0 - ox : sx1 - ox]
-    valid = ((ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]) & (own | (win <= level))
+        sy1, sx1 = min(oy + mask.shape[0], size_w), min(ox + mask.shape[1], size_w)
+        own[i, sy0:sy1, sx0:sx1] = mask[sy0 - oy : sy1 - oy, sx0 - ox : sx1 - ox]
+    valid = own | (win <= level)
+    if not inside:
+        valid &= (ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]
     if keep_sub is not None:
-        valid &= keep_sub[rows, cols] > 0
+        if inside:
+            kwin = np.lib.stride_tricks.sliding_window_view(keep_sub, (size_w, size_w))[y0, x0]
+        else:
+            kwin = keep_sub[rows, cols]
+        valid &= kwin > 0
     grid_x = xs.astype(np.float64)[:, None, :]
     grid_y = ys.astype(np.float64)[:, :, None]
     r2_ap = (r_ap**2)[:, None, None]
     r2_ring = ((r_ap + _RING_PX) ** 2)[:, None, None]
+    ring_outside = min(r_ap_l) >= 0.0
     for _ in range(_ITERATIONS):
         dx = grid_x - cx[:, None, None]
         dy = grid_y - cy[:, None, None]
         d2 = dx * dx + dy * dy
         aperture = valid & (d2 <= r2_ap)
-        ring = valid & (d2 > r2_ap) & (d2 <= r2_ring)
+        if ring_outside:  # the aperture lies within r2_ring: the ring is the rest of it
+            ring = (valid & (d2 <= r2_ring)) ^ aperture
+        else:
+            ring = valid & (d2 > r2_ap) & (d2 <= r2_ring)
         n_ring = ring.sum(axis=(1, 2))
         local_bg = np.where(
             n_ring >= 8, (win * ring).sum(axis=(1, 2)) / np.maximum(n_ring, 1), background
@@ -161,34 +187,56 @@ def detect_weighted(
     dx = grid_x - cx[:, None, None]
     dy = grid_y - cy[:, None, None]
     safe = np.where(flux > 0, flux, 1.0)
-    mxx = (weight * dx * dx).sum(axis=(1, 2)) / safe
+    wdx = weight * dx
+    mxx = (wdx * dx).sum(axis=(1, 2)) / safe
     myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
-    mxy = (weight * dx * dy).sum(axis=(1, 2)) / safe
-    mean = 0.5 * (mxx + myy)
-    spread = np.sqrt(0.25 * (mxx - myy) ** 2 + mxy**2)
-    lam_major = mean + spread
-    lam_minor = mean - spread
-    with np.errstate(divide="ignore", invalid="ignore"):
-        elongation = np.where(
-            lam_minor > 0, np.sqrt(lam_major / np.maximum(lam_minor, 1e-12)), np.inf
-        )
+    mxy = (wdx * dy).sum(axis=(1, 2)) / safe
     peak = np.where(aperture, win - local_bg[:, None, None], -np.inf).max(axis=(1, 2))
-    # A uniform disc of radius R has a variance R^2/4 per axis; the pixel adds 1/12.
-    size = 4.0 * np.sqrt(np.maximum(lam_major - 1.0 / 12.0, 0.0))
-    accept = (
-        (flux > 0)
-        & (peak >= min_contrast_dn)
-        & (elongation <= max_elongation)
-        & (np.abs(cx - shapes.centroid[:, 0]) <= r_ap)
-        & (np.abs(cy - shapes.centroid[:, 1]) <= r_ap)
-    )
-    rejected += int((~accept).sum())
-    uv = np.stack([cx + u0, cy + v0], axis=-1)[accept]
+    # Shape checks per blob, the array formulas' operations on plain floats.
+    uv, areas, sizes, elongations, peaks = [], [], [], [], []
+    c0 = centroid.tolist()
+    for i, (fl, pk, a, b, c, u, v) in enumerate(
+        zip(
+            flux.tolist(),
+            peak.tolist(),
+            mxx.tolist(),
+            myy.tolist(),
+            mxy.tolist(),
+            cx.tolist(),
+            cy.tolist(),
+            strict=True,
+        )
+    ):
+        mean = 0.5 * (a + b)
+        spread = math.sqrt(0.25 * ((a - b) * (a - b)) + c * c)
+        lam_major = mean + spread
+        lam_minor = mean - spread
+        elongation = math.sqrt(lam_major / max(lam_minor, 1e-12)) if lam_minor > 0 else math.inf
+        # A uniform disc of radius R has a variance R^2/4 per axis; the pixel adds 1/12.
+        size = 4.0 * math.sqrt(max(lam_major - 1.0 / 12.0, 0.0))
+        if (
+            fl > 0
+            and pk >= min_contrast_dn
+            and elongation <= max_elongation
+            and abs(u - c0[i][0]) <= r_ap_l[i]
+            and abs(v - c0[i][1]) <= r_ap_l[i]
+        ):
+            uv.append((u + u0, v + v0))
+            areas.append(float(area[cand[i]]))
+            sizes.append(size)
+            elongations.append(elongation)
+            peaks.append(pk)
+        else:
+            rejected += 1
+    if not uv:
+        return Blobs(
+            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
+        )
     return Blobs(
-        uv,
-        shapes.area[accept].astype(float),
-        size[accept],
-        elongation[accept],
-        peak[accept],
+        np.array(uv),
+        np.array(areas),
+        np.array(sizes),
+        np.array(elongations),
+        np.array(peaks),
         rejected,
     )
