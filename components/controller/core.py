@@ -126,12 +126,15 @@ class ControllerCore(Core):
             return []
         cycle, stamp, world_T_flange = self.robot
         c = self.config
+        if c.command_ahead and st.cycle == cycle + 1:
+            # The filter's state for the next cycle overtook that cycle's robot state on
+            # the bus: where the flange is then follows from this cycle and its step.
+            world_T_flange = law.apply_step(world_T_flange, *self._step_answering(cycle))
+            cycle, stamp = cycle + 1, stamp + round(c.cycle_period_ms * 1e6)
         ahead_s = 0.0
         base = self._sent.get(cycle)
         if base is None and c.command_ahead:
-            # Nothing sent for this cycle (the start, or this state came late): the gateway
-            # answers it with its velocity hold (the freshest older step), or zero.
-            base = self._sent.get(cycle - 1) or self._sent.get(cycle - 2) or (np.zeros(3), np.zeros(3))
+            base = self._step_answering(cycle)
         if (st.after_measurement or c.command_ahead) and base is not None:
             # Command the next cycle now, from where this cycle's step will have put the
             # flange, so the gateway can answer that cycle's status at once (after a new
@@ -212,6 +215,12 @@ class ControllerCore(Core):
             cycle=cycle, saturated=step.saturated, world_T_desired=pose(desired))
         outs.append((T_STATUS, status))
         return outs
+
+    def _step_answering(self, cycle: int) -> tuple[np.ndarray, np.ndarray]:
+        """The step the gateway answers ``cycle`` with: the one sent for it, else its
+        velocity hold (the freshest older step), else zero (nothing sent yet)."""
+        return (self._sent.get(cycle) or self._sent.get(cycle - 1) or self._sent.get(cycle - 2)
+                or (np.zeros(3), np.zeros(3)))
 
     def _servo(self, world_T_flange, world_T_tob, v_tob, w_tob, position_only) -> law.Step:
         c = self.config

@@ -271,3 +271,38 @@ def test_playback_follows_the_recorded_path():
 def test_config_rejects_unstable_gains():
     with pytest.raises(ValueError, match="gain_translation_1_s"):
         ControllerConfig(gain_translation_1_s=40.0)
+
+
+def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_cycle():
+    """On the bus the filter's state for cycle k may reach the controller before the robot
+    state k itself: the flange at k then follows from k - 1 and the step sent for it, and the
+    command is for k + 1 as if the robot state had come first (no cycle left without one)."""
+
+    def run(swap_at):
+        core = ControllerCore(ControllerConfig())
+        flange = start_flange(TARGET_X, (5, -3, 4), (1, -1, 2))
+        tob = T_m(TARGET_X)
+        pending, cmds = {}, []
+        for k in range(8):
+            t = k * DT_NS
+            rs = pb.RobotState(header=header(t, k, "world"), world_T_flange=pose(flange), cycle=k)
+            st = pb.TobState(header=header(t, k, "world"), world_T_tob=pose(tob), status=pb.TOB_STATUS_FULL,
+                             linear_velocity_m_s=vector3(np.zeros(3)), angular_velocity_rad_s=vector3(np.zeros(3)),
+                             cycle=k)
+            order = [("pose_filter/tob_state", st), ("alter_gateway/robot_state", rs)] if k == swap_at else \
+                [("alter_gateway/robot_state", rs), ("pose_filter/tob_state", st)]
+            for topic, m in order:
+                for tp, out in core.step(t + 1, topic, m):
+                    if tp == "controller/command":
+                        pending[out.cycle] = out
+                        cmds.append(out)
+            cmd = pending.pop(k, None)
+            if cmd is not None:
+                flange = law.apply_step(flange, from_vector3(cmd.d_translation_m), from_vector3(cmd.d_rotation_rad))
+        return cmds
+
+    plain, swapped = run(None), run(4)
+    assert [c.cycle for c in swapped] == [c.cycle for c in plain] == list(range(1, 9))
+    for a, b in zip(plain, swapped, strict=True):
+        np.testing.assert_allclose(from_vector3(a.d_translation_m), from_vector3(b.d_translation_m), atol=1e-12)
+        np.testing.assert_allclose(from_vector3(a.d_rotation_rad), from_vector3(b.d_rotation_rad), atol=1e-12)
