@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -205,6 +206,12 @@ def _wait_alive(cfg_path: Path, names: tuple[str, ...], timeout_s: float, procs)
     return False
 
 
+def _lower_priority() -> None:
+    """In a child before exec: a lower scheduling priority (POSIX; a no-op elsewhere)."""
+    if hasattr(os, "nice"):
+        os.nice(10)
+
+
 def run_live(args, op, ctl, run_dir: Path) -> int:
     from humanpt.cli.commands import _open_session
     from humanpt.runtime import config as cfgmod
@@ -227,8 +234,10 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
                                 start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
     # A pty delivers a STATUS at once (no 38 400 baud line time): its pose is for "now".
     gateway = dataclasses.replace(gateway, port=pty, status_delay_ms=0.0)
-    # The operator waits until everything is up, then holds the start pose while the servo settles.
-    op = dataclasses.replace(op, start_delay_s=2.0)
+    # The operator starts with the rest (its start-up must not fall into the running servo
+    # loop: on two cores that delayed ALTER statuses by ~85 ms) and holds the start pose
+    # while everything comes up and the servo settles.
+    op = dataclasses.replace(op, start_delay_s=3.0)
     cfg_path = run_dir / "humanpt.toml"
     sections = {
         "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
@@ -262,15 +271,16 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
         procs.append(("router", subprocess.Popen(base + ["router", "--config", str(cfg_path)], stdout=log,
                                                  stderr=subprocess.STDOUT)))
         time.sleep(0.5)
-        for name in comps:
+        for name in comps + ["operator"]:
+            # The simulated operator (a stand-in for the human, not part of the system) runs
+            # at a lower priority.
             procs.append((name, subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
-                                                 stdout=log, stderr=subprocess.STDOUT)))
-        print(f"humanpt demo: starting {', '.join(comps)} (log: {run_dir / 'processes.log'})", flush=True)
-        if not _wait_alive(cfg_path, tuple(comps), 60.0, procs):
+                                                 stdout=log, stderr=subprocess.STDOUT,
+                                                 preexec_fn=_lower_priority if name == "operator" else None)))
+        print(f"humanpt demo: starting {', '.join(comps)}, operator (log: {run_dir / 'processes.log'})", flush=True)
+        if not _wait_alive(cfg_path, tuple(comps) + ("operator",), 60.0, procs):
             failed.append("the components did not all come up within 60 s")
             return 1
-        procs.append(("operator", subprocess.Popen(base + ["operator", "--config", str(cfg_path), "--run-dir",
-                                                           str(run_dir)], stdout=log, stderr=subprocess.STDOUT)))
         t_start = time.monotonic()
         cfg = cfgmod.load(cfg_path)
         with _open_session(cfg) as s:
@@ -279,7 +289,8 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
             while not stop.wait(0.2):
                 el = time.monotonic() - t_start
                 print(f"\r  {el:5.1f} / {duration + 1.0:.1f} s", end="", file=sys.stderr, flush=True)
-                if not recording and el >= 1.0 + op.start_delay_s:
+                # The operator came up at about t_start: it starts moving ~start_delay_s later.
+                if not recording and el >= op.start_delay_s - 0.5:
                     pub.put(pb.Command(header=header(time.time_ns()), component="controller",
                                        verb="record_start").SerializeToString())
                     recording = True
