@@ -209,7 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Without WHAT: one table of perception images/s, lock-step speed, "
                        "image-to-command latency and ALTER cycles on time in a live demo run, replay speed "
                        "and MCAP write throughput. With WHAT: that component's detailed bench.")
-    p.add_argument("--live-seconds", type=float, default=30.0, help="length of the live demo run (default 30)")
+    p.add_argument("--live-seconds", type=float, default=60.0,
+                   help="length of the live demo run (default 60: the acceptance run of issue 9)")
     p.add_argument("--lockstep-seconds", type=float, default=10.0, help="lock-step twin time (default 10)")
     p.add_argument("--scenario", default="arc", help="scenario of the live run (default arc)")
     bsub = p.add_subparsers(dest="bench_verb", metavar="WHAT")

@@ -25,16 +25,17 @@ class PoseFilterConfig:
     accel_sigma_mm_s2: float = live(100.0, "white-acceleration noise of the target (hand)")
     ang_accel_sigma_deg_s2: float = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
     # A still target (the operator holds it, or it stands on a fixture): once the filtered
-    # speed has stayed below still_mm_s / still_deg_s for still_after_ms, the filter assumes
-    # it stays put: a zero-velocity update with every measurement and the process noise x
-    # still_q_scale, so the estimate becomes a long average instead of wandering with
-    # velocity noise.  A measurement off the estimate by more than still_release_mm /
-    # still_release_deg, twice in a row, ends it (back to the full model at once).
+    # speed has stayed below still_mm_s / still_deg_s for still_after_ms, a copy of the
+    # filter that assumes it stays put (a zero-velocity update with every measurement, the
+    # process noise x still_q_scale) gives the estimate: a long average instead of a pose
+    # wandering with velocity noise.  A measurement off it by more than still_release_mm /
+    # still_release_deg (inside the gate; twice beyond it) ends that: the moving model,
+    # which ran on underneath, gives the estimate again at once.
     still_detect: bool = live(True, "detect a still target and average it (zero-velocity updates)")
     still_mm_s: float = live(2.0, "the target may count as still below this filtered speed")
     still_deg_s: float = live(1.0, "... and below this filtered turn rate")
     still_after_ms: float = live(300.0, "... for this long")
-    still_release_mm: float = live(0.3, "a still target moved: a measurement this far off (twice)")
+    still_release_mm: float = live(0.3, "a still target moved: a measurement this far off")
     still_release_deg: float = live(0.3, "... or turned this far")
     still_q_scale: float = live(0.01, "process noise factor while still")
     # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.

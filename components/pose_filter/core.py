@@ -48,7 +48,9 @@ class PoseFilterCore(Core):
         self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
         self._fresh = False
         self._pose_at_measurement: tuple[tuple[int, int], pb.Pose] | None = None
-        self.still = False  # the target is held still: zero-velocity updates (see config)
+        # While the target is still: the filter that averages it (zero-velocity updates,
+        # calm process noise), started from the moving model, which runs on regardless.
+        self.still_kf: PoseKalman | None = None
         self._slow_since_ns: int | None = None  # first measurement of the current slow run
         self._off_in_a_row = 0  # measurements off a still estimate, in a row
 
@@ -66,7 +68,9 @@ class PoseFilterCore(Core):
 
     def on_config_changed(self, old, new) -> None:
         self._build(new)
-        self.kf.accel_sigma, self.kf.ang_accel_sigma = self._accel, self._ang_accel
+        for kf in (self.kf, self.still_kf):
+            if kf is not None:
+                kf.accel_sigma, kf.ang_accel_sigma = self._accel, self._ang_accel
 
     # ------------------------------------------------------------------------------------
     def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
@@ -103,7 +107,7 @@ class PoseFilterCore(Core):
         out = pb.TobState(header=self.next_header(TOPIC_STATE, target_ns, "world"), status=status,
                           gated_outliers=self.gated_total, cycle=cycle, measurements=self.accepted)
         if self.kf.initialised:
-            T, vel, P = self.kf.predicted(target_ns)
+            T, vel, P = self.active.predicted(target_ns)
             out.world_T_tob.CopyFrom(pose(T))
             vx, vy, vz, wx, wy, wz = vel.tolist()
             out.linear_velocity_m_s.CopyFrom(pb.Vector3(x=vx, y=vy, z=vz))
@@ -118,9 +122,10 @@ class PoseFilterCore(Core):
     def _pose_at(self, stamp_ns: int) -> pb.Pose:
         """The filter's pose at ``stamp_ns`` as a message, kept until the filter changes
         (every robot state between two measurements asks for the same one)."""
-        key = (self.kf.version, stamp_ns)
+        kf = self.active
+        key = (kf.version, stamp_ns)
         if self._pose_at_measurement is None or self._pose_at_measurement[0] != key:
-            self._pose_at_measurement = (key, pose(self.kf.predicted_pose(stamp_ns)))
+            self._pose_at_measurement = (key, pose(kf.predicted_pose(stamp_ns)))
         return self._pose_at_measurement[1]
 
     def _on_measurement(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
@@ -155,57 +160,62 @@ class PoseFilterCore(Core):
             self._accepted(stamp, pb.TOB_STATUS_FULL)
             return [self.event(t_ns, pb.SEVERITY_INFO, "filter_start", "filter started on a full pose")]
         self.kf.predict_to(stamp)
-        outs = self._check_still_moved(t_ns, world_T_tob)
+        outs = self._check_still_moved(t_ns, stamp, world_T_tob)
         gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
         outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
         if gate.accepted:
-            outs += self._still_update(t_ns, stamp)
+            outs += self._still_update(t_ns, stamp, world_T_tob)
         return outs
 
     # -- a still target ---------------------------------------------------------------
+    @property
+    def active(self) -> PoseKalman:
+        """The filter whose estimate is published: the still one while the target is still."""
+        return self.still_kf if self.still_kf is not None else self.kf
+
+    @property
+    def still(self) -> bool:
+        return self.still_kf is not None
+
     def _end_still(self) -> None:
-        self.still = False
+        if self.still_kf is not None:
+            self._pose_at_measurement = None  # another filter gives the estimate now
+        self.still_kf = None
         self._slow_since_ns = None
         self._off_in_a_row = 0
 
-    def _release(self) -> None:
-        c = self.config
-        self._end_still()
-        # It may have moved by up to twice the release distances before this measurement.
-        self.kf.open_velocity(2 * c.still_release_mm * 1e-3, np.radians(2 * c.still_release_deg))
-
-    def _check_still_moved(self, t_ns: int, world_T_tob: np.ndarray | None) -> list[Output]:
+    def _check_still_moved(self, t_ns: int, stamp: int, world_T_tob: np.ndarray | None) -> list[Output]:
         """While still: a measurement (``None``: a position-only one, which ends it) off the
-        estimate beyond the release distances twice in a row, or once beyond three times
-        them but inside the gate, means the target moves."""
-        if not self.still:
+        still estimate beyond the release distances, once inside the moving model's gate or
+        twice in a row beyond it, means the target moves: the moving model, which has run
+        on all along, gives the estimate again at once."""
+        if self.still_kf is None:
             return []
         c = self.config
-        off = far = True
+        off = inside = True
         if world_T_tob is not None:
-            T = self.kf.predicted_pose(self.kf.t_ns)
+            T = self.still_kf.predicted_pose(stamp)
             d_mm = float(np.linalg.norm(world_T_tob[:3, 3] - T[:3, 3])) * 1e3
             cos = (np.trace(world_T_tob[:3, :3] @ T[:3, :3].T) - 1.0) / 2.0
             d_deg = float(np.degrees(np.arccos(min(1.0, max(-1.0, cos)))))
             off = d_mm > c.still_release_mm or d_deg > c.still_release_deg
-            # Far off yet within the gate (not a glitch): it moves, no need to wait a frame.
-            far = ((d_mm > 3 * c.still_release_mm or d_deg > 3 * c.still_release_deg)
-                   and self.kf.pose_distance2(world_T_tob, self.R_pose) <= c.gate_chi2_pose)
+            inside = self.kf.pose_distance2(world_T_tob, self.R_pose) <= c.gate_chi2_pose
         self._off_in_a_row = self._off_in_a_row + 1 if off else 0
-        # Else twice in a row: one stray measurement (a glitch, soon gated) does not end it.
-        if not far and self._off_in_a_row < 2:
+        # Beyond the gate (a glitch, which the gate rejects, or a jump): only twice in a row.
+        if not (off and inside) and self._off_in_a_row < 2:
             return []
-        self._release()
+        self._end_still()
         return [self.event(t_ns, pb.SEVERITY_INFO, "target_moving", "the still target moves: full motion model")]
 
-    def _still_update(self, t_ns: int, stamp: int) -> list[Output]:
+    def _still_update(self, t_ns: int, stamp: int, world_T_tob: np.ndarray) -> list[Output]:
         c = self.config
         if not c.still_detect:
-            if self.still:
-                self._release()
+            self._end_still()
             return []
-        if self.still:
-            self.kf.update_zero_velocity(self.R_still)
+        if self.still_kf is not None:
+            self.still_kf.predict_to(stamp)
+            self.still_kf.update_pose(world_T_tob, self.R_pose, np.inf)
+            self.still_kf.update_zero_velocity(self.R_still)
             return []
         v = self.kf.x[6:12]
         slow = (float(np.linalg.norm(v[:3])) * 1e3 < c.still_mm_s
@@ -217,17 +227,18 @@ class PoseFilterCore(Core):
             self._slow_since_ns = stamp
         if stamp - self._slow_since_ns < c.still_after_ms * 1e6:
             return []
-        self.still = True
         self._off_in_a_row = 0
-        self.kf.q_scale = c.still_q_scale
-        self.kf.update_zero_velocity(self.R_still)
+        self.still_kf = self.kf.copy()
+        self._pose_at_measurement = None
+        self.still_kf.q_scale = c.still_q_scale
+        self.still_kf.update_zero_velocity(self.R_still)
         return [self.event(t_ns, pb.SEVERITY_INFO, "target_still", "the target is still: averaging it")]
 
     def _update_position(self, t_ns: int, stamp: int, world_p_m: np.ndarray) -> list[Output]:
         if not self.kf.initialised:
             return []  # a position alone cannot start an orientation
         self.kf.predict_to(stamp)
-        moved = self._check_still_moved(t_ns, None)
+        moved = self._check_still_moved(t_ns, stamp, None)
         T_pred = self.kf.predicted_pose(stamp)
         # Match each visible source to the nearest predicted source; G = source - R @ offset.
         world_sources = self.tob_p_sources_m @ T_pred[:3, :3].T + T_pred[:3, 3]

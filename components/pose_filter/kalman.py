@@ -13,12 +13,13 @@ F, H and Q are built by hand (filterpy's ``kinematic_kf`` builds a wrong H): F i
 constant-velocity transition, Q the discrete white-noise-acceleration model; filterpy's
 ``KalmanFilter.predict``/``update`` (Joseph form) do the rest.
 
-A still target (see the core) gets zero-velocity pseudo-measurements and a process noise
-scaled by ``q_scale``; :meth:`PoseKalman.open_velocity` undoes both when it moves.
+A still target (see the core) is averaged by a copy of the filter that gets
+zero-velocity pseudo-measurements and a process noise scaled by ``q_scale``.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass
 
@@ -187,14 +188,13 @@ class PoseKalman:
         self._recentre()
         self.version += 1
 
-    def open_velocity(self, sigma_m: float, sigma_rad: float) -> None:
-        """The target moves again: back to the full process noise, an open velocity, and a
-        pose that may be ``sigma_m`` / ``sigma_rad`` further off than the filter thought."""
-        self.q_scale = 1.0
-        self.kf.P[0:3, 0:3] += sigma_m**2 * I3
-        self.kf.P[3:6, 3:6] += sigma_rad**2 * I3
-        self.kf.P[6:12, 6:12] += np.diag(self.init_sd[6:12] ** 2)
-        self.version += 1
+    def copy(self) -> PoseKalman:
+        """An independent filter in the same state."""
+        other = PoseKalman.__new__(PoseKalman)
+        other.__dict__.update(self.__dict__)
+        other.kf = copy.deepcopy(self.kf)
+        other.R_ref = self.R_ref.copy()
+        return other
 
     def predicted(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(world_T_tob (4, 4) m, velocity (6,) [v m/s, w rad/s], covariance (12, 12)) at ``t_ns``,

@@ -89,6 +89,9 @@ def test_pose_rejects_non_rotation_and_nan():
     with pytest.raises(convert.MessageError, match="non-finite"):
         convert.from_pose(bad)
     np.testing.assert_array_equal(convert.from_pose(pb.Pose()), np.eye(4))  # unset = identity
+    tiny = pb.Pose(rotation=pb.Quaternion(x=1e-200, y=1e-200))  # its squares underflow to 0
+    with pytest.raises(convert.MessageError, match="no usable length"):
+        convert.from_pose(tiny)
 
 
 @pytest.mark.parametrize("shape,dtype,enc", [((48, 64), np.uint8, "mono8"), ((48, 64, 3), np.uint8, "rgb8"),
