@@ -166,7 +166,7 @@ class RuntimeConfig:
     peer_listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     run_dir: str = "runs"
     record: bool = True
-    chunk_size: int = 256 * 1024
+    chunk_size: int = 1024 * 1024  # 1 MB: ~3 camera images; zstd per chunk has a fixed cost
     flush_interval_s: float = 1.0
     multicast_scouting: bool = False
     connect_timeout_s: float = 10.0

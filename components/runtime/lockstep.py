@@ -78,7 +78,7 @@ class Lockstep:
         latency_ns: int = 0,
         run_dir: str | Path | None = None,
         keep_outputs: bool = True,
-        chunk_size: int = 256 * 1024,
+        chunk_size: int = 1024 * 1024,
         digest: bool = True,
     ):
         names = [c.name for c in cores]
