@@ -83,7 +83,7 @@ def with_overrides(obj, overrides: dict[str, dict], section: str):
     try:
         return build(type(obj), _merged(to_table(obj), overrides[section]), source="--set", section=section)
     except ConfigError as e:
-        raise SystemExit(f"humanpt demo: {e}") from None
+        raise SystemExit(f"humanpt: {e}") from None
 
 
 def write_toml(path: Path, sections: dict[str, dict]) -> None:

@@ -62,18 +62,22 @@ def against_known_path(x: np.ndarray, ideal: np.ndarray) -> np.ndarray:
 
 
 def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None, vectors: int = STATIC_VECTORS,
-            speed_scale: float = 1.0):
+            speed_scale: float = 1.0, overrides: dict[str, dict] | None = None):
     """One experiment with one perception method: (path X (N, 6), errors as the paper did,
-    errors against ground truth, which point, wall seconds, twin seconds)."""
-    from humanpt.cli.demo import scenario_duration_s
+    errors against ground truth, which point, wall seconds, twin seconds). ``overrides``:
+    {section: {key: value}} for sim_camera, perception, pose_filter, controller."""
+    from humanpt.cli.demo import scenario_duration_s, with_overrides
     from humanpt.controller.config import ControllerConfig
     from humanpt.perception.config import PerceptionConfig
+    from humanpt.pose_filter.config import PoseFilterConfig
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas.convert import header
+    from humanpt.sim_camera import SimCameraConfig
     from humanpt.twin.system import build_system, operator_config
 
     op = operator_config(name, seed)
-    ctl = ControllerConfig(recording_delay_cycles=10)
+    over = overrides or {}
+    ctl = with_overrides(ControllerConfig(recording_delay_cycles=10), over, "controller")
     if name == "static":
         # Record 106 vectors once the servo has settled on the still target.
         op = dataclasses.replace(op, start_delay_s=3.0)
@@ -81,8 +85,10 @@ def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None,
     else:
         op = dataclasses.replace(op, speed_scale=speed_scale)
         record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
-    world = build_system(op, seed=seed, perception=PerceptionConfig(method=method), controller=ctl, robot=robot,
-                         run_dir=run_dir, digest=False)
+    world = build_system(op, seed=seed, perception=with_overrides(PerceptionConfig(method=method), over, "perception"),
+                         controller=ctl, robot=robot, run_dir=run_dir, digest=False,
+                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"),
+                         sim_camera=with_overrides(SimCameraConfig(), over, "sim_camera"))
     t0 = time.perf_counter()
     world.run_until(round(record_from_s * 1e9))
     world.lockstep.inject(world.now_ns, "controller", "console/command",
@@ -142,6 +148,13 @@ def plots(name: str, results: dict, out: Path) -> Path:
 
 def experiment(args) -> int:
     from humanpt.cli.commands import run_stamp
+    from humanpt.cli.demo import parse_overrides
+
+    over = parse_overrides(getattr(args, "set", None))
+    unknown = set(over) - {"sim_camera", "perception", "pose_filter", "controller"}
+    if unknown:
+        raise ValueError(f"--set: no section {', '.join(sorted(unknown))} "
+                         "(sim_camera, perception, pose_filter, controller)")
 
     out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-{args.name}"
     out.mkdir(parents=True, exist_ok=True)
@@ -150,7 +163,7 @@ def experiment(args) -> int:
     for m in methods:
         run_dir = out / f"run-{m}" if args.record else None
         x, ep, et, which, wall, dur = run_one(args.name, m, args.seed, args.robot, run_dir, args.vectors,
-                                              args.speed_scale)
+                                              args.speed_scale, over)
         results[m] = {"x": x, "paper": evaluate.Stats.of(ep), "truth": evaluate.Stats.of(et), "which": which,
                       "wall_s": wall, "twin_s": dur}
         print(f"  {m} perception: {len(x)} vectors of {which}, {dur:.1f} s of twin time in {wall:.1f} s", flush=True)

@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--record", action="store_true", help="also record every component's MCAP")
     p.add_argument("--no-plots", action="store_true")
     p.add_argument("--vectors", type=int, default=106, help="static: vectors recorded (default 106, the paper's)")
+    p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
+                   help="override a setting of sim_camera, perception, pose_filter or controller "
+                        "(repeatable), e.g. --set pose_filter.still_detect=false")
     p.add_argument("--speed-scale", type=float, default=1.0,
                    help="arc/trapezium: pace of the operator (default 1; the paper's speeds)")
 
