@@ -51,6 +51,7 @@ class PoseFilterCore(Core):
         # While the target is still: the filter that averages it (zero-velocity updates,
         # calm process noise), started from the moving model, which runs on regardless.
         self.still_kf: PoseKalman | None = None
+        self._waiting_said = False  # "waiting_for_robot" said once
         self._slow_since_ns: int | None = None  # first measurement of the current slow run
         self._off_in_a_row = 0  # measurements off a still estimate, in a row
 
@@ -135,6 +136,13 @@ class PoseFilterCore(Core):
         stamp = msg.header.stamp_ns
         world_T_flange = self.robot.at(stamp, int(c.max_extrapolation_ms * 1e6))
         if world_T_flange is None:
+            if len(self.robot) == 0:
+                # Start-up: images before the robot's first state (its link is coming up).
+                if self._waiting_said:
+                    return []
+                self._waiting_said = True
+                return [self.event(t_ns, pb.SEVERITY_INFO, "waiting_for_robot",
+                                   "no robot state yet: measurements dropped until the first one")]
             return [self.event(t_ns, pb.SEVERITY_WARNING, "no_robot_pose",
                                f"no robot state near the image stamp {stamp} ns; measurement dropped")]
         world_T_camera = world_T_flange @ self.flange_T_camera_m

@@ -218,3 +218,14 @@ def test_lost_after_silence_and_bad_input_never_raises():
 def test_config_is_validated():
     with pytest.raises(ValueError, match="sigma_position_mm must be > 0"):
         PoseFilterConfig(sigma_position_mm=0)
+
+
+def test_images_before_the_robots_first_state_are_dropped_with_one_info():
+    """Start-up: the camera may see the target before the ALTER link is up."""
+    core = PoseFilterCore(PoseFilterConfig())
+    m = pb.TobMeasurement(header=header(1_000_000), status=pb.TOB_STATUS_FULL)
+    m.camera_T_tob.CopyFrom(pose(T_m(TARGET_X)))
+    first = core.step(1_000_001, "perception/tob", m)
+    again = core.step(2_000_001, "perception/tob", m)
+    assert [(e.code, e.severity) for _, e in first] == [("waiting_for_robot", pb.SEVERITY_INFO)]
+    assert again == [] and not core.kf.initialised
