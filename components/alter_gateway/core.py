@@ -142,6 +142,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         )
         self._missed = 0  # consecutive missed cycles
         self._armed = False  # the miss watchdog: armed by a fresh command
+        self._armed_from: int | None = None  # ... for the cycles from the one it commanded
         self._fault: str | None = None  # latched fault reason
         self._fault_alter_off_seen = False  # the controller showed ALTER off since the fault
         self._controller_gone = False
@@ -271,7 +272,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         if self._pending is not None and t_ns >= self._pending[1]:
             cycle = self._pending[0]
             self.counters["deadline_missed"] += 1
-            if self._armed and not self._controller_gone and self._fault is None:
+            if self._judged(cycle) and not self._controller_gone and self._fault is None:
                 self._ev(
                     outs,
                     t_ns,
@@ -352,6 +353,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             del self._commands[min(self._commands, key=lambda c: cycles_after(c, msg.cycle))]
         if not self._armed and self._fault is None:
             self._armed = True
+            # A controller that commands ahead starts with the NEXT cycle: the ones before
+            # its first command are not its misses.
+            self._armed_from = msg.cycle
         if self._pending is not None and self._pending[0] == msg.cycle:
             self._answer(msg.cycle, t_ns, outs)
 
@@ -415,7 +419,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         # Account for the previous cycle (and any lost in between).
         if (
             self._prev_cycle is not None
-            and self._armed
+            and self._judged(self._prev_cycle)
             and self._fault is None
             and not self._controller_gone
         ):
@@ -514,6 +518,11 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         return None
 
     # -- the answer -------------------------------------------------------------------------
+    def _judged(self, k: int) -> bool:
+        """Whether cycle ``k`` counts for the miss watchdog: armed, and not before the cycle
+        of the command that armed it."""
+        return self._armed and (self._armed_from is None or cycles_after(k, self._armed_from) >= 0)
+
     def _answer(self, k: int, t_ns: int, outs: list[Output]) -> None:
         """Send the correction for cycle ``k`` (the last STATUS) and close its wait."""
         self._pending = None
@@ -537,13 +546,13 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         if source == "stale" and hold is None:
             text = (
                 f"no command for cycle {k} or the {cfg.stale_cycles} before it: zero correction"
-                if self._armed
+                if self._judged(k)
                 else f"no command from the controller yet (cycle {k}): zero correction"
             )
             if not self._stale:
                 self._limiter.reset("stale_command")
             # Waiting for a controller that never commanded is normal at start-up: INFO.
-            severity = pb.SEVERITY_WARNING if self._armed else pb.SEVERITY_INFO
+            severity = pb.SEVERITY_WARNING if self._judged(k) else pb.SEVERITY_INFO
             self._ev(outs, t_ns, severity, "stale_command", text)
             self._stale = True
         elif self._stale and hold is None:

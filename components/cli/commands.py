@@ -68,7 +68,10 @@ def _open_session(cfg: cfgmod.ConfigFile):
     import zenoh
 
     try:
-        return zenoh.open(zenoh_config(cfg.runtime))
+        # A tool's session (topics, echo, param, console, the demo's own) is always a client
+        # of the router: a peer would make every component link to it and re-route when it
+        # comes and goes (on two cores that delayed the servo loop's messages by ~35 ms).
+        return zenoh.open(zenoh_config(cfg.runtime, mode="client"))
     except zenoh.ZError as e:
         raise ConnectionError(f"cannot reach the router at {', '.join(cfg.runtime.connect)}: {e}. "
                               "Start one with `humanpt router` or pass --connect ENDPOINT.") from e

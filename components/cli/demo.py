@@ -119,8 +119,11 @@ def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
     return T
 
 
-def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str) -> str:
-    """The accuracy table against ground truth, and where things are."""
+def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str,
+           stop_ns: int | None = None) -> str:
+    """The accuracy table against ground truth, and where things are. Warnings stamped after
+    ``stop_ns`` (the processes being stopped: e.g. the gateway seeing the controller go) are
+    counted apart."""
     from humanpt.twin import evaluate
 
     start = evaluate.scenario_start_ns(src)
@@ -141,8 +144,14 @@ def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: floa
 
     events = [pb.Event.FromString(o.data) for o in src.outputs() if o.topic.endswith("/events")]
     warn = [e for e in events if e.severity >= 3]
+    late = [e for e in warn if stop_ns is not None and e.header.stamp_ns >= stop_ns]
+    warn = [e for e in warn if not (stop_ns is not None and e.header.stamp_ns >= stop_ns)]
     if warn:
         lines += ["", f"{len(warn)} warnings/errors, e.g.: " + "; ".join(f"{e.source}: {e.code}" for e in warn[:5])]
+    else:
+        lines += ["", "no warnings or errors during the run"]
+    if late:
+        lines.append(f"(while stopping: {len(late)}, e.g. " + "; ".join(f"{e.source}: {e.code}" for e in late[:3]) + ")")
     paths = sorted((run_dir / "paths").glob("*.csv"))
     lines += ["", f"recordings: {run_dir}/*.mcap  (humanpt replay {run_dir}; humanpt view {run_dir})"]
     if paths:
@@ -303,6 +312,7 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
             pub.undeclare()
         print(file=sys.stderr)
     finally:
+        stop_ns = time.time_ns()
         for _, p in reversed(procs):
             if p.poll() is None:
                 p.send_signal(signal.SIGTERM)
@@ -316,7 +326,7 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     if failed:
         print(f"humanpt demo: stopped early: {'; '.join(failed)} (see {run_dir / 'processes.log'})", file=sys.stderr)
         return 1
-    print(report(RunOutputs(run_dir), ctl, run_dir, wall, duration, "live"))
+    print(report(RunOutputs(run_dir), ctl, run_dir, wall, duration, "live", stop_ns=stop_ns))
     return 0
 
 

@@ -414,3 +414,21 @@ def test_config_defaults_and_19200_baud():
     core = AlterGatewayCore(cfg)
     assert core.tick_period_ns() == 2 * MS
     assert dataclasses.asdict(cfg)["envelope_max_mm"] == (1600.0, 1600.0, 1600.0)
+
+
+def test_a_controller_commanding_ahead_is_not_blamed_for_the_cycle_before_its_first_command():
+    """Commanding one cycle ahead, the controller's first command is for the next cycle: the
+    current one goes unanswered (held) without a miss; from then on every cycle is judged."""
+    rig = _rig()
+    rig.status()  # cycle 1: no command for it will come
+    rig.command(cycle=2, dp_mm=(1.0, 0, 0))  # the first command, for the next cycle
+    rig.advance(7 * MS)
+    assert "deadline_missed" not in rig.codes()
+    assert all(e.severity == pb.SEVERITY_INFO for e in rig.events() if e.code == "stale_command")
+    rig.advance(CYCLE_NS - 7 * MS)
+    rig.status()  # cycle 2: its command is waiting, answered at once
+    assert rig.gw.sent[-1].source == "fresh" and rig.states()[-1].missed_cycles == 0
+    rig.advance(CYCLE_NS)
+    rig.status()  # cycle 3: nothing for it - a miss now
+    rig.advance(7 * MS)
+    assert rig.codes().count("deadline_missed") == 1
