@@ -94,8 +94,13 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
 
 def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[float]]:
     n = math.sqrt(x * x + y * y + z * z + w * w)
-    if not n > 0.0:  # all its squares underflow (or NaN): no rotation to be had
-        raise MessageError(f"quaternion ({x}, {y}, {z}, {w}) has no usable length")
+    if not 0.0 < n < math.inf:
+        # Its squares under- or overflow: scale by the largest component first.
+        m = max(abs(x), abs(y), abs(z), abs(w))
+        if not 0.0 < m < math.inf:  # zero, NaN or infinite: no rotation to be had
+            raise MessageError(f"quaternion ({x}, {y}, {z}, {w}) has no usable length")
+        x, y, z, w = x / m, y / m, z / m, w / m
+        n = math.sqrt(x * x + y * y + z * z + w * w)
     x, y, z, w = x / n, y / n, z / n, w / n
     return [
         [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],

@@ -264,6 +264,10 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._status_t_ns = None
         self._silent = False
         self._missed = 0
+        # Cycle numbers restart: the watchdog re-arms with the first command of this session
+        # (it still holds the robot meanwhile, as before any command).
+        self._armed = False
+        self._armed_from = None
 
     def _on_tick(self, t_ns: int, outs: list[Output]) -> None:
         events = self._host.poll(t_ns)
@@ -526,6 +530,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     def _answer(self, k: int, t_ns: int, outs: list[Output]) -> None:
         """Send the correction for cycle ``k`` (the last STATUS) and close its wait."""
         self._pending = None
+        if self._armed_from is not None and cycles_after(k, self._armed_from) >= 0:
+            self._armed_from = None  # reached: every cycle counts from now on (also past a wrap)
         status = self._status
         if status is None or status.cycle != k:
             return

@@ -215,10 +215,12 @@ def _wait_alive(cfg_path: Path, names: tuple[str, ...], timeout_s: float, procs)
     return False
 
 
-def _lower_priority() -> None:
-    """In a child before exec: a lower scheduling priority (POSIX; a no-op elsewhere)."""
-    if hasattr(os, "nice"):
-        os.nice(10)
+def _lower_priority(pid: int) -> None:
+    """A lower scheduling priority for a child (POSIX; a no-op elsewhere)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, 10)
+    except (AttributeError, OSError):
+        pass
 
 
 def run_live(args, op, ctl, run_dir: Path) -> int:
@@ -281,11 +283,13 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
                                                  stderr=subprocess.STDOUT)))
         time.sleep(0.5)
         for name in comps + ["operator"]:
-            # The simulated operator (a stand-in for the human, not part of the system) runs
-            # at a lower priority.
-            procs.append((name, subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
-                                                 stdout=log, stderr=subprocess.STDOUT,
-                                                 preexec_fn=_lower_priority if name == "operator" else None)))
+            p = subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
+                                 stdout=log, stderr=subprocess.STDOUT)
+            if name == "operator":
+                # The simulated operator (a stand-in for the human, not part of the system)
+                # runs at a lower priority.
+                _lower_priority(p.pid)
+            procs.append((name, p))
         print(f"humanpt demo: starting {', '.join(comps)}, operator (log: {run_dir / 'processes.log'})", flush=True)
         if not _wait_alive(cfg_path, tuple(comps) + ("operator",), 60.0, procs):
             failed.append("the components did not all come up within 60 s")
@@ -298,8 +302,10 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
             while not stop.wait(0.2):
                 el = time.monotonic() - t_start
                 print(f"\r  {el:5.1f} / {duration + 1.0:.1f} s", end="", file=sys.stderr, flush=True)
-                # The operator came up at about t_start: it starts moving ~start_delay_s later.
-                if not recording and el >= op.start_delay_s - 0.5:
+                # Record from a second after everything is up: the operator, which came up
+                # with the rest, holds the start pose for start_delay_s, so the path begins
+                # with it still whatever the order the processes came up in.
+                if not recording and el >= 1.0:
                     pub.put(pb.Command(header=header(time.time_ns()), component="controller",
                                        verb="record_start").SerializeToString())
                     recording = True

@@ -59,6 +59,15 @@ def _mm(T_m: np.ndarray) -> np.ndarray:
     return T
 
 
+def _next(cycle: int) -> int:
+    """The ALTER cycle after ``cycle`` (a uint32 counter: it wraps)."""
+    return (cycle + 1) & 0xFFFFFFFF
+
+
+def _prev(cycle: int) -> int:
+    return (cycle - 1) & 0xFFFFFFFF
+
+
 def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
     """The desired frame D in the flange frame (m): on the camera's optical axis at dz,
     parallel to the camera (Section 5)."""
@@ -126,11 +135,11 @@ class ControllerCore(Core):
             return []
         cycle, stamp, world_T_flange = self.robot
         c = self.config
-        if c.command_ahead and st.cycle == cycle + 1:
+        if c.command_ahead and st.cycle == _next(cycle):
             # The filter's state for the next cycle overtook that cycle's robot state on
             # the bus: where the flange is then follows from this cycle and its step.
             world_T_flange = law.apply_step(world_T_flange, *self._step_answering(cycle))
-            cycle, stamp = cycle + 1, stamp + round(c.cycle_period_ms * 1e6)
+            cycle, stamp = _next(cycle), stamp + round(c.cycle_period_ms * 1e6)
         ahead_s = 0.0
         base = self._sent.get(cycle)
         if base is None and c.command_ahead:
@@ -140,7 +149,7 @@ class ControllerCore(Core):
             # flange, so the gateway can answer that cycle's status at once (after a new
             # image: with the freshest information).
             world_T_flange = law.apply_step(world_T_flange, *base)
-            cycle, stamp = cycle + 1, stamp + round(c.cycle_period_ms * 1e6)
+            cycle, stamp = _next(cycle), stamp + round(c.cycle_period_ms * 1e6)
             ahead_s = c.cycle_period_ms * 1e-3
         outs: list[Output] = []
         valid = st.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
@@ -192,8 +201,10 @@ class ControllerCore(Core):
                                d_rotation_rad=vector3(step.d_rotation_rad), mode=mode,
                                measurement_stamp_ns=st.measurement_stamp_ns)
         outs.append((T_CMD, cmd))
+        self._sent.pop(cycle, None)
         self._sent[cycle] = (step.d_translation_m, step.d_rotation_rad)
-        self._sent.pop(cycle - 3, None)
+        while len(self._sent) > 4:  # the latest few cycles (any gaps, restarts or wraps)
+            del self._sent[next(iter(self._sent))]
         # The filter may send several states per cycle (a new image re-commands it): count
         # cycles, not states, for the recording delay.
         new_cycle = cycle != self._last_cycle
@@ -219,7 +230,7 @@ class ControllerCore(Core):
     def _step_answering(self, cycle: int) -> tuple[np.ndarray, np.ndarray]:
         """The step the gateway answers ``cycle`` with: the one sent for it, else its
         velocity hold (the freshest older step), else zero (nothing sent yet)."""
-        return (self._sent.get(cycle) or self._sent.get(cycle - 1) or self._sent.get(cycle - 2)
+        return (self._sent.get(cycle) or self._sent.get(_prev(cycle)) or self._sent.get(_prev(_prev(cycle)))
                 or (np.zeros(3), np.zeros(3)))
 
     def _servo(self, world_T_flange, world_T_tob, v_tob, w_tob, position_only) -> law.Step:

@@ -37,6 +37,8 @@ class PoseFilterConfig:
     still_after_ms: float = live(300.0, "... for this long")
     still_release_mm: float = live(0.3, "a still target moved: a measurement this far off")
     still_release_deg: float = live(0.3, "... or turned this far")
+    still_drift_mm: float = live(0.05, "... or the mean offset of the latest 15 measurements this far")
+    still_drift_deg: float = live(0.1, "... or turned that far on average")
     still_q_scale: float = live(0.01, "process noise factor while still")
     # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.
     gate_chi2_pose: float = live(22.46)
@@ -56,6 +58,7 @@ class PoseFilterConfig:
         for name in ("sigma_position_mm", "sigma_rotation_deg", "sigma_position_only_mm", "accel_sigma_mm_s2",
                      "ang_accel_sigma_deg_s2", "gate_chi2_pose", "gate_chi2_position", "lost_after_ms",
                      "still_mm_s", "still_deg_s", "still_after_ms", "still_release_mm", "still_release_deg",
+                     "still_drift_mm", "still_drift_deg",
                      "still_q_scale",
                      "target_leg_mm", "target_base_mm"):
             if not getattr(self, name) > 0:

@@ -16,11 +16,14 @@ as ``pose_filter/tob_state`` for that cycle (the controller re-commands the cycl
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 
 from humanpt.geometry.target import TargetModel
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.pose_filter.config import PoseFilterConfig
+from humanpt.pose_filter.fastmath import rotvec_of
 from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime.core import Core, Output
@@ -28,6 +31,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
 TOPIC_STATE = "pose_filter/tob_state"
+STILL_DRIFT_WINDOW = 15  # measurements (0.5 s at 30 images/s) whose mean offset shows a drift
 
 
 class PoseFilterCore(Core):
@@ -54,6 +58,9 @@ class PoseFilterCore(Core):
         self._waiting_said = False  # "waiting_for_robot" said once
         self._slow_since_ns: int | None = None  # first measurement of the current slow run
         self._off_in_a_row = 0  # measurements off a still estimate, in a row
+        # The latest offsets (mm, deg vectors) of measurements from the still estimate: a slow
+        # drift shows in their mean long before any one of them is off by the release distance.
+        self._offsets: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=STILL_DRIFT_WINDOW)
 
     def _build(self, c: PoseFilterConfig) -> None:
         T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
@@ -72,6 +79,8 @@ class PoseFilterCore(Core):
         for kf in (self.kf, self.still_kf):
             if kf is not None:
                 kf.accel_sigma, kf.ang_accel_sigma = self._accel, self._ang_accel
+        if self.still_kf is not None:
+            self.still_kf.q_scale = new.still_q_scale
 
     # ------------------------------------------------------------------------------------
     def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
@@ -167,6 +176,8 @@ class PoseFilterCore(Core):
             self._end_still()
             self._accepted(stamp, pb.TOB_STATUS_FULL)
             return [self.event(t_ns, pb.SEVERITY_INFO, "filter_start", "filter started on a full pose")]
+        if self.last_measurement_ns is not None and stamp - self.last_measurement_ns > self.config.lost_after_ms * 1e6:
+            self._end_still()  # lost and found again: not known to be still any more
         self.kf.predict_to(stamp)
         outs = self._check_still_moved(t_ns, stamp, world_T_tob)
         gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
@@ -191,26 +202,38 @@ class PoseFilterCore(Core):
         self.still_kf = None
         self._slow_since_ns = None
         self._off_in_a_row = 0
+        self._offsets.clear()
 
     def _check_still_moved(self, t_ns: int, stamp: int, world_T_tob: np.ndarray | None) -> list[Output]:
         """While still: a measurement (``None``: a position-only one, which ends it) off the
         still estimate beyond the release distances, once inside the moving model's gate or
-        twice in a row beyond it, means the target moves: the moving model, which has run
-        on all along, gives the estimate again at once."""
+        twice in a row beyond it, or the mean offset of the latest ones beyond the drift
+        distances, means the target moves: the moving model, which has run on all along,
+        gives the estimate again at once."""
         if self.still_kf is None:
             return []
         c = self.config
         off = inside = True
+        drift = False
         if world_T_tob is not None:
             T = self.still_kf.predicted_pose(stamp)
-            d_mm = float(np.linalg.norm(world_T_tob[:3, 3] - T[:3, 3])) * 1e3
-            cos = (np.trace(world_T_tob[:3, :3] @ T[:3, :3].T) - 1.0) / 2.0
-            d_deg = float(np.degrees(np.arccos(min(1.0, max(-1.0, cos)))))
-            off = d_mm > c.still_release_mm or d_deg > c.still_release_deg
+            dp_mm = (world_T_tob[:3, 3] - T[:3, 3]) * 1e3
+            dr_deg = np.degrees(rotvec_of(world_T_tob[:3, :3] @ T[:3, :3].T))
+            off = float(np.linalg.norm(dp_mm)) > c.still_release_mm or float(np.linalg.norm(dr_deg)) > c.still_release_deg
             inside = self.kf.pose_distance2(world_T_tob, self.R_pose) <= c.gate_chi2_pose
+            if inside:
+                self._offsets.append((dp_mm, dr_deg))
+            n = len(self._offsets)
+            if n >= 5:
+                # The mean of n offsets, against thresholds for the full window scaled by
+                # sqrt(window / n): the same false-alarm rate, an earlier verdict on a drift.
+                k = (self._offsets.maxlen / n) ** 0.5
+                drift = (float(np.linalg.norm(np.mean([o[0] for o in self._offsets], axis=0))) > k * c.still_drift_mm
+                         or float(np.linalg.norm(np.mean([o[1] for o in self._offsets], axis=0)))
+                         > k * c.still_drift_deg)
         self._off_in_a_row = self._off_in_a_row + 1 if off else 0
         # Beyond the gate (a glitch, which the gate rejects, or a jump): only twice in a row.
-        if not (off and inside) and self._off_in_a_row < 2:
+        if not (off and inside) and not drift and self._off_in_a_row < 2:
             return []
         self._end_still()
         return [self.event(t_ns, pb.SEVERITY_INFO, "target_moving", "the still target moves: full motion model")]

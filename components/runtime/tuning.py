@@ -6,7 +6,7 @@ Two things measurably matter on a small machine:
   its noise, float buffers).  By default glibc serves blocks above its (adaptive) mmap
   threshold with fresh ``mmap`` pages and gives freed heap tops back to the kernel, so each
   frame pays a page fault per 4 KB touched: ~1.4 ms per frame in the lock-step loop.  A
-  fixed 64 MB mmap threshold and a 256 MB trim threshold keep those buffers in the heap.
+  fixed 32 MB mmap threshold and a 256 MB trim threshold keep those buffers in the heap.
 * **the GIL switch interval.** A live shell has a Zenoh callback thread, a worker thread
   and (optionally) a recorder thread.  When one holds the GIL in Python code, another
   waits up to the switch interval (5 ms by default) before it may run: 0.5 ms bounds the
@@ -18,12 +18,15 @@ Neither changes results, only timing.
 from __future__ import annotations
 
 import ctypes
+import logging
 import sys
+
+log = logging.getLogger("humanpt.tuning")
 
 M_TRIM_THRESHOLD = -1  # glibc <malloc.h>
 M_MMAP_THRESHOLD = -3
 
-MMAP_THRESHOLD_BYTES = 64 << 20
+MMAP_THRESHOLD_BYTES = 32 << 20  # glibc's largest on 64-bit (DEFAULT_MMAP_THRESHOLD_MAX)
 TRIM_THRESHOLD_BYTES = 256 << 20
 SWITCH_INTERVAL_S = 0.0005
 
@@ -39,8 +42,11 @@ def tune_allocator() -> bool:
         return False
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
-    return bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)) and bool(
-        mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES))
+    mmap_ok = bool(mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES))
+    trim_ok = bool(mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES))
+    if not (mmap_ok and trim_ok):
+        log.debug("mallopt refused: mmap threshold %s, trim threshold %s", mmap_ok, trim_ok)
+    return mmap_ok and trim_ok
 
 
 def tune_process() -> None:

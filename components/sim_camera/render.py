@@ -29,9 +29,11 @@ the nonzero pixels, no full frame); coverage runs in the window that holds the e
 computes exact areas only for the pixels its boundary crosses. The (uniform) background
 comes from a bank of independent draws of the exact quantised background distribution
 (:func:`background_table`), built once per seed: each frame copies the run at an offset
-drawn from its own generator, so every pixel has exactly that distribution and a pixel's
-background is new in every frame. The pixels a blob touches get exact Poisson + Gaussian
-noise.
+drawn from its own generator, so every pixel has exactly that distribution and the same
+pixel sees a different draw in every frame (two frames' runs often overlap in the bank,
+shifted: one frame's background may be a shifted copy of part of another's, which leaves
+per-pixel statistics and the blobs' centroid noise as they are). The pixels a blob touches
+get exact Poisson + Gaussian noise.
 
 Units: mm in the camera frame, pixels of the complex image (centre of pixel (row i,
 column j) at (u, v) = (j, i)), DN (grey levels).
@@ -567,8 +569,8 @@ def _background_bank(seed: int, table: bytes, n_pixels: int) -> np.ndarray:
     draw of the distribution ``table`` holds (the inverse CDF of :func:`background_table`,
     indexed with uniform 16-bit numbers). A frame's background is the ``n_pixels`` run
     starting at a random offset: every pixel exactly that distribution, independent
-    within the frame; two frames share a pixel's value only when they drew the same offset
-    (probability 2^-20)."""
+    within the frame; the same pixel of two frames has the same value only when they drew
+    the same offset (probability 2^-20), though two frames' runs may overlap shifted."""
     rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_BANK_KEY,)))
     uniform = np.frombuffer(rng.bytes(2 * (n_pixels + _BANK_OFFSETS)), dtype=np.uint16)
     bank = np.frombuffer(table, dtype=np.uint8).take(uniform)

@@ -432,3 +432,26 @@ def test_a_controller_commanding_ahead_is_not_blamed_for_the_cycle_before_its_fi
     rig.status()  # cycle 3: nothing for it - a miss now
     rig.advance(7 * MS)
     assert rig.codes().count("deadline_missed") == 1
+
+
+def test_after_a_peer_restart_the_watchdog_rearms_with_the_new_sessions_first_command():
+    """Cycle numbers restart with a new session: misses count again from its first command
+    (not from the old session's first commanded cycle, which may lie far ahead)."""
+    rig = _rig()
+    for _ in range(50):
+        rig.status()
+        rig.advance(CYCLE_NS)
+    for _ in range(5):
+        rig.cycle_with_command()  # armed from cycle 51
+    rig.robot = ControllerEndpoint()  # the controller restarts, counting from 1 again
+    rig.cycle = 0
+    for e in rig.robot.start(rig.t_ns):
+        rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    rig.cycle_with_command()  # cycle 1 of the new session: re-arms
+    before = rig.codes().count("deadline_missed")
+    for _ in range(3):
+        rig.status()  # cycles 2-4: nothing commanded
+        rig.advance(CYCLE_NS)
+    rig.status()  # cycle 5 accounts for cycle 4
+    assert rig.codes().count("deadline_missed") > before  # (one event per interval)
+    assert rig.states()[-1].missed_cycles == 3

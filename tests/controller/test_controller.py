@@ -306,3 +306,18 @@ def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_c
     for a, b in zip(plain, swapped, strict=True):
         np.testing.assert_allclose(from_vector3(a.d_translation_m), from_vector3(b.d_translation_m), atol=1e-12)
         np.testing.assert_allclose(from_vector3(a.d_rotation_rad), from_vector3(b.d_rotation_rad), atol=1e-12)
+
+
+def test_the_cycle_counter_wraps_without_losing_a_command():
+    core = ControllerCore(ControllerConfig())
+    flange, tob = start_flange(TARGET_X), T_m(TARGET_X)
+    cycles = []
+    for k in (0xFFFFFFFE, 0xFFFFFFFF, 0, 1):
+        t = 1_000_000_000 + len(cycles) * DT_NS
+        core.step(t, "alter_gateway/robot_state", pb.RobotState(header=header(t, 0, "world"),
+                                                                world_T_flange=pose(flange), cycle=k))
+        st = pb.TobState(header=header(t, 0, "world"), world_T_tob=pose(tob), status=pb.TOB_STATUS_FULL,
+                         linear_velocity_m_s=vector3(np.zeros(3)), angular_velocity_rad_s=vector3(np.zeros(3)),
+                         cycle=k)
+        cycles += [m.cycle for tp, m in core.step(t + 1, "pose_filter/tob_state", st) if tp == "controller/command"]
+    assert cycles == [0xFFFFFFFF, 0, 1, 2]

@@ -78,3 +78,21 @@ def test_still_config_is_validated():
         PoseFilterConfig(still_q_scale=2.0)
     with pytest.raises(ValueError, match="still_release_mm"):
         PoseFilterConfig(still_release_mm=0.0)
+
+
+@pytest.mark.parametrize("speed_mm_s", [0.5, 1.0])
+def test_a_slow_drift_is_followed_about_as_well_as_by_the_plain_filter(speed_mm_s):
+    """Below the still speed a drifting target may be taken as still; the mean offset of the
+    latest measurements ends that before the lag grows (no sawtooth of 0.3 mm)."""
+    def tob(t):
+        return T_m((TARGET_X[0] + speed_mm_s * t * 1e-9, *TARGET_X[1:]))
+
+    def errors(detect):
+        w = World(PoseFilterCore(PoseFilterConfig(still_detect=detect)), still_flange, tob,
+                  np.random.default_rng(7), **NOISE)
+        w.run(0, 10_000_000_000)
+        return np.abs(_errors(w, tob, 3_000_000_000)[:, 0])
+
+    with_still, plain = errors(True), errors(False)
+    assert with_still.max() < plain.max() + 0.05, (with_still.max(), plain.max())
+    assert with_still.mean() < plain.mean() + 0.015, (with_still.mean(), plain.mean())

@@ -89,9 +89,13 @@ def test_pose_rejects_non_rotation_and_nan():
     with pytest.raises(convert.MessageError, match="non-finite"):
         convert.from_pose(bad)
     np.testing.assert_array_equal(convert.from_pose(pb.Pose()), np.eye(4))  # unset = identity
-    tiny = pb.Pose(rotation=pb.Quaternion(x=1e-200, y=1e-200))  # its squares underflow to 0
+    # Squares that underflow or overflow: the rotation is still the quaternion's direction.
+    for scale in (1e-200, 1e200):
+        q = pb.Pose(rotation=pb.Quaternion(x=scale, y=scale))
+        np.testing.assert_allclose(convert.from_pose(q)[:3, :3],
+                                   Rotation.from_quat([1.0, 1.0, 0.0, 0.0]).as_matrix(), atol=1e-12)
     with pytest.raises(convert.MessageError, match="no usable length"):
-        convert.from_pose(tiny)
+        convert.matrix_from_quat(np.array([0.0, 0.0, 0.0, 0.0]))
 
 
 @pytest.mark.parametrize("shape,dtype,enc", [((48, 64), np.uint8, "mono8"), ((48, 64, 3), np.uint8, "rgb8"),
