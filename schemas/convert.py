@@ -55,8 +55,9 @@ def from_vector3(m: pb.Vector3) -> np.ndarray:
     return np.array([m.x, m.y, m.z], dtype=float)
 
 
-def _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float, float]:
-    """Shepperd's method on plain floats: (x, y, z, w), unit, w >= 0."""
+def quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float, float]:
+    """A rotation matrix's nine entries (row by row, plain floats) -> unit quaternion
+    (x, y, z, w), w >= 0, by Shepperd's method (the hot paths' quaternion)."""
     tr = m00 + m11 + m22
     # Divide by the largest of the four candidates for stability.
     if tr >= m00 and tr >= m11 and tr >= m22:
@@ -89,7 +90,7 @@ def quat_from_matrix(R: np.ndarray) -> np.ndarray:
     per simulated second on the message path, so it works on plain floats.
     """
     (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
-    return np.array(_quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22))
+    return np.array(quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22))
 
 
 def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[float]]:
@@ -182,11 +183,18 @@ def pose(a_T_b: np.ndarray) -> pb.Pose:
     det = m00 * (m11 * m22 - m12 * m21) - m01 * (m10 * m22 - m12 * m20) + m02 * (m10 * m21 - m11 * m20)
     if not ok or not det >= 0:
         raise MessageError("the rotation part of the transform is not a proper rotation")
-    qx, qy, qz, qw = _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
+    qx, qy, qz, qw = quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
     return pb.Pose(
         translation=pb.Vector3(x=tx, y=ty, z=tz),
         rotation=pb.Quaternion(x=qx, y=qy, z=qz, w=qw),
     )
+
+
+def pose_from_mm(a_T_b_mm: np.ndarray) -> pb.Pose:
+    """:func:`pose` of a transform whose translation is in millimetres (the twin's unit)."""
+    T = np.array(a_T_b_mm, dtype=float)
+    T[:3, 3] /= 1000.0
+    return pose(T)
 
 
 def from_pose(m: pb.Pose) -> np.ndarray:

@@ -316,12 +316,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         step = (dt.x * 1000.0, dt.y * 1000.0, dt.z * 1000.0, dr.x, dr.y, dr.z)
         dp_mm, rv_rad = np.array(step[:3]), np.array(step[3:])
         if frame not in ("world", "tool") or not all(map(math.isfinite, step)):
-            self.counters["commands_dropped"] += 1
-            self._ev(
+            self._bad_command(
                 outs,
                 t_ns,
-                pb.SEVERITY_WARNING,
-                "bad_command",
                 f"command for cycle {msg.cycle} dropped: frame {frame!r}, step {dp_mm} mm, {rv_rad} rad "
                 "(need frame world or tool and finite values)",
             )
@@ -333,12 +330,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 self.counters["commands_dropped"] += 1
                 return  # too old to ever be used
             if lead > MAX_LEAD_CYCLES:
-                self.counters["commands_dropped"] += 1
-                self._ev(
+                self._bad_command(
                     outs,
                     t_ns,
-                    pb.SEVERITY_WARNING,
-                    "bad_command",
                     f"command for cycle {msg.cycle} is {lead} cycles ahead of the robot (cycle {ref}); dropped",
                 )
                 return
@@ -362,6 +356,10 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self._armed_from = msg.cycle
         if self._pending is not None and self._pending[0] == msg.cycle:
             self._answer(msg.cycle, t_ns, outs)
+
+    def _bad_command(self, outs: list[Output], t_ns: int, text: str) -> None:
+        self.counters["commands_dropped"] += 1
+        self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_command", text)
 
     def _on_liveliness(self, t_ns: int, msg: pb.Liveliness, outs: list[Output]) -> None:
         if msg.component != "controller":

@@ -69,8 +69,9 @@ def _open_session(cfg: cfgmod.ConfigFile):
 
     try:
         # A tool's session (topics, echo, param, console, the demo's own) is always a client
-        # of the router: a peer would make every component link to it and re-route when it
-        # comes and goes (on two cores that delayed the servo loop's messages by ~35 ms).
+        # of the router: as a peer every component would link to it and re-route when it
+        # comes and goes (a ~35 ms stall of the servo loop seen as the demo's session left
+        # is gone since; the cause was not isolated further).
         return zenoh.open(zenoh_config(cfg.runtime, mode="client"))
     except zenoh.ZError as e:
         raise ConnectionError(f"cannot reach the router at {', '.join(cfg.runtime.connect)}: {e}. "

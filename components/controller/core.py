@@ -141,9 +141,7 @@ class ControllerCore(Core):
             world_T_flange = law.apply_step(world_T_flange, *self._step_answering(cycle))
             cycle, stamp = _next(cycle), stamp + round(c.cycle_period_ms * 1e6)
         ahead_s = 0.0
-        base = self._sent.get(cycle)
-        if base is None and c.command_ahead:
-            base = self._step_answering(cycle)
+        base = self._step_answering(cycle) if c.command_ahead else self._sent.get(cycle)
         if (st.after_measurement or c.command_ahead) and base is not None:
             # Command the next cycle now, from where this cycle's step will have put the
             # flange, so the gateway can answer that cycle's status at once (after a new

@@ -3,22 +3,14 @@ truth (world_T_tob, and world_T_tip with a driver) on ``operator/truth`` at a fi
 
 from __future__ import annotations
 
-import numpy as np
-
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import pose
+from humanpt.schemas.convert import pose_from_mm
 
 from .config import OperatorConfig
 from .scenario import Trajectory
 
 __all__ = ["OperatorCore"]
-
-
-def _metres(a_T_b_mm: np.ndarray) -> np.ndarray:
-    out = np.array(a_T_b_mm, dtype=float)
-    out[:3, 3] /= 1000.0
-    return out
 
 
 class OperatorCore(Core):
@@ -66,10 +58,10 @@ class OperatorCore(Core):
         self.scenario_t_s += moving_s * self.config.speed_scale
         world_T_tob, world_T_tip = self.trajectory.pose(self.scenario_t_s, tremor_t_s=elapsed_s)
         truth = pb.Truth(header=self.next_header("operator/truth", t_ns, "world"))
-        truth.world_T_tob.CopyFrom(pose(_metres(world_T_tob)))
+        truth.world_T_tob.CopyFrom(pose_from_mm(world_T_tob))
         if world_T_tip is not None:
             truth.has_tip = True
-            truth.world_T_tip.CopyFrom(pose(_metres(world_T_tip)))
+            truth.world_T_tip.CopyFrom(pose_from_mm(world_T_tip))
         out.append(("operator/truth", truth))
         if (
             not self.done

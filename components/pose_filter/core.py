@@ -179,8 +179,9 @@ class PoseFilterCore(Core):
         if self.last_measurement_ns is not None and stamp - self.last_measurement_ns > self.config.lost_after_ms * 1e6:
             self._end_still()  # lost and found again: not known to be still any more
         self.kf.predict_to(stamp)
-        outs = self._check_still_moved(t_ns, stamp, world_T_tob)
         gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
+        # (The still check reads only the still filter and whether the moving one gated.)
+        outs = self._check_still_moved(t_ns, stamp, world_T_tob, inside=gate.accepted)
         outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
         if gate.accepted:
             outs += self._still_update(t_ns, stamp, world_T_tob)
@@ -192,10 +193,6 @@ class PoseFilterCore(Core):
         """The filter whose estimate is published: the still one while the target is still."""
         return self.still_kf if self.still_kf is not None else self.kf
 
-    @property
-    def still(self) -> bool:
-        return self.still_kf is not None
-
     def _end_still(self) -> None:
         if self.still_kf is not None:
             self._pose_at_measurement = None  # another filter gives the estimate now
@@ -204,23 +201,24 @@ class PoseFilterCore(Core):
         self._off_in_a_row = 0
         self._offsets.clear()
 
-    def _check_still_moved(self, t_ns: int, stamp: int, world_T_tob: np.ndarray | None) -> list[Output]:
+    def _check_still_moved(self, t_ns: int, stamp: int, world_T_tob: np.ndarray | None,
+                           inside: bool = True) -> list[Output]:
         """While still: a measurement (``None``: a position-only one, which ends it) off the
         still estimate beyond the release distances, once inside the moving model's gate or
         twice in a row beyond it, or the mean offset of the latest ones beyond the drift
         distances, means the target moves: the moving model, which has run on all along,
-        gives the estimate again at once."""
+        gives the estimate again at once. ``inside``: the measurement passed the moving
+        model's gate."""
         if self.still_kf is None:
             return []
         c = self.config
-        off = inside = True
+        off = True
         drift = False
         if world_T_tob is not None:
             T = self.still_kf.predicted_pose(stamp)
             dp_mm = (world_T_tob[:3, 3] - T[:3, 3]) * 1e3
             dr_deg = np.degrees(rotvec_of(world_T_tob[:3, :3] @ T[:3, :3].T))
             off = float(np.linalg.norm(dp_mm)) > c.still_release_mm or float(np.linalg.norm(dr_deg)) > c.still_release_deg
-            inside = self.kf.pose_distance2(world_T_tob, self.R_pose) <= c.gate_chi2_pose
             if inside:
                 self._offsets.append((dp_mm, dr_deg))
             n = len(self._offsets)

@@ -149,22 +149,13 @@ class PoseKalman:
         self.R_ref = self.rotation()
         self.kf.x[3:6] = 0.0
 
-    def _pose_innovation(self, world_T_tob: np.ndarray) -> np.ndarray:
+    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
         y[3:6] = rotvec_of(world_T_tob[:3, :3] @ self.rotation().T)
-        return y
-
-    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
-        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
-        return self._update(self._pose_innovation(world_T_tob), H_POSE, R_meas, gate_chi2)
-
-    def pose_distance2(self, world_T_tob: np.ndarray, R_meas: np.ndarray) -> float:
-        """The Mahalanobis distance^2 of a full pose from the prediction (no update)."""
-        y = self._pose_innovation(world_T_tob)
-        S = H_POSE @ self.P @ H_POSE.T + R_meas
-        return float(y @ np.linalg.solve(S, y))
+        return self._update(y, H_POSE, R_meas, gate_chi2)
 
     def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
         """Update the position only; ``R_meas`` (3, 3) in m^2."""

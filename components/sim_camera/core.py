@@ -15,7 +15,7 @@ import numpy as np
 
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import MessageError, from_pose, image
+from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm, quat_from_rows
 
 from .config import SimCameraConfig
 from .render import Renderer
@@ -42,37 +42,13 @@ def interpolate_pose(
     return out
 
 
-def _quaternion(m: list[list[float]]) -> tuple[float, float, float, float]:
-    """Rotation matrix (nested lists) -> unit quaternion (x, y, z, w), Shepperd's method."""
-    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = m
-    tr = m00 + m11 + m22
-    if tr >= m00 and tr >= m11 and tr >= m22:
-        w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
-        f = 0.25 / w
-        q = ((m21 - m12) * f, (m02 - m20) * f, (m10 - m01) * f, w)
-    elif m00 >= m11 and m00 >= m22:
-        x = 0.5 * math.sqrt(max(1.0 + m00 - m11 - m22, 0.0))
-        f = 0.25 / x
-        q = (x, (m01 + m10) * f, (m02 + m20) * f, (m21 - m12) * f)
-    elif m11 >= m22:
-        y = 0.5 * math.sqrt(max(1.0 + m11 - m00 - m22, 0.0))
-        f = 0.25 / y
-        q = ((m01 + m10) * f, y, (m12 + m21) * f, (m02 - m20) * f)
-    else:
-        z = 0.5 * math.sqrt(max(1.0 + m22 - m00 - m11, 0.0))
-        f = 0.25 / z
-        q = ((m02 + m20) * f, (m12 + m21) * f, z, (m10 - m01) * f)
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return q[0] / n, q[1] / n, q[2] / n, q[3] / n
-
-
 def _slerp(r0: list[list[float]], r1: list[list[float]], s: float) -> list[list[float]]:
     """The rotation a fraction ``s`` (any real: beyond [0, 1] it extrapolates) of the way
     along the shortest geodesic from ``r0`` to ``r1``: ``r0 exp(s log(r0^T r1))`` (as
     ``humanpt.schemas.convert.slerp_matrix``, to rounding; plain floats, this runs twice
     per image)."""
-    x0, y0, z0, w0 = _quaternion(r0)
-    x1, y1, z1, w1 = _quaternion(r1)
+    x0, y0, z0, w0 = quat_from_rows(*r0[0], *r0[1], *r0[2])
+    x1, y1, z1, w1 = quat_from_rows(*r1[0], *r1[1], *r1[2])
     # rel = conj(q0) q1, on the short way round
     rw = w0 * w1 + x0 * x1 + y0 * y1 + z0 * z1
     rx = w0 * x1 - w1 * x0 - (y0 * z1 - z0 * y1)
@@ -205,20 +181,7 @@ class SimCameraCore(Core):
         pixels = self.renderer.render(camera_T_tob, world_T_camera, self.frame_index)
         self.frame_index += 1
         truth = pb.Truth(header=self.next_header("sim_camera/truth", t_ns, "world"))
-        _set_pose_m(truth.world_T_flange, world_T_flange)
+        truth.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
         if world_T_tob is not None:
-            _set_pose_m(truth.world_T_tob, world_T_tob)
+            truth.world_T_tob.CopyFrom(pose_from_mm(world_T_tob))
         return [("camera/image", image(pixels, t_ns, "camera")), ("sim_camera/truth", truth)]
-
-
-def _set_pose_m(msg: pb.Pose, a_T_b_mm: np.ndarray) -> None:
-    """Fill ``msg`` with a rigid transform given in mm, translation in metres: the message
-    ``humanpt.schemas.convert.pose`` gives (to rounding), without its checks - the poses
-    here are rotations by construction (from messages, interpolated)."""
-    x, y, z, w = _quaternion(a_T_b_mm[:3, :3].tolist())
-    if w < 0.0:
-        x, y, z, w = -x, -y, -z, -w
-    tx, ty, tz = a_T_b_mm[:3, 3].tolist()
-    t, q = msg.translation, msg.rotation
-    t.x, t.y, t.z = tx / 1000.0, ty / 1000.0, tz / 1000.0
-    q.x, q.y, q.z, q.w = x, y, z, w

@@ -135,3 +135,13 @@ def test_vectors_and_covariance_round_trip():
     np.testing.assert_array_equal(convert.from_covariance(vals, n), P)
     with pytest.raises(convert.MessageError, match="expected 6x6"):
         convert.from_covariance(vals, 6)
+
+
+def test_pose_from_mm_is_pose_in_metres():
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec([0.3, -0.2, 1.1]).as_matrix()
+    T[:3, 3] = [1200.0, -35.5, 480.25]
+    m = T.copy()
+    m[:3, 3] /= 1000.0
+    assert convert.pose_from_mm(T) == convert.pose(m)
+    assert T[0, 3] == 1200.0  # the input is left alone
