@@ -35,10 +35,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import humanpt
-from humanpt.runtime import golden
 from humanpt.runtime.recording import RecordingError, read
 from humanpt.runtime.replay import build_core
 from humanpt.schemas import topics
+from humanpt.testing import golden
 
 REPO_ROOT = Path(humanpt.__file__).resolve().parents[1]
 SPEC_FILE = "runs.toml"

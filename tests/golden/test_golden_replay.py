@@ -18,7 +18,6 @@ from mcap.records import Message as McapMessage
 from mcap.writer import Writer
 
 from humanpt.cli.rerecord import SPEC_FILE, load_specs
-from humanpt.runtime import golden
 from humanpt.runtime.recording import (
     RUN_METADATA,
     RecordingError,
@@ -27,6 +26,7 @@ from humanpt.runtime.recording import (
     read_metadata,
 )
 from humanpt.schemas import topics
+from humanpt.testing import golden
 from tests.conftest import ROOT
 from tests.golden.perturb import fresh_copy, perturbed_factory
 

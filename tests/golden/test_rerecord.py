@@ -13,8 +13,8 @@ from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
 from humanpt.cli import rerecord as rr
 from humanpt.cli.demo import parse_overrides
-from humanpt.runtime import golden
 from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.testing import golden
 from tests.conftest import ROOT, run_cli
 from tests.golden.perturb import fresh_run, perturbed_factory
 
