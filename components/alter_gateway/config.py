@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
 SUPPORTED_BAUDS = (19_200, 38_400)
 # int16 wire units: 327.67 mm or 327.67 deg per cycle at most (messages.py).
@@ -25,36 +26,42 @@ class AlterGatewayConfig:
 
     # Serial device (/dev/ttyS0) or pyserial URL; the default is sim_robot's pty link.
     port: str = "/tmp/humanpt-alter"
-    baud: int = 38_400
-    cycle_period_ms: float = 28.0
+    baud: Annotated[int, Range(1200, 115200, "baud")] = 38_400
+    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Gateway timer: link timers, reply deadline, silence watchdog are checked this often.
-    tick_ms: float = 2.0
+    tick_ms: Annotated[float, Range(0.1, 1000, "ms")] = 2.0
     # Per-cycle limits = speed x cycle period (100 mm/s, 60 deg/s -> 2.8 mm, 1.68 deg).
-    max_speed_mm_s: float = live(100.0, "translation limit, mm/s (clamped by norm)")
-    max_angular_speed_deg_s: float = live(60.0, "rotation limit, deg/s (clamped by angle)")
-    envelope_min_mm: tuple[float, float, float] = live(
-        (-1600.0, -1600.0, -1400.0), "workspace box, world frame, lower corner (mm)"
-    )
-    envelope_max_mm: tuple[float, float, float] = live(
-        (1600.0, 1600.0, 1600.0), "workspace box, world frame, upper corner (mm)"
-    )
+    # The limits, envelope and watchdogs are hard limits: the values in the config file at
+    # start; at run time (`humanpt param`) they may only become stricter.
+    max_speed_mm_s: SpeedMmS = live(
+        100.0, "translation limit, mm/s (clamped by norm)", stricter="lower")
+    max_angular_speed_deg_s: RateDegS = live(
+        60.0, "rotation limit, deg/s (clamped by angle)", stricter="lower")
+    envelope_min_mm: tuple[Mm, Mm, Mm] = live(
+        (-1600.0, -1600.0, -1400.0), "workspace box, world frame, lower corner (mm)",
+        stricter="higher")
+    envelope_max_mm: tuple[Mm, Mm, Mm] = live(
+        (1600.0, 1600.0, 1600.0), "workspace box, world frame, upper corner (mm)",
+        stricter="lower")
     # A command older than this many cycles is stale: the gateway sends zero (HOLD).
-    stale_cycles: int = live(3, "cycles a command may be reused before it is stale")
+    stale_cycles: Annotated[int, Range(0, 100, "cycles")] = live(
+        3, "cycles a command may be reused before it is stale", stricter="lower")
     # This many consecutive missed cycles (no fresh command, correction late at the robot,
     # statuses lost) raise a fault: HOLD, and ALTER off if alter_off_on_fault.
-    fault_after_missed: int = live(10, "consecutive missed cycles that raise a fault")
+    fault_after_missed: Annotated[int, Range(1, 10000, "cycles")] = live(
+        10, "consecutive missed cycles that raise a fault", stricter="lower")
     alter_off_on_fault: bool = True
     # After a STATUS, wait at most this long for the command of its cycle before answering
     # with the freshest one (38 400 baud leaves ~9.8 ms of host slack in a 28 ms cycle).
-    reply_deadline_ms: float = 6.0
+    reply_deadline_ms: Annotated[float, Range(0.01, 1000, "ms")] = 6.0
     # No STATUS for this many cycles while the link is up: link_down event (silence).
-    status_timeout_cycles: int = 3
+    status_timeout_cycles: Annotated[int, Range(1, 1000, "cycles")] = 3
     # Subtracted from the receive time to stamp robot_state (the pose's sample time);
     # 0: stamp = receive time. On a real 38 400 baud line a STATUS takes 10.7 ms.
-    status_delay_ms: float = 0.0
-    world_T_base_mm_deg: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    status_delay_ms: Annotated[float, Range(0, 1000, "ms")] = 0.0
+    world_T_base_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0,) * 6
     # Repeated safety events of one code are rate-limited to one per interval.
-    event_interval_ms: float = 1000.0
+    event_interval_ms: Annotated[float, Range(0, 3600000, "ms")] = 1000.0
 
     def __post_init__(self) -> None:
         if not self.port:

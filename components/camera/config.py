@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Annotated
+
+from humanpt.runtime.config import Range
 
 
 @dataclass(frozen=True)
@@ -19,13 +22,13 @@ class CameraConfig:
     """
 
     source: str = "0"
-    width_px: int = 0
-    height_px: int = 0
-    fps: float = 0.0
+    width_px: Annotated[int, Range(0, 20000, "px")] = 0
+    height_px: Annotated[int, Range(0, 20000, "px")] = 0
+    fps: Annotated[float, Range(0, 10000, "frames/s")] = 0.0
     pace: bool = True
     loop: bool = False
     mono: bool = True
-    reopen_s: float = 2.0
+    reopen_s: Annotated[float, Range(0.01, 3600, "s")] = 2.0
 
     def __post_init__(self) -> None:
         if not self.source.strip():

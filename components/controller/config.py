@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 from humanpt.geometry.rig import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM
 from humanpt.geometry.transforms import x_from_transform
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
 _FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
 
@@ -19,39 +19,39 @@ class ControllerConfig:
     """``[controller]``: the visual servo, path recording, driver calibration, playback."""
 
     law: Literal["thetau", "paper"] = live("thetau", "thetau (default) or the paper's Section 5 law")
-    dz_mm: float = live(DEFAULT_DZ_MM, "distance of the desired point D from the camera (GUI: dz offset)")
-    gain_translation_1_s: float = live(4.0, "K for translation")
-    gain_rotation_1_s: float = live(4.0, "K for rotation")
+    dz_mm: Annotated[float, Range(10, 5000, "mm")] = live(DEFAULT_DZ_MM, "distance of the desired point D from the camera (GUI: dz offset)")
+    gain_translation_1_s: Annotated[float, Range(1e-3, 1000, "1/s")] = live(4.0, "K for translation")
+    gain_rotation_1_s: Annotated[float, Range(1e-3, 1000, "1/s")] = live(4.0, "K for rotation")
     feed_forward: bool = live(True, "add the target's filtered velocity (thetau law)")
     # The thetau law compares the flange and the target at the same instant: the robot
     # state's stamp plus this lead (the time until the command takes effect beyond one
     # cycle); the feed-forward then moves the flange with the target over the cycle.
-    lead_ms: float = live(0.0, "extra look-ahead of the target pose for the thetau law")
+    lead_ms: Annotated[float, Range(-1000, 1000, "ms")] = live(0.0, "extra look-ahead of the target pose for the thetau law")
     # Below these errors (and a still target) the flange is left alone: chasing the
     # measurement noise would only shake the camera (and the robot's quantised pose).
-    deadband_mm: float = live(0.1, "no correction while |G - D| is below this and the target is still")
-    deadband_deg: float = live(0.3, "no rotation while the angle error is below this and the target does not turn")
-    still_mm_s: float = live(1.0, "the target counts as still below this speed")
-    still_deg_s: float = live(0.5, "the target counts as not turning below this rate")
-    max_speed_mm_s: float = live(100.0, "translation speed limit (the paper's step controller)")
-    max_rotation_deg_s: float = live(60.0, "rotation speed limit")
-    cycle_period_ms: float = 28.0
+    deadband_mm: Annotated[float, Range(0, 100, "mm")] = live(0.1, "no correction while |G - D| is below this and the target is still")
+    deadband_deg: Annotated[float, Range(0, 90, "deg")] = live(0.3, "no rotation while the angle error is below this and the target does not turn")
+    still_mm_s: Annotated[float, Range(0, 100, "mm/s")] = live(1.0, "the target counts as still below this speed")
+    still_deg_s: Annotated[float, Range(0, 100, "deg/s")] = live(0.5, "the target counts as not turning below this rate")
+    max_speed_mm_s: SpeedMmS = live(100.0, "translation speed limit (the paper's step controller)")
+    max_rotation_deg_s: RateDegS = live(60.0, "rotation speed limit")
+    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Command cycle k + 1 as soon as the state of cycle k is in (from where cycle k's step
     # will have put the flange): the gateway then answers each STATUS at once instead of
     # waiting on three bus hops within its reply deadline.
     command_ahead: bool = live(True, "command each ALTER cycle one cycle ahead (no bus wait at the gateway)")
     lost_action: Literal["hold", "return"] = live("hold", "target lost: stop on current location, or return")
     start_mode: Literal["track", "hold"] = "track"
-    recording_delay_cycles: int = live(10, "a path point every N cycles (GUI: recording delay)")
+    recording_delay_cycles: Annotated[int, Range(1, 100000, "cycles")] = live(10, "a path point every N cycles (GUI: recording delay)")
     record_on_start: bool = False
-    tob_t_tip_mm: tuple[float, float, float] = live((0.0, 0.0, 60.0), "driver tip P in the TOB frame (eq. 9)")
+    tob_t_tip_mm: tuple[Mm, Mm, Mm] = live((0.0, 0.0, 60.0), "driver tip P in the TOB frame (eq. 9)")
     has_driver: bool = live(False, "record the driver tip P as well as G")
-    calibration_samples: int = live(60, "N samples for the driver-tip calibration (GUI)")
-    calibration_min_spread_deg: float = 1.5
-    flange_T_camera_x: X6 = _FLANGE_T_CAMERA_X
-    flange_T_tool_x: X6 = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)
-    playback_speed_mm_s: float = live(20.0, "tool speed along a played-back path")
-    playback_max_lag_mm: float = 2.0
+    calibration_samples: Annotated[int, Range(6, 100000, "samples")] = live(60, "N samples for the driver-tip calibration (GUI)")
+    calibration_min_spread_deg: Annotated[float, Range(0, 90, "deg")] = 1.5
+    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _FLANGE_T_CAMERA_X
+    flange_T_tool_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)
+    playback_speed_mm_s: SpeedMmS = live(20.0, "tool speed along a played-back path")
+    playback_max_lag_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 2.0
 
     def __post_init__(self):
         for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "cycle_period_ms", "playback_speed_mm_s",

@@ -5,9 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Range, live
 
 from .scenario import BUILTIN_SCENARIOS, Scenario, ScenarioError, builtin_scenario, parse_scenario
 
@@ -29,11 +29,11 @@ class OperatorConfig:
     scenario: Literal["static", "arc", "trapezium", "freehand"] = "static"
     scenario_file: str = ""
     scenario_text: str = ""
-    speed_mm_s: float = 0.0
-    speed_scale: float = live(1.0, "pace of the scenario (1 = as written)")
-    rate_hz: float = 100.0
-    start_delay_s: float = 2.0
-    seed: int = 0
+    speed_mm_s: Annotated[float, Range(0, 1000, "mm/s")] = 0.0
+    speed_scale: Annotated[float, Range(1e-3, 100, "")] = live(1.0, "pace of the scenario (1 = as written)")
+    rate_hz: Annotated[float, Range(1, 10000, "Hz")] = 100.0
+    start_delay_s: Annotated[float, Range(0, 3600, "s")] = 2.0
+    seed: Annotated[int, Range(0, 2**63 - 1, "")] = 0
 
     def __post_init__(self) -> None:
         if self.scenario not in BUILTIN_SCENARIOS:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 from humanpt.geometry.rig import DEFAULT_FLANGE_T_CAMERA_MM
 from humanpt.geometry.transforms import x_from_transform
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Deg, Mm, Range, live
 
 _DEFAULT_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
 
@@ -16,14 +17,14 @@ class PoseFilterConfig:
     """``[pose_filter]``: world_T_tob from measurements and robot states, Kalman-filtered."""
 
     # Hand-eye F_T_C as X = (x, y, z mm, psi, theta, phi deg).
-    flange_T_camera_x: tuple[float, float, float, float, float, float] = _DEFAULT_FLANGE_T_CAMERA_X
+    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _DEFAULT_FLANGE_T_CAMERA_X
     # Measurement noise of a full pose and of a position-only measurement.
-    sigma_position_mm: float = live(0.3, "1-sigma noise of a measured position")
-    sigma_rotation_deg: float = live(0.8, "1-sigma noise of a measured orientation")
-    sigma_position_only_mm: float = live(1.5, "1-sigma noise of a position from one or two sources")
+    sigma_position_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.3, "1-sigma noise of a measured position")
+    sigma_rotation_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.8, "1-sigma noise of a measured orientation")
+    sigma_position_only_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(1.5, "1-sigma noise of a position from one or two sources")
     # Process noise: white acceleration (how hard the operator's hand can change speed).
-    accel_sigma_mm_s2: float = live(100.0, "white-acceleration noise of the target (hand)")
-    ang_accel_sigma_deg_s2: float = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
+    accel_sigma_mm_s2: Annotated[float, Range(1e-3, 1e5, "mm/s^2")] = live(100.0, "white-acceleration noise of the target (hand)")
+    ang_accel_sigma_deg_s2: Annotated[float, Range(1e-3, 1e5, "deg/s^2")] = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
     # A still target (the operator holds it, or it stands on a fixture): once the filtered
     # speed has stayed below still_mm_s / still_deg_s for still_after_ms, a copy of the
     # filter that assumes it stays put (a zero-velocity update with every measurement, the
@@ -32,27 +33,27 @@ class PoseFilterConfig:
     # still_release_deg (inside the gate; twice beyond it) ends that: the moving model,
     # which ran on underneath, gives the estimate again at once.
     still_detect: bool = live(True, "detect a still target and average it (zero-velocity updates)")
-    still_mm_s: float = live(2.0, "the target may count as still below this filtered speed")
-    still_deg_s: float = live(1.0, "... and below this filtered turn rate")
-    still_after_ms: float = live(300.0, "... for this long")
-    still_release_mm: float = live(0.3, "a still target moved: a measurement this far off")
-    still_release_deg: float = live(0.3, "... or turned this far")
-    still_drift_mm: float = live(0.05, "... or the mean offset of the latest 15 measurements this far")
-    still_drift_deg: float = live(0.1, "... or turned that far on average")
-    still_q_scale: float = live(0.01, "process noise factor while still")
+    still_mm_s: Annotated[float, Range(1e-3, 100, "mm/s")] = live(2.0, "the target may count as still below this filtered speed")
+    still_deg_s: Annotated[float, Range(1e-3, 100, "deg/s")] = live(1.0, "... and below this filtered turn rate")
+    still_after_ms: Annotated[float, Range(1, 60000, "ms")] = live(300.0, "... for this long")
+    still_release_mm: Annotated[float, Range(1e-3, 100, "mm")] = live(0.3, "a still target moved: a measurement this far off")
+    still_release_deg: Annotated[float, Range(1e-3, 90, "deg")] = live(0.3, "... or turned this far")
+    still_drift_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.05, "... or the mean offset of the latest 15 measurements this far")
+    still_drift_deg: Annotated[float, Range(1e-4, 90, "deg")] = live(0.1, "... or turned that far on average")
+    still_q_scale: Annotated[float, Range(1e-6, 1, "")] = live(0.01, "process noise factor while still")
     # Mahalanobis gate (chi-square, 6 and 3 dof at 99.9 %) and re-acquisition.
-    gate_chi2_pose: float = live(22.46)
-    gate_chi2_position: float = live(16.27)
-    reset_after_rejects: int = live(5, "consecutive gated measurements before the filter restarts on them")
+    gate_chi2_pose: Annotated[float, Range(0.1, 1e4, "chi2, 6 dof")] = live(22.46)
+    gate_chi2_position: Annotated[float, Range(0.1, 1e4, "chi2, 3 dof")] = live(16.27)
+    reset_after_rejects: Annotated[int, Range(1, 1000, "measurements")] = live(5, "consecutive gated measurements before the filter restarts on them")
     # Prediction to the ALTER cycle being commanded.
-    predict_ahead_ms: float = live(28.0, "how far past a robot state's stamp the state is predicted")
-    lost_after_ms: float = live(250.0, "no measurement for this long: status LOST")
+    predict_ahead_ms: Annotated[float, Range(0, 1000, "ms")] = live(28.0, "how far past a robot state's stamp the state is predicted")
+    lost_after_ms: Annotated[float, Range(1, 60000, "ms")] = live(250.0, "no measurement for this long: status LOST")
     # Robot poses at the image stamp: interpolate, or extrapolate at most this far.
-    max_extrapolation_ms: float = 60.0
-    robot_history: int = 64
+    max_extrapolation_ms: Annotated[float, Range(0, 1000, "ms")] = 60.0
+    robot_history: Annotated[int, Range(2, 100000, "states")] = 64
     # Target model used to place G from one or two visible sources (mm).
-    target_leg_mm: float = 40.0
-    target_base_mm: float = 30.0
+    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
+    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
 
     def __post_init__(self):
         for name in ("sigma_position_mm", "sigma_rotation_deg", "sigma_position_only_mm", "accel_sigma_mm_s2",

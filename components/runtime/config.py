@@ -5,30 +5,67 @@ raises ``ValueError``.  :func:`build` turns a TOML table into that dataclass and
 raises :class:`ConfigError` naming the file, the section and the key for an unknown
 key, an ill-typed value or a value the dataclass rejects.
 
+Every number has a physical range: a numeric field is annotated
+``Annotated[float, Range(lo, hi, "unit")]`` (tuples elementwise), and a value outside it, or
+not finite (TOML's ``inf`` and ``nan``), is a :class:`ConfigError` naming the key before
+anything starts.  ``tests/runtime/test_config.py`` checks that every numeric parameter of
+every component has one.
+
 Fields declared with :func:`live` can be changed while the component runs (through the
-parameter queryable or ``humanpt param``); the change reaches the core as an input.
+parameter queryable or ``humanpt param``); the change reaches the core as an input.  A live
+safety limit is declared with ``stricter="lower"`` (or ``"higher"``): at run time it may only
+move to the strict side of the value the component started with (its config file's value is
+a hard limit, :func:`replace_live`'s ``hard``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import tomllib
 import types
 import typing
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 
 class ConfigError(ValueError):
     """A configuration problem; the message names the file, section and key."""
 
 
-def live(default: Any, doc: str = "") -> Any:
-    """A dataclass field that may be changed at run time."""
-    return field(default=default, metadata={"live": True, "doc": doc})
+@dataclass(frozen=True)
+class Range:
+    """The physical range of a numeric parameter, ``lo <= value <= hi`` (closed)."""
+
+    lo: float
+    hi: float
+    unit: str = ""
+
+    def check(self, value: float, where: str) -> None:
+        if not self.lo <= value <= self.hi:
+            unit = f" {self.unit}" if self.unit else ""
+            raise ConfigError(f"{where}: {value!r} is outside its range [{self.lo:g}, {self.hi:g}]{unit}")
+
+
+# Ranges shared by several components.  Lengths and angles of poses (the Puma's reach is
+# 1.25 m; a cell is a few metres); speeds of the tool at most ISO 10218-1's reduced speed for
+# a person in the cell (250 mm/s, the paper's 100 mm/s is the default).
+Mm = Annotated[float, Range(-5000.0, 5000.0, "mm")]
+Deg = Annotated[float, Range(-360.0, 360.0, "deg")]
+SpeedMmS = Annotated[float, Range(1e-3, 250.0, "mm/s")]
+RateDegS = Annotated[float, Range(1e-3, 180.0, "deg/s")]
+
+
+def live(default: Any, doc: str = "", *, stricter: Literal["lower", "higher"] | None = None) -> Any:
+    """A dataclass field that may be changed at run time.
+
+    ``stricter``: a safety limit that may only become stricter than the value the component
+    started with - ``"lower"`` (a speed, a count of cycles; for a tuple, every element) or
+    ``"higher"`` (a lower corner of a box)."""
+    return field(default=default, metadata={"live": True, "doc": doc, "stricter": stricter})
 
 
 def live_keys(cls_or_obj) -> list[str]:
@@ -49,6 +86,12 @@ def coerce(tp, value: Any, where: str) -> Any:
     args = typing.get_args(tp)
     if tp is Any:
         return value
+    if origin is Annotated:
+        typed = coerce(args[0], value, where)
+        for rng in (m for m in tp.__metadata__ if isinstance(m, Range)):
+            for i, v in _numbers(typed):
+                rng.check(v, f"{where}{i}")
+        return typed
     if origin in (typing.Union, types.UnionType):
         if value is None and type(None) in args:
             return None
@@ -95,6 +138,8 @@ def coerce(tp, value: Any, where: str) -> Any:
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where}: expected a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{where}: expected a finite number, got {value!r}")
         return float(value)
     if tp is str:
         if not isinstance(value, str):
@@ -105,6 +150,20 @@ def coerce(tp, value: Any, where: str) -> Any:
     raise ConfigError(f"{where}: cannot check a value of type {_type_name(tp)}")
 
 
+def _numbers(value: Any) -> list[tuple[str, float]]:
+    """(index suffix, number) of a number or a (nested) tuple of numbers."""
+    if isinstance(value, (tuple, list)):
+        return [(f"[{i}]{j}", v) for i, x in enumerate(value) for j, v in _numbers(x)]
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return [("", value)]
+    return []
+
+
+def hints(cls: type) -> dict[str, Any]:
+    """The field annotations of a config dataclass, ranges (``Annotated``) included."""
+    return typing.get_type_hints(cls, include_extras=True)
+
+
 def build(cls: type, table: Mapping[str, Any], *, source: str, section: str) -> Any:
     """Validate a TOML table into the frozen dataclass ``cls``.
 
@@ -112,12 +171,14 @@ def build(cls: type, table: Mapping[str, Any], *, source: str, section: str) -> 
     that every error reads ``FILE: [section] key: problem``.
     """
     where = f"{source}: [{section}]" if section else source
-    hints = typing.get_type_hints(cls)
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{where}: must be a [section] (a table), got {type(table).__name__} {table!r}")
+    types_ = hints(cls)
     names = [f.name for f in dataclasses.fields(cls) if f.init]
     unknown = [k for k in table if k not in names]
     if unknown:
         raise ConfigError(f"{where} unknown key {unknown[0]!r}; known keys: {', '.join(names)}")
-    kwargs = {k: coerce(hints[k], v, f"{where} {k}") for k, v in table.items()}
+    kwargs = {k: coerce(types_[k], v, f"{where} {k}") for k, v in table.items()}
     try:
         return cls(**kwargs)
     except (ValueError, TypeError) as e:
@@ -137,16 +198,26 @@ def to_table(obj: Any) -> dict[str, Any]:
     return plain(obj)
 
 
-def replace_live(obj: Any, key: str, value_json: str) -> Any:
-    """A copy of ``obj`` with live field ``key`` set from JSON (validated)."""
+def replace_live(obj: Any, key: str, value_json: str, hard: Any = None) -> Any:
+    """A copy of ``obj`` with live field ``key`` set from JSON (validated).
+
+    ``hard`` is the config the component started with: a field declared
+    ``live(..., stricter=...)`` may not pass its value there (:func:`live`)."""
     if key not in live_keys(obj):
         raise ConfigError(f"{key!r} is not a live parameter; live parameters: {', '.join(live_keys(obj)) or 'none'}")
     try:
         value = json.loads(value_json)
-    except json.JSONDecodeError as e:
+    except (json.JSONDecodeError, RecursionError) as e:
         raise ConfigError(f"{key}: value is not JSON: {e}") from e
-    hints = typing.get_type_hints(type(obj))
-    typed = coerce(hints[key], value, key)
+    typed = coerce(hints(type(obj))[key], value, key)
+    stricter = next(f for f in dataclasses.fields(obj) if f.name == key).metadata.get("stricter")
+    if stricter and hard is not None:
+        limit = getattr(hard, key)
+        pairs = zip(_numbers(typed), _numbers(limit), strict=True)
+        if any((v > h) if stricter == "lower" else (v < h) for (_, v), (_, h) in pairs):
+            side = "above" if stricter == "lower" else "below"
+            raise ConfigError(f"{key}: {typed!r} is {side} the hard limit {limit!r} this component "
+                              f"started with; at run time a safety limit may only become stricter")
     try:
         return dataclasses.replace(obj, **{key: typed})
     except (ValueError, TypeError) as e:
@@ -166,10 +237,10 @@ class RuntimeConfig:
     peer_listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     run_dir: str = "runs"
     record: bool = True
-    chunk_size: int = 1024 * 1024  # 1 MB: ~3 camera images; zstd per chunk has a fixed cost
-    flush_interval_s: float = 1.0
+    chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 1024 * 1024  # 1 MB: ~3 camera images; zstd per chunk has a fixed cost
+    flush_interval_s: Annotated[float, Range(0.01, 3600, "s")] = 1.0
     multicast_scouting: bool = False
-    connect_timeout_s: float = 10.0
+    connect_timeout_s: Annotated[float, Range(0.1, 3600, "s")] = 10.0
     # Record on a writer thread of its own: off the core's path (lower latency), but a
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False
@@ -219,18 +290,36 @@ def load(path: str | Path | None, known_sections: Mapping[str, type] | None = No
     return from_dict(data, source, known_sections)
 
 
+# Keys that name one quantity of the cell: every component that has one must agree (the
+# controller, the gateway and the robot run one cycle).
+SHARED_KEYS = ("cycle_period_ms",)
+
+
+def _check_shared(built: Mapping[str, Any], source: str) -> None:
+    for key in SHARED_KEYS:
+        values = {name: getattr(cfg, key) for name, cfg in built.items() if hasattr(cfg, key)}
+        if len(set(values.values())) > 1:
+            listed = ", ".join(f"[{n}] {key} = {v:g}" for n, v in sorted(values.items()))
+            raise ConfigError(f"{source}: {key} differs between components ({listed}); "
+                              f"they run one cycle and must agree")
+
+
 def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str, type] | None = None) -> ConfigFile:
     """Validate an already parsed TOML document (see :func:`load`)."""
+    for name, table in data.items():
+        if not isinstance(table, Mapping):
+            raise ConfigError(f"{source}: {name!r} must be a [section] (a table), got "
+                              f"{type(table).__name__} {table!r}")
     runtime = build(RuntimeConfig, data.get("runtime", {}), source=source, section="runtime")
     profiles_raw = data.get("profiles", {})
     profiles = {k: coerce(tuple[str, ...], v, f"{source}: [profiles] {k}") for k, v in profiles_raw.items()}
     sections = {k: dict(v) for k, v in data.items() if k not in ("runtime", "profiles")}
-    for name, table in sections.items():
-        if not isinstance(table, Mapping):
-            raise ConfigError(f"{source}: {name!r} must be a [section], got a value")
-        if known_sections is not None:
+    if known_sections is not None:
+        for name in sections:
             if name not in known_sections:
                 raise ConfigError(f"{source}: unknown section [{name}]; known: runtime, profiles, "
                                   f"{', '.join(sorted(known_sections))}")
-            build(known_sections[name], table, source=source, section=name)
+        built = {name: build(cls, sections.get(name, {}), source=source, section=name)
+                 for name, cls in known_sections.items()}
+        _check_shared(built, source)
     return ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles)

@@ -45,6 +45,8 @@ class Core:
         if not isinstance(config, self.config_type):
             raise TypeError(f"{type(self).__name__} needs a {self.config_type.__name__}, got {type(config).__name__}")
         self.config = config
+        # The config the core started with: the hard limit of its ``stricter`` parameters.
+        self.start_config = config
         self._seq: dict[str, int] = defaultdict(int)
 
     # -- what shells call -------------------------------------------------------------
@@ -86,7 +88,7 @@ class Core:
     def _on_param(self, t_ns: int, msg: pb.ParamSet) -> list[Output]:
         old = self.config
         try:
-            new = replace_live(old, msg.key, msg.value_json)
+            new = replace_live(old, msg.key, msg.value_json, hard=self.start_config)
         except ConfigError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "param_rejected", f"{self.name}: {e}")]
         self.config = new

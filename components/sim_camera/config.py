@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from humanpt.geometry import (
     x_from_transform,
 )
 from humanpt.geometry.config import PsvsConfig
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Deg, Mm, Range, live
 
 _M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
 DEFAULT_FLANGE_T_CAMERA_MM_DEG: tuple[float, ...] = tuple(
@@ -66,42 +66,42 @@ class SimCameraConfig:
     Randomness: ``np.random.default_rng([seed, frame_index])``.
     """
 
-    fps: float = 30.0
-    seed: int = 0
+    fps: Annotated[float, Range(0.1, 10000, "frames/s")] = 30.0
+    seed: Annotated[int, Range(0, 2**63 - 1, "")] = 0
     psvs: PsvsConfig = field(default_factory=PsvsConfig)
-    flange_T_camera_mm_deg: tuple[float, float, float, float, float, float] = (
+    flange_T_camera_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (
         DEFAULT_FLANGE_T_CAMERA_MM_DEG
     )
-    target_leg_mm: float = 40.0
-    target_base_mm: float = 30.0
-    source_diameter_mm: float = 5.0
+    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
+    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
+    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
     # photometry
-    source_dn_per_ms: float = live(420.0, "radiance of a source (DN/ms, before the view gain)")
-    exposure_ms: float = live(1.0, "exposure time (ms)")
-    view_gain_right: float = 0.5
-    view_gain_left: float = 0.44
-    background_dn_per_ms: float = live(10.0, "ambient background (DN/ms)")
-    black_level_dn: float = 4.0
-    blur_sigma_px: float = 0.7
+    source_dn_per_ms: Annotated[float, Range(0, 1e6, "DN/ms")] = live(420.0, "radiance of a source (DN/ms, before the view gain)")
+    exposure_ms: Annotated[float, Range(1e-3, 10000, "ms")] = live(1.0, "exposure time (ms)")
+    view_gain_right: Annotated[float, Range(0, 10, "")] = 0.5
+    view_gain_left: Annotated[float, Range(0, 10, "")] = 0.44
+    background_dn_per_ms: Annotated[float, Range(0, 1e6, "DN/ms")] = live(10.0, "ambient background (DN/ms)")
+    black_level_dn: Annotated[float, Range(0, 255, "DN")] = 4.0
+    blur_sigma_px: Annotated[float, Range(0, 100, "px")] = 0.7
     # sensor
     noise: bool = True
-    gain_e_per_dn: float = 40.0
-    read_noise_e: float = 10.0
-    full_well_e: float = 12_000.0
+    gain_e_per_dn: Annotated[float, Range(1e-3, 1e6, "e-/DN")] = 40.0
+    read_noise_e: Annotated[float, Range(0, 1e6, "e-")] = 10.0
+    full_well_e: Annotated[float, Range(1, 1e9, "e-")] = 12_000.0
     # clutter
-    reflection_gain: float = live(0.0, "brightness of the mirror images (0: off)")
-    reflection_plane_tob: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 30.0)
-    reflection_blur_px: float = 1.5
-    lamp_position_mm: tuple[float, float, float] | None = None
+    reflection_gain: Annotated[float, Range(0, 10, "")] = live(0.0, "brightness of the mirror images (0: off)")
+    reflection_plane_tob: tuple[Annotated[float, Range(-1e4, 1e4, "unit normal, mm")], ...] = (1.0, 0.0, 0.0, 30.0)
+    reflection_blur_px: Annotated[float, Range(0, 100, "px")] = 1.5
+    lamp_position_mm: tuple[Mm, Mm, Mm] | None = None
     lamp_frame: Literal["world", "camera"] = "world"
-    lamp_diameter_mm: float = 30.0
-    lamp_dn_per_ms: float = 300.0
-    occluded_sources: tuple[int, ...] = live((), "sources partly hidden (0=A, 1=B, 2=C)")
-    occlusion_fraction: float = live(0.5, "hidden fraction of each occluded source")
-    occlusion_angle_deg: float = live(0.0, "direction of the hidden side in the TOB plane")
+    lamp_diameter_mm: Annotated[float, Range(0.01, 10000, "mm")] = 30.0
+    lamp_dn_per_ms: Annotated[float, Range(0, 1e6, "DN/ms")] = 300.0
+    occluded_sources: tuple[Annotated[int, Range(0, 2, "source")], ...] = live((), "sources partly hidden (0=A, 1=B, 2=C)")
+    occlusion_fraction: Annotated[float, Range(0, 1, "")] = live(0.5, "hidden fraction of each occluded source")
+    occlusion_angle_deg: Annotated[float, Range(-360, 360, "deg")] = live(0.0, "direction of the hidden side in the TOB plane")
     # timing
-    max_extrapolation_ms: float = 50.0
-    near_mm: float = 10.0
+    max_extrapolation_ms: Annotated[float, Range(0, 10000, "ms")] = 50.0
+    near_mm: Annotated[float, Range(1e-3, 10000, "mm")] = 10.0
 
     def __post_init__(self) -> None:
         own = "sim_camera"

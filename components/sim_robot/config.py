@@ -3,16 +3,18 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
+from humanpt.runtime.config import Deg, Mm, Range
 from humanpt.sim_robot.kinematics import PumaKinematics, RobotModelConfig, UnreachableError
 
 # Flange straight down in front of the robot, elbow up: (786.0, 190.0, -296.0) mm in the
 # base frame, yaw 0, pitch 0, roll 180 deg (puma762). Well inside every joint limit and
 # away from the wrist singularity (q5 = 25 deg).
 DEFAULT_START_JOINTS_DEG = (0.0, -35.0, 190.0, 0.0, 25.0, -180.0)
+
 
 
 @dataclass(frozen=True)
@@ -25,24 +27,24 @@ class SimRobotConfig:
     """
 
     model: Literal["puma762", "puma560"] = "puma762"
-    cycle_period_ms: float = 28.0
+    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # world: a correction moves the flange in the base frame, rotating about the flange
     # origin; tool: the step is expressed in the flange frame.
     alter_mode: Literal["world", "tool"] = "world"
-    start_joints_deg: tuple[float, float, float, float, float, float] = DEFAULT_START_JOINTS_DEG
+    start_joints_deg: tuple[Deg, Deg, Deg, Deg, Deg, Deg] = DEFAULT_START_JOINTS_DEG
     # If given (six values), overrides start_joints_deg: base_T_flange as x, y, z mm, yaw,
     # pitch, roll deg, solved by IK on the branch closest to start_joints_deg. Empty: unset.
-    start_pose_mm_deg: tuple[float, ...] = ()
-    world_T_base_mm_deg: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    start_pose_mm_deg: tuple[Annotated[float, Range(-5000, 5000, "mm or deg")], ...] = ()
+    world_T_base_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0,) * 6
     # Symlink to the pty's slave side; the gateway opens this path as its port.
     pty_link: str = "/tmp/humanpt-alter"
     # Oldest correction (cycles behind the latest STATUS) the controller still applies.
-    max_correction_age_cycles: int = 2
+    max_correction_age_cycles: Annotated[int, Range(0, 100, "cycles")] = 2
     # A correction needing a faster joint motion than this faults the controller (near a
     # singularity the closest IK branch can jump).
-    max_joint_speed_deg_s: float = 250.0
+    max_joint_speed_deg_s: Annotated[float, Range(1e-3, 1000, "deg/s")] = 250.0
     alter_on_start: bool = True
-    event_interval_ms: float = 1000.0
+    event_interval_ms: Annotated[float, Range(0, 3600000, "ms")] = 1000.0
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.cycle_period_ms <= 1000.0:

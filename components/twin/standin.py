@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -36,6 +36,8 @@ __all__ = [
     "DEFAULT_START_FLANGE_MM_DEG",
     "viewing_start_flange",
 ]
+
+from humanpt.runtime.config import Deg, Mm, Range
 
 
 def viewing_start_flange(
@@ -67,12 +69,12 @@ class StandInRobotConfig:
     ``start_dz_mm`` on its axis. Per-cycle steps are clipped to ``max_speed_mm_s`` and
     ``max_rate_deg_s``."""
 
-    cycle_ms: float = 28.0
-    start_flange_mm_deg: tuple[float, float, float, float, float, float] | None = None
+    cycle_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
+    start_flange_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] | None = None
     start_view: Literal["static", "arc", "trapezium", "freehand"] = "static"
-    start_dz_mm: float = DEFAULT_DZ_MM
-    max_speed_mm_s: float = 100.0
-    max_rate_deg_s: float = 60.0
+    start_dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
+    max_speed_mm_s: Annotated[float, Range(1e-3, 1000, "mm/s")] = 100.0
+    max_rate_deg_s: Annotated[float, Range(1e-3, 1000, "deg/s")] = 60.0
 
     def __post_init__(self) -> None:
         for name in ("cycle_ms", "max_speed_mm_s", "max_rate_deg_s", "start_dz_mm"):

@@ -238,7 +238,8 @@ def test_garbage_and_unknown_console_verbs_never_raise():
     [
         ({"model": "puma999"}, "is not one of"),
         ({"alter_mode": "joint"}, "is not one of"),
-        ({"start_joints_deg": [0, 0, 0, 0, 0, 400]}, "outside the joint limits"),
+        ({"start_joints_deg": [0, 0, 0, 0, 0, 300]}, "outside the joint limits"),
+        ({"start_joints_deg": [0, 0, 0, 0, 0, 400]}, "start_joints_deg[5]: 400.0 is outside its range"),
         ({"start_pose_mm_deg": [5000, 0, 0, 0, 0, 0]}, "not reachable"),
         ({"start_pose_mm_deg": [1, 2, 3]}, "six finite values"),
         ({"cycle_period_ms": 0.1}, "cycle_period_ms"),
