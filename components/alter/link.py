@@ -67,7 +67,9 @@ class LinkConfig:
     start_timeout_ns: STRT/STACK resend period during start-up.
     rep_timeout_ns: with data unacknowledged this long, send REP (default 3 cycles: the
         peer may piggyback its ACK on its next cycle's data).
-    max_reps: REPs without any answer before the link is declared down and restarted.
+    max_reps: REPs without any answer before the link is declared down and restarted; also
+        the STACKs an end in start-up (ASTRT) resends before it starts over with STRT, so
+        that two ends can never wait on each other for good.
     window: most data messages in flight unacknowledged (< 128 so mod-256 numbers stay
         unambiguous).
     ack_delay_ns: 0 acknowledges at the end of each ``receive``; > 0 waits that long for
@@ -224,8 +226,14 @@ class DdcmpLink:
             events.append(_control_tx(strt, cfg.address))
             self._timer_ns = now_ns + cfg.start_timeout_ns
         elif self._state is LinkState.ASTRT:
-            events.append(_control_tx(stack, cfg.address))
-            self._timer_ns = now_ns + cfg.start_timeout_ns
+            self._rep_count += 1
+            if self._rep_count > cfg.max_reps:
+                # STACK after STACK and no ACK(0): the peer may be running on an old sequence
+                # (a forged or lost frame). Start over: a STRT restarts any peer.
+                events.extend(self.start(now_ns))
+            else:
+                events.append(_control_tx(stack, cfg.address))
+                self._timer_ns = now_ns + cfg.start_timeout_ns
         elif self._state is LinkState.RUNNING and self._outstanding:
             self._rep_count += 1
             if self._rep_count > cfg.max_reps:
@@ -359,4 +367,10 @@ class DdcmpLink:
             self._timer_ns = now_ns + cfg.start_timeout_ns
             events.append(_control_tx(stack, cfg.address))
         elif kind is ControlType.STACK:
-            events.append(_control_tx(ack, self._r, cfg.address))  # it missed our ACK(0)
+            if self._r == 0 and self._n == 0:
+                events.append(_control_tx(ack, 0, cfg.address))  # it missed our ACK(0)
+            else:
+                # The peer is in start-up while we run on a sequence it has forgotten (it
+                # got a STRT we did not send): no ACK of ours can end its start-up. Restart.
+                events.append(LinkDown("peer in start-up (STACK while running)", len(self._outstanding)))
+                events.extend(self.start(now_ns))

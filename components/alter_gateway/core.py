@@ -301,9 +301,13 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 pb.SEVERITY_ERROR,
                 "link_down",
                 f"no STATUS from the controller for {(t_ns - self._status_t_ns) / 1e6:.0f} ms; "
-                "the robot gets no corrections (holds)",
+                "the robot gets no corrections (holds); restarting the ALTER link",
                 limited=False,
             )
+            # Whatever silenced it (a cut line, a peer stuck in start-up), a restart is the
+            # way back: the link_up event says when it is.
+            self._link_down = True
+            self._link(self._host.start(t_ns), t_ns, outs)
 
     # -- controller side ----------------------------------------------------------------------
     def _on_command(self, t_ns: int, msg: pb.FlangeCommand, outs: list[Output]) -> None:
