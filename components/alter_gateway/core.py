@@ -63,6 +63,7 @@ from humanpt.alter_gateway.safety import (
     clip_to_envelope,
     quantize,
     rotation_angle_deg,
+    safe_norm,
 )
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output
@@ -597,12 +598,14 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         base_T_flange, world_T_flange = self._pose(status)
         world_R_base = self._world_T_base[:3, :3]
         dp, rv = cmd.dp_mm, cmd.rv_rad
-        if cmd.frame == "tool":  # to world: a step about the flange origin
-            world_R_flange = world_R_base @ base_T_flange[:3, :3]
-            dp, rv = world_R_flange @ dp, world_R_flange @ rv
         max_mm, max_deg = cfg.max_step_mm, cfg.max_step_deg
+        # Clamp before any frame change: a rotation keeps the norm, and a huge (finite) step
+        # would overflow to NaN in it.
         dp_c, t_clamped = clamp_norm(dp, max_mm)
         rv_c, r_clamped = clamp_norm(rv, math.radians(max_deg))
+        if cmd.frame == "tool":  # to world: a step about the flange origin
+            world_R_flange = world_R_base @ base_T_flange[:3, :3]
+            dp_c, rv_c = world_R_flange @ dp_c, world_R_flange @ rv_c
         if t_clamped or r_clamped:
             self.counters["clamped"] += 1
             self._ev(
@@ -610,7 +613,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 t_ns,
                 pb.SEVERITY_WARNING,
                 "clamped",
-                f"cycle {k}: step {np.linalg.norm(dp):.3f} mm / {rotation_angle_deg(rv):.3f} deg "
+                f"cycle {k}: step {safe_norm(dp):.3f} mm / {rotation_angle_deg(rv):.3f} deg "
                 f"clamped to {max_mm:.3f} mm / {max_deg:.3f} deg per cycle "
                 f"({cfg.max_speed_mm_s:g} mm/s, {cfg.max_angular_speed_deg_s:g} deg/s)",
             )
@@ -633,6 +636,11 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         if StatusBits.TOOL_MODE in status.bits:
             R = base_T_flange[:3, :3]
             dp_b, rv_b = R.T @ dp_b, R.T @ rv_b
+        if not (np.all(np.isfinite(dp_b)) and np.all(np.isfinite(rv_b))):
+            # Cannot happen after the clamp; if it ever does, the robot holds, nothing raises.
+            self._bad_command(outs, t_ns, f"cycle {k}: the correction is not finite after the frame "
+                                          f"changes ({dp_b} mm, {rv_b} rad): zero correction")
+            return Correction.hold(k, CorrectionFlags(0))
         return quantize(k, dp_b, rv_b, max_mm, max_deg)
 
     # -- fault ----------------------------------------------------------------------------------

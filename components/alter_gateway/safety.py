@@ -27,13 +27,28 @@ def _norm(v: np.ndarray) -> float:
     return math.sqrt(x.dot(x))
 
 
+def safe_norm(v: np.ndarray) -> float:
+    """The Euclidean norm of a finite vector without overflow in its squares (inf only when
+    the norm itself is beyond the float range)."""
+    big = float(np.max(np.abs(v))) if np.size(v) else 0.0
+    if big == 0.0 or not math.isfinite(big):
+        return big
+    return big * _norm(np.asarray(v, dtype=float) / big)
+
+
 def clamp_norm(v: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
-    """(3,) ``v`` scaled down to norm ``limit`` if longer (direction kept); (v, clamped?)."""
+    """(3,) ``v`` scaled down to norm ``limit`` if longer (direction kept); (v, clamped?).
+
+    Safe for any finite ``v``: a step of 1e305 is clamped, not squared into inf and NaN."""
     v = np.asarray(v, dtype=float)
-    n = _norm(v)
+    with np.errstate(over="ignore"):
+        n = _norm(v)
     if n <= limit:
         return v, False
-    return v * (limit / n), True
+    if math.isfinite(n):
+        return v * (limit / n), True
+    u = v / float(np.max(np.abs(v)))  # components within [-1, 1]: no overflow
+    return u * (limit / _norm(u)), True
 
 
 def clip_to_envelope(
@@ -53,7 +68,7 @@ def clip_to_envelope(
 
 
 def rotation_angle_deg(rv_rad: np.ndarray) -> float:
-    return float(np.degrees(np.linalg.norm(rv_rad)))
+    return math.degrees(safe_norm(rv_rad))
 
 
 def wire_rotation_deg(rv_rad: np.ndarray) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -463,3 +464,30 @@ def test_after_a_peer_restart_the_watchdog_rearms_with_the_new_sessions_first_co
     rig.status()  # cycle 5 accounts for cycle 4
     assert rig.codes().count("deadline_missed") > before  # (one event per interval)
     assert rig.states()[-1].missed_cycles == 3
+
+
+# -- absurd but finite steps (issue 14, item 4) ----------------------------------------------
+
+
+@pytest.mark.parametrize("frame", ["tool", "world"])
+@pytest.mark.parametrize("step_m", [1.7e305, -1e300, 1e-300])
+def test_an_absurd_finite_step_is_clamped_never_raises(frame, step_m):
+    """The attack: a tool-frame step of 1.7e305 m overflowed to NaN in the frame change and
+    raised inside the gateway, losing cycles. Any finite step is clamped to the per-cycle
+    limit (100 mm/s x 28 ms = 2.8 mm; 0.01 mm wire units, PROTOCOL.md) and the loop goes on."""
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(0, 0, 0))
+    n_states = len(rig.states())
+    rig.status()
+    rig.command(dp_mm=(step_m * 1000.0, step_m * 1000.0, 0.0), rv_deg=(0, 0, 0), frame=frame)
+    rig.advance(CYCLE_NS)
+    _, c = rig.corrections[-1]
+    norm_mm = math.sqrt(sum((d * 0.01) ** 2 for d in c.deltas[:3]))
+    if abs(step_m) * 1000.0 > 2.8:
+        assert 2.8 - 0.02 <= norm_mm <= 2.8 + 0.01  # clamped, not zeroed (quantisation 0.01 mm)
+        assert "clamped" in rig.codes()
+    else:
+        assert norm_mm == 0.0
+    for _ in range(3):
+        rig.cycle_with_command(dp_mm=(0.5, 0, 0))
+    assert len(rig.states()) == n_states + 4  # every cycle still answered and reported
