@@ -17,8 +17,10 @@ it, e.g. the first, is predicted with the gateway's velocity hold or zero).  Mod
 * playback: the tool tip follows a path (the one just recorded, or one given).
 
 Commands (``console/command``, verb and JSON args): track, hold, return, record_start,
-record_stop, save {"file"}, calibrate {"samples", "pivot_mm"}, playback {"points", "speed_mm_s"},
-stop.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
+record_stop, save {"file", "overwrite"}, calibrate {"samples", "pivot_mm"}, playback {"points",
+"speed_mm_s"}, stop.  Every command's arguments are checked (:func:`check_command`: known
+names, types, physical ranges, a plain file name for save); a bad one gets a ``bad_command``
+event and changes nothing.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
 point (G and, with a driver, the tip P) is published; the shell appends it to the path file.
 """
 
@@ -26,6 +28,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
+from typing import Annotated, Any
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -40,6 +44,7 @@ from humanpt.geometry.transforms import (
     transform_from_x,
     x_from_transform,
 )
+from humanpt.runtime.config import ConfigError, Deg, Mm, Range, SpeedMmS, coerce
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose, vector3
@@ -123,6 +128,8 @@ class ControllerCore(Core):
             return []
         if topic == "pose_filter/tob_state":
             return self._cycle(t_ns, msg)
+        if topic == "path_file":  # the shell's path writer reports what it did (local input)
+            return [self.event(t_ns, msg.severity, msg.code, msg.text)]
         if topic == "console/command":
             if msg.component not in ("", self.name):
                 return []
@@ -348,10 +355,8 @@ class ControllerCore(Core):
     # -- commands ---------------------------------------------------------------------------------
     def _command(self, t_ns: int, verb: str, args_json: str) -> list[Output]:
         try:
-            args = json.loads(args_json) if args_json else {}
-            if not isinstance(args, dict):
-                raise ValueError("arguments must be a JSON object")
-        except ValueError as e:
+            args = check_command(verb, args_json)
+        except ConfigError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"{verb}: {e}")]
         info = lambda code, text: [self.event(t_ns, pb.SEVERITY_INFO, code, text)]  # noqa: E731
         if verb == "track":
@@ -371,27 +376,75 @@ class ControllerCore(Core):
             self.recording = False
             return info("record_stopped", json.dumps({"points": len(self.path)}))
         if verb == "save":
-            return info("save", json.dumps({"file": str(args.get("file", "")), "points": len(self.path)}))
+            return info("save", json.dumps({"file": args["file"], "overwrite": args.get("overwrite", False),
+                                            "points": len(self.path)}))
         if verb == "calibrate":
-            n = int(args.get("samples", self.config.calibration_samples))
-            if n < 6:
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", "calibrate: samples must be >= 6")]
+            n = args.get("samples", self.config.calibration_samples)
             self.cal_samples, self.cal_target = [], n
             pivot = args.get("pivot_mm")
-            self.cal_pivot_mm = None if pivot is None else np.asarray(pivot, dtype=float).reshape(3)
+            self.cal_pivot_mm = None if pivot is None else np.asarray(pivot, dtype=float)
             self.mode = pb.CONTROL_MODE_CALIBRATE
             return info("calibration_started", f"pivot the target on its driver tip: {n} samples")
         if verb == "playback":
-            speed = float(args.get("speed_mm_s", self.config.playback_speed_mm_s))
+            speed = args.get("speed_mm_s", self.config.playback_speed_mm_s)
+            if speed > self.config.max_speed_mm_s:
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
+                                   f"playback: speed_mm_s {speed:g} is above the controller's "
+                                   f"max_speed_mm_s {self.config.max_speed_mm_s:g}")]
             if "points" in args:
                 pts = np.asarray(args["points"], dtype=float)
             else:
                 pts = np.array([x_from_transform(_mm(from_pose(p.world_T_tip if p.has_tip else p.world_T_tob)))
-                                for p in self.path])
-            if pts.ndim != 2 or pts.shape[1] != 6 or len(pts) < 1 or not np.all(np.isfinite(pts)) or speed <= 0:
+                                for p in self.path]).reshape(-1, 6)
+            if len(pts) < 1:
                 return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
-                                   "playback: need points as N x 6 (mm, deg), or a recorded path, and speed > 0")]
+                                   "playback: no points given and no path recorded")]
             self._start_playback(pts, speed)
             self.mode = pb.CONTROL_MODE_PLAYBACK
             return info("playback_started", f"{len(pts)} points at {speed:g} mm/s")
-        return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"unknown verb {verb!r}")]
+        raise AssertionError(f"check_command let {verb!r} through")  # pragma: no cover
+
+
+# -- console command arguments ---------------------------------------------------------------------
+_NO_ARGS: dict[str, Any] = {}
+# verb -> {argument: type (with its range)}; every argument is optional.
+COMMAND_ARGS: dict[str, dict[str, Any]] = {
+    "track": _NO_ARGS, "hold": _NO_ARGS, "stop": _NO_ARGS, "return": _NO_ARGS,
+    "record_start": _NO_ARGS, "record_stop": _NO_ARGS,
+    "save": {"file": str, "overwrite": bool},
+    "calibrate": {"samples": Annotated[int, Range(6, 100_000, "samples")], "pivot_mm": tuple[Mm, Mm, Mm]},
+    "playback": {"points": tuple[tuple[Mm, Mm, Mm, Deg, Deg, Deg], ...], "speed_mm_s": SpeedMmS},
+}
+# A saved path's name: a plain file name in the run's paths/ directory (no directories, no
+# dot files), so that a console command can never write elsewhere.
+_FILE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
+MAX_PLAYBACK_POINTS = 1_000_000
+
+
+def check_command(verb: str, args_json: str) -> dict[str, Any]:
+    """The checked arguments of console command ``verb`` (JSON object text), typed and in
+    range; :class:`ConfigError` naming the argument otherwise."""
+    if verb not in COMMAND_ARGS:
+        raise ConfigError(f"unknown verb {verb!r}; known: {', '.join(COMMAND_ARGS)}")
+    try:
+        args = json.loads(args_json) if args_json else {}
+    except (ValueError, RecursionError) as e:
+        raise ConfigError(f"arguments are not JSON: {e}") from None
+    if not isinstance(args, dict):
+        raise ConfigError("arguments must be a JSON object")
+    spec = COMMAND_ARGS[verb]
+    unknown = sorted(set(args) - set(spec))
+    if unknown:
+        raise ConfigError(f"unknown argument {unknown[0]!r}; {verb} takes "
+                          f"{', '.join(spec) if spec else 'no arguments'}")
+    if len(args.get("points", ())) > MAX_PLAYBACK_POINTS:
+        raise ConfigError(f"points: at most {MAX_PLAYBACK_POINTS} points")
+    checked = {k: coerce(spec[k], v, k) for k, v in args.items()}
+    if verb == "save":
+        name = checked.get("file", "")
+        if not _FILE_NAME.fullmatch(name):
+            raise ConfigError(f"file {name!r}: give a plain file name (letters, digits, '.', '_', '-'; "
+                              "no directories): paths are saved in the run's paths/ directory")
+        if "." not in name:
+            checked["file"] = name + ".csv"
+    return checked

@@ -1,8 +1,12 @@
 """The controller's live-shell adapter: writes recorded path points to CSV path files.
 
 Every path point is appended (and flushed) to ``<path_dir>/path-<n>.csv`` as it arrives,
-so a crash loses nothing; ``record_start`` opens a new file, ``save {"file": F}`` copies
-the current one to F.  The files are in mm and degrees (see pathfile.py).
+so a crash loses nothing; ``record_start`` opens a new file, ``save {"file": NAME}`` copies
+the current one to ``<path_dir>/NAME`` (a plain name, checked by the core; an existing file
+only with ``"overwrite": true``).  Nothing is ever truncated: a restarted controller in the
+same run directory continues the numbering after the files already there.  What a save did
+comes back to the core as a ``path_file`` input and goes out as an event (``path_saved`` or
+``save_failed``).  The files are in mm and degrees (see pathfile.py).
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 import logging
+import re
 import shutil
 from pathlib import Path
 
@@ -38,29 +43,62 @@ class PathWriter:
         self.current: Path | None = None
         self._f = None
         self._w = None
+        self._put = None
 
     def start(self, put) -> None:
+        self._put = put
         self.dir.mkdir(parents=True, exist_ok=True)
+        # A restart into the same run: continue after the files already there.
+        taken = [int(m.group(1)) for p in self.dir.glob("path-*.csv")
+                 if (m := re.fullmatch(r"path-(\d+)\.csv", p.name))]
+        self.n = max(taken, default=0)
 
     def _open(self, with_tip: bool) -> None:
         self.close()
-        self.n += 1
-        self.current = self.dir / f"path-{self.n}.csv"
-        self._f = open(self.current, "w", newline="")  # noqa: SIM115 - closed in close()
+        while True:
+            self.n += 1
+            self.current = self.dir / f"path-{self.n}.csv"
+            try:
+                self._f = open(self.current, "x", newline="")  # noqa: SIM115 - closed in close()
+                break
+            except FileExistsError:  # never truncate a path file
+                continue
         self._w = csv.writer(self._f)
         self._w.writerow(pathfile.header(with_tip))
         self._f.flush()
         log.info("recording path to %s", self.current)
 
+    def _report(self, severity: int, code: str, text: str) -> None:
+        (log.info if severity == pb.SEVERITY_INFO else log.warning)("%s", text)
+        if self._put is not None:
+            self._put("path_file", pb.Event(severity=severity, source="controller", code=code, text=text))
+
+    def _save(self, request: dict) -> None:
+        name, overwrite = str(request.get("file") or ""), bool(request.get("overwrite", False))
+        dest = (self.dir / name).resolve()
+        if not name or dest.parent != self.dir.resolve() or dest.is_symlink() or (self.dir / name).is_symlink():
+            self._report(pb.SEVERITY_WARNING, "save_failed", f"save: {name!r} is not a file name in {self.dir}")
+        elif self.current is None:
+            self._report(pb.SEVERITY_WARNING, "save_failed", "save: no path recorded yet")
+        elif dest == self.current.resolve():
+            self._report(pb.SEVERITY_WARNING, "save_failed", f"save: {name} is the file being recorded")
+        elif dest.exists() and not overwrite:
+            self._report(pb.SEVERITY_WARNING, "save_failed",
+                         f"save: {dest} exists; give overwrite to replace it")
+        else:
+            try:
+                shutil.copyfile(self.current, dest)
+            except OSError as e:
+                self._report(pb.SEVERITY_WARNING, "save_failed", f"save: {dest}: {e}")
+            else:
+                self._report(pb.SEVERITY_INFO, "path_saved", f"path saved to {dest}")
+
     def write(self, topic: str, msg) -> None:
         if topic == "controller/events":
             if msg.code == "record_started":
                 self._open(json.loads(msg.text or "{}").get("has_tip", False))
-            elif msg.code == "save" and self.current is not None:
-                dest = json.loads(msg.text or "{}").get("file") or ""
-                if dest:
-                    shutil.copyfile(self.current, dest)
-                    log.info("path saved to %s", dest)
+            elif msg.code == "save":
+                self._save(json.loads(msg.text or "{}"))
             return
         if self._w is None:
             self._open(msg.has_tip)

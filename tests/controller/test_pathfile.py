@@ -85,9 +85,9 @@ def test_path_writer_appends_as_points_arrive(tmp_path):
                                                 has_tip=True, world_T_tip=pose(T)))
         # Readable at once (flushed): a crash loses nothing.
         assert len(pathfile.read(tmp_path / "paths" / "path-1.csv")) == i + 1
-    w.write("controller/events", pb.Event(code="save", text=json.dumps({"file": str(tmp_path / "seam.csv")})))
+    w.write("controller/events", pb.Event(code="save", text=json.dumps({"file": "seam.csv"})))
     w.close()
-    p = pathfile.read(tmp_path / "seam.csv")
+    p = pathfile.read(tmp_path / "paths" / "seam.csv")
     np.testing.assert_allclose(p.x_g[0, :3], [100, 200, 300])
     np.testing.assert_allclose(p.x_tip[2, :3], [100, 200, 300])
 
@@ -103,3 +103,52 @@ def test_cli_path_verbs(tmp_path, capsys):
     assert (tmp_path / "p.v2").read_text().startswith(".PROGRAM seam()")
     assert main(["path", "val", str(tmp_path / "missing.csv"), str(tmp_path / "x.v2")]) == 2
     assert "no such path file" in capsys.readouterr().err
+
+
+# -- saving never leaves paths/, never overwrites, never truncates (issue 14, items 8 and 11) --
+def _writer_with_a_path(paths, reports):
+    w = PathWriter(paths)
+    w.start(lambda topic, msg: reports.append((topic, msg.code, msg.text)))
+    w.write("controller/events", pb.Event(code="record_started", text="{}"))
+    w.write("controller/path", pb.PathPoint(header=header(0, 0), index=0, world_T_tob=pose(np.eye(4))))
+    return w
+
+
+def _save(w, **request):
+    w.write("controller/events", pb.Event(code="save", text=json.dumps(request)))
+
+
+def test_save_goes_only_into_paths_and_never_overwrites_unasked(tmp_path):
+    paths, reports = tmp_path / "run" / "paths", []
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    (paths.parent).mkdir()
+    w = _writer_with_a_path(paths, reports)
+    # The attack: a path out of paths/ (absolute, relative, through a symlink).
+    (paths / "link").symlink_to(victim)
+    for name in (str(victim), "../victim.txt", "link"):
+        _save(w, file=name)
+    assert victim.read_text() == "precious"
+    assert [code for _, code, _ in reports] == ["save_failed"] * 3
+    _save(w, file="seam.csv")
+    assert reports[-1][:2] == ("path_file", "path_saved")
+    (paths / "seam.csv").write_text("edited by hand")
+    _save(w, file="seam.csv")
+    assert reports[-1][1] == "save_failed" and "exists" in reports[-1][2]
+    assert (paths / "seam.csv").read_text() == "edited by hand"
+    _save(w, file="seam.csv", overwrite=True)
+    assert reports[-1][1] == "path_saved"
+    assert len(pathfile.read(paths / "seam.csv")) == 1
+    w.close()
+
+
+def test_a_restarted_writer_continues_the_numbering_and_truncates_nothing(tmp_path):
+    paths = tmp_path / "paths"
+    first = _writer_with_a_path(paths, [])
+    first.close()
+    before = (paths / "path-1.csv").read_bytes()
+    second = _writer_with_a_path(paths, [])  # the controller restarted into the same run
+    second.close()
+    assert (paths / "path-1.csv").read_bytes() == before
+    assert second.current == paths / "path-2.csv"
+    assert len(pathfile.read(paths / "path-2.csv")) == 1
