@@ -1,0 +1,120 @@
+"""Faults on the serial line between real processes (issue 14, item 5).
+
+`humanpt sim_robot` and `humanpt alter_gateway` run as processes on a real router; the test
+sits on the line between them as a tap (its own pty for the gateway, relaying to and from
+sim_robot's pty) and injects one forged STRT frame toward either end, as the attack did. The attack saw the link
+stay dead; here the previous codec happened to recover through its REP timeout (0.45 s:
+the gateway had a correction unacknowledged), so this test guards the recovery end to end,
+and tests/alter/test_alter_link_recovery.py reproduces the deadlock itself (an end with
+nothing unacknowledged), which the previous codec failed.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import select
+import threading
+import time
+import tty
+
+import pytest
+
+from humanpt.alter.ddcmp import encode_frame, strt
+from humanpt.schemas import humanpt_pb2 as pb
+from tests.conftest import write_config, zenoh_client
+
+
+class LineTap:
+    """A pty for the gateway (symlinked at ``gateway_link``) relayed to sim_robot's pty."""
+
+    def __init__(self, gateway_link, robot_link):
+        self.master, slave = os.openpty()
+        tty.setraw(self.master)
+        tty.setraw(slave)
+        self._slave = slave
+        os.symlink(os.ttyname(slave), gateway_link)
+        self.robot_link = robot_link
+        self.robot_fd: int | None = None
+        self.inject: queue.Queue[tuple[str, bytes]] = queue.Queue()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def start(self):
+        self.robot_fd = os.open(self.robot_link, os.O_RDWR | os.O_NOCTTY)
+        tty.setraw(self.robot_fd)
+        self.thread.start()
+
+    def _run(self):
+        while not self.stop.is_set():
+            ready, _, _ = select.select([self.master, self.robot_fd], [], [], 0.01)
+            for fd in ready:
+                data = os.read(fd, 4096)
+                os.write(self.robot_fd if fd == self.master else self.master, data)
+            while not self.inject.empty():
+                to, data = self.inject.get()
+                os.write(self.robot_fd if to == "robot" else self.master, data)
+
+    def close(self):
+        self.stop.set()
+        self.thread.join(timeout=2)
+        for fd in (self.master, self._slave, self.robot_fd):
+            if fd is not None:
+                os.close(fd)
+
+
+@pytest.mark.timeout(90)
+@pytest.mark.parametrize("toward", ["robot", "gateway"])
+def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, tmp_path, toward):
+    port, _ = router
+    robot_link, gateway_link = tmp_path / "robot-pty", tmp_path / "gateway-pty"
+    cfg = write_config(tmp_path / "alter.toml", port,
+                       extra=f'[sim_robot]\npty_link = "{robot_link}"\n'
+                             f'[alter_gateway]\nport = "{gateway_link}"\n')
+    run = tmp_path / "run"
+    procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
+    deadline = time.monotonic() + 20
+    while not robot_link.exists():
+        assert time.monotonic() < deadline, "sim_robot made no pty"
+        time.sleep(0.05)
+    tap = LineTap(gateway_link, robot_link)
+    tap.start()
+    states: list[float] = []
+    codes: list[str] = []
+    got_state = threading.Event()
+    try:
+        with zenoh_client(port) as s:
+            def on_state(_sample):
+                states.append(time.monotonic())
+                got_state.set()
+
+            subs = [s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state),
+                    s.declare_subscriber("humanpt/test/*/events", lambda smp: codes.append(
+                        pb.Event.FromString(smp.payload.to_bytes()).code))]
+            procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+            assert got_state.wait(30), "no robot state: the link never came up"
+            # Let it run a second, then forge one STRT toward the robot.
+            t_run = time.monotonic()
+            while time.monotonic() - t_run < 1.0:
+                got_state.clear()
+                assert got_state.wait(5)
+            n_before = len(states)
+            t_forged = time.monotonic()
+            tap.inject.put((toward, encode_frame(strt())))
+            # That end is in start-up at once; robot states resume within a few start-up
+            # retries (100 ms each), not never.
+            resumed = None
+            while time.monotonic() - t_forged < 10.0:
+                got_state.clear()
+                got_state.wait(0.5)
+                late = [t for t in states[n_before:] if t > t_forged + 0.1]
+                if len(late) >= 10:
+                    resumed = late[0] - t_forged
+                    break
+            assert resumed is not None, f"robot states stopped after the forged STRT; events: {codes}"
+            assert resumed < 3.0, f"robot states resumed only {resumed:.2f} s after the forged STRT"
+            assert "link_down" in codes and "link_up" in codes, codes
+            for sub in subs:
+                sub.undeclare()
+    finally:
+        tap.close()
