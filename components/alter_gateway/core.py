@@ -57,7 +57,7 @@ from humanpt.alter import (
     Transmit,
 )
 from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.limiter import EventLimiter, SerialLinkCoreMixin
+from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.alter_gateway.safety import (
     clamp_norm,
     clip_to_envelope,

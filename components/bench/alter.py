@@ -30,7 +30,7 @@ import numpy as np
 from humanpt.alter.budget import cycle_budget
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import ScriptedControllerConfig, ThreadShell, scripted_command
+from humanpt.testing.harness import ScriptedControllerConfig, ThreadShell, scripted_command
 from humanpt.alter_gateway.shell import PatientSerialAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore

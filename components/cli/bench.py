@@ -167,7 +167,7 @@ def bench_perception(args) -> int:
     import cv2
 
     from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
-    from humanpt.perception.evaluate import (
+    from humanpt.testing.perception_eval import (
         SETS,
         cases_for,
         evaluate,
@@ -234,8 +234,8 @@ def bench_perception(args) -> int:
 
 
 def bench_alter(args) -> int:
-    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.alter_gateway.bench``)."""
-    from humanpt.alter_gateway.bench import bench_alter as run
+    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
+    from humanpt.bench.alter import bench_alter as run
 
     periods = tuple(float(p) for p in args.periods.split(",") if p.strip())
     run(args.duration, periods, args.search_seconds, "zenoh" if args.zenoh else "threads")

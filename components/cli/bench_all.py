@@ -24,7 +24,7 @@ def _perception_rate(n: int = 300) -> float:
     import cv2
 
     from humanpt.perception import PerceptionConfig, PerceptionCore
-    from humanpt.perception.evaluate import random_cases
+    from humanpt.testing.perception_eval import random_cases
     from humanpt.schemas.convert import image
     from humanpt.sim_camera import Renderer
 

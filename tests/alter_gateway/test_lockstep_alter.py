@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import (
+from humanpt.testing.harness import (
     ScriptedControllerConfig,
     ScriptedControllerCore,
     scripted_step,

@@ -17,7 +17,7 @@ import pytest
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import (
+from humanpt.testing.harness import (
     ScriptedControllerConfig,
     ThreadShell,
     scripted_command,

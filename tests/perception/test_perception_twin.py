@@ -11,7 +11,7 @@ import pytest
 
 from humanpt.geometry import DEFAULT_FLANGE_T_CAMERA_MM, invert_transform
 from humanpt.perception import PerceptionConfig, PerceptionCore
-from humanpt.perception.evaluate import (
+from humanpt.testing.perception_eval import (
     clutter_cases,
     evaluate,
     format_table,
