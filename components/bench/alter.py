@@ -30,11 +30,11 @@ import numpy as np
 from humanpt.alter.budget import cycle_budget
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.testing.harness import ScriptedControllerConfig, ThreadShell, scripted_command
 from humanpt.alter_gateway.shell import PatientSerialAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
+from humanpt.testing.harness import ScriptedControllerConfig, ThreadShell, scripted_command
 
 
 @dataclass

@@ -167,6 +167,8 @@ def bench_perception(args) -> int:
     import cv2
 
     from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
+    from humanpt.schemas.convert import image
+    from humanpt.sim_camera import Renderer
     from humanpt.testing.perception_eval import (
         SETS,
         cases_for,
@@ -175,8 +177,6 @@ def bench_perception(args) -> int:
         random_cases,
         range_cases,
     )
-    from humanpt.schemas.convert import image
-    from humanpt.sim_camera import Renderer
 
     cv2.setNumThreads(1)
     pinned = ""

@@ -24,9 +24,9 @@ def _perception_rate(n: int = 300) -> float:
     import cv2
 
     from humanpt.perception import PerceptionConfig, PerceptionCore
-    from humanpt.testing.perception_eval import random_cases
     from humanpt.schemas.convert import image
     from humanpt.sim_camera import Renderer
+    from humanpt.testing.perception_eval import random_cases
 
     cv2.setNumThreads(1)
     cases = random_cases(16, seed=1)

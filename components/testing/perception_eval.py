@@ -46,7 +46,6 @@ from humanpt.geometry import (
     transform_points,
     viewing_world_T_flange,
 )
-
 from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.correspondence import FULL, LOST, POSITION_ONLY
 from humanpt.perception.pipeline import Perception

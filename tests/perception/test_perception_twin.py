@@ -11,6 +11,9 @@ import pytest
 
 from humanpt.geometry import DEFAULT_FLANGE_T_CAMERA_MM, invert_transform
 from humanpt.perception import PerceptionConfig, PerceptionCore
+from humanpt.runtime.replay import replay
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose
 from humanpt.testing.perception_eval import (
     clutter_cases,
     evaluate,
@@ -18,9 +21,6 @@ from humanpt.testing.perception_eval import (
     random_cases,
     standard_cases,
 )
-from humanpt.runtime.replay import replay
-from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_pose
 from humanpt.twin import build_world
 
 
