@@ -67,25 +67,6 @@ def parse_overrides(items: list[str] | None) -> dict[str, dict]:
     return out
 
 
-def _merged(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merged(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
-    return out
-
-
-def with_overrides(obj, overrides: dict[str, dict], section: str):
-    """``obj`` (a config dataclass) with ``overrides[section]`` applied, validated."""
-    from humanpt.runtime.config import ConfigError, build
-
-    if not overrides.get(section):
-        return obj
-    try:
-        return build(type(obj), _merged(to_table(obj), overrides[section]), source="--set", section=section)
-    except ConfigError as e:
-        raise SystemExit(f"humanpt: {e}") from None
-
-
 def write_toml(path: Path, sections: dict[str, dict]) -> None:
     lines = ["# written by humanpt demo: the configuration of this run", ""]
     for name, table in sections.items():
@@ -105,53 +86,33 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
     path.write_text("\n".join(lines))
 
 
-def scenario_duration_s(op) -> float:
-    from humanpt.operator.scenario import Trajectory
-
-    return Trajectory(op.build_scenario()).duration_s
-
-
-def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
-    from humanpt.controller.core import flange_T_desired_m
-
-    T = flange_T_desired_m(ctl)
-    T[:3, 3] *= 1e3
-    return T
-
-
 def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str,
            stop_ns: int | None = None) -> str:
-    """The accuracy table against ground truth, and where things are. Warnings stamped after
-    ``stop_ns`` (the processes being stopped: e.g. the gateway seeing the controller go) are
-    counted apart."""
+    """The accuracy table against ground truth (:func:`humanpt.twin.run.accuracy`), and
+    where things are. Warnings stamped after ``stop_ns`` (the processes being stopped: e.g.
+    the gateway seeing the controller go) are counted apart."""
     from humanpt.twin import evaluate
+    from humanpt.twin.run import accuracy
 
-    start = evaluate.scenario_start_ns(src)
-    which, err, stamps = evaluate.path_truth_errors(src, after_ns=start)
-    t, e_mm, e_deg = evaluate.tracking_errors(src, flange_T_desired_mm(ctl))
-    moving = t >= start if start else np.ones_like(t, dtype=bool)
+    acc = accuracy(src, ctl, stop_ns)
     if mode == "live":
         lines = [f"humanpt demo (live): {sim_s:.1f} s of scenario, {wall_s:.1f} s of wall time with start-up", ""]
     else:
         lines = [f"humanpt demo ({mode}): {sim_s:.1f} s of twin time in {wall_s:.1f} s of wall time "
                  f"({sim_s / max(wall_s, 1e-9):.1f}x real time)", ""]
-    lines.append(evaluate.format_stats(f"recorded path of {which} against ground truth", evaluate.Stats.of(err)))
-    if moving.any():
-        lines += ["", f"servo error |G - D| while the target moved: mean {e_mm[moving].mean():.3f} mm, "
-                  f"max {e_mm[moving].max():.3f} mm; angle mean {e_deg[moving].mean():.3f} deg, "
-                  f"max {e_deg[moving].max():.3f} deg"]
-    from humanpt.schemas import humanpt_pb2 as pb
-
-    events = [pb.Event.FromString(o.data) for o in src.outputs() if o.topic.endswith("/events")]
-    warn = [e for e in events if e.severity >= 3]
-    late = [e for e in warn if stop_ns is not None and e.header.stamp_ns >= stop_ns]
-    warn = [e for e in warn if not (stop_ns is not None and e.header.stamp_ns >= stop_ns)]
-    if warn:
-        lines += ["", f"{len(warn)} warnings/errors, e.g.: " + "; ".join(f"{e.source}: {e.code}" for e in warn[:5])]
+    lines.append(evaluate.format_stats(f"recorded path of {acc.which} against ground truth", acc.path))
+    if len(acc.servo_mm):
+        lines += ["", f"servo error |G - D| while the target moved: mean {acc.servo_mm.mean():.3f} mm, "
+                  f"max {acc.servo_mm.max():.3f} mm; angle mean {acc.servo_deg.mean():.3f} deg, "
+                  f"max {acc.servo_deg.max():.3f} deg"]
+    if acc.warnings:
+        lines += ["", f"{len(acc.warnings)} warnings/errors, e.g.: "
+                  + "; ".join(f"{e.source}: {e.code}" for e in acc.warnings[:5])]
     else:
         lines += ["", "no warnings or errors during the run"]
-    if late:
-        lines.append(f"(while stopping: {len(late)}, e.g. " + "; ".join(f"{e.source}: {e.code}" for e in late[:3]) + ")")
+    if acc.stopping:
+        lines.append(f"(while stopping: {len(acc.stopping)}, e.g. "
+                     + "; ".join(f"{e.source}: {e.code}" for e in acc.stopping[:3]) + ")")
     paths = sorted((run_dir / "paths").glob("*.csv"))
     lines += ["", f"recordings: {run_dir}/*.mcap  (humanpt replay {run_dir}; humanpt view {run_dir})"]
     if paths:
@@ -159,40 +120,19 @@ def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: floa
     return "\n".join(lines)
 
 
-def run_lockstep(args, op, ctl, run_dir: Path) -> int:
-    from humanpt.controller import pathfile
-    from humanpt.schemas import humanpt_pb2 as pb
-    from humanpt.schemas.convert import header
-    from humanpt.twin.evaluate import path_points
-    from humanpt.twin.system import build_system
+def _progress(now_s: float, duration_s: float) -> None:
+    print(f"\r  {now_s:5.1f} / {duration_s:.1f} s", end="", file=sys.stderr, flush=True)
 
-    duration = args.duration or (op.start_delay_s + scenario_duration_s(op) + 1.5)
-    from humanpt.perception.config import PerceptionConfig
-    from humanpt.pose_filter.config import PoseFilterConfig
-    from humanpt.sim_camera import SimCameraConfig
 
-    over = parse_overrides(getattr(args, "set", None))
-    world = build_system(op, seed=args.seed, controller=ctl, robot=args.robot, run_dir=run_dir,
-                         sim_camera=with_overrides(SimCameraConfig(), over, "sim_camera"),
-                         perception=with_overrides(PerceptionConfig(), over, "perception"),
-                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"), digest=False)
-    t0 = time.perf_counter()
+def run_lockstep(args, cfg, run_dir: Path) -> int:
+    from humanpt.twin.run import run
+
     # Record once the target starts to move (the servo has acquired it by then).
-    world.run_until(int(op.start_delay_s * 1e9))
-    world.lockstep.inject(world.now_ns, "controller", "console/command",
-                          pb.Command(header=header(world.now_ns), component="controller", verb="record_start"))
-    step_ns = int(max(1.0, duration / 20) * 1e9)
-    end_ns = round(duration * 1e9)
-    while world.now_ns < end_ns:
-        world.run_until(min(end_ns, world.now_ns + step_ns))
-        print(f"\r  {world.now_ns / 1e9:5.1f} / {duration:.1f} s", end="", file=sys.stderr, flush=True)
+    res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
+              run_dir=run_dir, progress=_progress)
     print(file=sys.stderr)
-    wall = time.perf_counter() - t0
-    world.close()
-    stamps, xg, xt = path_points(world)
-    (run_dir / "paths").mkdir(exist_ok=True)
-    pathfile.write(run_dir / "paths" / "path-1.csv", pathfile.Path6(np.arange(len(stamps)), stamps, xg, xt))
-    print(report(world, ctl, run_dir, wall, duration, "lock-step"))
+    res.write_path(run_dir / "paths" / "path-1.csv")
+    print(report(res.world, cfg.controller, run_dir, res.wall_s, res.twin_s, "lock-step"))
     return 0
 
 
@@ -223,20 +163,19 @@ def _lower_priority(pid: int) -> None:
         pass
 
 
-def run_live(args, op, ctl, run_dir: Path) -> int:
+def run_live(args, cfg, run_dir: Path) -> int:
     from humanpt.cli.commands import _open_session
     from humanpt.runtime import config as cfgmod
     from humanpt.runtime.bus import free_tcp_port
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas.convert import header
-    from humanpt.sim_camera import SimCameraConfig
     from humanpt.twin.evaluate import RunOutputs
     from humanpt.twin.system import puma_cores
     from humanpt.twin.world import start_flange_for
 
     port = args.port or free_tcp_port()
     over = parse_overrides(getattr(args, "set", None))
-    cam = with_overrides(SimCameraConfig(seed=args.seed), over, "sim_camera")
+    op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
     robot, gateway = puma_cores(start)
     pty = str(run_dir / "alter.pty")
@@ -258,13 +197,10 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     }
     if "psvs" not in over.get("sim_camera", {}):
         sections["sim_camera"].pop("psvs", None)
-    # Other components' overrides (validated): only the keys given, so the defaults stay theirs.
-    from humanpt.perception.config import PerceptionConfig
-    from humanpt.pose_filter.config import PoseFilterConfig
-
-    for name, cls in (("perception", PerceptionConfig), ("pose_filter", PoseFilterConfig)):
+    # Other components' overrides (validated in cfg): only the keys given, so the defaults
+    # stay theirs.
+    for name in ("perception", "pose_filter"):
         if over.get(name):
-            with_overrides(cls(), over, name)
             sections[name] = over[name]
     write_toml(cfg_path, sections)
     cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
@@ -275,7 +211,7 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *a: stop.set())
-    duration = args.duration or (op.start_delay_s + scenario_duration_s(op) + 1.5)
+    duration = args.duration or dataclasses.replace(cfg, operator=op).default_duration_s()
     failed = []
     t0 = time.perf_counter()
     try:
@@ -338,30 +274,21 @@ def run_live(args, op, ctl, run_dir: Path) -> int:
 
 def demo(args) -> int:
     from humanpt.cli.commands import run_stamp
-    from humanpt.twin.system import operator_config
+    from humanpt.twin.run import SECTIONS, OverrideError, SystemConfig
 
     over = parse_overrides(getattr(args, "set", None))
-    unknown = set(over) - {"operator", "sim_camera", "perception", "pose_filter", "controller"}
+    unknown = set(over) - set(SECTIONS)
     if unknown:
-        raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} (operator, sim_camera, "
-                         "perception, pose_filter, controller)")
-    op = with_overrides(operator_config(args.scenario, args.seed), over, "operator")
-    ctl = with_overrides(ControllerConfig(law=args.law), over, "controller")
-    from humanpt.perception.config import PerceptionConfig
-    from humanpt.pose_filter.config import PoseFilterConfig
-    from humanpt.sim_camera import SimCameraConfig
-
-    for name, cls in (("sim_camera", SimCameraConfig), ("perception", PerceptionConfig),
-                      ("pose_filter", PoseFilterConfig)):
-        with_overrides(cls(), over, name)  # a bad key or value fails here, before the run starts
-    driver = op.build_scenario().driver_mm
-    if driver is not None:
-        ctl = dataclasses.replace(ctl, has_driver=True, tob_t_tip_mm=tuple(float(v) for v in driver))
+        raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
+    try:  # a bad key or value fails here, before the run starts
+        cfg = SystemConfig.for_scenario(args.scenario, args.seed, over, controller=ControllerConfig(law=args.law))
+    except OverrideError as e:
+        raise SystemExit(f"humanpt: {e}") from None
     label = Path(args.scenario).stem if Path(args.scenario).suffix else args.scenario
     run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{label}"
     run_dir.mkdir(parents=True, exist_ok=True)
     print(f"humanpt demo: scenario {label}, {'lock-step' if args.lockstep else 'live'}, recording to {run_dir}/",
           flush=True)
     if args.lockstep:
-        return run_lockstep(args, op, ctl, run_dir)
-    return run_live(args, op, ctl, run_dir)
+        return run_lockstep(args, cfg, run_dir)
+    return run_live(args, cfg, run_dir)
