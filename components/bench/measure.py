@@ -1,10 +1,13 @@
-"""``humanpt bench ...``: benchmarks that print a table.  Nothing here is asserted."""
+"""What ``humanpt bench runtime|render|perception`` measure (the CLI prints the tables).
+Nothing here is asserted."""
 
 from __future__ import annotations
 
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -74,46 +77,77 @@ def mcap_throughput(msg_factory, seconds: float, compression: str = "zstd") -> t
         return rec.bytes_written / dt / 1e6, n / dt, path.stat().st_size
 
 
-def bench_runtime(args) -> int:
+@dataclass
+class RoundTrip:
+    """Round trips of one payload through the router (ms); empty when nothing came back."""
+
+    label: str
+    p50_ms: float | None
+    p99_ms: float | None
+    n: int
+
+
+@dataclass
+class Throughput:
+    """MCAP writing with the Recorder: payload MB/s, messages/s, file bytes / payload bytes."""
+
+    label: str
+    mb_s: float
+    msg_s: float
+    file_over_payload: float | None
+
+
+def measure_runtime(n: int, seconds: float,
+                    progress: Callable[[str], None] | None = None) -> tuple[list[RoundTrip], list[Throughput]]:
+    """``n`` round trips each of a 200-byte message and a 640x480 image through a router on
+    loopback (router and both clients in this process); MCAP write throughput for
+    ``seconds`` each of images and of 200-byte events (zstd). ``progress(label)`` after
+    each round-trip case."""
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas.convert import header, image
 
-    print("humanpt bench runtime (loopback, router and both clients in one process; medians of noisy "
-          "shared machines: compare ratios)", flush=True)
-    rows = []
+    trips = []
     small = bytes(range(200))
     img = synthetic_image()
     img_payload = image(img, 0).SerializeToString()
     for label, payload in (("200-byte message", small), (f"640x480 mono8 image ({len(img_payload)} B)", img_payload)):
-        rtts = round_trips(payload, args.n, free_tcp_port())
+        rtts = round_trips(payload, n, free_tcp_port())
         if not rtts:
-            rows.append((f"round trip, {label}", "no replies", "", ""))
+            trips.append(RoundTrip(label, None, None, 0))
             continue
-        rows.append((f"round trip, {label}", f"{percentile_ms(rtts, 50):.3f} ms", f"{percentile_ms(rtts, 99):.3f} ms",
-                     f"n={len(rtts)}"))
-        print(f"  measured {label}", flush=True)
+        trips.append(RoundTrip(label, percentile_ms(rtts, 50), percentile_ms(rtts, 99), len(rtts)))
+        if progress is not None:
+            progress(label)
     imgs = [image(synthetic_image(seed=s), s) for s in range(8)]
-    mbps, rate, size = mcap_throughput(lambda n: imgs[n % len(imgs)], args.seconds)
-    rows.append(("MCAP write, images (zstd)", f"{mbps:.1f} MB/s", f"{rate:.0f} msg/s",
-                 f"file/payload {size / max(1, rate * args.seconds * len(img_payload)):.2f}"))
+    mbps, rate, size = mcap_throughput(lambda k: imgs[k % len(imgs)], seconds)
+    writes = [Throughput("images (zstd)", mbps, rate, size / max(1, rate * seconds * len(img_payload)))]
     ev = pb.Event(header=header(1, 2, "world"), severity=2, source="bench", code="x", text="y" * 150)
-    mbps, rate, size = mcap_throughput(lambda n: ev, args.seconds)
-    rows.append(("MCAP write, 200-byte events (zstd)", f"{mbps:.1f} MB/s", f"{rate:.0f} msg/s", ""))
-    w = max(len(r[0]) for r in rows)
-    print(f"\n{'case':{w}s}  {'p50 / rate':>12s}  {'p99 / msgs':>12s}  note")
-    for r in rows:
-        print(f"{r[0]:{w}s}  {r[1]:>12s}  {r[2]:>12s}  {r[3]}")
-    return 0
+    mbps, rate, size = mcap_throughput(lambda k: ev, seconds)
+    writes.append(Throughput("200-byte events (zstd)", mbps, rate, None))
+    return trips, writes
 
 
-def bench_render(args) -> int:
-    """Frames per second of the simulated PSVS camera at its default settings."""
+@dataclass
+class RenderBench:
+    """Seconds per frame of the simulated PSVS camera, per stage and for its core step."""
+
+    frames: int
+    width_px: int
+    height_px: int
+    blur_sigma_px: float
+    render_s: float  # the renderer alone, per frame
+    stages_s: dict[str, float]  # per frame
+    core_step_s: float  # the sim_camera core: truth in, image message out, per frame
+
+
+def measure_render(frames: int) -> RenderBench:
+    """The simulated PSVS camera at its default settings, ``frames`` frames per case."""
     from humanpt.geometry import camera_T_desired
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas.convert import header, pose
     from humanpt.sim_camera import Renderer, SimCameraConfig, SimCameraCore
 
-    n = max(1, args.frames)
+    n = max(1, frames)
     cfg = SimCameraConfig()
     renderer = Renderer(cfg)
     camera_T_tob = camera_T_desired(600.0)
@@ -149,44 +183,36 @@ def bench_render(args) -> int:
     for i in range(n):
         core.step((i + 1) * period, "tick", pb.Tick(header=header((i + 1) * period), period_ns=period))
     core_total = time.perf_counter() - t0
-    print(f"humanpt bench render: {cfg.psvs.image_width_px}x{cfg.psvs.image_height_px}, 3 sources x 2 views at "
-          f"600 mm, blur {cfg.blur_sigma_px} px, shot + read noise; {n} frames per case")
-    print(f"\n{'case':34s} {'frames/s':>10s} {'ms/frame':>10s}")
-    print(f"{'render (renderer alone)':34s} {n / total:10.0f} {1e3 * total / n:10.3f}")
-    for name, t in stages.items():
-        print(f"{'  ' + name:34s} {'':>10s} {1e3 * t / n:10.3f}")
-    print(f"{'sim_camera core step (+ message)':34s} {n / core_total:10.0f} {1e3 * core_total / n:10.3f}")
-    return 0
+    return RenderBench(n, cfg.psvs.image_width_px, cfg.psvs.image_height_px, cfg.blur_sigma_px, total / n,
+                       {k: t / n for k, t in stages.items()}, core_total / n)
 
 
-def bench_perception(args) -> int:
-    """Images per second of each perception method on 640x480 twin images, on one core; and
-    (unless ``--no-accuracy``) both methods' accuracy on twin images with ground truth."""
+def pin_one_cpu() -> str:
+    """Run this process (and OpenCV) on one CPU: '' or a note for the table's title."""
     import os
 
     import cv2
 
-    from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
-    from humanpt.schemas.convert import image
-    from humanpt.sim_camera import Renderer
-    from humanpt.testing.perception_eval import (
-        SETS,
-        cases_for,
-        evaluate,
-        format_table,
-        random_cases,
-        range_cases,
-    )
-
     cv2.setNumThreads(1)
-    pinned = ""
     if hasattr(os, "sched_setaffinity"):
         try:
             os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-            pinned = ", pinned to one CPU"
+            return ", pinned to one CPU"
         except OSError:
             pass
-    n = max(1, args.images)
+    return ""
+
+
+def measure_perception(n_images: int) -> list[tuple[str, str, float, float, float]]:
+    """Each perception method on 640x480 twin images (random poses): rows of (method,
+    case, images/s, p50 ms, p99 ms), ``n_images`` per case."""
+
+    from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
+    from humanpt.schemas.convert import image
+    from humanpt.sim_camera import Renderer
+    from humanpt.testing.perception_eval import random_cases
+
+    n = max(1, n_images)
     cases = random_cases(16, seed=1)
     renderer = Renderer(cases[0].sim)
     images = [renderer.render(c.camera_T_tob, frame_index=c.frame_index) for c in cases]
@@ -218,25 +244,15 @@ def bench_perception(args) -> int:
         core = PerceptionCore(PerceptionConfig(method=method))
         rows.append((method, "core step (decode ... message)",
                      *timed(lambda k, core=core: core.step(k, "camera/image", messages[(k // 4) % m]))))
-    print(f"humanpt bench perception: 640x480 twin images (random poses, 450-900 mm, default noise), "
-          f"{n} per case, cv2 threads 1{pinned}")
-    print(f"\n{'method':9s} {'case':32s} {'images/s':>9s} {'p50 ms':>8s} {'p99 ms':>8s}")
-    for method, case, rate, p50, p99 in rows:
-        print(f"{method:9s} {case:32s} {rate:9.0f} {p50:8.3f} {p99:8.3f}")
-    if not args.no_accuracy:
-        print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
-              "bound: geometry error model at the measured centre RMS):\n")
-        results = {name: evaluate(cases_for(name, args.accuracy_images, args.seed)) for name in SETS if name != "range"}
-        for z in (250.0, 350.0, 1200.0, 1800.0):  # the ends of the working range, one row each
-            results[f"z={z:.0f}mm"] = evaluate(range_cases(args.accuracy_images // 4, args.seed, (z,)))
-        print(format_table(results))
-    return 0
+    return rows
 
 
-def bench_alter(args) -> int:
-    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
-    from humanpt.bench.alter import bench_alter as run
+def perception_accuracy(images: int, seed: int) -> dict:
+    """Both methods' accuracy on twin images with ground truth: {set name: evaluation},
+    ``images`` per set (a quarter of it at each end of the working range)."""
+    from humanpt.testing.perception_eval import SETS, cases_for, evaluate, range_cases
 
-    periods = tuple(float(p) for p in args.periods.split(",") if p.strip())
-    run(args.duration, periods, args.search_seconds, "zenoh" if args.zenoh else "threads")
-    return 0
+    results = {name: evaluate(cases_for(name, images, seed)) for name in SETS if name != "range"}
+    for z in (250.0, 350.0, 1200.0, 1800.0):  # the ends of the working range, one row each
+        results[f"z={z:.0f}mm"] = evaluate(range_cases(images // 4, seed, (z,)))
+    return results

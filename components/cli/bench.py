@@ -1,0 +1,119 @@
+"""``humanpt bench [runtime|alter|render|perception]``: print the tables of what
+``humanpt.bench`` measures.  Nothing here is asserted."""
+
+from __future__ import annotations
+
+import sys
+
+
+def bench_runtime(args) -> int:
+    from humanpt.bench.measure import measure_runtime
+
+    print("humanpt bench runtime (loopback, router and both clients in one process; medians of noisy "
+          "shared machines: compare ratios)", flush=True)
+    trips, writes = measure_runtime(args.n, args.seconds, progress=lambda label: print(f"  measured {label}",
+                                                                                           flush=True))
+    rows = []
+    for t in trips:
+        if t.n == 0:
+            rows.append((f"round trip, {t.label}", "no replies", "", ""))
+        else:
+            rows.append((f"round trip, {t.label}", f"{t.p50_ms:.3f} ms", f"{t.p99_ms:.3f} ms", f"n={t.n}"))
+    for w in writes:
+        note = f"file/payload {w.file_over_payload:.2f}" if w.file_over_payload is not None else ""
+        rows.append((f"MCAP write, {w.label}", f"{w.mb_s:.1f} MB/s", f"{w.msg_s:.0f} msg/s", note))
+    w = max(len(r[0]) for r in rows)
+    print(f"\n{'case':{w}s}  {'p50 / rate':>12s}  {'p99 / msgs':>12s}  note")
+    for r in rows:
+        print(f"{r[0]:{w}s}  {r[1]:>12s}  {r[2]:>12s}  {r[3]}")
+    return 0
+
+
+def bench_render(args) -> int:
+    """Frames per second of the simulated PSVS camera at its default settings."""
+    from humanpt.bench.measure import measure_render
+
+    b = measure_render(args.frames)
+    n = b.frames
+    print(f"humanpt bench render: {b.width_px}x{b.height_px}, 3 sources x 2 views at "
+          f"600 mm, blur {b.blur_sigma_px} px, shot + read noise; {n} frames per case")
+    print(f"\n{'case':34s} {'frames/s':>10s} {'ms/frame':>10s}")
+    print(f"{'render (renderer alone)':34s} {1 / b.render_s:10.0f} {1e3 * b.render_s:10.3f}")
+    for name, t in b.stages_s.items():
+        print(f"{'  ' + name:34s} {'':>10s} {1e3 * t:10.3f}")
+    print(f"{'sim_camera core step (+ message)':34s} {1 / b.core_step_s:10.0f} {1e3 * b.core_step_s:10.3f}")
+    return 0
+
+
+def bench_perception(args) -> int:
+    """Images per second of each perception method on 640x480 twin images, on one core; and
+    (unless ``--no-accuracy``) both methods' accuracy on twin images with ground truth."""
+    from humanpt.bench.measure import measure_perception, perception_accuracy, pin_one_cpu
+    from humanpt.testing.perception_eval import format_table
+
+    pinned = pin_one_cpu()
+    n = max(1, args.images)
+    rows = measure_perception(n)
+    print(f"humanpt bench perception: 640x480 twin images (random poses, 450-900 mm, default noise), "
+          f"{n} per case, cv2 threads 1{pinned}")
+    print(f"\n{'method':9s} {'case':32s} {'images/s':>9s} {'p50 ms':>8s} {'p99 ms':>8s}")
+    for method, case, rate, p50, p99 in rows:
+        print(f"{method:9s} {case:32s} {rate:9.0f} {p50:8.3f} {p99:8.3f}")
+    if not args.no_accuracy:
+        print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
+              "bound: geometry error model at the measured centre RMS):\n")
+        print(format_table(perception_accuracy(args.accuracy_images, args.seed)))
+    return 0
+
+
+def bench_alter(args) -> int:
+    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
+    from humanpt.bench.alter import line_capacity, measure_alter, shortest_sustained
+
+    periods = tuple(float(p) for p in args.periods.split(",") if p.strip())
+    mode = "zenoh" if args.zenoh else "threads"
+    print(f"humanpt bench alter ({mode}: gateway <-> sim_robot over a real pty; a pty has no baud "
+          "rate; scripted controller answering at once)", flush=True)
+    done: list = []
+
+    def progress(r) -> None:
+        done.append(r)
+        if len(done) == 1:
+            print(f"  28 ms for {args.duration:g} s: {r.on_time}/{r.cycles} cycles on time", flush=True)
+        else:
+            print(f"  {r.period_ms:g} ms for {args.search_seconds:g} s: {r.on_time}/{r.cycles} on time", flush=True)
+
+    rows = measure_alter(args.duration, periods, args.search_seconds, mode, progress=progress)
+    print("")
+    print(f"{'period':>7s} {'run':>6s} {'cycles':>7s} {'on time':>8s} {'missed':>7s} {'reply p50':>10s} "
+          f"{'reply p99':>10s} {'jitter p99':>11s} {'38400 line':>11s}")
+    for r in rows:
+        lat50 = f"{r.pct(50, r.latency_ms):.2f} ms" if r.latency_ms else "-"
+        lat99 = f"{r.pct(99, r.latency_ms):.2f} ms" if r.latency_ms else "-"
+        jit = f"{r.pct(99, r.jitter_ms):.2f} ms" if r.jitter_ms else "-"
+        print(f"{r.period_ms:5g} ms {r.duration_s:5g}s {r.cycles:7d} {r.on_time:8d} {r.missed:7d} {lat50:>10s} "
+              f"{lat99:>10s} {jit:>11s} {line_capacity(r.period_ms):>11s} {r.note}")
+    best = shortest_sustained(rows)
+    print("")
+    print(f"shortest cycle period sustained without a miss: {f'{best:g} ms' if best else 'none of those tried'}"
+          f" ({args.search_seconds:g} s runs)")
+    return 0
+
+
+def bench_all(args) -> int:
+    """One table of the figures that matter (:func:`humanpt.bench.summary.measure_all`)."""
+    from humanpt.bench.summary import measure_all
+
+    print("humanpt bench: measuring (a shared 2-core machine is noisy: compare ratios, not digits)",
+          file=sys.stderr, flush=True)
+    figures, wall, failure = measure_all(
+        args.live_seconds, args.lockstep_seconds, args.scenario,
+        on_figure=lambda f: print(f"  {f.name}: {f.value} {f.note}", file=sys.stderr, flush=True))
+    if failure:
+        print(failure, file=sys.stderr)
+    w = max(len(f.name) for f in figures)
+    print(f"\nhumanpt bench (live run {args.live_seconds:g} s of {args.scenario}, {wall:.0f} s wall)\n")
+    print(f"{'figure':{w}s}  {'value':>20s}  note")
+    for f in figures:
+        print(f"{f.name:{w}s}  {f.value:>20s}  {f.note}")
+    return 0
