@@ -1,47 +1,21 @@
 """``humanpt demo``: the whole system on the digital twin, and its accuracy against ground truth.
 
-Live (default): the router, sim_robot behind a pty, alter_gateway, operator, sim_camera,
-perception, pose_filter and controller (and viz with ``--viewer``) as separate processes
-over Zenoh.  ``--lockstep``: the same cores in one process on virtual time.  Either way
-every component records its MCAP in the run directory, the path is written as CSV, and an
-accuracy table against ground truth is printed.
+Live (default, :func:`humanpt.twin.live.run_live`): the router, sim_robot behind a pty,
+alter_gateway, operator, sim_camera, perception, pose_filter and controller (and viz with
+``--viewer``) as separate processes over Zenoh.  ``--lockstep`` (:func:`humanpt.twin.run.run`):
+the same cores in one process on virtual time.  Either way every component records its
+MCAP in the run directory, the path is written as CSV, and an accuracy table against
+ground truth is printed.  This module parses and prints.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
-import os
 import signal
-import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
-import numpy as np
-
 from humanpt.controller.config import ControllerConfig
-from humanpt.geometry.transforms import (
-    invert_transform,
-    transform_from_x,
-    x_from_transform,
-)
-from humanpt.runtime.config import to_table
-
-LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
-
-
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {v!r} to TOML")
 
 
 def parse_overrides(items: list[str] | None) -> dict[str, dict]:
@@ -65,25 +39,6 @@ def parse_overrides(items: list[str] | None) -> dict[str, dict]:
             table = table.setdefault(p, {})
         table[parts[-1]] = value
     return out
-
-
-def write_toml(path: Path, sections: dict[str, dict]) -> None:
-    lines = ["# written by humanpt demo: the configuration of this run", ""]
-    for name, table in sections.items():
-        lines.append(f"[{name}]")
-        for k, v in table.items():
-            if v is None or (isinstance(v, (list, tuple)) and v and isinstance(v[0], dict)):
-                continue
-            if isinstance(v, dict):
-                continue
-            lines.append(f"{k} = {_toml_value(v)}")
-        lines.append("")
-        for k, v in table.items():
-            if isinstance(v, dict):  # a nested config table, e.g. [sim_camera.psvs]
-                lines.append(f"[{name}.{k}]")
-                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
-                lines.append("")
-    path.write_text("\n".join(lines))
 
 
 def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str,
@@ -136,139 +91,27 @@ def run_lockstep(args, cfg, run_dir: Path) -> int:
     return 0
 
 
-def _wait_alive(cfg_path: Path, names: tuple[str, ...], timeout_s: float, procs) -> bool:
-    from humanpt.cli.commands import _open_session
-    from humanpt.runtime import config as cfgmod
-    from humanpt.runtime.bus import liveliness_key
-
-    cfg = cfgmod.load(cfg_path)
-    deadline = time.monotonic() + timeout_s
-    with _open_session(cfg) as s:
-        while time.monotonic() < deadline:
-            if any(p.poll() is not None for _, p in procs):
-                return False
-            alive = {str(r.ok.key_expr).rsplit("/", 1)[-1]
-                     for r in s.liveliness().get(liveliness_key(cfg.runtime.cell, "*")) if r.ok is not None}
-            if set(names) <= alive:
-                return True
-            time.sleep(0.3)
-    return False
-
-
-def _lower_priority(pid: int) -> None:
-    """A lower scheduling priority for a child (POSIX; a no-op elsewhere)."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, pid, 10)
-    except (AttributeError, OSError):
-        pass
-
-
 def run_live(args, cfg, run_dir: Path) -> int:
-    from humanpt.cli.commands import _open_session
-    from humanpt.runtime import config as cfgmod
-    from humanpt.runtime.bus import free_tcp_port
-    from humanpt.schemas import humanpt_pb2 as pb
-    from humanpt.schemas.convert import header
     from humanpt.twin.evaluate import RunOutputs
-    from humanpt.twin.system import puma_cores
-    from humanpt.twin.world import start_flange_for
+    from humanpt.twin.live import run_live as run
 
-    port = args.port or free_tcp_port()
-    over = parse_overrides(getattr(args, "set", None))
-    op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
-    start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
-    robot, gateway = puma_cores(start)
-    pty = str(run_dir / "alter.pty")
-    start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
-    robot = dataclasses.replace(robot, pty_link=pty,
-                                start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
-    # A pty delivers a STATUS at once (no 38 400 baud line time): its pose is for "now".
-    gateway = dataclasses.replace(gateway, port=pty, status_delay_ms=0.0)
-    # The operator starts with the rest (its start-up must not fall into the running servo
-    # loop: on two cores that delayed ALTER statuses by ~85 ms) and holds the start pose
-    # while everything comes up and the servo settles.
-    op = dataclasses.replace(op, start_delay_s=3.0)
-    cfg_path = run_dir / "humanpt.toml"
-    sections = {
-        "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
-                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer"},
-        "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
-        "sim_camera": to_table(cam), "controller": to_table(ctl),
-    }
-    if "psvs" not in over.get("sim_camera", {}):
-        sections["sim_camera"].pop("psvs", None)
-    # Other components' overrides (validated in cfg): only the keys given, so the defaults
-    # stay theirs.
-    for name in ("perception", "pose_filter"):
-        if over.get(name):
-            sections[name] = over[name]
-    write_toml(cfg_path, sections)
-    cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
-    comps = list(LIVE_COMPONENTS) + (["viz"] if args.viewer else [])
-    base = [sys.executable, "-m", "humanpt.cli.main"]
-    procs: list[tuple[str, subprocess.Popen]] = []
-    log = open(run_dir / "processes.log", "w")  # noqa: SIM115 - closed below
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *a: stop.set())
-    duration = args.duration or dataclasses.replace(cfg, operator=op).default_duration_s()
-    failed = []
-    t0 = time.perf_counter()
-    try:
-        procs.append(("router", subprocess.Popen(base + ["router", "--config", str(cfg_path)], stdout=log,
-                                                 stderr=subprocess.STDOUT)))
-        time.sleep(0.5)
-        for name in comps + ["operator"]:
-            p = subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
-                                 stdout=log, stderr=subprocess.STDOUT)
-            if name == "operator":
-                # The simulated operator (a stand-in for the human, not part of the system)
-                # runs at a lower priority.
-                _lower_priority(p.pid)
-            procs.append((name, p))
+
+    def started(comps: list[str]) -> None:
         print(f"humanpt demo: starting {', '.join(comps)}, operator (log: {run_dir / 'processes.log'})", flush=True)
-        if not _wait_alive(cfg_path, tuple(comps) + ("operator",), 60.0, procs):
-            failed.append("the components did not all come up within 60 s")
-            return 1
-        t_start = time.monotonic()
-        cfg = cfgmod.load(cfg_path)
-        with _open_session(cfg) as s:
-            pub = s.declare_publisher("humanpt/demo/console/command")
-            recording = False
-            while not stop.wait(0.2):
-                el = time.monotonic() - t_start
-                print(f"\r  {el:5.1f} / {duration + 1.0:.1f} s", end="", file=sys.stderr, flush=True)
-                # Record from a second after everything is up: the operator, which came up
-                # with the rest, holds the start pose for start_delay_s, so the path begins
-                # with it still whatever the order the processes came up in.
-                if not recording and el >= 1.0:
-                    pub.put(pb.Command(header=header(time.time_ns()), component="controller",
-                                       verb="record_start").SerializeToString())
-                    recording = True
-                if el >= duration + 1.0:
-                    break
-                dead = [(n, p.returncode) for n, p in procs if p.poll() is not None]
-                if dead:
-                    failed += [f"{n} exited with {rc}" for n, rc in dead]
-                    break
-            pub.undeclare()
-        print(file=sys.stderr)
-    finally:
-        stop_ns = time.time_ns()
-        for _, p in reversed(procs):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-        for _, p in reversed(procs):
-            try:
-                p.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                p.kill()
-        log.close()
-    wall = time.perf_counter() - t0
-    if failed:
-        print(f"humanpt demo: stopped early: {'; '.join(failed)} (see {run_dir / 'processes.log'})", file=sys.stderr)
+
+    res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
+              overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
+              progress=_progress)
+    print(file=sys.stderr)
+    if res.failed:
+        print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
+              file=sys.stderr)
         return 1
-    print(report(RunOutputs(run_dir), ctl, run_dir, wall, duration, "live", stop_ns=stop_ns))
+    print(report(RunOutputs(run_dir), res.config.controller, run_dir, res.wall_s, res.duration_s, "live",
+                 stop_ns=res.stop_ns))
     return 0
 
 
