@@ -3,7 +3,8 @@ them as one table).
 
 * perception: images/s of the default method's core step on 640x480 twin images, one core;
 * lock-step: the closed loop on virtual time, in x real time (with and without recording);
-* a live run of the whole system (``humanpt demo``, every component a process over Zenoh):
+* a live run of the whole system (:func:`humanpt.twin.live.run_live`, as ``humanpt demo``
+  runs it: every component a process over Zenoh):
   image-to-command latency (capture stamp to the controller's first command using it),
   ALTER cycles answered on time (a command of that cycle within the gateway's deadline);
 * replay of that run's recordings, in x real time;
@@ -12,8 +13,6 @@ them as one table).
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -115,14 +114,17 @@ def measure_all(live_seconds: float, lockstep_seconds: float, scenario: str,
     show("lock-step closed loop, recorded (humanpt demo --lockstep)",
          f"{lockstep_speed(lockstep_seconds, True):.1f}x real time", "target >= 10x")
     with tempfile.TemporaryDirectory() as d:
+        from humanpt.twin.live import run_live
+        from humanpt.twin.run import SystemConfig
+
         run_dir = Path(d) / "live"
+        run_dir.mkdir()
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-m", "humanpt.cli.main", "demo", "--scenario", scenario,
-                            "--duration", str(live_seconds), "--run-dir", str(run_dir)],
-                           capture_output=True, text=True, timeout=live_seconds * 4 + 180)
-        if r.returncode != 0:
-            failure = r.stdout[-2000:] + r.stderr[-2000:]
-            show("live demo", "FAILED", f"exit {r.returncode}")
+        # As humanpt demo --scenario SCENARIO --duration LIVE_SECONDS runs it.
+        live = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=live_seconds)
+        if live.failed:
+            failure = "; ".join(live.failed) + "\n" + (run_dir / "processes.log").read_text()[-2000:]
+            show("live demo", "FAILED", live.failed[0])
         else:
             res = latency_and_cycles(run_dir)
             lat = res["latency_ms"]

@@ -24,8 +24,8 @@ from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "flange_T_desired_mm", "operator_config", "puma_placement", "puma_cores", "tracking_errors", "path_points",
-           "truth_at"]
+__all__ = ["build_system", "flange_T_desired_mm", "operator_config", "puma_placement", "puma_cores",
+           "tracking_errors", "path_points", "truth_at"]
 
 
 def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") -> tuple[float, ...]:
