@@ -8,6 +8,7 @@ See PROTOCOL.md for the byte layout. Layers, each pure (bytes in, events out):
 - ``messages``: STATUS and CORRECTION payloads (fixed point, little-endian).
 - ``endpoint``: ``HostEndpoint`` (gateway) and ``ControllerEndpoint`` (robot side).
 - ``budget``: bytes per 28 ms cycle at 19 200 / 38 400 baud.
+- ``limiter``: rate-limited events and the serial-chunk output both link ends' cores share.
 """
 
 from humanpt.alter.budget import CycleBudget, bytes_per_cycle, cycle_budget

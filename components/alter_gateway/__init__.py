@@ -2,6 +2,6 @@
 
 ``core.AlterGatewayCore`` (pure) turns the controller's per-cycle STATUS into
 ``alter_gateway/robot_state`` and answers each with a clamped, enveloped, fresh-or-zero
-CORRECTION; ``shell.adapters`` binds it to a serial port; ``harness`` runs cores on
-threads without Zenoh (benches, tests). See README.md.
+CORRECTION; ``shell.adapters`` binds it to a serial port. Cores on threads without
+Zenoh (benches, tests) are in ``humanpt.testing.harness``. See README.md.
 """

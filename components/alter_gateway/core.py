@@ -56,8 +56,8 @@ from humanpt.alter import (
     StatusReceived,
     Transmit,
 )
+from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.alter_gateway.safety import (
     clamp_norm,
     clip_to_envelope,

@@ -16,7 +16,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
-from humanpt.runtime.bus import liveliness_key, params_key, zenoh_config
+from humanpt.runtime.bus import liveliness_key, open_tool_session, params_key, zenoh_config
 from humanpt.runtime.registry import (
     COMPONENTS,
     PROFILES,
@@ -65,17 +65,7 @@ def run_stamp() -> str:
 
 
 def _open_session(cfg: cfgmod.ConfigFile):
-    import zenoh
-
-    try:
-        # A tool's session (topics, echo, param, console, the demo's own) is always a client
-        # of the router: as a peer every component would link to it and re-route when it
-        # comes and goes (a ~35 ms stall of the servo loop seen as the demo's session left
-        # is gone since; the cause was not isolated further).
-        return zenoh.open(zenoh_config(cfg.runtime, mode="client"))
-    except zenoh.ZError as e:
-        raise ConnectionError(f"cannot reach the router at {', '.join(cfg.runtime.connect)}: {e}. "
-                              "Start one with `humanpt router` or pass --connect ENDPOINT.") from e
+    return open_tool_session(cfg.runtime)
 
 
 # -- router, components, up ------------------------------------------------------------------

@@ -1,28 +1,20 @@
 """``humanpt experiment static|arc|trapezium``: the paper's Section 6 on the twin.
 
-Each experiment runs the closed loop in lock-step (the simulated Puma behind the ALTER
-link), records the path as the paper did (one state vector every 10 cycles) and computes
-the paper's statistics: ME, MAE, MaxE and SD of x, y, z, psi, theta, phi,
-
-* as the paper did: against the mean (static, Table 1) or the known path (arc, Table 2:
-  the circle; trapezium, Table 3: the edges), taking for each recorded point the nearest
-  point of the ideal path;
-* against ground truth at the same instant (what the paper could not measure);
-
-with the paper's perception method and the default one side by side, beside the paper's
-published tables.  Plots like Figures 7-9 are saved as PNG.
+Each experiment (:func:`humanpt.twin.experiment.run_experiment`: the closed loop in
+lock-step, the simulated Puma behind the ALTER link, the path recorded as the paper did)
+gives the paper's statistics: ME, MAE, MaxE and SD of x, y, z, psi, theta, phi, as the
+paper computed them and against ground truth, with the paper's perception method and the
+default one side by side, beside the paper's published tables.  Plots like Figures 7-9
+are saved as PNG.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
-import time
 from pathlib import Path
 
 import numpy as np
 
-from humanpt.geometry.transforms import x_from_transform
 from humanpt.twin import evaluate
 
 # The paper's published Tables 1-3 (mm, deg); Table 2 and 3 have no SD row.
@@ -39,74 +31,6 @@ PAPER = {
                   "MaxE": [3.934, 3.8898, 1.344, 3.181, 2.588, 3.276]},
 }
 TABLE = {"static": 1, "arc": 2, "trapezium": 3}
-# The static experiment records 106 vectors (paper, Section 6) at 10 cycles each.
-STATIC_VECTORS = 106
-
-
-def _ideal_path(op, n: int = 4000) -> np.ndarray:
-    """(n, 6) X of the ideal path (the scenario without tremor): the tip's for a tip path."""
-    from humanpt.operator.scenario import Trajectory
-
-    traj = Trajectory(op.build_scenario())
-    ts = np.linspace(0.0, max(traj.duration_s, 1e-9), n)
-    return np.array([x_from_transform(traj.path_pose(t)) for t in ts])
-
-
-def against_known_path(x: np.ndarray, ideal: np.ndarray) -> np.ndarray:
-    """Errors (N, 6) of recorded X against the nearest (in position) point of the ideal path."""
-    d = np.linalg.norm(x[:, None, :3] - ideal[None, :, :3], axis=2)
-    near = ideal[np.argmin(d, axis=1)]
-    err = x - near
-    err[:, 3:] = evaluate.wrap_deg(err[:, 3:])
-    return err
-
-
-def run_one(name: str, method: str, seed: int, robot: str, run_dir: Path | None, vectors: int = STATIC_VECTORS,
-            speed_scale: float = 1.0, overrides: dict[str, dict] | None = None):
-    """One experiment with one perception method: (path X (N, 6), errors as the paper did,
-    errors against ground truth, which point, wall seconds, twin seconds). ``overrides``:
-    {section: {key: value}} for sim_camera, perception, pose_filter, controller."""
-    from humanpt.cli.demo import scenario_duration_s, with_overrides
-    from humanpt.controller.config import ControllerConfig
-    from humanpt.perception.config import PerceptionConfig
-    from humanpt.pose_filter.config import PoseFilterConfig
-    from humanpt.schemas import humanpt_pb2 as pb
-    from humanpt.schemas.convert import header
-    from humanpt.sim_camera import SimCameraConfig
-    from humanpt.twin.system import build_system, operator_config
-
-    op = operator_config(name, seed)
-    over = overrides or {}
-    ctl = with_overrides(ControllerConfig(recording_delay_cycles=10), over, "controller")
-    if name == "static":
-        # Record 106 vectors once the servo has settled on the still target.
-        op = dataclasses.replace(op, start_delay_s=3.0)
-        record_from_s, duration = 3.0, 3.0 + vectors * 10 * ctl.cycle_period_ms * 1e-3 + 0.2
-    else:
-        op = dataclasses.replace(op, speed_scale=speed_scale)
-        record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
-    world = build_system(op, seed=seed, perception=with_overrides(PerceptionConfig(method=method), over, "perception"),
-                         controller=ctl, robot=robot, run_dir=run_dir, digest=False,
-                         pose_filter=with_overrides(PoseFilterConfig(), over, "pose_filter"),
-                         sim_camera=with_overrides(SimCameraConfig(), over, "sim_camera"))
-    t0 = time.perf_counter()
-    world.run_until(round(record_from_s * 1e9))
-    world.lockstep.inject(world.now_ns, "controller", "console/command",
-                          pb.Command(header=header(world.now_ns), component="controller", verb="record_start"))
-    world.run_until(round(duration * 1e9))
-    wall = time.perf_counter() - t0
-    world.close()
-    which, err_truth, _ = evaluate.path_truth_errors(world)
-    _, xg, xt = evaluate.path_points(world)
-    x = xt if xt is not None else xg
-    if name == "static":
-        x = x[:vectors]
-        err_truth = err_truth[:vectors]
-        err_paper = x - x.mean(0)
-        err_paper[:, 3:] = evaluate.wrap_deg(err_paper[:, 3:])
-    else:
-        err_paper = against_known_path(x, _ideal_path(op))
-    return x, err_paper, err_truth, which, wall, duration
 
 
 def _fmt_row(label: str, v) -> str:
@@ -149,6 +73,8 @@ def plots(name: str, results: dict, out: Path) -> Path:
 def experiment(args) -> int:
     from humanpt.cli.commands import run_stamp
     from humanpt.cli.demo import parse_overrides
+    from humanpt.twin.experiment import run_experiment
+    from humanpt.twin.run import OverrideError
 
     over = parse_overrides(getattr(args, "set", None))
     unknown = set(over) - {"sim_camera", "perception", "pose_filter", "controller"}
@@ -162,11 +88,14 @@ def experiment(args) -> int:
     results = {}
     for m in methods:
         run_dir = out / f"run-{m}" if args.record else None
-        x, ep, et, which, wall, dur = run_one(args.name, m, args.seed, args.robot, run_dir, args.vectors,
-                                              args.speed_scale, over)
-        results[m] = {"x": x, "paper": evaluate.Stats.of(ep), "truth": evaluate.Stats.of(et), "which": which,
-                      "wall_s": wall, "twin_s": dur}
-        print(f"  {m} perception: {len(x)} vectors of {which}, {dur:.1f} s of twin time in {wall:.1f} s", flush=True)
+        try:
+            r = run_experiment(args.name, m, args.seed, args.robot, run_dir, args.vectors, args.speed_scale, over)
+        except OverrideError as e:
+            raise SystemExit(f"humanpt: {e}") from None
+        results[m] = {"x": r.x, "paper": evaluate.Stats.of(r.err_paper), "truth": evaluate.Stats.of(r.err_truth),
+                      "which": r.which, "wall_s": r.wall_s, "twin_s": r.twin_s}
+        print(f"  {m} perception: {len(r.x)} vectors of {r.which}, {r.twin_s:.1f} s of twin time in "
+              f"{r.wall_s:.1f} s", flush=True)
     how = "against the mean" if args.name == "static" else "against the known path"
     lines = [f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
              f"(mm, deg; errors {how} as the paper computed them, and against ground truth)", "",

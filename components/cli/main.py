@@ -326,7 +326,7 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             from humanpt.cli.bench import bench_perception
             return bench_perception(args)
         if args.bench_verb is None:
-            from humanpt.cli.bench_all import bench_all
+            from humanpt.cli.bench import bench_all
 
             return bench_all(args)
         ap.parse_args(["bench", "--help"])

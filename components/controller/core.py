@@ -38,6 +38,7 @@ from humanpt.controller import law
 from humanpt.controller.config import ControllerConfig
 from humanpt.geometry.calibration import calibrate_tip_paper, calibrate_tip_pivot
 from humanpt.geometry.errors import GeometryError
+from humanpt.geometry.rig import flange_T_desired
 from humanpt.geometry.transforms import (
     invert_transform,
     make_transform,
@@ -76,8 +77,7 @@ def _prev(cycle: int) -> int:
 def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
     """The desired frame D in the flange frame (m): on the camera's optical axis at dz,
     parallel to the camera (Section 5)."""
-    return _m(transform_from_x(np.asarray(c.flange_T_camera_x))) @ make_transform(
-        np.eye(3), np.array([0, 0, c.dz_mm * 1e-3]))
+    return _m(flange_T_desired(transform_from_x(np.asarray(c.flange_T_camera_x)), c.dz_mm))
 
 
 class ControllerCore(Core):

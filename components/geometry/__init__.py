@@ -49,6 +49,7 @@ from .rig import (
     DEFAULT_DZ_MM,
     DEFAULT_FLANGE_T_CAMERA_MM,
     camera_T_desired,
+    flange_T_desired,
     viewing_world_T_flange,
 )
 from .target import (
@@ -127,6 +128,7 @@ __all__ = [
     "DEFAULT_DZ_MM",
     "DEFAULT_FLANGE_T_CAMERA_MM",
     "camera_T_desired",
+    "flange_T_desired",
     "viewing_world_T_flange",
     # calibration (eq. 10-13)
     "TipCalibration",

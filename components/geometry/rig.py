@@ -21,6 +21,7 @@ __all__ = [
     "DEFAULT_FLANGE_T_CAMERA_MM",
     "DEFAULT_DZ_MM",
     "camera_T_desired",
+    "flange_T_desired",
     "viewing_world_T_flange",
 ]
 
@@ -38,6 +39,14 @@ def camera_T_desired(dz_mm: float = DEFAULT_DZ_MM) -> np.ndarray:
     if not (np.isfinite(dz_mm) and dz_mm > 0):
         raise ValueError(f"dz_mm must be finite and > 0, got {dz_mm}")
     return make_transform(np.eye(3), np.array([0.0, 0.0, dz_mm]))
+
+
+def flange_T_desired(
+    flange_T_camera: np.ndarray = DEFAULT_FLANGE_T_CAMERA_MM, dz_mm: float = DEFAULT_DZ_MM
+) -> np.ndarray:
+    """Section 5: the desired point D frame in the flange frame, ``flange_T_camera @
+    camera_T_desired(dz_mm)``: where the servo drives the target. (4, 4), mm in, mm out."""
+    return np.asarray(flange_T_camera, dtype=float) @ camera_T_desired(dz_mm)
 
 
 def viewing_world_T_flange(

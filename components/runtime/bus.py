@@ -49,3 +49,15 @@ def liveliness_key(cell: str, component: str) -> str:
 def params_key(cell: str, component: str) -> str:
     """The parameter queryable of a running component."""
     return f"{KEY_PREFIX}/{cell}/{component}/params"
+
+
+def open_tool_session(rt: RuntimeConfig) -> zenoh.Session:
+    """A tool's session (topics, echo, param, console, the demo's own): always a client of
+    the router. As a peer every component would link to it and re-route when it comes and
+    goes (a ~35 ms stall of the servo loop seen as the demo's session left is gone since;
+    the cause was not isolated further). Raises ConnectionError naming the router."""
+    try:
+        return zenoh.open(zenoh_config(rt, mode="client"))
+    except zenoh.ZError as e:
+        raise ConnectionError(f"cannot reach the router at {', '.join(rt.connect)}: {e}. "
+                              "Start one with `humanpt router` or pass --connect ENDPOINT.") from e

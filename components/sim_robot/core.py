@@ -42,7 +42,7 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter_gateway.limiter import EventLimiter, SerialLinkCoreMixin
+from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb

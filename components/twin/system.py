@@ -10,7 +10,8 @@ import numpy as np
 
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
-from humanpt.geometry.transforms import x_from_transform
+from humanpt.geometry.rig import flange_T_desired
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig
 from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.core import PerceptionCore
@@ -23,8 +24,8 @@ from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "operator_config", "puma_placement", "puma_cores", "tracking_errors", "path_points",
-           "truth_at"]
+__all__ = ["build_system", "flange_T_desired_mm", "operator_config", "puma_placement", "puma_cores",
+           "tracking_errors", "path_points", "truth_at"]
 
 
 def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") -> tuple[float, ...]:
@@ -89,8 +90,6 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     standin = None
     wire = False
     if robot_cores is None:
-        from humanpt.geometry.transforms import transform_from_x
-
         start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
         off = np.asarray(start_offset_mm_deg, dtype=float)
         D = transform_from_x(np.r_[0.0, 0.0, 0.0, off[3:]])
@@ -124,6 +123,10 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
 def tracking_errors(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """True servo error per robot cycle of a built system (see evaluate.tracking_errors)."""
     ctl = next(c for c in world.extra if isinstance(c, ControllerCore))
-    flange_T_desired_mm = ctl.flange_T_desired.copy()
-    flange_T_desired_mm[:3, 3] *= 1e3
-    return evaluate.tracking_errors(world, flange_T_desired_mm)
+    return evaluate.tracking_errors(world, flange_T_desired_mm(ctl.config))
+
+
+def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
+    """The desired point D in the flange frame (4, 4), mm, of a controller configured by
+    ``ctl`` (:func:`humanpt.geometry.flange_T_desired`, as the controller computes it)."""
+    return flange_T_desired(transform_from_x(np.asarray(ctl.flange_T_camera_x)), ctl.dz_mm)

@@ -17,8 +17,8 @@ from typing import Literal
 import numpy as np
 
 from humanpt.geometry import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM, PsvsParams, TargetModel
+from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
-from humanpt.perception.config import PsvsConfig
 from humanpt.runtime.config import live
 
 __all__ = ["VizConfig", "MODES"]

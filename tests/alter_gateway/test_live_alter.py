@@ -15,10 +15,10 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.alter_gateway.harness import ScriptedControllerConfig, scripted_command
 from humanpt.runtime.bus import liveliness_key
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
+from humanpt.testing.harness import ScriptedControllerConfig, scripted_command
 from tests.conftest import run_cli, write_config, zenoh_client
 
 

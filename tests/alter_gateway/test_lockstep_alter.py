@@ -9,11 +9,6 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import (
-    ScriptedControllerConfig,
-    ScriptedControllerCore,
-    scripted_step,
-)
 from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.core import Core
 from humanpt.runtime.lockstep import Lockstep
@@ -22,6 +17,11 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
+from humanpt.testing.harness import (
+    ScriptedControllerConfig,
+    ScriptedControllerCore,
+    scripted_step,
+)
 
 MS = 1_000_000
 CYCLE_NS = 28 * MS

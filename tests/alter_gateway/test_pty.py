@@ -17,12 +17,6 @@ import pytest
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import (
-    ScriptedControllerConfig,
-    ThreadShell,
-    scripted_command,
-    scripted_step,
-)
 from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.replay import replay
 from humanpt.runtime.serial_io import SerialAdapter
@@ -31,6 +25,12 @@ from humanpt.schemas.convert import header
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
+from humanpt.testing.harness import (
+    ScriptedControllerConfig,
+    ThreadShell,
+    scripted_command,
+    scripted_step,
+)
 
 SCRIPT = ScriptedControllerConfig()
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from humanpt.cli.bench_all import latency_and_cycles
+from humanpt.bench.summary import latency_and_cycles
 from humanpt.controller import pathfile
 from humanpt.runtime.replay import replay
 from tests.conftest import free_port, run_cli

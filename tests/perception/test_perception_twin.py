@@ -11,16 +11,16 @@ import pytest
 
 from humanpt.geometry import DEFAULT_FLANGE_T_CAMERA_MM, invert_transform
 from humanpt.perception import PerceptionConfig, PerceptionCore
-from humanpt.perception.evaluate import (
+from humanpt.runtime.replay import replay
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose
+from humanpt.testing.perception_eval import (
     clutter_cases,
     evaluate,
     format_table,
     random_cases,
     standard_cases,
 )
-from humanpt.runtime.replay import replay
-from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_pose
 from humanpt.twin import build_world
 
 

@@ -33,7 +33,7 @@ from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 
-log = logging.getLogger("humanpt.alter_gateway.harness")
+log = logging.getLogger("humanpt.testing.harness")
 
 COMMAND = "controller/command"
 

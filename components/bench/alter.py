@@ -22,6 +22,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,11 +31,11 @@ import numpy as np
 from humanpt.alter.budget import cycle_budget
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.harness import ScriptedControllerConfig, ThreadShell, scripted_command
 from humanpt.alter_gateway.shell import PatientSerialAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
+from humanpt.testing.harness import ScriptedControllerConfig, ThreadShell, scripted_command
 
 
 @dataclass
@@ -227,54 +228,38 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
     return res
 
 
-def bench_alter(
+def line_capacity(period_ms: float) -> str:
+    """Whether a real 38 400 baud line carries a cycle of ``period_ms``: ``same cycle``
+    (the reply fits in the same cycle), ``next cycle`` or ``no`` (:mod:`humanpt.alter.budget`)."""
+    b = cycle_budget(38_400, round(period_ms * 1e6))
+    return "same cycle" if b.same_cycle_reply else ("next cycle" if b.fits else "no")
+
+
+def shortest_sustained(runs: list[AlterRun]) -> float | None:
+    """The shortest period (ms) such that it and every longer one tried ran without a miss
+    (``runs[0]``, the long run at 28 ms, is not one of those tried)."""
+    best = None
+    for r in sorted(runs[1:], key=lambda r: -r.period_ms):
+        if r.cycles == 0 or r.missed:
+            break
+        best = r.period_ms
+    return best
+
+
+def measure_alter(
     duration_s: float = 60.0,
     periods_ms: tuple[float, ...] = (28.0, 16.0, 8.0, 4.0, 2.0),
     search_s: float = 3.0,
     mode: str = "threads",
-    out=print,
+    progress: Callable[[AlterRun], None] | None = None,
 ) -> list[AlterRun]:
-    """Run at 28 ms for ``duration_s``, then ``search_s`` at each of ``periods_ms``; print tables."""
+    """Run at 28 ms for ``duration_s``, then ``search_s`` at each of ``periods_ms``
+    (``mode``: ``threads`` or ``zenoh``); ``progress(run)`` after each."""
     run = run_zenoh if mode == "zenoh" else run_threads
-    logging.getLogger("humanpt.sim_robot").setLevel(
-        logging.WARNING
-    )  # one pty line per run is noise here
-    out(
-        f"humanpt bench alter ({mode}: gateway <-> sim_robot over a real pty; a pty has no baud "
-        "rate; scripted controller answering at once)",
-        flush=True,
-    )
-    main = run(28.0, duration_s)
-    rows = [main]
-    out(f"  28 ms for {duration_s:g} s: {main.on_time}/{main.cycles} cycles on time", flush=True)
-    for p in periods_ms:
-        r = run(p, search_s)
-        rows.append(r)
-        out(f"  {p:g} ms for {search_s:g} s: {r.on_time}/{r.cycles} on time", flush=True)
-    out("")
-    out(
-        f"{'period':>7s} {'run':>6s} {'cycles':>7s} {'on time':>8s} {'missed':>7s} {'reply p50':>10s} "
-        f"{'reply p99':>10s} {'jitter p99':>11s} {'38400 line':>11s}"
-    )
-    for r in rows:
-        b = cycle_budget(38_400, round(r.period_ms * 1e6))
-        line = "same cycle" if b.same_cycle_reply else ("next cycle" if b.fits else "no")
-        lat50 = f"{r.pct(50, r.latency_ms):.2f} ms" if r.latency_ms else "-"
-        lat99 = f"{r.pct(99, r.latency_ms):.2f} ms" if r.latency_ms else "-"
-        jit = f"{r.pct(99, r.jitter_ms):.2f} ms" if r.jitter_ms else "-"
-        out(
-            f"{r.period_ms:5g} ms {r.duration_s:5g}s {r.cycles:7d} {r.on_time:8d} {r.missed:7d} {lat50:>10s} "
-            f"{lat99:>10s} {jit:>11s} {line:>11s} {r.note}"
-        )
-    # The shortest period such that it and every longer one tried ran without a miss.
-    best = None
-    for r in sorted(rows[1:], key=lambda r: -r.period_ms):
-        if r.cycles == 0 or r.missed:
-            break
-        best = r.period_ms
-    out("")
-    out(
-        f"shortest cycle period sustained without a miss: {f'{best:g} ms' if best else 'none of those tried'}"
-        f" ({search_s:g} s runs)"
-    )
+    logging.getLogger("humanpt.sim_robot").setLevel(logging.WARNING)  # one pty line per run is noise here
+    rows = []
+    for period_ms, seconds in ((28.0, duration_s), *((p, search_s) for p in periods_ms)):
+        rows.append(run(period_ms, seconds))
+        if progress is not None:
+            progress(rows[-1])
     return rows

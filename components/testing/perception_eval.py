@@ -26,8 +26,8 @@ rotation angle, deg) of FULL measurements next to its bound
 (:func:`humanpt.geometry.pose_sigma`, same sigma: the root sum of squares of the three
 position and of the three angle sigmas).
 
-Nothing here is imported by the core; it needs ``humanpt.sim_camera`` and
-``humanpt.operator``.
+Test machinery (``humanpt.testing``): the perception package never imports it; it needs
+``humanpt.sim_camera`` and ``humanpt.operator``.
 """
 
 from __future__ import annotations
@@ -46,10 +46,9 @@ from humanpt.geometry import (
     transform_points,
     viewing_world_T_flange,
 )
-
-from .config import PerceptionConfig
-from .correspondence import FULL, LOST, POSITION_ONLY
-from .pipeline import Perception
+from humanpt.perception.config import PerceptionConfig
+from humanpt.perception.correspondence import FULL, LOST, POSITION_ONLY
+from humanpt.perception.pipeline import Perception
 
 __all__ = [
     "Case",

@@ -1,4 +1,6 @@
-"""Rate-limited events: the first occurrence goes out at once, repeats at most once per
+"""Shared by both ends of the ALTER link (alter_gateway and sim_robot cores).
+
+Rate-limited events: the first occurrence goes out at once, repeats at most once per
 interval with a count of what was held back. Pure (times are given, never read)."""
 
 from __future__ import annotations

@@ -1,8 +1,10 @@
-"""``humanpt bench`` (no sub-verb): one table of the figures that matter, measured now.
+"""``humanpt bench`` (no sub-verb): the figures that matter, measured now (the CLI prints
+them as one table).
 
 * perception: images/s of the default method's core step on 640x480 twin images, one core;
 * lock-step: the closed loop on virtual time, in x real time (with and without recording);
-* a live run of the whole system (``humanpt demo``, every component a process over Zenoh):
+* a live run of the whole system (:func:`humanpt.twin.live.run_live`, as ``humanpt demo``
+  runs it: every component a process over Zenoh):
   image-to-command latency (capture stamp to the controller's first command using it),
   ALTER cycles answered on time (a command of that cycle within the gateway's deadline);
 * replay of that run's recordings, in x real time;
@@ -11,22 +13,23 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 
-def _perception_rate(n: int = 300) -> float:
+def perception_rate(n: int = 300) -> float:
+    """Images/s of the default method's core step on 640x480 twin images, cv2 on one thread."""
     import cv2
 
     from humanpt.perception import PerceptionConfig, PerceptionCore
-    from humanpt.perception.evaluate import random_cases
     from humanpt.schemas.convert import image
     from humanpt.sim_camera import Renderer
+    from humanpt.testing.perception_eval import random_cases
 
     cv2.setNumThreads(1)
     cases = random_cases(16, seed=1)
@@ -42,17 +45,16 @@ def _perception_rate(n: int = 300) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def _lockstep_speed(seconds: float, record: bool) -> float:
-    from humanpt.twin.system import build_system
+def lockstep_speed(seconds: float, record: bool) -> float:
+    """x real time of the closed loop on the lock-step twin (arc, the simulated Puma),
+    ``seconds`` of twin time, every core recorded or not (:func:`humanpt.twin.run.run`)."""
+    from humanpt.twin.run import SystemConfig, run
 
     with tempfile.TemporaryDirectory() as d:
-        # As humanpt demo --lockstep runs it (no output digest).
-        world = build_system("arc", seed=0, robot="puma", run_dir=d if record else None, keep_outputs=False,
-                             digest=False)
-        t0 = time.perf_counter()
-        world.run_for(seconds)
-        world.close()
-        return seconds / (time.perf_counter() - t0)
+        # As humanpt demo --lockstep runs it (no output digest), without keeping outputs.
+        res = run(SystemConfig.for_scenario("arc", 0), robot="puma", duration_s=seconds,
+                  run_dir=d if record else None, keep_outputs=False)
+        return res.speed
 
 
 def latency_and_cycles(run_dir: Path, deadline_ms: float = 6.0) -> dict:
@@ -85,29 +87,44 @@ def latency_and_cycles(run_dir: Path, deadline_ms: float = 6.0) -> dict:
     return {"latency_ms": np.array(lat), "cycles": len(judged), "on_time": on_time}
 
 
-def bench_all(args) -> int:
-    rows: list[tuple[str, str, str]] = []
+@dataclass
+class Figure:
+    """One figure of the table: its name, value and a note (a target, a sample size)."""
+
+    name: str
+    value: str
+    note: str = ""
+
+
+def measure_all(live_seconds: float, lockstep_seconds: float, scenario: str,
+                on_figure: Callable[[Figure], None] | None = None) -> tuple[list[Figure], float, str]:
+    """Every figure, in order: (figures, wall seconds of the live part, what went wrong in
+    the live run or ''). ``on_figure`` is called as each is measured."""
+    figures: list[Figure] = []
 
     def show(name, value, note=""):
-        rows.append((name, value, note))
-        print(f"  {name}: {value} {note}", file=sys.stderr, flush=True)
+        figures.append(Figure(name, value, note))
+        if on_figure is not None:
+            on_figure(figures[-1])
 
-    print("humanpt bench: measuring (a shared 2-core machine is noisy: compare ratios, not digits)",
-          file=sys.stderr, flush=True)
-    show("perception, default method (core step, 640x480, one core)", f"{_perception_rate():.0f} images/s",
+    failure = ""
+    show("perception, default method (core step, 640x480, one core)", f"{perception_rate():.0f} images/s",
          "target >= 500")
-    show("lock-step closed loop, no recording", f"{_lockstep_speed(args.lockstep_seconds, False):.1f}x real time")
+    show("lock-step closed loop, no recording", f"{lockstep_speed(lockstep_seconds, False):.1f}x real time")
     show("lock-step closed loop, recorded (humanpt demo --lockstep)",
-         f"{_lockstep_speed(args.lockstep_seconds, True):.1f}x real time", "target >= 10x")
+         f"{lockstep_speed(lockstep_seconds, True):.1f}x real time", "target >= 10x")
     with tempfile.TemporaryDirectory() as d:
+        from humanpt.twin.live import run_live
+        from humanpt.twin.run import SystemConfig
+
         run_dir = Path(d) / "live"
+        run_dir.mkdir()
         t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-m", "humanpt.cli.main", "demo", "--scenario", args.scenario,
-                            "--duration", str(args.live_seconds), "--run-dir", str(run_dir)],
-                           capture_output=True, text=True, timeout=args.live_seconds * 4 + 180)
-        if r.returncode != 0:
-            print(r.stdout[-2000:], r.stderr[-2000:], file=sys.stderr)
-            show("live demo", "FAILED", f"exit {r.returncode}")
+        # As humanpt demo --scenario SCENARIO --duration LIVE_SECONDS runs it.
+        live = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=live_seconds)
+        if live.failed:
+            failure = "; ".join(live.failed) + "\n" + (run_dir / "processes.log").read_text()[-2000:]
+            show("live demo", "FAILED", live.failed[0])
         else:
             res = latency_and_cycles(run_dir)
             lat = res["latency_ms"]
@@ -116,25 +133,20 @@ def bench_all(args) -> int:
                      f"(n = {len(lat)})")
                 show("image-to-command latency through Zenoh, p99", f"{np.percentile(lat, 99):.2f} ms",
                      "target <= 10 ms")
-            show(f"ALTER cycles answered on time ({args.live_seconds:g} s live demo)",
+            show(f"ALTER cycles answered on time ({live_seconds:g} s live demo)",
                  f"{res['on_time']} / {res['cycles']}", "target: all")
             from humanpt.runtime.replay import replay
 
             t1 = time.perf_counter()
             ok = all(replay(f).match for f in sorted(run_dir.glob("*.mcap")))
             dt = time.perf_counter() - t1
-            show("replay of every component of that run", f"{args.live_seconds / dt:.1f}x real time",
+            show("replay of every component of that run", f"{live_seconds / dt:.1f}x real time",
                  "outputs identical" if ok else "MISMATCH")
         wall = time.perf_counter() - t0
-    from humanpt.cli.bench import mcap_throughput, synthetic_image
+    from humanpt.bench.measure import mcap_throughput, synthetic_image
     from humanpt.schemas.convert import image
 
     imgs = [image(synthetic_image(seed=s), s) for s in range(8)]
     mbps, rate, _ = mcap_throughput(lambda n: imgs[n % len(imgs)], 2.0)
     show("MCAP write, 640x480 images, zstd", f"{mbps:.0f} MB/s", f"({rate:.0f} images/s)")
-    w = max(len(r[0]) for r in rows)
-    print(f"\nhumanpt bench (live run {args.live_seconds:g} s of {args.scenario}, {wall:.0f} s wall)\n")
-    print(f"{'figure':{w}s}  {'value':>20s}  note")
-    for name, value, note in rows:
-        print(f"{name:{w}s}  {value:>20s}  {note}")
-    return 0
+    return figures, wall, failure

@@ -1,0 +1,99 @@
+"""The paper's Section 6 experiments (static, arc, trapezium) on the lock-step twin.
+
+Each runs the closed loop (:func:`humanpt.twin.run.run`), records the path as the paper
+did (one state vector every 10 cycles) and gives its errors
+
+* as the paper computed them: against the mean (static, Table 1) or the known path (arc,
+  Table 2: the circle; trapezium, Table 3: the edges), taking for each recorded point the
+  nearest point of the ideal path;
+* against ground truth at the same instant (what the paper could not measure).
+
+``humanpt experiment`` prints them beside the paper's published tables.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.controller.config import ControllerConfig
+from humanpt.geometry.transforms import x_from_transform
+from humanpt.operator import OperatorConfig
+from humanpt.perception.config import PerceptionConfig
+
+from . import evaluate
+from .run import SystemConfig, run, scenario_duration_s
+
+__all__ = ["EXPERIMENTS", "STATIC_VECTORS", "ExperimentResult", "run_experiment", "against_known_path",
+           "ideal_path"]
+
+EXPERIMENTS = ("static", "arc", "trapezium")
+# The static experiment records 106 vectors (paper, Section 6) at 10 cycles each.
+STATIC_VECTORS = 106
+
+
+def ideal_path(op: OperatorConfig, n: int = 4000) -> np.ndarray:
+    """(n, 6) X (mm, deg) of the ideal path (the scenario without tremor): the tip's for a
+    tip path."""
+    from humanpt.operator.scenario import Trajectory
+
+    traj = Trajectory(op.build_scenario())
+    ts = np.linspace(0.0, max(traj.duration_s, 1e-9), n)
+    return np.array([x_from_transform(traj.path_pose(t)) for t in ts])
+
+
+def against_known_path(x: np.ndarray, ideal: np.ndarray) -> np.ndarray:
+    """Errors (N, 6) of recorded X against the nearest (in position) point of the ideal path."""
+    d = np.linalg.norm(x[:, None, :3] - ideal[None, :, :3], axis=2)
+    near = ideal[np.argmin(d, axis=1)]
+    err = x - near
+    err[:, 3:] = evaluate.wrap_deg(err[:, 3:])
+    return err
+
+
+@dataclass
+class ExperimentResult:
+    """One experiment with one perception method."""
+
+    x: np.ndarray  # (N, 6) the recorded path, X (mm, deg): the tip's for a tip path, else G's
+    err_paper: np.ndarray  # (N, 6) errors as the paper computed them
+    err_truth: np.ndarray  # (N, 6) errors against ground truth at the same instant
+    which: str  # the point recorded ("G" or "tip")
+    wall_s: float
+    twin_s: float
+
+
+def run_experiment(name: str, method: str, seed: int = 0, robot: str = "puma", run_dir: str | Path | None = None,
+                   vectors: int = STATIC_VECTORS, speed_scale: float = 1.0,
+                   overrides: dict[str, dict] | None = None) -> ExperimentResult:
+    """Experiment ``name`` (one of :data:`EXPERIMENTS`) with perception ``method``.
+    ``overrides``: {section: {key: value}} for sim_camera, perception, pose_filter,
+    controller (OverrideError on a bad key or value). Static: ``vectors`` recorded once
+    the servo has settled on the still target; arc, trapezium: the scenario at
+    ``speed_scale`` times its speed, recorded from its start."""
+    cfg = SystemConfig.for_scenario(name, seed, overrides, controller=ControllerConfig(recording_delay_cycles=10),
+                                    perception=PerceptionConfig(method=method))
+    op = cfg.operator
+    if name == "static":
+        op = dataclasses.replace(op, start_delay_s=3.0)
+        record_from_s = 3.0
+        duration = 3.0 + vectors * 10 * cfg.controller.cycle_period_ms * 1e-3 + 0.2
+    else:
+        op = dataclasses.replace(op, speed_scale=speed_scale)
+        record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
+    res = run(dataclasses.replace(cfg, operator=op), robot=robot, duration_s=duration, record_from_s=record_from_s,
+              run_dir=run_dir)
+    which, err_truth, _ = res.path_truth_errors()
+    _, xg, xt = res.path_points()
+    x = xt if xt is not None else xg
+    if name == "static":
+        x = x[:vectors]
+        err_truth = err_truth[:vectors]
+        err_paper = x - x.mean(0)
+        err_paper[:, 3:] = evaluate.wrap_deg(err_paper[:, 3:])
+    else:
+        err_paper = against_known_path(x, ideal_path(op))
+    return ExperimentResult(x, err_paper, err_truth, which, res.wall_s, duration)

@@ -1,0 +1,219 @@
+"""The whole system on the twin, live: the router, sim_robot behind a pty, alter_gateway,
+operator, sim_camera, perception, pose_filter and controller (and viz) as separate
+processes over Zenoh, each recording its MCAP in the run directory (``humanpt demo``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
+from humanpt.runtime import config as cfgmod
+from humanpt.runtime.bus import free_tcp_port, liveliness_key, open_tool_session
+from humanpt.runtime.config import to_table
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
+
+from .run import SystemConfig
+from .system import puma_cores
+from .world import start_flange_for
+
+__all__ = ["LIVE_COMPONENTS", "LiveResult", "live_sections", "run_live", "write_toml"]
+
+LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"cannot write {v!r} to TOML")
+
+
+def write_toml(path: Path, sections: dict[str, dict]) -> None:
+    """Write {section: {key: value}} as the run's TOML config (nested tables as
+    ``[section.key]``; lists of tables and None values are left out)."""
+    lines = ["# written by humanpt demo: the configuration of this run", ""]
+    for name, table in sections.items():
+        lines.append(f"[{name}]")
+        for k, v in table.items():
+            if v is None or (isinstance(v, (list, tuple)) and v and isinstance(v[0], dict)):
+                continue
+            if isinstance(v, dict):
+                continue
+            lines.append(f"{k} = {_toml_value(v)}")
+        lines.append("")
+        for k, v in table.items():
+            if isinstance(v, dict):  # a nested config table, e.g. [sim_camera.psvs]
+                lines.append(f"[{name}.{k}]")
+                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
+                lines.append("")
+    path.write_text("\n".join(lines))
+
+
+def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
+                  overrides: dict[str, dict] | None = None) -> tuple[SystemConfig, dict[str, dict]]:
+    """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
+    simulated Puma is mounted so that it starts where the camera sees the target, behind a
+    pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
+    get only the ``overrides`` keys (so the defaults stay theirs), sim_camera its ``psvs``
+    only when overridden."""
+    over = overrides or {}
+    op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
+    start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
+    robot, gateway = puma_cores(start)
+    pty = str(run_dir / "alter.pty")
+    start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
+    robot = dataclasses.replace(robot, pty_link=pty,
+                                start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
+    # A pty delivers a STATUS at once (no 38 400 baud line time): its pose is for "now".
+    gateway = dataclasses.replace(gateway, port=pty, status_delay_ms=0.0)
+    # The operator starts with the rest (its start-up must not fall into the running servo
+    # loop: on two cores that delayed ALTER statuses by ~85 ms) and holds the start pose
+    # while everything comes up and the servo settles.
+    op = dataclasses.replace(op, start_delay_s=3.0)
+    sections = {
+        "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
+                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer"},
+        "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
+        "sim_camera": to_table(cam), "controller": to_table(ctl),
+    }
+    if "psvs" not in over.get("sim_camera", {}):
+        sections["sim_camera"].pop("psvs", None)
+    for name in ("perception", "pose_filter"):
+        if over.get(name):
+            sections[name] = over[name]
+    return dataclasses.replace(cfg, operator=op), sections
+
+
+def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], timeout_s: float, procs) -> bool:
+    deadline = time.monotonic() + timeout_s
+    with open_tool_session(cfg.runtime) as s:
+        while time.monotonic() < deadline:
+            if any(p.poll() is not None for _, p in procs):
+                return False
+            alive = {str(r.ok.key_expr).rsplit("/", 1)[-1]
+                     for r in s.liveliness().get(liveliness_key(cfg.runtime.cell, "*")) if r.ok is not None}
+            if set(names) <= alive:
+                return True
+            time.sleep(0.3)
+    return False
+
+
+def _lower_priority(pid: int) -> None:
+    """A lower scheduling priority for a child (POSIX; a no-op elsewhere)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, 10)
+    except (AttributeError, OSError):
+        pass
+
+
+@dataclass
+class LiveResult:
+    """A finished live run."""
+
+    config: SystemConfig  # as run live (see live_sections)
+    run_dir: Path
+    duration_s: float  # scenario time run (from everything up to the stop, less the 1 s before recording)
+    wall_s: float  # wall time with start-up and stop
+    stop_ns: int  # wall clock (ns) when the processes were told to stop
+    failed: list[str] = field(default_factory=list)  # what went wrong; empty: the run went through
+
+
+def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None, viewer: bool = False,
+             duration_s: float | None = None, overrides: dict[str, dict] | None = None,
+             stop: threading.Event | None = None, on_started: Callable[[list[str]], None] | None = None,
+             progress: Callable[[float, float], None] | None = None) -> LiveResult:
+    """Run ``cfg`` live (:func:`live_sections`; ``port``: the router's, a free one by
+    default; ``viewer``: viz too) for ``duration_s`` of scenario (default: start delay +
+    scenario + 1.5 s) after everything is up, recording the path from a second after
+    that. ``stop`` ends the run early; ``on_started(components)`` once the processes are
+    spawned; ``progress(elapsed_s, total_s)`` about five times a second."""
+    run_dir = Path(run_dir)
+    port = port or free_tcp_port()
+    cfg, sections = live_sections(cfg, run_dir, port, overrides)
+    cfg_path = run_dir / "humanpt.toml"
+    write_toml(cfg_path, sections)
+    file_cfg = cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
+    comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
+    base = [sys.executable, "-m", "humanpt.cli.main"]
+    procs: list[tuple[str, subprocess.Popen]] = []
+    stop = stop or threading.Event()
+    duration = duration_s or cfg.default_duration_s()
+    failed: list[str] = []
+    t0 = time.perf_counter()
+    with open(run_dir / "processes.log", "w") as log:
+        try:
+            procs.append(("router", subprocess.Popen(base + ["router", "--config", str(cfg_path)], stdout=log,
+                                                     stderr=subprocess.STDOUT)))
+            time.sleep(0.5)
+            for name in comps + ["operator"]:
+                p = subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
+                                     stdout=log, stderr=subprocess.STDOUT)
+                if name == "operator":
+                    # The simulated operator (a stand-in for the human, not part of the
+                    # system) runs at a lower priority.
+                    _lower_priority(p.pid)
+                procs.append((name, p))
+            if on_started is not None:
+                on_started(comps)
+            if not _wait_alive(file_cfg, tuple(comps) + ("operator",), 60.0, procs):
+                failed.append("the components did not all come up within 60 s")
+            else:
+                _drive(file_cfg, duration, procs, stop, failed, progress)
+        finally:
+            stop_ns = time.time_ns()
+            for _, p in reversed(procs):
+                if p.poll() is None:
+                    p.send_signal(signal.SIGTERM)
+            for _, p in reversed(procs):
+                try:
+                    p.wait(timeout=15)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+    return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, stop_ns, failed)
+
+
+def _drive(file_cfg: cfgmod.ConfigFile, duration: float, procs, stop: threading.Event, failed: list[str],
+           progress: Callable[[float, float], None] | None) -> None:
+    """Start the path recording a second after everything is up; watch the processes until
+    ``duration`` + 1 s, a stop, or one of them exiting."""
+    t_start = time.monotonic()
+    with open_tool_session(file_cfg.runtime) as s:
+        pub = s.declare_publisher("humanpt/demo/console/command")
+        recording = False
+        while not stop.wait(0.2):
+            el = time.monotonic() - t_start
+            if progress is not None:
+                progress(el, duration + 1.0)
+            # Record from a second after everything is up: the operator, which came up
+            # with the rest, holds the start pose for start_delay_s, so the path begins
+            # with it still whatever the order the processes came up in.
+            if not recording and el >= 1.0:
+                pub.put(pb.Command(header=header(time.time_ns()), component="controller",
+                                   verb="record_start").SerializeToString())
+                recording = True
+            if el >= duration + 1.0:
+                break
+            dead = [(n, p.returncode) for n, p in procs if p.poll() is not None]
+            if dead:
+                failed += [f"{n} exited with {rc}" for n, rc in dead]
+                break
+        pub.undeclare()
