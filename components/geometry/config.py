@@ -4,12 +4,18 @@ one dataclass, so the simulated camera and perception always mean the same thing
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
+
+from humanpt.runtime.config import Range
 
 from .psvs import PsvsParams, psvs_m_l_mm
 
 __all__ = ["PsvsConfig"]
 
 _M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
+
+# A distortion coefficient (OpenCV's k1, k2, p1, p2, k3): real lenses stay well inside.
+Dist = Annotated[float, Range(-100.0, 100.0, "")]
 
 
 @dataclass(frozen=True)
@@ -19,17 +25,17 @@ class PsvsConfig:
     Defaults: the issue's sensor - 640 x 480, a_u = a_v = 1000 px, centre (320, 240),
     baseline 90 mm, m, l of a 1 mm beam splitter at 45 deg (eq. (5), (6)), no distortion."""
 
-    image_width_px: int = 640
-    image_height_px: int = 480
-    a_u: float = 1000.0
-    a_v: float = 1000.0
-    skew: float = 0.0
-    u0: float = 320.0
-    v0: float = 240.0
-    baseline_mm: float = 90.0
-    m_mm: float = _M_MM
-    l_mm: float = _L_MM
-    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+    image_width_px: Annotated[int, Range(1, 20000, "px")] = 640
+    image_height_px: Annotated[int, Range(1, 20000, "px")] = 480
+    a_u: Annotated[float, Range(1, 1e6, "px")] = 1000.0
+    a_v: Annotated[float, Range(1, 1e6, "px")] = 1000.0
+    skew: Annotated[float, Range(-1e4, 1e4, "px")] = 0.0
+    u0: Annotated[float, Range(-1e5, 1e5, "px")] = 320.0
+    v0: Annotated[float, Range(-1e5, 1e5, "px")] = 240.0
+    baseline_mm: Annotated[float, Range(0.1, 10000, "mm")] = 90.0
+    m_mm: Annotated[float, Range(-1e4, 1e4, "mm")] = _M_MM
+    l_mm: Annotated[float, Range(-1e4, 1e4, "mm")] = _L_MM
+    dist_coeffs: tuple[Dist, Dist, Dist, Dist, Dist] = (0.0, 0.0, 0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         self.params()  # PsvsParams validates every field and names it

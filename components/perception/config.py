@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, Literal
 
 from humanpt.geometry import TRIANGULATION_METHODS, PsvsParams, TargetModel, psvs_m_l_mm
 from humanpt.geometry.config import PsvsConfig
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Range, live
 
 __all__ = ["PerceptionConfig", "PsvsConfig", "METHODS"]
 
@@ -54,41 +54,41 @@ class PerceptionConfig:
     """
 
     method: Literal["weighted", "paper"] = live("weighted", "weighted (default) or paper")
-    threshold: float = live(60.0, "binarisation threshold T (DN)")
+    threshold: Annotated[float, Range(0, 255, "DN")] = live(60.0, "binarisation threshold T (DN)")
     invert: bool = live(False, "sources darker than the background: use 255 - I")
-    mask: tuple[tuple[int, int, int, int], ...] = live(
+    mask: tuple[tuple[Annotated[int, Range(0, 20_000, "px")], Annotated[int, Range(0, 20_000, "px")], Annotated[int, Range(0, 20_000, "px")], Annotated[int, Range(0, 20_000, "px")]], ...] = live(
         (), "rectangles [u, v, width, height] (px) to ignore"
     )
     track_roi: bool = live(True, "search around the last measurement first")
-    roi_margin_px: int = 40
+    roi_margin_px: Annotated[int, Range(0, 20000, "px")] = 40
     # geometry
     psvs: PsvsConfig = field(default_factory=PsvsConfig)
-    target_leg_mm: float = 40.0
-    target_base_mm: float = 30.0
-    source_diameter_mm: float = 5.0
-    side_tolerance_mm: float = 3.0
-    min_depth_mm: float = 200.0
-    max_depth_mm: float = 2000.0
+    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
+    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
+    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
+    side_tolerance_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 3.0
+    min_depth_mm: Annotated[float, Range(1, 1e5, "mm")] = 200.0
+    max_depth_mm: Annotated[float, Range(1, 1e5, "mm")] = 2000.0
     triangulation: Literal["eq4", "eq2", "lsq"] = "eq4"
     # paper method
-    paper_cross_px: tuple[int, ...] = (9, 5)
-    paper_scanline_tol_px: float = 3.0
+    paper_cross_px: tuple[Annotated[int, Range(1, 1000, "px")], ...] = (9, 5)
+    paper_scanline_tol_px: Annotated[float, Range(0, 1000, "px")] = 3.0
     # weighted method: detection and shape checks
-    noise_k: float = 8.0
-    aperture_pad_px: float = 3.0
-    min_area_px: int = 4
-    max_area_px: int = 3000
-    max_elongation: float = 4.0
-    min_contrast_dn: float = 20.0
-    size_ratio_range: tuple[float, float] = (0.5, 1.8)
-    max_blobs: int = 24
+    noise_k: Annotated[float, Range(0, 1000, "noise SDs")] = 8.0
+    aperture_pad_px: Annotated[float, Range(0, 1000, "px")] = 3.0
+    min_area_px: Annotated[int, Range(1, 10000000, "px")] = 4
+    max_area_px: Annotated[int, Range(1, 10000000, "px")] = 3000
+    max_elongation: Annotated[float, Range(1, 1000, "")] = 4.0
+    min_contrast_dn: Annotated[float, Range(0, 255, "DN")] = 20.0
+    size_ratio_range: tuple[Annotated[float, Range(0.01, 100, "")], Annotated[float, Range(0.01, 100, "")]] = (0.5, 1.8)
+    max_blobs: Annotated[int, Range(3, 10000, "blobs")] = 24
     # weighted method: correspondence
-    epipolar_tol_px: float = 2.0
-    epipolar_sigma_px: float = 0.05
-    side_sigma_mm: float = 0.5
-    max_area_ratio: float = 2.5
+    epipolar_tol_px: Annotated[float, Range(0, 1000, "px")] = 2.0
+    epipolar_sigma_px: Annotated[float, Range(1e-6, 1000, "px")] = 0.05
+    side_sigma_mm: Annotated[float, Range(1e-6, 1000, "mm")] = 0.5
+    max_area_ratio: Annotated[float, Range(1, 1000, "")] = 2.5
     # bad images
-    max_saturated_fraction: float = 0.25
+    max_saturated_fraction: Annotated[float, Range(0, 1, "")] = 0.25
 
     def __post_init__(self) -> None:
         own = "perception"

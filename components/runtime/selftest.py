@@ -7,15 +7,16 @@ ping with an Event on ``ponger/pong`` that carries the ping's sequence number.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Range, live
 from humanpt.runtime.core import Core, Output
 from humanpt.schemas import humanpt_pb2 as pb
 
 
 @dataclass(frozen=True)
 class PingerConfig:
-    period_ms: float = live(100.0, "ping period")
+    period_ms: Annotated[float, Range(1, 60000, "ms")] = live(100.0, "ping period")
     payload_note: str = "ping"
 
     def __post_init__(self):

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 
 from humanpt.geometry import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM, PsvsParams, TargetModel
 from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
-from humanpt.runtime.config import live
+from humanpt.runtime.config import Deg, Mm, Range, live
 
 __all__ = ["VizConfig", "MODES"]
 
@@ -42,7 +42,7 @@ class VizConfig:
 
     mode: Literal["spawn", "serve", "connect", "save"] = "spawn"
     rrd_path: str = ""
-    grpc_port: int = 9876
+    grpc_port: Annotated[int, Range(0, 65535, "TCP port")] = 9876
     bind_ip: str = "0.0.0.0"
     connect_url: str = "rerun+http://127.0.0.1:9876/proxy"
     server_memory_limit: str = "1GiB"
@@ -50,19 +50,19 @@ class VizConfig:
     # What the core forwards to the viewer (pure, replayable decimation).
     # Every 2nd image by default: ~15 Hz of a 30 Hz camera is plenty to watch, and each shown
     # image is recorded twice in viz.mcap (as input and as the forwarded copy).
-    image_every: int = live(2, "show every Nth camera image (1: all)")
+    image_every: Annotated[int, Range(1, 10000, "images")] = live(2, "show every Nth camera image (1: all)")
     # Geometry the views need (the messages carry poses, not the rig).
     # D's distance at start; the view follows the controller's dz_mm changes (its events).
-    dz_mm: float = DEFAULT_DZ_MM
-    flange_T_camera_x: tuple[float, float, float, float, float, float] = _FLANGE_T_CAMERA_X
-    cycle_period_ms: float = 28.0
+    dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
+    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _FLANGE_T_CAMERA_X
+    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     psvs: PsvsConfig = field(default_factory=PsvsConfig)
-    target_leg_mm: float = 40.0
-    target_base_mm: float = 30.0
-    source_diameter_mm: float = 5.0
+    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
+    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
+    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
     # The recorded path is drawn as line strips of at most this many points each (a new
     # strip starts when one is full, so a long path is not re-sent whole at every point).
-    path_strip_points: int = 200
+    path_strip_points: Annotated[int, Range(2, 10000000, "points")] = 200
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:

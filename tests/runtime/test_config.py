@@ -71,7 +71,7 @@ def test_load_file_errors(tmp_path):
     with pytest.raises(cfg.ConfigError, match=r"\[runtime\]: cell 'a/b'"):
         cfg.load(f, config_types())
     f.write_text('[runtime]\ncell = "a"\n[pinger]\nperiod_ms = 0.5\n')
-    with pytest.raises(cfg.ConfigError, match=r"\[pinger\]: period_ms must be within"):
+    with pytest.raises(cfg.ConfigError, match=r"\[pinger\] period_ms: 0.5 is outside its range \[1, 60000\] ms"):
         cfg.load(f, config_types())
 
 
