@@ -449,13 +449,16 @@ def config(args) -> int:
         print(f"{cfg.source}: OK")
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
-    sections = {"runtime": cfgmod.to_table(cfg.runtime)}
+    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig)}
     for name in sorted(COMPONENTS):
-        sections[name] = cfgmod.to_table(cfg.component(name, core_class(name).config_type))
-    for name, table in sections.items():
+        cls = core_class(name).config_type
+        sections[name] = (cfg.component(name, cls), cls)
+    for name, (value, cls) in sections.items():
         print(f"\n[{name}]")
-        for k, v in table.items():
-            print(f"{k} = {json.dumps(v)}")
+        notes = cfgmod.field_notes(cls)
+        for k, v in cfgmod.to_table(value).items():
+            note = f"  # {notes[k]}" if k in notes else ""
+            print(f"{k} = {json.dumps(v)}{note}")
     return 0
 
 

@@ -164,6 +164,29 @@ def hints(cls: type) -> dict[str, Any]:
     return typing.get_type_hints(cls, include_extras=True)
 
 
+def field_notes(cls: type) -> dict[str, str]:
+    """Per field of a config dataclass, what a person editing it should know: its range
+    (of each element for a tuple), whether it is live, and whether it may only tighten."""
+    notes = {}
+    types_ = hints(cls)
+    for f in dataclasses.fields(cls):
+        parts = []
+        ranges = {(r.lo, r.hi, r.unit) for r in _ranges(types_[f.name])}
+        parts += [f"range [{lo:g}, {hi:g}]{' ' + unit if unit else ''}" for lo, hi, unit in sorted(ranges)]
+        if f.metadata.get("live"):
+            parts.append("live" + (f", may only go {f.metadata['stricter']} at run time"
+                                   if f.metadata.get("stricter") else ""))
+        if parts:
+            notes[f.name] = "; ".join(parts)
+    return notes
+
+
+def _ranges(tp) -> list[Range]:
+    if typing.get_origin(tp) is Annotated:
+        return [m for m in tp.__metadata__ if isinstance(m, Range)] + _ranges(typing.get_args(tp)[0])
+    return [r for a in typing.get_args(tp) if a is not Ellipsis for r in _ranges(a)]
+
+
 def build(cls: type, table: Mapping[str, Any], *, source: str, section: str) -> Any:
     """Validate a TOML table into the frozen dataclass ``cls``.
 

@@ -167,3 +167,11 @@ def test_param_over_the_bus_cannot_loosen_a_running_gateway(tmp_path, procs):
     assert r.returncode == 1 and r.stdout.count("REJECTED") == 2, r.stdout + r.stderr
     r = param("max_speed_mm_s=40")
     assert r.returncode == 0 and "set:" in r.stdout, r.stdout + r.stderr
+
+
+def test_config_shows_each_range_and_hard_limit():
+    r = run_cli("config")
+    assert r.returncode == 0, r.stderr
+    assert ("max_speed_mm_s = 100.0  # range [0.001, 250] mm/s; live, may only go lower at run time"
+            in r.stdout)
+    assert "connect_timeout_s = 10.0  # range [0.1, 3600] s" in r.stdout
