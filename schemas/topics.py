@@ -75,6 +75,7 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
     "serial_tx": pb.SerialChunk,  # output: bytes the shell writes to the serial port
     "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
     "capture": RawImage,  # a frame grabbed by the camera's capture adapter (stamp = capture)
+    "path_file": pb.Event,  # what the controller's path writer did on save (path_saved, save_failed)
 }
 
 TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}

@@ -66,7 +66,7 @@ from humanpt.alter_gateway.safety import (
     safe_norm,
 )
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 
@@ -121,7 +121,13 @@ class Sent:
 class AlterGatewayCore(SerialLinkCoreMixin, Core):
     name = "alter_gateway"
     config_type = AlterGatewayConfig
-    inputs = ("controller/command", "console/command")
+    ports = (
+        Port("tick", pb.Tick, "_in_tick"),
+        Port("serial_rx", pb.SerialChunk, "_in_serial"),
+        Port("controller/command", pb.FlangeCommand, "_in_command"),
+        Port("liveliness", pb.Liveliness, "_in_liveliness"),
+        Port("console/command", pb.Command, "_in_console"),
+    )
     watch = ("controller",)
 
     def __init__(self, config: AlterGatewayConfig):
@@ -189,22 +195,42 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     def link_running(self) -> bool:
         return self._host.link.is_running
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+    # -- inputs: the first input of any kind starts the link; each sends what it wrote ------
+    def _begin(self, t_ns: int) -> list[Output]:
         outs: list[Output] = []
         if not self._started:
             self._started = True
             self._link(self._host.start(t_ns), t_ns, outs)
-        if topic == "tick":
-            self._on_tick(t_ns, outs)
-        elif topic == "serial_rx":
-            rx_ns = msg.header.stamp_ns or t_ns
-            self._link(self._host.receive(bytes(msg.data), t_ns), rx_ns, outs)
-        elif topic == "controller/command":
-            self._on_command(t_ns, msg, outs)
-        elif topic == "liveliness":
-            self._on_liveliness(t_ns, msg, outs)
-        elif topic == "console/command":
-            self._on_console(t_ns, msg, outs)
+        return outs
+
+    def _in_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
+        outs = self._begin(t_ns)
+        self._on_tick(t_ns, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_serial(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
+        outs = self._begin(t_ns)
+        rx_ns = msg.header.stamp_ns or t_ns
+        self._link(self._host.receive(bytes(msg.data), t_ns), rx_ns, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_command(self, t_ns: int, msg: pb.FlangeCommand) -> list[Output]:
+        outs = self._begin(t_ns)
+        self._on_command(t_ns, msg, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_liveliness(self, t_ns: int, msg: pb.Liveliness) -> list[Output]:
+        outs = self._begin(t_ns)
+        self._on_liveliness(t_ns, msg, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_console(self, t_ns: int, msg: pb.Command) -> list[Output]:
+        outs = self._begin(t_ns)
+        self._on_console(t_ns, msg, outs)
         self._flush_tx(t_ns, outs)
         return outs
 

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_image, image, image_stamp_ns
 
@@ -29,7 +30,7 @@ class CameraCore(Core):
 
     name = "camera"
     config_type = CameraConfig
-    inputs = ()  # frames arrive as the local input "capture"
+    ports = (Port("capture", RawImage, "_on_capture"),)  # frames grabbed by the shell's adapter
 
     def __init__(self, config: CameraConfig):
         super().__init__(config)
@@ -37,9 +38,7 @@ class CameraCore(Core):
         self.frames = 0
         self.dropped = 0
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic != "capture":
-            return []
+    def _on_capture(self, t_ns: int, msg: RawImage) -> list[Output]:
         try:
             pixels = from_image(msg)
         except MessageError as e:

@@ -46,7 +46,7 @@ from humanpt.geometry.transforms import (
     x_from_transform,
 )
 from humanpt.runtime.config import ConfigError, Deg, Mm, Range, SpeedMmS, coerce
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose, vector3
 
@@ -83,7 +83,13 @@ def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
 class ControllerCore(Core):
     name = "controller"
     config_type = ControllerConfig
-    inputs = ("pose_filter/tob_state", "alter_gateway/robot_state", "console/command")
+    ports = (
+        Port("pose_filter/tob_state", pb.TobState, "_cycle"),
+        Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+        Port("console/command", pb.Command, "_on_console"),
+        # The shell's path writer reports what a save did (a local input).
+        Port("path_file", pb.Event, "_on_path_file"),
+    )
 
     def __init__(self, config: ControllerConfig):
         super().__init__(config)
@@ -116,25 +122,23 @@ class ControllerCore(Core):
         self._derive(new)
 
     # -- inputs ------------------------------------------------------------------------------
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic == "alter_gateway/robot_state":
-            try:
-                T = from_pose(msg.world_T_flange)
-            except MessageError as e:
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
-            self.robot = (msg.cycle, msg.header.stamp_ns, T)
-            if self.start_world_T_flange is None:
-                self.start_world_T_flange = T.copy()
-            return []
-        if topic == "pose_filter/tob_state":
-            return self._cycle(t_ns, msg)
-        if topic == "path_file":  # the shell's path writer reports what it did (local input)
-            return [self.event(t_ns, msg.severity, msg.code, msg.text)]
-        if topic == "console/command":
-            if msg.component not in ("", self.name):
-                return []
-            return self._command(t_ns, msg.verb, msg.args_json)
+    def _on_path_file(self, t_ns: int, msg: pb.Event) -> list[Output]:
+        return [self.event(t_ns, msg.severity, msg.code, msg.text)]
+
+    def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
+        try:
+            T = from_pose(msg.world_T_flange)
+        except MessageError as e:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
+        self.robot = (msg.cycle, msg.header.stamp_ns, T)
+        if self.start_world_T_flange is None:
+            self.start_world_T_flange = T.copy()
         return []
+
+    def _on_console(self, t_ns: int, msg: pb.Command) -> list[Output]:
+        if msg.component not in ("", self.name):
+            return []
+        return self._command(t_ns, msg.verb, msg.args_json)
 
     # -- one ALTER cycle ----------------------------------------------------------------------
     def _cycle(self, t_ns: int, st: pb.TobState) -> list[Output]:

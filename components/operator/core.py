@@ -3,7 +3,7 @@ truth (world_T_tob, and world_T_tip with a driver) on ``operator/truth`` at a fi
 
 from __future__ import annotations
 
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose_from_mm
 
@@ -20,7 +20,7 @@ class OperatorCore(Core):
 
     name = "operator"
     config_type = OperatorConfig
-    inputs = ()
+    ports = (Port("tick", pb.Tick, "_on_tick"),)
 
     def __init__(self, config: OperatorConfig):
         super().__init__(config)
@@ -34,9 +34,7 @@ class OperatorCore(Core):
     def tick_period_ns(self) -> int | None:
         return self.config.tick_period_ns
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic != "tick":
-            return []
+    def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         out: list[Output] = []
         if self.first_ns is None:
             self.first_ns = self.last_ns = t_ns

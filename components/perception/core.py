@@ -22,8 +22,9 @@ measured time would make replays differ; ``humanpt bench perception`` measures t
 from __future__ import annotations
 
 import numpy as np
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import image_stamp_ns, pose
 
@@ -76,7 +77,7 @@ class PerceptionCore(Core):
 
     name = "perception"
     config_type = PerceptionConfig
-    inputs = ("camera/image",)
+    ports = (Port("camera/image", RawImage, "_on_image"),)
 
     def __init__(self, config: PerceptionConfig):
         super().__init__(config)
@@ -98,9 +99,7 @@ class PerceptionCore(Core):
         self._anchor = None  # search the whole image with the new settings
 
     # -- input -------------------------------------------------------------------------
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic != "camera/image":
-            return []
+    def _on_image(self, t_ns: int, msg: RawImage) -> list[Output]:
         self.counters["images"] += 1
         outputs: list[Output] = []
         c = self.perception.config

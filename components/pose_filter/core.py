@@ -26,7 +26,7 @@ from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.fastmath import rotvec_of
 from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
@@ -37,7 +37,10 @@ STILL_DRIFT_WINDOW = 15  # measurements (0.5 s at 30 images/s) whose mean offset
 class PoseFilterCore(Core):
     name = "pose_filter"
     config_type = PoseFilterConfig
-    inputs = ("perception/tob", "alter_gateway/robot_state")
+    ports = (
+        Port("perception/tob", pb.TobMeasurement, "_on_tob"),
+        Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+    )
 
     def __init__(self, config: PoseFilterConfig):
         super().__init__(config)
@@ -83,21 +86,17 @@ class PoseFilterCore(Core):
             self.still_kf.q_scale = new.still_q_scale
 
     # ------------------------------------------------------------------------------------
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic == "alter_gateway/robot_state":
-            return self._on_robot_state(t_ns, msg)
-        if topic == "perception/tob":
-            self._fresh = False
-            outs = self._on_measurement(t_ns, msg)
-            if self._fresh and self._cycle is not None:
-                # A new measurement: the state for the current cycle again, at once, so the
-                # controller's command for the coming cycle uses it (image-to-command latency
-                # is processing time, not up to a cycle of waiting).
-                topic, st = self._state(t_ns, *self._cycle)
-                st.after_measurement = True
-                outs.append((topic, st))
-            return outs
-        return []
+    def _on_tob(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
+        self._fresh = False
+        outs = self._on_measurement(t_ns, msg)
+        if self._fresh and self._cycle is not None:
+            # A new measurement: the state for the current cycle again, at once, so the
+            # controller's command for the coming cycle uses it (image-to-command latency
+            # is processing time, not up to a cycle of waiting).
+            topic, st = self._state(t_ns, *self._cycle)
+            st.after_measurement = True
+            outs.append((topic, st))
+        return outs
 
     def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
         try:

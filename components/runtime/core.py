@@ -5,6 +5,10 @@ threads and never touches Zenoh, files or serial ports.  Timer ticks (topic ``ti
 parameter changes (topic ``param``) and serial bytes reach it as inputs like any other
 message.  A shell (live, replay or lock-step) binds it to the world.
 
+A core states its inputs once, as a table of :class:`Port` rows (topic, message type,
+handler) on its class; :meth:`Core.step` dispatches by that table and every shell uses it
+to subscribe and to decode.
+
 Replaying a core's recorded inputs into a fresh core built from the same config must
 reproduce its recorded outputs exactly; every shell relies on that.
 """
@@ -13,33 +17,116 @@ from __future__ import annotations
 
 import dataclasses
 from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from google.protobuf.message import Message
 
 from humanpt.runtime.config import ConfigError, live_keys, replace_live, to_table
 from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas import topics
 from humanpt.schemas.convert import header
 
 Output = tuple[str, Message]
+
+
+@dataclass(frozen=True)
+class Port:
+    """One input of a core: messages on ``topic`` (a short name: ``<component>/<topic>`` from
+    the bus, or a local input without a slash: ``tick``, ``param``, ``serial_rx``,
+    ``liveliness``, ``capture``) are of protobuf class ``type`` and go to the core's method
+    named ``handler``, called as ``handler(t_ns, msg) -> list[Output]``.
+
+    ``type`` must be the topic's type in ``humanpt.schemas.topics`` (checked when the core
+    class is created): the shells decode what arrives on ``topic`` with it.
+    """
+
+    topic: str
+    type: type[Message]
+    handler: str
+
+    @property
+    def on_bus(self) -> bool:
+        """Whether messages come from the bus (a topic of the topic table) rather than from
+        the shell itself."""
+        return self.topic in topics.TOPICS
+
+
+# Every core takes live parameter changes (:meth:`Core._on_param`); the base class adds
+# this port to each core's table.
+PARAM_PORT = Port("param", pb.ParamSet, "_on_param")
+
+
+class UndeclaredInputError(ValueError):
+    """An input on a topic the core has no port for.
+
+    Shells deliver only declared ports, so this is the caller's mistake (a wrong topic
+    given to ``step`` or ``Lockstep.inject``, or a recording of a core that had a port
+    this version dropped); it is raised rather than dropped so that a misspelt topic
+    cannot silently starve a core.
+    """
+
+
+def _check_ports(cls: type[Core]) -> None:
+    """Refuse a port table that no shell could serve (TypeError, at class creation)."""
+    seen: set[str] = set()
+    for p in cls.ports:
+        where = f"{cls.__name__}.ports"
+        if not isinstance(p, Port):
+            raise TypeError(f"{where}: {p!r} is not a Port")
+        if p.topic in seen:
+            raise TypeError(f"{where}: two ports on {p.topic!r}")
+        seen.add(p.topic)
+        try:
+            expected = topics.message_type(p.topic)
+        except topics.UnknownTopicError:
+            raise TypeError(f"{where}: {p.topic!r} is neither a topic of humanpt.schemas.topics nor a "
+                            f"local input ({', '.join(topics.LOCAL_TOPICS)})") from None
+        if p.type is not expected:
+            raise TypeError(f"{where}: {p.topic!r} carries {expected.DESCRIPTOR.full_name} "
+                            f"(humanpt.schemas.topics), the port says {p.type.__name__}")
+        if not callable(getattr(cls, p.handler, None)):
+            raise TypeError(f"{where}: {cls.__name__} has no method {p.handler!r} for {p.topic!r}")
+    # The shells deliver ticks when tick_period_ns says so, and liveliness for ``watch``.
+    ticks = cls.tick_period_ns is not Core.tick_period_ns
+    if ticks != ("tick" in seen):
+        raise TypeError(f"{cls.__name__}: a core that overrides tick_period_ns needs a 'tick' port, "
+                        "and one with a 'tick' port must override tick_period_ns")
+    if bool(cls.watch) != ("liveliness" in seen):
+        raise TypeError(f"{cls.__name__}: a core that watches components needs a 'liveliness' port, "
+                        "and one with a 'liveliness' port must name them in watch")
 
 
 class Core:
     """Base class of every component core.
 
     Subclasses set ``name`` (the component name, first part of its topics),
-    ``config_type`` (a frozen dataclass), ``inputs`` (short topic names it consumes,
-    besides ``tick`` and ``param``) and implement :meth:`on_input`.  A core that wants
-    timer ticks returns a period from :meth:`tick_period_ns`; one that must know whether
-    other components are up names them in ``watch`` and gets ``liveliness`` inputs.
-    Outputs on local topics (``serial_tx``) go to the shell's adapters, not the bus.
+    ``config_type`` (a frozen dataclass) and ``ports``: one :class:`Port` per input, bus
+    topics and local inputs alike, e.g.
+    ``ports = (Port("perception/tob", pb.TobMeasurement, "_on_tob"), Port("tick", pb.Tick,
+    "_on_tick"))``; the base class adds :data:`PARAM_PORT`, and checks the table when the
+    class is created.  A core with a ``tick`` port returns its period from
+    :meth:`tick_period_ns`; one that must know whether other components are up names them
+    in ``watch`` and has a ``liveliness`` port.  Outputs on local topics (``serial_tx``) go
+    to the shell's adapters, not the bus.
     """
 
     name: ClassVar[str] = ""
     config_type: ClassVar[type] = type(None)
-    inputs: ClassVar[tuple[str, ...]] = ()
+    # Every input of the core (see Port); after class creation it includes PARAM_PORT.
+    ports: ClassVar[tuple[Port, ...]] = (PARAM_PORT,)
     # Components whose liveliness this core is told about (``liveliness`` inputs).
     watch: ClassVar[tuple[str, ...]] = ()
+    _port_of: ClassVar[dict[str, Port]] = {PARAM_PORT.topic: PARAM_PORT}
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        declared = cls.__dict__.get("ports")
+        if declared is not None and all(p.topic != PARAM_PORT.topic for p in declared):
+            cls.ports = (*declared, PARAM_PORT)
+        _check_ports(cls)
+        cls._port_of = {p.topic: p for p in cls.ports}
 
     def __init__(self, config: Any):
         if not isinstance(config, self.config_type):
@@ -48,17 +135,36 @@ class Core:
         # The config the core started with: the hard limit of its ``stricter`` parameters.
         self.start_config = config
         self._seq: dict[str, int] = defaultdict(int)
+        # topic -> bound handler: step's one lookup per input.
+        self._handlers: dict[str, Callable[[int, Message], list[Output]]] = {
+            p.topic: self._bind(p) for p in self.ports}
 
     # -- what shells call -------------------------------------------------------------
     def tick_period_ns(self) -> int | None:
         """Period of the ``tick`` input this core wants, or None for no ticks."""
         return None
 
+    @classmethod
+    def port(cls, topic: str) -> Port:
+        """The port of input ``topic`` (UndeclaredInputError if the core has none)."""
+        try:
+            return cls._port_of[topic]
+        except KeyError:
+            raise UndeclaredInputError(cls._undeclared(topic)) from None
+
     def step(self, t_ns: int, topic: str, msg: Message) -> list[Output]:
-        """Consume one input given at time ``t_ns`` (ns); return the outputs it causes."""
-        if topic == "param":
-            return self._on_param(t_ns, msg)
-        return self.on_input(t_ns, topic, msg)
+        """Consume one input given at time ``t_ns`` (ns) on one of the core's ports; return
+        the outputs it causes.  An undeclared ``topic`` raises UndeclaredInputError."""
+        try:
+            handler = self._handlers[topic]
+        except KeyError:
+            raise UndeclaredInputError(self._undeclared(topic)) from None
+        return handler(t_ns, msg)
+
+    @classmethod
+    def _undeclared(cls, topic: str) -> str:
+        return (f"{cls.__name__} has no input port {topic!r}; its ports: "
+                f"{', '.join(p.topic for p in cls.ports)}")
 
     def params(self) -> dict[str, Any]:
         """Current values of the live parameters."""
@@ -66,8 +172,10 @@ class Core:
         return {k: table[k] for k in live_keys(self.config)}
 
     # -- what subclasses implement / use -----------------------------------------------
-    def on_input(self, t_ns: int, topic: str, msg: Message) -> list[Output]:
-        raise NotImplementedError
+    def _bind(self, port: Port) -> Callable[[int, Message], list[Output]]:
+        """What takes ``port``'s inputs: the method named ``port.handler``.  A core that
+        treats many topics alike and must know which one came (viz) binds one per topic."""
+        return getattr(self, port.handler)
 
     def on_config_changed(self, old: Any, new: Any) -> None:
         """Called after a live parameter changed ``self.config`` from ``old`` to ``new``."""

@@ -1,6 +1,7 @@
 """The live shell: a core on a Zenoh session.
 
-* inputs arrive from Zenoh subscribers (one per input topic) and from the tick timer;
+* inputs arrive from Zenoh subscribers (one per bus port of the core, decoded with the
+  port's message type) and from the tick timer;
   they are queued and fed to the core one at a time from one thread, in arrival order,
   with ``t_ns`` = the wall-clock time at which the core is given the input;
 * outputs are published on ``humanpt/<cell>/<topic>``;
@@ -13,8 +14,9 @@
   in the recording); the component lives on;
 * the liveliness of the components named in ``core.watch`` reaches the core as
   ``liveliness`` inputs;
-* adapters bridge local I/O: an adapter puts local inputs (``serial_rx``) into the same
-  queue and receives the core's outputs on its local topics (``serial_tx``).
+* adapters bridge local I/O: an adapter puts local inputs (``serial_rx``, ``capture``:
+  ports of the core) into the same queue and receives the core's outputs on its local
+  topics (``serial_tx``).
 """
 
 from __future__ import annotations
@@ -212,7 +214,7 @@ class LiveShell:
     def _handle(self, kind: str, short: str, item) -> None:
         t_ns = time.time_ns()
         if kind == "bus":
-            cls = topics.message_type(short)
+            cls = self.core.port(short).type
             msg = cls()
             try:
                 msg.ParseFromString(item)
@@ -249,8 +251,9 @@ class LiveShell:
         try:
             with zenoh.open(self.zconf) as session:
                 self._session = session
+                bus_ports = [p.topic for p in self.core.ports if p.on_bus]
                 subs = [session.declare_subscriber(topics.TOPICS[s].key(self.cell), self._on_sample(s))
-                        for s in self.core.inputs]
+                        for s in bus_ports]
                 token = session.liveliness().declare_token(liveliness_key(self.cell, name))
                 watchers = [session.liveliness().declare_subscriber(liveliness_key(self.cell, w),
                                                                     self._on_liveliness(w), history=True)
@@ -261,7 +264,7 @@ class LiveShell:
                 ticker = threading.Thread(target=self._tick_loop, name=f"{name}-tick", daemon=True)
                 ticker.start()
                 self.ready.set()
-                log.info("%s up in cell %s (inputs: %s)", name, self.cell, ", ".join(self.core.inputs) or "none")
+                log.info("%s up in cell %s (bus inputs: %s)", name, self.cell, ", ".join(bus_ports) or "none")
                 while not self.stop.is_set():
                     try:
                         kind, short, item = self._q.get(timeout=0.1)

@@ -26,7 +26,6 @@ from humanpt.runtime.core import Core
 from humanpt.runtime.recording import IN, OUT, Recorder
 from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas import topics
 from humanpt.schemas.convert import header
 
 
@@ -93,11 +92,14 @@ class Lockstep:
         self._digest = hashlib.sha256() if digest else None
         self._heap: list[tuple[int, int, int, str, bytes]] = []
         self._order = 0
-        self._subs: dict[str, list[int]] = {}
+        self._subs: dict[str, list[int]] = {}  # bus topic -> indices of the cores with a port on it
+        # per core index: topic -> message class of its port (decodes what is delivered)
+        self._types: list[dict[str, type]] = [{p.topic: p.type for p in c.ports} for c in cores]
         self._lines: dict[int, list[tuple[SerialLine, int]]] = {}  # src index -> (line, dst index)
         for i, c in enumerate(cores):
-            for t in c.inputs:
-                self._subs.setdefault(t, []).append(i)
+            for p in c.ports:
+                if p.on_bus:
+                    self._subs.setdefault(p.topic, []).append(i)
             if c.tick_period_ns():
                 self._push(start_ns, i, "tick", b"")
         self.recorders: dict[str, Recorder] = {}
@@ -132,6 +134,8 @@ class Lockstep:
         names = [c.name for c in self.cores]
         ia, ib = names.index(a), names.index(b)
         pairs = [(a, ia, b, ib)] + ([(b, ib, a, ia)] if both_ways else [])
+        for _, _, _, idst in pairs:
+            self.cores[idst].port("serial_rx")  # a core without a serial_rx port cannot take the line
         lines = []
         for src, isrc, dst, idst in pairs:
             line = SerialLine(src, dst, baud, bits_per_byte, free_at_ns=self.now_ns)
@@ -155,8 +159,10 @@ class Lockstep:
             self._push(end, dst, "serial_rx", chunk.SerializeToString())
 
     def inject(self, t_ns: int, component: str, topic: str, msg) -> None:
-        """Schedule an input (e.g. a ``param`` change) for one component."""
+        """Schedule an input (e.g. a ``param`` change) for one component; ``topic`` must be
+        one of its ports (else UndeclaredInputError, now rather than when it is due)."""
         idx = [c.name for c in self.cores].index(component)
+        self.cores[idx].port(topic)
         self._push(t_ns, idx, topic, msg.SerializeToString())
 
     def set_param(self, t_ns: int, component: str, key: str, value_json: str) -> None:
@@ -180,7 +186,7 @@ class Lockstep:
                     self._push(t_ns + period, idx, "tick", b"")
                 data = msg.SerializeToString()
             else:
-                msg = topics.message_type(topic)()
+                msg = self._types[idx][topic]()
                 msg.ParseFromString(data)
             rec = self.recorders.get(core.name)
             if rec:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from typing import Annotated
 
 from humanpt.runtime.config import Range, live
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 
 
@@ -27,14 +27,12 @@ class PingerConfig:
 class PingerCore(Core):
     name = "pinger"
     config_type = PingerConfig
-    inputs = ()
+    ports = (Port("tick", pb.Tick, "_on_tick"),)
 
     def tick_period_ns(self) -> int | None:
         return int(self.config.period_ms * 1e6)
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic != "tick":
-            return []
+    def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         return [("pinger/ping", pb.Tick(header=self.next_header("pinger/ping", t_ns, self.config.payload_note),
                                         period_ns=self.tick_period_ns()))]
 
@@ -47,13 +45,13 @@ class PongerConfig:
 class PongerCore(Core):
     name = "ponger"
     config_type = PongerConfig
-    inputs = ("pinger/ping",)
+    ports = (Port("pinger/ping", pb.Tick, "_on_ping"),)
 
     def __init__(self, config: PongerConfig):
         super().__init__(config)
         self.pings = 0
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+    def _on_ping(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         self.pings += 1
         text = f"{self.config.prefix} {msg.header.seq} (#{self.pings})"
         return [("ponger/pong", pb.Event(header=self.next_header("ponger/pong", msg.header.stamp_ns),

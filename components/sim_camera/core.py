@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm, quat_from_rows
 
@@ -104,7 +104,11 @@ class SimCameraCore(Core):
 
     name = "sim_camera"
     config_type = SimCameraConfig
-    inputs = ("operator/truth", "sim_robot/truth")
+    ports = (
+        Port("tick", pb.Tick, "_on_tick"),
+        Port("operator/truth", pb.Truth, "_on_tob_truth"),
+        Port("sim_robot/truth", pb.Truth, "_on_flange_truth"),
+    )
 
     def __init__(self, config: SimCameraConfig):
         super().__init__(config)
@@ -123,12 +127,14 @@ class SimCameraCore(Core):
     def on_config_changed(self, old: SimCameraConfig, new: SimCameraConfig) -> None:
         self.renderer = Renderer(new)
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic == "tick":
-            return self._capture(t_ns)
-        if topic in ("operator/truth", "sim_robot/truth"):
-            return self._truth(t_ns, topic, msg)
-        return []
+    def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
+        return self._capture(t_ns)
+
+    def _on_tob_truth(self, t_ns: int, msg: pb.Truth) -> list[Output]:
+        return self._truth(t_ns, "operator/truth", msg)
+
+    def _on_flange_truth(self, t_ns: int, msg: pb.Truth) -> list[Output]:
+        return self._truth(t_ns, "sim_robot/truth", msg)
 
     def _truth(self, t_ns: int, topic: str, msg: pb.Truth) -> list[Output]:
         field = "world_T_tob" if topic == "operator/truth" else "world_T_flange"

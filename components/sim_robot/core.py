@@ -44,7 +44,7 @@ from humanpt.alter import (
 )
 from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig
@@ -68,7 +68,11 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
 class SimRobotCore(SerialLinkCoreMixin, Core):
     name = "sim_robot"
     config_type = SimRobotConfig
-    inputs = ("console/command",)
+    ports = (
+        Port("tick", pb.Tick, "_in_tick"),
+        Port("serial_rx", pb.SerialChunk, "_in_serial"),
+        Port("console/command", pb.Command, "_in_console"),
+    )
 
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
@@ -148,15 +152,23 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         return StatusBits(bits)
 
     # -- inputs -----------------------------------------------------------------------------
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
+    # Each input sends what it wrote to the line as one serial_tx chunk.
+    def _in_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         outs: list[Output] = []
-        if topic == "tick":
-            self._on_cycle(t_ns, outs)
-        elif topic == "serial_rx":
-            if self._started:
-                self._link(self._ctrl.receive(bytes(msg.data), t_ns), t_ns, outs)
-        elif topic == "console/command":
-            self._on_console(t_ns, msg, outs)
+        self._on_cycle(t_ns, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_serial(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
+        outs: list[Output] = []
+        if self._started:
+            self._link(self._ctrl.receive(bytes(msg.data), t_ns), t_ns, outs)
+        self._flush_tx(t_ns, outs)
+        return outs
+
+    def _in_console(self, t_ns: int, msg: pb.Command) -> list[Output]:
+        outs: list[Output] = []
+        self._on_console(t_ns, msg, outs)
         self._flush_tx(t_ns, outs)
         return outs
 

@@ -27,7 +27,7 @@ import numpy as np
 
 import humanpt
 from humanpt.runtime.config import to_table
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.runtime.recording import IN, OUT, Recorder
 from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
@@ -86,11 +86,9 @@ def scripted_command(
 class ScriptedControllerCore(Core):
     name = "controller"
     config_type = ScriptedControllerConfig
-    inputs = ("alter_gateway/robot_state",)
+    ports = (Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic != "alter_gateway/robot_state":
-            return []
+    def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
         if any(lo <= msg.cycle <= hi for lo, hi in self.config.mute):
             return []
         cmd = scripted_command(msg, self.config, self._seq[COMMAND])

@@ -26,7 +26,7 @@ from humanpt.geometry import (
     x_from_transform,
 )
 from humanpt.operator.scenario import BUILTIN_SCENARIOS, Scenario, Trajectory, builtin_scenario
-from humanpt.runtime.core import Core, Output
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_vector3, pose
 
@@ -106,7 +106,10 @@ class StandInRobotCore(Core):
 
     name = "standin_robot"
     config_type = StandInRobotConfig
-    inputs = ("controller/command",)
+    ports = (
+        Port("controller/command", pb.FlangeCommand, "_on_command"),
+        Port("tick", pb.Tick, "_on_tick"),
+    )
 
     def __init__(self, config: StandInRobotConfig):
         super().__init__(config)
@@ -119,27 +122,26 @@ class StandInRobotCore(Core):
     def tick_period_ns(self) -> int | None:
         return round(self.config.cycle_ms * 1e6)
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic == "controller/command":
-            d_t_mm = from_vector3(msg.d_translation_m) * 1000.0
-            d_r = from_vector3(msg.d_rotation_rad)
-            if not (np.all(np.isfinite(d_t_mm)) and np.all(np.isfinite(d_r))):
-                return [
-                    self.event(
-                        t_ns,
-                        pb.SEVERITY_WARNING,
-                        "bad_command",
-                        f"ignored a command with non-finite values (cycle {msg.cycle})",
-                    )
-                ]
-            # Keyed by cycle, as a controller applies a correction: the command computed from
-            # state c moves the flange during the next cycle (published as state c + 1); one
-            # sent early for c + 1 (after a new image) waits its turn.
-            self.pending[int(msg.cycle)] = (d_t_mm, d_r)
-            return []
-        if topic == "tick":
-            return self._cycle(t_ns)
+    def _on_command(self, t_ns: int, msg: pb.FlangeCommand) -> list[Output]:
+        d_t_mm = from_vector3(msg.d_translation_m) * 1000.0
+        d_r = from_vector3(msg.d_rotation_rad)
+        if not (np.all(np.isfinite(d_t_mm)) and np.all(np.isfinite(d_r))):
+            return [
+                self.event(
+                    t_ns,
+                    pb.SEVERITY_WARNING,
+                    "bad_command",
+                    f"ignored a command with non-finite values (cycle {msg.cycle})",
+                )
+            ]
+        # Keyed by cycle, as a controller applies a correction: the command computed from
+        # state c moves the flange during the next cycle (published as state c + 1); one
+        # sent early for c + 1 (after a new image) waits its turn.
+        self.pending[int(msg.cycle)] = (d_t_mm, d_r)
         return []
+
+    def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
+        return self._cycle(t_ns)
 
     def _cycle(self, t_ns: int) -> list[Output]:
         out: list[Output] = []

@@ -14,7 +14,11 @@ outputs are exactly what the viewer was given.
 
 from __future__ import annotations
 
-from humanpt.runtime.core import Core, Output
+import functools
+
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import topics
 from humanpt.viz.config import VizConfig
 
@@ -40,18 +44,27 @@ SHOWN_TOPICS: tuple[str, ...] = (
 class VizCore(Core):
     name = "viz"
     config_type = VizConfig
-    inputs = SHOWN_TOPICS
+    ports = (
+        Port("camera/image", RawImage, "_on_image"),
+        *(Port(t, topics.message_type(t), "_forward") for t in SHOWN_TOPICS if t != "camera/image"),
+    )
 
     def __init__(self, config: VizConfig):
         super().__init__(config)
         self.images_seen = 0
 
-    def on_input(self, t_ns: int, topic: str, msg) -> list[Output]:
-        if topic not in SHOWN_TOPICS:
+    def _bind(self, port: Port):
+        if port.handler == "_forward":  # one forwarder per topic: its output names the topic
+            return functools.partial(self._forward, topics.show_topic(port.topic))
+        return super()._bind(port)
+
+    def _forward(self, shown: str, t_ns: int, msg) -> list[Output]:
+        return [(shown, msg)]
+
+    def _on_image(self, t_ns: int, msg: RawImage) -> list[Output]:
+        self.images_seen += 1
+        # Decimate by count (not by stamp) so that the first image is always shown.
+        if (self.images_seen - 1) % self.config.image_every:
             return []
-        if topic == "camera/image":
-            self.images_seen += 1
-            # Decimate by count (not by stamp) so that the first image is always shown.
-            if (self.images_seen - 1) % self.config.image_every:
-                return []
-        return [(topics.show_topic(topic), msg)]
+        return [(topics.show_topic("camera/image"), msg)]
+

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
 from humanpt.alter_gateway.safety import clamp_norm, quantize
-from humanpt.runtime.core import Core
+from humanpt.runtime.core import Core, Port
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
@@ -273,11 +273,9 @@ class _PushOut(Core):
 
     name = "controller"
     config_type = ScriptedControllerConfig
-    inputs = ("alter_gateway/robot_state",)
+    ports = (Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
 
-    def on_input(self, t_ns, topic, msg):
-        if topic != "alter_gateway/robot_state":
-            return []
+    def _on_robot_state(self, t_ns, msg):
         cmd = pb.FlangeCommand(
             header=self.next_header("controller/command", t_ns, "world"),
             cycle=msg.cycle,

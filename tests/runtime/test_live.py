@@ -100,7 +100,7 @@ def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(rou
         assert r.returncode == 0, r.stderr
         assert '"prefix": "PONG"' in r.stdout
         r = run_cli("param", "pinger", "period_ms=-5", "--config", str(cfg))
-        assert r.returncode == 1 and "REJECTED" in r.stdout and "period_ms must be within" in r.stdout
+        assert r.returncode == 1 and "REJECTED" in r.stdout and "period_ms: -5.0 is outside its range" in r.stdout
         while not q.empty():
             q.get()
         later = _collect(q, 3)

@@ -50,8 +50,8 @@ def test_lockstep_recordings_replay_exactly(tmp_path):
 
 
 class _Perturbed(PongerCore):
-    def on_input(self, t_ns, topic, msg):
-        outs = super().on_input(t_ns, topic, msg)
+    def _on_ping(self, t_ns, msg):
+        outs = super()._on_ping(t_ns, msg)
         if self.pings == 42:
             outs[0][1].header.stamp_ns += 7
         return outs

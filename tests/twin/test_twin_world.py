@@ -18,7 +18,7 @@ from humanpt.geometry import (
     x_from_transform,
 )
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig
-from humanpt.runtime.core import Core
+from humanpt.runtime.core import Core, Port
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
@@ -107,6 +107,7 @@ class _Commander(Core):
 
     name = "commander"
     config_type = type(None)
+    ports = (Port("tick", pb.Tick, "_on_tick"),)
 
     def __init__(self, d_t_m, d_r_rad):
         super().__init__(None)
@@ -116,7 +117,7 @@ class _Commander(Core):
     def tick_period_ns(self):
         return 28_000_000
 
-    def on_input(self, t_ns, topic, msg):
+    def _on_tick(self, t_ns, msg):
         cmd = pb.FlangeCommand(
             header=self.next_header("controller/command", t_ns, "world"),
             cycle=self.k,
