@@ -80,15 +80,16 @@ class SystemConfig:
                      **base) -> SystemConfig:
         """The configs for ``scenario`` (a built-in name, a scenario file or an
         OperatorConfig) and ``seed`` (operator and camera): ``base`` configs by section
-        name (defaults for the rest), then ``overrides`` ({section: {key: value}}) applied
-        and validated (ConfigError). A scenario with a driver makes the controller record
-        the tip (``has_driver``, ``tob_t_tip_mm`` from the scenario) unless it already does."""
-        unknown = set(base) - set(SECTIONS)
+        name (sim_camera, perception, pose_filter, controller; defaults for the rest),
+        then ``overrides`` ({section: {key: value}}, operator too) applied and validated
+        (OverrideError). A scenario with a driver makes the controller record the tip
+        (``has_driver``, ``tob_t_tip_mm`` from the scenario) unless it already does."""
+        unknown = set(base) - set(SECTIONS[1:])
         if unknown:
-            raise TypeError(f"SystemConfig.for_scenario: no section {sorted(unknown)[0]!r}")
+            raise TypeError(f"SystemConfig.for_scenario: no base config {sorted(unknown)[0]!r}")
         op = with_overrides(operator_config(scenario, seed), overrides, "operator")
-        cfg = cls(seed=seed, operator=op, sim_camera=base.get("sim_camera", SimCameraConfig(seed=seed)),
-                  **{k: v for k, v in base.items() if k not in ("operator", "sim_camera")})
+        cam = dataclasses.replace(base.pop("sim_camera", SimCameraConfig()), seed=seed)
+        cfg = cls(seed=seed, operator=op, sim_camera=cam, **base)
         cfg = dataclasses.replace(cfg, **{s: with_overrides(getattr(cfg, s), overrides, s) for s in SECTIONS[1:]})
         driver = op.build_scenario().driver_mm
         if driver is not None and not cfg.controller.has_driver:
