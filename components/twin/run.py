@@ -153,20 +153,23 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
                          pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest)
     t0 = time.perf_counter()
-    if record_from_s is not None:
-        world.run_until(round(record_from_s * 1e9))
-        world.lockstep.inject(world.now_ns, "controller", "console/command",
-                              pb.Command(header=header(world.now_ns), component="controller", verb="record_start"))
-    end_ns = round(duration_s * 1e9)
-    if progress is None:
-        world.run_until(end_ns)
-    else:
-        step_ns = int(max(1.0, duration_s / 20) * 1e9)
-        while world.now_ns < end_ns:
-            world.run_until(min(end_ns, world.now_ns + step_ns))
-            progress(world.now_ns / 1e9, duration_s)
-    t1 = time.perf_counter()
-    world.close()
+    try:
+        if record_from_s is not None:
+            world.run_until(round(record_from_s * 1e9))
+            world.lockstep.inject(world.now_ns, "controller", "console/command",
+                                  pb.Command(header=header(world.now_ns), component="controller",
+                                             verb="record_start"))
+        end_ns = round(duration_s * 1e9)
+        if progress is None:
+            world.run_until(end_ns)
+        else:
+            step_ns = int(max(1.0, duration_s / 20) * 1e9)
+            while world.now_ns < end_ns:
+                world.run_until(min(end_ns, world.now_ns + step_ns))
+                progress(world.now_ns / 1e9, duration_s)
+    finally:
+        t1 = time.perf_counter()
+        world.close()  # also on an error: the recordings end readable
     return RunResult(world, config, Path(run_dir) if run_dir is not None else None, t1 - t0, duration_s,
                      time.perf_counter() - t1)
 
