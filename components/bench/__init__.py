@@ -1,4 +1,9 @@
-"""``humanpt bench ...``: speed and accuracy benchmarks that print tables.
+"""``humanpt bench ...``: speed and accuracy benchmarks; the CLI prints their tables.
 
-Product components never import this package; the CLI calls it.
+- ``measure``: round trips through the router and MCAP write throughput (``bench runtime``),
+  the simulated camera (``bench render``), each perception method (``bench perception``);
+- ``alter``: alter_gateway <-> sim_robot over a real pty in real time (``bench alter``);
+- ``summary``: the figures that matter in one table (``humanpt bench``).
+
+Product components never import this package (tests/test_boundaries.py checks it).
 """

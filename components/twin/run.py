@@ -80,15 +80,16 @@ class SystemConfig:
                      **base) -> SystemConfig:
         """The configs for ``scenario`` (a built-in name, a scenario file or an
         OperatorConfig) and ``seed`` (operator and camera): ``base`` configs by section
-        name (defaults for the rest), then ``overrides`` ({section: {key: value}}) applied
-        and validated (ConfigError). A scenario with a driver makes the controller record
-        the tip (``has_driver``, ``tob_t_tip_mm`` from the scenario) unless it already does."""
-        unknown = set(base) - set(SECTIONS)
+        name (sim_camera, perception, pose_filter, controller; defaults for the rest),
+        then ``overrides`` ({section: {key: value}}, operator too) applied and validated
+        (OverrideError). A scenario with a driver makes the controller record the tip
+        (``has_driver``, ``tob_t_tip_mm`` from the scenario) unless it already does."""
+        unknown = set(base) - set(SECTIONS[1:])
         if unknown:
-            raise TypeError(f"SystemConfig.for_scenario: no section {sorted(unknown)[0]!r}")
+            raise TypeError(f"SystemConfig.for_scenario: no base config {sorted(unknown)[0]!r}")
         op = with_overrides(operator_config(scenario, seed), overrides, "operator")
-        cfg = cls(seed=seed, operator=op, sim_camera=base.get("sim_camera", SimCameraConfig(seed=seed)),
-                  **{k: v for k, v in base.items() if k not in ("operator", "sim_camera")})
+        cam = dataclasses.replace(base.pop("sim_camera", SimCameraConfig()), seed=seed)
+        cfg = cls(seed=seed, operator=op, sim_camera=cam, **base)
         cfg = dataclasses.replace(cfg, **{s: with_overrides(getattr(cfg, s), overrides, s) for s in SECTIONS[1:]})
         driver = op.build_scenario().driver_mm
         if driver is not None and not cfg.controller.has_driver:
@@ -152,20 +153,23 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
                          pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest)
     t0 = time.perf_counter()
-    if record_from_s is not None:
-        world.run_until(round(record_from_s * 1e9))
-        world.lockstep.inject(world.now_ns, "controller", "console/command",
-                              pb.Command(header=header(world.now_ns), component="controller", verb="record_start"))
-    end_ns = round(duration_s * 1e9)
-    if progress is None:
-        world.run_until(end_ns)
-    else:
-        step_ns = int(max(1.0, duration_s / 20) * 1e9)
-        while world.now_ns < end_ns:
-            world.run_until(min(end_ns, world.now_ns + step_ns))
-            progress(world.now_ns / 1e9, duration_s)
-    t1 = time.perf_counter()
-    world.close()
+    try:
+        if record_from_s is not None:
+            world.run_until(round(record_from_s * 1e9))
+            world.lockstep.inject(world.now_ns, "controller", "console/command",
+                                  pb.Command(header=header(world.now_ns), component="controller",
+                                             verb="record_start"))
+        end_ns = round(duration_s * 1e9)
+        if progress is None:
+            world.run_until(end_ns)
+        else:
+            step_ns = int(max(1.0, duration_s / 20) * 1e9)
+            while world.now_ns < end_ns:
+                world.run_until(min(end_ns, world.now_ns + step_ns))
+                progress(world.now_ns / 1e9, duration_s)
+    finally:
+        t1 = time.perf_counter()
+        world.close()  # also on an error: the recordings end readable
     return RunResult(world, config, Path(run_dir) if run_dir is not None else None, t1 - t0, duration_s,
                      time.perf_counter() - t1)
 
