@@ -26,6 +26,7 @@ from google.protobuf.message import Message
 from humanpt.runtime.config import ConfigError, live_keys, replace_live, to_table
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
+from humanpt.schemas.checks import ABSURD, absurd_field
 from humanpt.schemas.convert import header
 
 Output = tuple[str, Message]
@@ -135,6 +136,7 @@ class Core:
         # The config the core started with: the hard limit of its ``stricter`` parameters.
         self.start_config = config
         self._seq: dict[str, int] = defaultdict(int)
+        self._bad_inputs: dict[str, int] = {}
         # topic -> bound handler: step's one lookup per input.
         self._handlers: dict[str, Callable[[int, Message], list[Output]]] = {
             p.topic: self._bind(p) for p in self.ports}
@@ -159,7 +161,20 @@ class Core:
             handler = self._handlers[topic]
         except KeyError:
             raise UndeclaredInputError(self._undeclared(topic)) from None
+        bad = absurd_field(msg)
+        if bad is not None:
+            return self._bad_input(t_ns, topic, bad)
         return handler(t_ns, msg)
+
+    def _bad_input(self, t_ns: int, topic: str, what: str) -> list[Output]:
+        """Drop an input with a non-finite or absurd number before it touches any state;
+        report the 1st, 10th, 100th... of each topic (a flood must not become one)."""
+        n = self._bad_inputs[topic] = self._bad_inputs.get(topic, 0) + 1
+        if n != 10 ** (len(str(n)) - 1):  # 1, 10, 100, ...
+            return []
+        return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_input",
+                           f"{self.name}: input on {topic} dropped ({n} so far): {what} is not a "
+                           f"finite number within +-{ABSURD:g}")]
 
     @classmethod
     def _undeclared(cls, topic: str) -> str:
