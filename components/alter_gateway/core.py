@@ -124,9 +124,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     ports = (
         Port("tick", pb.Tick, "_in_tick"),
         Port("serial_rx", pb.SerialChunk, "_in_serial"),
-        Port("controller/command", pb.FlangeCommand, "_in_command"),
+        Port("controller/command", pb.FlangeCommand, "_in_command", queue=8),
         Port("liveliness", pb.Liveliness, "_in_liveliness"),
-        Port("console/command", pb.Command, "_in_console"),
+        Port("console/command", pb.Command, "_in_console", queue=8),
     )
     watch = ("controller",)
 

@@ -77,7 +77,8 @@ class PerceptionCore(Core):
 
     name = "perception"
     config_type = PerceptionConfig
-    ports = (Port("camera/image", RawImage, "_on_image"),)
+    # Latest wins: a stale image is worth nothing once a newer one waits.
+    ports = (Port("camera/image", RawImage, "_on_image", queue=1),)
 
     def __init__(self, config: PerceptionConfig):
         super().__init__(config)

@@ -41,11 +41,17 @@ class Port:
 
     ``type`` must be the topic's type in ``humanpt.schemas.topics`` (checked when the core
     class is created): the shells decode what arrives on ``topic`` with it.
+
+    ``queue``: how many messages of a bus topic the live shell holds while the core is busy;
+    beyond it the oldest is dropped (counted).  1 means latest wins (a newer image replaces the
+    one waiting).  Local inputs (serial bytes, ticks, liveliness, parameters) are never
+    bounded and always go first: bus traffic can never delay the serial line.
     """
 
     topic: str
     type: type[Message]
     handler: str
+    queue: int = 64
 
     @property
     def on_bus(self) -> bool:

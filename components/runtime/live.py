@@ -24,10 +24,10 @@ from __future__ import annotations
 import json
 import logging
 import os
-import queue
 import socket
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -82,6 +82,63 @@ class Adapter(Protocol):
     def close(self) -> None: ...
 
 
+class Inbox:
+    """What waits for the core: local inputs (serial bytes, ticks, liveliness, parameters,
+    adapters' inputs) in arrival order and always first, then bus messages, one topic after
+    another (round robin), each topic bounded by its port's ``queue`` (oldest dropped; 1:
+    latest wins).  So a flood on one bus topic delays neither the serial line nor the other
+    topics, and holds bounded memory.  Thread-safe: Zenoh's threads put, the worker gets."""
+
+    def __init__(self, bounds: dict[str, int]):
+        self._bounds = bounds
+        self._cv = threading.Condition()
+        self._local: deque = deque()
+        self._bus: dict[str, deque] = {}
+        self._turn: deque[str] = deque()  # bus topics with something waiting, in turn
+        self.dropped: dict[str, int] = {}  # topic -> messages dropped for a full queue
+        self._tick_waiting = False
+
+    def put_local(self, item) -> None:
+        with self._cv:
+            if item[0] == "tick" and self._tick_waiting:
+                return  # a core that fell behind gets one tick, not a burst of them
+            self._tick_waiting = self._tick_waiting or item[0] == "tick"
+            self._local.append(item)
+            self._cv.notify()
+
+    def put_bus(self, short: str, payload: bytes) -> None:
+        with self._cv:
+            q = self._bus.get(short)
+            if q is None:
+                q = self._bus[short] = deque()
+            if not q:
+                self._turn.append(short)
+            elif len(q) >= self._bounds.get(short, 64):
+                q.popleft()
+                self.dropped[short] = self.dropped.get(short, 0) + 1
+            q.append(payload)
+            self._cv.notify()
+
+    def get(self, timeout: float):
+        """The next (kind, short, item), or None after ``timeout`` s with nothing waiting."""
+        with self._cv:
+            if not self._local and not self._turn:
+                self._cv.wait(timeout)
+            if self._local:
+                item = self._local.popleft()
+                if item[0] == "tick":
+                    self._tick_waiting = False
+                return item
+            if not self._turn:
+                return None
+            short = self._turn.popleft()
+            q = self._bus[short]
+            payload = q.popleft()
+            if q:
+                self._turn.append(short)
+            return "bus", short, payload
+
+
 class LiveShell:
     """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
 
@@ -97,14 +154,14 @@ class LiveShell:
         self.counters = Counters()
         self.stop = threading.Event()
         self.ready = threading.Event()
-        self._q: queue.Queue = queue.Queue()
+        self._q = Inbox({p.topic: p.queue for p in core.ports if p.on_bus})
         self._pubs: dict[str, zenoh.Publisher] = {}
         self.recorder: Recorder | None = None
 
     # -- Zenoh callbacks (Zenoh threads): only enqueue -----------------------------------
     def _on_sample(self, short: str):
         def cb(sample: zenoh.Sample) -> None:
-            self._q.put(("bus", short, sample.payload.to_bytes()))
+            self._q.put_bus(short, sample.payload.to_bytes())
         return cb
 
     def _on_query(self, query: zenoh.Query) -> None:
@@ -119,22 +176,31 @@ class LiveShell:
         results = []
         for key, value in sets.items():
             req = _ParamRequest(str(key), json.dumps(value))
-            self._q.put(("param", "param", req))
+            self._q.put_local(("param", "param", req))
             if not req.done.wait(5.0):
                 results.append({"key": key, "ok": False, "text": "the component did not answer in 5 s"})
             else:
                 results.append(req.result)
+        self._sync_drops()
         reply = {"ok": all(r["ok"] for r in results), "component": self.core.name, "results": results,
                  "params": self.core.params(), "counters": self.counters.__dict__}
         query.reply(query.key_expr, json.dumps(reply, default=str))
 
+    def _sync_drops(self) -> None:
+        """Messages the inbox dropped for a full queue, into the counters."""
+        c = self.counters
+        for short, n in list(self._q.dropped.items()):
+            reason = f"queue of {short} full (oldest dropped)"
+            c.dropped += n - c.by_reason.get(reason, 0)
+            c.by_reason[reason] = n
+
     def _on_liveliness(self, component: str):
         def cb(sample: zenoh.Sample) -> None:
-            self._q.put(("liveliness", component, sample.kind == zenoh.SampleKind.PUT))
+            self._q.put_local(("liveliness", component, sample.kind == zenoh.SampleKind.PUT))
         return cb
 
     def _put_local(self, topic: str, msg) -> None:
-        self._q.put(("local", topic, msg))
+        self._q.put_local(("local", topic, msg))
 
     def _tick_loop(self) -> None:
         next_t = time.monotonic()
@@ -149,7 +215,7 @@ class LiveShell:
                 delay = 0.0
             if self.stop.wait(max(delay, 0.0)):
                 return
-            self._q.put(("tick", "tick", None))
+            self._q.put_local(("tick", "tick", None))
 
     # -- the one worker thread -----------------------------------------------------------
     def _feed(self, t_ns: int, topic: str, msg, data: bytes | None = None) -> list:
@@ -266,12 +332,11 @@ class LiveShell:
                 self.ready.set()
                 log.info("%s up in cell %s (bus inputs: %s)", name, self.cell, ", ".join(bus_ports) or "none")
                 while not self.stop.is_set():
-                    try:
-                        kind, short, item = self._q.get(timeout=0.1)
-                    except queue.Empty:
-                        continue
-                    self._handle(kind, short, item)
+                    got = self._q.get(timeout=0.1)
+                    if got is not None:
+                        self._handle(*got)
                 ticker.join(timeout=1.0)
+                self._sync_drops()
                 qbl.undeclare()
                 token.undeclare()
                 for w in watchers:

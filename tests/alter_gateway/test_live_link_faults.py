@@ -21,6 +21,7 @@ import tty
 import pytest
 
 from humanpt.alter.ddcmp import encode_frame, strt
+from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from tests.conftest import write_config, zenoh_client
 
@@ -118,3 +119,54 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
                 sub.undeclare()
     finally:
         tap.close()
+
+
+@pytest.mark.timeout(120)
+def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
+    """The attack: a flood of messages the gateway drops shared one unbounded queue with the
+    serial input; serial input waited 2 s and the link restarted. Serial bytes and ticks now
+    go first and bus topics are bounded: on the previous shell this flood left no robot state
+    at all for its whole length.
+
+    The flood is on the command key, which only the gateway takes here (sim_robot, the
+    twin's robot, takes console commands and would starve on a flood of its own). On two
+    shared cores the flood also starves the simulated robot's own timing now and then, so the
+    test asserts what the gateway controls: how long serial input waits in it, and that robot
+    states keep coming."""
+    port, _ = router
+    link = tmp_path / "pty"
+    cfg = write_config(tmp_path / "alter.toml", port,
+                       extra=f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n')
+    run = tmp_path / "run"
+    gateway = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
+    stamps: list[float] = []
+    got = threading.Event()
+    with zenoh_client(port) as s:
+        def on_state(_sample):
+            stamps.append(time.monotonic())
+            got.set()
+
+        sub = s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state)
+        assert got.wait(30), "no robot state: the link never came up"
+        # Commands for a cycle far ahead: the gateway drops each (bad_command, rate-limited).
+        pub = s.declare_publisher("humanpt/test/controller/command")
+        payload = pb.FlangeCommand(cycle=2**31, header=pb.Header(frame_id="world")).SerializeToString()
+        t0 = time.monotonic()
+        n = 0
+        while time.monotonic() - t0 < 3.0:
+            for _ in range(200):
+                pub.put(payload)
+            n += 200
+        t_end = time.monotonic()
+        during = [t for t in stamps if t0 <= t <= t_end]
+        # A 28 ms cycle: ~107 states in 3 s; at least a third of them must get through.
+        assert len(during) > 35, f"{len(during)} robot states during a 3 s flood of {n} messages"
+        pub.undeclare()
+        sub.undeclare()
+    procs.stop(gateway)
+    rec = read(run / "alter_gateway.mcap")
+    waits_ms = [(e.t_ns - pb.SerialChunk.FromString(e.data).header.stamp_ns) / 1e6
+                for e in rec.entries if e.direction == "in" and e.topic == "serial_rx"]
+    assert len(waits_ms) > 100 and max(waits_ms) < 500, (
+        f"serial input waited up to {max(waits_ms):.0f} ms in the gateway during the flood")
