@@ -28,8 +28,8 @@ def test_top_level_help_lists_every_verb(capsys):
         assert f"    {verb}" in out
 
 
-def test_no_verb_prints_help_and_fails(capsys):
-    assert main([]) == 2
+def test_no_verb_prints_help_and_fails(capsys, cli_main):
+    assert cli_main([]) == 2
     assert "usage: humanpt" in capsys.readouterr().out
 
 
