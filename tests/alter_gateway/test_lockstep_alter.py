@@ -14,7 +14,6 @@ from humanpt.alter_gateway.harness import (
     ScriptedControllerCore,
     scripted_step,
 )
-from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.core import Core
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import replay
@@ -22,6 +21,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
+from tests.alter_gateway.oracle import LIMIT_DEG, LIMIT_MM, assert_wire_correction, clamped
 
 MS = 1_000_000
 CYCLE_NS = 28 * MS
@@ -96,13 +96,11 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
     assert gw.counters["zero"] == gw.counters["reused"] == 0
     assert sim.counters["missed"] == 0 and sim.counters["applied_on_time"] == len(gw.sent)
     assert gw.counters["clamped"] > 50  # the script exceeds the limits at its peaks
-    # What was sent = the commands, clamped by norm and angle, quantised (an independent recomputation).
+    # What was sent = the commands, clamped by norm and angle to the limits, rounded.
     for s in gw.sent:
         dp, rv = scripted_step(s.cycle, cfg)
-        expected = quantize(
-            s.cycle, clamp_norm(dp, 2.8)[0], clamp_norm(rv, np.radians(1.68))[0], 2.8, 1.68
-        )
-        assert s.correction == expected
+        assert s.correction.echo_cycle == s.cycle
+        assert_wire_correction(s.correction, dp, rv, LIMIT_MM, LIMIT_DEG)
     # What was applied = what was sent, in order.
     assert [c for _, c in sim.applied] == [s.correction for s in gw.sent]
     # The flange path = the integral of the applied corrections (exact to float rounding).
@@ -153,7 +151,7 @@ def test_tool_mode_robot_follows_world_commands():
             continue
         dp, _ = scripted_step(s.cycle, cfg)
         np.testing.assert_allclose(
-            truths[i][:3, 3] - truths[i - 1][:3, 3], clamp_norm(dp, 2.8)[0], atol=0.02
+            truths[i][:3, 3] - truths[i - 1][:3, 3], clamped(dp, LIMIT_MM), atol=0.02
         )
 
 

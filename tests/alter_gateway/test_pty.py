@@ -23,7 +23,6 @@ from humanpt.alter_gateway.harness import (
     scripted_command,
     scripted_step,
 )
-from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.replay import replay
 from humanpt.runtime.serial_io import SerialAdapter
 from humanpt.schemas import humanpt_pb2 as pb
@@ -31,6 +30,7 @@ from humanpt.schemas.convert import header
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
+from tests.alter_gateway.oracle import LIMIT_DEG, LIMIT_MM, assert_wire_correction
 
 SCRIPT = ScriptedControllerConfig()
 
@@ -123,12 +123,11 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         assert len(served) >= 290
         assert sum(s.source == "fresh" for s in served) >= 0.9 * len(served)
         assert counters["applied_on_time"] >= 0.9 * counters["applied"]
-        # Each correction sent = the command it answers, clamped and quantised.
+        # Each correction sent = the command it answers, clamped to the limits and rounded.
         for s in served:
             dp, rv = scripted_step(s.command_cycle, SCRIPT)
-            assert s.correction == quantize(
-                s.cycle, clamp_norm(dp, 2.8)[0], clamp_norm(rv, np.radians(1.68))[0], 2.8, 1.68
-            )
+            assert s.correction.echo_cycle == s.cycle
+            assert_wire_correction(s.correction, dp, rv, LIMIT_MM, LIMIT_DEG)
         # What the robot applied is what the gateway sent (in order, none twice) ...
         sent_by_cycle = {s.cycle: s.correction for s in gw_sent}
         assert all(sent_by_cycle[c.echo_cycle] == c for _, c in applied)
