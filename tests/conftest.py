@@ -48,6 +48,22 @@ def wait_port(port: int, timeout: float = 15.0) -> None:
     raise TimeoutError(f"nothing listens on port {port}")
 
 
+def wait_for(pred, timeout: float, what: str, poll_s: float = 0.02) -> None:
+    """Wait until ``pred()`` is true (polled every ``poll_s``), else fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def wait_matching(publisher, timeout: float = 15.0) -> None:
+    """Wait until a subscriber somewhere matches a Zenoh ``publisher``'s key expression, so
+    that what it puts next is delivered (rather than sleeping until the peer is up)."""
+    wait_for(lambda: publisher.matching_status.matching, timeout,
+             f"a subscriber to {publisher.key_expr}")
+
+
 class Procs:
     """Child processes that are stopped (TERM, then KILL) at the end of a test."""
 
