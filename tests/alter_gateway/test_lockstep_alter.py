@@ -117,6 +117,7 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
         for o in ls.outputs
         if o.topic == "alter_gateway/robot_state"
     ]
+    assert len(states) >= 395
     for st in states[-50:]:
         T = from_pose(st.world_T_flange)
         np.testing.assert_allclose(
@@ -295,7 +296,8 @@ def test_pushing_out_of_reach_faults_the_robot_which_stops_and_the_gateway_holds
     x = [T[0, 3] for T in truths]
     stop = 5 + int(np.argmax(np.diff(x[5:]) < 1e-9)) + 1
     assert 150 < stop < 300 and np.ptp(x[stop:]) < 1e-9
-    assert all(s.source == "robot_fault" for s in gw.sent if s.cycle > stop + 2)
+    after = [s.source for s in gw.sent if s.cycle > stop + 2]
+    assert len(after) >= 10 and set(after) == {"robot_fault"}
 
 
 def test_the_envelope_stops_the_flange_at_its_wall():

@@ -143,6 +143,7 @@ def test_static_target_converges_and_holds(which):
     # Within the deadbands (0.1 mm, 0.3 deg) of the thetau law; the paper's law has none.
     assert e_mm < 0.1 and e_deg < (0.3 if which == "thetau" else 0.05), (e_mm, e_deg)
     # Per-cycle limits held all along (100 mm/s, 60 deg/s at 28 ms).
+    assert len(rig.of("controller/command")) == 200
     for cmd in rig.of("controller/command"):
         assert np.linalg.norm(from_vector3(cmd.d_translation_m)) <= 2.8e-3 + 1e-12
         assert np.linalg.norm(from_vector3(cmd.d_rotation_rad)) <= np.radians(60) * 0.028 + 1e-12

@@ -63,6 +63,7 @@ def test_target_lost_holds_within_one_cycle():
     assert len(cmds) == len(states)
     first_lost = next(i for i, s in enumerate(states) if s.status == pb.TOB_STATUS_LOST and s.cycle > 100)
     assert cmds[first_lost - 1].mode == pb.CONTROL_MODE_TRACK
+    assert len(cmds) - first_lost > 20
     for c in cmds[first_lost:]:
         assert c.mode == pb.CONTROL_MODE_LOST
         assert (c.d_translation_m.x, c.d_translation_m.y, c.d_translation_m.z) == (0, 0, 0)
