@@ -21,7 +21,14 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
-from tests.alter_gateway.oracle import LIMIT_DEG, LIMIT_MM, assert_wire_correction, clamped
+from tests.alter_gateway.oracle import (
+    LIMIT_DEG,
+    LIMIT_MM,
+    assert_wire_correction,
+    clamped,
+    wire_rotation,
+    wire_translation_mm,
+)
 
 MS = 1_000_000
 CYCLE_NS = 28 * MS
@@ -81,9 +88,8 @@ def _integrate(T0: np.ndarray, applied, n_truths: int) -> list[np.ndarray]:
     out = [T.copy()]
     for i in range(1, n_truths):
         for c in by_cycle.get(i, ()):
-            d = c.delta_T_mm()
-            T[:3, :3] = d[:3, :3] @ T[:3, :3]
-            T[:3, 3] += d[:3, 3]
+            T[:3, :3] = wire_rotation(c).as_matrix() @ T[:3, :3]  # world mode, about the flange
+            T[:3, 3] += wire_translation_mm(c)
         out.append(T.copy())
     return out
 

@@ -30,7 +30,13 @@ from humanpt.schemas.convert import header
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
-from tests.alter_gateway.oracle import LIMIT_DEG, LIMIT_MM, assert_wire_correction
+from tests.alter_gateway.oracle import (
+    LIMIT_DEG,
+    LIMIT_MM,
+    assert_wire_correction,
+    wire_rotation,
+    wire_translation_mm,
+)
 
 SCRIPT = ScriptedControllerConfig()
 
@@ -143,9 +149,8 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         # ... and the flange moved by exactly its integral.
         T = T0.copy()
         for _, c in applied:
-            d = c.delta_T_mm()
-            T[:3, :3] = d[:3, :3] @ T[:3, :3]
-            T[:3, 3] += d[:3, 3]
+            T[:3, :3] = wire_rotation(c).as_matrix() @ T[:3, :3]  # world mode, about the flange
+            T[:3, 3] += wire_translation_mm(c)
         np.testing.assert_allclose(T1, T, atol=1e-6)
         assert np.linalg.norm(T1[:3, 3] - T0[:3, 3]) > 1.0 or len(applied) > 250
 
