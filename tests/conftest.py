@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import socket
@@ -45,6 +46,22 @@ def wait_port(port: int, timeout: float = 15.0) -> None:
         except OSError:
             time.sleep(0.05)
     raise TimeoutError(f"nothing listens on port {port}")
+
+
+def wait_for(pred, timeout: float, what: str, poll_s: float = 0.02) -> None:
+    """Wait until ``pred()`` is true (polled every ``poll_s``), else fail naming ``what``."""
+    deadline = time.monotonic() + timeout
+    while not pred():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def wait_matching(publisher, timeout: float = 15.0) -> None:
+    """Wait until a subscriber somewhere matches a Zenoh ``publisher``'s key expression, so
+    that what it puts next is delivered (rather than sleeping until the peer is up)."""
+    wait_for(lambda: publisher.matching_status.matching, timeout,
+             f"a subscriber to {publisher.key_expr}")
 
 
 class Procs:
@@ -102,3 +119,63 @@ def zenoh_client(port: int):
 
 
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
+
+
+# -- process-wide settings ------------------------------------------------------------------
+# A test must leave the interpreter as it found it: the GIL switch interval and the logging
+# set-up are process-wide, and a test that changes them changes the timing and the output of
+# every test after it. (glibc's allocator tuning cannot be read back: tests that may apply
+# it run it in a subprocess, or through ``cli_main`` below, which leaves it out.)
+
+
+def _process_settings() -> dict:
+    """The process-wide settings a test must not leave changed."""
+
+    def ours(handlers):  # pytest's own capture handlers change from phase to phase
+        return [h for h in handlers if not type(h).__module__.startswith("_pytest")]
+
+    root = logging.getLogger()
+    loggers = {name: lg.level for name, lg in logging.root.manager.loggerDict.items()
+               if name.startswith("humanpt") and isinstance(lg, logging.Logger)}
+    return {"switch interval (s)": sys.getswitchinterval(), "root logger level": root.level,
+            "root logger handlers": ours(root.handlers), "humanpt logger levels": loggers}
+
+
+@pytest.fixture(autouse=True)
+def _process_settings_unchanged():
+    """Fails the test (at teardown) that leaves a process-wide setting changed."""
+    before = _process_settings()
+    yield
+    after = _process_settings()
+    changed = {k: (before[k], after[k]) for k in before
+               if before[k] != after[k] and not (k == "humanpt logger levels"
+                                                 and _levels_kept(before[k], after[k]))}
+    if changed:
+        pytest.fail(f"the test left process-wide settings changed (before, after): {changed}")
+
+
+def _levels_kept(before: dict, after: dict) -> bool:
+    """Loggers created by the test (level NOTSET) are no change."""
+    return all(after.get(n) == lvl for n, lvl in before.items()) and all(
+        lvl == logging.NOTSET for n, lvl in after.items() if n not in before)
+
+
+@pytest.fixture
+def cli_main(monkeypatch):
+    """``humanpt.cli.main.main`` in this process, with the process left as it was: main
+    sets the switch interval and configures logging for a CLI process; they are restored
+    afterwards, and the allocator tuning (which cannot be undone) is skipped."""
+    from humanpt.cli.main import main
+    from humanpt.runtime import tuning
+
+    monkeypatch.setattr(tuning, "tune_allocator", lambda: False)
+    root = logging.getLogger()
+    interval, level, handlers = sys.getswitchinterval(), root.level, list(root.handlers)
+    try:
+        yield main
+    finally:
+        sys.setswitchinterval(interval)
+        root.setLevel(level)
+        for h in root.handlers:
+            if h not in handlers:
+                root.removeHandler(h)

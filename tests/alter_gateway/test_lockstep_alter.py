@@ -9,7 +9,6 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.core import Core, Port
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import replay
@@ -21,6 +20,14 @@ from humanpt.testing.harness import (
     ScriptedControllerConfig,
     ScriptedControllerCore,
     scripted_step,
+)
+from tests.alter_gateway.oracle import (
+    LIMIT_DEG,
+    LIMIT_MM,
+    assert_wire_correction,
+    clamped,
+    wire_rotation,
+    wire_translation_mm,
 )
 
 MS = 1_000_000
@@ -81,9 +88,8 @@ def _integrate(T0: np.ndarray, applied, n_truths: int) -> list[np.ndarray]:
     out = [T.copy()]
     for i in range(1, n_truths):
         for c in by_cycle.get(i, ()):
-            d = c.delta_T_mm()
-            T[:3, :3] = d[:3, :3] @ T[:3, :3]
-            T[:3, 3] += d[:3, 3]
+            T[:3, :3] = wire_rotation(c).as_matrix() @ T[:3, :3]  # world mode, about the flange
+            T[:3, 3] += wire_translation_mm(c)
         out.append(T.copy())
     return out
 
@@ -96,13 +102,11 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
     assert gw.counters["zero"] == gw.counters["reused"] == 0
     assert sim.counters["missed"] == 0 and sim.counters["applied_on_time"] == len(gw.sent)
     assert gw.counters["clamped"] > 50  # the script exceeds the limits at its peaks
-    # What was sent = the commands, clamped by norm and angle, quantised (an independent recomputation).
+    # What was sent = the commands, clamped by norm and angle to the limits, rounded.
     for s in gw.sent:
         dp, rv = scripted_step(s.cycle, cfg)
-        expected = quantize(
-            s.cycle, clamp_norm(dp, 2.8)[0], clamp_norm(rv, np.radians(1.68))[0], 2.8, 1.68
-        )
-        assert s.correction == expected
+        assert s.correction.echo_cycle == s.cycle
+        assert_wire_correction(s.correction, dp, rv, LIMIT_MM, LIMIT_DEG)
     # What was applied = what was sent, in order.
     assert [c for _, c in sim.applied] == [s.correction for s in gw.sent]
     # The flange path = the integral of the applied corrections (exact to float rounding).
@@ -119,6 +123,7 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
         for o in ls.outputs
         if o.topic == "alter_gateway/robot_state"
     ]
+    assert len(states) >= 395
     for st in states[-50:]:
         T = from_pose(st.world_T_flange)
         np.testing.assert_allclose(
@@ -153,7 +158,7 @@ def test_tool_mode_robot_follows_world_commands():
             continue
         dp, _ = scripted_step(s.cycle, cfg)
         np.testing.assert_allclose(
-            truths[i][:3, 3] - truths[i - 1][:3, 3], clamp_norm(dp, 2.8)[0], atol=0.02
+            truths[i][:3, 3] - truths[i - 1][:3, 3], clamped(dp, LIMIT_MM), atol=0.02
         )
 
 
@@ -295,7 +300,8 @@ def test_pushing_out_of_reach_faults_the_robot_which_stops_and_the_gateway_holds
     x = [T[0, 3] for T in truths]
     stop = 5 + int(np.argmax(np.diff(x[5:]) < 1e-9)) + 1
     assert 150 < stop < 300 and np.ptp(x[stop:]) < 1e-9
-    assert all(s.source == "robot_fault" for s in gw.sent if s.cycle > stop + 2)
+    after = [s.source for s in gw.sent if s.cycle > stop + 2]
+    assert len(after) >= 10 and set(after) == {"robot_fault"}
 
 
 def test_the_envelope_stops_the_flange_at_its_wall():

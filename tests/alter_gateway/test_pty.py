@@ -17,7 +17,6 @@ import pytest
 
 from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.safety import clamp_norm, quantize
 from humanpt.runtime.replay import replay
 from humanpt.runtime.serial_io import SerialAdapter
 from humanpt.schemas import humanpt_pb2 as pb
@@ -30,6 +29,13 @@ from humanpt.testing.harness import (
     ThreadShell,
     scripted_command,
     scripted_step,
+)
+from tests.alter_gateway.oracle import (
+    LIMIT_DEG,
+    LIMIT_MM,
+    assert_wire_correction,
+    wire_rotation,
+    wire_translation_mm,
 )
 
 SCRIPT = ScriptedControllerConfig()
@@ -102,6 +108,13 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         with sim_shell.lock:
             return sim.base_T_flange_mm
 
+    def still_for_cycles(n_cycles: int) -> None:
+        """The flange does not move while the robot runs ``n_cycles`` more cycles (robot
+        states received), rather than for a guessed time."""
+        P, n = pose(), len(ctl.states)
+        wait_for(lambda: len(ctl.states) >= n + n_cycles, 2.0, f"{n_cycles} more robot cycles")
+        np.testing.assert_allclose(pose(), P, atol=1e-9)
+
     sim_shell.start()
     gw_shell.start()
     try:
@@ -123,12 +136,11 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         assert len(served) >= 290
         assert sum(s.source == "fresh" for s in served) >= 0.9 * len(served)
         assert counters["applied_on_time"] >= 0.9 * counters["applied"]
-        # Each correction sent = the command it answers, clamped and quantised.
+        # Each correction sent = the command it answers, clamped to the limits and rounded.
         for s in served:
             dp, rv = scripted_step(s.command_cycle, SCRIPT)
-            assert s.correction == quantize(
-                s.cycle, clamp_norm(dp, 2.8)[0], clamp_norm(rv, np.radians(1.68))[0], 2.8, 1.68
-            )
+            assert s.correction.echo_cycle == s.cycle
+            assert_wire_correction(s.correction, dp, rv, LIMIT_MM, LIMIT_DEG)
         # What the robot applied is what the gateway sent (in order, none twice) ...
         sent_by_cycle = {s.cycle: s.correction for s in gw_sent}
         assert all(sent_by_cycle[c.echo_cycle] == c for _, c in applied)
@@ -137,9 +149,8 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         # ... and the flange moved by exactly its integral.
         T = T0.copy()
         for _, c in applied:
-            d = c.delta_T_mm()
-            T[:3, :3] = d[:3, :3] @ T[:3, :3]
-            T[:3, 3] += d[:3, 3]
+            T[:3, :3] = wire_rotation(c).as_matrix() @ T[:3, :3]  # world mode, about the flange
+            T[:3, 3] += wire_translation_mm(c)
         np.testing.assert_allclose(T1, T, atol=1e-6)
         assert np.linalg.norm(T1[:3, 3] - T0[:3, 3]) > 1.0 or len(applied) > 250
 
@@ -147,9 +158,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         ctl.mode = "mute"
         wait_for(lambda: "stale_command" in ctl.codes(), 2.0, "stale_command")
         wait_for(lambda: sent()[-1].source == "stale", 1.0, "a zero correction")
-        P = pose()
-        time.sleep(0.1)
-        np.testing.assert_allclose(pose(), P, atol=1e-9)  # zero corrections: no motion
+        still_for_cycles(4)  # zero corrections: no motion
         ctl.mode = "normal"
         wait_for(lambda: "command_resumed" in ctl.codes(), 2.0, "command_resumed")
 
@@ -160,9 +169,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         )
         wait_for(lambda: "controller_gone" in ctl.codes(), 1.0, "controller_gone")
         wait_for(lambda: sent()[-1].source == "gone", 1.0, "a zero correction (gone)")
-        P = pose()
-        time.sleep(0.15)
-        np.testing.assert_allclose(pose(), P, atol=1e-9)
+        still_for_cycles(4)
         assert sent()[-1].correction.deltas == (0,) * 6
         gw_shell.put(
             "liveliness",
@@ -181,9 +188,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
             "ALTER off at the robot",
         )
         assert sent()[-1].correction.deltas == (0,) * 6
-        P = pose()
-        time.sleep(0.15)
-        np.testing.assert_allclose(pose(), P, atol=1e-9)
+        still_for_cycles(4)
         ctl.mode = "normal"
         sim_shell.put("console/command", pb.Command(component="sim_robot", verb="alter_on"))
         wait_for(lambda: "fault_cleared" in ctl.codes(), 1.0, "fault_cleared")
@@ -194,7 +199,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         assert not link.exists()
         wait_for(lambda: "link_down" in ctl.codes(), 1.0, "link_down")
         n = len(sent())
-        time.sleep(0.2)
+        time.sleep(0.2)  # an absence can only be watched for a while: 7 cycles here
         assert len(sent()) == n
         assert gw.fault is None
     finally:

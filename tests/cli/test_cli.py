@@ -28,32 +28,32 @@ def test_top_level_help_lists_every_verb(capsys):
         assert f"    {verb}" in out
 
 
-def test_no_verb_prints_help_and_fails(capsys):
-    assert main([]) == 2
+def test_no_verb_prints_help_and_fails(capsys, cli_main):
+    assert cli_main([]) == 2
     assert "usage: humanpt" in capsys.readouterr().out
 
 
-def test_config_check_names_the_bad_key(tmp_path, capsys):
+def test_config_check_names_the_bad_key(tmp_path, capsys, cli_main):
     f = tmp_path / "h.toml"
     f.write_text("[ponger]\nprefx = 'x'\n")
-    assert main(["config", "--config", str(f), "--check"]) == 2
+    assert cli_main(["config", "--config", str(f), "--check"]) == 2
     err = capsys.readouterr().err
     assert f"{f}: [ponger] unknown key 'prefx'" in err
     f.write_text("[ponger]\nprefix = 'x'\n")
-    assert main(["config", "--config", str(f), "--check"]) == 0
-    assert main(["config", "--config", str(f)]) == 0
+    assert cli_main(["config", "--config", str(f), "--check"]) == 0
+    assert cli_main(["config", "--config", str(f)]) == 0
     assert 'prefix = "x"' in capsys.readouterr().out
 
 
-def test_unknown_profile_and_component_are_named(tmp_path, capsys):
-    assert main(["up", "--profile", "nosuch"]) == 2
+def test_unknown_profile_and_component_are_named(tmp_path, capsys, cli_main):
+    assert cli_main(["up", "--profile", "nosuch"]) == 2
     assert "unknown profile 'nosuch'" in capsys.readouterr().err
-    assert main(["up", "--components", "pinger,warp_drive"]) == 2
+    assert cli_main(["up", "--components", "pinger,warp_drive"]) == 2
     assert "warp_drive" in capsys.readouterr().err
 
 
-def test_topic_table(capsys):
-    assert main(["topics", "--table"]) == 0
+def test_topic_table(capsys, cli_main):
+    assert cli_main(["topics", "--table"]) == 0
     out = capsys.readouterr().out
     assert "perception/tob" in out and "humanpt.TobMeasurement" in out and "foxglove.RawImage" in out
 

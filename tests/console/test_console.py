@@ -15,24 +15,21 @@ from humanpt.cli.console import ConsoleError, StatusBoard, gui_values, parse_opt
 from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
-from tests.conftest import run_cli, zenoh_client
+from tests.conftest import run_cli, wait_for, zenoh_client
 
 pytestmark = pytest.mark.timeout(150)
 
 
 def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
+    """Wait until each component answers its params query: what the console needs (a shell
+    declares that queryable after its liveliness token, so the token alone is not enough)."""
     with zenoh_client(port) as s:
-        while time.monotonic() < deadline:
-            up = {
-                str(r.ok.key_expr).rsplit("/", 1)[-1]
-                for r in s.liveliness().get("humanpt/test/*", timeout=1.0)
-                if r.ok is not None
-            }
-            if set(names) <= up:
-                return
-            time.sleep(0.3)
-    raise TimeoutError(f"{names} did not all come up")
+
+        def answering() -> bool:
+            return all(any(r.ok is not None for r in s.get(f"humanpt/test/{name}/params", timeout=1.0))
+                       for name in names)
+
+        wait_for(answering, timeout, f"{names} to answer their params queries", poll_s=0.3)
 
 
 def _params(rec, key: str) -> list:

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.controller import law
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.geometry.rig import viewing_world_T_flange
@@ -42,6 +41,17 @@ def start_flange(target_x, offset_mm=(0, 0, 0), rot_deg=(0, 0, 0)):
     return F
 
 
+def robot_step(world_T_flange, d_t_m, d_r_rad):
+    """What the robot does with a command (ALTER world mode, as sim_robot applies it): turn
+    by the rotation vector ``d_r_rad`` (3,) about the flange origin, axes in the world, and
+    move by ``d_t_m`` (3,) in the world. Written here with scipy, independently of the
+    controller's own prediction (``law.apply_step``), so that a wrong prediction shows."""
+    T = np.array(world_T_flange, dtype=float)
+    T[:3, :3] = Rotation.from_rotvec(d_r_rad).as_matrix() @ T[:3, :3]
+    T[:3, 3] += d_t_m
+    return T
+
+
 class Rig:
     """A perfect robot and a perfectly known target, cycle by cycle."""
 
@@ -53,6 +63,7 @@ class Rig:
         self.flanges = []
         self.pending: dict[int, pb.FlangeCommand] = {}
         self.answered: list[bool] = []
+        self.at_cycle: dict[int, np.ndarray] = {}  # the robot's flange at the start of each cycle
 
     def command(self, verb, **args):
         msg = pb.Command(header=header(self.k * DT_NS), component="controller", verb=verb,
@@ -62,6 +73,7 @@ class Rig:
     def step(self, n=1):
         for _ in range(n):
             t = self.k * DT_NS
+            self.at_cycle[self.k] = self.flange.copy()
             self.core.step(t, "alter_gateway/robot_state", pb.RobotState(
                 header=header(t, self.k, "world"), world_T_flange=pose(self.flange), cycle=self.k))
             T, v, w = self.tob_fn(t)
@@ -76,8 +88,8 @@ class Rig:
             cmd = self.pending.pop(self.k, None)
             self.answered.append(cmd is not None)
             if cmd is not None:
-                self.flange = law.apply_step(self.flange, from_vector3(cmd.d_translation_m),
-                                             from_vector3(cmd.d_rotation_rad))
+                self.flange = robot_step(self.flange, from_vector3(cmd.d_translation_m),
+                                         from_vector3(cmd.d_rotation_rad))
             self.flanges.append(self.flange.copy())
             self.k += 1
 
@@ -107,6 +119,17 @@ def test_commands_each_cycle_one_ahead_from_the_predicted_flange(ahead):
     assert [c.cycle for c in cmds] == (list(range(1, 61)) if ahead else list(range(60)))
     # Ahead, only the very first cycle goes unanswered (the robot holds it).
     assert rig.answered == ([False] + [True] * 59 if ahead else [True] * 60)
+    # Each command was worked out from where the robot's flange really is in the cycle it
+    # commands: the error it reports (|G - D| and the angle between G and D, D = flange @
+    # flange_T_desired) is the one at the robot's own flange in that cycle.
+    G = T_m(TARGET_X)
+    statuses = rig.of("controller/status")
+    assert [s.cycle for s in statuses] == [c.cycle for c in cmds]
+    for s in statuses[:-1]:  # the last commands a cycle the rig has not reached
+        D = rig.at_cycle[s.cycle] @ core.flange_T_desired
+        assert s.error_translation_m == pytest.approx(np.linalg.norm(G[:3, 3] - D[:3, 3]), abs=1e-9)
+        angle = Rotation.from_matrix(G[:3, :3] @ D[:3, :3].T).magnitude()
+        assert s.error_rotation_rad == pytest.approx(angle, abs=1e-9)
     e_mm, e_deg = rig.d_error()
     assert e_mm < 0.1 and e_deg < 0.3, (e_mm, e_deg)
 
@@ -120,6 +143,7 @@ def test_static_target_converges_and_holds(which):
     # Within the deadbands (0.1 mm, 0.3 deg) of the thetau law; the paper's law has none.
     assert e_mm < 0.1 and e_deg < (0.3 if which == "thetau" else 0.05), (e_mm, e_deg)
     # Per-cycle limits held all along (100 mm/s, 60 deg/s at 28 ms).
+    assert len(rig.of("controller/command")) == 200
     for cmd in rig.of("controller/command"):
         assert np.linalg.norm(from_vector3(cmd.d_translation_m)) <= 2.8e-3 + 1e-12
         assert np.linalg.norm(from_vector3(cmd.d_rotation_rad)) <= np.radians(60) * 0.028 + 1e-12
@@ -157,6 +181,7 @@ def test_lost_target_holds_within_one_cycle_or_returns():
     rig.step(60)
     cmds = rig.of("controller/command")
     assert np.linalg.norm(from_vector3(cmds[lost_from - 1].d_translation_m)) > 0
+    assert len(cmds) == 60
     for c in cmds[lost_from:]:
         assert c.mode == pb.CONTROL_MODE_LOST
         assert from_vector3(c.d_translation_m).tolist() == [0, 0, 0]
@@ -186,7 +211,8 @@ def test_hold_and_track_commands_and_bad_commands():
     rig = Rig(core, start_flange(TARGET_X, (20, 0, 0)), static(T_m(TARGET_X)))
     rig.command("hold")
     rig.step(5)
-    assert all(from_vector3(c.d_translation_m).tolist() == [0, 0, 0] for c in rig.of("controller/command"))
+    held = rig.of("controller/command")
+    assert len(held) == 5 and all(from_vector3(c.d_translation_m).tolist() == [0, 0, 0] for c in held)
     rig.command("track")
     rig.step(1)
     assert np.linalg.norm(from_vector3(rig.of("controller/command")[-1].d_translation_m)) > 0
@@ -298,7 +324,7 @@ def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_c
                         cmds.append(out)
             cmd = pending.pop(k, None)
             if cmd is not None:
-                flange = law.apply_step(flange, from_vector3(cmd.d_translation_m), from_vector3(cmd.d_rotation_rad))
+                flange = robot_step(flange, from_vector3(cmd.d_translation_m), from_vector3(cmd.d_rotation_rad))
         return cmds
 
     plain, swapped = run(None), run(4)

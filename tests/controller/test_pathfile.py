@@ -92,16 +92,14 @@ def test_path_writer_appends_as_points_arrive(tmp_path):
     np.testing.assert_allclose(p.x_tip[2, :3], [100, 200, 300])
 
 
-def test_cli_path_verbs(tmp_path, capsys):
-    from humanpt.cli.main import main
-
+def test_cli_path_verbs(tmp_path, capsys, cli_main):
     f = tmp_path / "p.csv"
     pathfile.write(f, _path(30))
-    assert main(["path", "smooth", str(f), str(tmp_path / "s.csv")]) == 0
+    assert cli_main(["path", "smooth", str(f), str(tmp_path / "s.csv")]) == 0
     assert len(pathfile.read(tmp_path / "s.csv")) == 30
-    assert main(["path", "val", str(f), str(tmp_path / "p.v2"), "--name", "seam"]) == 0
+    assert cli_main(["path", "val", str(f), str(tmp_path / "p.v2"), "--name", "seam"]) == 0
     assert (tmp_path / "p.v2").read_text().startswith(".PROGRAM seam()")
-    assert main(["path", "val", str(tmp_path / "missing.csv"), str(tmp_path / "x.v2")]) == 2
+    assert cli_main(["path", "val", str(tmp_path / "missing.csv"), str(tmp_path / "x.v2")]) == 2
     assert "no such path file" in capsys.readouterr().err
 
 

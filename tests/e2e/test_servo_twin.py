@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
@@ -33,6 +34,16 @@ def test_static_target_converges_and_holds():
     assert e_mm[0] > 10.0  # it did start off target
     settled = t > t[0] + 4e9
     assert e_mm[settled].max() < 0.5 and e_deg[settled].max() < 0.5, (e_mm[settled].max(), e_deg[settled].max())
+    # The same against hand values rather than the controller's own flange_T_desired (which
+    # the error above uses): D is on the camera's axis 600 mm ahead of the camera, which sits
+    # at (0, 60, 100) mm on the flange with the flange's axes: (0, 60, 700) mm in the flange.
+    # G is Table 1's pose.
+    flange_T_d = transform_from_x(np.array([0.0, 60.0, 700.0, 0.0, 0.0, 0.0]))
+    G = transform_from_x(np.array([236.132, 1248.772, 85.284, -2.598, -0.883, -4.535]))
+    last = w.truths("sim_robot/truth")[-1][1]
+    D = last["world_T_flange"] @ flange_T_d
+    assert np.linalg.norm(G[:3, 3] - D[:3, 3]) < 0.5
+    assert np.degrees(Rotation.from_matrix(G[:3, :3] @ D[:3, :3].T).magnitude()) < 0.5
 
 
 def test_arc_is_tracked_and_the_recorded_radius_is_246_mm(tmp_path):
@@ -63,6 +74,7 @@ def test_target_lost_holds_within_one_cycle():
     assert len(cmds) == len(states)
     first_lost = next(i for i, s in enumerate(states) if s.status == pb.TOB_STATUS_LOST and s.cycle > 100)
     assert cmds[first_lost - 1].mode == pb.CONTROL_MODE_TRACK
+    assert len(cmds) - first_lost > 20
     for c in cmds[first_lost:]:
         assert c.mode == pb.CONTROL_MODE_LOST
         assert (c.d_translation_m.x, c.d_translation_m.y, c.d_translation_m.z) == (0, 0, 0)

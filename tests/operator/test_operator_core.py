@@ -52,9 +52,10 @@ def test_moves_after_the_start_delay_at_the_live_pace_and_says_when_done():
     ls.set_param(1_500_000_000, "operator", "speed_scale", "2.0")
     ls.run_until(12_000_000_000)
     truths = _truths(ls)
-    assert all(t.has_tip for t in truths)
+    assert len(truths) == 1201 and all(t.has_tip for t in truths)  # 100 Hz for 12 s
     tips = np.array([_mm(t.world_T_tip)[:3, 3] for t in truths])
     stamps = np.array([t.header.stamp_ns for t in truths]) / 1e9
+    assert np.sum(stamps <= 0.5) == 51  # 0 ... 0.5 s
     assert np.allclose(tips[stamps <= 0.5], tips[0])  # holding still during the delay
     speed = np.linalg.norm(np.diff(tips, axis=0), axis=1) / np.diff(stamps)
     mid = (stamps[1:] > 0.6) & (stamps[1:] < 1.4)
@@ -70,4 +71,5 @@ def test_moves_after_the_start_delay_at_the_live_pace_and_says_when_done():
     assert len(done) == 1
     expected_done_s = 0.5 + 1.0 + (duration - 1.0) / 2.0  # 1 s at pace 1, the rest at pace 2
     assert done[0].t_ns / 1e9 == pytest.approx(expected_done_s, abs=0.011)
+    assert np.sum(stamps > expected_done_s + 0.02) > 50
     assert np.allclose(tips[stamps > expected_done_s + 0.02], tips[-1])  # holds at the end

@@ -249,6 +249,7 @@ def test_clutter_reflection_lamp_and_occlusion():
     b = mirrored.blobs(mirrored.discs(camera_T_tob))
     assert n_plain == 6 and len(b) == 12
     ghosts = b.label >= 10
+    assert ghosts.sum() == 6
     assert np.allclose(b.dn[ghosts] / b.dn[~ghosts], 0.3)
     assert np.all(b.sigma_px[ghosts] > b.sigma_px[~ghosts])
     # A lamp fixed in the camera frame shows up once per view.

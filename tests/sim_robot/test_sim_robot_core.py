@@ -124,11 +124,10 @@ def test_tool_mode_applies_the_step_in_the_flange_frame():
     T0 = rig.sim.base_T_flange_mm
     rig.correct((0.0, 0.0, 2.0), (0.5, 0.0, 0.0))  # 2 mm along the flange z (down)
     rig.tick()
-    np.testing.assert_allclose(
-        rig.sim.base_T_flange_mm,
-        T0 @ Correction.from_mm_deg(1, np.array([0, 0, 2.0]), np.array([0.5, 0, 0])).delta_T_mm(),
-        atol=1e-9,
-    )
+    delta = np.eye(4)  # the step in the flange frame: 0.5 deg about x, 2 mm along z
+    delta[:3, :3] = Rotation.from_euler("ZYX", [0.0, 0.0, 0.5], degrees=True).as_matrix()
+    delta[:3, 3] = [0.0, 0.0, 2.0]
+    np.testing.assert_allclose(rig.sim.base_T_flange_mm, T0 @ delta, atol=1e-9)
     assert rig.sim.base_T_flange_mm[2, 3] == pytest.approx(T0[2, 3] - 2.0)
 
 

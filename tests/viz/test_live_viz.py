@@ -4,6 +4,8 @@ serve mode), messages published over Zenoh end up in the .rrd; its recording rep
 from __future__ import annotations
 
 import collections
+import json
+import queue
 import time
 
 import numpy as np
@@ -13,23 +15,41 @@ import rerun.chunk as rrc
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, image, pose
-from tests.conftest import free_port, write_config, zenoh_client
+from tests.conftest import free_port, wait_for, wait_matching, wait_port, write_config, zenoh_client
 
 pytestmark = pytest.mark.timeout(120)
 
 
 def _wait_alive(session, name: str, timeout: float = 40.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if any(
-            r.ok is not None for r in session.liveliness().get(f"humanpt/test/{name}", timeout=1.0)
-        ):
-            return
-        time.sleep(0.2)
-    raise TimeoutError(f"{name} did not come up")
+    """Wait for ``name``'s liveliness token (the component's shell is up)."""
+    alive: queue.Queue = queue.Queue()
+    sub = session.liveliness().declare_subscriber(f"humanpt/test/{name}", lambda smp: alive.put(smp),
+                                                  history=True)
+    try:
+        alive.get(timeout=timeout)
+    except queue.Empty:
+        raise TimeoutError(f"{name} did not come up") from None
+    finally:
+        sub.undeclare()
 
 
-def _publish_some(session, n: int = 20) -> None:
+def _consumed(session, name: str, timeout: float = 20.0) -> int:
+    """How many inputs the component's shell has consumed (its params queryable). The shell
+    declares that queryable after its liveliness token: wait for the first answer."""
+    got: list[int] = []
+
+    def answered() -> bool:
+        for r in session.get(f"humanpt/test/{name}/params", timeout=2.0):
+            if r.ok is not None:
+                got.append(json.loads(r.ok.payload.to_bytes())["counters"]["consumed"])
+        return bool(got)
+
+    wait_for(answered, timeout, f"{name} to answer its params query")
+    return got[0]
+
+
+def _publish_some(session, n: int = 20) -> int:
+    """Publish ``n`` cycles of what viz shows (and one event); returns how many messages."""
     pubs = {
         t: session.declare_publisher(f"humanpt/test/{t}")
         for t in (
@@ -40,6 +60,8 @@ def _publish_some(session, n: int = 20) -> None:
             "controller/events",
         )
     }
+    for p in pubs.values():  # viz subscribes to each: nothing put below is lost
+        wait_matching(p)
     t0 = time.time_ns()
     for i in range(n):
         t = t0 + i * 28_000_000
@@ -66,15 +88,15 @@ def _publish_some(session, n: int = 20) -> None:
             ).SerializeToString()
         )
         pubs["camera/image"].put(image(np.full((480, 640), i, np.uint8), t).SerializeToString())
-        time.sleep(0.01)
+        time.sleep(0.01)  # paced like a live source (not a wait for anything)
     pubs["controller/events"].put(
         pb.Event(
             header=header(t0), source="controller", code="mode", text="mode TRACK"
         ).SerializeToString()
     )
-    time.sleep(1.0)
     for p in pubs.values():
         p.undeclare()
+    return 4 * n + 1
 
 
 def test_live_viz_saves_what_it_receives_and_replays(procs, tmp_path):
@@ -86,12 +108,14 @@ def test_live_viz_saves_what_it_receives_and_replays(procs, tmp_path):
         extra=f'[viz]\nmode = "save"\nrrd_path = "{rrd}"\nimage_every = 2\n',
     )
     procs.start("router", "--config", str(cfg))
+    wait_port(port)
     run_dir = tmp_path / "run"
     viz = procs.start("viz", "--config", str(cfg), "--run-dir", str(run_dir))
     with zenoh_client(port) as s:
         _wait_alive(s, "viz")
-        time.sleep(0.5)
-        _publish_some(s)
+        before = _consumed(s, "viz")
+        n = _publish_some(s)
+        wait_for(lambda: _consumed(s, "viz") >= before + n, 30.0, f"viz to consume {n} messages")
     out = procs.stop(viz)
     assert "stopped; consumed" in out, out
     rows: dict[str, int] = collections.Counter()
@@ -114,13 +138,15 @@ def test_live_viz_serves_over_grpc_headless(procs, tmp_path):
         extra=f'[viz]\nmode = "serve"\ngrpc_port = {grpc}\nbind_ip = "127.0.0.1"\n',
     )
     procs.start("router", "--config", str(cfg))
+    wait_port(port)
     viz = procs.start("viz", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
+    # The rerun gRPC server listens for viewers. (Viz's liveliness token may come first: the
+    # server starts after the shell; wait for what is needed, the port accepting.)
+    wait_port(grpc, timeout=40.0)
     with zenoh_client(port) as s:
         _wait_alive(s, "viz")
-        import socket
-
-        with socket.create_connection(("127.0.0.1", grpc), timeout=5):
-            pass  # the rerun gRPC server listens for viewers
-        _publish_some(s, n=3)
+        before = _consumed(s, "viz")
+        n = _publish_some(s, n=3)
+        wait_for(lambda: _consumed(s, "viz") >= before + n, 30.0, f"viz to consume {n} messages")
     out = procs.stop(viz)
     assert "stopped; consumed" in out and "Traceback" not in out, out

@@ -115,10 +115,10 @@ def test_viz_recording_of_a_lockstep_run_replays(twin_run):
     assert res.recorded_outputs > n_images  # every status, state... and a third of the images
 
 
-def test_view_save_writes_the_blueprint_and_the_expected_entities(twin_run, tmp_path, capsys):
+def test_view_save_writes_the_blueprint_and_the_expected_entities(twin_run, tmp_path, capsys, cli_main):
     run_dir, n_path, n_images = twin_run
     out = tmp_path / "run.rrd"
-    assert main(["view", str(run_dir), "--save", str(out)]) == 0
+    assert cli_main(["view", str(run_dir), "--save", str(out)]) == 0
     captured = capsys.readouterr()
     assert f"-> the file {out}" in captured.out
     assert "humanpt view:" in captured.err  # the progress line
@@ -186,10 +186,10 @@ def test_view_of_the_same_run_with_image_decimation_and_a_progress_callback(twin
     assert _entities(out)["/image"] == stats.counts["camera/image"]
 
 
-def test_view_names_a_missing_run(tmp_path, capsys):
-    assert main(["view", str(tmp_path / "nope"), "--save", str(tmp_path / "x.rrd")]) == 2
+def test_view_names_a_missing_run(tmp_path, capsys, cli_main):
+    assert cli_main(["view", str(tmp_path / "nope"), "--save", str(tmp_path / "x.rrd")]) == 2
     assert "no such run directory" in capsys.readouterr().err
-    assert main(["view", str(tmp_path), "--save", str(tmp_path / "x.rrd")]) == 2
+    assert cli_main(["view", str(tmp_path), "--save", str(tmp_path / "x.rrd")]) == 2
     assert "no component recordings" in capsys.readouterr().err
 
 
@@ -265,8 +265,8 @@ def test_a_viewer_that_cannot_open_does_not_take_viz_down(caplog):
         a.close()
 
 
-def test_view_without_a_display_says_to_save_or_serve(twin_run, monkeypatch, capsys):
+def test_view_without_a_display_says_to_save_or_serve(twin_run, monkeypatch, capsys, cli_main):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    assert main(["view", str(twin_run[0])]) == 2
+    assert cli_main(["view", str(twin_run[0])]) == 2
     assert "use --save FILE.rrd, or --serve" in capsys.readouterr().err
