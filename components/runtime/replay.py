@@ -151,7 +151,7 @@ class ReplayResult:
             if self.compared == 0:
                 return f"{head}{trunc}\n  MATCH: the core output nothing, recorded or replayed"
             upto = " up to the truncation" if self.truncated else ""
-            return f"{head}{trunc}\n  MATCH: all {self.compared} outputs identical{upto}"
+            return f"{head}{trunc}\n  MATCH: every output is identical{upto} ({self.compared} compared)"
         return f"{head}{trunc}\n  MISMATCH\n{self.divergence.describe()}"
 
 

@@ -171,14 +171,14 @@ def test_cli_replay_never_says_match_on_nothing(tmp_path):
     r = run_cli("replay", str(cut))
     assert r.returncode == 0, (r.stdout, r.stderr)
     assert f"{n_out} compared" in r.stdout and "truncated" in r.stdout
-    assert f"MATCH: all {n_out} outputs identical up to the truncation" in r.stdout
+    assert f"MATCH: every output is identical up to the truncation ({n_out} compared)" in r.stdout
 
     # A run directory with one good and one unreadable recording: the worst verdict.
     (tmp_path / "mixed").mkdir()
     (tmp_path / "mixed" / "a.mcap").write_bytes(data)
     (tmp_path / "mixed" / "b.mcap").write_bytes(unreadable.read_bytes())
     r = run_cli("replay", str(tmp_path / "mixed"))
-    assert r.returncode == 2 and "MATCH: all 400 outputs identical" in r.stdout
+    assert r.returncode == 2 and "MATCH: every output is identical (400 compared)" in r.stdout
     assert "b.mcap" in r.stderr and "no message could be read" in r.stderr
 
 
