@@ -280,10 +280,11 @@ class FieldDelta:
     at: int = -1  # index on the topic (old stream) of that message
     max_count: int = 0  # bytes: most bytes that differ in one message
     example: str = ""  # for text: "old -> new" of the first difference
+    judged: bool = True  # False for two live runs (pairing by order): no tolerance applies
 
     def describe(self) -> str:
-        tol = f"; tolerance {self.tolerance}" if self.tolerance != "exact" else ""
-        if self.beyond:
+        tol = f"; tolerance {self.tolerance}" if self.judged and self.tolerance != "exact" else ""
+        if self.judged and self.beyond:
             tol += f"; BEYOND it in {self.beyond}, first at #{self.first_beyond}"
         if self.kind == "text":
             return (f"{self.field}: differs in {self.differing} message(s), first at #{self.at}: "
@@ -310,6 +311,7 @@ class TopicDiff:
     first: int | None = None  # index on the topic (old stream) of the first differing pair
     first_beyond: int | None = None  # ... of the first pair beyond tolerance
     fields: list[FieldDelta] = field(default_factory=list)
+    judged: bool = True  # False for two live runs (pairing by order): no tolerance applies
 
     @property
     def identical(self) -> bool:
@@ -327,7 +329,9 @@ class TopicDiff:
         head += f", {self.added} added, {self.removed} removed, {self.differing} differ"
         if self.first is not None:
             head += f" (first at #{self.first})"
-        if self.within_tolerance:
+        if not self.judged:
+            pass
+        elif self.within_tolerance:
             head += ", all within tolerance"
         elif self.beyond:
             head += f", {self.beyond} beyond tolerance (first at #{self.first_beyond})"
@@ -446,6 +450,10 @@ def compare_streams(
                     td.first_beyond = i
         td.added = len(kb) - len(paired_b)
         td.fields = list(fields.values())
+        if pairing == "order":
+            td.judged = False
+            for fd in td.fields:
+                fd.judged = False
         result.append(td)
     return StreamDiff(result)
 
