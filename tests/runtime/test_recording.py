@@ -142,6 +142,14 @@ def test_cli_replay_errors_are_clear(tmp_path):
 def test_cli_replay_never_says_match_on_nothing(tmp_path):
     """Exit statuses (components/runtime/README.md): 3 for a readable recording without
     inputs, 2 when not one message can be read, 0 only with outputs compared."""
+    foreign = tmp_path / "foreign.mcap"  # a valid MCAP file, empty and not humanpt's
+    with open(foreign, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    r = run_cli("replay", str(foreign))
+    assert r.returncode == 2 and "not a humanpt recording" in r.stderr and "MATCH" not in r.stdout
+
     empty = tmp_path / "empty" / "ponger.mcap"
     Recorder(empty, {"component": "ponger", "core": "humanpt.runtime.selftest:PongerCore"}).close()
     r = run_cli("replay", str(empty))
