@@ -13,8 +13,8 @@ The reference runs in ``recordings/<run>/`` (made live on the digital twin by
   gives the largest difference per field; on failure it names the run, the component, the
   topic, the first offending message (its index on that topic and in the whole output
   stream, its time) and the fields that differ, then summarises the whole replay per topic.
-  ``exact=True`` demands the recorded bytes (run == replay within one build:
-  :func:`humanpt.runtime.replay.replay`).
+  ``exact=True`` demands the recorded bytes (run == replay within one build, as
+  :func:`humanpt.runtime.replay.replay` does).
 - :func:`compare_streams` compares two output streams per topic: messages added and
   removed, messages that differ, and the largest difference per field (numbers by value,
   images and other byte strings byte by byte, enums and text by count), each with its
@@ -43,7 +43,7 @@ from google.protobuf.message import Message
 from humanpt.runtime.config import ConfigError
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import Recording, RecordingError, read
-from humanpt.runtime.replay import ReplayResult, build_core, diff_messages, replay
+from humanpt.runtime.replay import build_core, diff_messages
 from humanpt.schemas import topics
 
 Stream = list[tuple[int, str, bytes]]  # (log time ns, short topic, serialised message)
@@ -598,7 +598,6 @@ class GoldenResult:
     ref: ReferenceFile
     ok: bool
     message: str
-    replay: ReplayResult | None = None
     diff: StreamDiff | None = None
 
 
@@ -617,15 +616,12 @@ def check_component(
         ref = ReferenceFile(p.parent.name, p.stem, p)
     who = f"reference run {ref.run!r}, component {ref.component!r} ({ref.path})"
     try:
-        result = replay(ref.path, core_factory) if exact else None
         rec, recorded, replayed = replay_streams(ref.path, core_factory)
     except (RecordingError, ConfigError) as e:
         # Old recordings are never misread: an incompatible one is refused, naming why.
         return GoldenResult(ref, False, f"{who}: cannot be replayed: {e}\n  {RERECORD_HINT}")
     if rec.truncated:
-        return GoldenResult(
-            ref, False, f"{who}: the reference recording is damaged: {rec.truncated}", result
-        )
+        return GoldenResult(ref, False, f"{who}: the reference recording is damaged: {rec.truncated}")
     n_inputs = len(rec.inputs)
     if n_inputs == 0 or not recorded:
         return GoldenResult(
@@ -633,22 +629,22 @@ def check_component(
             False,
             f"{who}: {n_inputs} inputs and {len(recorded)} outputs "
             "recorded: a reference recording that holds nothing tests nothing",
-            result,
         )
     diff = compare_streams(recorded, replayed, pairing="step")
     if exact:
-        if result.match:
+        first = next((i for i, (a, b) in enumerate(zip(recorded, replayed, strict=False)) if a != b),
+                     None if len(recorded) == len(replayed) else min(len(recorded), len(replayed)))
+        if first is None:
             return GoldenResult(
                 ref, True, f"{who}: {n_inputs} inputs replayed, {len(recorded)} outputs identical",
-                result, diff,
+                diff,
             )
-        first = result.divergence.index
         verdict = "does not reproduce its recorded outputs byte for byte"
     else:
         first = _first_offence(recorded, replayed, diff)
         if first is None:
             return GoldenResult(ref, True, _pass_message(who, n_inputs, recorded, diff, max_fields),
-                                result, diff)
+                                diff)
         verdict = ("does not reproduce its recorded outputs (discrete fields exactly, floats "
                    "within TOLERANCES of humanpt.testing.golden)")
     r = recorded[first] if first < len(recorded) else None
@@ -685,7 +681,7 @@ def check_component(
     )
     lines.append(diff.describe(max_fields, indent="    ", only_changes=True))
     lines.append(f"  {RERECORD_HINT}")
-    return GoldenResult(ref, False, "\n".join(lines), result, diff)
+    return GoldenResult(ref, False, "\n".join(lines), diff)
 
 
 def _first_offence(recorded: Stream, replayed: Stream, diff: StreamDiff) -> int | None:
