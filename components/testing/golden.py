@@ -80,8 +80,8 @@ class Tolerance:
 
 # Float tolerances, by the unit a field's name (or its message) states.  Far above the
 # rounding of double arithmetic (~1e-16 relative: what a refactoring or a library update
-# changes), far below anything the system can resolve or act on (the pose filter's noise is
-# ~1e-5 m, the servo's steps ~1e-6 m, image centres ~1e-2 px).
+# changes), far below what the system resolves (3D points ~3e-6 m RMS, image centres
+# ~6e-3 px RMS: perception/README.md).
 TOLERANCES: dict[str, Tolerance] = {
     "m": Tolerance("m", 1e-9),
     "rad": Tolerance("rad", 1e-9),
