@@ -353,6 +353,12 @@ def param(args) -> int:
 # -- recordings ----------------------------------------------------------------------------
 def replay(args) -> int:
     from humanpt.runtime.recording import RecordingError
+    from humanpt.runtime.replay import (
+        EXIT_MATCH,
+        EXIT_MISMATCH,
+        EXIT_NOTHING_COMPARED,
+        EXIT_UNREADABLE,
+    )
     from humanpt.runtime.replay import replay as do_replay
 
     path = Path(args.run)
@@ -371,12 +377,21 @@ def replay(args) -> int:
         files = [path]
     else:
         raise RecordingError(f"{path}: no such run directory or file")
-    ok = True
+    codes = []
     for f in files:
-        res = do_replay(f)
+        try:
+            res = do_replay(f)
+        except (RecordingError, cfgmod.ConfigError) as e:  # say why, go on with the other files
+            print(f"humanpt replay: cannot replay {f}: {e}", file=sys.stderr, flush=True)
+            codes.append(EXIT_UNREADABLE)
+            continue
         print(res.report(), flush=True)
-        ok &= res.match
-    return 0 if ok else 1
+        codes.append(res.exit_code)
+    # The worst verdict: unreadable, then a mismatch, then nothing compared.
+    for code in (EXIT_UNREADABLE, EXIT_MISMATCH, EXIT_NOTHING_COMPARED):
+        if code in codes:
+            return code
+    return EXIT_MATCH
 
 
 def runs_merge(args) -> int:

@@ -451,8 +451,15 @@ def _common_after_action(q: argparse.ArgumentParser) -> None:
     )
 
 
-def _add_actions(asub) -> None:
-    q = asub.add_parser(
+def _add_actions(asub) -> dict[str, str]:
+    """Add the console's actions to the sub-parsers ``asub``; {action: its one-line help}."""
+    helps: dict[str, str] = {}
+
+    def action(verb: str, **kw) -> argparse.ArgumentParser:
+        helps[verb] = kw["help"]
+        return asub.add_parser(verb, **kw)
+
+    q = action(
         "status",
         help="mode, visible sources, error, cycle misses, recording",
         description="Print the live status once (or a line every --interval with --follow): "
@@ -469,12 +476,12 @@ def _add_actions(asub) -> None:
         help="seconds between lines with --follow (default 0.5)",
     )
     q.add_argument("--duration", type=float, help="stop following after this many seconds")
-    q = asub.add_parser(
+    q = action(
         "show",
         help="the GUI options' current values",
         description="Ask perception and the controller for the current values of the GUI's options.",
     )
-    q = asub.add_parser(
+    q = action(
         "set",
         help="set GUI options: threshold, invert, delay, dz, stop-on-current-location, ...",
         description="Set the paper's GUI options on the running components (their live "
@@ -484,21 +491,21 @@ def _add_actions(asub) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     q.add_argument("assignments", nargs="+", metavar="NAME=VALUE")
-    q = asub.add_parser(
+    q = action(
         "record",
         help="start or stop recording the path",
         description="Start recording the path (a new path file under the controller's run "
         "directory, a point every `delay` cycles) or stop it.",
     )
     q.add_argument("action", choices=["start", "stop"])
-    q = asub.add_parser(
+    q = action(
         "save",
         help="save the recorded path to a file (on the controller's machine)",
         description="Copy the current path file (CSV, mm and degrees) to FILE. The controller "
         "writes it, on its machine; a relative FILE is taken from the console's directory.",
     )
     q.add_argument("file", metavar="FILE")
-    q = asub.add_parser(
+    q = action(
         "calibrate",
         help="calibrate the driver tip (N samples pivoting on it)",
         description="Start the driver-tip calibration (paper §4.1): track while collecting N "
@@ -507,7 +514,7 @@ def _add_actions(asub) -> None:
     )
     q.add_argument("--samples", type=int, help="N (default: the controller's calib-samples option)")
     q.add_argument("--pivot", metavar="X,Y,Z", help="P' in the world frame, mm")
-    q = asub.add_parser(
+    q = action(
         "playback",
         help="replay the recorded path (or a path file) with the tool",
         description="The tool tip follows the path just recorded, or the path in FILE (a path "
@@ -526,9 +533,10 @@ def _add_actions(asub) -> None:
         ("track", "track the target (visual servo)"),
         ("return", "return to the start pose"),
     ):
-        asub.add_parser(verb, help=text, description=f"Controller command: {text}.")
+        action(verb, help=text, description=f"Controller command: {text}.")
     for q in asub.choices.values():
         _common_after_action(q)
+    return helps
 
 
 def add_parser(sub, add_common) -> argparse.ArgumentParser:
@@ -591,8 +599,7 @@ def _do(con: Console, a) -> int:
 def _interactive(con: Console, stream=sys.stdin) -> int:
     ap = argparse.ArgumentParser(prog="", add_help=False, exit_on_error=False)
     asub = ap.add_subparsers(dest="console_verb", metavar="ACTION")
-    _add_actions(asub)
-    helps = {a.dest: a.help for a in asub._choices_actions}
+    helps = _add_actions(asub)
     verbs = "verbs ('VERB --help' for its options; 'quit' ends):\n" + "\n".join(
         f"  {v:10s} {h}" for v, h in helps.items()
     )

@@ -5,10 +5,13 @@ The reference runs are listed in ``recordings/runs.toml`` (scenario, twin second
 pty, alter_gateway, sim_camera, perception, pose_filter, controller and operator as
 processes over Zenoh) into a temporary directory.  Then, per run:
 
-1. every new component recording must replay exactly (else nothing is replaced);
+1. every new component recording must replay exactly, byte for byte (else nothing is
+   replaced);
 2. *this build on the old run's inputs*: each component of the old reference run is
-   replayed with this build and compared with what it recorded, messages paired by step.
-   This is exact: it is what the change does to each component, free of live timing;
+   replayed with this build and compared with what it recorded, messages paired by step:
+   identical, within the golden test's tolerances (``golden.TOLERANCES``; the largest
+   difference per field is shown) or CHANGED.  Free of live timing: it is what the change
+   does to each component;
 3. *the new live run against the old*: each component's outputs, paired in order per
    topic, stamps relative to each recording's start.  Live runs differ in timing from run
    to run, so expect differences here even without a change; look at their size.
@@ -267,7 +270,8 @@ def compare_run(
     )
     bad = []
     for name, p in new_files.items():
-        r = golden.check_component(golden.ReferenceFile(spec.name, name, p))
+        # Recorded and replayed by this build: run == replay, byte for byte.
+        r = golden.check_component(golden.ReferenceFile(spec.name, name, p), exact=True)
         if not r.ok:
             bad.append(r.message)
     if not new_files:
@@ -294,6 +298,10 @@ def compare_run(
         diff = golden.compare_streams(recorded, replayed, pairing="step")
         if diff.identical:
             out.append(f"    {name}: identical ({len(recorded)} outputs)")
+        elif diff.within_tolerance:
+            # What the golden test accepts (golden.TOLERANCES): shown, not a change.
+            out.append(f"    {name}: within tolerance ({len(recorded)} outputs; recorded -> this build):")
+            out.append(diff.describe(max_fields, indent="      ", only_changes=True))
         else:
             rep.changed = True
             out.append(f"    {name}: CHANGED (recorded -> this build):")

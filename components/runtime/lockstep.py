@@ -117,7 +117,7 @@ class Lockstep:
                         "wall_start_time_ns": time.time_ns(),
                     },
                     chunk_size=chunk_size,
-                    pipeline=True,
+                    background=True,
                 )
 
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:

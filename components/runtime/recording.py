@@ -9,32 +9,30 @@ FileDescriptorSets so Foxglove and rerun open the files.  A metadata record
 ``humanpt.run`` holds the component, its core class, its config, the version and the
 start time; replay builds the core from it.
 
-The stream is flushed to the file whenever a chunk is finalised, and the writer is flushed every ``flush_interval_s`` of
-wall time and whenever a chunk fills, so a crash loses at most the chunk in progress.
+Writing uses mcap's public :class:`mcap.writer.Writer` only (zstd chunks of
+``chunk_size`` bytes).  Each finished chunk is put in the file at once, and the chunk in
+progress is ended and put in the file every ``flush_interval_s`` of wall time, so a crash
+loses at most the chunk in progress (plus, with ``background=True``, the messages still
+queued for the writer thread: at most about one more chunk's worth, see :class:`Recorder`).
 """
 
 from __future__ import annotations
 
 import json
 import queue
-import struct
 import threading
 import time
-import zlib
 from collections.abc import Iterator
-from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import zstandard
 from google.protobuf.message import DecodeError, Message
 from mcap.exceptions import McapError
-from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, ChunkIndex, MessageIndex, Metadata, Schema
+from mcap.records import Channel, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader
-from mcap.writer import CompressionType, IndexType, Writer
+from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
 
 from humanpt.schemas import topics
@@ -48,182 +46,24 @@ class RecordingError(ValueError):
     written by an incompatible schema version.  The message says which."""
 
 
-_local = threading.local()
-
-
-def _zstd_chunk(data: bytes) -> tuple[bytes, int]:
-    """(zstd of ``data`` as ``zstandard.compress`` makes it, crc32 of ``data``)."""
-    compressor = getattr(_local, "zstd", None)
-    if compressor is None:
-        compressor = _local.zstd = zstandard.ZstdCompressor()  # = zstandard.compress's, reused
-    return compressor.compress(data), zlib.crc32(data)
-
-
-_compressor: ThreadPoolExecutor | None = None
-_compressor_lock = threading.Lock()
-
-
-def _compressor_pool() -> ThreadPoolExecutor:
-    global _compressor
-    with _compressor_lock:
-        if _compressor is None:
-            _compressor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mcap-zstd")
-        return _compressor
-
-
-def _pipeline_ok() -> bool:
-    """PipelinedWriter overrides private methods of mcap's Writer as they are in mcap 1.6;
-    with another mcap the plain writer is used (same file, no helper thread)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        v = version("mcap")
-    except PackageNotFoundError:
-        return False
-    return (v.startswith("1.6.") and hasattr(Writer, "_Writer__finalize_chunk")
-            and hasattr(Writer, "_Writer__maybe_finalize_chunk"))
-
-
-class PipelinedWriter(Writer):
-    """An MCAP writer (zstd chunks) that compresses each finished chunk on a helper thread
-    (zstd and crc32 release the GIL) while the caller carries on.
-
-    The file is byte for byte what :class:`mcap.writer.Writer` writes: a chunk goes into the
-    stream, with its message indexes, before anything written after it (the next chunk,
-    metadata, a flush, the summary).  Until then it is *pending*: :meth:`write_ready`
-    writes it once its compression is done.  Relies on the internals of mcap's Writer
-    (name-mangled attributes; checked against mcap 1.6).
-    """
-
-    def __init__(self, output, *, chunk_size: int):
-        super().__init__(output, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-        self._pending: tuple[Future, int, int, int, dict] | None = None
-        self._pool = _compressor_pool()
-        self.chunks_written = 0
-
-    def _Writer__finalize_chunk(self) -> None:  # replaces Writer.__finalize_chunk
-        self._write_pending()
-        builder = self._Writer__chunk_builder
-        if not builder or builder.num_messages == 0:
-            return
-        self._Writer__statistics.chunk_count += 1
-        data = builder.end()
-        self._pending = (
-            self._pool.submit(_zstd_chunk, data),
-            len(data),
-            builder.message_start_time,
-            builder.message_end_time,
-            dict(builder.message_indices),
-        )
-        builder.reset()
-
-    def write_ready(self) -> None:
-        """Write the pending chunk if its compression is done."""
-        if self._pending is not None and self._pending[0].done():
-            self._write_pending()
-
-    def _write_pending(self) -> None:
-        if self._pending is None:
-            return
-        future, size, start, end, indices = self._pending
-        self._pending = None
-        compressed, crc = future.result()
-        chunk = Chunk(
-            compression="zstd",
-            data=compressed,
-            message_start_time=start,
-            message_end_time=end,
-            uncompressed_crc=crc if self._Writer__enable_crcs else 0,
-            uncompressed_size=size,
-        )
-        # From here on exactly as Writer.__finalize_chunk.
-        stream, records = self._Writer__stream, self._Writer__record_builder
-        self._Writer__flush()
-        chunk_start_offset = stream.tell()
-        chunk.write(records)
-        chunk_index = ChunkIndex(
-            message_start_time=start,
-            message_end_time=end,
-            chunk_start_offset=chunk_start_offset,
-            chunk_length=records.count,
-            message_index_offsets={},
-            message_index_length=0,
-            compression=chunk.compression,
-            compressed_size=len(compressed),
-            uncompressed_size=size,
-        )
-        self._Writer__flush()
-        message_index_start_offset = stream.tell()
-        if self._Writer__index_types & IndexType.MESSAGE:
-            for cid, index in indices.items():
-                chunk_index.message_index_offsets[cid] = message_index_start_offset + records.count
-                index.write(records)
-        chunk_index.message_index_length = records.count
-        self._Writer__flush()
-        self._Writer__chunk_indices.append(chunk_index)
-        self.chunks_written += 1
-
-    _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
-
-    def add_message(self, channel_id: int, log_time: int, data: bytes, publish_time: int,
-                    sequence: int = 0) -> None:
-        """Writer.add_message's bookkeeping and bytes (a chunked writer's path), without a
-        Message record object and five small writes per message: the same file."""
-        stats = self._Writer__statistics
-        if stats.message_count == 0:
-            stats.message_start_time = log_time
-        else:
-            stats.message_start_time = min(log_time, stats.message_start_time)
-        stats.message_end_time = max(log_time, stats.message_end_time)
-        stats.channel_message_counts[channel_id] += 1
-        stats.message_count += 1
-        b = self._Writer__chunk_builder
-        if b.num_messages == 0:
-            b.message_start_time = log_time
-        else:
-            b.message_start_time = min(b.message_start_time, log_time)
-        b.message_end_time = max(b.message_end_time, log_time)
-        index = b.message_indices.get(channel_id)
-        if not index:
-            index = b.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-        buf = b.record_writer._buffer
-        index.records.append((log_time, buf.tell()))
-        b.num_messages += 1
-        buf.write(self._MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, sequence, log_time,
-                                          publish_time))
-        buf.write(data)
-        self._Writer__maybe_finalize_chunk()
-
-    def add_metadata(self, name: str, data: dict[str, str]) -> None:
-        self._write_pending()
-        super().add_metadata(name, data)
-
-    def add_attachment(self, *args, **kwargs) -> None:
-        self._write_pending()
-        super().add_attachment(*args, **kwargs)
-
-    def flush(self) -> None:
-        self._Writer__finalize_chunk()
-        self._write_pending()
-        super().flush()
-
-    def finish(self) -> None:
-        self._Writer__finalize_chunk()
-        self._write_pending()
-        super().finish()
-
-
 class Recorder:
     """Writes one component's inputs and outputs to an MCAP file.
 
     Call it from one thread (the shell's worker).  With ``background=True`` the MCAP
-    writing and compression happen on a writer thread of their own (zstd releases the
-    GIL), so recording costs the core's thread only a queue put; the queue is bounded
-    (back-pressure rather than unbounded memory) and :meth:`close` drains it.  With
-    ``pipeline=True`` (zstd only) the caller's thread does the MCAP writing but each
-    chunk's compression runs on a helper thread (:class:`PipelinedWriter`, same bytes);
-    a chunk reaches the file once compressed, so a crash may lose one more chunk.
+    writing and the chunks' compression run on a writer thread of the recorder's own
+    (zstd releases the GIL, so compression overlaps the caller's work); the caller only
+    appends each message to a batch, handed to the thread when it holds a quarter of
+    ``chunk_size`` bytes or :data:`BATCH_MESSAGES` messages, on :meth:`flush` and every
+    ``flush_interval_s``.  At most :data:`QUEUED_BATCHES` batches wait for the thread (the
+    caller then waits: back-pressure, not unbounded memory), so a crash loses at most the
+    chunk in progress and about one chunk's worth of messages not yet written (the batch
+    being filled, the queued ones and the one being written).  One thread writes, in the
+    order the messages were given: the file holds the same messages in the same order
+    as without the thread.  :meth:`close` drains the queue.
     """
+
+    BATCH_MESSAGES = 256  # a batch's size in messages, at most
+    QUEUED_BATCHES = 2  # batches waiting for the writer thread, at most
 
     def __init__(
         self,
@@ -234,7 +74,6 @@ class Recorder:
         flush_interval_s: float = 1.0,
         compression: str = "zstd",
         background: bool = False,
-        pipeline: bool = False,
     ):
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
@@ -247,15 +86,7 @@ class Recorder:
             "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE,
         }[compression]
-        if pipeline and comp == CompressionType.ZSTD and _PIPELINE_OK:
-            self._pipelined: PipelinedWriter | None = PipelinedWriter(
-                self._file, chunk_size=chunk_size
-            )
-            self._writer: Writer = self._pipelined
-        else:
-            self._pipelined = None
-            self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
-        self._chunks_seen = 0
+        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
         self._writer.start(profile="humanpt", library="humanpt")
         meta = {
             k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
@@ -272,8 +103,11 @@ class Recorder:
         self._stream_pos = self._file.tell()
         self.bytes_written = 0
         self._closed = False
+        self._batch: list[tuple] = []
+        self._batch_bytes = 0
+        self._batch_limit = max(1, chunk_size // 4)
         if background:
-            self._queue = queue.Queue(maxsize=512)
+            self._queue = queue.Queue(maxsize=self.QUEUED_BATCHES)
             self._thread = threading.Thread(
                 target=self._drain, name=f"recorder-{self.path.stem}", daemon=True
             )
@@ -281,11 +115,12 @@ class Recorder:
 
     def _drain(self) -> None:
         while True:
-            item = self._queue.get()
-            if item is None:
+            batch = self._queue.get()
+            if batch is None:
                 return
             try:
-                self._do(*item)
+                for item in batch:
+                    self._do(*item)
             except BaseException as e:  # noqa: BLE001 - reported on close
                 self._error = e
 
@@ -296,11 +131,27 @@ class Recorder:
         elif kind == "flush":
             self._flush_now()
 
-    def _submit(self, *item) -> None:
-        if self._queue is not None:
-            self._queue.put(item)
-        else:
+    def _submit(self, item: tuple, size: int = 0) -> None:
+        """Write ``item`` now, or batch it for the writer thread."""
+        due = time.monotonic() - self._last_flush >= self._flush_interval_s
+        if due:
+            self._last_flush = time.monotonic()
+        if self._queue is None:
             self._do(*item)
+            if due:
+                self._flush_now()
+            return
+        self._batch.append(item)
+        self._batch_bytes += size
+        if due:
+            self._batch.append(("flush",))
+        if due or self._batch_bytes >= self._batch_limit or len(self._batch) >= self.BATCH_MESSAGES:
+            self._hand_over()
+
+    def _hand_over(self) -> None:
+        if self._batch:
+            self._queue.put(self._batch)
+            self._batch, self._batch_bytes = [], 0
 
     def _channel(self, direction: str, topic: str, msg_type: type[Message] | None) -> int:
         key = (direction, topic)
@@ -331,11 +182,11 @@ class Recorder:
         ``data`` may pass the already serialised bytes of ``msg`` to save work.
         """
         payload = msg.SerializeToString() if data is None else data
-        self._submit("msg", direction, t_ns, topic, type(msg), payload)
+        self._submit(("msg", direction, t_ns, topic, type(msg), payload), len(payload))
 
     def write_dropped(self, t_ns: int, topic: str, payload: bytes) -> None:
         """Record an input that failed to decode, raw."""
-        self._submit("msg", DROPPED, t_ns, topic, None, payload)
+        self._submit(("msg", DROPPED, t_ns, topic, None, payload), len(payload))
 
     def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
         self._writer.add_message(
@@ -347,36 +198,31 @@ class Recorder:
         )
         self._count += 1
         self.bytes_written += len(payload)
-        if self._pipelined is not None:
-            self._pipelined.write_ready()
-            if self._pipelined.chunks_written != self._chunks_seen:
-                # A chunk went into the stream buffer: put it in the file now.
-                self._file.flush()
-                self._chunks_seen = self._pipelined.chunks_written
-        else:
-            pos = self._file.tell()
-            if pos != self._stream_pos:
-                # A chunk was finalised into the stream buffer: put it in the file now.
-                self._file.flush()
-                self._stream_pos = pos
-        now = time.monotonic()
-        if now - self._last_flush >= self._flush_interval_s:
-            self._flush_now()
+        pos = self._file.tell()
+        if pos != self._stream_pos:
+            # A chunk was finalised into the stream buffer: put it in the file now.
+            self._file.flush()
+            self._stream_pos = pos
 
     def flush(self) -> None:
-        """End the chunk in progress and put it in the file."""
-        self._submit("flush")
+        """End the chunk in progress and put it in the file (with ``background=True``:
+        once the writer thread gets there)."""
+        if self._queue is None:
+            self._flush_now()
+        else:
+            self._batch.append(("flush",))
+            self._hand_over()
 
     def _flush_now(self) -> None:
         self._writer.flush()
         self._stream_pos = self._file.tell()
-        self._last_flush = time.monotonic()
 
     def close(self) -> None:
         """Write the summary and close the file (idempotent)."""
         if not self._closed:
             self._closed = True
             if self._thread is not None:
+                self._hand_over()
                 self._queue.put(None)
                 self._thread.join()
             self._writer.finish()
@@ -546,5 +392,3 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
             )
     return rec
 
-
-_PIPELINE_OK = _pipeline_ok()

@@ -2,8 +2,15 @@
 
 The core is rebuilt from the recording's metadata (core class and config), fed every
 recorded input in order with the time it was given, and its outputs are compared byte
-for byte with the recorded ones.  The first divergence is reported with the fields that
-differ.
+for byte with the recorded ones (run == replay is exact within one build).  The first
+divergence is reported with the fields that differ.
+
+A verdict is never reached on nothing: a recording of which no message can be read
+raises :class:`RecordingError`; one that holds no inputs, or whose truncation leaves no
+output to compare, is "nothing compared", not a match.  A truncated recording is
+compared up to the damage and the report says how much that was.  Exit statuses of
+``humanpt replay``: :data:`EXIT_MATCH`, :data:`EXIT_MISMATCH`, :data:`EXIT_UNREADABLE`,
+:data:`EXIT_NOTHING_COMPARED`.
 """
 
 from __future__ import annotations
@@ -91,27 +98,60 @@ class Divergence:
         return "\n".join(lines)
 
 
+EXIT_MATCH = 0  # every output compared identical (up to a truncation, said so)
+EXIT_MISMATCH = 1  # an output differs, is missing or is extra
+EXIT_UNREADABLE = 2  # the recording cannot be read (missing, not MCAP, no message, ...)
+EXIT_NOTHING_COMPARED = 3  # readable, but no input to replay or no output left to compare
+
+
 @dataclass
 class ReplayResult:
     path: Path
     component: str
     inputs: int
-    recorded_outputs: int
-    replayed_outputs: int
+    recorded_outputs: int  # read from the recording (up to a truncation)
+    replayed_outputs: int  # made by the replay from the inputs read
     divergence: Divergence | None
-    truncated: str | None
+    truncated: str | None  # why reading stopped early, None when the file is complete
+    compared: int = 0  # output pairs found identical (before the divergence, if any)
+    messages_read: int = 0  # every message read: inputs, outputs, dropped inputs
+
+    @property
+    def nothing_compared(self) -> bool:
+        """No input to replay, or a truncation that leaves no recorded output to compare
+        while the replay made some: no verdict either way."""
+        if self.divergence is not None:
+            return False
+        return self.inputs == 0 or (
+            self.truncated is not None and self.compared == 0 and self.replayed_outputs > 0
+        )
 
     @property
     def match(self) -> bool:
-        return self.divergence is None
+        return self.divergence is None and not self.nothing_compared
+
+    @property
+    def exit_code(self) -> int:
+        if self.match:
+            return EXIT_MATCH
+        return EXIT_NOTHING_COMPARED if self.nothing_compared else EXIT_MISMATCH
 
     def report(self) -> str:
-        head = (f"{self.path}: component {self.component}: {self.inputs} inputs replayed, "
-                f"{self.recorded_outputs} outputs recorded, {self.replayed_outputs} replayed")
-        trunc = f"\n  the recording is truncated ({self.truncated}); compared up to the truncation" \
-            if self.truncated else ""
+        head = (f"{self.path}: component {self.component}: {self.messages_read} messages read, "
+                f"{self.inputs} inputs replayed, {self.recorded_outputs} outputs recorded, "
+                f"{self.replayed_outputs} replayed, {self.compared} compared")
+        trunc = (f"\n  the recording is truncated ({self.truncated}); only the "
+                 f"{self.recorded_outputs} outputs recorded before the damage are compared"
+                 if self.truncated else "")
+        if self.nothing_compared:
+            why = ("the recording holds no inputs" if self.inputs == 0
+                   else "no recorded output survives the truncation")
+            return f"{head}{trunc}\n  NOTHING COMPARED: {why}; this is not a match"
         if self.match:
-            return f"{head}{trunc}\n  MATCH: every output is identical"
+            if self.compared == 0:
+                return f"{head}{trunc}\n  MATCH: the core output nothing, recorded or replayed"
+            upto = " up to the truncation" if self.truncated else ""
+            return f"{head}{trunc}\n  MATCH: every output is identical{upto} ({self.compared} compared)"
         return f"{head}{trunc}\n  MISMATCH\n{self.divergence.describe()}"
 
 
@@ -127,6 +167,8 @@ def _decode(topic: str, data: bytes) -> Message | None:
 def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_core) -> ReplayResult:
     """Replay one component recording; see the module docstring."""
     rec = read(path)
+    if not rec.entries and rec.truncated:
+        raise RecordingError(f"{rec.truncated}: no message could be read, nothing to replay")
     core = core_factory(rec)
     replayed: list[tuple[int, str, bytes]] = []
     for e in rec.inputs:
@@ -139,6 +181,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
     else:
         replayed_cmp = replayed
     div = None
+    compared = min(len(recorded), len(replayed_cmp))
     for i in range(max(len(recorded), len(replayed_cmp))):
         r = recorded[i] if i < len(recorded) else None
         p = replayed_cmp[i] if i < len(replayed_cmp) else None
@@ -154,8 +197,10 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                     if a is not None and b is not None:
                         fields += diff_messages(a, b)
             div = Divergence(i, r, p, fields)
+            compared = i
             break
-    return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div, rec.truncated)
+    return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div,
+                        rec.truncated, compared, len(rec.entries))
 
 
 def message_text(topic: str, data: bytes) -> str:

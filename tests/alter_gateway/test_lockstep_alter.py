@@ -168,7 +168,8 @@ def test_same_run_twice_is_identical_and_the_recordings_replay(tmp_path):
     assert a.digest() == b.digest()
     for comp in ("alter_gateway", "sim_robot", "controller"):
         res = replay(tmp_path / f"{comp}.mcap")
-        assert res.match, res.report()
+        # Each answers (nearly) every one of the 120 ALTER cycles.
+        assert res.match and res.compared >= 100, res.report()
 
 
 def test_a_silent_controller_is_reused_then_zero_and_a_long_silence_faults_and_stops_alter():

@@ -43,7 +43,11 @@ def test_distortion_matches_cv2_project_points():
 def test_undistortion_matches_cv2_undistort_points_iter():
     observed = _grid()
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-14)
-    cv_ideal = cv2.undistortPointsIter(observed.reshape(-1, 1, 2), K, D, None, K, criteria)
+    src = observed.reshape(-1, 1, 2)
+    if hasattr(cv2, "undistortPointsIter"):  # OpenCV 4 names the iterated form so
+        cv_ideal = cv2.undistortPointsIter(src, K, D, None, K, criteria)
+    else:  # OpenCV 5: undistortPoints takes the criteria
+        cv_ideal = cv2.undistortPoints(src, K, D, R=None, P=K, criteria=criteria)
     np.testing.assert_allclose(
         undistort_pixels(observed, K, D), cv_ideal[:, 0, :], rtol=0, atol=1e-6
     )

@@ -30,9 +30,12 @@ def perturbed_factory(
     delta: float = 0.0,
     drop: bool = False,
     pixel: int | None = None,
+    pixels: int = 1,
+    dn: int = 1,
 ):
     """A core factory whose core perturbs message #``after`` (and later ones, unless
-    ``drop``: then only that one is dropped) on ``topic``."""
+    ``drop``: then only that one is dropped) on ``topic``: ``field`` nudged by ``delta``,
+    or ``pixels`` image bytes from index ``pixel`` on (every 7th) brightened by ``dn``."""
 
     def factory(rec):
         base = build_core(rec)
@@ -53,7 +56,8 @@ def perturbed_factory(
                                 _nudge(m, field, delta)
                             if pixel is not None:
                                 data = bytearray(m.data)
-                                data[pixel] = min(255, data[pixel] + 1)
+                                for k in range(pixel, pixel + 7 * pixels, 7):
+                                    data[k] = min(255, data[k] + dn)
                                 m.data = bytes(data)
                     outs.append((t, m))
                 return outs

@@ -1,10 +1,12 @@
 """Golden replay of the reference runs in recordings/.
 
 Every component of every reference run (found on disk, so a new run is picked up by
-itself) is replayed on its recorded inputs and must reproduce its recorded outputs exactly.
+itself) is replayed on its recorded inputs and must reproduce its recorded outputs:
+discrete fields exactly, floats and images within golden.TOLERANCES / IMAGE_TOLERANCE.
 No reference runs at all is a failure, not a pass.  A deliberately perturbed core (made
 here, in the test) is caught with the run, component, topic, message and field deltas
-named; a recording of another schema version is refused, naming the version.
+named, when beyond tolerance, and passes within it; a recording of another schema version
+is refused, naming the version.
 """
 
 from __future__ import annotations
@@ -60,6 +62,7 @@ def test_golden_replay(ref):
     result = golden.check_component(ref)
     if not result.ok:
         pytest.fail(result.message, pytrace=False)
+    print(result.message)  # the largest difference per field (pytest -rP shows it)
 
 
 def test_reference_runs_are_complete_live_and_small():
@@ -145,12 +148,95 @@ def test_dropped_message_is_named_as_removed(tmp_path):
     assert "0 added, 1 removed" in result.message
 
 
-def test_changed_image_pixel_is_named_with_its_size(tmp_path):
-    path = _static(tmp_path, "sim_camera")
-    result = golden.check_component(path, perturbed_factory("camera/image", after=3, pixel=1000))
+@pytest.mark.parametrize(
+    "component, topic, field, within, beyond",
+    [
+        # metres: tolerance 1e-9 m
+        ("pose_filter", "pose_filter/tob_state", "world_T_tob.translation.x", 1e-12, 1e-8),
+        # quaternion components: 1e-9
+        ("operator", "operator/truth", "world_T_tob.rotation.y", 1e-12, 1e-8),
+        # radians: 1e-9 rad
+        ("controller", "controller/command", "d_rotation_rad.z", 1e-12, 1e-8),
+    ],
+)
+def test_float_within_tolerance_passes_and_beyond_fails(tmp_path, component, topic, field,
+                                                        within, beyond):
+    path = _static(tmp_path, component)
+    ok = golden.check_component(path, perturbed_factory(topic, after=3, field=field, delta=within))
+    assert ok.ok, ok.message
+    assert f"{field}: max |d| " in ok.message and "within tolerance" in ok.message
+    assert _largest(ok, topic, field) == pytest.approx(within, rel=1e-3)  # the nudge, reported
+    bad = golden.check_component(path, perturbed_factory(topic, after=3, field=field, delta=beyond))
+    assert not bad.ok
+    assert f"topic {topic}, message #3 on that topic" in bad.message
+    assert f"{field}: max |d| " in bad.message and "BEYOND it in" in bad.message
+    assert _largest(bad, topic, field) == pytest.approx(beyond, rel=1e-3)
+    # Run == replay stays exact within one build: the exact mode refuses even the tiny nudge.
+    exact = golden.check_component(
+        path, perturbed_factory(topic, after=3, field=field, delta=within), exact=True
+    )
+    assert not exact.ok and "byte for byte" in exact.message
+    assert golden.check_component(path, exact=True).ok
+
+
+def _largest(result, topic: str, field: str) -> float:
+    (td,) = [t for t in result.diff.topics if t.topic == topic]
+    (fd,) = [f for f in td.fields if f.field == field]
+    return fd.max_abs
+
+
+def test_discrete_fields_are_exact(tmp_path):
+    path = _static(tmp_path, "pose_filter")
+    result = golden.check_component(
+        path, perturbed_factory("pose_filter/tob_state", after=5, field="header.seq", delta=1)
+    )
     assert not result.ok
-    assert "topic camera/image, message #3 on that topic" in result.message
-    assert "data: max |d| (bytes as uint8) 1 " in result.message
+    assert "header.seq: max |d| 1 " in result.message and "BEYOND" in result.message
+
+
+def test_float_field_without_a_unit_rule_fails(tmp_path):
+    assert golden.tolerance_of("world_T_tob.translation.x") is golden.TOLERANCES["m"]
+    assert golden.tolerance_of("centers_px[3].u") is golden.TOLERANCES["px"]
+    assert golden.tolerance_of("linear_velocity_m_s.x") is golden.TOLERANCES["m/s"]
+    assert golden.tolerance_of("mystery") is None
+    # Every float field of every message on a topic has a rule (else it could never pass).
+    types = {t.short: t.type for t in golden.topics.TOPICS.values()} | golden.topics.LOCAL_TOPICS
+    for short, msg_type in types.items():
+        for name, value in golden.flatten(_filled(msg_type())).items():
+            if isinstance(value, float):
+                assert golden.tolerance_of(name) is not None, f"{short}: {name}"
+
+
+def _filled(msg):
+    """``msg`` with one item in every repeated message field (so their fields are named)."""
+    for fd in msg.DESCRIPTOR.fields:
+        if fd.type == fd.TYPE_MESSAGE:
+            if fd.is_repeated:
+                _filled(getattr(msg, fd.name).add())
+            else:
+                _filled(getattr(msg, fd.name))
+        elif fd.is_repeated and fd.type in (fd.TYPE_DOUBLE, fd.TYPE_FLOAT):
+            getattr(msg, fd.name).append(0.0)
+    return msg
+
+
+@pytest.mark.parametrize(
+    "pixels, dn, ok",
+    [
+        (1, 1, True),  # one draw of the shot noise moved by 1 DN
+        (1, 20, False),  # beyond IMAGE_TOLERANCE.max_dn
+        (1000, 1, False),  # too many pixels, and all one way (a brighter image)
+    ],
+)
+def test_changed_image_pixels_within_and_beyond_tolerance(tmp_path, pixels, dn, ok):
+    path = _static(tmp_path, "sim_camera")
+    result = golden.check_component(
+        path, perturbed_factory("camera/image", after=3, pixel=1000, pixels=pixels, dn=dn)
+    )
+    assert result.ok == ok, result.message
+    assert f"data: max |d| (bytes as uint8) {dn} " in result.message
+    if not ok:
+        assert "topic camera/image, message #3 on that topic" in result.message
 
 
 def rewrite_metadata(src: Path, dst: Path, **changes: str) -> None:

@@ -61,8 +61,8 @@ def test_field_difference_added_and_removed_by_step():
     text = "\n".join(t.describe())
     assert "3 -> 4 messages, 2 added, 1 removed, 1 differ (first at #1)" in text
     assert (
-        "world_T_tob.translation.x: max |d| 0.0005 (new - old = +0.0005 at #1; differs in 1)"
-        in text
+        "world_T_tob.translation.x: max |d| 0.0005 (new - old = +0.0005 at #1; differs in 1; "
+        "tolerance 1e-09 m; BEYOND it in 1, first at #1)" in text
     )
 
 
@@ -271,7 +271,9 @@ def test_summary_shows_what_a_changed_component_does(scratch, fresh, tmp_path):
         "controller/command: " in text and "0 added, 0 removed" in text and "(first at #4)" in text
     )
     assert re.search(
-        r"d_translation_m.y: max \|d\| 2e-05 \(new - old = -2e-05 at #\d+; differs in \d+\)", text
+        r"d_translation_m.y: max \|d\| 2e-05 \(new - old = -2e-05 at #\d+; differs in \d+; "
+        r"tolerance 1e-09 m; BEYOND it in \d+, first at #4\)",
+        text,
     )
 
 
@@ -331,4 +333,5 @@ def test_quaternion_sign_is_not_a_rotation_change():
     (t,) = golden.compare_streams(
         [_pose(10, (0.99, 0.1, 0.0, 0.01))], [_pose(10, (-0.99, -0.1, 0.0, 0.01))]
     ).topics
-    assert {f.field for f in t.fields} == {"world_T_tob.rotation.x", "world_T_tob.rotation.y"}
+    # Another rotation: compared with the sign that brings it nearest (only w differs).
+    assert {f.field for f in t.fields} == {"world_T_tob.rotation.w"}

@@ -46,7 +46,8 @@ def test_lockstep_recordings_replay_exactly(tmp_path):
     for comp in ("pinger", "ponger"):
         res = replay(tmp_path / f"{comp}.mcap")
         assert res.match, res.report()
-        assert res.recorded_outputs == res.replayed_outputs > 0
+        # A ping per 20 ms then 10 ms over 2 s (pinger), a pong per ping (ponger): > 100 each.
+        assert res.compared == res.recorded_outputs == res.replayed_outputs > 100
 
 
 class _Perturbed(PongerCore):
@@ -82,7 +83,28 @@ def test_truncated_recording_replays_up_to_the_truncation(tmp_path):
     cut.write_bytes(data[: len(data) // 2])
     res = replay(cut)
     assert res.truncated and res.match, res.report()
-    assert 0 < res.recorded_outputs < len(read(tmp_path / "ponger.mcap").outputs)
+    assert 0 < res.compared == res.recorded_outputs < len(read(tmp_path / "ponger.mcap").outputs)
+    assert f"{res.compared} compared" in res.report() and "up to the truncation" in res.report()
+
+
+def test_a_recording_cut_before_its_first_output_is_no_match(tmp_path):
+    """Inputs survive but no recorded output does: nothing compared, not a match."""
+    _run(tmp_path, end_s=2.0, chunk_size=2048)
+    rec = read(tmp_path / "ponger.mcap")
+    data = (tmp_path / "ponger.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    # Cut back until the file reads up to its first output but not that output.
+    for end in range(len(data), 0, -64):
+        cut.write_bytes(data[:end])
+        got = read(cut)
+        if got.entries and not got.outputs:
+            break
+    else:
+        pytest.fail("no cut leaves inputs without outputs")
+    assert got.inputs and rec.outputs
+    res = replay(cut)
+    assert not res.match and res.nothing_compared and res.compared == 0, res.report()
+    assert "NOTHING COMPARED" in res.report()
 
 
 def test_a_run_without_digest_says_so_and_runs_the_same():

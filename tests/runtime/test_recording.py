@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from humanpt.runtime.recording import IN, OUT, Recorder, RecordingError, read, read_metadata
+from humanpt.runtime.selftest import PongerConfig, PongerCore
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 from tests.conftest import ROOT, run_cli
@@ -29,6 +30,18 @@ def _write(path, n, chunk_size=4096, close=True):
     if close:
         rec.close()
     return rec
+
+
+def _ponger_run(path, n):
+    """A recording of the real ponger core on ``n`` pings (so that it replays)."""
+    core = PongerCore(PongerConfig())
+    with Recorder(path, {"component": "ponger", "core": "humanpt.runtime.selftest:PongerCore",
+                         "config": {"prefix": "pong"}}, chunk_size=2048) as rec:
+        for i in range(n):
+            ping = pb.Tick(header=header(i * 1000, i), period_ns=1000)
+            rec.write(IN, i * 1000, "pinger/ping", ping)
+            for topic, out in core.step(i * 1000, "pinger/ping", ping):
+                rec.write(OUT, i * 1000, topic, out)
 
 
 def test_recording_reads_back_with_schemas_and_metadata(tmp_path):
@@ -121,6 +134,60 @@ def test_cli_replay_errors_are_clear(tmp_path):
     (tmp_path / "run" / "ponger.mcap").write_text("not mcap")
     r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
     assert r.returncode == 2 and "not an MCAP file" in r.stderr
+    (tmp_path / "run" / "ponger.mcap").write_bytes(b"")
+    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr and "MATCH" not in r.stdout
+
+
+def test_cli_replay_never_says_match_on_nothing(tmp_path):
+    """Exit statuses (components/runtime/README.md): 3 for a readable recording without
+    inputs, 2 when not one message can be read, 0 only with outputs compared."""
+    foreign = tmp_path / "foreign.mcap"  # a valid MCAP file, empty and not humanpt's
+    with open(foreign, "wb") as f:
+        w = Writer(f)
+        w.start()
+        w.finish()
+    r = run_cli("replay", str(foreign))
+    assert r.returncode == 2 and "not a humanpt recording" in r.stderr and "MATCH" not in r.stdout
+
+    empty = tmp_path / "empty" / "ponger.mcap"
+    Recorder(empty, {"component": "ponger", "core": "humanpt.runtime.selftest:PongerCore"}).close()
+    r = run_cli("replay", str(empty))
+    assert r.returncode == 3, (r.stdout, r.stderr)
+    assert "NOTHING COMPARED: the recording holds no inputs" in r.stdout and "MATCH:" not in r.stdout
+
+    full = tmp_path / "full.mcap"
+    _write(full, 400)
+    data = full.read_bytes()
+    # Cut inside the first chunk: the metadata is there, not one message can be read.
+    with open(full, "rb") as f:
+        first_chunk = min(c.chunk_start_offset for c in make_reader(f).get_summary().chunk_indexes)
+    unreadable = tmp_path / "unreadable" / "ponger.mcap"
+    unreadable.parent.mkdir()
+    unreadable.write_bytes(data[: first_chunk + 40])
+    assert read(unreadable).entries == [] and read_metadata(unreadable)[0]["component"] == "ponger"
+    r = run_cli("replay", str(unreadable))
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    assert "no message could be read" in r.stderr and "MATCH" not in r.stdout
+
+    _ponger_run(tmp_path / "ponger.mcap", 400)
+    data = (tmp_path / "ponger.mcap").read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) // 2])
+    n_out = len(read(cut).outputs)
+    assert 0 < n_out < 400
+    r = run_cli("replay", str(cut))
+    assert r.returncode == 0, (r.stdout, r.stderr)
+    assert f"{n_out} compared" in r.stdout and "truncated" in r.stdout
+    assert f"MATCH: every output is identical up to the truncation ({n_out} compared)" in r.stdout
+
+    # A run directory with one good and one unreadable recording: the worst verdict.
+    (tmp_path / "mixed").mkdir()
+    (tmp_path / "mixed" / "a.mcap").write_bytes(data)
+    (tmp_path / "mixed" / "b.mcap").write_bytes(unreadable.read_bytes())
+    r = run_cli("replay", str(tmp_path / "mixed"))
+    assert r.returncode == 2 and "MATCH: every output is identical (400 compared)" in r.stdout
+    assert "b.mcap" in r.stderr and "no message could be read" in r.stderr
 
 
 def test_background_recorder_writes_the_same_messages(tmp_path):
