@@ -32,6 +32,7 @@ from .psvs import (
     TRIANGULATION_METHODS,
     PinholeCamera,
     PsvsParams,
+    eq4_points_mm,
     in_image,
     intrinsic_matrix,
     project,
@@ -60,6 +61,7 @@ from .target import (
     tip_pose,
     tob_frame_from_points,
     tob_T_tip_on_w_axis,
+    triangle_sides_mm,
 )
 from .transforms import (
     apply_step,
@@ -86,6 +88,7 @@ __all__ = [
     "PinholeCamera",
     "PsvsParams",
     "TRIANGULATION_METHODS",
+    "eq4_points_mm",
     "in_image",
     "intrinsic_matrix",
     "project",
@@ -114,6 +117,7 @@ __all__ = [
     "tip_pose",
     "tob_frame_from_points",
     "tob_T_tip_on_w_axis",
+    "triangle_sides_mm",
     # transforms, chains, X
     "apply_step",
     "chain_world_T_tob",
