@@ -63,7 +63,7 @@ def rotation_angle_deg(rv_rad: np.ndarray) -> float:
 
 def wire_rotation_deg(rv_rad: np.ndarray) -> np.ndarray:
     """Rotation vector -> the wire's (drx, dry, drz) degrees with dR = Rz(drz) Ry(dry) Rx(drx)."""
-    drz, dry, drx = ypr_deg_from_rotation(matrix_from_rotvec(np.asarray(rv_rad, dtype=float)))
+    drz, dry, drx = ypr_deg_from_rotation(matrix_from_rotvec(rv_rad), assume_valid=True)
     return np.array([drx, dry, drz])
 
 

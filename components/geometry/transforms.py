@@ -10,7 +10,8 @@ Conventions (DESIGN.md):
 * Yaw, pitch, roll (psi, theta, phi) are Z-Y-X: ``R = Rz(psi) @ Ry(theta) @ Rx(phi)``,
   computed only through :class:`scipy.spatial.transform.Rotation` (``"ZYX"``, intrinsic).
 * Rotation vectors (theta-u: axis times angle, rad), rotation angles and geodesics
-  (:func:`slerp`) are scipy's too: this module is the project's one implementation of each.
+  (:func:`slerp`) are scipy's too (the rotation vector -> matrix direction is OpenCV's
+  Rodrigues, for speed): this module is the project's one implementation of each.
 * The six-vector is ``X = (x, y, z, psi, theta, phi)`` in mm and degrees.
 
 Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
@@ -18,6 +19,7 @@ Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -134,15 +136,16 @@ def rotation_from_ypr_deg(ypr_deg: np.ndarray) -> np.ndarray:
     return mats.reshape(ypr_deg.shape[:-1] + (3, 3))
 
 
-def ypr_deg_from_rotation(rotation: np.ndarray) -> np.ndarray:
+def ypr_deg_from_rotation(rotation: np.ndarray, assume_valid: bool = False) -> np.ndarray:
     """Rotation (..., 3, 3) -> yaw, pitch, roll (..., 3) in degrees, Z-Y-X (inverse of
     :func:`rotation_from_ypr_deg`). psi, phi in (-180, 180], theta in [-90, 90]; at
-    theta = +-90 deg (gimbal lock) scipy picks one of the equivalent triples."""
+    theta = +-90 deg (gimbal lock) scipy picks one of the equivalent triples.
+    ``assume_valid`` as in :func:`rotvec_from_matrix`."""
     rotation = np.asarray(rotation, dtype=float)
     if rotation.shape[-2:] != (3, 3):
         raise ValueError(f"rotation must have shape (..., 3, 3), got {rotation.shape}")
     flat = rotation.reshape(-1, 3, 3)
-    ypr = Rotation.from_matrix(flat).as_euler(EULER_SEQUENCE, degrees=True)
+    ypr = Rotation.from_matrix(flat, assume_valid=assume_valid).as_euler(EULER_SEQUENCE, degrees=True)
     return ypr.reshape(rotation.shape[:-2] + (3,))
 
 
@@ -162,9 +165,18 @@ def transform_from_x(x_mm_deg: np.ndarray) -> np.ndarray:
 
 
 def matrix_from_rotvec(rotvec_rad) -> np.ndarray:
-    """Rotation vector(s) (3,) or (n, 3) - axis times angle, rad - -> rotation matrix
-    (3, 3) or (n, 3, 3): ``Rotation.from_rotvec(rotvec_rad).as_matrix()``."""
-    return Rotation.from_rotvec(rotvec_rad).as_matrix()
+    """Rotation vector(s) (..., 3) - axis times angle, rad - -> rotation matrices
+    (..., 3, 3): Rodrigues' formula, ``Rotation.from_rotvec(rotvec_rad).as_matrix()`` to
+    rounding. OpenCV's ``cv2.Rodrigues`` computes it: a tenth of scipy's per-call cost, and
+    the filter, the controller and the twin turn one small step at a time. (Its inverse is
+    not used: near zero angle it loses digits; :func:`rotvec_from_matrix` is scipy's.)"""
+    v = np.asarray(rotvec_rad, dtype=float)
+    if v.shape == (3,):
+        return cv2.Rodrigues(v)[0]
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"rotation vectors must have shape (..., 3), got {v.shape}")
+    flat = [cv2.Rodrigues(r)[0] for r in v.reshape(-1, 3)]
+    return np.array(flat).reshape(v.shape[:-1] + (3, 3))
 
 
 def rotvec_from_matrix(rotation: np.ndarray, assume_valid: bool = False) -> np.ndarray:
