@@ -187,9 +187,8 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     n = len(blobs)
     ii, jj = _ordered_pairs(n)
     d_lo, d_hi = disparity_range_px(s.params, s.min_depth_mm, s.max_depth_mm)
-    disparity = uv[jj, 0] - uv[ii, 0]
-    keep = (disparity >= d_lo) & (disparity <= d_hi)
-    keep &= np.abs(uv[jj, 1] - uv[ii, 1]) <= 3 * s.epipolar_tol_px + 5
+    duv = uv[jj] - uv[ii]  # (disparity u_L - u_R, v_L - v_R)
+    keep = (duv[:, 0] >= d_lo) & (duv[:, 0] <= d_hi) & (np.abs(duv[:, 1]) <= 3 * s.epipolar_tol_px + 5)
     ii, jj = ii[keep], jj[keep]
     uv_r, uv_l = uv[ii], uv[jj]
     p = eq4_points_mm(s.params, uv_r, uv_l)
@@ -199,13 +198,11 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     # depth gate also drops the NaN and infinite z of pairs without disparity
     expected = s.params.a_u * s.model.source_diameter_mm / (z + s.params.baseline_mm / 2.0)
     lo, hi = s.size_ratio_range
-    size = blobs.size_px
+    ratio = blobs.size_px[np.stack([ii, jj])] / expected  # (2, k): right and left views
     log_area = np.log(blobs.area_px[ii] / blobs.area_px[jj])
     with np.errstate(invalid="ignore"):
-        keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm)
-        keep &= np.abs(res) <= s.epipolar_tol_px
-        for ratio in (size[ii] / expected, size[jj] / expected):
-            keep &= (ratio >= lo) & (ratio <= hi)
+        keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm) & (np.abs(res) <= s.epipolar_tol_px)
+        keep &= np.all((ratio >= lo) & (ratio <= hi), axis=0)
         keep &= np.abs(log_area) <= math.log(s.max_area_ratio)
     ii, jj, p, res, log_area = ii[keep], jj[keep], p[keep], res[keep], log_area[keep]
     peak = np.maximum(blobs.peak_dn, 1e-6)
