@@ -11,26 +11,6 @@ import math
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-from scipy.spatial.transform import Rotation
-
-try:  # scipy's compiled backend of Rotation (1.17): the same numbers without per-call overhead
-    from scipy.spatial.transform import _rotation_cy as _rot
-
-    _FAST = all(
-        hasattr(_rot, f)
-        for f in (
-            "as_rotvec",
-            "from_matrix",
-            "as_matrix",
-            "from_rotvec",
-            "magnitude",
-            "from_quat",
-            "compose_quat",
-            "inv",
-        )
-    )
-except ImportError:  # another scipy: fall back to the public API below
-    _rot, _FAST = None, False
 
 from humanpt.schemas import humanpt_pb2 as pb
 
@@ -55,9 +35,11 @@ def from_vector3(m: pb.Vector3) -> np.ndarray:
     return np.array([m.x, m.y, m.z], dtype=float)
 
 
-def quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float, float]:
+def _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, float, float, float]:
     """A rotation matrix's nine entries (row by row, plain floats) -> unit quaternion
-    (x, y, z, w), w >= 0, by Shepperd's method (the hot paths' quaternion)."""
+    (x, y, z, w), w >= 0, by Shepperd's method: ``Rotation.from_matrix(R).as_quat(
+    canonical=True)`` to rounding (tested), on plain floats because every pose message
+    goes through it (scipy's per-call overhead is ten times the arithmetic)."""
     tr = m00 + m11 + m22
     # Divide by the largest of the four candidates for stability.
     if tr >= m00 and tr >= m11 and tr >= m22:
@@ -82,17 +64,6 @@ def quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22) -> tuple[float, 
     return x / n, y / n, z / n, w / n
 
 
-def quat_from_matrix(R: np.ndarray) -> np.ndarray:
-    """(3, 3) rotation -> unit quaternion (x, y, z, w), w >= 0.
-
-    Same result as ``scipy.spatial.transform.Rotation.from_matrix(R).as_quat(canonical=True)``
-    (tested, to 1e-12), without scipy's per-call overhead: this runs several thousand times
-    per simulated second on the message path, so it works on plain floats.
-    """
-    (m00, m01, m02), (m10, m11, m12), (m20, m21, m22) = np.asarray(R, dtype=float).tolist()
-    return np.array(quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22))
-
-
 def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[float]]:
     n = math.sqrt(x * x + y * y + z * z + w * w)
     if not 0.0 < n < math.inf:
@@ -108,62 +79,6 @@ def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[
         [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
         [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
     ]
-
-
-def matrix_from_quat(q: np.ndarray) -> np.ndarray:
-    """Quaternion (x, y, z, w), normalised here -> (3, 3) rotation (as scipy's as_matrix)."""
-    x, y, z, w = (float(c) for c in q)
-    return np.array(_matrix_rows_from_quat(x, y, z, w))
-
-
-# Single rotations through scipy's compiled Rotation backend: exactly the numbers of the
-# scipy.spatial.transform.Rotation calls named in each docstring (tested), without the
-# array-API wrapping that costs more than the arithmetic on these hot paths.
-
-
-def _f64(a) -> np.ndarray:
-    return np.asarray(a, dtype=np.float64)
-
-
-if _FAST:
-
-    def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
-        """``Rotation.from_matrix(R).as_rotvec()`` for one (3, 3) matrix."""
-        return _rot.as_rotvec(_rot.from_matrix(_f64(R))[None])[0]
-
-    def matrix_from_rotvec(rotvec) -> np.ndarray:
-        """``Rotation.from_rotvec(rotvec).as_matrix()`` for one rotation vector (rad)."""
-        return _rot.as_matrix(_rot.from_rotvec(_f64(rotvec))[None])[0]
-
-    def rotation_angle(R: np.ndarray) -> np.float64:
-        """``Rotation.from_matrix(R).magnitude()`` for one (3, 3) matrix (rad)."""
-        return _rot.magnitude(_rot.from_matrix(_f64(R))[None])[0]
-
-    def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
-        """``(r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()`` with
-        ``r0, r1 = Rotation.from_matrix(R0), Rotation.from_matrix(R1)``: the rotation a
-        fraction ``s`` of the way along the geodesic from R0 to R1."""
-        q0 = _rot.from_matrix(_f64(R0))[None]
-        q1 = _rot.from_matrix(_f64(R1))[None]
-        rel = _rot.from_quat(_rot.compose_quat(_rot.inv(q0), q1), normalize=True, copy=False)
-        step = _rot.from_rotvec(_f64(s * _rot.as_rotvec(rel)[0]))[None]
-        q = _rot.from_quat(_rot.compose_quat(q0, step), normalize=True, copy=False)
-        return _rot.as_matrix(q)[0]
-
-else:  # pragma: no cover - only on a scipy without the backend
-
-    def rotvec_from_matrix(R: np.ndarray) -> np.ndarray:
-        return Rotation.from_matrix(_f64(R)).as_rotvec()
-
-    def matrix_from_rotvec(rotvec) -> np.ndarray:
-        return Rotation.from_rotvec(_f64(rotvec)).as_matrix()
-
-    def rotation_angle(R: np.ndarray) -> np.float64:
-        return np.float64(Rotation.from_matrix(_f64(R)).magnitude())
-
-    def slerp_matrix(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
-        r0, r1 = Rotation.from_matrix(_f64(R0)), Rotation.from_matrix(_f64(R1))
-        return (r0 * Rotation.from_rotvec(s * (r0.inv() * r1).as_rotvec())).as_matrix()
 
 
 def pose(a_T_b: np.ndarray) -> pb.Pose:
@@ -183,7 +98,7 @@ def pose(a_T_b: np.ndarray) -> pb.Pose:
     det = m00 * (m11 * m22 - m12 * m21) - m01 * (m10 * m22 - m12 * m20) + m02 * (m10 * m21 - m11 * m20)
     if not ok or not det >= 0:
         raise MessageError("the rotation part of the transform is not a proper rotation")
-    qx, qy, qz, qw = quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
+    qx, qy, qz, qw = _quat_from_rows(m00, m01, m02, m10, m11, m12, m20, m21, m22)
     return pb.Pose(
         translation=pb.Vector3(x=tx, y=ty, z=tz),
         rotation=pb.Quaternion(x=qx, y=qy, z=qz, w=qw),

@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from humanpt.alter.rotations import euler_zyx_deg_from_matrix, matrix_from_euler_zyx_deg
+from humanpt.geometry.transforms import rotation_from_ypr_deg, ypr_deg_from_rotation
 
 MSG_STATUS = 0x53  # 'S'
 MSG_CORRECTION = 0x43  # 'C'
@@ -131,7 +131,7 @@ class ControllerStatus:
         if base_T_flange_mm.shape != (4, 4):
             raise ValueError(f"base_T_flange_mm must be 4x4, got {base_T_flange_mm.shape}")
         p = base_T_flange_mm[:3, 3].tolist()
-        ypr = euler_zyx_deg_from_matrix(base_T_flange_mm[:3, :3]).tolist()
+        ypr = ypr_deg_from_rotation(base_T_flange_mm[:3, :3]).tolist()
         x, y, z = (
             _to_units(v, MM_PER_UNIT, n, INT32_MIN, INT32_MAX)
             for v, n in zip(p, "xyz", strict=True)
@@ -255,7 +255,7 @@ class Correction:
 
 @lru_cache(maxsize=4096)
 def _rotation_cdeg_cached(z_cdeg: int, y_cdeg: int, x_cdeg: int) -> np.ndarray:
-    R = matrix_from_euler_zyx_deg(np.array([z_cdeg, y_cdeg, x_cdeg], dtype=float) * DEG_PER_UNIT)
+    R = rotation_from_ypr_deg(np.array([z_cdeg, y_cdeg, x_cdeg], dtype=float) * DEG_PER_UNIT)
     R.flags.writeable = False
     return R
 

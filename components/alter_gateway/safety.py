@@ -14,7 +14,12 @@ import numpy as np
 
 from humanpt.alter import Correction, CorrectionFlags
 from humanpt.alter.messages import DEG_PER_UNIT, NO_FLAGS
-from humanpt.alter.rotations import angle_from_euler_zyx_deg, euler_zyx_deg_from_rotvec
+from humanpt.geometry.transforms import (
+    matrix_from_rotvec,
+    rotation_angle_rad,
+    rotation_from_ypr_deg,
+    ypr_deg_from_rotation,
+)
 
 _QUANT_MM = 0.01  # wire unit of translation
 _QUANT_DEG = 0.01  # wire unit of rotation
@@ -73,7 +78,7 @@ def rotation_angle_deg(rv_rad: np.ndarray) -> float:
 
 def wire_rotation_deg(rv_rad: np.ndarray) -> np.ndarray:
     """Rotation vector -> the wire's (drx, dry, drz) degrees with dR = Rz(drz) Ry(dry) Rx(drx)."""
-    drz, dry, drx = euler_zyx_deg_from_rotvec(np.asarray(rv_rad, dtype=float))
+    drz, dry, drx = ypr_deg_from_rotation(matrix_from_rotvec(rv_rad), assume_valid=True)
     return np.array([drx, dry, drz])
 
 
@@ -87,7 +92,7 @@ def _angle_deg_cdeg(drx_cdeg: int, dry_cdeg: int, drz_cdeg: int) -> float:
     """Angle of Rz(drz) Ry(dry) Rx(drx), wire units in, degrees out. Cached: the
     corrections of a steady motion repeat the same few wire values."""
     drx, dry, drz = np.array([drx_cdeg, dry_cdeg, drz_cdeg], dtype=float) * DEG_PER_UNIT
-    return float(np.degrees(angle_from_euler_zyx_deg([drz, dry, drx])))
+    return float(np.degrees(rotation_angle_rad(rotation_from_ypr_deg([drz, dry, drx]))))
 
 
 def quantize(

@@ -32,7 +32,6 @@ import re
 from typing import Annotated, Any
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.controller import law
 from humanpt.controller.config import ControllerConfig
@@ -40,8 +39,10 @@ from humanpt.geometry.calibration import calibrate_tip_paper, calibrate_tip_pivo
 from humanpt.geometry.errors import GeometryError
 from humanpt.geometry.rig import flange_T_desired
 from humanpt.geometry.transforms import (
+    interpolate_transform,
     invert_transform,
     make_transform,
+    rotation_angle_rad,
     transform_from_x,
     x_from_transform,
 )
@@ -281,7 +282,7 @@ class ControllerCore(Core):
         if self.cal_samples:
             # Only keep poses that differ (a pivot fit needs rotation diversity).
             last = self.cal_samples[-1][0]
-            angle = np.degrees(Rotation.from_matrix(world_T_tob[:3, :3] @ last[:3, :3].T).magnitude())
+            angle = np.degrees(rotation_angle_rad(world_T_tob[:3, :3] @ last[:3, :3].T, assume_valid=True))
             if angle < self.config.calibration_min_spread_deg:
                 return []
         self.cal_samples.append((world_T_tob.copy(), world_T_flange.copy()))
@@ -333,9 +334,7 @@ class ControllerCore(Core):
         i = int(np.clip(np.searchsorted(S, s) - 1, 0, len(S) - 2))
         L = S[i + 1] - S[i]
         a = 0.0 if L <= 0 else min(1.0, (s - S[i]) / L)
-        tip = np.eye(4)
-        tip[:3, 3] = tips[i, :3, 3] + a * (tips[i + 1, :3, 3] - tips[i, :3, 3])
-        tip[:3, :3] = Slerp([0, 1], Rotation.from_matrix([tips[i, :3, :3], tips[i + 1, :3, :3]]))(a).as_matrix()
+        tip = interpolate_transform(tips[i], tips[i + 1], a)
         v = (tips[i + 1, :3, 3] - tips[i, :3, 3]) / L * pb_["speed"] if L > 0 and s < S[-1] else np.zeros(3)
         return tip @ invert_transform(self.flange_T_tool), v
 

@@ -2,8 +2,8 @@
 
 Both laws return a per-cycle flange step in the WORLD frame, about the flange origin:
 ``(d_translation_m (3,), d_rotation_rad (3,) rotation vector)``, saturated to the speed
-limits.  The robot applies ``world_T_flange' = [exp(d_rot) | d_t] @ world_T_flange``
-with the rotation about the flange origin.
+limits.  The robot applies it as :func:`humanpt.geometry.transforms.apply_step` does
+(``R' = exp(d_rot) R``, ``t' = t + d_t``).
 
 * ``paper_step``: Section 5 of the paper.  X_FG and X_FD are the six-vectors (mm, deg,
   yaw-pitch-roll Z-Y-X) of the TOB frame G and the desired frame D in the flange frame;
@@ -19,33 +19,21 @@ with the rotation about the flange origin.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from humanpt.geometry.transforms import x_from_transform
-from humanpt.schemas.convert import matrix_from_rotvec, rotvec_from_matrix
+from humanpt.geometry.transforms import (
+    apply_step,
+    invert_transform,
+    rotvec_from_matrix,
+    x_from_transform,
+)
 
 
-def norm3(v) -> float:
-    """|v| of a 3-vector (plain floats: numpy's norm costs more than the sum on a (3,))."""
-    x, y, z = v.tolist() if isinstance(v, np.ndarray) else v
-    return math.sqrt(x * x + y * y + z * z)
-
-
-def _inverse(a_T_b: np.ndarray) -> np.ndarray:
-    """b_T_a of one rigid (4, 4) transform."""
-    T = np.eye(4)
-    Rt = a_T_b[:3, :3].T
-    T[:3, :3] = Rt
-    T[:3, 3] = -(Rt @ a_T_b[:3, 3])
-    return T
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    (a0, a1, a2), (b0, b1, b2) = a.tolist(), b.tolist()
-    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+def norm3(v: np.ndarray) -> float:
+    """|v| of a 3-vector, as a float."""
+    return float(np.linalg.norm(v))
 
 
 @dataclass(frozen=True)
@@ -70,27 +58,16 @@ def saturate(
     return d_t, d_r, sat
 
 
-def apply_step(world_T_flange: np.ndarray, d_t: np.ndarray, d_r: np.ndarray) -> np.ndarray:
-    """The flange pose after a world-frame step about the flange origin."""
-    T = np.array(world_T_flange, dtype=float)
-    T[:3, :3] = matrix_from_rotvec(d_r) @ T[:3, :3]
-    T[:3, 3] = T[:3, 3] + d_t
-    return T
-
-
 def extrapolate(
     world_T_tob: np.ndarray, v_m_s: np.ndarray, w_rad_s: np.ndarray, dt_s: float
 ) -> np.ndarray:
     """A pose moved at constant (world-frame) velocity for ``dt_s`` (may be negative)."""
-    T = np.array(world_T_tob, dtype=float)
-    T[:3, :3] = matrix_from_rotvec(np.asarray(w_rad_s) * dt_s) @ T[:3, :3]
-    T[:3, 3] = T[:3, 3] + np.asarray(v_m_s) * dt_s
-    return T
+    return apply_step(world_T_tob, np.asarray(v_m_s) * dt_s, np.asarray(w_rad_s) * dt_s)
 
 
 def desired_flange(world_T_tob: np.ndarray, flange_T_desired: np.ndarray) -> np.ndarray:
     """The flange pose at which the desired frame D coincides with G."""
-    return world_T_tob @ _inverse(flange_T_desired)
+    return world_T_tob @ invert_transform(flange_T_desired)
 
 
 def pose_error(
@@ -98,7 +75,7 @@ def pose_error(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(translation error (3,) m, theta-u rotation error (3,) rad), world frame."""
     e_t = world_T_target[:3, 3] - world_T_flange[:3, 3]
-    e_r = rotvec_from_matrix(world_T_target[:3, :3] @ world_T_flange[:3, :3].T)
+    e_r = rotvec_from_matrix(world_T_target[:3, :3] @ world_T_flange[:3, :3].T, assume_valid=True)
     return e_t, e_r
 
 
@@ -128,7 +105,7 @@ def thetau_step(
     w = k_r * e_r
     if feed_forward:
         # The desired flange pose moves rigidly with the target.
-        v = v + v_tob_m_s + _cross(w_tob_rad_s, world_T_fd[:3, 3] - world_T_tob[:3, 3])
+        v = v + v_tob_m_s + np.cross(w_tob_rad_s, world_T_fd[:3, 3] - world_T_tob[:3, 3])
         w = w + w_tob_rad_s
     if position_only:
         # Keep the orientation; move so that D (not the flange origin) goes to G.
@@ -162,7 +139,7 @@ def paper_step(
     position_only: bool = False,
 ) -> Step:
     """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame."""
-    flange_T_tob = _inverse(world_T_flange) @ world_T_tob
+    flange_T_tob = invert_transform(world_T_flange) @ world_T_tob
     x_fg = x_from_transform(_mm(flange_T_tob))
     x_fd = x_from_transform(_mm(flange_T_desired))
     e = x_fg - x_fd

@@ -46,6 +46,7 @@ __all__ = [
     "projection_jacobian",
     "project",
     "in_image",
+    "eq4_points_mm",
     "triangulate_eq4",
     "triangulate_eq2",
     "triangulate_lsq",
@@ -399,7 +400,7 @@ def _check_disparity(denominator: np.ndarray) -> None:
 
 def _check_in_front(camera_p_mm: np.ndarray, *cameras: PinholeCamera) -> None:
     for cam in cameras:
-        depth = camera_p_mm[..., 2] - cam.centre[2]
+        depth = camera_p_mm[..., 2] - cam.centre_mm[2]
         if np.any(~(depth > 0)):
             raise GeometryError(
                 "triangulated point lies behind a virtual camera (depth "
@@ -407,11 +408,11 @@ def _check_in_front(camera_p_mm: np.ndarray, *cameras: PinholeCamera) -> None:
             )
 
 
-def triangulate_eq4(
-    params: PsvsParams, uv_right_px: np.ndarray, uv_left_px: np.ndarray
-) -> np.ndarray:
-    """Eq. (4), as printed: ideal (undistorted) pixels of one point in the right and left
-    views (..., 2) -> the point (..., 3) in the camera frame, mm.
+def eq4_points_mm(params: PsvsParams, uv_right_px: np.ndarray, uv_left_px: np.ndarray) -> np.ndarray:
+    """Eq. (4), as printed, without checks: ideal (undistorted) pixels of right and left
+    views (..., 2) -> points (..., 3) in the camera frame, mm; a pair with no disparity
+    gives inf/NaN, a wrong pair a point behind the cameras (for scoring many candidate
+    pairs, whose gates drop those). :func:`triangulate_eq4` checks.
 
     ``z = (a_u (b + m) + l (u_L - u0L)) / ((u_L - u0L) - (u_R - u0R)) - b/2``;
     ``x = (z + b/2)(u_R - u0R)/a_u + b/2`` (the left-view x equation gives the same value
@@ -419,19 +420,34 @@ def triangulate_eq4(
     ``(z + b/2)(v_R - v0R)/a_v`` and the left-view ``(z + b/2 - l)(v_L - v0L)/a_v``.
     Eq. (4) has no skew; a non-zero skew c is removed first (``u - c (v - v0)/a_v``).
     """
-    uv_r = _pixels(uv_right_px, "uv_right_px")
-    uv_l = _pixels(uv_left_px, "uv_left_px")
+    return _eq4(params, _pixels(uv_right_px, "uv_right_px"), _pixels(uv_left_px, "uv_left_px"))[0]
+
+
+def _eq4(params: PsvsParams, uv_r: np.ndarray, uv_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(points (..., 3), disparity denominator (...,)) of :func:`eq4_points_mm`."""
     a_u, a_v, b, m, l = params.a_u, params.a_v, params.baseline_mm, params.m_mm, params.l_mm
     du_r, dv_r = _deskewed_offsets(params.right_camera, uv_r)
     du_l, dv_l = _deskewed_offsets(params.left_camera, uv_l)
     denominator = du_l - du_r
+    p = np.empty(denominator.shape + (3,))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (a_u * (b + m) + l * du_l) / denominator - b / 2.0
+        depth_r = z + b / 2.0  # z - z0 of the right virtual camera; the left's is l less
+        depth_l = depth_r - l
+        p[..., 0] = 0.5 * ((depth_r * du_r / a_u + b / 2.0) + (depth_l * du_l / a_u - b / 2.0 - m))
+        p[..., 1] = 0.5 * (depth_r * dv_r / a_v + depth_l * dv_l / a_v)
+    p[..., 2] = z
+    return p, denominator
+
+
+def triangulate_eq4(
+    params: PsvsParams, uv_right_px: np.ndarray, uv_left_px: np.ndarray
+) -> np.ndarray:
+    """Eq. (4) (:func:`eq4_points_mm`) of one point's ideal pixels in the right and left
+    views (..., 2) -> the point (..., 3) in the camera frame, mm. Raises
+    :class:`GeometryError` for a zero disparity and for a point behind a virtual camera."""
+    p, denominator = _eq4(params, _pixels(uv_right_px, "uv_right_px"), _pixels(uv_left_px, "uv_left_px"))
     _check_disparity(denominator)
-    z = (a_u * (b + m) + l * du_l) / denominator - b / 2.0
-    x_right = (z + b / 2.0) * du_r / a_u + b / 2.0
-    x_left = (z + b / 2.0 - l) * du_l / a_u - b / 2.0 - m
-    y_right = (z + b / 2.0) * dv_r / a_v
-    y_left = (z + b / 2.0 - l) * dv_l / a_v
-    p = np.stack([0.5 * (x_right + x_left), 0.5 * (y_right + y_left), z], axis=-1)
     _check_in_front(p, params.right_camera, params.left_camera)
     return p
 

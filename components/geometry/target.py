@@ -22,7 +22,6 @@ AB = AC = 40 mm, base BC = 30 mm, 5 mm sources - three dots picked by a mask fro
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass, replace
 
@@ -40,6 +39,7 @@ __all__ = [
     "tob_T_tip_on_w_axis",
     "tip_pose",
     "isosceles_source_positions_mm",
+    "triangle_sides_mm",
     "COLLINEAR_SINE_TOL",
 ]
 
@@ -53,82 +53,59 @@ def tob_frame_from_points(a_p_a_mm, a_p_b_mm, a_p_c_mm) -> np.ndarray:
     (..., 3) given in any frame ``a`` (normally the camera frame), mm.
 
     G is the mean of A, B, C; ``W = GB x GA``, ``U = -GA``, ``V = W x U``, normalised.
-    Raises :class:`GeometryError` for coincident or collinear points.
+    Raises :class:`GeometryError` for coincident or collinear points. One triangle is
+    computed on plain floats (perception builds one frame per image); a stack, triangle
+    by triangle.
     """
     a = np.asarray(a_p_a_mm, dtype=float)
     b = np.asarray(a_p_b_mm, dtype=float)
     c = np.asarray(a_p_c_mm, dtype=float)
-    if a.shape == (3,) and b.shape == (3,) and c.shape == (3,):
-        frame = _tob_frame_single(a.tolist(), b.tolist(), c.tolist())
-        if frame is not None:
-            return frame
     if a.shape[-1:] != (3,) or b.shape[-1:] != (3,) or c.shape[-1:] != (3,):
         raise ValueError("source points must have shape (..., 3)")
-    g = (a + b + c) / 3.0
-    r_a = a - g
-    r_b = b - g
-    w = np.cross(r_b, r_a)
-    u = -r_a
-    v = np.cross(w, u)
-    n_a = np.linalg.norm(r_a, axis=-1)
-    n_b = np.linalg.norm(r_b, axis=-1)
-    n_w = np.linalg.norm(w, axis=-1)
-    scale = np.maximum(n_a * n_b, 1e-300)
-    if np.any(~np.isfinite(n_w)) or np.any(n_a < 1e-9) or np.any(n_b < 1e-9):
-        raise GeometryError("light sources coincide (or are not finite): no TOB frame")
-    sine = n_w / scale
-    if np.any(sine < COLLINEAR_SINE_TOL):
-        raise GeometryError(
-            f"light sources are collinear (|sin(GA, GB)| = {np.min(sine):.3g}): no TOB frame"
-        )
-    rot = np.stack(
-        [
-            u / np.linalg.norm(u, axis=-1, keepdims=True),
-            v / np.linalg.norm(v, axis=-1, keepdims=True),
-            w / n_w[..., None],
-        ],
-        axis=-1,
-    )
-    return make_transform(rot, g)
+    if a.shape == b.shape == c.shape == (3,):
+        return np.array(_tob_frame(a.tolist(), b.tolist(), c.tolist()))
+    batch = np.broadcast_shapes(a.shape[:-1], b.shape[:-1], c.shape[:-1])
+    a, b, c = (np.broadcast_to(x, batch + (3,)).reshape(-1, 3).tolist() for x in (a, b, c))
+    frames = [_tob_frame(pa, pb, pc) for pa, pb, pc in zip(a, b, c, strict=True)]
+    return np.array(frames).reshape(batch + (4, 4))
 
 
-def _norm3(x: float, y: float, z: float) -> float:
-    """``np.linalg.norm`` of a 3-vector, the same number (squares summed in order)."""
-    return math.sqrt(x * x + y * y + z * z)
+def _sub(p, q) -> tuple[float, float, float]:
+    return p[0] - q[0], p[1] - q[1], p[2] - q[2]
 
 
-def _tob_frame_single(a: list, b: list, c: list) -> np.ndarray | None:
-    """:func:`tob_frame_from_points` for one triangle in plain float arithmetic: the same
-    operations in the same order as the array code (so the same numbers), without numpy's
-    per-call overhead on 3-vectors. None when the array code has to decide (non-finite
-    input, coincident or collinear points: it raises with the message)."""
-    ax, ay, az = a
-    bx, by, bz = b
-    cx, cy, cz = c
-    gx, gy, gz = (ax + bx + cx) / 3.0, (ay + by + cy) / 3.0, (az + bz + cz) / 3.0
-    rax, ray, raz = ax - gx, ay - gy, az - gz
-    rbx, rby, rbz = bx - gx, by - gy, bz - gz
-    # w = r_b x r_a, u = -r_a, v = w x u (np.cross's operation order)
-    wx, wy, wz = rby * raz - rbz * ray, rbz * rax - rbx * raz, rbx * ray - rby * rax
-    ux, uy, uz = -rax, -ray, -raz
-    vx, vy, vz = wy * uz - wz * uy, wz * ux - wx * uz, wx * uy - wy * ux
-    n_a = _norm3(rax, ray, raz)
-    n_b = _norm3(rbx, rby, rbz)
-    n_w = _norm3(wx, wy, wz)
+def _cross(p, q) -> tuple[float, float, float]:
+    return p[1] * q[2] - p[2] * q[1], p[2] * q[0] - p[0] * q[2], p[0] * q[1] - p[1] * q[0]
+
+
+def _dot(p, q) -> float:
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+
+
+def _norm(p) -> float:
+    return math.sqrt(_dot(p, p))
+
+
+def _tob_frame(a: list, b: list, c: list) -> list[list[float]]:
+    """Eq. (7), (8) for one triangle (three (x, y, z) lists): the rows of a_T_tob."""
+    g = ((a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0)
+    r_a, r_b = _sub(a, g), _sub(b, g)
+    w = _cross(r_b, r_a)
+    u = (-r_a[0], -r_a[1], -r_a[2])
+    v = _cross(w, u)
+    n_a, n_b, n_w = _norm(r_a), _norm(r_b), _norm(w)
     if not (math.isfinite(n_w) and n_a >= 1e-9 and n_b >= 1e-9):
-        return None
-    if not n_w / (n_a * n_b) >= COLLINEAR_SINE_TOL:
-        return None
-    n_u = _norm3(ux, uy, uz)
-    n_v = _norm3(vx, vy, vz)
-    return np.array(
-        [
-            [ux / n_u, vx / n_v, wx / n_w, gx],
-            [uy / n_u, vy / n_v, wy / n_w, gy],
-            [uz / n_u, vz / n_v, wz / n_w, gz],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
+        raise GeometryError("light sources coincide (or are not finite): no TOB frame")
+    sine = n_w / (n_a * n_b)
+    if not sine >= COLLINEAR_SINE_TOL:
+        raise GeometryError(f"light sources are collinear (|sin(GA, GB)| = {sine:.3g}): no TOB frame")
+    n_u, n_v = _norm(u), _norm(v)
+    return [
+        [u[0] / n_u, v[0] / n_v, w[0] / n_w, g[0]],
+        [u[1] / n_u, v[1] / n_v, w[1] / n_w, g[1]],
+        [u[2] / n_u, v[2] / n_v, w[2] / n_w, g[2]],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
 
 
 def tob_T_tip_on_w_axis(distance_mm: float) -> np.ndarray:
@@ -158,16 +135,11 @@ def isosceles_source_positions_mm(leg_mm: float, base_mm: float) -> np.ndarray:
     )
 
 
-def _sides(p: np.ndarray) -> np.ndarray:
-    """(|AB|, |BC|, |CA|) of points (..., 3, 3)."""
-    return np.stack(
-        [
-            np.linalg.norm(p[..., 0, :] - p[..., 1, :], axis=-1),
-            np.linalg.norm(p[..., 1, :] - p[..., 2, :], axis=-1),
-            np.linalg.norm(p[..., 2, :] - p[..., 0, :], axis=-1),
-        ],
-        axis=-1,
-    )
+def triangle_sides_mm(p_mm: np.ndarray) -> np.ndarray:
+    """Side lengths (|AB|, |BC|, |CA|) (..., 3) of triangles A, B, C (..., 3, 3), mm."""
+    p = np.asarray(p_mm, dtype=float)
+    d = p - p[..., [1, 2, 0], :]
+    return np.sqrt(np.einsum("...ij,...ij->...i", d, d))
 
 
 _DEFAULT_LEG_MM = 40.0
@@ -216,7 +188,7 @@ class TargetModel:
                 raise ValueError(f"TargetModel.{name} must be finite and > 0, got {value}")
             object.__setattr__(self, name, value)
         pts = self.source_positions_mm
-        sides = _sides(pts)
+        sides = triangle_sides_mm(pts)
         object.__setattr__(self, "_sides_mm", tuple(sides.tolist()))  # for label_sources
         if np.min(sides) <= self.source_diameter_mm:
             raise ValueError(
@@ -236,7 +208,7 @@ class TargetModel:
         # The labelling must be unique: every other cyclic naming (same orientation) must
         # miss the model's sides by more than twice the tolerance.
         for shift in (1, 2):
-            other = _sides(np.roll(pts, shift, axis=0))
+            other = triangle_sides_mm(np.roll(pts, shift, axis=0))
             miss = float(np.max(np.abs(other - sides)))
             if miss <= 2.0 * self.side_tolerance_mm:
                 raise ValueError(
@@ -287,7 +259,7 @@ class TargetModel:
     @property
     def sides_mm(self) -> np.ndarray:
         """(|AB|, |BC|, |CA|) in mm."""
-        return _sides(self.source_positions_mm)
+        return np.array(self._sides_mm)
 
     @property
     def has_driver(self) -> bool:
@@ -338,108 +310,62 @@ def label_sources(
     Raises :class:`GeometryError` when the points coincide or are collinear, when the
     triangle is seen edge-on, when the best naming's sides differ from the model's by more
     than the tolerance (``model.side_tolerance_mm`` unless given), and when two namings fit
-    (ambiguous).
+    (ambiguous). Three points: plain float arithmetic (perception labels once per image).
     """
     p = np.asarray(camera_p_mm, dtype=float)
     if p.shape != (3, 3):
         raise ValueError(f"label_sources needs exactly three points (3, 3), got {p.shape}")
-    if not np.all(np.isfinite(p)):
+    pts = p.tolist()
+    if not math.isfinite(sum(pts[0] + pts[1] + pts[2])):  # a NaN or an inf spreads to the sum
         raise GeometryError("source points are not finite")
     tol = model.side_tolerance_mm if side_tolerance_mm is None else float(side_tolerance_mm)
-    lab = _label_single(model, p, viewpoint_mm, tol)
-    if lab is not None:
-        return lab
-    sides = _sides(p)
-    if np.min(sides) < 1e-9:
-        raise GeometryError(f"two light sources coincide (sides {sides.tolist()} mm)")
-    g = p.mean(axis=0)
-    normal = np.cross(p[1] - p[0], p[2] - p[0])
-    sine = np.linalg.norm(normal) / (sides[0] * sides[2])
-    if sine < COLLINEAR_SINE_TOL:
+    d01 = _norm(_sub(pts[0], pts[1]))
+    d12 = _norm(_sub(pts[1], pts[2]))
+    d20 = _norm(_sub(pts[2], pts[0]))
+    sides = [d01, d12, d20]
+    if min(sides) < 1e-9:
+        raise GeometryError(f"two light sources coincide (sides {sides} mm)")
+    normal = _cross(_sub(pts[1], pts[0]), _sub(pts[2], pts[0]))
+    n_norm = _norm(normal)
+    if n_norm / (d01 * d20) < COLLINEAR_SINE_TOL:
         raise GeometryError(
-            f"light sources are collinear (sides {np.round(sides, 4).tolist()} mm): "
+            f"light sources are collinear (sides {[round(d, 4) for d in sides]} mm): "
             "not a target triangle"
         )
-    line_of_sight = g - np.asarray(viewpoint_mm, dtype=float)
-    facing = float(np.dot(normal, line_of_sight)) / (
-        np.linalg.norm(normal) * np.linalg.norm(line_of_sight)
-    )
+    g = [(pts[0][k] + pts[1][k] + pts[2][k]) / 3.0 for k in range(3)]
+    line_of_sight = _sub(g, np.asarray(viewpoint_mm, dtype=float).reshape(3).tolist())
+    facing = _dot(normal, line_of_sight) / (n_norm * _norm(line_of_sight))
     if abs(facing) < 1e-6:
         raise GeometryError("the target triangle is seen edge-on: B and C cannot be told apart")
-    model_sides = model.sides_mm
+    # For points named in input order (or any cyclic renaming of it) GB x GA = -normal/3,
+    # for the other three namings +normal/3: w points away from the viewpoint for these.
+    orders = _CYCLIC if facing < 0 else _ANTICYCLIC
+    dist = ((0.0, d01, d20), (d01, 0.0, d12), (d20, d12, 0.0))
+    model_sides = model._sides_mm
+    m0, m1, m2 = model_sides
     candidates = []
-    for order in itertools.permutations(range(3)):
-        q = p[list(order)]
-        w = np.cross(q[1] - g, q[0] - g)
-        if np.dot(w, line_of_sight) <= 0:
-            continue
-        s = _sides(q)
-        candidates.append((float(np.max(np.abs(s - model_sides))), order, q, s))
+    for i, j, k in orders:
+        s = (dist[i][j], dist[j][k], dist[k][i])
+        candidates.append((max(abs(s[0] - m0), abs(s[1] - m1), abs(s[2] - m2)), (i, j, k), s))
     candidates.sort(key=lambda c: c[0])
-    best_err, order, q, s = candidates[0]
+    best_err, order, s = candidates[0]
     if best_err > tol:
         raise GeometryError(
             f"measured triangle does not match the target: sides "
-            f"{np.round(np.sort(sides), 3).tolist()} mm vs model "
-            f"{np.round(np.sort(model_sides), 3).tolist()} mm (best naming off by "
+            f"{[round(d, 3) for d in sorted(sides)]} mm vs model "
+            f"{[round(m, 3) for m in sorted(model_sides)]} mm (best naming off by "
             f"{best_err:.3f} mm > tolerance {tol} mm)"
         )
-    if len(candidates) > 1 and candidates[1][0] <= tol:
+    if candidates[1][0] <= tol:
         raise GeometryError(
             f"ambiguous labelling: two namings of the sources fit the model within {tol} mm "
             f"(errors {best_err:.3f} and {candidates[1][0]:.3f} mm)"
         )
-    return Labelling(tuple(int(i) for i in order), q, s, best_err)
-
-
-_PERMUTATIONS = tuple(itertools.permutations(range(3)))
-
-
-def _label_single(model: TargetModel, p: np.ndarray, viewpoint_mm, tol: float):
-    """:func:`label_sources` in plain float arithmetic (the array code's operations in the
-    same order, so the same numbers): the Labelling, or None when the array code has to
-    decide (it raises with the message)."""
-    pts = p.tolist()
-    vx, vy, vz = np.asarray(viewpoint_mm, dtype=float).reshape(3).tolist()
-    # side k joins point k and point k + 1; |p_i - p_j| == |p_j - p_i| exactly
-    d01 = _norm3(pts[0][0] - pts[1][0], pts[0][1] - pts[1][1], pts[0][2] - pts[1][2])
-    d12 = _norm3(pts[1][0] - pts[2][0], pts[1][1] - pts[2][1], pts[1][2] - pts[2][2])
-    d20 = _norm3(pts[2][0] - pts[0][0], pts[2][1] - pts[0][1], pts[2][2] - pts[0][2])
-    if not min(d01, d12, d20) >= 1e-9:
-        return None
-    dist = ((0.0, d01, d20), (d01, 0.0, d12), (d20, d12, 0.0))
-    (ax, ay, az), (bx, by, bz), (cx, cy, cz) = pts
-    gx, gy, gz = (ax + bx + cx) / 3.0, (ay + by + cy) / 3.0, (az + bz + cz) / 3.0
-    ux, uy, uz = bx - ax, by - ay, bz - az
-    wx, wy, wz = cx - ax, cy - ay, cz - az
-    nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-    n_norm = _norm3(nx, ny, nz)
-    if not n_norm / (d01 * d20) >= COLLINEAR_SINE_TOL:
-        return None
-    lx, ly, lz = gx - vx, gy - vy, gz - vz
-    facing = (nx * lx + ny * ly + nz * lz) / (n_norm * _norm3(lx, ly, lz))
-    if not abs(facing) >= 1e-6:
-        return None
-    m0, m1, m2 = model._sides_mm
-    candidates = []
-    for order in _PERMUTATIONS:
-        i, j, k = order
-        qi, qj = pts[i], pts[j]
-        rx, ry, rz = qj[0] - gx, qj[1] - gy, qj[2] - gz  # q1 - g
-        sx, sy, sz = qi[0] - gx, qi[1] - gy, qi[2] - gz  # q0 - g
-        w0, w1, w2 = ry * sz - rz * sy, rz * sx - rx * sz, rx * sy - ry * sx
-        if w0 * lx + w1 * ly + w2 * lz <= 0:
-            continue
-        s = (dist[i][j], dist[j][k], dist[k][i])
-        err = max(abs(s[0] - m0), abs(s[1] - m1), abs(s[2] - m2))
-        candidates.append((err, order, s))
-    if not candidates:
-        return None
-    candidates.sort(key=lambda c: c[0])
-    best_err, order, s = candidates[0]
-    if not best_err <= tol or (len(candidates) > 1 and candidates[1][0] <= tol):
-        return None
     return Labelling(order, p[list(order)], np.array(s), best_err)
+
+
+_CYCLIC = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+_ANTICYCLIC = ((0, 2, 1), (1, 0, 2), (2, 1, 0))
 
 
 def estimate_camera_T_tob(

@@ -6,10 +6,12 @@ Conventions (DESIGN.md):
   so ``a_p = a_T_b @ b_p`` and chains read like the paper,
   ``world_T_tob = world_T_flange @ flange_T_camera @ camera_T_tob``.
 * Translations inside this library are in **millimetres** (the paper's unit). Messages use
-  metres and quaternions; :func:`transform_from_position_quaternion` and
-  :func:`position_quaternion_from_transform` convert at that boundary.
+  metres and quaternions; :mod:`humanpt.schemas.convert` converts at that boundary.
 * Yaw, pitch, roll (psi, theta, phi) are Z-Y-X: ``R = Rz(psi) @ Ry(theta) @ Rx(phi)``,
   computed only through :class:`scipy.spatial.transform.Rotation` (``"ZYX"``, intrinsic).
+* Rotation vectors (theta-u: axis times angle, rad), rotation angles and geodesics
+  (:func:`slerp`) are scipy's too (the rotation vector -> matrix direction is OpenCV's
+  Rodrigues, for speed): this module is the project's one implementation of each.
 * The six-vector is ``X = (x, y, z, psi, theta, phi)`` in mm and degrees.
 
 Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
@@ -17,6 +19,7 @@ Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -33,8 +36,12 @@ __all__ = [
     "ypr_deg_from_rotation",
     "x_from_transform",
     "transform_from_x",
-    "transform_from_position_quaternion",
-    "position_quaternion_from_transform",
+    "matrix_from_rotvec",
+    "rotvec_from_matrix",
+    "rotation_angle_rad",
+    "slerp",
+    "interpolate_transform",
+    "apply_step",
 ]
 
 EULER_SEQUENCE = "ZYX"  # intrinsic: R = Rz(psi) Ry(theta) Rx(phi)
@@ -129,15 +136,16 @@ def rotation_from_ypr_deg(ypr_deg: np.ndarray) -> np.ndarray:
     return mats.reshape(ypr_deg.shape[:-1] + (3, 3))
 
 
-def ypr_deg_from_rotation(rotation: np.ndarray) -> np.ndarray:
+def ypr_deg_from_rotation(rotation: np.ndarray, assume_valid: bool = False) -> np.ndarray:
     """Rotation (..., 3, 3) -> yaw, pitch, roll (..., 3) in degrees, Z-Y-X (inverse of
     :func:`rotation_from_ypr_deg`). psi, phi in (-180, 180], theta in [-90, 90]; at
-    theta = +-90 deg (gimbal lock) scipy picks one of the equivalent triples."""
+    theta = +-90 deg (gimbal lock) scipy picks one of the equivalent triples.
+    ``assume_valid`` as in :func:`rotvec_from_matrix`."""
     rotation = np.asarray(rotation, dtype=float)
     if rotation.shape[-2:] != (3, 3):
         raise ValueError(f"rotation must have shape (..., 3, 3), got {rotation.shape}")
     flat = rotation.reshape(-1, 3, 3)
-    ypr = Rotation.from_matrix(flat).as_euler(EULER_SEQUENCE, degrees=True)
+    ypr = Rotation.from_matrix(flat, assume_valid=assume_valid).as_euler(EULER_SEQUENCE, degrees=True)
     return ypr.reshape(rotation.shape[:-2] + (3,))
 
 
@@ -156,29 +164,66 @@ def transform_from_x(x_mm_deg: np.ndarray) -> np.ndarray:
     return make_transform(rotation_from_ypr_deg(x_mm_deg[..., 3:]), x_mm_deg[..., :3])
 
 
-def transform_from_position_quaternion(
-    position_m: np.ndarray, quaternion_xyzw: np.ndarray
-) -> np.ndarray:
-    """Message boundary: position (..., 3) in **metres** and unit quaternion (..., 4) in
-    (x, y, z, w) order -> 4x4 transform with translation in **mm**. The quaternion is
-    normalised; a zero quaternion raises :class:`GeometryError`."""
-    position_m = np.asarray(position_m, dtype=float)
-    q = np.asarray(quaternion_xyzw, dtype=float)
-    if q.shape[-1:] != (4,) or position_m.shape[-1:] != (3,):
-        raise ValueError(
-            f"need position (..., 3) and quaternion (..., 4), got {position_m.shape}, {q.shape}"
-        )
-    norms = np.linalg.norm(q, axis=-1)
-    if np.any(~np.isfinite(norms)) or np.any(norms < 1e-12):
-        raise GeometryError("quaternion is zero or not finite")
-    mats = Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape(q.shape[:-1] + (3, 3))
-    return make_transform(mats, position_m * 1000.0)
+def matrix_from_rotvec(rotvec_rad) -> np.ndarray:
+    """Rotation vector(s) (..., 3) - axis times angle, rad - -> rotation matrices
+    (..., 3, 3): Rodrigues' formula, ``Rotation.from_rotvec(rotvec_rad).as_matrix()`` to
+    rounding. OpenCV's ``cv2.Rodrigues`` computes it: a tenth of scipy's per-call cost, and
+    the filter, the controller and the twin turn one small step at a time. (Its inverse is
+    not used: near zero angle it loses digits; :func:`rotvec_from_matrix` is scipy's.)"""
+    v = np.asarray(rotvec_rad, dtype=float)
+    if v.shape == (3,):
+        return cv2.Rodrigues(v)[0]
+    if v.shape[-1:] != (3,):
+        raise ValueError(f"rotation vectors must have shape (..., 3), got {v.shape}")
+    flat = [cv2.Rodrigues(r)[0] for r in v.reshape(-1, 3)]
+    return np.array(flat).reshape(v.shape[:-1] + (3, 3))
 
 
-def position_quaternion_from_transform(a_T_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Message boundary: 4x4 transform (translation in mm) -> (position (..., 3) in
-    **metres**, quaternion (..., 4) in (x, y, z, w) order with w >= 0)."""
-    a_T_b = _as_transform(a_T_b)
-    rot = a_T_b[..., :3, :3]
-    q = Rotation.from_matrix(rot.reshape(-1, 3, 3)).as_quat(canonical=True)
-    return a_T_b[..., :3, 3] / 1000.0, q.reshape(rot.shape[:-2] + (4,))
+def rotvec_from_matrix(rotation: np.ndarray, assume_valid: bool = False) -> np.ndarray:
+    """Rotation matrix (3, 3) or (n, 3, 3) -> rotation vector (3,) or (n, 3), rad, angle in
+    [0, pi]: ``Rotation.from_matrix(rotation, assume_valid=...).as_rotvec()``.
+
+    ``assume_valid``: skip scipy's orthonormality check (and its repair of a matrix that
+    fails it); for products of rotations, where the check costs more than the conversion
+    and would pass anyway."""
+    return Rotation.from_matrix(rotation, assume_valid=assume_valid).as_rotvec()
+
+
+def rotation_angle_rad(rotation: np.ndarray, assume_valid: bool = False) -> np.ndarray:
+    """Angle (rad, in [0, pi]) of rotation matrices (..., 3, 3), ``Rotation.magnitude()``;
+    ``assume_valid`` as in :func:`rotvec_from_matrix`. A float for one matrix."""
+    return Rotation.from_matrix(rotation, assume_valid=assume_valid).magnitude()
+
+
+def slerp(r0: np.ndarray, r1: np.ndarray, s, assume_valid: bool = False) -> np.ndarray:
+    """The rotation a fraction ``s`` of the way along the shortest geodesic from ``r0`` to
+    ``r1`` (3, 3) (both in the same frame): ``r0 exp(s log(r0^T r1))``. Any real ``s``:
+    0 gives r0, 1 gives r1, beyond [0, 1] it extrapolates at the same angular rate.
+    Equal to ``Slerp([0, 1], Rotation.from_matrix([r0, r1]))(s)`` for s in [0, 1];
+    ``assume_valid`` (r0 and r1 are rotations) as in :func:`rotvec_from_matrix`."""
+    r0 = np.asarray(r0, dtype=float)
+    step = rotvec_from_matrix(r0.T @ r1, assume_valid=assume_valid)
+    return r0 @ matrix_from_rotvec(s * step)
+
+
+def interpolate_transform(a_T_b0: np.ndarray, a_T_b1: np.ndarray, s, assume_valid: bool = False) -> np.ndarray:
+    """The pose (4, 4) a fraction ``s`` of the way from ``a_T_b0`` to ``a_T_b1``: the
+    translation on the straight line, the rotation on the geodesic (:func:`slerp`). Any
+    real ``s``: beyond [0, 1] it extrapolates at the same linear and angular rates.
+    ``assume_valid`` as in :func:`slerp`."""
+    t0 = np.asarray(a_T_b0, dtype=float)
+    t1 = np.asarray(a_T_b1, dtype=float)
+    out = np.eye(4)
+    out[:3, :3] = slerp(t0[:3, :3], t1[:3, :3], s, assume_valid=assume_valid)
+    out[:3, 3] = t0[:3, 3] + s * (t1[:3, 3] - t0[:3, 3])
+    return out
+
+
+def apply_step(a_T_b: np.ndarray, d_translation: np.ndarray, d_rotvec_rad: np.ndarray) -> np.ndarray:
+    """``a_T_b`` (4, 4) after a step given in frame ``a`` about b's origin: rotated by
+    ``exp(d_rotvec_rad)`` (3,) and moved by ``d_translation`` (3,) (the unit of a_T_b's
+    translation): ``R' = exp(d_r) R``, ``t' = t + d_t``."""
+    out = np.array(a_T_b, dtype=float)
+    out[:3, :3] = matrix_from_rotvec(d_rotvec_rad) @ out[:3, :3]
+    out[:3, 3] += d_translation
+    return out

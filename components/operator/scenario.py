@@ -22,8 +22,15 @@ from typing import Literal
 
 import numpy as np
 
-from humanpt.geometry import make_transform, transform_from_x
-from humanpt.schemas.convert import matrix_from_rotvec, rotation_angle, slerp_matrix
+from humanpt.geometry import (
+    apply_step,
+    interpolate_transform,
+    invert_transform,
+    make_transform,
+    matrix_from_rotvec,
+    rotation_angle_rad,
+    transform_from_x,
+)
 
 __all__ = [
     "ScenarioError",
@@ -439,7 +446,7 @@ class _Piece:
 
 
 def _rotation_angle_deg(r0: np.ndarray, r1: np.ndarray) -> float:
-    return math.degrees(rotation_angle(r0.T @ r1))
+    return math.degrees(rotation_angle_rad(r0.T @ r1))
 
 
 def _arc_pose(seg: Arc, start: np.ndarray, fraction: float) -> np.ndarray:
@@ -459,7 +466,7 @@ class Trajectory:
     def __init__(self, scenario: Scenario):
         self.scenario = scenario
         self.tob_T_tip = scenario.tob_T_tip
-        self.tip_T_tob = None if self.tob_T_tip is None else np.linalg.inv(self.tob_T_tip)
+        self.tip_T_tob = None if self.tob_T_tip is None else invert_transform(self.tob_T_tip)
         self.tremor = None if scenario.tremor is None else TremorModel(scenario.tremor)
         pose = transform_from_x(np.asarray(scenario.start_x_mm_deg, dtype=float))
         self.start_pose = pose
@@ -519,10 +526,7 @@ class Trajectory:
             return piece.start.copy()
         if isinstance(seg, Arc):
             return _arc_pose(seg, piece.start, f)
-        out = np.eye(4)
-        out[:3, 3] = piece.start[:3, 3] + f * (piece.end[:3, 3] - piece.start[:3, 3])
-        out[:3, :3] = slerp_matrix(piece.start[:3, :3], piece.end[:3, :3], f)
-        return out
+        return interpolate_transform(piece.start, piece.end, f, assume_valid=True)
 
     def pose(
         self, t_s: float, tremor_t_s: float | None = None
@@ -532,8 +536,7 @@ class Trajectory:
         path = self.path_pose(t_s)
         if self.tremor is not None:
             d_p, d_r = self.tremor.offset(t_s if tremor_t_s is None else tremor_t_s)
-            path[:3, :3] = matrix_from_rotvec(d_r) @ path[:3, :3]
-            path[:3, 3] += d_p
+            path = apply_step(path, d_p, d_r)
         if self.scenario.path == "tip":
             return path @ self.tip_T_tob, path
         tip = None if self.tob_T_tip is None else path @ self.tob_T_tip

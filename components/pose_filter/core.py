@@ -21,9 +21,8 @@ from collections import deque
 import numpy as np
 
 from humanpt.geometry.target import TargetModel
-from humanpt.geometry.transforms import transform_from_x
+from humanpt.geometry.transforms import rotvec_from_matrix, transform_from_x
 from humanpt.pose_filter.config import PoseFilterConfig
-from humanpt.pose_filter.fastmath import rotvec_of
 from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime.core import Core, Output, Port
@@ -216,7 +215,7 @@ class PoseFilterCore(Core):
         if world_T_tob is not None:
             T = self.still_kf.predicted_pose(stamp)
             dp_mm = (world_T_tob[:3, 3] - T[:3, 3]) * 1e3
-            dr_deg = np.degrees(rotvec_of(world_T_tob[:3, :3] @ T[:3, :3].T))
+            dr_deg = np.degrees(rotvec_from_matrix(world_T_tob[:3, :3] @ T[:3, :3].T, assume_valid=True))
             off = float(np.linalg.norm(dp_mm)) > c.still_release_mm or float(np.linalg.norm(dr_deg)) > c.still_release_deg
             if inside:
                 self._offsets.append((dp_mm, dr_deg))

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from filterpy.kalman import KalmanFilter
 
-from humanpt.pose_filter.fastmath import matrix_of, rotvec_of
+from humanpt.geometry.transforms import matrix_from_rotvec, rotvec_from_matrix
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
@@ -143,7 +143,7 @@ class PoseKalman:
 
     def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
         x = self.x if x is None else x
-        return matrix_of(x[3:6]) @ self.R_ref
+        return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
@@ -154,7 +154,7 @@ class PoseKalman:
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
-        y[3:6] = rotvec_of(world_T_tob[:3, :3] @ self.rotation().T)
+        y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation().T, assume_valid=True)
         return self._update(y, H_POSE, R_meas, gate_chi2)
 
     def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
@@ -204,6 +204,6 @@ class PoseKalman:
 
     def _transform(self, x: np.ndarray) -> np.ndarray:
         T = np.eye(4)
-        T[:3, :3] = matrix_of(x[3:6]) @ self.R_ref
+        T[:3, :3] = self.rotation(x)
         T[:3, 3] = x[0:3]
         return T

@@ -9,13 +9,12 @@ stamp = capture, frame "camera") with the truth it used on ``sim_camera/truth``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
+from humanpt.geometry.transforms import interpolate_transform, invert_transform
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm, quat_from_rows
+from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm
 
 from .config import SimCameraConfig
 from .render import Renderer
@@ -36,44 +35,7 @@ def interpolate_pose(
         return np.array(a_T_b1, dtype=float)
     s = (t_ns - t0_ns) / span
     s = min(max(s, -max_extra_ns / span), 1.0 + max_extra_ns / span)
-    out = np.eye(4)
-    out[:3, :3] = _slerp(a_T_b0[:3, :3].tolist(), a_T_b1[:3, :3].tolist(), s)
-    out[:3, 3] = a_T_b0[:3, 3] + s * (a_T_b1[:3, 3] - a_T_b0[:3, 3])
-    return out
-
-
-def _slerp(r0: list[list[float]], r1: list[list[float]], s: float) -> list[list[float]]:
-    """The rotation a fraction ``s`` (any real: beyond [0, 1] it extrapolates) of the way
-    along the shortest geodesic from ``r0`` to ``r1``: ``r0 exp(s log(r0^T r1))`` (as
-    ``humanpt.schemas.convert.slerp_matrix``, to rounding; plain floats, this runs twice
-    per image)."""
-    x0, y0, z0, w0 = quat_from_rows(*r0[0], *r0[1], *r0[2])
-    x1, y1, z1, w1 = quat_from_rows(*r1[0], *r1[1], *r1[2])
-    # rel = conj(q0) q1, on the short way round
-    rw = w0 * w1 + x0 * x1 + y0 * y1 + z0 * z1
-    rx = w0 * x1 - w1 * x0 - (y0 * z1 - z0 * y1)
-    ry = w0 * y1 - w1 * y0 - (z0 * x1 - x0 * z1)
-    rz = w0 * z1 - w1 * z0 - (x0 * y1 - y0 * x1)
-    if rw < 0.0:
-        rw, rx, ry, rz = -rw, -rx, -ry, -rz
-    n = math.sqrt(rx * rx + ry * ry + rz * rz)
-    if n > 0.0:
-        half = s * math.atan2(n, rw)  # s times half the relative angle
-        k = math.sin(half) / n
-        sx, sy, sz, sw = rx * k, ry * k, rz * k, math.cos(half)
-    else:
-        sx, sy, sz, sw = 0.0, 0.0, 0.0, 1.0
-    # q = q0 step
-    w = w0 * sw - (x0 * sx + y0 * sy + z0 * sz)
-    x = w0 * sx + sw * x0 + (y0 * sz - z0 * sy)
-    y = w0 * sy + sw * y0 + (z0 * sx - x0 * sz)
-    z = w0 * sz + sw * z0 + (x0 * sy - y0 * sx)
-    f = 2.0 / (w * w + x * x + y * y + z * z)
-    return [
-        [1.0 - f * (y * y + z * z), f * (x * y - z * w), f * (x * z + y * w)],
-        [f * (x * y + z * w), 1.0 - f * (x * x + z * z), f * (y * z - x * w)],
-        [f * (x * z - y * w), f * (y * z + x * w), 1.0 - f * (x * x + y * y)],
-    ]
+    return interpolate_transform(a_T_b0, a_T_b1, s, assume_valid=True)
 
 
 class PoseTrack:
@@ -177,13 +139,7 @@ class SimCameraCore(Core):
             return []
         world_T_tob = self.tob.at(t_ns, extra_ns)
         world_T_camera = world_T_flange @ self.flange_T_camera
-        camera_T_tob = None
-        if world_T_tob is not None:
-            # inv(world_T_camera) @ world_T_tob, rigid
-            r_t = world_T_camera[:3, :3].T
-            camera_T_tob = np.eye(4)
-            camera_T_tob[:3, :3] = r_t @ world_T_tob[:3, :3]
-            camera_T_tob[:3, 3] = r_t @ (world_T_tob[:3, 3] - world_T_camera[:3, 3])
+        camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
         pixels = self.renderer.render(camera_T_tob, world_T_camera, self.frame_index)
         self.frame_index += 1
         truth = pb.Truth(header=self.next_header("sim_camera/truth", t_ns, "world"))

@@ -42,6 +42,7 @@ from humanpt.geometry import (
     invert_transform,
     point_sigma_mm,
     pose_sigma,
+    rotation_angle_rad,
     transform_from_x,
     transform_points,
     viewing_world_T_flange,
@@ -241,8 +242,7 @@ def cases_for(name: str, n: int, seed: int = 0) -> list[Case]:
 
 
 def _rotation_angle_deg(a: np.ndarray, b: np.ndarray) -> float:
-    c = (np.trace(a[:3, :3].T @ b[:3, :3]) - 1.0) / 2.0
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return math.degrees(rotation_angle_rad(a[:3, :3].T @ b[:3, :3]))
 
 
 def evaluate(

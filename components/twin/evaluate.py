@@ -12,9 +12,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
-from humanpt.geometry.transforms import x_from_transform
+from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
 from humanpt.runtime.lockstep import Delivered
 from humanpt.runtime.recording import iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
@@ -86,7 +85,7 @@ def tracking_errors(src, flange_T_desired_mm: np.ndarray) -> tuple[np.ndarray, n
     for (_, r), G in zip(robot, tobs, strict=True):
         D = r["world_T_flange"] @ flange_T_desired_mm
         e_mm.append(np.linalg.norm(G[:3, 3] - D[:3, 3]))
-        e_deg.append(np.degrees(Rotation.from_matrix(G[:3, :3] @ D[:3, :3].T).magnitude()))
+        e_deg.append(np.degrees(rotation_angle_rad(G[:3, :3] @ D[:3, :3].T)))
     return stamps, np.array(e_mm), np.array(e_deg)
 
 

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import (
     DEFAULT_DZ_MM,
     DEFAULT_FLANGE_T_CAMERA_MM,
+    apply_step,
     transform_from_x,
     viewing_world_T_flange,
     x_from_transform,
@@ -173,12 +173,7 @@ class StandInRobotCore(Core):
                     )
                 )
             self.clipping = clipped
-            new = np.eye(4)
-            new[:3, :3] = (
-                Rotation.from_rotvec(d_r) * Rotation.from_matrix(self.world_T_flange[:3, :3])
-            ).as_matrix()
-            new[:3, 3] = self.world_T_flange[:3, 3] + d_t_mm
-            self.world_T_flange = new
+            self.world_T_flange = apply_step(self.world_T_flange, d_t_mm, d_r)
         world_T_flange_m = self.world_T_flange.copy()
         world_T_flange_m[:3, 3] /= 1000.0
         state = pb.RobotState(

@@ -56,9 +56,8 @@ from collections import deque
 
 import numpy as np
 import rerun as rr
-from scipy.spatial.transform import Rotation
 
-from humanpt.geometry import camera_T_desired, project
+from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
 from humanpt.viz.config import VizConfig
@@ -402,9 +401,7 @@ class RerunLogger:
         w = np.array(
             [st.angular_velocity_rad_s.x, st.angular_velocity_rad_s.y, st.angular_velocity_rad_s.z]
         )
-        T[:3, 3] += v * dt
-        T[:3, :3] = Rotation.from_rotvec(w * dt).as_matrix() @ T[:3, :3]
-        return T
+        return apply_step(T, v * dt, w * dt)
 
     def _tob_state(self, topic, msg: pb.TobState, t_ns) -> None:
         self._state = msg
@@ -504,9 +501,7 @@ class RerunLogger:
             world_T_flange, world_T_tob = from_pose(msg.world_T_flange), from_pose(msg.world_T_tob)
             desired = world_T_flange @ self.flange_T_camera @ _metres(camera_T_desired(self.dz_mm))
             e_t = np.linalg.norm(world_T_tob[:3, 3] - desired[:3, 3]) * 1e3
-            e_r = np.degrees(
-                Rotation.from_matrix(world_T_tob[:3, :3] @ desired[:3, :3].T).magnitude()
-            )
+            e_r = np.degrees(rotation_angle_rad(world_T_tob[:3, :3] @ desired[:3, :3].T))
             self.rec.log(ENTITIES["true_error_t"], rr.Scalars(e_t))
             self.rec.log(ENTITIES["true_error_r"], rr.Scalars(e_r))
             uv_r, uv_l = self._project(self._camera_T_tob_mm(world_T_flange, world_T_tob))

@@ -192,13 +192,3 @@ def test_tip_on_w_axis_eq9():
     np.testing.assert_allclose(tip[:3, :3], pose[:3, :3])  # tob_R_tip = I
     np.testing.assert_allclose(tip[:3, 3], pose[:3, 3] + 55.0 * pose[:3, 2], atol=1e-12)
     assert np.linalg.norm(tip[:3, 3] - pose[:3, 3]) == pytest.approx(55.0)
-
-
-def test_a_single_frame_is_bit_identical_to_the_vectorised_one():
-    # one triangle goes through plain float arithmetic, a stack through the array code
-    rng = np.random.default_rng(3)
-    pts = rng.normal(0.0, 40.0, (200, 3, 3)) + [0.0, 0.0, 600.0]
-    stacked = tob_frame_from_points(pts[:, 0], pts[:, 1], pts[:, 2])
-    for k in range(len(pts)):
-        single = tob_frame_from_points(pts[k, 0], pts[k, 1], pts[k, 2])
-        assert single.tobytes() == stacked[k].tobytes()

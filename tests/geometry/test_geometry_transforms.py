@@ -5,18 +5,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hypothesis import given, settings
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.geometry import (
     GeometryError,
+    apply_step,
     chain_world_T_tob,
     check_rigid,
     compose,
+    interpolate_transform,
     invert_transform,
     make_transform,
-    position_quaternion_from_transform,
+    matrix_from_rotvec,
+    rotation_angle_rad,
     rotation_from_ypr_deg,
-    transform_from_position_quaternion,
+    rotvec_from_matrix,
+    slerp,
     transform_from_x,
     transform_points,
     x_from_transform,
@@ -66,20 +70,56 @@ def test_chain_inverse_and_points(a, b, c):
     )
 
 
-@settings(deadline=None, max_examples=60)
-@given(t=rigid_transforms())
-def test_position_quaternion_round_trip_metres(t):
-    pos_m, q = position_quaternion_from_transform(t)
-    np.testing.assert_allclose(pos_m * 1000.0, t[:3, 3], atol=1e-12)
-    assert q[3] >= 0 and np.linalg.norm(q) == pytest.approx(1.0)
-    np.testing.assert_allclose(transform_from_position_quaternion(pos_m, q), t, atol=1e-12)
+def _rz(angle_rad: float) -> np.ndarray:
+    """Rotation about z by hand (the oracle of the rotation-vector tests)."""
+    c, s = np.cos(angle_rad), np.sin(angle_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
-def test_quaternion_boundary_checks():
-    with pytest.raises(GeometryError, match="zero"):
-        transform_from_position_quaternion([0, 0, 0], [0, 0, 0, 0])
-    t = transform_from_position_quaternion([0.1, 0.2, 0.3], [0, 0, 0, 2.0])  # normalised
-    np.testing.assert_allclose(t, make_transform(np.eye(3), [100.0, 200.0, 300.0]))
+def test_rotation_vectors_by_hand():
+    # exp: a rotation vector along z of length a is Rz(a); log the way back; its angle a.
+    for a in (0.0, 1e-9, 0.3, 2.0, np.pi - 1e-9):
+        np.testing.assert_allclose(matrix_from_rotvec([0.0, 0.0, a]), _rz(a), atol=1e-15)
+        np.testing.assert_allclose(rotvec_from_matrix(_rz(a)), [0.0, 0.0, a], atol=1e-12)
+        assert rotation_angle_rad(_rz(a)) == pytest.approx(a, abs=1e-12)
+        assert rotation_angle_rad(_rz(-a), assume_valid=True) == pytest.approx(a, abs=1e-12)
+    # any axis: R = Rz(a) in a frame whose z is that axis
+    rng = np.random.default_rng(2)
+    for _ in range(50):
+        q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        q *= np.sign(np.linalg.det(q))
+        a = rng.uniform(0.0, 3.0)
+        expected = q @ _rz(a) @ q.T
+        np.testing.assert_allclose(matrix_from_rotvec(q[:, 2] * a), expected, atol=1e-12)
+        np.testing.assert_allclose(rotvec_from_matrix(expected), q[:, 2] * a, atol=1e-9)
+
+
+def test_slerp_and_interpolation_by_hand():
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+        q *= np.sign(np.linalg.det(q))
+        r0 = q @ _rz(rng.uniform(-3, 3)) @ q.T @ matrix_from_rotvec(rng.normal(size=3))
+        a = rng.uniform(-3.0, 3.0)
+        r1 = r0 @ q @ _rz(a) @ q.T  # a turn of a about q's z, in r0's frame
+        for s in (0.0, 0.25, 1.0, -0.5, 1.7):
+            np.testing.assert_allclose(slerp(r0, r1, s), r0 @ q @ _rz(s * a) @ q.T, atol=1e-12)
+        s = rng.uniform(0.0, 1.0)
+        scipy_slerp = Slerp([0.0, 1.0], Rotation.from_matrix([r0, r1]))(s).as_matrix()
+        np.testing.assert_allclose(slerp(r0, r1, s, assume_valid=True), scipy_slerp, atol=1e-12)
+        t0 = make_transform(r0, rng.normal(size=3) * 100)
+        t1 = make_transform(r1, rng.normal(size=3) * 100)
+        mid = interpolate_transform(t0, t1, s)
+        np.testing.assert_allclose(mid[:3, 3], (1 - s) * t0[:3, 3] + s * t1[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(mid[:3, :3], scipy_slerp, atol=1e-12)
+        np.testing.assert_array_equal(mid[3], [0.0, 0.0, 0.0, 1.0])
+
+
+def test_apply_step_turns_about_the_origin_in_the_outer_frame():
+    t = make_transform(_rz(0.5), [10.0, 0.0, 0.0])
+    moved = apply_step(t, np.array([1.0, 2.0, 3.0]), np.array([0.0, 0.0, 0.25]))
+    np.testing.assert_allclose(moved, make_transform(_rz(0.75), [11.0, 2.0, 3.0]), atol=1e-15)
+    np.testing.assert_array_equal(t, make_transform(_rz(0.5), [10.0, 0.0, 0.0]))  # not in place
 
 
 def test_stacks_broadcast():

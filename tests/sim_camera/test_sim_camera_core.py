@@ -18,12 +18,9 @@ from humanpt.schemas.convert import (
     from_pose,
     header,
     image_stamp_ns,
-    matrix_from_rotvec,
     pose,
-    slerp_matrix,
 )
 from humanpt.sim_camera import Renderer, SimCameraConfig, SimCameraCore, interpolate_pose
-from humanpt.sim_camera.core import _slerp
 
 
 def _truth(t_ns: int, field: str, a_T_b_mm: np.ndarray) -> pb.Truth:
@@ -134,23 +131,17 @@ def test_exposure_is_a_live_parameter():
     assert bad[0][1].code == "param_rejected"
 
 
-def test_the_cores_own_slerp_matches_the_convert_module():
-    """The capture path interpolates with plain floats: the same numbers as
-    humanpt.schemas.convert's slerp_matrix, to rounding."""
-    rng = np.random.default_rng(6)
-    for i in range(300):
-        r0 = matrix_from_rotvec(rng.normal(size=3) * rng.uniform(0, 3))
-        step = rng.normal(size=3) * (rng.uniform(0, 3) if i % 2 else 10 ** rng.uniform(-12, -2))
-        r1 = r0 @ matrix_from_rotvec(step)
-        s = rng.uniform(-1.5, 3.0)
-        np.testing.assert_allclose(
-            _slerp(r0.tolist(), r1.tolist(), s), slerp_matrix(r0, r1, s), atol=1e-12
-        )
-    # the identity and an exact half turn
-    np.testing.assert_allclose(_slerp(np.eye(3).tolist(), np.eye(3).tolist(), 2.5), np.eye(3))
-    half_turn = matrix_from_rotvec([0.0, 0.0, np.pi])
-    np.testing.assert_allclose(
-        _slerp(np.eye(3).tolist(), half_turn.tolist(), 0.5),
-        matrix_from_rotvec([0.0, 0.0, np.pi / 2]),
-        atol=1e-12,
-    )
+def test_interpolated_pose_turns_at_a_constant_rate_and_extrapolates_a_little():
+    """Between two stamped truths the pose moves on the constant-velocity screw: here a
+    turn about the world z axis, so the angle and the translation are linear in time (by
+    hand), and beyond the last stamp it goes on for max_extra_ns, then holds."""
+
+    def pose_at(angle_rad: float, x_mm: float) -> np.ndarray:
+        c, s = np.cos(angle_rad), np.sin(angle_rad)
+        return np.array([[c, -s, 0, x_mm], [s, c, 0, 0], [0, 0, 1, 500.0], [0, 0, 0, 1.0]])
+
+    p0, p1 = pose_at(0.2, 10.0), pose_at(0.5, 40.0)  # 0.3 rad and 30 mm in 100 ms
+    for t_ms, expected in ((0, (0.2, 10.0)), (25, (0.275, 17.5)), (100, (0.5, 40.0)),
+                           (120, (0.56, 46.0)), (500, (0.65, 55.0))):
+        got = interpolate_pose(t_ms * 1_000_000, 0, p0, 100_000_000, p1, 50_000_000)
+        np.testing.assert_allclose(got, pose_at(*expected), atol=1e-12)
