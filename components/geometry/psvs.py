@@ -386,7 +386,7 @@ def _deskewed_offsets(camera: PinholeCamera, uv: np.ndarray) -> tuple[np.ndarray
     """(u - u0 - c (v - v0)/a_v, v - v0): the centred pixel coordinates of eq. (2), with the
     skew of eq. (1) removed."""
     dv = uv[..., 1] - camera.v0
-    du = uv[..., 0] - camera.u0 - camera.skew * dv / camera.a_v
+    du = uv[..., 0] - camera.u0 - (camera.skew / camera.a_v) * dv
     return du, dv
 
 
@@ -431,12 +431,14 @@ def _eq4(params: PsvsParams, uv_r: np.ndarray, uv_l: np.ndarray) -> tuple[np.nda
     denominator = du_l - du_r
     p = np.empty(denominator.shape + (3,))
     with np.errstate(divide="ignore", invalid="ignore"):
-        z = (a_u * (b + m) + l * du_l) / denominator - b / 2.0
-        depth_r = z + b / 2.0  # z - z0 of the right virtual camera; the left's is l less
+        # z + b/2 and z + b/2 - l: the depths in front of the right and left virtual cameras
+        depth_r = (a_u * (b + m) + l * du_l) / denominator
         depth_l = depth_r - l
-        p[..., 0] = 0.5 * ((depth_r * du_r / a_u + b / 2.0) + (depth_l * du_l / a_u - b / 2.0 - m))
-        p[..., 1] = 0.5 * (depth_r * dv_r / a_v + depth_l * dv_l / a_v)
-    p[..., 2] = z
+        # means of the right and left x equations, (depth_r du_R/a_u + b/2) and
+        # (depth_l du_L/a_u - b/2 - m), and of the two y equations
+        p[..., 0] = (depth_r * du_r + depth_l * du_l) * (0.5 / a_u) - 0.5 * m
+        p[..., 1] = (depth_r * dv_r + depth_l * dv_l) * (0.5 / a_v)
+    p[..., 2] = depth_r - b / 2.0
     return p, denominator
 
 
