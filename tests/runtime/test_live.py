@@ -17,6 +17,7 @@ from tests.conftest import (
     run_cli,
     wait_for,
     wait_matching,
+    wait_port,
     write_config,
     zenoh_client,
 )
@@ -132,14 +133,21 @@ def test_param_for_an_absent_component_says_so(router):
     assert r.returncode == 1 and "no component 'ponger' answered" in r.stderr
 
 
-def test_up_runs_a_profile_and_merge_and_topics_work(tmp_path):
+def test_up_runs_a_profile_and_merge_and_topics_work(procs, tmp_path):
     port = free_port()
     cfg = write_config(tmp_path / "h.toml", port)
     run_dir = tmp_path / "up"
-    r = run_cli("up", "--profile", "selftest", "--config", str(cfg), "--run-dir", str(run_dir),
-                "--duration", "4", timeout=90)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert f"recording to {run_dir}/" in r.stdout
+    # Stopped (SIGTERM, as Ctrl-C) once its components talk, not after a guessed duration: on
+    # a loaded machine they may take longer than that to start.
+    up = procs.start("up", "--profile", "selftest", "--config", str(cfg), "--run-dir", str(run_dir))
+    wait_port(port, timeout=60.0)
+    with zenoh_client(port) as s:
+        q, sub = _pongs(s)
+        assert len(_collect(q, 3, timeout=60.0)) == 3, "the profile's components did not talk"
+        sub.undeclare()
+    out = procs.stop(up, timeout=30.0)
+    assert up.returncode == 0, out
+    assert f"recording to {run_dir}/" in out
     assert {p.name for p in run_dir.glob("*.mcap")} == {"pinger.mcap", "ponger.mcap"}
     out = tmp_path / "merged.mcap"
     r = run_cli("runs", "merge", str(run_dir), str(out))
