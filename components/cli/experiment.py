@@ -82,40 +82,59 @@ def experiment(args) -> int:
         raise ValueError(f"--set: no section {', '.join(sorted(unknown))} "
                          "(sim_camera, perception, pose_filter, controller)")
 
+    if args.seeds < 1:
+        raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
     out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-{args.name}"
+    made = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     methods = ["paper", "weighted"] if args.method == "both" else [args.method]
+    seeds = list(range(args.seed, args.seed + args.seeds))
     results = {}
     for m in methods:
-        run_dir = out / f"run-{m}" if args.record else None
-        try:
-            r = run_experiment(args.name, m, args.seed, args.robot, run_dir, args.vectors, args.speed_scale, over)
-        except OverrideError as e:
-            raise SystemExit(f"humanpt: {e}") from None
-        results[m] = {"x": r.x, "paper": evaluate.Stats.of(r.err_paper), "truth": evaluate.Stats.of(r.err_truth),
-                      "which": r.which, "wall_s": r.wall_s, "twin_s": r.twin_s}
-        print(f"  {m} perception: {len(r.x)} vectors of {r.which}, {r.twin_s:.1f} s of twin time in "
-              f"{r.wall_s:.1f} s", flush=True)
+        per_seed = []
+        for seed in seeds:
+            run_dir = (out / f"run-{m}" if len(seeds) == 1 else out / f"run-{m}-seed{seed}") if args.record else None
+            try:
+                r = run_experiment(args.name, m, seed, args.robot, run_dir, args.vectors, args.speed_scale, over)
+            except OverrideError as e:
+                if made and not any(out.iterdir()):
+                    out.rmdir()  # nothing was run: leave no empty run directory behind
+                raise SystemExit(f"humanpt: {e}") from None
+            per_seed.append(r)
+            print(f"  {m} perception, seed {seed}: {len(r.x)} vectors of {r.which}, {r.twin_s:.1f} s of twin "
+                  f"time in {r.wall_s:.1f} s", flush=True)
+        stats = {kind: [evaluate.Stats.of(getattr(r, f"err_{kind}")) for r in per_seed]
+                 for kind in ("paper", "truth")}
+        results[m] = {"x": per_seed[0].x, "which": per_seed[0].which,
+                      "wall_s": sum(r.wall_s for r in per_seed), "twin_s": sum(r.twin_s for r in per_seed),
+                      "n": [s.n for s in stats["paper"]],
+                      **{kind: {stat: np.median([dict(s.rows())[stat] for s in stats[kind]], axis=0)
+                                for stat in ("ME", "MAE", "MaxE", "SD")} for kind in ("paper", "truth")},
+                      "spread": {kind: {stat: [np.min([dict(s.rows())[stat] for s in stats[kind]], axis=0).tolist(),
+                                               np.max([dict(s.rows())[stat] for s in stats[kind]], axis=0).tolist()]
+                                        for stat in ("ME", "MAE", "MaxE", "SD")} for kind in ("paper", "truth")}}
     how = "against the mean" if args.name == "static" else "against the known path"
+    over_seeds = (f"; median over seeds {seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else f"; seed {seeds[0]}")
     lines = [f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
-             f"(mm, deg; errors {how} as the paper computed them, and against ground truth)", "",
+             f"(mm, deg; errors {how} as the paper computed them, and against ground truth{over_seeds})", "",
              f"{'':44s}" + "".join(f"{c:>10s}" for c in evaluate.COORDS)]
     names = {"paper": "paper's perception", "weighted": "default perception"}
     for stat in ("ME", "MAE", "MaxE", "SD"):
         if stat in PAPER[args.name]:
             lines.append(_fmt_row(f"{stat}  paper, Table {TABLE[args.name]} (published)", PAPER[args.name][stat]))
         for m in methods:
-            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, {how}", dict(results[m]["paper"].rows())[stat]))
+            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, {how}", results[m]["paper"][stat]))
         for m in methods:
-            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, vs ground truth", dict(results[m]["truth"].rows())[stat]))
+            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, vs ground truth", results[m]["truth"][stat]))
         lines.append("")
     text = "\n".join(lines)
     print(text)
     (out / "table.txt").write_text(text + "\n")
-    summary = {m: {"which": r["which"], "n": r["paper"].n, "wall_s": r["wall_s"], "twin_s": r["twin_s"],
-                   **{f"{kind}_{stat}": dict(r[kind].rows())[stat].tolist() for kind in ("paper", "truth")
-                      for stat in ("ME", "MAE", "MaxE", "SD")}} for m, r in results.items()}
-    (out / "results.json").write_text(json.dumps({"experiment": args.name, "seed": args.seed,
+    summary = {m: {"which": r["which"], "n": r["n"], "wall_s": r["wall_s"], "twin_s": r["twin_s"],
+                   **{f"{kind}_{stat}": np.asarray(r[kind][stat]).tolist() for kind in ("paper", "truth")
+                      for stat in ("ME", "MAE", "MaxE", "SD")},
+                   "spread_min_max": r["spread"]} for m, r in results.items()}
+    (out / "results.json").write_text(json.dumps({"experiment": args.name, "seed": args.seed, "seeds": seeds,
                                                    "published": PAPER[args.name], "twin": summary}, indent=1))
     if "weighted" in results and not args.no_plots:
         print(f"figure: {plots(args.name, results, out)}")

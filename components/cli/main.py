@@ -76,7 +76,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("name", choices=["static", "arc", "trapezium"])
     p.add_argument("--method", choices=["both", "paper", "weighted"], default="both",
                    help="perception method(s) (default both, side by side)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="the twin's seed (noise, operator tremor)")
+    p.add_argument("--seeds", type=int, default=1, metavar="N",
+                   help="run seeds SEED..SEED+N-1 and report each statistic's median over them "
+                        "(one seed's figures move with any arithmetic change: the rendered noise "
+                        "is drawn per pixel)")
     p.add_argument("--robot", choices=["puma", "standin"], default="puma")
     p.add_argument("--out", help="output directory (default runs/<time>-experiment-<name>)")
     p.add_argument("--record", action="store_true", help="also record every component's MCAP")

@@ -320,7 +320,6 @@ class LiveShell:
                 bus_ports = [p.topic for p in self.core.ports if p.on_bus]
                 subs = [session.declare_subscriber(topics.TOPICS[s].key(self.cell), self._on_sample(s))
                         for s in bus_ports]
-                token = session.liveliness().declare_token(liveliness_key(self.cell, name))
                 watchers = [session.liveliness().declare_subscriber(liveliness_key(self.cell, w),
                                                                     self._on_liveliness(w), history=True)
                             for w in self.core.watch]
@@ -329,6 +328,9 @@ class LiveShell:
                 qbl = session.declare_queryable(params_key(self.cell, name), self._on_query)
                 ticker = threading.Thread(target=self._tick_loop, name=f"{name}-tick", daemon=True)
                 ticker.start()
+                # Last: the liveliness token means "ready" (adapters, e.g. viz's server, and the
+                # parameter queryable are up), not merely "process started".
+                token = session.liveliness().declare_token(liveliness_key(self.cell, name))
                 self.ready.set()
                 log.info("%s up in cell %s (bus inputs: %s)", name, self.cell, ", ".join(bus_ports) or "none")
                 while not self.stop.is_set():
