@@ -107,7 +107,6 @@ def run_component(args) -> int:
     stop_on_signals(shell.stop)
     if args.duration:
         threading.Timer(args.duration, shell.stop.set).start()
-    log.info("%s: recording to %s", name, run_dir / f"{name}.mcap")
     try:
         counters = shell.run()
     except Exception as e:  # zenoh.ZError and friends: say it plainly
@@ -115,7 +114,7 @@ def run_component(args) -> int:
         return 1
     print(f"humanpt {name}: stopped; consumed {counters.consumed}, produced {counters.produced}, "
           f"dropped {counters.dropped}, core errors {counters.core_errors}; recording "
-          f"{run_dir / (name + '.mcap')}", file=sys.stderr, flush=True)
+          f"{shell.recorder.path if shell.recorder else 'off'}", file=sys.stderr, flush=True)
     return 0
 
 

@@ -9,7 +9,8 @@
 * a queryable ``humanpt/<cell>/<component>/params`` serves the live parameters and sets
   them (payload ``{"set": {"key": value}}``); a change reaches the core as a ``param``
   input, so it is recorded and replays;
-* everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``;
+* everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``
+  (``<component>.1.mcap``... when the component restarts into the same run: never truncated);
 * a payload that fails to decode is dropped with a log line and a counter (and kept raw
   in the recording); the component lives on;
 * the liveliness of the components named in ``core.watch`` reaches the core as
@@ -314,6 +315,7 @@ class LiveShell:
                  "cell": self.cell, "host": socket.gethostname(), "pid": os.getpid()},
                 chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s,
                 background=self.rt.record_thread)
+            log.info("%s: recording to %s", name, self.recorder.path)
         try:
             with zenoh.open(self.zconf) as session:
                 self._session = session

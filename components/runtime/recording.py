@@ -46,6 +46,20 @@ class RecordingError(ValueError):
     written by an incompatible schema version.  The message says which."""
 
 
+def _open_new_segment(path: Path):
+    """Open ``path`` for writing, never over an existing file: a component restarted into
+    the same run directory writes ``<stem>.1.mcap``, ``<stem>.2.mcap``... beside the first
+    recording. Returns (the path opened, the file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    candidate, n = path, 0
+    while True:
+        try:
+            return candidate, open(candidate, "xb")  # noqa: SIM115 - closed by the Recorder
+        except FileExistsError:
+            n += 1
+            candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+
+
 class Recorder:
     """Writes one component's inputs and outputs to an MCAP file.
 
@@ -78,9 +92,7 @@ class Recorder:
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
-        self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "wb")  # noqa: SIM115 - closed in close()
+        self.path, self._file = _open_new_segment(Path(path))
         comp = {
             "zstd": CompressionType.ZSTD,
             "lz4": CompressionType.LZ4,

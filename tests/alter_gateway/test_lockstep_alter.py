@@ -11,7 +11,7 @@ from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.alter_gateway.core import AlterGatewayCore
 from humanpt.runtime.core import Core, Port
 from humanpt.runtime.lockstep import Lockstep
-from humanpt.runtime.replay import replay
+from humanpt.runtime.replay import factory_with, replay
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
 from humanpt.sim_robot.config import SimRobotConfig
@@ -167,7 +167,7 @@ def test_same_run_twice_is_identical_and_the_recordings_replay(tmp_path):
     b, _, _ = _run(n_cycles=120)
     assert a.digest() == b.digest()
     for comp in ("alter_gateway", "sim_robot", "controller"):
-        res = replay(tmp_path / f"{comp}.mcap")
+        res = replay(tmp_path / f"{comp}.mcap", core_factory=factory_with(ScriptedControllerCore))
         # Each answers (nearly) every one of the 120 ALTER cycles.
         assert res.match and res.compared >= 100, res.report()
 
