@@ -51,6 +51,9 @@ class PoseFilterConfig:
     # Robot poses at the image stamp: interpolate, or extrapolate at most this far.
     max_extrapolation_ms: Annotated[float, Range(0, 1000, "ms")] = 60.0
     robot_history: Annotated[int, Range(2, 100000, "states")] = 64
+    # A robot state stamped this far from the time it reaches the filter (the receiver's
+    # clock) is not believed: a forged future stamp would otherwise lock the buffer.
+    max_stamp_skew_ms: Annotated[float, Range(1, 60000, "ms")] = 1000.0
     # Target model used to place G from one or two visible sources (mm).
     target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
     target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0

@@ -44,6 +44,8 @@ class PoseFilterCore(Core):
     def __init__(self, config: PoseFilterConfig):
         super().__init__(config)
         self.robot = RobotPoseBuffer(config.robot_history)
+        self._backwards = 0  # robot states in a row stamped before the latest one
+        self._rejected_states: dict[str, int] = {}
         self._build(config)
         self.kf = PoseKalman(self._accel, self._ang_accel)
         self.rejects_in_a_row = 0
@@ -102,9 +104,38 @@ class PoseFilterCore(Core):
             world_T_flange = from_pose(msg.world_T_flange)
         except MessageError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
-        self.robot.add(msg.header.stamp_ns, world_T_flange)
-        self._cycle = (msg.header.stamp_ns, msg.cycle)
-        return [self._state(t_ns, msg.header.stamp_ns, msg.cycle)]
+        stamp_ns = msg.header.stamp_ns
+        skew_ns = stamp_ns - t_ns
+        if abs(skew_ns) > self.config.max_stamp_skew_ms * 1e6:
+            return self._reject_robot_state(t_ns, "stamp_skew", (
+                f"robot state of cycle {msg.cycle} stamped {skew_ns / 1e9:+.3f} s from this clock "
+                f"(more than max_stamp_skew_ms = {self.config.max_stamp_skew_ms:g}): dropped"))
+        if not self.robot.add(stamp_ns, world_T_flange):
+            # Backwards or repeated. A few in a row, each near this clock, is the robot's
+            # clock stepping back (a restart, an NTP step): start the buffer again on them.
+            self._backwards += 1
+            if self._backwards < 3:
+                return self._reject_robot_state(t_ns, "stamp_backwards", (
+                    f"robot state of cycle {msg.cycle} stamped {(stamp_ns - self.robot.latest[0]) / 1e6:+.1f} "
+                    "ms from the latest one: dropped"))
+            self.robot.clear()
+            self.robot.add(stamp_ns, world_T_flange)
+            self._backwards = 0
+            self._cycle = (stamp_ns, msg.cycle)
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "robot_clock_reset",
+                               "three robot states in a row stamped before the latest: the robot's clock "
+                               "went back; the robot pose buffer starts again"),
+                    self._state(t_ns, stamp_ns, msg.cycle)]
+        self._backwards = 0
+        self._cycle = (stamp_ns, msg.cycle)
+        return [self._state(t_ns, stamp_ns, msg.cycle)]
+
+    def _reject_robot_state(self, t_ns: int, why: str, text: str) -> list[Output]:
+        """An event for the 1st, 10th, 100th... robot state rejected for ``why``."""
+        n = self._rejected_states[why] = self._rejected_states.get(why, 0) + 1
+        if n != 10 ** (len(str(n)) - 1):
+            return []
+        return [self.event(t_ns, pb.SEVERITY_WARNING, "robot_state_rejected", f"{text} ({n} so far)")]
 
     def _state(self, t_ns: int, robot_stamp_ns: int, cycle: int) -> Output:
         c = self.config

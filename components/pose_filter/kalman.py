@@ -165,7 +165,7 @@ class PoseKalman:
     def _update(self, y: np.ndarray, H: np.ndarray, R: np.ndarray, gate_chi2: float) -> Gate:
         S = H @ self.P @ H.T + R
         d2 = float(y @ np.linalg.solve(S, y))
-        if d2 > gate_chi2:
+        if not d2 <= gate_chi2:  # a NaN distance is not inside the gate either
             return Gate(False, d2)
         self.kf.update(H @ self.x + y, R=R, H=H)
         self._recentre()

@@ -17,11 +17,18 @@ class RobotPoseBuffer:
         self._items: deque[tuple[int, np.ndarray]] = deque(maxlen=maxlen)
         self._stamps: deque[int] = deque(maxlen=maxlen)
 
-    def add(self, stamp_ns: int, world_T_flange: np.ndarray) -> None:
+    def add(self, stamp_ns: int, world_T_flange: np.ndarray) -> bool:
+        """Append a state; False (and nothing kept) when its stamp is not after the latest:
+        the buffer stays in stamp order."""
         if self._items and stamp_ns <= self._items[-1][0]:
-            return  # out of order or duplicate: keep the buffer monotonic
+            return False
         self._items.append((int(stamp_ns), np.asarray(world_T_flange, dtype=float)))
         self._stamps.append(int(stamp_ns))
+        return True
+
+    def clear(self) -> None:
+        self._items.clear()
+        self._stamps.clear()
 
     def __len__(self) -> int:
         return len(self._items)

@@ -206,13 +206,16 @@ def test_lost_after_silence_and_bad_input_never_raises():
     bad = pb.TobMeasurement(header=header(800_000_000), status=pb.TOB_STATUS_FULL)
     bad.camera_T_tob.translation.x = float("nan")
     outs = core.step(800_000_001, "perception/tob", bad)
-    assert [m.code for _, m in outs] == ["bad_measurement"]
+    assert [m.code for _, m in outs] == ["bad_input"]  # every core's input check
     far = pb.TobMeasurement(header=header(50_000_000_000), status=pb.TOB_STATUS_FULL)
     outs = core.step(800_000_002, "perception/tob", far)
     assert [m.code for _, m in outs] == ["no_robot_pose"]
     outs = core.step(800_000_003, "alter_gateway/robot_state", pb.RobotState(
         world_T_flange=pb.Pose(translation=pb.Vector3(x=float("inf")))))
-    assert [m.code for _, m in outs] == ["bad_robot_state"]
+    assert [m.code for _, m in outs] == ["bad_input"]
+    outs = core.step(800_000_003, "alter_gateway/robot_state", pb.RobotState(
+        header=header(2**63 - 1), world_T_flange=pb.Pose(rotation=pb.Quaternion(w=1.0))))
+    assert [m.code for _, m in outs] == ["robot_state_rejected"]
 
 
 def test_config_is_validated():
@@ -229,3 +232,40 @@ def test_images_before_the_robots_first_state_are_dropped_with_one_info():
     again = core.step(2_000_001, "perception/tob", m)
     assert [(e.code, e.severity) for _, e in first] == [("waiting_for_robot", pb.SEVERITY_INFO)]
     assert again == [] and not core.kf.initialised
+
+
+# -- forged and stepping robot stamps (issue 14, item 2) --------------------------------------
+def test_a_forged_future_robot_state_does_not_lock_out_the_real_ones():
+    """The attack: one robot_state stamped in the future made the buffer refuse every real
+    state after it (servo error 0.19 -> 73 mm while the status stayed FULL)."""
+    core = PoseFilterCore(PoseFilterConfig())
+    truth = T_m(TARGET_X)
+    w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
+    w.run(0, 500_000_000)
+    for stamp in (500_000_000 + 10**12, 2**63 - 1):  # 1000 s ahead; the largest int64
+        forged = pb.RobotState(header=header(stamp), cycle=99, world_T_flange=pose(np.eye(4)))
+        outs = core.step(500_000_001, "alter_gateway/robot_state", forged)
+        assert all(t == "pose_filter/events" for t, _ in outs)
+    assert [m.code for t, m in core.step(500_000_001, "alter_gateway/robot_state", forged)] == []  # rate-limited
+    n = len(w.states)
+    w.run(500_000_000, 1_000_000_000)
+    assert len(w.states) > n + 10  # the real states still come in and are answered
+    got = from_pose(w.states[-1].world_T_tob)
+    assert np.abs(got[:3, 3] - truth[:3, 3]).max() < 1e-3 and w.states[-1].status == pb.TOB_STATUS_FULL
+
+
+def test_a_robot_clock_that_steps_back_restarts_the_buffer():
+    core = PoseFilterCore(PoseFilterConfig())
+    flange = pose(np.eye(4))
+    t = 10_000_000_000
+    for k in range(5):
+        core.step(t + k * 28_000_000, "alter_gateway/robot_state",
+                  pb.RobotState(header=header(t + k * 28_000_000), cycle=k, world_T_flange=flange))
+    back = t - 500_000_000  # the robot's clock stepped back half a second (within the skew)
+    codes = []
+    for k in range(3):
+        outs = core.step(t + (5 + k) * 28_000_000, "alter_gateway/robot_state",
+                         pb.RobotState(header=header(back + k * 28_000_000), cycle=5 + k, world_T_flange=flange))
+        codes += [m.code for tp, m in outs if tp == "pose_filter/events"]
+    assert codes == ["robot_state_rejected", "robot_clock_reset"]
+    assert core.robot.latest[0] == back + 2 * 28_000_000
