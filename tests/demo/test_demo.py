@@ -55,7 +55,7 @@ def test_experiment_prints_the_papers_table_beside_the_twins(tmp_path):
     assert "SD  paper, Table 1 (published)" in r.stdout
     assert "twin, default perception, vs ground truth" in r.stdout
     res = json.loads((out / "results.json").read_text())
-    assert res["twin"]["weighted"]["n"] == 20
+    assert res["twin"]["weighted"]["n"] == [20]  # one seed
     # The default perception is far better than the paper's on the same images.
     assert np.mean(res["twin"]["weighted"]["truth_SD"][:3]) < np.mean(res["twin"]["paper"]["truth_SD"][:3])
     assert (out / "figure-static.png").stat().st_size > 10_000
@@ -73,11 +73,12 @@ def test_experiment_set_overrides_a_component_and_rejects_unknown_sections(tmp_p
     def static_theta_sd(*extra):
         out = tmp_path / f"exp{len(extra)}"
         r = run_cli("experiment", "static", "--method", "weighted", "--vectors", "30", "--no-plots",
-                    "--out", str(out), *extra, timeout=300)
+                    "--seeds", "3", "--out", str(out), *extra, timeout=300)
         assert r.returncode == 0, r.stdout + r.stderr
         return json.loads((out / "results.json").read_text())["twin"]["weighted"]["paper_SD"][4]
 
-    # The still-target averaging is what brings the static tilt noise below the paper's.
+    # The still-target averaging is what brings the static tilt noise below the paper's
+    # (the median over three seeds: one seed's figure moves with any arithmetic change).
     assert static_theta_sd() * 3 < static_theta_sd("--set", "pose_filter.still_detect=false")
     r = run_cli("experiment", "static", "--set", "nosuch.key=1", "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and "no section nosuch" in r.stderr

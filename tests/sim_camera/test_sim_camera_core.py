@@ -98,7 +98,7 @@ def test_bad_truth_is_an_event_and_the_core_lives_on():
     nan_truth = pb.Truth(header=header(5))
     nan_truth.world_T_flange.translation.x = float("nan")
     outs = core.step(5, "sim_robot/truth", nan_truth)
-    assert outs[0][0] == "sim_camera/events" and outs[0][1].code == "bad_truth"
+    assert outs[0][0] == "sim_camera/events" and outs[0][1].code == "bad_input"  # every core's input check
     outs = core.step(6, "operator/truth", pb.Truth(header=header(6)))  # world_T_tob missing
     assert outs[0][1].code == "bad_truth" and "world_T_tob is not set" in outs[0][1].text
     core.step(7, "sim_robot/truth", _truth(7, "world_T_flange", np.eye(4)))
