@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import queue
 import shlex
 import sys
@@ -85,7 +84,7 @@ REPLIES = {
     "return": ("command",),
     "record_start": ("record_started",),
     "record_stop": ("record_stopped",),
-    "save": ("save",),
+    "save": ("path_saved", "save_failed"),  # what the controller's path writer did
     "calibrate": ("calibration_started",),
     "playback": ("playback_started",),
 }
@@ -381,7 +380,7 @@ class Console:
                     ev = pb.Event.FromString(events.get(timeout=left))
                 except queue.Empty:
                     continue
-                if ev.code == "bad_command":
+                if ev.code in ("bad_command", "save_failed"):
                     self.say(f"REJECTED by the {component}: {ev.text}")
                     return 1
                 if ev.code in wanted or not wanted:
@@ -500,11 +499,14 @@ def _add_actions(asub) -> dict[str, str]:
     q.add_argument("action", choices=["start", "stop"])
     q = action(
         "save",
-        help="save the recorded path to a file (on the controller's machine)",
-        description="Copy the current path file (CSV, mm and degrees) to FILE. The controller "
-        "writes it, on its machine; a relative FILE is taken from the console's directory.",
+        help="save the recorded path under a name in the run's paths/ directory",
+        description="Copy the current path file (CSV, mm and degrees) to NAME in the run's "
+        "paths/ directory, on the controller's machine (NAME is a plain file name: letters, "
+        "digits, '.', '_', '-'; '.csv' is added when it has no suffix). An existing file is "
+        "replaced only with --overwrite.",
     )
-    q.add_argument("file", metavar="FILE")
+    q.add_argument("file", metavar="NAME")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing file of that name")
     q = action(
         "calibrate",
         help="calibrate the driver tip (N samples pivoting on it)",
@@ -547,7 +549,7 @@ def add_parser(sub, add_common) -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="examples:\n  humanpt console status --follow\n"
         "  humanpt console set threshold=70 invert=false delay=10 dz=600 stop-on-current-location=true\n"
-        "  humanpt console record start\n  humanpt console save ~/weld.csv\n"
+        "  humanpt console record start\n  humanpt console save weld-1\n"
         "  humanpt console --connect tcp/192.168.1.10:7447      (from the other machine)",
     )
     add_common(p)
@@ -569,7 +571,7 @@ def _do(con: Console, a) -> int:
     if v == "record":
         return con.command("record_start" if a.action == "start" else "record_stop")
     if v == "save":
-        return con.command("save", {"file": os.path.abspath(os.path.expanduser(a.file))})
+        return con.command("save", {"file": a.file, "overwrite": a.overwrite})
     if v == "calibrate":
         args: dict = {}
         if a.samples is not None:

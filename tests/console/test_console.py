@@ -146,6 +146,22 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
         and "hold (stop on current location)" in r.stdout
     ), r.stdout + r.stderr
 
+    # Save: a plain name in the run's paths/ directory, never over a file unless asked, never
+    # anywhere else (the attack wrote any file the controller could write).
+    save = ("console", "--config", str(cfg), "--timeout", "20", "save")
+    r = run_cli(*save, "seam")
+    assert r.returncode == 0 and "path_saved" in r.stdout, r.stdout + r.stderr
+    assert (run_dir / "paths" / "seam.csv").is_file()
+    r = run_cli(*save, "seam")
+    assert r.returncode == 1 and "exists" in r.stdout, r.stdout + r.stderr
+    r = run_cli(*save, "seam", "--overwrite")
+    assert r.returncode == 0 and "path_saved" in r.stdout, r.stdout + r.stderr
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    r = run_cli(*save, str(victim))
+    assert r.returncode == 1 and "plain file name" in r.stdout, r.stdout + r.stderr
+    assert victim.read_text() == "precious"
+
     procs.stop(ctl)
     procs.stop(per)
     prec, crec = read(run_dir / "perception.mcap"), read(run_dir / "controller.mcap")
@@ -156,7 +172,7 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
         30
     ]
     verbs = [e.decode().verb for e in crec.inputs if e.topic == "console/command"]
-    assert verbs == ["record_start", "playback", "record_stop", "hold"]
+    assert verbs == ["record_start", "playback", "record_stop", "hold", "save", "save", "save", "save"]
     codes = [e.decode().code for e in crec.outputs if e.topic == "controller/events"]
     assert "record_started" in codes and "record_stopped" in codes
     assert sum(c == "param_changed" for c in codes) == 4
