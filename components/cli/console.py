@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import queue
 import shlex
 import sys
@@ -87,7 +88,23 @@ REPLIES = {
     "save": ("path_saved", "save_failed"),  # what the controller's path writer did
     "calibrate": ("calibration_started",),
     "playback": ("playback_started",),
+    "reset_fault": ("fault_cleared", "no_fault"),
+    "alter_on": ("alter_on",),
+    "alter_off": ("alter_off",),
 }
+REFUSALS = ("bad_command", "save_failed", "bad_console_command")
+
+
+def operator_name() -> str:
+    """Who is at this console: user@host (logged by the component that acts on a command)."""
+    import getpass
+    import socket
+
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):  # no passwd entry (a container)
+        user = f"uid{os.getuid()}"
+    return f"{user}@{socket.gethostname()}"
 
 STATUS_TOPICS = (
     "controller/status",
@@ -380,7 +397,7 @@ class Console:
                     ev = pb.Event.FromString(events.get(timeout=left))
                 except queue.Empty:
                     continue
-                if ev.code in ("bad_command", "save_failed"):
+                if ev.code in REFUSALS:
                     self.say(f"REJECTED by the {component}: {ev.text}")
                     return 1
                 if ev.code in wanted or not wanted:
@@ -507,6 +524,20 @@ def _add_actions(asub) -> dict[str, str]:
     )
     q.add_argument("file", metavar="NAME")
     q.add_argument("--overwrite", action="store_true", help="replace an existing file of that name")
+    action(
+        "reset-fault",
+        help="clear the ALTER gateway's latched fault (the operator's decision, logged by name)",
+        description="Clear the gateway's latched fault (missed cycles, a lost controller...): "
+        "corrections flow again once the controller commands. The gateway logs who asked "
+        "(user@host of this console).",
+    )
+    q = action(
+        "alter",
+        help="switch the simulated robot's ALTER mode on or off (logged by name)",
+        description="ALTER on or off at the twin's robot controller (sim_robot); on a real Puma "
+        "this is done at the robot's terminal. Logged with who asked.",
+    )
+    q.add_argument("state", choices=["on", "off"])
     q = action(
         "calibrate",
         help="calibrate the driver tip (N samples pivoting on it)",
@@ -593,6 +624,10 @@ def _do(con: Console, a) -> int:
 
             args["points"] = pathfile.read(a.file).points(a.point).tolist()
         return con.command("playback", args)
+    if v == "reset-fault":
+        return con.command("reset_fault", {"operator": operator_name()}, component="alter_gateway")
+    if v == "alter":
+        return con.command(f"alter_{a.state}", {"operator": operator_name()}, component="sim_robot")
     if v in ("hold", "track", "return"):
         return con.command(v)
     raise ConsoleError(f"unknown action {v!r}")

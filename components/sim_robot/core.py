@@ -22,6 +22,7 @@ an operator would restart it at the controller; ``alter_off`` stops it.
 
 from __future__ import annotations
 
+import json
 import math
 from collections import deque
 
@@ -63,6 +64,16 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
         StatusBits.CORRECTION_MISSED,
     )
 )
+
+
+def _operator(args_json: str) -> str:
+    """The operator named in a console command's arguments ({"operator": "user@host"}), or ""."""
+    try:
+        args = json.loads(args_json or "{}")
+    except (ValueError, RecursionError):
+        return ""
+    who = args.get("operator") if isinstance(args, dict) else None
+    return who.strip()[:100] if isinstance(who, str) else ""
 
 
 class SimRobotCore(SerialLinkCoreMixin, Core):
@@ -201,7 +212,12 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def _on_console(self, t_ns: int, msg: pb.Command, outs: list[Output]) -> None:
         if msg.component != self.name:
             return
-        if msg.verb == "alter_on":
+        who = _operator(msg.args_json)
+        if msg.verb in ("alter_on", "alter_off") and not who:
+            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_console_command",
+                     f"{msg.verb} refused: it needs the operator's name (humanpt console alter on|off)",
+                     limited=False)
+        elif msg.verb == "alter_on":
             was = self.fault
             self.fault = None
             self.alter_active = True
@@ -210,13 +226,13 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
                 t_ns,
                 pb.SEVERITY_INFO,
                 "alter_on",
-                "ALTER on" + (f" (fault cleared: {was})" if was else ""),
+                f"ALTER on by {who}" + (f" (fault cleared: {was})" if was else ""),
                 limited=False,
             )
         elif msg.verb == "alter_off":
             self.alter_active = False
             self._ev(
-                outs, t_ns, pb.SEVERITY_INFO, "alter_off", "ALTER off (console)", limited=False
+                outs, t_ns, pb.SEVERITY_INFO, "alter_off", f"ALTER off by {who} (console)", limited=False
             )
         else:
             self._ev(

@@ -308,8 +308,15 @@ def test_a_console_reset_clears_a_fault_and_without_alter_off_only_hold_is_sent(
         rig.status()
         rig.advance(CYCLE_NS)
     assert rig.gw.fault is not None and rig.last_correction().flags == HOLD
+    # Only the operator clears a fault, by name (issue 14, item 1): a bare command is refused.
     outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault"))
-    assert rig.codes(outs) == ["fault_cleared"]
+    assert rig.codes(outs) == ["bad_console_command"] and rig.gw.fault is not None
+    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault",
+                                                  args_json='{"operator": "ann@cell1"}'))
+    assert rig.codes(outs) == ["fault_cleared"] and "ann@cell1" in rig.events(outs)[0].text
+    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault",
+                                                  args_json='{"operator": "ann@cell1"}'))
+    assert rig.codes(outs) == ["no_fault"]
     outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="explode"))
     assert rig.codes(outs) == ["bad_console_command"]
 

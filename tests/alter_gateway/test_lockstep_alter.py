@@ -198,7 +198,7 @@ def test_a_silent_controller_is_reused_then_zero_and_a_long_silence_faults_and_s
             ls.now_ns,
             "sim_robot",
             "console/command",
-            pb.Command(component="sim_robot", verb="alter_on"),
+            pb.Command(component="sim_robot", verb="alter_on", args_json='{"operator": "test"}'),
         )
 
     ls, gw, sim = _run(

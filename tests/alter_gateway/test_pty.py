@@ -190,7 +190,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         assert sent()[-1].correction.deltas == (0,) * 6
         still_for_cycles(4)
         ctl.mode = "normal"
-        sim_shell.put("console/command", pb.Command(component="sim_robot", verb="alter_on"))
+        sim_shell.put("console/command", pb.Command(component="sim_robot", verb="alter_on", args_json='{"operator": "test"}'))
         wait_for(lambda: "fault_cleared" in ctl.codes(), 1.0, "fault_cleared")
         wait_for(lambda: sent()[-1].source == "fresh", 2.0, "fresh corrections after the fault")
 

@@ -241,3 +241,14 @@ def test_console_says_when_nobody_answers(router):
     assert r.returncode == 1 and "controller did not answer" in r.stdout
     r = run_cli("console", "status", "--config", str(cfg), "--timeout", "1")
     assert r.returncode == 1 and "no status within 1 s" in r.stdout
+
+
+def test_reset_fault_goes_to_the_gateway_with_the_operators_name(router, procs, tmp_path):
+    port, cfg = router
+    conf = tmp_path / "gw.toml"
+    conf.write_text(cfg.read_text() + f'\n[alter_gateway]\nport = "{tmp_path / "no-robot"}"\n')
+    procs.start("alter_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
+    _wait_alive(port, ("alter_gateway",))
+    r = run_cli("console", "--config", str(conf), "--timeout", "20", "reset-fault")
+    assert r.returncode == 0 and "no_fault" in r.stdout, r.stdout + r.stderr
+    assert "reset_fault by " in r.stdout and "@" in r.stdout  # who asked, as user@host

@@ -174,7 +174,7 @@ def test_an_unreachable_correction_faults_stops_alter_and_holds_until_alter_on()
     rig.tick()
     np.testing.assert_allclose(rig.sim.base_T_flange_mm, T)  # stopped
     assert "correction_ignored" in rig.codes()
-    rig.step("console/command", pb.Command(component="sim_robot", verb="alter_on"))
+    rig.step("console/command", pb.Command(component="sim_robot", verb="alter_on", args_json='{"operator": "test"}'))
     rig.tick()
     assert rig.sim.fault is None and rig.statuses[-1].bits & StatusBits.ALTER_ACTIVE
     rig.correct((-1.0, 0, 0))
