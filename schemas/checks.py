@@ -3,62 +3,83 @@
 Messages carry SI units (metres, radians, seconds, m/s...) and pixels; no physical quantity
 of this system comes near 1e9 in them, so a float beyond that (or NaN, or inf) in any field of
 an input is a forged or corrupted message, never data.
+
+The check runs on every input of every core, so it is compiled once per message type into
+plain attribute reads and comparisons (``-limit <= v <= limit`` is False for NaN and inf).
 """
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
-from google.protobuf.descriptor import FieldDescriptor
+from google.protobuf.descriptor import Descriptor, FieldDescriptor
 from google.protobuf.message import Message
 
 # Largest magnitude of any float in a message (SI units, pixels).
 ABSURD = 1e9
 
 _FLOATS = (FieldDescriptor.TYPE_DOUBLE, FieldDescriptor.TYPE_FLOAT)
+_checkers: dict[str, object] = {}  # full message name -> check(msg) -> bool, or None (no floats)
 
 
-def _repeated(fd: FieldDescriptor) -> bool:
-    return fd.is_repeated
+def _has_floats(desc: Descriptor, seen: frozenset = frozenset()) -> bool:
+    if desc.full_name in seen:
+        return False
+    for fd in desc.fields:
+        if fd.type in _FLOATS:
+            return True
+        if (fd.type == FieldDescriptor.TYPE_MESSAGE and not fd.message_type.GetOptions().map_entry
+                and _has_floats(fd.message_type, seen | {desc.full_name})):
+            return True
+    return False
 
 
-def _sane(msg: Message, limit: float) -> bool:
-    """Fast pass: whether every float of ``msg`` is finite and within ``limit``."""
-    isfinite = math.isfinite
-    for fd, value in msg.ListFields():
-        t = fd.type
-        if t in _FLOATS:
-            if _repeated(fd):
-                if len(value) > 8:
-                    a = np.fromiter(value, float, len(value))
-                    if not (np.isfinite(a).all() and np.abs(a).max() <= limit):
-                        return False
-                    continue
-                values = value
+def _checker(desc: Descriptor):
+    """``check(msg, limit) -> bool`` for messages of ``desc`` (None: no floats inside)."""
+    name = desc.full_name
+    if name in _checkers:
+        return _checkers[name]
+    if not _has_floats(desc):
+        _checkers[name] = None
+        return None
+    _checkers[name] = None  # a recursive type checks its own nesting no deeper
+    lines, env = ["def check(m, L):"], {}
+    for i, fd in enumerate(desc.fields):
+        if fd.type in _FLOATS:
+            if fd.is_repeated:
+                lines += [f"    for v in m.{fd.name}:", "        if not -L <= v <= L: return False"]
             else:
-                values = (value,)
-            for v in values:
-                if not (isfinite(v) and -limit <= v <= limit):
-                    return False
-        elif t == FieldDescriptor.TYPE_MESSAGE and not fd.message_type.GetOptions().map_entry:
-            for m in (value if _repeated(fd) else (value,)):
-                if not _sane(m, limit):
-                    return False
-    return True
+                lines += [f"    v = m.{fd.name}", "    if not -L <= v <= L: return False"]
+        elif fd.type == FieldDescriptor.TYPE_MESSAGE and not fd.message_type.GetOptions().map_entry:
+            sub = _checker(fd.message_type)
+            if sub is None:
+                continue
+            env[f"c{i}"] = sub
+            if fd.is_repeated:
+                lines += [f"    for s in m.{fd.name}:", f"        if not c{i}(s, L): return False"]
+            else:
+                lines += [f"    if m.HasField({fd.name!r}) and not c{i}(m.{fd.name}, L): return False"]
+    lines.append("    return True")
+    exec("\n".join(lines), env)  # noqa: S102 - source built above from the message's own descriptor
+    _checkers[name] = env["check"]
+    return env["check"]
 
 
 def absurd_field(msg: Message, limit: float = ABSURD) -> str | None:
     """The first float field of ``msg`` (nested messages and repeated fields included) that
     is not finite or beyond ``limit`` in magnitude, as ``"path = value"``; None if all are
-    sane.  Only fields that are set are visited."""
-    return None if _sane(msg, limit) else _find(msg, limit, "")
+    sane."""
+    check = _checker(msg.DESCRIPTOR)
+    if check is None or check(msg, limit):
+        return None
+    return _find(msg, limit, "")
 
 
 def _find(msg: Message, limit: float, path: str) -> str | None:
+    """The slow path, only for a message that failed: name the field."""
     for fd, value in msg.ListFields():
         name = f"{path}{fd.name}"
-        rep = _repeated(fd)
+        rep = fd.is_repeated
         if fd.type in _FLOATS:
             for i, v in enumerate(value if rep else (value,)):
                 if not (math.isfinite(v) and -limit <= v <= limit):
