@@ -33,7 +33,6 @@ header.frame_id says whether its step is in ``world`` (default) or ``tool``.
 
 from __future__ import annotations
 
-import json
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -67,21 +66,12 @@ from humanpt.alter_gateway.safety import (
     safe_norm,
 )
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.runtime.core import Core, Output, Port
+from humanpt.runtime.core import Core, Output, Port, command_operator
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 
 _CYCLE_MOD = 1 << 32
 
-
-def _operator(args_json: str) -> str:
-    """The operator named in a console command's arguments ({"operator": "user@host"}), or ""."""
-    try:
-        args = json.loads(args_json or "{}")
-    except (ValueError, RecursionError):
-        return ""
-    who = args.get("operator") if isinstance(args, dict) else None
-    return who.strip()[:100] if isinstance(who, str) else ""
 # Commands further ahead than this (cycles) are refused: the controller's cycle count is off.
 MAX_LEAD_CYCLES = 64
 # Command modes that mean "do not move".
@@ -436,7 +426,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         if msg.component != self.name:
             return
         if msg.verb == "reset_fault":
-            who = _operator(msg.args_json)
+            who = command_operator(msg)
             if not who:
                 self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_console_command",
                          "reset_fault refused: it needs the operator's name (humanpt console reset-fault)",

@@ -16,6 +16,7 @@ reproduce its recorded outputs exactly; every shell relies on that.
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections import defaultdict
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -30,6 +31,17 @@ from humanpt.schemas.checks import ABSURD, absurd_field
 from humanpt.schemas.convert import header
 
 Output = tuple[str, Message]
+
+
+def command_operator(msg: pb.Command) -> str:
+    """Who sent a console command: the ``operator`` its arguments name ("user@host", what
+    ``humanpt console`` sends), or "" when none does."""
+    try:
+        args = json.loads(msg.args_json or "{}")
+    except (ValueError, RecursionError):
+        return ""
+    who = args.get("operator") if isinstance(args, dict) else None
+    return who.strip()[:100] if isinstance(who, str) else ""
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,6 @@ an operator would restart it at the controller; ``alter_off`` stops it.
 
 from __future__ import annotations
 
-import json
 import math
 from collections import deque
 
@@ -45,7 +44,7 @@ from humanpt.alter import (
 )
 from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.runtime.core import Core, Output, Port
+from humanpt.runtime.core import Core, Output, Port, command_operator
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig
@@ -64,16 +63,6 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
         StatusBits.CORRECTION_MISSED,
     )
 )
-
-
-def _operator(args_json: str) -> str:
-    """The operator named in a console command's arguments ({"operator": "user@host"}), or ""."""
-    try:
-        args = json.loads(args_json or "{}")
-    except (ValueError, RecursionError):
-        return ""
-    who = args.get("operator") if isinstance(args, dict) else None
-    return who.strip()[:100] if isinstance(who, str) else ""
 
 
 class SimRobotCore(SerialLinkCoreMixin, Core):
@@ -212,7 +201,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def _on_console(self, t_ns: int, msg: pb.Command, outs: list[Output]) -> None:
         if msg.component != self.name:
             return
-        who = _operator(msg.args_json)
+        who = command_operator(msg)
         if msg.verb in ("alter_on", "alter_off") and not who:
             self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_console_command",
                      f"{msg.verb} refused: it needs the operator's name (humanpt console alter on|off)",
