@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import heapq
 import json
 import logging
 import signal
@@ -397,7 +396,7 @@ def runs_merge(args) -> int:
     from mcap.writer import Writer
     from mcap_protobuf.schema import register_schema
 
-    from humanpt.runtime.recording import RecordingError, iter_entries, read_metadata
+    from humanpt.runtime.recording import OUT, RecordingError, merge_entries, read_metadata
 
     run_dir = Path(args.run_dir)
     files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []
@@ -406,22 +405,30 @@ def runs_merge(args) -> int:
     out = Path(args.out)
     if out.resolve().parent == run_dir.resolve() and out.suffix == ".mcap":
         raise RecordingError(f"{out}: write the merged file outside the run directory")
-    streams = []
-    notes = []
-    for i, f in enumerate(files):
-        meta, _ = read_metadata(f)
-        cell = meta.get("cell", "cell0")
-        streams.append((e.t_ns, i, e.index, cell, e) for e in iter_entries(f, notes) if e.direction == "out")
+    notes: list[str] = []
+    where: dict[Path, tuple[str, str]] = {}  # file -> (cell, component)
+    for f in files:
+        try:
+            meta, _ = read_metadata(f)
+        except RecordingError:
+            meta = {}  # merge_entries says why it leaves it out
+        where[f] = (meta.get("cell", "cell0"), meta.get("component", f.stem.split(".")[0]))
     n = 0
     with open(out, "wb") as fh:
         w = Writer(fh)
         w.start(profile="humanpt", library="humanpt runs merge")
         schema_ids: dict[str, int] = {}
         channels: dict[str, int] = {}
-        for t_ns, _, _, cell, e in heapq.merge(*streams):
-            key = f"{topics.KEY_PREFIX}/{cell}/{e.topic}"
+        for t_ns, f, e in merge_entries(files, notes, keep=lambda e: e.direction == OUT):
+            cell, component = where[f]
+            # Bus topics on their key; a component's local outputs (serial bytes...) apart.
+            key = (f"{topics.KEY_PREFIX}/{cell}/{e.topic}" if "/" in e.topic
+                   else f"{topics.KEY_PREFIX}/{cell}/{component}/local/{e.topic}")
             if key not in channels:
-                cls = topics.message_type(e.topic)
+                try:
+                    cls = topics.message_type(e.topic)
+                except topics.UnknownTopicError:
+                    continue  # a topic this version does not know: nothing to decode it with
                 name = cls.DESCRIPTOR.full_name
                 if name not in schema_ids:
                     schema_ids[name] = register_schema(w, cls)

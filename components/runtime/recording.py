@@ -18,20 +18,21 @@ queued for the writer thread: at most about one more chunk's worth, see :class:`
 
 from __future__ import annotations
 
+import heapq
 import json
 import queue
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from google.protobuf.message import DecodeError, Message
 from mcap.exceptions import McapError
-from mcap.records import Channel, Metadata, Schema
+from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
 
@@ -306,10 +307,28 @@ class Recording:
         return json.loads(self.metadata.get("config", "{}"))
 
 
-def iter_records(path: Path) -> Iterator[Any]:
-    """MCAP records of ``path`` in file order; stops (raising McapError/EOFError) at damage."""
+def iter_records(path: Path, skipped: list[str] | None = None) -> Iterator[Any]:
+    """MCAP records of ``path`` in file order, chunks opened; stops (raising McapError,
+    EOFError...) where the file itself is cut or its record framing is broken.
+
+    A chunk whose content is damaged (CRC, compression) is skipped, its description appended
+    to ``skipped``, and reading goes on with the next record: one bad chunk does not hide
+    the rest of the file.  Without ``skipped`` it raises at the bad chunk instead."""
     with open(path, "rb") as f:
-        yield from StreamReader(f, skip_magic=False, emit_chunks=False, validate_crcs=True).records
+        for record in StreamReader(f, skip_magic=False, emit_chunks=True, validate_crcs=True).records:
+            if not isinstance(record, Chunk):
+                yield record
+                continue
+            try:
+                inner = breakup_chunk(record, validate_crc=True)
+            except _DAMAGE as e:
+                if skipped is None:
+                    raise
+                skipped.append(f"{path}: skipped a damaged chunk of messages logged "
+                               f"{record.message_start_time}..{record.message_end_time} ns "
+                               f"({type(e).__name__}: {e})")
+                continue
+            yield from inner
 
 
 def _check_file(p: Path) -> None:
@@ -341,8 +360,9 @@ def iter_entries(
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str, int]] = {}
     n = 0
+    skipped: list[str] = []
     try:
-        for r in iter_records(p):
+        for r in iter_records(p, skipped):
             if isinstance(r, Schema):
                 schemas[r.id] = r.name
             elif isinstance(r, Channel):
@@ -350,6 +370,8 @@ def iter_entries(
             elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
                 metadata.update(r.metadata)
             elif isinstance(r, McapMessage):
+                if r.channel_id not in channels:  # its channel was in a skipped chunk
+                    continue
                 topic, direction, sid = channels[r.channel_id]
                 yield Entry(n, direction, r.log_time, topic, r.data, schemas.get(sid, "raw"))
                 n += 1
@@ -358,6 +380,29 @@ def iter_entries(
             notes.append(
                 f"{p}: truncated or damaged after {n} messages ({type(e).__name__}{': ' + str(e) if str(e) else ''})"
             )
+    finally:
+        if notes is not None:
+            notes.extend(skipped)
+
+
+def merge_entries(files: list[Path], notes: list[str], keep: Callable[[Entry], bool] = lambda e: True,
+                  ) -> Iterator[tuple[int, Path, Entry]]:
+    """(log time ns, file, entry) of several recordings, merged by log time (ties: the
+    files' order, then each file's order), for the entries ``keep`` accepts.  A file that
+    cannot be read at all is left out with a note; a damaged one is read to the damage and
+    past its bad chunks (notes say what was skipped): one bad file does not refuse a run."""
+
+    def stream(i: int, f: Path) -> Iterator[tuple[int, int, int, Path, Entry]]:
+        try:
+            for e in iter_entries(f, notes):
+                if keep(e):
+                    yield e.t_ns, i, e.index, f, e
+        except RecordingError as err:
+            notes.append(f"{err} - left out")
+
+    for t_ns, _, _, f, e in heapq.merge(*(stream(i, f) for i, f in enumerate(files)),
+                                        key=lambda item: item[:3]):
+        yield t_ns, f, e
 
 
 def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
@@ -366,7 +411,7 @@ def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
     _check_file(p)
     meta: dict[str, str] = {}
     try:
-        for r in iter_records(p):
+        for r in iter_records(p, []):
             if isinstance(r, Metadata) and r.name == RUN_METADATA:
                 meta = dict(r.metadata)
                 break

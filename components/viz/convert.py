@@ -9,7 +9,6 @@ hand-eye, PSVS, target) comes from the run's recorded controller and perception 
 
 from __future__ import annotations
 
-import heapq
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -19,7 +18,7 @@ import rerun as rr
 from mcap.reader import make_reader
 
 from humanpt.runtime.config import ConfigError, build, to_table
-from humanpt.runtime.recording import OUT, RecordingError, iter_entries, read_metadata
+from humanpt.runtime.recording import OUT, RecordingError, merge_entries, read_metadata
 from humanpt.schemas import topics
 from humanpt.viz.config import VizConfig
 from humanpt.viz.core import SHOWN_TOPICS, VizCore
@@ -97,16 +96,9 @@ def _expected_outputs(path: Path) -> int | None:
 
 
 def _merged_outputs(files: list[Path], notes: list[str]) -> Iterator[tuple[int, str, bytes]]:
-    streams = [
-        (
-            (e.t_ns, i, e.index, e.topic, e.data)
-            for e in iter_entries(f, notes)
-            if e.direction == OUT and e.topic in SHOWN_TOPICS
-        )
-        for i, f in enumerate(files)
-    ]
-    for t_ns, _, _, topic, data in heapq.merge(*streams):
-        yield t_ns, topic, data
+    keep = lambda e: e.direction == OUT and e.topic in SHOWN_TOPICS  # noqa: E731
+    for t_ns, _, e in merge_entries(files, notes, keep):
+        yield t_ns, e.topic, e.data
 
 
 def convert_run(
