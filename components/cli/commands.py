@@ -392,6 +392,29 @@ def replay(args) -> int:
     return EXIT_MATCH
 
 
+def runs_info(args) -> int:
+    from humanpt.runtime.runinfo import run_info
+
+    infos = run_info(args.run_dir)
+    bad = False
+    for f in infos:
+        print(f"{f.path.name}: component {f.component}, {f.duration_s:.1f} s, {f.size_bytes / 1e6:.2f} MB")
+        rows = sorted(f.topics.items(), key=lambda kv: (kv[0][0] != "in", kv[0][1]))
+        for (direction, topic), t in rows:
+            missed = ""
+            if t.missing:
+                missed = f"  MISSED {t.missing} in {t.gaps} gap(s), largest {t.largest_gap}"
+            if t.restarts:
+                missed += f"  publisher restarted {t.restarts}x"
+            print(f"  {direction:3s} {topic:32s} {t.count:8d} msgs {t.rate_hz:8.1f} Hz{missed}")
+        for note in f.notes:
+            print(f"  note: {note}")
+        bad |= bool(f.missing_inputs or f.notes)
+    total = sum(f.missing_inputs for f in infos)
+    print(f"humanpt runs info: {len(infos)} recordings; inputs missed: {total}")
+    return 1 if bad else 0
+
+
 def runs_merge(args) -> int:
     from mcap.writer import Writer
     from mcap_protobuf.schema import register_schema

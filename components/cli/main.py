@@ -164,13 +164,19 @@ def build_parser() -> argparse.ArgumentParser:
     view_cli.add_parser(sub)
     console_cli.add_parser(sub, _add_common)
 
-    p = sub.add_parser("runs", help="work with recorded runs (list, merge, rerecord)")
+    p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
     q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
                         description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
                         "(topics as full Zenoh keys, time order), for Foxglove or rerun.")
     q.add_argument("run_dir")
     q.add_argument("out")
+    q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages",
+                        description="Per component recording of RUN_DIR: duration, size, messages per topic in "
+                        "and out with their rates, and the messages it never received (gaps in each input "
+                        "topic's sequence numbers: a partition, a full queue), plus damage and restarts. Exit 1 "
+                        "when any input was missed or a file is damaged.")
+    q.add_argument("run_dir")
     q = rsub.add_parser("list", help="list runs and their recordings")
     q.add_argument("dir", nargs="?", default="runs")
     q = rsub.add_parser("rerecord", help="re-record the reference runs (recordings/) live; show what changed",
@@ -309,6 +315,8 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     if args.verb == "runs":
         if args.runs_verb == "merge":
             return commands.runs_merge(args)
+        if args.runs_verb == "info":
+            return commands.runs_info(args)
         if args.runs_verb == "list":
             return commands.runs_list(args)
         if args.runs_verb == "rerecord":
