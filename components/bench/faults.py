@@ -289,15 +289,17 @@ def _console(ctx: Ctx, component: str, verb: str, args: dict, codes: tuple[str, 
 def attack_console(ctx: Ctx, row: FaultRow) -> None:
     """Bad controller commands: playback speed NaN, calibrate samples "x", save /etc/passwd."""
     passwd = Path("/etc/passwd")
-    before = passwd.stat().st_mtime_ns if passwd.exists() else None
+    before = passwd.read_bytes() if passwd.exists() else None
     cases = [("playback", {"speed_mm_s": math.nan}), ("calibrate", {"samples": "x"}),
-             ("save", {"file": "/etc/passwd", "overwrite": True})]
+             ("save", {"file": str(passwd), "overwrite": False})]
     times = []
     for verb, args in cases:
         t0 = time.monotonic()
         hit = _console(ctx, "controller", verb, args, ("bad_command", "save_failed"))
         times.append(None if hit is None else hit - t0)
-    after = passwd.stat().st_mtime_ns if passwd.exists() else None
+    after = passwd.read_bytes() if passwd.exists() else None
+    if before is not None and after != before:  # a controller that regressed: put the file back
+        passwd.write_bytes(before)
     refused = [v for (v, _), t in zip(cases, times, strict=True) if t is not None]
     row.expected = len(refused) == len(cases) and before == after
     row.reaction_ms = 1e3 * max(times) if all(t is not None for t in times) else None
