@@ -11,7 +11,8 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
 - robot held: the largest flange step per ALTER cycle in ``sim_robot/truth`` from the
   injection to the recovery, against the gateway's limit ``max_speed_mm_s`` x cycle (+ 5 %);
 - recovered: (for the attacks that must not break the loop, the loop stayed up throughout,
-  and) how long after the injection ended the loop was back (robot states every
+  and) how long after the injection ended the loop was back; and how long robot states
+  stopped in between (gaps over two cycles, less one cycle each) (robot states every
   cycle without a fault, ``tob_state`` finite and FULL, the servo error small) for 1 s;
 - data lost: messages missing (sequence gaps) in ``alter_gateway/robot_state`` and
   ``pose_filter/tob_state`` over the same window.
@@ -60,7 +61,8 @@ class FaultRow:
     max_step_mm: float | None = None     # largest flange step per cycle in the window, mm
     limit_mm: float | None = None        # the gateway's per-cycle limit, mm
     recovered: bool | None = None
-    recovery_ms: float | None = None
+    recovery_ms: float | None = None     # injection end -> the loop steadily back
+    down_ms: float = 0.0                 # time without robot states (gaps over 2 cycles) in the window
     lost: dict[str, int] = field(default_factory=dict)  # short topic -> messages missing
     expected: bool = False               # the system answered the attack as it should (see each attack)
     note: str = ""
@@ -455,6 +457,9 @@ def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
     if attack.keeps_loop and (not worst <= MAX_SERVO_ERROR_MM or not_full):
         row.recovered = False
         row.note += f"; the loop broke during it ({not_full} tob_states not FULL and finite)"
+    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("alter_gateway/robot_state", t0, t1)]
+    row.down_ms = float(sum(1e-6 * g - 1e3 * ctx.cycle_s for g in np.diff(stamps) if g > 2e9 * ctx.cycle_s)) \
+        if len(stamps) > 1 else 0.0
     row.lost = {s: seq_gaps(ctx.mon, s, t0, t1) for s in ("alter_gateway/robot_state", "pose_filter/tob_state")}
     return row
 
@@ -577,7 +582,8 @@ def row_cells(r: FaultRow) -> tuple[str, ...]:
     held = ("not observed" if r.held is None
             else f"{'yes' if r.held else 'NO'} ({r.max_step_mm:.2f} / {r.limit_mm:.2f} mm)")
     rec = ("not observed" if r.recovered is None else
-           f"yes ({r.recovery_ms:.0f} ms)" if r.recovered else "NO")
+           f"yes ({r.recovery_ms:.0f} ms" + (f"; down {r.down_ms:.0f} ms)" if r.down_ms else ")")
+           if r.recovered else "NO" + (f" (down {r.down_ms:.0f} ms)" if r.down_ms else ""))
     lost = ", ".join(f"{k.split('/')[-1]} {v}" for k, v in r.lost.items())
     note = r.note if r.expected else f"UNEXPECTED: {r.note}"
     return (r.fault, react, held, rec, lost, note)

@@ -73,7 +73,7 @@ def test_quick_attacks_are_seen_held_and_recovered(tmp_path):
         assert held, (fault, row)
         assert float(held[2]) == pytest.approx(100.0 * 0.028)
         assert float(held[1]) <= 1.05 * float(held[2])
-        assert re.fullmatch(r"yes \(\d+ ms\)", row["recovered"]), (fault, row)
+        assert re.fullmatch(r"yes \(\d+ ms(; down \d+ ms)?\)", row["recovered"]), (fault, row)
         assert re.fullmatch(r"robot_state \d+, tob_state \d+", row["data lost"]), (fault, row)
         assert not row["note"].startswith("UNEXPECTED"), (fault, row)
     assert "5/5 keys refused" in rows[QUICK_FAULTS[0]]["note"]
