@@ -1,4 +1,4 @@
-"""``humanpt bench [runtime|alter|render|perception]``: print the tables of what
+"""``humanpt bench [runtime|alter|render|perception|faults]``: print the tables of what
 ``humanpt.bench`` measures.  Nothing here is asserted."""
 
 from __future__ import annotations
@@ -117,3 +117,26 @@ def bench_all(args) -> int:
     for f in figures:
         print(f"{f.name:{w}s}  {f.value:>20s}  {f.note}")
     return 0
+
+
+def bench_faults(args) -> int:
+    """The attacks of issue 14 against a live twin (:func:`humanpt.bench.faults.run_faults`);
+    exit status 1 if one was not seen, not held or not recovered, 2 if the twin failed."""
+    from humanpt.bench.faults import QUICK, format_table, run_faults
+
+    only = tuple(a.strip() for a in args.only.split(",") if a.strip()) if args.only else (
+        QUICK if args.quick else None)
+    print("humanpt bench faults: attacks on a live twin (router + 7 processes; reaction = injection to the "
+          "first event or reply; held = largest flange step per cycle / the gateway's limit)",
+          file=sys.stderr, flush=True)
+    rows, failure = run_faults(only, args.faults_scenario, args.run_dir,
+                               on_row=lambda r: print(f"  {r.key}: {'ok' if r.ok else 'FAILED'} {r.note}",
+                                                      file=sys.stderr, flush=True),
+                               say=lambda t: print(f"  {t}", file=sys.stderr, flush=True))
+    if rows:
+        print("")
+        print(format_table(rows))
+    if failure:
+        print(f"humanpt bench faults: {failure}", file=sys.stderr)
+        return 2
+    return 0 if all(r.ok for r in rows) else 1

@@ -26,6 +26,7 @@ examples:
   humanpt bench alter                             ALTER link cycles on time, shortest cycle
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
+  humanpt bench faults                            the attacks of issue 14 against a live twin
 """
 
 
@@ -262,6 +263,21 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--accuracy-images", type=int, default=200, help="images per accuracy set (default 200)")
     q.add_argument("--seed", type=int, default=0, help="seed of the accuracy sets (default 0)")
     q.add_argument("--no-accuracy", action="store_true", help="timing only")
+    q = bsub.add_parser("faults", help="the attack set of issue 14 against a live twin: reaction, held, recovered",
+                        description="Start the whole system live (scenario --scenario, default static), wait for "
+                        "the servo loop, inject each attack (param loosening, forged robot_state, NaN/1e308 "
+                        "measurement, absurd command, forged STRT on the serial line, bus flood, bad console "
+                        "commands, reset_fault without operator) with a recovery check after each, stop the "
+                        "twin and print one row per attack: reaction time, robot held (largest flange step "
+                        "per cycle against the gateway's limit), recovered, data lost (sequence gaps). Exit "
+                        "status 1 if any attack was not seen, not held or not recovered.")
+    q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
+                   "console, reset; default all)")
+    q.add_argument("--quick", action="store_true", help="all but the bus flood (which takes both cores of a "
+                   "small machine)")
+    q.add_argument("--scenario", dest="faults_scenario", default="static",
+                   help="scenario of the live twin (default static)")
+    q.add_argument("--run-dir", help="keep the twin's recordings here (default: a temporary directory, removed)")
     return ap
 
 
@@ -341,6 +357,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "perception":
             from humanpt.cli.bench import bench_perception
             return bench_perception(args)
+        if args.bench_verb == "faults":
+            from humanpt.cli.bench import bench_faults
+            return bench_faults(args)
         if args.bench_verb is None:
             from humanpt.cli.bench import bench_all
 

@@ -1,0 +1,596 @@
+"""``humanpt bench faults``: the attack set of issue 14 against a live twin, one row each.
+
+:func:`run_faults` starts the whole system live (:func:`humanpt.twin.live.run_live`: router,
+sim_robot behind a pty, alter_gateway, sim_camera, perception, pose_filter, controller,
+operator, as processes), waits until the servo loop runs, then injects each attack of
+:data:`ATTACKS` in turn from a Zenoh client session (or, for the forged STRT, on the serial
+line itself), each followed by a recovery check, and stops the twin (always: on an error and
+on Ctrl-C too). For each attack it measures, from its own subscriber:
+
+- reaction: injection -> the first event or reply showing the system saw it (ms);
+- robot held: the largest flange step per ALTER cycle in ``sim_robot/truth`` from the
+  injection to the recovery, against the gateway's limit ``max_speed_mm_s`` x cycle (+ 5 %);
+- recovered: (for the attacks that must not break the loop, the loop stayed up throughout,
+  and) how long after the injection ended the loop was back; and how long robot states
+  stopped in between (gaps over two cycles, less one cycle each) (robot states every
+  cycle without a fault, ``tob_state`` finite and FULL, the servo error small) for 1 s;
+- data lost: messages missing (sequence gaps) in ``alter_gateway/robot_state`` and
+  ``pose_filter/tob_state`` over the same window.
+
+Every wait has a timeout; what does not come is reported as "not observed".
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas import topics
+from humanpt.schemas.convert import from_pose, header
+
+__all__ = ["ATTACKS", "QUICK", "FaultRow", "format_table", "loop_ok", "run_faults"]
+
+STEP_TOLERANCE = 1.05        # a flange step may exceed the gateway's limit by 5 % (rounding, quantising)
+RECOVERY_TIMEOUT_S = 10.0    # the loop must be back within this after an attack
+REACTION_TIMEOUT_S = 5.0     # an event or reply must come within this of the injection
+STEADY_S = 1.0               # the loop counts as back after this long without a fault
+MAX_SERVO_ERROR_MM = 5.0     # servo error (controller/status) that counts as "small"
+FAULT_GIVE_UP_S = 2.0        # a robot faulted this long after an attack needs the operator's reset
+OPERATOR = "humanpt-bench-faults"  # the operator name the bench's own resets are logged with
+
+
+@dataclass
+class FaultRow:
+    """One attack's result (times in ms; None: not observed within the timeout)."""
+
+    key: str
+    fault: str
+    reaction_ms: float | None = None
+    held: bool | None = None
+    max_step_mm: float | None = None     # largest flange step per cycle in the window, mm
+    limit_mm: float | None = None        # the gateway's per-cycle limit, mm
+    recovered: bool | None = None
+    recovery_ms: float | None = None     # injection end -> the loop steadily back
+    down_ms: float = 0.0                 # time without robot states (gaps over 2 cycles) in the window
+    lost: dict[str, int] = field(default_factory=dict)  # short topic -> messages missing
+    expected: bool = False               # the system answered the attack as it should (see each attack)
+    note: str = ""
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.expected and self.held and self.recovered)
+
+
+class Monitor:
+    """What the bench's session sees: arrival time (monotonic s) and message, per topic."""
+
+    SHORTS = ("alter_gateway/robot_state", "pose_filter/tob_state", "sim_robot/truth", "controller/status")
+
+    def __init__(self, session, cell: str):
+        self.lock = threading.Lock()
+        self.msgs: dict[str, list[tuple[float, object]]] = {s: [] for s in self.SHORTS}
+        self.events: list[tuple[float, pb.Event]] = []
+        self.changed = threading.Condition(self.lock)
+        self._subs = [session.declare_subscriber(topics.TOPICS[s].key(cell), self._on(s)) for s in self.SHORTS]
+        self._subs.append(session.declare_subscriber(f"humanpt/{cell}/*/events", self._on_event))
+
+    def _on(self, short: str) -> Callable:
+        cls = topics.TOPICS[short].type
+
+        def on_sample(sample) -> None:
+            t = time.monotonic()
+            try:
+                msg = cls.FromString(sample.payload.to_bytes())
+            except Exception:  # noqa: BLE001 -- a forged or junk message: not the system's
+                return
+            # The bench's own forgeries (stamped far in the future) are not the system's output.
+            if msg.header.stamp_ns > time.time_ns() + 10**9:
+                return
+            with self.changed:
+                self.msgs[short].append((t, msg))
+                self.changed.notify_all()
+        return on_sample
+
+    def _on_event(self, sample) -> None:
+        t = time.monotonic()
+        ev = pb.Event.FromString(sample.payload.to_bytes())
+        with self.changed:
+            self.events.append((t, ev))
+            self.changed.notify_all()
+
+    def close(self) -> None:
+        for s in self._subs:
+            s.undeclare()
+
+    def since(self, short: str, t0: float, t1: float = math.inf) -> list[tuple[float, object]]:
+        with self.lock:
+            return [(t, m) for t, m in self.msgs[short] if t0 <= t <= t1]
+
+    def latest(self, short: str) -> tuple[float, object] | None:
+        with self.lock:
+            return self.msgs[short][-1] if self.msgs[short] else None
+
+    def wait_event(self, t0: float, codes: tuple[str, ...], source: str | None = None,
+                   timeout_s: float = REACTION_TIMEOUT_S) -> tuple[float, pb.Event] | None:
+        """The first event at or after ``t0`` with one of ``codes`` (from ``source``), or None."""
+        deadline = time.monotonic() + timeout_s
+        with self.changed:
+            while True:
+                for t, ev in self.events:
+                    if t >= t0 and ev.code in codes and (source is None or ev.source == source):
+                        return t, ev
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return None
+                self.changed.wait(left)
+
+    def events_since(self, t0: float) -> list[pb.Event]:
+        with self.lock:
+            return [ev for t, ev in self.events if t >= t0]
+
+
+@dataclass
+class Ctx:
+    """What an attack needs: the session, the monitor, the cell and the gateway's settings."""
+
+    session: object
+    mon: Monitor
+    cell: str
+    gateway_port: str
+    cycle_s: float
+    pubs: dict[str, object] = field(default_factory=dict)
+
+    def pub(self, short: str):
+        if short not in self.pubs:
+            self.pubs[short] = self.session.declare_publisher(topics.TOPICS[short].key(self.cell))
+        return self.pubs[short]
+
+    def put(self, short: str, msg) -> None:
+        self.pub(short).put(msg.SerializeToString())
+
+
+def _ms(t: float | None, t0: float) -> float | None:
+    return None if t is None else 1e3 * (t - t0)
+
+
+# -- the attacks: each injects, waits for the system's answer, and fills row.reaction_ms,
+# row.expected and row.note; it returns when its injection is over. ------------------------------
+def attack_param(ctx: Ctx, row: FaultRow) -> None:
+    """Loosen the gateway's safety limits over the bus: every key must be refused."""
+    from humanpt.runtime.bus import params_key
+
+    sets = {"max_speed_mm_s": 1000.0, "envelope_min_mm": [-1e6, -1e6, -1e6],
+            "envelope_max_mm": [1e6, 1e6, 1e6], "stale_cycles": 100, "fault_after_missed": 10000}
+    t0 = time.monotonic()
+    replies = list(ctx.session.get(params_key(ctx.cell, "alter_gateway"), payload=json.dumps({"set": sets}),
+                                   timeout=REACTION_TIMEOUT_S))
+    t1 = time.monotonic()
+    bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
+    if not bodies:
+        row.note = "no reply from alter_gateway"
+        return
+    results = bodies[0].get("results", [])
+    accepted = [r.get("key") or r.get("text") for r in results if r.get("ok")]
+    row.reaction_ms = 1e3 * (t1 - t0)
+    row.expected = not accepted and len(results) == len(sets)
+    row.note = (f"{len(results) - len(accepted)}/{len(sets)} keys refused" if not accepted
+                else f"ACCEPTED: {', '.join(map(str, accepted))}")
+
+
+def attack_forged_state(ctx: Ctx, row: FaultRow) -> None:
+    """A copy of the latest robot state stamped an hour ahead, on the gateway's key."""
+    last = ctx.mon.latest("alter_gateway/robot_state")
+    if last is None:
+        row.note = "no robot state to copy"
+        return
+    forged = pb.RobotState()
+    forged.CopyFrom(last[1])
+    forged.header.stamp_ns = time.time_ns() + 3600 * 10**9
+    t0 = time.monotonic()
+    ctx.put("alter_gateway/robot_state", forged)
+    hit = ctx.mon.wait_event(t0, ("robot_state_rejected",), "pose_filter")
+    row.expected = hit is not None
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = "pose_filter: robot_state_rejected" if hit else "no robot_state_rejected"
+
+
+def attack_nan(ctx: Ctx, row: FaultRow) -> None:
+    """A NaN and then a 1e308 pose on perception/tob (status FULL, three sources)."""
+    t0 = time.monotonic()
+    for bad in (math.nan, 1e308):
+        m = pb.TobMeasurement(header=header(time.time_ns(), 0, "camera"), visible=3, quality=1.0,
+                              status=pb.TOB_STATUS_FULL)
+        m.camera_T_tob.translation.x, m.camera_T_tob.translation.z = bad, 0.6
+        m.camera_T_tob.rotation.w = 1.0
+        ctx.put("perception/tob", m)
+    hit = ctx.mon.wait_event(t0, ("bad_input",), "pose_filter")
+    row.expected = hit is not None
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = "pose_filter: bad_input" if hit else "no bad_input from pose_filter"
+
+
+def attack_absurd(ctx: Ctx, row: FaultRow) -> None:
+    """A tool-frame step of 1.7e305 m for the next cycle on controller/command."""
+    last = ctx.mon.latest("alter_gateway/robot_state")
+    cycle = (last[1].cycle + 1) if last else 0
+    cmd = pb.FlangeCommand(header=header(time.time_ns(), 0, "tool"), cycle=cycle, mode=pb.CONTROL_MODE_TRACK)
+    cmd.d_translation_m.x = 1.7e305
+    t0 = time.monotonic()
+    ctx.put("controller/command", cmd)
+    hit = ctx.mon.wait_event(t0, ("bad_input",), "alter_gateway")
+    row.expected = hit is not None
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = "alter_gateway: bad_input" if hit else "no bad_input from alter_gateway"
+
+
+def attack_strt(ctx: Ctx, row: FaultRow) -> None:
+    """One DDCMP STRT frame written on the gateway's side of the serial line (toward sim_robot)."""
+    from humanpt.alter.ddcmp import encode_frame, strt
+
+    fd = os.open(ctx.gateway_port, os.O_WRONLY | os.O_NOCTTY)
+    try:
+        t0 = time.monotonic()
+        os.write(fd, encode_frame(strt()))
+    finally:
+        os.close(fd)
+    down = ctx.mon.wait_event(t0, ("link_down",))
+    up = ctx.mon.wait_event(down[0] if down else t0, ("link_up",))
+    row.expected = down is not None and up is not None
+    row.reaction_ms = _ms(up and up[0], t0)
+    row.note = ((f"link_down ({down[1].source}) {_ms(down[0], t0):.0f} ms, " if down else "no link_down, ")
+                + (f"link_up ({up[1].source})" if up else "no link_up"))
+
+
+def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
+    """Junk commands (cycle 2**31) on controller/command as fast as this process can put them."""
+    pub = ctx.pub("controller/command")
+    junk = pb.FlangeCommand(header=header(time.time_ns(), 0, "world"), cycle=2**31,
+                            mode=pb.CONTROL_MODE_TRACK).SerializeToString()
+    t0 = time.monotonic()
+    n = 0
+    while time.monotonic() - t0 < seconds:
+        for _ in range(200):
+            pub.put(junk)
+        n += 200
+    t1 = time.monotonic()
+    # Robot states must keep coming: the largest gap between their cycle stamps (producer
+    # clock, so the bench's own busy loop does not count) during the flood.
+    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("alter_gateway/robot_state", t0, t1 + 0.2)]
+    gap_ms = 1e-6 * max(np.diff(stamps), default=0) if len(stamps) > 1 else math.inf
+    evs = ctx.mon.events_since(t0)
+    faults = [ev.code for ev in evs if ev.code in ("fault", "link_down", "watchdog_fault")]
+    late = sum(ev.code in ("deadline_missed", "stale_command") for ev in evs)
+    faulted = any(m.status.fault for _, m in ctx.mon.since("alter_gateway/robot_state", t0))
+    hit = ctx.mon.wait_event(t0, ("bad_command",), "alter_gateway", timeout_s=0.5)
+    row.expected = len(stamps) > 1 and gap_ms < 10 * 1e3 * ctx.cycle_s and not faults and not faulted
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = (f"{n / (t1 - t0):.0f} puts/s; robot_state max gap {gap_ms:.0f} ms; {late} late-command events"
+                + (f"; {', '.join(faults)}" if faults else "") + ("; FAULT" if faulted else ""))
+
+
+def _console(ctx: Ctx, component: str, verb: str, args: dict, codes: tuple[str, ...]) -> float | None:
+    """Send one console command; the time (monotonic s) of the refusal, or None."""
+    t0 = time.monotonic()
+    ctx.put("console/command", pb.Command(header=header(time.time_ns()), component=component, verb=verb,
+                                          args_json=json.dumps(args)))
+    hit = ctx.mon.wait_event(t0, codes, component)
+    return hit and hit[0]
+
+
+def attack_console(ctx: Ctx, row: FaultRow) -> None:
+    """Bad controller commands: playback speed NaN, calibrate samples "x", save /etc/passwd."""
+    passwd = Path("/etc/passwd")
+    before = passwd.read_bytes() if passwd.exists() else None
+    cases = [("playback", {"speed_mm_s": math.nan}), ("calibrate", {"samples": "x"}),
+             ("save", {"file": str(passwd), "overwrite": False})]
+    times = []
+    for verb, args in cases:
+        t0 = time.monotonic()
+        hit = _console(ctx, "controller", verb, args, ("bad_command", "save_failed"))
+        times.append(None if hit is None else hit - t0)
+    after = passwd.read_bytes() if passwd.exists() else None
+    if before is not None and after != before:  # a controller that regressed: put the file back
+        passwd.write_bytes(before)
+    refused = [v for (v, _), t in zip(cases, times, strict=True) if t is not None]
+    row.expected = len(refused) == len(cases) and before == after
+    row.reaction_ms = 1e3 * max(times) if all(t is not None for t in times) else None
+    row.note = (f"{len(refused)}/{len(cases)} refused (slowest shown)"
+                + ("" if before == after else "; /etc/passwd CHANGED"))
+
+
+def attack_reset_fault(ctx: Ctx, row: FaultRow) -> None:
+    """reset_fault with no operator's name."""
+    t0 = time.monotonic()
+    hit = _console(ctx, "alter_gateway", "reset_fault", {}, ("bad_console_command", "fault_cleared", "no_fault"))
+    ev = [e for e in ctx.mon.events_since(t0) if e.source == "alter_gateway"
+          and e.code in ("bad_console_command", "fault_cleared", "no_fault")]
+    row.expected = bool(ev) and ev[0].code == "bad_console_command"
+    row.reaction_ms = _ms(hit, t0)
+    row.note = f"alter_gateway: {ev[0].code}" if ev else "no answer"
+
+
+@dataclass(frozen=True)
+class Attack:
+    """``keeps_loop``: the loop must stay up through the attack (tob_state FULL, servo error
+    small), not only come back after it."""
+
+    key: str
+    fault: str
+    run: Callable[[Ctx, FaultRow], None]
+    keeps_loop: bool = True
+
+
+ATTACKS: tuple[Attack, ...] = (
+    Attack("param", "param loosening (speed, envelope, watchdog)", attack_param),
+    Attack("forged", "forged robot_state, future stamp", attack_forged_state),
+    Attack("nan", "NaN / 1e308 measurement", attack_nan),
+    Attack("absurd", "absurd command (1.7e305 m, tool frame)", attack_absurd),
+    Attack("strt", "forged STRT on the serial line", attack_strt, keeps_loop=False),
+    Attack("flood", "bus flood (2 s junk commands)", attack_flood, keeps_loop=False),
+    Attack("console", "bad console commands", attack_console),
+    Attack("reset", "reset_fault without operator", attack_reset_fault),
+)
+# All but the flood: 2 s of puts at full rate take both cores of a small machine (the bench's
+# own process and the router), which is an attack on the machine as much as on the gateway.
+QUICK = tuple(a.key for a in ATTACKS if a.key != "flood")
+
+
+# -- the loop's health ----------------------------------------------------------------------
+def _finite_pose(p: pb.Pose) -> bool:
+    v = (p.translation.x, p.translation.y, p.translation.z, p.rotation.x, p.rotation.y, p.rotation.z,
+         p.rotation.w)
+    return all(math.isfinite(x) for x in v) and any(v)
+
+
+def loop_ok(mon: Monitor, cycle_s: float, now: float | None = None) -> tuple[bool, str]:
+    """Whether the servo loop runs now: a robot state in the last 4 cycles without a fault, a
+    finite FULL tob_state in the last 8, a controller status with a small servo error."""
+    now = time.monotonic() if now is None else now
+    rs, tob, st = (mon.latest(s) for s in ("alter_gateway/robot_state", "pose_filter/tob_state",
+                                          "controller/status"))
+    if rs is None or now - rs[0] > 4 * cycle_s:
+        return False, "no robot state"
+    if rs[1].status.fault or not rs[1].status.alter_active:
+        return False, FAULTED
+    if tob is None or now - tob[0] > 8 * cycle_s:
+        return False, "no tob_state"
+    if tob[1].status != pb.TOB_STATUS_FULL or not _finite_pose(tob[1].world_T_tob):
+        return False, "tob_state not FULL and finite"
+    if st is None or now - st[0] > 8 * cycle_s:
+        return False, "no controller status"
+    if not 1e3 * st[1].error_translation_m <= MAX_SERVO_ERROR_MM:
+        return False, f"servo error {1e3 * st[1].error_translation_m:.1f} mm"
+    return True, ""
+
+
+FAULTED = "robot faulted or ALTER off"
+
+
+def wait_loop(mon: Monitor, cycle_s: float, timeout_s: float, stop: threading.Event | None = None,
+              faulted_s: float = math.inf) -> tuple[float | None, str]:
+    """Wait until :func:`loop_ok` holds for :data:`STEADY_S`; (the time it began to hold, or
+    None after ``timeout_s``, or once the robot has been faulted for ``faulted_s`` (a fault
+    needs the operator); the last reason it did not)."""
+    deadline = time.monotonic() + timeout_s
+    good_since = faulted_since = None
+    why = ""
+    while time.monotonic() < deadline and not (stop and stop.is_set()):
+        ok, why = loop_ok(mon, cycle_s)
+        now = time.monotonic()
+        if ok:
+            good_since = good_since or now
+            if now - good_since >= STEADY_S:
+                return good_since, ""
+        else:
+            good_since = None
+        faulted_since = (faulted_since or now) if why == FAULTED else None
+        if faulted_since is not None and now - faulted_since >= faulted_s:
+            break
+        time.sleep(0.01)
+    return None, why
+
+
+def operator_reset(ctx: Ctx) -> bool:
+    """What the operator does after a fault: reset_fault on the gateway, then ALTER on."""
+    ok = _console(ctx, "alter_gateway", "reset_fault", {"operator": OPERATOR},
+                  ("fault_cleared", "no_fault", "bad_console_command")) is not None
+    return _console(ctx, "sim_robot", "alter_on", {"operator": OPERATOR}, ("alter_on", "bad_console_command")) \
+        is not None and ok
+
+
+def max_step_mm(mon: Monitor, t0: float, t1: float, cycle_s: float) -> float:
+    """The largest flange step per ALTER cycle in ``sim_robot/truth`` between t0 and t1 (mm);
+    a step over missing cycles is divided by the cycles it spans."""
+    truth = [m for _, m in mon.since("sim_robot/truth", t0 - cycle_s, t1)]
+    best = 0.0
+    for a, b in zip(truth, truth[1:], strict=False):
+        step = 1e3 * float(np.linalg.norm(from_pose(b.world_T_flange)[:3, 3] - from_pose(a.world_T_flange)[:3, 3]))
+        cycles = max(1, round((b.header.stamp_ns - a.header.stamp_ns) * 1e-9 / cycle_s))
+        best = max(best, step / cycles)
+    return best
+
+
+def seq_gaps(mon: Monitor, short: str, t0: float, t1: float) -> int:
+    """Messages missing on ``short`` between t0 and t1: the sum of its sequence gaps."""
+    seqs = [m.header.seq for _, m in mon.since(short, t0, t1)]
+    return int(sum(max(0, b - a - 1) for a, b in zip(seqs, seqs[1:], strict=False)))
+
+
+def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
+    row = FaultRow(attack.key, attack.fault, limit_mm=limit_mm)
+    t0 = time.monotonic()
+    try:
+        attack.run(ctx, row)
+    except Exception as e:  # noqa: BLE001 -- the bench reports a failed injection as a row
+        row.note = f"injection failed: {type(e).__name__}: {e}"
+    t_end = time.monotonic()
+    back, why = wait_loop(ctx.mon, ctx.cycle_s, RECOVERY_TIMEOUT_S, faulted_s=FAULT_GIVE_UP_S)
+    row.recovered = back is not None
+    row.recovery_ms = None if back is None else max(0.0, 1e3 * (back - t_end))
+    if back is None:
+        row.note += f"; not back by itself ({why})"
+        if why == FAULTED:
+            # Not a recovery, but the next attack needs a running loop: reset as the operator would.
+            t_reset = time.monotonic()
+            again, why = wait_loop(ctx.mon, ctx.cycle_s, RECOVERY_TIMEOUT_S) if operator_reset(ctx) else (None, "")
+            row.note += (f"; back {1e3 * (again - t_reset):.0f} ms after the operator's reset_fault + ALTER on"
+                         if again is not None else f"; not back after the operator's reset either ({why})")
+    t1 = time.monotonic()
+    row.max_step_mm = max_step_mm(ctx.mon, t0, t1, ctx.cycle_s)
+    row.held = row.max_step_mm <= limit_mm * STEP_TOLERANCE
+    errors = [1e3 * m.error_translation_m for _, m in ctx.mon.since("controller/status", t0, t1)]
+    worst = max(errors, default=math.nan)
+    not_full = sum(m.status != pb.TOB_STATUS_FULL or not _finite_pose(m.world_T_tob)
+                   for _, m in ctx.mon.since("pose_filter/tob_state", t0, t1))
+    row.note += f"; servo error max {worst:.2f} mm"
+    if attack.keeps_loop and (not worst <= MAX_SERVO_ERROR_MM or not_full):
+        row.recovered = False
+        row.note += f"; the loop broke during it ({not_full} tob_states not FULL and finite)"
+    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("alter_gateway/robot_state", t0, t1)]
+    row.down_ms = float(sum(1e-6 * g - 1e3 * ctx.cycle_s for g in np.diff(stamps) if g > 2e9 * ctx.cycle_s)) \
+        if len(stamps) > 1 else 0.0
+    row.lost = {s: seq_gaps(ctx.mon, s, t0, t1) for s in ("alter_gateway/robot_state", "pose_filter/tob_state")}
+    return row
+
+
+# -- the run --------------------------------------------------------------------------------
+def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
+               run_dir: str | Path | None = None, start_timeout_s: float = 90.0,
+               on_row: Callable[[FaultRow], None] | None = None,
+               say: Callable[[str], None] = lambda text: None) -> tuple[list[FaultRow], str]:
+    """Run the attacks ``only`` (keys of :data:`ATTACKS`; default all) against a live twin
+    of ``scenario``; (rows, failure text or ""). The twin is stopped before this returns,
+    whatever happens; ``run_dir`` keeps its recordings (default: a temporary directory,
+    removed)."""
+    from humanpt.runtime import config as cfgmod
+    from humanpt.runtime.bus import open_tool_session
+    from humanpt.twin.live import run_live
+    from humanpt.twin.run import SystemConfig
+
+    attacks = [a for a in ATTACKS if only is None or a.key in only]
+    unknown = set(only or ()) - {a.key for a in ATTACKS}
+    if unknown:
+        raise ValueError(f"unknown attack(s) {', '.join(sorted(unknown))}: choose from "
+                         f"{', '.join(a.key for a in ATTACKS)}")
+    tmp = run_dir is None
+    run_dir = Path(tempfile.mkdtemp(prefix="humanpt-faults-") if tmp else run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    stop, started = threading.Event(), threading.Event()
+    result: dict = {}
+
+    def live() -> None:
+        try:
+            result["live"] = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=3600.0,
+                                      stop=stop, on_started=lambda _c: started.set())
+        except BaseException as e:  # noqa: BLE001 -- reported by the caller
+            result["error"] = e
+        finally:
+            started.set()
+
+    thread = threading.Thread(target=live, name="humanpt-faults-twin")
+    rows: list[FaultRow] = []
+    failure = ""
+    try:
+        thread.start()
+        say(f"starting the live twin ({scenario}) in {run_dir}")
+        started.wait(start_timeout_s)
+        cfg_path = run_dir / "humanpt.toml"
+        if "error" in result or not cfg_path.exists():
+            raise RuntimeError(f"the live twin did not start: {result.get('error', 'no config written')}")
+        file_cfg = cfgmod.load(cfg_path)
+        gw = _gateway_config(cfg_path)
+        cycle_s = gw["cycle_period_ms"] * 1e-3
+        limit_mm = gw["max_speed_mm_s"] * cycle_s
+        with open_tool_session(file_cfg.runtime) as session:
+            mon = Monitor(session, file_cfg.runtime.cell)
+            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw["port"], cycle_s)
+            try:
+                back, why = wait_loop(mon, cycle_s, start_timeout_s, stop=_dead(thread))
+                if back is None:
+                    raise RuntimeError(f"the servo loop did not start within {start_timeout_s:g} s ({why}); "
+                                       f"see {run_dir / 'processes.log'}")
+                say(f"loop running; {len(attacks)} attacks")
+                for attack in attacks:
+                    if not thread.is_alive():
+                        raise RuntimeError(f"the live twin ended: {_live_failure(result)}")
+                    row = run_attack(ctx, attack, limit_mm)
+                    rows.append(row)
+                    if on_row is not None:
+                        on_row(row)
+            finally:
+                for p in ctx.pubs.values():
+                    p.undeclare()
+                mon.close()
+    except RuntimeError as e:
+        failure = str(e)
+    finally:
+        stop.set()
+        while thread.is_alive():
+            try:
+                thread.join()
+            except KeyboardInterrupt:  # a second Ctrl-C: the twin is already stopping
+                continue
+        if tmp:
+            shutil.rmtree(run_dir, ignore_errors=True)
+    live_fail = _live_failure(result)
+    if live_fail and not failure:
+        failure = f"the live twin reported: {live_fail}"
+    return rows, failure
+
+
+def _gateway_config(cfg_path: Path) -> dict:
+    import tomllib
+
+    return tomllib.loads(cfg_path.read_text())["alter_gateway"]
+
+
+def _dead(thread: threading.Thread) -> threading.Event:
+    """An event set when ``thread`` ends (so waits give up when the twin has stopped)."""
+    ev = threading.Event()
+
+    def watch() -> None:
+        thread.join()
+        ev.set()
+    threading.Thread(target=watch, daemon=True).start()
+    return ev
+
+
+def _live_failure(result: dict) -> str:
+    if "error" in result:
+        return f"{type(result['error']).__name__}: {result['error']}"
+    live = result.get("live")
+    return "; ".join(live.failed) if live is not None and live.failed else ""
+
+
+# -- the table ------------------------------------------------------------------------------
+HEADERS = ("fault", "reaction", "robot held", "recovered", "data lost", "note")
+
+
+def row_cells(r: FaultRow) -> tuple[str, ...]:
+    react = "not observed" if r.reaction_ms is None else f"{r.reaction_ms:.1f} ms"
+    held = ("not observed" if r.held is None
+            else f"{'yes' if r.held else 'NO'} ({r.max_step_mm:.2f} / {r.limit_mm:.2f} mm)")
+    rec = ("not observed" if r.recovered is None else
+           f"yes ({r.recovery_ms:.0f} ms" + (f"; down {r.down_ms:.0f} ms)" if r.down_ms else ")")
+           if r.recovered else "NO" + (f" (down {r.down_ms:.0f} ms)" if r.down_ms else ""))
+    lost = ", ".join(f"{k.split('/')[-1]} {v}" for k, v in r.lost.items())
+    note = r.note if r.expected else f"UNEXPECTED: {r.note}"
+    return (r.fault, react, held, rec, lost, note)
+
+
+def format_table(rows: list[FaultRow]) -> str:
+    """The rows as aligned plain text (one header line, one line per attack)."""
+    cells = [HEADERS] + [row_cells(r) for r in rows]
+    widths = [max(len(c[i]) for c in cells) for i in range(len(HEADERS))]
+    return "\n".join("  ".join(c[i].ljust(widths[i]) for i in range(len(HEADERS))).rstrip() for c in cells)
