@@ -113,8 +113,8 @@ def run_component(args) -> int:
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
     print(f"humanpt {name}: stopped; consumed {counters.consumed}, produced {counters.produced}, "
-          f"dropped {counters.dropped}, core errors {counters.core_errors}; recording "
-          f"{shell.recorder.path if shell.recorder else 'off'}", file=sys.stderr, flush=True)
+          f"dropped {counters.dropped}, core errors {counters.core_errors}; "
+          f"{shell.recorder.summary() if shell.recorder else 'recording off'}", file=sys.stderr, flush=True)
     return 0
 
 
