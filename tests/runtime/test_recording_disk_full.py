@@ -161,3 +161,50 @@ def test_a_full_disk_is_reported_at_once_the_component_lives_and_recording_resum
     # The first segment ends cleanly after its last whole chunk (cut back at the error).
     first = entries["ponger.mcap"]
     assert first and first[-1].t_ns <= losses["first_lost_ns"]
+
+
+@pytest.mark.parametrize("thread", [True, False], ids=["record_thread", "foreground"])
+def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, procs, tmp_path, thread):
+    """The attack's worst case: with ``record_thread = false`` the full disk killed the
+    gateway. Here it must keep its 28 ms cycle with the robot (robot states keep coming, the
+    link never drops) and say at once that it is not recording."""
+    port, _ = router
+    link = tmp_path / "pty"
+    cfg = write_config(tmp_path / "alter.toml", port, extra=(
+        f"record_thread = {str(thread).lower()}\nchunk_size = 4096\nflush_interval_s = 0.2\n"
+        f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n'))
+    run = small_disk / "run"
+    procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(tmp_path / "robot-run"))
+    gateway = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    with zenoh_client(port) as s:
+        states: queue.Queue = queue.Queue()
+        events: queue.Queue = queue.Queue()
+        subs = [s.declare_subscriber("humanpt/test/alter_gateway/robot_state",
+                                     lambda smp: states.put(time.monotonic())),
+                s.declare_subscriber("humanpt/test/alter_gateway/events", lambda smp: events.put(
+                    (time.monotonic(), pb.Event.FromString(smp.payload.to_bytes()))))]
+        states.get(timeout=30)  # the link is up
+        _fill(small_disk / "filler")
+        t_full = time.monotonic()
+        t_err, err = _wait_event(events, "record_error", timeout=5.0)
+        assert "No space left on device" in err.text
+        # Two seconds on the full disk: ~71 cycles of 28 ms; robot states keep coming.
+        while time.monotonic() < t_err + 2.0:
+            time.sleep(0.05)
+        during = [t for t in list(states.queue) if t > t_err]
+        assert len(during) > 50, f"{len(during)} robot states in 2 s on a full disk"
+        assert max(b - a for a, b in zip(during, during[1:], strict=False)) < 0.5
+        assert gateway.poll() is None, "the gateway died on the full disk"
+        codes = [ev.code for _, ev in list(events.queue)]
+        assert "link_down" not in codes, codes
+        (small_disk / "filler").unlink()
+        _wait_event(events, "record_resumed", timeout=5.0)
+        print(f"\ngateway ({'thread' if thread else 'foreground'}): record_error "
+              f"{(t_err - t_full) * 1e3:.0f} ms after the fill, {len(during)} robot states in the 2 s after")
+        for sub in subs:
+            sub.undeclare()
+    out = procs.stop(gateway)
+    assert gateway.returncode == 0 and "LOST" in out, out
+    losses = json.loads((run / "alter_gateway.losses.json").read_text())
+    assert losses["lost"] > 0 and losses["lost_by_topic"]["in"]["serial_rx"] > 0
+    assert losses["segments"] == ["alter_gateway.mcap", "alter_gateway.1.mcap"]
