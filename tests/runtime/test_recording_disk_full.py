@@ -24,7 +24,7 @@ import pytest
 
 from humanpt.runtime.recording import iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import write_config, zenoh_client
+from tests.conftest import run_cli, write_config, zenoh_client
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -161,6 +161,12 @@ def test_a_full_disk_is_reported_at_once_the_component_lives_and_recording_resum
     # The first segment ends cleanly after its last whole chunk (cut back at the error).
     first = entries["ponger.mcap"]
     assert first and first[-1].t_ns <= losses["first_lost_ns"]
+    # Replay: the first segment matches up to its end; the continuation is no verdict (its
+    # core's state at the start was not recorded), never a false MISMATCH.
+    r = run_cli("replay", str(run))
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "MATCH: every output is identical up to the truncation" in r.stdout
+    assert "NOTHING COMPARED: this segment continues ponger.mcap after" in r.stdout
 
 
 @pytest.mark.parametrize("thread", [True, False], ids=["record_thread", "foreground"])
