@@ -221,6 +221,10 @@ def up(args) -> int:
         if failed:
             print(f"humanpt up: stopped because a child died: {', '.join(failed)}", file=sys.stderr, flush=True)
     print(f"humanpt up: stopped; recordings in {run_dir}/", flush=True)
+    from humanpt.runtime.recording import losses_lines
+
+    for line in losses_lines(run_dir):  # a component's recording lost messages to a write error
+        print(f"humanpt up: {line}", flush=True)
     return 1 if failed else 0
 
 

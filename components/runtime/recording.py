@@ -14,6 +14,8 @@ Writing uses mcap's public :class:`mcap.writer.Writer` only (zstd chunks of
 progress is ended and put in the file every ``flush_interval_s`` of wall time, so a crash
 loses at most the chunk in progress (plus, with ``background=True``, the messages still
 queued for the writer thread: at most about one more chunk's worth, see :class:`Recorder`).
+A write error (a full disk) never raises to the component: the recording stops at its last
+whole chunk, counts what it loses, and resumes in the next segment when there is room.
 """
 
 from __future__ import annotations
@@ -512,6 +514,20 @@ class Recorder:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def losses_lines(run_dir: str | Path) -> list[str]:
+    """One line per component whose recording lost messages to a write error (its
+    ``<component>.losses.json``, see runtime/README.md); none when nothing was lost."""
+    out = []
+    for f in sorted(Path(run_dir).glob("*.losses.json")):
+        try:
+            d = json.loads(f.read_text())
+            out.append(f"RECORDING LOST {d['lost']} messages of {d['component']} in {len(d['outages'])} "
+                       f"write outage(s) ({d['outages'][0]['error'] if d['outages'] else '?'}): {f}")
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            out.append(f"RECORDING LOSSES: {f} cannot be read ({type(e).__name__}: {e})")
+    return out
 
 
 @dataclass

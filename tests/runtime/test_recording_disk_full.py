@@ -22,7 +22,7 @@ import time
 
 import pytest
 
-from humanpt.runtime.recording import iter_entries, read_metadata
+from humanpt.runtime.recording import iter_entries, losses_lines, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
 from tests.conftest import run_cli, write_config, zenoh_client
 
@@ -142,6 +142,9 @@ def test_a_full_disk_is_reported_at_once_the_component_lives_and_recording_resum
     outage = losses["outages"][0]
     assert outage["resumed_in"] == "ponger.1.mcap" and "No space left" in outage["error"]
     assert outage["lost"] == losses["lost"] > 0
+    # What humanpt up and the demo print after the run:
+    assert losses_lines(run) == [f"RECORDING LOST {losses['lost']} messages of ponger in 1 write outage(s) "
+                                 f"([Errno 28] No space left on device): {run / 'ponger.losses.json'}"]
     lost_in = losses["lost_by_topic"]["in"]["pinger/ping"]
     lost_out = losses["lost_by_topic"]["out"]["ponger/pong"]
     assert lost_in + lost_out == losses["lost"]
@@ -194,17 +197,20 @@ def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, pro
         t_full = time.monotonic()
         t_err, err = _wait_event(events, "record_error", timeout=5.0)
         assert "No space left on device" in err.text
-        # Two seconds on the full disk: ~71 cycles of 28 ms; robot states keep coming.
+        # Two seconds on the full disk: ~71 cycles of 28 ms; robot states keep coming (on two
+        # shared cores at least half of them, as in the bus flood test).
         while time.monotonic() < t_err + 2.0:
             time.sleep(0.05)
         during = [t for t in list(states.queue) if t > t_err]
-        assert len(during) > 50, f"{len(during)} robot states in 2 s on a full disk"
-        assert max(b - a for a, b in zip(during, during[1:], strict=False)) < 0.5
-        assert gateway.poll() is None, "the gateway died on the full disk"
         codes = [ev.code for _, ev in list(events.queue)]
+        assert gateway.poll() is None, "the gateway died on the full disk:\n" + procs.stop(gateway)
+        assert len(during) > 35, f"{len(during)} robot states in 2 s on a full disk; events {codes}"
+        gap = max(b - a for a, b in zip(during, during[1:], strict=False))
+        assert gap < 1.0, f"robot states stopped {gap:.2f} s on a full disk; events {codes}"
         assert "link_down" not in codes, codes
         (small_disk / "filler").unlink()
         _wait_event(events, "record_resumed", timeout=5.0)
+        assert gateway.poll() is None
         print(f"\ngateway ({'thread' if thread else 'foreground'}): record_error "
               f"{(t_err - t_full) * 1e3:.0f} ms after the fill, {len(during)} robot states in the 2 s after")
         for sub in subs:
@@ -212,5 +218,5 @@ def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, pro
     out = procs.stop(gateway)
     assert gateway.returncode == 0 and "LOST" in out, out
     losses = json.loads((run / "alter_gateway.losses.json").read_text())
-    assert losses["lost"] > 0 and losses["lost_by_topic"]["in"]["serial_rx"] > 0
-    assert losses["segments"] == ["alter_gateway.mcap", "alter_gateway.1.mcap"]
+    assert losses["lost"] > 0 and losses["lost_by_topic"]["in"]["serial_rx"] > 0, losses
+    assert losses["segments"] == ["alter_gateway.mcap", "alter_gateway.1.mcap"], losses
