@@ -112,8 +112,8 @@ def run_component(args) -> int:
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
     print(f"humanpt {name}: stopped; consumed {counters.consumed}, produced {counters.produced}, "
-          f"dropped {counters.dropped}, core errors {counters.core_errors}; recording "
-          f"{shell.recorder.path if shell.recorder else 'off'}", file=sys.stderr, flush=True)
+          f"dropped {counters.dropped}, core errors {counters.core_errors}; "
+          f"{shell.recorder.summary() if shell.recorder else 'recording off'}", file=sys.stderr, flush=True)
     return 0
 
 
@@ -220,6 +220,10 @@ def up(args) -> int:
         if failed:
             print(f"humanpt up: stopped because a child died: {', '.join(failed)}", file=sys.stderr, flush=True)
     print(f"humanpt up: stopped; recordings in {run_dir}/", flush=True)
+    from humanpt.runtime.recording import losses_lines
+
+    for line in losses_lines(run_dir):  # a component's recording lost messages to a write error
+        print(f"humanpt up: {line}", flush=True)
     return 1 if failed else 0
 
 

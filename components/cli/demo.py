@@ -72,6 +72,9 @@ def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: floa
     lines += ["", f"recordings: {run_dir}/*.mcap  (humanpt replay {run_dir}; humanpt view {run_dir})"]
     if paths:
         lines.append(f"path file:  {paths[-1]}")
+    from humanpt.runtime.recording import losses_lines
+
+    lines += losses_lines(run_dir)  # a component's recording lost messages to a write error
     return "\n".join(lines)
 
 

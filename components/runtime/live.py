@@ -11,6 +11,9 @@
   input, so it is recorded and replays;
 * everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``
   (``<component>.1.mcap``... when the component restarts into the same run: never truncated);
+  a write error (full disk) never stops the component: it publishes a ``record_error``
+  event at once, ``record_resumed`` when recording goes on in a new segment, and the
+  losses go to ``<component>.losses.json`` (see :class:`~humanpt.runtime.recording.Recorder`);
 * a payload that fails to decode is dropped with a log line and a counter (and kept raw
   in the recording); the component lives on;
 * the liveliness of the components named in ``core.watch`` reaches the core as
@@ -268,6 +271,16 @@ class LiveShell:
         except Exception:  # noqa: BLE001
             log.exception("could not publish on %s", short)
 
+    def _recording_news(self) -> None:
+        """The recorder's write errors and resumptions, as events (and log lines)."""
+        while self.recorder.news:
+            code, text = self.recorder.news.popleft()
+            error = code == "record_error"
+            log.log(logging.ERROR if error else logging.WARNING, "%s: %s", self.core.name, text)
+            self._publish_raw(f"{self.core.name}/events", pb.Event(
+                header=header(time.time_ns()), severity=pb.SEVERITY_ERROR if error else pb.SEVERITY_INFO,
+                source=self.core.name, code=code, text=text))
+
     def _drop(self, t_ns: int, short: str, payload: bytes, reason: str) -> None:
         c = self.counters
         c.dropped += 1
@@ -335,10 +348,13 @@ class LiveShell:
                 token = session.liveliness().declare_token(liveliness_key(self.cell, name))
                 self.ready.set()
                 log.info("%s up in cell %s (bus inputs: %s)", name, self.cell, ", ".join(bus_ports) or "none")
+                rec = self.recorder
                 while not self.stop.is_set():
                     got = self._q.get(timeout=0.1)
                     if got is not None:
                         self._handle(*got)
+                    if rec is not None and rec.news:  # a cheap test, after every input
+                        self._recording_news()
                 ticker.join(timeout=1.0)
                 self._sync_drops()
                 qbl.undeclare()

@@ -14,15 +14,21 @@ Writing uses mcap's public :class:`mcap.writer.Writer` only (zstd chunks of
 progress is ended and put in the file every ``flush_interval_s`` of wall time, so a crash
 loses at most the chunk in progress (plus, with ``background=True``, the messages still
 queued for the writer thread: at most about one more chunk's worth, see :class:`Recorder`).
+A write error (a full disk) never raises to the component: the recording stops at its last
+whole chunk, counts what it loses, and resumes in the next segment when there is room.
 """
 
 from __future__ import annotations
 
+import errno
 import heapq
 import json
+import logging
+import os
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,24 +47,68 @@ from humanpt.schemas import topics
 RUN_METADATA = "humanpt.run"
 IN, OUT, DROPPED = "in", "out", "dropped"
 
+log = logging.getLogger("humanpt.recording")
+
 
 class RecordingError(ValueError):
     """A recording that cannot be read: missing, not MCAP, not a humanpt recording, or
     written by an incompatible schema version.  The message says which."""
 
 
-def _open_new_segment(path: Path):
+class _SegmentFile:
+    """A recording file written straight to the OS, no buffer in between: :meth:`tell` is
+    what the OS accepted, so after a failed write the Recorder knows where its last
+    complete chunk ends and cuts the file back there (the reader then finds a clean end,
+    and the messages counted as lost are exactly those not in the file).  Never opens an
+    existing file (``O_EXCL``)."""
+
+    def __init__(self, path: Path):
+        flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0) | getattr(os, "O_BINARY", 0)
+        self.fd = os.open(path, flags, 0o644)
+        self.pos = 0  # bytes the OS accepted
+
+    def write(self, data) -> int:
+        view = memoryview(data)
+        while view:  # a full disk may take part of a write, then refuse the rest
+            n = os.write(self.fd, view)
+            if n <= 0:
+                raise OSError(errno.EIO, "write wrote nothing")
+            self.pos += n
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self.pos
+
+    def flush(self) -> None:
+        """Nothing waits in memory (the MCAP writer calls this)."""
+
+    def close(self) -> None:
+        if self.fd >= 0:
+            fd, self.fd = self.fd, -1
+            os.close(fd)
+
+
+def _open_new_segment(path: Path) -> tuple[Path, _SegmentFile]:
     """Open ``path`` for writing, never over an existing file: a component restarted into
-    the same run directory writes ``<stem>.1.mcap``, ``<stem>.2.mcap``... beside the first
-    recording. Returns (the path opened, the file)."""
+    the same run directory (or a recording resumed after a write error) writes
+    ``<stem>.1.mcap``, ``<stem>.2.mcap``... beside the first recording. Returns (the path
+    opened, the file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     candidate, n = path, 0
     while True:
         try:
-            return candidate, open(candidate, "xb")  # noqa: SIM115 - closed by the Recorder
+            return candidate, _SegmentFile(candidate)
         except FileExistsError:
             n += 1
             candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+
+
+def _by_topic_text(lost: dict[tuple[str, str], int], most: int = 4) -> str:
+    """``in pinger/ping 60, out ponger/pong 60``: the most lost first."""
+    items = sorted(lost.items(), key=lambda kv: (-kv[1], kv[0]))
+    text = ", ".join(f"{d} {t} {n}" for (d, t), n in items[:most])
+    return text + (f", {len(items) - most} more topics" if len(items) > most else "")
 
 
 class Recorder:
@@ -75,6 +125,18 @@ class Recorder:
     being filled, the queued ones and the one being written).  One thread writes, in the
     order the messages were given: the file holds the same messages in the same order
     as without the thread.  :meth:`close` drains the queue.
+
+    A write error (a full disk, EIO...) never raises to the caller, in either mode: the
+    recorder cuts the file back to its last complete chunk (still a readable recording),
+    counts every message it could not keep (by direction and topic: the chunk in progress
+    and all later ones), and every ``flush_interval_s``, once the file system has
+    :attr:`min_free_bytes` free, opens the next segment (``<stem>.N.mcap``, its metadata
+    naming the segment it continues).  Recording has resumed when a first chunk of that
+    segment is in the file.  The caller polls :attr:`news` (a deque, cheap to test) for
+    ``(code, text)`` pairs: ``record_error`` when an outage starts (what was lost so
+    far), ``record_resumed`` when it ends (what it lost).  :meth:`losses` sums it up and
+    is saved as ``<first segment stem>.losses.json`` beside the recording (at each error
+    and resumption, and at :meth:`close`); no such file: nothing was lost.
     """
 
     BATCH_MESSAGES = 256  # a batch's size in messages, at most
@@ -92,33 +154,46 @@ class Recorder:
     ):
         self._queue: queue.Queue | None = None
         self._thread: threading.Thread | None = None
-        self._error: BaseException | None = None
-        self.path, self._file = _open_new_segment(Path(path))
-        comp = {
+        self._base = Path(path)
+        self._chunk_size = chunk_size
+        self._comp = {
             "zstd": CompressionType.ZSTD,
             "lz4": CompressionType.LZ4,
             "none": CompressionType.NONE,
         }[compression]
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp)
-        self._writer.start(profile="humanpt", library="humanpt")
-        meta = {
+        self._meta = {
             k: v if isinstance(v, str) else json.dumps(v, sort_keys=True)
             for k, v in metadata.items()
         }
-        meta.setdefault("schema_version", str(topics.SCHEMA_VERSION))
-        self._writer.add_metadata(RUN_METADATA, meta)
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[tuple[str, str], int] = {}
-        self._raw_schema: int | None = None
+        self._meta.setdefault("schema_version", str(topics.SCHEMA_VERSION))
+        # Resume only into room for a couple of chunks: a disk that frees a few pages
+        # (the cut-off chunk's) would fail again at once.
+        self.min_free_bytes = 2 * chunk_size + 64 * 1024
+        self.segments: list[Path] = []
+        self._writer: Writer | None = None
+        self._file: _SegmentFile | None = None
         self._count = 0
         self._flush_interval_s = flush_interval_s
         self._last_flush = time.monotonic()
-        self._stream_pos = self._file.tell()
         self.bytes_written = 0
         self._closed = False
         self._batch: list[tuple] = []
         self._batch_bytes = 0
         self._batch_limit = max(1, chunk_size // 4)
+        # Losses (writer side; read by the caller only through ``news`` and after close).
+        self.news: deque[tuple[str, str]] = deque()
+        self._lost: dict[tuple[str, str], int] = {}  # (direction, topic) -> messages
+        self._lost_n = 0
+        self._lost_t: list[int] = []  # [first, last] log time (ns) of a lost message
+        self._outages: list[dict[str, Any]] = []
+        self._outage: dict[str, Any] | None = None  # the one in progress
+        self._retry_at = 0.0
+        try:
+            self._open_segment()
+        except OSError as e:  # before the run: a clear error, the component does not start
+            raise RecordingError(f"cannot start recording {self._base}: {e}") from e
+        self.path = self.segments[0]  # the segment being written (the last one opened)
+        self.losses_path = self.path.with_name(f"{self.path.stem}.losses.json")
         if background:
             self._queue = queue.Queue(maxsize=self.QUEUED_BATCHES)
             self._thread = threading.Thread(
@@ -126,23 +201,197 @@ class Recorder:
             )
             self._thread.start()
 
+    # -- segments --------------------------------------------------------------------------
+    def _open_segment(self) -> None:
+        """Open the next segment and write its header and metadata (raises OSError)."""
+        path, f = _open_new_segment(self._base)
+        meta = dict(self._meta)
+        if self._outages:  # a continuation: replay cannot rebuild the core's state here
+            meta["continues"] = self.segments[-1].name if self.segments else ""
+            meta["lost_before"] = str(self._lost_n)
+        try:
+            writer = Writer(f, chunk_size=self._chunk_size, compression=self._comp)
+            writer.start(profile="humanpt", library="humanpt")
+            writer.add_metadata(RUN_METADATA, meta)
+        except BaseException:
+            f.close()
+            path.unlink(missing_ok=True)
+            raise
+        self._writer, self._file, self.path = writer, f, path
+        self.segments.append(path)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._chan_keys: list[tuple[str, str]] = [("", "")]  # channel id -> (direction, topic)
+        self._pend: list[int] = [0]  # channel id -> messages not yet in the file
+        self._pend_t: list[int] = []  # [first, last] log time of those
+        self._raw_schema: int | None = None
+        self._committed_pos = f.pos  # the file ends here at a record boundary
+        self._seg_messages = 0  # messages of this segment in the file
+        self._probation = bool(self._outage)  # resumed once a first chunk is in the file
+
+    def _commit(self) -> None:
+        """The messages given so far are in the file (a chunk was written whole)."""
+        self._committed_pos = self._file.pos
+        n = sum(self._pend)
+        if n:
+            self._seg_messages += n
+            self._pend = [0] * len(self._pend)
+            self._pend_t = []
+            if self._probation:
+                self._resumed()
+
+    def _fail(self, e: BaseException) -> None:
+        """A write failed: count what is lost, cut the file back, wait for room."""
+        if not isinstance(e, OSError):
+            log.exception("recording to %s failed", self.path)
+        lost_before = self._lost_n
+        pend = {self._chan_keys[cid]: n for cid, n in enumerate(self._pend) if n}
+        for key, n in pend.items():
+            self._lose(key, n, self._pend_t)
+        lost_now = sum(pend.values())
+        f, path, kept = self._file, self.path, self._seg_messages
+        self._writer, self._file = None, None
+        try:
+            if kept:
+                os.ftruncate(f.fd, self._committed_pos)  # a clean end after the last whole chunk
+            f.close()
+            if not kept:
+                path.unlink(missing_ok=True)  # nothing of it was kept
+                self.segments.remove(path)
+        except OSError as e2:
+            log.warning("recording: could not tidy %s after the write error: %s", path, e2)
+            f.close()
+        self._retry_at = time.monotonic() + self._flush_interval_s
+        if self._probation:  # the resumed segment failed before its first chunk: same outage
+            self._probation = False
+            return
+        now = time.time_ns()
+        self._outage = {"error": str(e) or type(e).__name__, "segment": path.name, "start_ns": now,
+                        "end_ns": None, "lost": lost_before}
+        self._outages.append(self._outage)
+        self.news.append(("record_error", (
+            f"recording stopped: cannot write {path.name}: {self._outage['error']}; "
+            f"{lost_now} messages lost so far{f' ({_by_topic_text(pend)})' if pend else ''}; "
+            f"retrying every {self._flush_interval_s:g} s (with {self.min_free_bytes // 1024} KiB free) "
+            f"in a new segment")))
+        self._save_losses()
+
+    def _lose(self, key: tuple[str, str], n: int, times: list[int]) -> None:
+        self._lost[key] = self._lost.get(key, 0) + n
+        self._lost_n += n
+        if times:
+            if not self._lost_t:
+                self._lost_t = [times[0], times[-1]]
+            else:
+                self._lost_t[0] = min(self._lost_t[0], times[0])
+                self._lost_t[1] = max(self._lost_t[1], times[-1])
+
+    def _resumed(self) -> None:
+        self._probation = False
+        o, self._outage = self._outage, None
+        now = time.time_ns()
+        o["end_ns"] = now
+        o["lost"] = self._lost_n - o["lost"]
+        o["resumed_in"] = self.path.name
+        lost = {k: n for k, n in self._lost.items()}
+        self.news.append(("record_resumed", (
+            f"recording resumed in {self.path.name} after {(now - o['start_ns']) / 1e9:.1f} s: "
+            f"{o['lost']} messages lost in this outage, {self._lost_n} in all ({_by_topic_text(lost)})")))
+        self._save_losses()
+
+    def _retry(self) -> bool:
+        """At most every ``flush_interval_s``: open the next segment if there is room."""
+        now = time.monotonic()
+        if now < self._retry_at:
+            return False
+        self._retry_at = now + self._flush_interval_s
+        try:
+            st = os.statvfs(self._base.parent)
+            if st.f_bavail * st.f_frsize < self.min_free_bytes:
+                return False
+        except (OSError, AttributeError):
+            pass  # no statvfs here: opening the segment will tell
+        try:
+            self._open_segment()
+        except Exception as e:  # noqa: BLE001 - still no room (or no disk): keep waiting
+            if self._outage is not None:
+                self._outage["retry_error"] = str(e)
+            return False
+        return True
+
+    def losses(self) -> dict[str, Any]:
+        """What was lost: segments written, messages lost (in all and by direction and
+        topic), first and last log time (ns) of a lost message, and each outage (wall-clock
+        start and end in ns, the error, messages lost, the segment it resumed in)."""
+        by: dict[str, dict[str, int]] = {}
+        for (d, t), n in sorted(self._lost.items()):
+            by.setdefault(d, {})[t] = n
+        return {"component": self._meta.get("component", ""), "segments": [p.name for p in self.segments],
+                "lost": self._lost_n, "lost_by_topic": by,
+                "first_lost_ns": self._lost_t[0] if self._lost_t else None,
+                "last_lost_ns": self._lost_t[1] if self._lost_t else None,
+                "outages": [dict(o) for o in self._outages], "closed": self._closed}
+
+    def _save_losses(self) -> None:
+        """Write :meth:`losses` beside the recording (atomically; on a full disk it may
+        fail: logged, tried again at the next resumption and at close)."""
+        tmp = self.losses_path.with_name(self.losses_path.name + ".tmp")
+        try:
+            tmp.write_text(json.dumps(self.losses(), indent=1) + "\n")
+            os.replace(tmp, self.losses_path)
+        except OSError as e:
+            tmp.unlink(missing_ok=True)
+            log.warning("recording: could not write %s: %s", self.losses_path, e)
+
+    def summary(self) -> str:
+        """One line: the segments written and what was lost."""
+        if self.segments:
+            text = "recording " + " + ".join([str(self.segments[0])] + [p.name for p in self.segments[1:]])
+        else:
+            text = f"recording {self._base}: nothing kept"
+        if self._lost_n or self._outages:
+            text += (f"; LOST {self._lost_n} messages ({_by_topic_text(self._lost) or 'none'}) in "
+                     f"{len(self._outages)} write outage(s), first: {self._outages[0]['error']}"
+                     f"{'; not recording at the end' if self._outage is not None else ''} (see {self.losses_path.name})")
+        return text
+
+    # -- writing ---------------------------------------------------------------------------
     def _drain(self) -> None:
         while True:
             batch = self._queue.get()
             if batch is None:
                 return
-            try:
-                for item in batch:
+            for item in batch:
+                try:
                     self._do(*item)
-            except BaseException as e:  # noqa: BLE001 - reported on close
-                self._error = e
+                except BaseException:  # noqa: BLE001 - the thread must live, or the caller blocks
+                    log.exception("recording: writer thread")
 
     def _do(self, kind: str, *args) -> None:
+        """Write one item (``("msg", direction, t_ns, topic, type, payload)`` or
+        ``("flush",)``); on a write error count it lost instead.  Never raises."""
+        if self._writer is None and not self._retry():
+            if kind == "msg":
+                self._lose((args[0], args[2]), 1, [args[1]])
+            return
+        # A full disk must not stop the component: no error leaves here.
         if kind == "msg":
             direction, t_ns, topic, msg_type, payload = args
-            self._add(self._channel(direction, topic, msg_type), t_ns, payload)
+            try:
+                cid = self._channel(direction, topic, msg_type)
+            except Exception as e:  # noqa: BLE001 - registering the channel ended a chunk, which failed
+                self._lose((direction, topic), 1, [t_ns])
+                self._fail(e)
+                return
+            try:
+                self._add(cid, t_ns, payload)  # counts the message pending first
+            except Exception as e:  # noqa: BLE001
+                self._fail(e)
         elif kind == "flush":
-            self._flush_now()
+            try:
+                self._flush_now()
+            except Exception as e:  # noqa: BLE001
+                self._fail(e)
 
     def _submit(self, item: tuple, size: int = 0) -> None:
         """Write ``item`` now, or batch it for the writer thread."""
@@ -152,7 +401,7 @@ class Recorder:
         if self._queue is None:
             self._do(*item)
             if due:
-                self._flush_now()
+                self._do("flush")
             return
         self._batch.append(item)
         self._batch_bytes += size
@@ -185,6 +434,10 @@ class Recorder:
                 topic=topic, message_encoding=enc, schema_id=sid, metadata={"direction": direction}
             )
             self._channels[key] = cid
+            self._chan_keys.append(key)
+            self._pend.append(0)
+            if self._file.pos != self._committed_pos:  # registering ended a chunk
+                self._commit()
         return cid
 
     def write(
@@ -202,6 +455,13 @@ class Recorder:
         self._submit(("msg", DROPPED, t_ns, topic, None, payload), len(payload))
 
     def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
+        # Pending first: if add_message fails (ending a chunk), this message is lost too.
+        self._pend[channel_id] += 1
+        pt = self._pend_t
+        if pt:
+            pt[1] = t_ns
+        else:
+            self._pend_t = [t_ns, t_ns]
         self._writer.add_message(
             channel_id=channel_id,
             log_time=int(t_ns),
@@ -211,46 +471,64 @@ class Recorder:
         )
         self._count += 1
         self.bytes_written += len(payload)
-        pos = self._file.tell()
-        if pos != self._stream_pos:
-            # A chunk was finalised into the stream buffer: put it in the file now.
-            self._file.flush()
-            self._stream_pos = pos
+        if self._file.pos != self._committed_pos:
+            # A chunk (holding this message too) was written whole.
+            self._commit()
 
     def flush(self) -> None:
         """End the chunk in progress and put it in the file (with ``background=True``:
         once the writer thread gets there)."""
         if self._queue is None:
-            self._flush_now()
+            self._do("flush")
         else:
             self._batch.append(("flush",))
             self._hand_over()
 
     def _flush_now(self) -> None:
         self._writer.flush()
-        self._stream_pos = self._file.tell()
+        if self._file.pos != self._committed_pos:
+            self._commit()
 
     def close(self) -> None:
-        """Write the summary and close the file (idempotent)."""
-        if not self._closed:
-            self._closed = True
-            if self._thread is not None:
-                self._hand_over()
-                self._queue.put(None)
-                self._thread.join()
-            self._writer.finish()
-            self._file.flush()
-            self._file.close()
-            if self._error is not None:
-                raise RecordingError(
-                    f"{self.path}: recording failed: {self._error}"
-                ) from self._error
+        """Write the summary and close the file (idempotent).  Never raises for a write
+        error: what was lost is in :meth:`losses`, :meth:`summary` and the losses file."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._thread is not None:
+            self._hand_over()
+            self._queue.put(None)
+            self._thread.join()
+        if self._writer is not None:
+            try:
+                self._writer.finish()
+                self._file.close()
+                self._writer = None
+            except Exception as e:  # noqa: BLE001
+                self._fail(e)
+        if self._lost_n or self._outages:
+            self._save_losses()
+            log.warning("%s", self.summary())
 
     def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def losses_lines(run_dir: str | Path) -> list[str]:
+    """One line per component whose recording lost messages to a write error (its
+    ``<component>.losses.json``, see runtime/README.md); none when nothing was lost."""
+    out = []
+    for f in sorted(Path(run_dir).glob("*.losses.json")):
+        try:
+            d = json.loads(f.read_text())
+            out.append(f"RECORDING LOST {d['lost']} messages of {d['component']} in {len(d['outages'])} "
+                       f"write outage(s) ({d['outages'][0]['error'] if d['outages'] else '?'}): {f}")
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            out.append(f"RECORDING LOSSES: {f} cannot be read ({type(e).__name__}: {e})")
+    return out
 
 
 @dataclass

@@ -137,6 +137,9 @@ class ReplayResult:
     truncated: str | None  # why reading stopped early, None when the file is complete
     compared: int = 0  # output pairs found identical (before the divergence, if any)
     messages_read: int = 0  # every message read: inputs, outputs, dropped inputs
+    # A segment resumed after a write error (metadata ``continues``): the core's state at its
+    # start was never recorded, so a fresh core cannot replay it. Why, else None.
+    continuation: str | None = None
 
     @property
     def nothing_compared(self) -> bool:
@@ -144,7 +147,7 @@ class ReplayResult:
         while the replay made some: no verdict either way."""
         if self.divergence is not None:
             return False
-        return self.inputs == 0 or (
+        return self.continuation is not None or self.inputs == 0 or (
             self.truncated is not None and self.compared == 0 and self.replayed_outputs > 0
         )
 
@@ -166,8 +169,8 @@ class ReplayResult:
                  f"{self.recorded_outputs} outputs recorded before the damage are compared"
                  if self.truncated else "")
         if self.nothing_compared:
-            why = ("the recording holds no inputs" if self.inputs == 0
-                   else "no recorded output survives the truncation")
+            why = (self.continuation or ("the recording holds no inputs" if self.inputs == 0
+                                         else "no recorded output survives the truncation"))
             return f"{head}{trunc}\n  NOTHING COMPARED: {why}; this is not a match"
         if self.match:
             if self.compared == 0:
@@ -191,6 +194,12 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
     rec = read(path)
     if not rec.entries and rec.truncated:
         raise RecordingError(f"{rec.truncated}: no message could be read, nothing to replay")
+    if "continues" in rec.metadata:
+        why = (f"this segment continues {rec.metadata['continues'] or 'the recording'} after "
+               f"{rec.metadata.get('lost_before', '?')} messages were lost to a write error: the core's "
+               f"state at its start was not recorded, so it cannot be replayed from its config")
+        return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
+                            0, len(rec.entries), continuation=why)
     core = core_factory(rec)
     replayed: list[tuple[int, str, bytes]] = []
     for e in rec.inputs:
