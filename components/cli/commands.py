@@ -414,9 +414,15 @@ def runs_info(args) -> int:
         for note in f.notes:
             print(f"  note: {note}")
         bad |= bool(f.missing_inputs or f.notes)
+    from humanpt.runtime.recording import losses_lines
+
+    lost = losses_lines(args.run_dir)  # what a full disk (or another write error) cost
+    for line in lost:
+        print(line)
     total = sum(f.missing_inputs for f in infos)
-    print(f"humanpt runs info: {len(infos)} recordings; inputs missed: {total}")
-    return 1 if bad else 0
+    print(f"humanpt runs info: {len(infos)} recordings; inputs missed: {total}; "
+          f"recordings with write losses: {len(lost)}")
+    return 1 if bad or lost else 0
 
 
 def runs_merge(args) -> int:

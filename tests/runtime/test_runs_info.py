@@ -42,3 +42,18 @@ def test_runs_info_of_a_complete_run_says_nothing_was_missed():
     r = run_cli("runs", "info", "recordings/static")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "inputs missed: 0" in r.stdout and "component pose_filter" in r.stdout
+    assert "recordings with write losses: 0" in r.stdout
+
+
+def test_runs_info_reports_write_losses(tmp_path):
+    """A full disk's losses file (written by the Recorder, runtime/README.md) is reported."""
+    import json
+    import shutil
+
+    run_dir = tmp_path / "run"
+    shutil.copytree("recordings/static", run_dir)
+    (run_dir / "perception.losses.json").write_text(json.dumps(
+        {"component": "perception", "lost": 7, "outages": [{"error": "[Errno 28] No space left on device"}]}))
+    r = run_cli("runs", "info", str(run_dir))
+    assert r.returncode == 1, r.stdout + r.stderr
+    assert "RECORDING LOST 7 messages of perception in 1 write outage(s)" in r.stdout
