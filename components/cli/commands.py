@@ -304,6 +304,11 @@ def echo(args) -> int:
 
     cfg = load_cfg(args)
     key = _full_key(args.key, cfg.runtime.cell)
+    short = key.split("/", 2)[2] if key.count("/") >= 2 else key
+    if "*" not in key and short not in topics.TOPICS:
+        near = sorted(t for t in topics.TOPICS if short.split("/")[0] in t) or sorted(topics.TOPICS)
+        raise ValueError(f"no topic {short!r} in this version (wildcards like '*/events' are fine); "
+                         f"known: {', '.join(near)}")
     q: _queue.Queue = _queue.Queue()
     stop = stop_on_signals()
     n = 0
@@ -519,6 +524,11 @@ def config(args) -> int:
 def path_cmd(args) -> int:
     from humanpt.controller import pathfile
 
+    out_path = Path(args.output)
+    if out_path.exists() and out_path.resolve() == Path(args.input).resolve():
+        raise ValueError(f"{args.output}: is the input; write the result to another file")
+    if out_path.exists() and not args.overwrite:
+        raise ValueError(f"{args.output}: exists; give --overwrite to replace it")
     p = pathfile.read(args.input)
     if args.path_verb == "smooth":
         out = pathfile.Path6(p.index, p.stamp_ns, pathfile.smooth(p.x_g, p.stamp_ns, accel_sigma=args.accel,

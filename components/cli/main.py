@@ -207,12 +207,14 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("output")
     q.add_argument("--accel", type=float, default=200.0, help="process noise, mm/s^2 (deg/s^2) (default 200)")
     q.add_argument("--sigma", type=float, default=0.3, help="measurement noise, mm (deg) (default 0.3)")
+    q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
     q = psub.add_parser("val", help="export a path as a VAL II program for the Puma",
                         description="Write a VAL II program (.PROGRAM with SET/TRANS and MOVES) through the "
                         "path's points: the driver tip's if recorded, else G's.")
     q.add_argument("input")
     q.add_argument("output")
     q.add_argument("--name", default="path", help="program name (default path)")
+    q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--speed", type=float, default=20.0, help="SPEED in percent (default 20)")
@@ -297,6 +299,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError, ValueError) as e:
         print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
         return 2
+    except ConnectionError as e:  # no router where the config says: one line, not a traceback
+        print(f"humanpt {args.verb}: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
 

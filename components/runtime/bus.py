@@ -59,5 +59,6 @@ def open_tool_session(rt: RuntimeConfig) -> zenoh.Session:
     try:
         return zenoh.open(zenoh_config(rt, mode="client"))
     except zenoh.ZError as e:
-        raise ConnectionError(f"cannot reach the router at {', '.join(rt.connect)}: {e}. "
+        why = str(e).split(" at /")[0].rstrip(".")  # Zenoh appends its Rust source location
+        raise ConnectionError(f"cannot reach the router at {', '.join(rt.connect)} ({why}). "
                               "Start one with `humanpt router` or pass --connect ENDPOINT.") from e

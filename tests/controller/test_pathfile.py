@@ -101,6 +101,13 @@ def test_cli_path_verbs(tmp_path, capsys, cli_main):
     assert (tmp_path / "p.v2").read_text().startswith(".PROGRAM seam()")
     assert cli_main(["path", "val", str(tmp_path / "missing.csv"), str(tmp_path / "x.v2")]) == 2
     assert "no such path file" in capsys.readouterr().err
+    # Never over the input, never over another file unasked (issue 20: smooth overwrote its input).
+    before = f.read_bytes()
+    assert cli_main(["path", "smooth", str(f), str(f)]) == 2
+    assert "is the input" in capsys.readouterr().err and f.read_bytes() == before
+    assert cli_main(["path", "smooth", str(f), str(tmp_path / "s.csv")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert cli_main(["path", "smooth", str(f), str(tmp_path / "s.csv"), "--overwrite"]) == 0
 
 
 # -- saving never leaves paths/, never overwrites, never truncates (issue 14, items 8 and 11) --
