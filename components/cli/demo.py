@@ -16,6 +16,7 @@ import threading
 from pathlib import Path
 
 from humanpt.controller.config import ControllerConfig
+from humanpt.runtime import config as cfgmod
 
 
 def parse_overrides(items: list[str] | None) -> dict[str, dict]:
@@ -104,6 +105,9 @@ def run_live(args, cfg, run_dir: Path) -> int:
 
     def started(comps: list[str]) -> None:
         print(f"humanpt demo: starting {', '.join(comps)}, operator (log: {run_dir / 'processes.log'})", flush=True)
+        rt = cfgmod.load(run_dir / "humanpt.toml").runtime  # written by run_live before the start
+        print(f"humanpt demo: router {', '.join(rt.listen)}, cell {rt.cell}; watch it with "
+              f"`humanpt topics --config {run_dir / 'humanpt.toml'}` (or echo, console, view)", flush=True)
 
     res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
               overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,

@@ -35,11 +35,14 @@ def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path):
 
 def test_live_demo_runs_every_component_as_a_process(tmp_path):
     run = tmp_path / "live"
+    port = free_port()
     r = run_cli("demo", "--scenario", "static", "--duration", "8", "--run-dir", str(run),
-                "--port", str(free_port()), timeout=400)
+                "--port", str(port), timeout=400)
     assert r.returncode == 0, r.stdout + r.stderr + (run / "processes.log").read_text()[-3000:]
     assert "humanpt demo (live)" in r.stdout and "recorded path of G against ground truth" in r.stdout
     assert (run / "humanpt.toml").is_file() and list((run / "paths").glob("path-*.csv"))
+    # Where a user's tools find it (issue 20.4): the router's endpoint and the cell.
+    assert f"router tcp/127.0.0.1:{port}, cell demo" in r.stdout and "humanpt topics --config" in r.stdout
     res = latency_and_cycles(run)
     assert res["cycles"] > 100 and len(res["latency_ms"]) > 50
     assert res["on_time"] > 0.8 * res["cycles"]  # a loaded CI machine: most, not all
