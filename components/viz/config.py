@@ -51,6 +51,11 @@ class VizConfig:
     # Every 2nd image by default: ~15 Hz of a 30 Hz camera is plenty to watch, and each shown
     # image is recorded twice in viz.mcap (as input and as the forwarded copy).
     image_every: Annotated[int, Range(1, 10000, "images")] = live(2, "show every Nth camera image (1: all)")
+    # Display transfer of 8-bit images: shown = 255 * (raw / 255) ** display_gamma. The complex
+    # image is small bright sources on a nearly black background; below 1 the background and
+    # the sources' halos show at panel size (1: the raw image). Display only: what perception
+    # sees and what is recorded are untouched.
+    display_gamma: Annotated[float, Range(0.1, 1.0, "")] = 0.5
     # Geometry the views need (the messages carry poses, not the rig).
     # D's distance at start; the view follows the controller's dz_mm changes (its events).
     dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM

@@ -132,6 +132,11 @@ def _transform(p: pb.Pose) -> rr.Transform3D:
     return rr.Transform3D(translation=_translation(p), quaternion=q)
 
 
+def display_lut(gamma: float) -> np.ndarray:
+    """(256,) uint8 look-up table of the display transfer: 255 * (v / 255) ** gamma, rounded."""
+    return np.rint(255.0 * (np.arange(256) / 255.0) ** gamma).astype(np.uint8)
+
+
 class RerunLogger:
     """Logs humanpt messages to ``rec`` (a ``rerun.RecordingStream``).
 
@@ -155,6 +160,7 @@ class RerunLogger:
         self.sources_mm = self.config.target_model().source_positions_mm  # (3, 3) TOB frame
         self.flange_T_camera = self.config.flange_T_camera_m()
         self.dz_mm = float(self.config.dz_mm)
+        self._display_lut = display_lut(self.config.display_gamma)
         self.counts: dict[str, int] = {}
         self.errors: dict[str, int] = {}
         self._virtual: bool | None = None  # decided by the first stamp
@@ -336,6 +342,8 @@ class RerunLogger:
     def _image(self, topic, msg, t_ns) -> None:
         stamp = image_stamp_ns(msg)
         pixels = from_image(msg)
+        if pixels.dtype == np.uint8:
+            pixels = self._display_lut[pixels]
         self._time(stamp, t_ns)
         if pixels.ndim == 2:
             img = rr.Image(pixels, color_model="L")

@@ -270,3 +270,16 @@ def test_view_without_a_display_says_to_save_or_serve(twin_run, monkeypatch, cap
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
     assert cli_main(["view", str(twin_run[0])]) == 2
     assert "use --save FILE.rrd, or --serve" in capsys.readouterr().err
+
+
+def test_display_transfer_brightens_the_dark_complex_image():
+    """Issue 20: the complex image was nearly black at panel size. shown = 255 (v/255)^gamma."""
+    from humanpt.viz.logger import display_lut
+
+    lut = display_lut(0.5)
+    assert lut.dtype == np.uint8 and lut.shape == (256,)
+    assert (lut[0], lut[255]) == (0, 255)
+    assert lut[16] == 64  # 255 * sqrt(16/255) = 63.87: a background of 16 DN shows at a quarter
+    assert lut[64] == 128  # 255 * sqrt(64/255) = 127.75
+    assert np.all(np.diff(lut.astype(int)) >= 0)  # monotone: the order of brightness is kept
+    assert np.array_equal(display_lut(1.0), np.arange(256, dtype=np.uint8))  # 1: the raw image
