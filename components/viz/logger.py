@@ -169,7 +169,7 @@ class RerunLogger:
         )  # (stamp ns, world_T_flange m)
         self._robot_stamps: deque[int] = deque(maxlen=256)
         self._state: pb.TobState | None = None
-        self._state_by_cycle: dict[int, int] = {}  # ALTER cycle -> measurement stamp (ns)
+        self._last_measurement_ns = 0  # image capture stamp of the last command drawn
         self._shown_images: deque[int] = deque(maxlen=64)  # stamps of the images drawn
         self._pending: dict[int, list] = {}  # image stamp -> overlays waiting for their image
         self._path_n = 0
@@ -413,9 +413,6 @@ class RerunLogger:
 
     def _tob_state(self, topic, msg: pb.TobState, t_ns) -> None:
         self._state = msg
-        self._state_by_cycle[msg.cycle] = msg.measurement_stamp_ns
-        if len(self._state_by_cycle) > 128:
-            self._state_by_cycle.pop(next(iter(self._state_by_cycle)))
         self._time(msg.header.stamp_ns, t_ns)
         if msg.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
             self.rec.log(ENTITIES["tob"], _transform(msg.world_T_tob))
@@ -441,9 +438,14 @@ class RerunLogger:
         self.rec.log(ENTITIES["cmd_v"], rr.Scalars(d_t * 1e3 * per_s))
         self.rec.log(ENTITIES["cmd_w"], rr.Scalars(np.degrees(d_r) * per_s))
         if t_ns is not None:
-            self.rec.log(ENTITIES["lat_state"], rr.Scalars((int(t_ns) - stamp) * 1e-6))
-            captured = self._state_by_cycle.get(msg.cycle, 0)
-            if captured:
+            # A command is for the NEXT cycle (command ahead) and stamped with it, so its own
+            # stamp is no start: the robot state it answers is the latest one seen, and the
+            # image it uses is its measurement_stamp_ns (the first command using it counts).
+            if self._robot_stamps and t_ns >= self._robot_stamps[-1]:
+                self.rec.log(ENTITIES["lat_state"], rr.Scalars((int(t_ns) - self._robot_stamps[-1]) * 1e-6))
+            captured = msg.measurement_stamp_ns
+            if captured and captured != self._last_measurement_ns and t_ns >= captured:
+                self._last_measurement_ns = captured
                 self.rec.log(ENTITIES["lat_capture"], rr.Scalars((int(t_ns) - captured) * 1e-6))
 
     def _status(self, topic, msg: pb.ControllerStatus, t_ns) -> None:

@@ -167,6 +167,12 @@ def test_view_save_writes_the_blueprint_and_the_expected_entities(twin_run, tmp_
     # The measured target is close to D (the loop tracks): |G - D| plotted in mm, small.
     errors = [v[0] for v in _column(out, "/plots/error/translation_mm", "Scalars:scalars")]
     assert len(errors) >= 100 and np.median(errors[-30:]) < 5.0
+    # Latencies (issue 20: robot state -> command was negative, image -> command nearly
+    # empty): never negative, one image -> command sample per image the loop used.
+    lat_state = [v[0] for v in _column(out, "/plots/latency/state_to_command_ms", "Scalars:scalars")]
+    lat_image = [v[0] for v in _column(out, "/plots/latency/capture_to_command_ms", "Scalars:scalars")]
+    assert len(lat_state) >= 100 and min(lat_state) >= 0.0
+    assert len(lat_image) >= 0.5 * n_images and min(lat_image) >= 0.0
 
 
 def test_view_of_the_same_run_with_image_decimation_and_a_progress_callback(twin_run, tmp_path):
