@@ -166,6 +166,13 @@ def _ms(t: float | None, t0: float) -> float | None:
 
 # -- the attacks: each injects, waits for the system's answer, and fills row.reaction_ms,
 # row.expected and row.note; it returns when its injection is over. ------------------------------
+def _answered(row: FaultRow, hit, t0: float, seen: str, missing: str) -> None:
+    """Fill ``row`` from the event ``hit`` ((time, ...) or None) awaited since ``t0``."""
+    row.expected = hit is not None
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = seen if hit else missing
+
+
 def attack_param(ctx: Ctx, row: FaultRow) -> None:
     """Loosen the gateway's safety limits over the bus: every key must be refused."""
     from humanpt.runtime.bus import params_key
@@ -200,9 +207,7 @@ def attack_forged_state(ctx: Ctx, row: FaultRow) -> None:
     t0 = time.monotonic()
     ctx.put("alter_gateway/robot_state", forged)
     hit = ctx.mon.wait_event(t0, ("robot_state_rejected",), "pose_filter")
-    row.expected = hit is not None
-    row.reaction_ms = _ms(hit and hit[0], t0)
-    row.note = "pose_filter: robot_state_rejected" if hit else "no robot_state_rejected"
+    _answered(row, hit, t0, "pose_filter: robot_state_rejected", "no robot_state_rejected")
 
 
 def attack_nan(ctx: Ctx, row: FaultRow) -> None:
@@ -215,9 +220,7 @@ def attack_nan(ctx: Ctx, row: FaultRow) -> None:
         m.camera_T_tob.rotation.w = 1.0
         ctx.put("perception/tob", m)
     hit = ctx.mon.wait_event(t0, ("bad_input",), "pose_filter")
-    row.expected = hit is not None
-    row.reaction_ms = _ms(hit and hit[0], t0)
-    row.note = "pose_filter: bad_input" if hit else "no bad_input from pose_filter"
+    _answered(row, hit, t0, "pose_filter: bad_input", "no bad_input from pose_filter")
 
 
 def attack_absurd(ctx: Ctx, row: FaultRow) -> None:
@@ -229,9 +232,7 @@ def attack_absurd(ctx: Ctx, row: FaultRow) -> None:
     t0 = time.monotonic()
     ctx.put("controller/command", cmd)
     hit = ctx.mon.wait_event(t0, ("bad_input",), "alter_gateway")
-    row.expected = hit is not None
-    row.reaction_ms = _ms(hit and hit[0], t0)
-    row.note = "alter_gateway: bad_input" if hit else "no bad_input from alter_gateway"
+    _answered(row, hit, t0, "alter_gateway: bad_input", "no bad_input from alter_gateway")
 
 
 def attack_strt(ctx: Ctx, row: FaultRow) -> None:
