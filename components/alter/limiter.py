@@ -38,7 +38,27 @@ def suffix(held: int) -> str:
 class SerialLinkCoreMixin:
     """What both ends of the ALTER link share (alter_gateway and sim_robot cores): bytes to
     send gathered in ``self._tx`` go out as one ``serial_tx`` chunk per step, and events are
-    rate-limited by ``self._limiter``."""
+    rate-limited by ``self._limiter``.
+
+    Their port handlers take ``(t_ns, msg, outs)`` and append to ``outs``; every input
+    (parameters aside) starts with :meth:`_begin` and ends by sending what it wrote."""
+
+    def _bind(self, port):
+        handler = getattr(self, port.handler)
+        if port.topic == "param":
+            return handler
+
+        def step(t_ns: int, msg) -> list:
+            outs = self._begin(t_ns)
+            handler(t_ns, msg, outs)
+            self._flush_tx(t_ns, outs)
+            return outs
+
+        return step
+
+    def _begin(self, t_ns: int) -> list:
+        """The outputs list of a step (a core may start its link here)."""
+        return []
 
     def _flush_tx(self, t_ns: int, outs: list) -> None:
         if self._tx:

@@ -123,11 +123,11 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     name = "alter_gateway"
     config_type = AlterGatewayConfig
     ports = (
-        Port("tick", pb.Tick, "_in_tick"),
-        Port("serial_rx", pb.SerialChunk, "_in_serial"),
-        Port("controller/command", pb.FlangeCommand, "_in_command", queue=8),
-        Port("liveliness", pb.Liveliness, "_in_liveliness"),
-        Port("console/command", pb.Command, "_in_console", queue=8),
+        Port("tick", pb.Tick, "_on_tick"),
+        Port("serial_rx", pb.SerialChunk, "_on_serial"),
+        Port("controller/command", pb.FlangeCommand, "_on_command", queue=8),
+        Port("liveliness", pb.Liveliness, "_on_liveliness"),
+        Port("console/command", pb.Command, "_on_console", queue=8),
     )
     watch = ("controller",)
 
@@ -196,7 +196,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
     def link_running(self) -> bool:
         return self._host.link.is_running
 
-    # -- inputs: the first input of any kind starts the link; each sends what it wrote ------
+    # -- inputs (SerialLinkCoreMixin._bind): the first input of any kind starts the link -----
     def _begin(self, t_ns: int) -> list[Output]:
         outs: list[Output] = []
         if not self._started:
@@ -204,36 +204,9 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self._link(self._host.start(t_ns), t_ns, outs)
         return outs
 
-    def _in_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
-        outs = self._begin(t_ns)
-        self._on_tick(t_ns, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_serial(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
-        outs = self._begin(t_ns)
+    def _on_serial(self, t_ns: int, msg: pb.SerialChunk, outs: list[Output]) -> None:
         rx_ns = msg.header.stamp_ns or t_ns
         self._link(self._host.receive(bytes(msg.data), t_ns), rx_ns, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_command(self, t_ns: int, msg: pb.FlangeCommand) -> list[Output]:
-        outs = self._begin(t_ns)
-        self._on_command(t_ns, msg, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_liveliness(self, t_ns: int, msg: pb.Liveliness) -> list[Output]:
-        outs = self._begin(t_ns)
-        self._on_liveliness(t_ns, msg, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_console(self, t_ns: int, msg: pb.Command) -> list[Output]:
-        outs = self._begin(t_ns)
-        self._on_console(t_ns, msg, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
 
     # -- link -------------------------------------------------------------------------------
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
@@ -297,7 +270,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._armed = False
         self._armed_from = None
 
-    def _on_tick(self, t_ns: int, outs: list[Output]) -> None:
+    def _on_tick(self, t_ns: int, msg: pb.Tick, outs: list[Output]) -> None:
         events = self._host.poll(t_ns)
         if events:
             self._link(events, t_ns, outs)

@@ -69,9 +69,9 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     name = "sim_robot"
     config_type = SimRobotConfig
     ports = (
-        Port("tick", pb.Tick, "_in_tick"),
-        Port("serial_rx", pb.SerialChunk, "_in_serial"),
-        Port("console/command", pb.Command, "_in_console"),
+        Port("tick", pb.Tick, "_on_cycle"),
+        Port("serial_rx", pb.SerialChunk, "_on_serial"),
+        Port("console/command", pb.Command, "_on_console"),
     )
 
     def __init__(self, config: SimRobotConfig):
@@ -151,26 +151,10 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             bits |= _CORRECTION_MISSED
         return StatusBits(bits)
 
-    # -- inputs -----------------------------------------------------------------------------
-    # Each input sends what it wrote to the line as one serial_tx chunk.
-    def _in_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
-        outs: list[Output] = []
-        self._on_cycle(t_ns, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_serial(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
-        outs: list[Output] = []
+    # -- inputs (SerialLinkCoreMixin._bind: each sends what it wrote as one serial_tx) -------
+    def _on_serial(self, t_ns: int, msg: pb.SerialChunk, outs: list[Output]) -> None:
         if self._started:
             self._link(self._ctrl.receive(bytes(msg.data), t_ns), t_ns, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
-
-    def _in_console(self, t_ns: int, msg: pb.Command) -> list[Output]:
-        outs: list[Output] = []
-        self._on_console(t_ns, msg, outs)
-        self._flush_tx(t_ns, outs)
-        return outs
 
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
         for e in events:
@@ -233,7 +217,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             )
 
     # -- the cycle --------------------------------------------------------------------------
-    def _on_cycle(self, t_ns: int, outs: list[Output]) -> None:
+    def _on_cycle(self, t_ns: int, msg: pb.Tick, outs: list[Output]) -> None:
         if not self._started:
             self._started = True
             self._link(self._ctrl.start(t_ns), t_ns, outs)
