@@ -189,6 +189,22 @@ def _decode(topic: str, data: bytes) -> Message | None:
         return None
 
 
+Stream = list[tuple[int, str, bytes]]  # (log time ns, short topic, serialised message)
+
+
+def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] = build_core,
+                     ) -> tuple[Stream, Stream]:
+    """(recorded outputs, replayed outputs) of a recording: a fresh core fed every recorded
+    input (of a truncated recording, the replayed stream runs past the recorded one's cut)."""
+    core = core_factory(rec)
+    replayed: Stream = []
+    for e in rec.inputs:
+        for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
+            replayed.append((e.t_ns, topic, msg.SerializeToString()))
+    recorded: Stream = [(e.t_ns, e.topic, e.data) for e in rec.outputs]
+    return recorded, replayed
+
+
 def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_core) -> ReplayResult:
     """Replay one component recording; see the module docstring."""
     rec = read(path)
@@ -200,17 +216,9 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                f"state at its start was not recorded, so it cannot be replayed from its config")
         return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
                             0, len(rec.entries), continuation=why)
-    core = core_factory(rec)
-    replayed: list[tuple[int, str, bytes]] = []
-    for e in rec.inputs:
-        for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
-            replayed.append((e.t_ns, topic, msg.SerializeToString()))
-    recorded = [(e.t_ns, e.topic, e.data) for e in rec.outputs]
-    if rec.truncated:
-        # The lost chunk held the tail of both streams: compare what both have.
-        replayed_cmp = replayed[:len(recorded)]
-    else:
-        replayed_cmp = replayed
+    recorded, replayed = replay_recording(rec, core_factory)
+    # The lost chunk of a truncated file held the tail of both streams: compare what both have.
+    replayed_cmp = replayed[:len(recorded)] if rec.truncated else replayed
     div = None
     compared = min(len(recorded), len(replayed_cmp))
     for i in range(max(len(recorded), len(replayed_cmp))):

@@ -43,7 +43,7 @@ from google.protobuf.message import Message
 from humanpt.runtime.config import ConfigError
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import Recording, RecordingError, read
-from humanpt.runtime.replay import build_core, diff_messages
+from humanpt.runtime.replay import build_core, diff_messages, replay_recording
 from humanpt.schemas import topics
 
 Stream = list[tuple[int, str, bytes]]  # (log time ns, short topic, serialised message)
@@ -580,15 +580,8 @@ def replay_streams(
     does, and keeps both output streams for :func:`compare_streams`.
     """
     rec = read(path)
-    core = core_factory(rec)
-    replayed: Stream = []
-    for e in rec.inputs:
-        for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
-            replayed.append((e.t_ns, topic, msg.SerializeToString()))
-    recorded: Stream = [(e.t_ns, e.topic, e.data) for e in rec.outputs]
-    if rec.truncated:
-        replayed = replayed[: len(recorded)]
-    return rec, recorded, replayed
+    recorded, replayed = replay_recording(rec, core_factory)
+    return rec, recorded, replayed[: len(recorded)] if rec.truncated else replayed
 
 
 @dataclass
