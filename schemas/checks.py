@@ -22,26 +22,11 @@ _FLOATS = (FieldDescriptor.TYPE_DOUBLE, FieldDescriptor.TYPE_FLOAT)
 _checkers: dict[str, object] = {}  # full message name -> check(msg) -> bool, or None (no floats)
 
 
-def _has_floats(desc: Descriptor, seen: frozenset = frozenset()) -> bool:
-    if desc.full_name in seen:
-        return False
-    for fd in desc.fields:
-        if fd.type in _FLOATS:
-            return True
-        if (fd.type == FieldDescriptor.TYPE_MESSAGE and not fd.message_type.GetOptions().map_entry
-                and _has_floats(fd.message_type, seen | {desc.full_name})):
-            return True
-    return False
-
-
 def _checker(desc: Descriptor):
     """``check(msg, limit) -> bool`` for messages of ``desc`` (None: no floats inside)."""
     name = desc.full_name
     if name in _checkers:
         return _checkers[name]
-    if not _has_floats(desc):
-        _checkers[name] = None
-        return None
     _checkers[name] = None  # a recursive type checks its own nesting no deeper
     lines, env = ["def check(m, L):"], {}
     for i, fd in enumerate(desc.fields):
@@ -59,6 +44,8 @@ def _checker(desc: Descriptor):
                 lines += [f"    for s in m.{fd.name}:", f"        if not c{i}(s, L): return False"]
             else:
                 lines += [f"    if m.HasField({fd.name!r}) and not c{i}(m.{fd.name}, L): return False"]
+    if len(lines) == 1:
+        return None  # no floats inside: nothing to check
     lines.append("    return True")
     exec("\n".join(lines), env)  # noqa: S102 - source built above from the message's own descriptor
     _checkers[name] = env["check"]

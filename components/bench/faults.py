@@ -510,12 +510,14 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         if "error" in result or not cfg_path.exists():
             raise RuntimeError(f"the live twin did not start: {result.get('error', 'no config written')}")
         file_cfg = cfgmod.load(cfg_path)
-        gw = _gateway_config(cfg_path)
-        cycle_s = gw["cycle_period_ms"] * 1e-3
-        limit_mm = gw["max_speed_mm_s"] * cycle_s
+        from humanpt.alter_gateway.config import AlterGatewayConfig
+
+        gw = file_cfg.component("alter_gateway", AlterGatewayConfig)
+        cycle_s = gw.cycle_period_ms * 1e-3
+        limit_mm = gw.max_step_mm
         with open_tool_session(file_cfg.runtime) as session:
             mon = Monitor(session, file_cfg.runtime.cell)
-            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw["port"], cycle_s)
+            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw.port, cycle_s)
             try:
                 back, why = wait_loop(mon, cycle_s, start_timeout_s, stop=_dead(thread))
                 if back is None:
@@ -548,12 +550,6 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     if live_fail and not failure:
         failure = f"the live twin reported: {live_fail}"
     return rows, failure
-
-
-def _gateway_config(cfg_path: Path) -> dict:
-    import tomllib
-
-    return tomllib.loads(cfg_path.read_text())["alter_gateway"]
 
 
 def _dead(thread: threading.Thread) -> threading.Event:

@@ -63,10 +63,6 @@ def run_stamp() -> str:
     return time.strftime("%Y%m%d-%H%M%S")
 
 
-def _open_session(cfg: cfgmod.ConfigFile):
-    return open_tool_session(cfg.runtime)
-
-
 # -- router, components, up ------------------------------------------------------------------
 def router(args) -> int:
     import zenoh
@@ -273,7 +269,7 @@ def topics_cmd(args) -> int:
             s[2] = s[2] or now
             s[3] = now
 
-    with _open_session(cfg) as session:
+    with open_tool_session(cfg.runtime) as session:
         sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
         alive = sorted(str(r.ok.key_expr).rsplit("/", 1)[-1]
                        for r in session.liveliness().get(liveliness_key(cell, "*")) if r.ok is not None)
@@ -312,7 +308,7 @@ def echo(args) -> int:
     q: _queue.Queue = _queue.Queue()
     stop = stop_on_signals()
     n = 0
-    with _open_session(cfg) as session:
+    with open_tool_session(cfg.runtime) as session:
         sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes())))
         deadline = time.monotonic() + args.duration if args.duration else None
         while not stop.is_set() and (args.count is None or n < args.count):
@@ -342,7 +338,7 @@ def _parse_assignment(a: str) -> tuple[str, object]:
 def param(args) -> int:
     cfg = load_cfg(args)
     sets = dict(_parse_assignment(a) for a in args.assignments)
-    with _open_session(cfg) as session:
+    with open_tool_session(cfg.runtime) as session:
         replies = list(session.get(params_key(cfg.runtime.cell, args.component),
                                    payload=json.dumps({"set": sets}), timeout=args.timeout))
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]

@@ -21,7 +21,7 @@ import sys
 import threading
 import time
 
-from humanpt.runtime.bus import liveliness_key, params_key
+from humanpt.runtime.bus import liveliness_key, open_tool_session, params_key
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 
@@ -284,22 +284,17 @@ class Console:
     """One Zenoh session (a client of the router) and the console's requests."""
 
     def __init__(self, cfg, timeout_s: float = 5.0, out=sys.stdout):
-        import zenoh
 
-        from humanpt.runtime.bus import zenoh_config
 
         self.cfg = cfg
         self.cell = cfg.runtime.cell
         self.timeout_s = timeout_s
         self.out = out
         self._seq = 0
-        try:
-            self.session = zenoh.open(zenoh_config(cfg.runtime))
-        except zenoh.ZError as e:
-            raise ConsoleError(
-                f"cannot reach the router at {', '.join(cfg.runtime.connect)}: {e} "
-                "(start one with `humanpt router`, or pass --connect ENDPOINT)"
-            ) from e
+        try:  # always a client of the router, never a peer of the running loop
+            self.session = open_tool_session(cfg.runtime)
+        except ConnectionError as e:
+            raise ConsoleError(str(e)) from e
         self._pub = self.session.declare_publisher(topics.TOPICS["console/command"].key(self.cell))
 
     def close(self) -> None:

@@ -30,7 +30,7 @@ def parse_overrides(items: list[str] | None) -> dict[str, dict]:
         key, sep, raw = item.partition("=")
         parts = key.strip().split(".")
         if not sep or len(parts) < 2 or not all(parts):
-            raise SystemExit(f"humanpt demo: --set {item!r}: expected SECTION.KEY=VALUE, e.g. sim_camera.fps=15")
+            raise SystemExit(f"humanpt: --set {item!r}: expected SECTION.KEY=VALUE, e.g. sim_camera.fps=15")
         try:
             value = tomllib.loads(f"v = {raw}")["v"]
         except tomllib.TOMLDecodeError:

@@ -183,7 +183,8 @@ def build_parser() -> argparse.ArgumentParser:
     q = rsub.add_parser("rerecord", help="re-record the reference runs (recordings/) live; show what changed",
                         description="Record every reference run of recordings/runs.toml live on the digital twin "
                         "(humanpt demo) into a temporary directory; check that each new recording replays exactly; "
-                        "print, per run and component, what this build does to the old run's inputs (exact) and "
+                        "print, per run and component, what this build does to the old run's inputs (identical, within "
+                        "tolerance or changed) and "
                         "how the new live run compares with the old (per topic: messages added or removed, the "
                         "largest difference per field); then replace the reference runs and the table in "
                         "recordings/README.md, unless --dry-run. Exit 1 (nothing replaced) when a run fails.")

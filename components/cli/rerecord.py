@@ -286,7 +286,7 @@ def compare_run(
         return rep
 
     out.append(
-        "  this build on the old run's inputs (exact: what the change does to each component):"
+        "  this build on the old run's inputs (identical, within tolerance or CHANGED: what the change does to each component):"
     )
     for name, p in old_files.items():
         try:

@@ -117,7 +117,7 @@ class Inbox:
                 q = self._bus[short] = deque()
             if not q:
                 self._turn.append(short)
-            elif len(q) >= self._bounds.get(short, 64):
+            elif len(q) >= self._bounds[short]:
                 q.popleft()
                 self.dropped[short] = self.dropped.get(short, 0) + 1
             q.append(payload)

@@ -94,7 +94,6 @@ class Lockstep:
         self._order = 0
         self._subs: dict[str, list[int]] = {}  # bus topic -> indices of the cores with a port on it
         # per core index: topic -> message class of its port (decodes what is delivered)
-        self._types: list[dict[str, type]] = [{p.topic: p.type for p in c.ports} for c in cores]
         self._lines: dict[int, list[tuple[SerialLine, int]]] = {}  # src index -> (line, dst index)
         for i, c in enumerate(cores):
             for p in c.ports:
@@ -186,7 +185,7 @@ class Lockstep:
                     self._push(t_ns + period, idx, "tick", b"")
                 data = msg.SerializeToString()
             else:
-                msg = self._types[idx][topic]()
+                msg = core.port(topic).type()
                 msg.ParseFromString(data)
             rec = self.recorders.get(core.name)
             if rec:

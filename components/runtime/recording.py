@@ -35,7 +35,6 @@ from pathlib import Path
 from typing import Any
 
 from google.protobuf.message import DecodeError, Message
-from mcap.exceptions import McapError
 from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -293,10 +292,9 @@ class Recorder:
         o["end_ns"] = now
         o["lost"] = self._lost_n - o["lost"]
         o["resumed_in"] = self.path.name
-        lost = {k: n for k, n in self._lost.items()}
         self.news.append(("record_resumed", (
             f"recording resumed in {self.path.name} after {(now - o['start_ns']) / 1e9:.1f} s: "
-            f"{o['lost']} messages lost in this outage, {self._lost_n} in all ({_by_topic_text(lost)})")))
+            f"{o['lost']} messages lost in this outage, {self._lost_n} in all ({_by_topic_text(self._lost)})")))
         self._save_losses()
 
     def _retry(self) -> bool:
@@ -622,7 +620,7 @@ def _check_file(p: Path) -> None:
 
 MAGIC = b"\x89MCAP0\r\n"
 # Whatever a damaged file makes the MCAP reader raise (struct.error, zstd errors, ...): stop there.
-_DAMAGE = (McapError, EOFError, Exception)
+_DAMAGE = Exception
 
 
 def iter_entries(

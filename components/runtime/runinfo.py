@@ -92,7 +92,7 @@ def file_info(path: str | Path) -> FileInfo:
             t.gaps += 1
             t.missing += seq - prev - 1
             t.largest_gap = max(t.largest_gap, seq - prev - 1)
-        elif seq <= prev and seq < prev - 1:
+        elif seq < prev - 1:
             t.restarts += 1
     info.topics = dict(per)
     return info

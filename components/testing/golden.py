@@ -329,11 +329,9 @@ class TopicDiff:
         head += f", {self.added} added, {self.removed} removed, {self.differing} differ"
         if self.first is not None:
             head += f" (first at #{self.first})"
-        if not self.judged:
-            pass
-        elif self.within_tolerance:
+        if self.judged and self.within_tolerance:
             head += ", all within tolerance"
-        elif self.beyond:
+        elif self.judged and self.beyond:
             head += f", {self.beyond} beyond tolerance (first at #{self.first_beyond})"
         lines = [head]
         shown = (
