@@ -75,10 +75,15 @@ def _prev(cycle: int) -> int:
     return (cycle - 1) & 0xFFFFFFFF
 
 
+def flange_T_desired_mm(c: ControllerConfig) -> np.ndarray:
+    """The desired frame D in the flange frame (4, 4), mm, of a controller configured by
+    ``c``: on the camera's optical axis at dz, parallel to the camera (Section 5)."""
+    return flange_T_desired(transform_from_x(np.asarray(c.flange_T_camera_x)), c.dz_mm)
+
+
 def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
-    """The desired frame D in the flange frame (m): on the camera's optical axis at dz,
-    parallel to the camera (Section 5)."""
-    return _m(flange_T_desired(transform_from_x(np.asarray(c.flange_T_camera_x)), c.dz_mm))
+    """:func:`flange_T_desired_mm` in metres."""
+    return _m(flange_T_desired_mm(c))
 
 
 class ControllerCore(Core):

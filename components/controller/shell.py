@@ -76,7 +76,7 @@ class PathWriter:
     def _save(self, request: dict) -> None:
         name, overwrite = str(request.get("file") or ""), bool(request.get("overwrite", False))
         dest = (self.dir / name).resolve()
-        if not name or dest.parent != self.dir.resolve() or dest.is_symlink() or (self.dir / name).is_symlink():
+        if not name or dest.parent != self.dir.resolve() or (self.dir / name).is_symlink():
             self._report(pb.SEVERITY_WARNING, "save_failed", f"save: {name!r} is not a file name in {self.dir}")
         elif self.current is None:
             self._report(pb.SEVERITY_WARNING, "save_failed", "save: no path recorded yet")

@@ -25,7 +25,7 @@ from humanpt.geometry.transforms import rotvec_from_matrix, transform_from_x
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
-from humanpt.runtime.core import Core, Output, Port
+from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
@@ -132,8 +132,8 @@ class PoseFilterCore(Core):
 
     def _reject_robot_state(self, t_ns: int, why: str, text: str) -> list[Output]:
         """An event for the 1st, 10th, 100th... robot state rejected for ``why``."""
-        n = self._rejected_states[why] = self._rejected_states.get(why, 0) + 1
-        if n != 10 ** (len(str(n)) - 1):
+        n = count_decades(self._rejected_states, why)
+        if n is None:
             return []
         return [self.event(t_ns, pb.SEVERITY_WARNING, "robot_state_rejected", f"{text} ({n} so far)")]
 

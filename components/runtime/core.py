@@ -33,6 +33,13 @@ from humanpt.schemas.convert import header
 Output = tuple[str, Message]
 
 
+def count_decades(counts: dict, key) -> int | None:
+    """Count one more ``key`` in ``counts``; the count when it is 1, 10, 100... (worth a
+    report: a flood of the same fault must not become a flood of events), else None."""
+    n = counts[key] = counts.get(key, 0) + 1
+    return n if n == 10 ** (len(str(n)) - 1) else None
+
+
 def command_operator(msg: pb.Command) -> str:
     """Who sent a console command: the ``operator`` its arguments name ("user@host", what
     ``humanpt console`` sends), or "" when none does."""
@@ -187,8 +194,8 @@ class Core:
     def _bad_input(self, t_ns: int, topic: str, what: str) -> list[Output]:
         """Drop an input with a non-finite or absurd number before it touches any state;
         report the 1st, 10th, 100th... of each topic (a flood must not become one)."""
-        n = self._bad_inputs[topic] = self._bad_inputs.get(topic, 0) + 1
-        if n != 10 ** (len(str(n)) - 1):  # 1, 10, 100, ...
+        n = count_decades(self._bad_inputs, topic)
+        if n is None:
             return []
         return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_input",
                            f"{self.name}: input on {topic} dropped ({n} so far): {what} is not a "

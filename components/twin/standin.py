@@ -26,6 +26,7 @@ from humanpt.geometry import (
     x_from_transform,
 )
 from humanpt.operator.scenario import BUILTIN_SCENARIOS, Scenario, Trajectory, builtin_scenario
+from humanpt.runtime.config import Deg, Mm, Range
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_vector3, pose
@@ -37,7 +38,6 @@ __all__ = [
     "viewing_start_flange",
 ]
 
-from humanpt.runtime.config import Deg, Mm, Range
 
 
 def viewing_start_flange(

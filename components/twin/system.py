@@ -9,8 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.controller.config import ControllerConfig
-from humanpt.controller.core import ControllerCore
-from humanpt.geometry.rig import flange_T_desired
+from humanpt.controller.core import ControllerCore, flange_T_desired_mm
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig
 from humanpt.perception.config import PerceptionConfig
@@ -126,7 +125,3 @@ def tracking_errors(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return evaluate.tracking_errors(world, flange_T_desired_mm(ctl.config))
 
 
-def flange_T_desired_mm(ctl: ControllerConfig) -> np.ndarray:
-    """The desired point D in the flange frame (4, 4), mm, of a controller configured by
-    ``ctl`` (:func:`humanpt.geometry.flange_T_desired`, as the controller computes it)."""
-    return flange_T_desired(transform_from_x(np.asarray(ctl.flange_T_camera_x)), ctl.dz_mm)

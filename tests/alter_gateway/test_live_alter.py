@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import queue
 import signal
-import time
 
 import numpy as np
 import pytest
@@ -19,16 +18,7 @@ from humanpt.runtime.bus import liveliness_key
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 from humanpt.testing.harness import ScriptedControllerConfig, scripted_command
-from tests.conftest import run_cli, write_config, zenoh_client
-
-
-def _wait(pred, timeout_s: float, what: str):
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.02)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+from tests.conftest import run_cli, wait_for, write_config, zenoh_client
 
 
 @pytest.mark.timeout(90)
@@ -78,21 +68,21 @@ def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
             return code in codes
 
         # 1. Scripted commands for 150 cycles: the robot follows.
-        _wait(lambda: len(states) >= 150, 30.0, "150 robot states")
+        wait_for(lambda: len(states) >= 150, 30.0, "150 robot states")
         on_time = sum(st.missed_cycles == 0 for st in states[-100:])
         assert on_time >= 80, [st.missed_cycles for st in states[-100:]]
         assert np.linalg.norm(truths[-1] - truths[0]) > 5.0
         assert states[-1].status.alter_active and not states[-1].status.fault
         # 2. The controller's liveliness token goes: zero corrections, an event.
         token.undeclare()
-        _wait(lambda: seen("alter_gateway:controller_gone"), 3.0, "controller_gone")
+        wait_for(lambda: seen("alter_gateway:controller_gone"), 3.0, "controller_gone")
         n = len(truths) + 3  # (a correction already on its way may still be applied)
-        _wait(lambda: len(truths) >= n + 6, 3.0, "six more cycles of the robot")
+        wait_for(lambda: len(truths) >= n + 6, 3.0, "six more cycles of the robot")
         assert np.ptp(truths[n:], axis=0).max() < 1e-9  # held although commands keep coming
         # 3. The robot end dies: a lost link.
         sim.send_signal(signal.SIGKILL)
         sim.wait(10)
-        _wait(lambda: seen("alter_gateway:link_down"), 3.0, "link_down")
+        wait_for(lambda: seen("alter_gateway:link_down"), 3.0, "link_down")
         for sub in subs:
             sub.undeclare()
     out = procs.stop(gw)

@@ -37,17 +37,9 @@ from tests.alter_gateway.oracle import (
     wire_rotation,
     wire_translation_mm,
 )
+from tests.conftest import wait_for
 
 SCRIPT = ScriptedControllerConfig()
-
-
-def wait_for(pred, timeout_s: float, what: str) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if pred():
-            return
-        time.sleep(0.01)
-    raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
 
 
 class Controller:

@@ -21,8 +21,7 @@ pytestmark = pytest.mark.timeout(150)
 
 
 def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 60.0) -> None:
-    """Wait until each component answers its params query: what the console needs (a shell
-    declares that queryable after its liveliness token, so the token alone is not enough)."""
+    """Wait until each component answers its params query: what the console needs."""
     with zenoh_client(port) as s:
 
         def answering() -> bool:

@@ -242,10 +242,13 @@ def test_a_forged_future_robot_state_does_not_lock_out_the_real_ones():
     truth = T_m(TARGET_X)
     w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
     w.run(0, 500_000_000)
+    reported = []
     for stamp in (500_000_000 + 10**12, 2**63 - 1):  # 1000 s ahead; the largest int64
         forged = pb.RobotState(header=header(stamp), cycle=99, world_T_flange=pose(np.eye(4)))
         outs = core.step(500_000_001, "alter_gateway/robot_state", forged)
-        assert all(t == "pose_filter/events" for t, _ in outs)
+        assert all(t == "pose_filter/events" for t, _ in outs)  # no state from a forged one
+        reported += [m.code for _, m in outs]
+    assert reported == ["robot_state_rejected"]  # the first reported, the second counted
     assert [m.code for t, m in core.step(500_000_001, "alter_gateway/robot_state", forged)] == []  # rate-limited
     n = len(w.states)
     w.run(500_000_000, 1_000_000_000)

@@ -35,8 +35,8 @@ def _wait_alive(session, name: str, timeout: float = 40.0) -> None:
 
 
 def _consumed(session, name: str, timeout: float = 20.0) -> int:
-    """How many inputs the component's shell has consumed (its params queryable). The shell
-    declares that queryable after its liveliness token: wait for the first answer."""
+    """How many inputs the component's shell has consumed (its params queryable; waits for
+    the first answer)."""
     got: list[int] = []
 
     def answered() -> bool:
@@ -145,8 +145,7 @@ def test_live_viz_serves_over_grpc_headless(procs, tmp_path):
     procs.start("router", "--config", str(cfg))
     wait_port(port)
     viz = procs.start("viz", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
-    # The rerun gRPC server listens for viewers. (Viz's liveliness token may come first: the
-    # server starts after the shell; wait for what is needed, the port accepting.)
+    # The rerun gRPC server listens for viewers: wait for what is needed, the port accepting.
     wait_port(grpc, timeout=40.0)
     with zenoh_client(port) as s:
         _wait_alive(s, "viz")
