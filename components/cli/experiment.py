@@ -31,6 +31,8 @@ PAPER = {
                   "MaxE": [3.934, 3.8898, 1.344, 3.181, 2.588, 3.276]},
 }
 TABLE = {"static": 1, "arc": 2, "trapezium": 3}
+STATS = ("ME", "MAE", "MaxE", "SD")
+KINDS = ("paper", "truth")
 
 
 def _fmt_row(label: str, v) -> str:
@@ -103,16 +105,16 @@ def experiment(args) -> int:
             per_seed.append(r)
             print(f"  {m} perception, seed {seed}: {len(r.x)} vectors of {r.which}, {r.twin_s:.1f} s of twin "
                   f"time in {r.wall_s:.1f} s", flush=True)
-        stats = {kind: [evaluate.Stats.of(getattr(r, f"err_{kind}")) for r in per_seed]
-                 for kind in ("paper", "truth")}
+        # (seeds, 6) per statistic and kind, once: the median is reported, min-max kept.
+        stats = {kind: [dict(evaluate.Stats.of(getattr(r, f"err_{kind}")).rows()) for r in per_seed]
+                 for kind in KINDS}
+        per = {kind: {stat: np.array([st[stat] for st in stats[kind]]) for stat in STATS} for kind in KINDS}
         results[m] = {"x": per_seed[0].x, "which": per_seed[0].which,
                       "wall_s": sum(r.wall_s for r in per_seed), "twin_s": sum(r.twin_s for r in per_seed),
-                      "n": [s.n for s in stats["paper"]],
-                      **{kind: {stat: np.median([dict(s.rows())[stat] for s in stats[kind]], axis=0)
-                                for stat in ("ME", "MAE", "MaxE", "SD")} for kind in ("paper", "truth")},
-                      "spread": {kind: {stat: [np.min([dict(s.rows())[stat] for s in stats[kind]], axis=0).tolist(),
-                                               np.max([dict(s.rows())[stat] for s in stats[kind]], axis=0).tolist()]
-                                        for stat in ("ME", "MAE", "MaxE", "SD")} for kind in ("paper", "truth")}}
+                      "n": [evaluate.Stats.of(r.err_paper).n for r in per_seed],
+                      **{kind: {stat: np.median(a, axis=0) for stat, a in per[kind].items()} for kind in KINDS},
+                      "spread": {kind: {stat: [a.min(axis=0).tolist(), a.max(axis=0).tolist()]
+                                        for stat, a in per[kind].items()} for kind in KINDS}}
     how = "against the mean" if args.name == "static" else "against the known path"
     over_seeds = (f"; median over seeds {seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else f"; seed {seeds[0]}")
     lines = [f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
