@@ -44,6 +44,7 @@ def load_cfg(args) -> cfgmod.ConfigFile:
         except ValueError as e:
             raise cfgmod.ConfigError(f"command line: {e}") from e
         cfg = dataclasses.replace(cfg, runtime=rt)
+    cfg.rig()  # a missing or bad rig file fails here, before anything starts
     return cfg
 
 
@@ -91,10 +92,10 @@ def run_component(args) -> int:
     cfg = load_cfg(args)
     name = args.component
     cls = core_class(name)
-    core = cls(cfg.component(name, cls.config_type))
+    core = cls.create(cfg.component(name, cls.config_type), cfg.rig())
     run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
     try:
-        adapters = adapters_for(name, core.config, run_dir=run_dir)
+        adapters = adapters_for(name, core.config, run_dir=run_dir, rig=core.rig)
     except Exception as e:  # a serial port that does not open, say: name it and stop
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
@@ -500,10 +501,13 @@ def runs_list(args) -> int:
 
 def config(args) -> int:
     cfg = cfgmod.load(args.config, config_types())
+    rig = cfg.rig()
+    rig_source = cfg.rig_path() or "nominal design values (no [runtime] rig)"
     if args.check:
-        print(f"{cfg.source}: OK")
+        print(f"{cfg.source}: OK; rig {rig_source}: OK ({rig.methods()})")
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
+    print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
     sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig)}
     for name in sorted(COMPONENTS):
         cls = core_class(name).config_type

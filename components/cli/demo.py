@@ -42,7 +42,7 @@ def parse_overrides(items: list[str] | None) -> dict[str, dict]:
     return out
 
 
-def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: float, mode: str,
+def report(src, cfg, run_dir: Path, wall_s: float, sim_s: float, mode: str,
            stop_ns: int | None = None) -> str:
     """The accuracy table against ground truth (:func:`humanpt.twin.run.accuracy`), and
     where things are. Warnings stamped after ``stop_ns`` (the processes being stopped: e.g.
@@ -50,7 +50,7 @@ def report(src, ctl: ControllerConfig, run_dir: Path, wall_s: float, sim_s: floa
     from humanpt.twin import evaluate
     from humanpt.twin.run import accuracy
 
-    acc = accuracy(src, ctl, stop_ns)
+    acc = accuracy(src, cfg.controller, cfg.sim_camera.flange_T_camera, stop_ns)
     if mode == "live":
         lines = [f"humanpt demo (live): {sim_s:.1f} s of scenario, {wall_s:.1f} s of wall time with start-up", ""]
     else:
@@ -91,7 +91,7 @@ def run_lockstep(args, cfg, run_dir: Path) -> int:
               run_dir=run_dir, progress=_progress)
     print(file=sys.stderr)
     res.write_path(run_dir / "paths" / "path-1.csv")
-    print(report(res.world, cfg.controller, run_dir, res.wall_s, res.twin_s, "lock-step"))
+    print(report(res.world, cfg, run_dir, res.wall_s, res.twin_s, "lock-step"))
     return 0
 
 
@@ -117,7 +117,7 @@ def run_live(args, cfg, run_dir: Path) -> int:
         print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
               file=sys.stderr)
         return 1
-    print(report(RunOutputs(run_dir), res.config.controller, run_dir, res.wall_s, res.duration_s, "live",
+    print(report(RunOutputs(run_dir), res.config, run_dir, res.wall_s, res.duration_s, "live",
                  stop_ns=res.stop_ns))
     return 0
 

@@ -5,18 +5,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from humanpt.geometry.rig import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM
-from humanpt.geometry.transforms import x_from_transform
+from humanpt.geometry.rig import DEFAULT_DZ_MM
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
-
-_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
 
 X6 = tuple[float, float, float, float, float, float]
 
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    """``[controller]``: the visual servo, path recording, driver calibration, playback."""
+    """``[controller]``: the visual servo, path recording, driver calibration, playback.
+    The hand-eye transform and the driver tip come from the rig."""
 
     law: Literal["thetau", "paper"] = live("thetau", "thetau (default) or the paper's Section 5 law")
     dz_mm: Annotated[float, Range(10, 5000, "mm")] = live(DEFAULT_DZ_MM, "distance of the desired point D from the camera (GUI: dz offset)")
@@ -44,11 +42,9 @@ class ControllerConfig:
     start_mode: Literal["track", "hold"] = "track"
     recording_delay_cycles: Annotated[int, Range(1, 100000, "cycles")] = live(10, "a path point every N cycles (GUI: recording delay)")
     record_on_start: bool = False
-    tob_t_tip_mm: tuple[Mm, Mm, Mm] = live((0.0, 0.0, 60.0), "driver tip P in the TOB frame (eq. 9)")
     has_driver: bool = live(False, "record the driver tip P as well as G")
     calibration_samples: Annotated[int, Range(6, 100000, "samples")] = live(60, "N samples for the driver-tip calibration (GUI)")
     calibration_min_spread_deg: Annotated[float, Range(0, 90, "deg")] = 1.5
-    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _FLANGE_T_CAMERA_X
     flange_T_tool_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)
     playback_speed_mm_s: SpeedMmS = live(20.0, "tool speed along a played-back path")
     playback_max_lag_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 2.0

@@ -37,11 +37,10 @@ from humanpt.controller import law
 from humanpt.controller.config import ControllerConfig
 from humanpt.geometry.calibration import calibrate_tip_paper, calibrate_tip_pivot
 from humanpt.geometry.errors import GeometryError
-from humanpt.geometry.rig import flange_T_desired
+from humanpt.geometry.rig import Calibration, Rig, Tip, flange_T_desired
 from humanpt.geometry.transforms import (
     interpolate_transform,
     invert_transform,
-    make_transform,
     rotation_angle_rad,
     transform_from_x,
     x_from_transform,
@@ -75,15 +74,16 @@ def _prev(cycle: int) -> int:
     return (cycle - 1) & 0xFFFFFFFF
 
 
-def flange_T_desired_mm(c: ControllerConfig) -> np.ndarray:
+def flange_T_desired_mm(c: ControllerConfig, rig: Rig | None = None) -> np.ndarray:
     """The desired frame D in the flange frame (4, 4), mm, of a controller configured by
-    ``c``: on the camera's optical axis at dz, parallel to the camera (Section 5)."""
-    return flange_T_desired(transform_from_x(np.asarray(c.flange_T_camera_x)), c.dz_mm)
+    ``c`` on ``rig`` (None: the nominal rig): on the camera's optical axis at dz, parallel
+    to the camera (Section 5), as far as the rig's hand-eye transform knows."""
+    return flange_T_desired((Rig() if rig is None else rig).hand_eye.flange_T_camera_mm(), c.dz_mm)
 
 
-def flange_T_desired_m(c: ControllerConfig) -> np.ndarray:
+def flange_T_desired_m(c: ControllerConfig, rig: Rig | None = None) -> np.ndarray:
     """:func:`flange_T_desired_mm` in metres."""
-    return _m(flange_T_desired_mm(c))
+    return _m(flange_T_desired_mm(c, rig))
 
 
 class ControllerCore(Core):
@@ -97,8 +97,10 @@ class ControllerCore(Core):
         Port("path_file", pb.Event, "_on_path_file"),
     )
 
-    def __init__(self, config: ControllerConfig):
-        super().__init__(config)
+    uses_rig = True  # the hand-eye transform (where D is) and the driver tip
+
+    def __init__(self, config: ControllerConfig, rig: Rig | None = None):
+        super().__init__(config, Rig() if rig is None else rig)
         self.mode = pb.CONTROL_MODE_TRACK if config.start_mode == "track" else pb.CONTROL_MODE_HOLD
         self.robot: tuple[int, int, np.ndarray] | None = None  # (cycle, stamp_ns, world_T_flange m)
         self.start_world_T_flange: np.ndarray | None = None
@@ -116,10 +118,10 @@ class ControllerCore(Core):
         self._derive(config)
 
     def _derive(self, c: ControllerConfig) -> None:
-        self.flange_T_camera = _m(transform_from_x(np.asarray(c.flange_T_camera_x)))
-        self.flange_T_desired = flange_T_desired_m(c)
+        self.flange_T_camera = self.rig.hand_eye.flange_T_camera_m()
+        self.flange_T_desired = flange_T_desired_m(c, self.rig)
         self.flange_T_tool = _m(transform_from_x(np.asarray(c.flange_T_tool_x)))
-        self.tob_T_tip = make_transform(np.eye(3), np.asarray(c.tob_t_tip_mm) * 1e-3)
+        self.tob_T_tip = _m(self.rig.tip.tob_T_tip_mm())
         self.dt = c.cycle_period_ms * 1e-3
         self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
         self.max_step_rad = np.radians(c.max_rotation_deg_s) * self.dt
@@ -317,7 +319,15 @@ class ControllerCore(Core):
                 result["paper_residual_rms_mm"] = round(float(paper.residual_rms_mm), 5)
             except (GeometryError, ValueError) as e:
                 outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "calibration_paper_failed", str(e)))
-        self.config = dataclasses.replace(self.config, tob_t_tip_mm=tuple(float(v) for v in tip), has_driver=True)
+        # The calibrated tip replaces the rig's from now on (a rig file is written by the
+        # shell or `humanpt calibrate tip`; the core only knows its inputs).
+        sigma = float(np.max(np.asarray(res.tob_t_tip_sigma_mm, dtype=float)))
+        stamp = np.datetime64(int(t_ns), "ns").astype("datetime64[s]")
+        self.rig = dataclasses.replace(self.rig, tip=Tip(
+            tob_t_tip_mm=tuple(float(v) for v in tip),
+            calibration=Calibration(method="pivot", date=f"{stamp}Z", note=f"{len(tobs)} samples, residual RMS "
+                                    f"{float(res.residual_rms_mm):.3f} mm", sigma={"tob_t_tip_mm": round(sigma, 6)})))
+        self.config = dataclasses.replace(self.config, has_driver=True)
         self._derive(self.config)
         outs.append(self.event(t_ns, pb.SEVERITY_INFO, "calibration_done", json.dumps(result)))
         return outs

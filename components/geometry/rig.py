@@ -13,11 +13,25 @@ paper's experiments), with its frame parallel to the camera frame, so at converg
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+from typing import Annotated
+
 import numpy as np
 
+from humanpt.runtime.config import Deg, Mm, Range
+
+from .config import PsvsConfig
+from .psvs import PsvsParams
+from .target import TargetModel
 from .transforms import compose, invert_transform, make_transform
 
 __all__ = [
+    "RIG_VERSION",
+    "Calibration",
+    "HandEye",
+    "TargetGeometry",
+    "Tip",
+    "Rig",
     "DEFAULT_FLANGE_T_CAMERA_MM",
     "DEFAULT_DZ_MM",
     "camera_T_desired",
@@ -64,3 +78,125 @@ def viewing_world_T_flange(
         invert_transform(camera_T_desired(dz_mm)),
         invert_transform(np.asarray(flange_T_camera, dtype=float)),
     )
+
+
+# --------------------------------------------------------------------------- the rig file
+
+RIG_VERSION = 1
+"""The rig file format this version reads and writes (``version = 1``)."""
+
+_SIGMA = Annotated[float, Range(0.0, 1e6, "the field's unit")]
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """How one part of the rig was obtained: ``method`` (``"nominal"`` for design values,
+    else the tool: ``"zhang"``, ``"ax=yb"``, ``"pivot"``...), ``date`` (ISO 8601, empty for
+    design values), ``note`` (free text), and ``sigma``: the 1-sigma uncertainty of each
+    field of the part that was estimated, in that field's unit (e.g. ``{"a_u" = 0.4}`` px,
+    ``{"flange_T_camera_x" = 0.1}`` mm/deg for each element)."""
+
+    method: str = "nominal"
+    date: str = ""
+    note: str = ""
+    sigma: dict[str, _SIGMA] = field(default_factory=dict)
+
+
+def _x6(T: np.ndarray) -> tuple[float, ...]:
+    from .transforms import x_from_transform
+
+    return tuple(float(v) for v in x_from_transform(T))
+
+
+@dataclass(frozen=True)
+class HandEye:
+    """``[hand_eye]``: the camera frame in the flange frame, ``F T_C`` of the paper (Section
+    4), as X = (x, y, z mm, yaw, pitch, roll deg, Z-Y-X)."""
+
+    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = field(
+        default_factory=lambda: _x6(DEFAULT_FLANGE_T_CAMERA_MM))
+    calibration: Calibration = field(default_factory=Calibration)
+
+    def flange_T_camera_mm(self) -> np.ndarray:
+        """(4, 4), translation in mm."""
+        from .transforms import transform_from_x
+
+        return transform_from_x(np.asarray(self.flange_T_camera_x, dtype=float))
+
+    def flange_T_camera_m(self) -> np.ndarray:
+        """(4, 4), translation in metres (what the messages use)."""
+        T = self.flange_T_camera_mm()
+        T[:3, 3] *= 1e-3
+        return T
+
+
+@dataclass(frozen=True)
+class TargetGeometry:
+    """``[target]``: the TOB's three sources, an isosceles triangle (Fig. 3c): legs AB = AC =
+    ``leg_mm``, base BC = ``base_mm``, each source a disc of ``source_diameter_mm``;
+    ``side_tolerance_mm``: how far a measured side may differ and still count as the
+    target's."""
+
+    leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
+    base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
+    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
+    side_tolerance_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 3.0
+    calibration: Calibration = field(default_factory=Calibration)
+
+    def __post_init__(self) -> None:
+        self.model()  # the triangle must exist (2 leg > base)
+
+    def model(self) -> TargetModel:
+        return TargetModel.isosceles(self.leg_mm, self.base_mm, self.source_diameter_mm, None,
+                                     self.side_tolerance_mm)
+
+
+@dataclass(frozen=True)
+class Tip:
+    """``[tip]``: the driver's endpoint P in the TOB frame, ``G t_P`` of eq. (9) (mm)."""
+
+    tob_t_tip_mm: tuple[Mm, Mm, Mm] = (0.0, 0.0, 60.0)
+    calibration: Calibration = field(default_factory=Calibration)
+
+    def tob_T_tip_mm(self) -> np.ndarray:
+        return make_transform(np.eye(3), np.asarray(self.tob_t_tip_mm, dtype=float))
+
+
+@dataclass(frozen=True)
+class Rig:
+    """Everything the pipeline believes about the hardware (DESIGN.md, "Rig and world"):
+    ``psvs`` (camera intrinsics, distortion, each virtual camera, baseline, m, l:
+    :class:`humanpt.geometry.config.PsvsConfig`) with ``psvs_calibration``, ``hand_eye``,
+    ``target`` and ``tip``, each with how it was obtained and its uncertainty.
+
+    Perception, the pose filter, the controller and viz read it; nothing else in the
+    configuration holds these values. The twin's truth (its world) is separate and may
+    differ. :mod:`humanpt.runtime.rigfile` reads and writes it as TOML."""
+
+    version: int = RIG_VERSION
+    name: str = "nominal"
+    psvs: PsvsConfig = field(default_factory=PsvsConfig)
+    psvs_calibration: Calibration = field(default_factory=Calibration)
+    hand_eye: HandEye = field(default_factory=HandEye)
+    target: TargetGeometry = field(default_factory=TargetGeometry)
+    tip: Tip = field(default_factory=Tip)
+
+    def __post_init__(self) -> None:
+        if self.version != RIG_VERSION:
+            raise ValueError(f"version: this humanpt reads rig version {RIG_VERSION}, the file says "
+                             f"{self.version!r}")
+
+    def params(self) -> PsvsParams:
+        """The PSVS as the geometry library's :class:`PsvsParams`."""
+        return self.psvs.params()
+
+    def target_model(self) -> TargetModel:
+        return self.target.model()
+
+    def methods(self) -> str:
+        """One line: how each part was obtained, e.g. ``psvs nominal, hand_eye ax=yb (2026-11-23)``."""
+        parts = []
+        for name, cal in (("psvs", self.psvs_calibration), ("hand_eye", self.hand_eye.calibration),
+                          ("target", self.target.calibration), ("tip", self.tip.calibration)):
+            parts.append(f"{name} {cal.method}" + (f" ({cal.date})" if cal.date else ""))
+        return ", ".join(parts)

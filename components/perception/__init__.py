@@ -7,7 +7,7 @@ subpixel centroids, shape checks, scored correspondence). See ``README.md``.
 """
 
 from .blobs import Blobs, Region, find_shapes
-from .config import METHODS, PerceptionConfig, PsvsConfig
+from .config import METHODS, PerceptionConfig
 from .core import PerceptionCore, measurement_message
 from .correspondence import (
     FULL,
@@ -37,7 +37,6 @@ __all__ = [
     "PerceptionConfig",
     "PerceptionCore",
     "Prepared",
-    "PsvsConfig",
     "Region",
     "Result",
     "background_and_noise",

@@ -11,18 +11,15 @@ integers). Lengths are mm.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from humanpt.geometry import TRIANGULATION_METHODS, PsvsParams, TargetModel, psvs_m_l_mm
-from humanpt.geometry.config import PsvsConfig
+from humanpt.geometry import TRIANGULATION_METHODS
 from humanpt.runtime.config import Range, live
 
-__all__ = ["PerceptionConfig", "PsvsConfig", "METHODS"]
+__all__ = ["PerceptionConfig", "METHODS"]
 
 METHODS = ("weighted", "paper")
-
-_M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
 
 
 def _check(owner: str, name: str, value, *, positive=False, nonneg=False, integer=False):
@@ -47,8 +44,8 @@ class PerceptionConfig:
     in px whose pixels are ignored), ``track_roi`` (search a region around the last
     measurement first).
 
-    Geometry: ``psvs``, the target (isosceles, ``target_leg_mm``, ``target_base_mm``,
-    ``source_diameter_mm``, ``side_tolerance_mm``), the working depth range
+    The PSVS and the target come from the rig (``[runtime] rig``,
+    :class:`humanpt.geometry.rig.Rig`), not from here.  The working depth range
     ``min_depth_mm`` .. ``max_depth_mm`` (z of the sources in the camera frame) and the
     ``triangulation`` of the weighted method (the paper method always uses eq. (4)).
     """
@@ -61,12 +58,7 @@ class PerceptionConfig:
     )
     track_roi: bool = live(True, "search around the last measurement first")
     roi_margin_px: Annotated[int, Range(0, 20000, "px")] = 40
-    # geometry
-    psvs: PsvsConfig = field(default_factory=PsvsConfig)
-    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
-    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
-    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
-    side_tolerance_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 3.0
+    # geometry (the PSVS and the target: the rig)
     min_depth_mm: Annotated[float, Range(1, 1e5, "mm")] = 200.0
     max_depth_mm: Annotated[float, Range(1, 1e5, "mm")] = 2000.0
     triangulation: Literal["eq4", "eq2", "lsq"] = "eq4"
@@ -112,12 +104,6 @@ class PerceptionConfig:
                     f"{own}.mask: rectangle {list(rect)} has no area (width, height > 0)"
                 )
         _check(own, "roi_margin_px", self.roi_margin_px, nonneg=True, integer=True)
-        if not isinstance(self.psvs, PsvsConfig):
-            raise ValueError(f"{own}.psvs must be a PsvsConfig, got {type(self.psvs).__name__}")
-        try:
-            self.target_model()
-        except ValueError as e:
-            raise ValueError(f"{own}: target: {e}") from None
         _check(own, "min_depth_mm", self.min_depth_mm, positive=True)
         _check(own, "max_depth_mm", self.max_depth_mm, positive=True)
         if not self.min_depth_mm < self.max_depth_mm:
@@ -160,16 +146,3 @@ class PerceptionConfig:
         _check(own, "max_saturated_fraction", self.max_saturated_fraction, positive=True)
         if self.max_saturated_fraction > 1:
             raise ValueError(f"{own}.max_saturated_fraction must be in (0, 1]")
-
-    # -- derived ---------------------------------------------------------------------------
-    def params(self) -> PsvsParams:
-        return self.psvs.params()
-
-    def target_model(self) -> TargetModel:
-        return TargetModel.isosceles(
-            self.target_leg_mm,
-            self.target_base_mm,
-            self.source_diameter_mm,
-            None,
-            self.side_tolerance_mm,
-        )

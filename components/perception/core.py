@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
+from humanpt.geometry.rig import Rig
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import image_stamp_ns, pose
@@ -80,9 +81,11 @@ class PerceptionCore(Core):
     # Latest wins: a stale image is worth nothing once a newer one waits.
     ports = (Port("camera/image", RawImage, "_on_image", queue=1),)
 
-    def __init__(self, config: PerceptionConfig):
-        super().__init__(config)
-        self.perception = Perception(config)
+    uses_rig = True
+
+    def __init__(self, config: PerceptionConfig, rig: Rig | None = None):
+        super().__init__(config, Rig() if rig is None else rig)
+        self.perception = Perception(config, self.rig)
         self._anchor: tuple[np.ndarray, np.ndarray] | None = None  # last FULL centres, sizes
         self._bad_code: str | None = None
         self._bad_count = 0
@@ -96,7 +99,7 @@ class PerceptionCore(Core):
         }
 
     def on_config_changed(self, old: PerceptionConfig, new: PerceptionConfig) -> None:
-        self.perception = Perception(new)
+        self.perception = Perception(new, self.rig)
         self._anchor = None  # search the whole image with the new settings
 
     # -- input -------------------------------------------------------------------------

@@ -1,7 +1,8 @@
 """One complex image -> blobs -> pairs, points, target frame, for either method.
 
-:class:`Perception` holds what follows from a :class:`PerceptionConfig` (PSVS parameters,
-target model, mask image, correspondence settings) and measures prepared images; the core
+:class:`Perception` holds what follows from a :class:`PerceptionConfig` and the rig
+(:class:`humanpt.geometry.rig.Rig`: PSVS parameters, target model; plus the mask image and
+the correspondence settings) and measures prepared images; the core
 (:mod:`humanpt.perception.core`) adds the message plumbing, the region of interest and
 the events. Benchmarks and tests use it directly.
 """
@@ -11,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from humanpt.geometry.rig import Rig
 
 from .blobs import Blobs, Region, clip_region, full_region
 from .config import PerceptionConfig
@@ -34,10 +37,11 @@ class Result:
 class Perception:
     """The measuring part of the component, for one configuration (immutable)."""
 
-    def __init__(self, config: PerceptionConfig):
+    def __init__(self, config: PerceptionConfig, rig: Rig | None = None):
         self.config = config
-        self.params = config.params()
-        self.model = config.target_model()
+        self.rig = Rig() if rig is None else rig
+        self.params = self.rig.params()
+        self.model = self.rig.target_model()
         self.size_px = self.params.image_size_px
         self.keep = mask_array(config.mask, self.size_px)
         self.settings = MatchSettings(

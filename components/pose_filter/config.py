@@ -5,19 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-from humanpt.geometry.rig import DEFAULT_FLANGE_T_CAMERA_MM
-from humanpt.geometry.transforms import x_from_transform
-from humanpt.runtime.config import Deg, Mm, Range, live
-
-_DEFAULT_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
+from humanpt.runtime.config import Range, live
 
 
 @dataclass(frozen=True)
 class PoseFilterConfig:
-    """``[pose_filter]``: world_T_tob from measurements and robot states, Kalman-filtered."""
+    """``[pose_filter]``: world_T_tob from measurements and robot states, Kalman-filtered.
+    The hand-eye transform and the target's triangle come from the rig."""
 
-    # Hand-eye F_T_C as X = (x, y, z mm, psi, theta, phi deg).
-    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _DEFAULT_FLANGE_T_CAMERA_X
     # Measurement noise of a full pose and of a position-only measurement.
     sigma_position_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.3, "1-sigma noise of a measured position")
     sigma_rotation_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.8, "1-sigma noise of a measured orientation")
@@ -54,17 +49,13 @@ class PoseFilterConfig:
     # A robot state stamped this far from the time it reaches the filter (the receiver's
     # clock) is not believed: a forged future stamp would otherwise lock the buffer.
     max_stamp_skew_ms: Annotated[float, Range(1, 60000, "ms")] = 1000.0
-    # Target model used to place G from one or two visible sources (mm).
-    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
-    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
 
     def __post_init__(self):
         for name in ("sigma_position_mm", "sigma_rotation_deg", "sigma_position_only_mm", "accel_sigma_mm_s2",
                      "ang_accel_sigma_deg_s2", "gate_chi2_pose", "gate_chi2_position", "lost_after_ms",
                      "still_mm_s", "still_deg_s", "still_after_ms", "still_release_mm", "still_release_deg",
                      "still_drift_mm", "still_drift_deg",
-                     "still_q_scale",
-                     "target_leg_mm", "target_base_mm"):
+                     "still_q_scale"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.still_q_scale > 1:

@@ -20,8 +20,8 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.geometry.target import TargetModel
-from humanpt.geometry.transforms import rotvec_from_matrix, transform_from_x
+from humanpt.geometry.rig import Rig
+from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.kalman import PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
@@ -41,8 +41,10 @@ class PoseFilterCore(Core):
         Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
     )
 
-    def __init__(self, config: PoseFilterConfig):
-        super().__init__(config)
+    uses_rig = True  # the hand-eye transform and the target's triangle
+
+    def __init__(self, config: PoseFilterConfig, rig: Rig | None = None):
+        super().__init__(config, Rig() if rig is None else rig)
         self.robot = RobotPoseBuffer(config.robot_history)
         self._backwards = 0  # robot states in a row stamped before the latest one
         self._rejected_states: dict[str, int] = {}
@@ -67,16 +69,14 @@ class PoseFilterCore(Core):
         self._offsets: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=STILL_DRIFT_WINDOW)
 
     def _build(self, c: PoseFilterConfig) -> None:
-        T = transform_from_x(np.asarray(c.flange_T_camera_x, dtype=float))
-        T[:3, 3] *= 1e-3
-        self.flange_T_camera_m = T
+        self.flange_T_camera_m = self.rig.hand_eye.flange_T_camera_m()
         self._accel = c.accel_sigma_mm_s2 * 1e-3
         self._ang_accel = np.radians(c.ang_accel_sigma_deg_s2)
         self.R_pose = np.diag([(c.sigma_position_mm * 1e-3) ** 2] * 3 + [np.radians(c.sigma_rotation_deg) ** 2] * 3)
         self.R_position = np.eye(3) * (c.sigma_position_only_mm * 1e-3) ** 2
         # Zero-velocity pseudo-measurement noise: a still target's speed is ~0 to this.
         self.R_still = np.diag([(0.01e-3) ** 2] * 3 + [np.radians(0.01) ** 2] * 3)
-        self.tob_p_sources_m = TargetModel.isosceles(c.target_leg_mm, c.target_base_mm).source_positions_mm * 1e-3
+        self.tob_p_sources_m = self.rig.target_model().source_positions_mm * 1e-3
 
     def on_config_changed(self, old, new) -> None:
         self._build(new)

@@ -46,6 +46,11 @@ def liveliness_key(cell: str, component: str) -> str:
     return f"{KEY_PREFIX}/{cell}/{component}"
 
 
+def rig_key(cell: str, component: str) -> str:
+    """The rig queryable of a running component (its rig as JSON)."""
+    return f"{KEY_PREFIX}/{cell}/{component}/rig"
+
+
 def params_key(cell: str, component: str) -> str:
     """The parameter queryable of a running component."""
     return f"{KEY_PREFIX}/{cell}/{component}/params"

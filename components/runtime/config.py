@@ -221,6 +221,53 @@ def to_table(obj: Any) -> dict[str, Any]:
     return plain(obj)
 
 
+def _toml_value(v: Any, where: str) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and not math.isfinite(v):
+        raise ConfigError(f"{where}: {v!r} cannot be written (values are finite)")
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)  # a JSON string is a valid TOML basic string
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x, where) for x in v) + "]"
+    if isinstance(v, Mapping):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(x, where)}" for k, x in v.items()
+                               if x is not None) + "}"
+    raise ConfigError(f"{where}: cannot write a {type(v).__name__} to TOML")
+
+
+def _toml_key(k: str) -> str:
+    return k if k and all(c.isalnum() or c in "_-" for c in k) else json.dumps(k)
+
+
+def dumps_toml(doc: Mapping[str, Any], prefix: str = "") -> str:
+    """A document of plain values (numbers, strings, bools, lists, nested tables) as TOML
+    that a person can read: scalars and lists on one line each, nested tables as
+    ``[a.b]`` sections (an empty or all-scalar table of one level deeper inline when it is
+    a small leaf, e.g. ``sigma = {a_u = 0.4}``).  None values are left out (TOML has no null).
+    ``tomllib.loads(dumps_toml(d))`` gives ``d`` back (tuples as lists)."""
+    lines: list[str] = []
+    sub: list[tuple[str, Mapping]] = []
+    for k, v in doc.items():
+        if v is None:
+            continue
+        if isinstance(v, Mapping) and any(isinstance(x, Mapping) for x in v.values()):
+            sub.append((k, v))
+        elif isinstance(v, Mapping) and prefix and len(v) <= 4:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v, prefix + k)}")
+        elif isinstance(v, Mapping):
+            sub.append((k, v))
+        else:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v, prefix + k)}")
+    out = "\n".join(lines) + ("\n" if lines else "")
+    for k, v in sub:
+        name = f"{prefix}{_toml_key(k)}"
+        out += f"\n[{name}]\n" + dumps_toml(v, name + ".")
+    return out
+
+
 def replace_live(obj: Any, key: str, value_json: str, hard: Any = None) -> Any:
     """A copy of ``obj`` with live field ``key`` set from JSON (validated).
 
@@ -267,6 +314,10 @@ class RuntimeConfig:
     # Record on a writer thread of its own: off the core's path (lower latency), but a
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False
+    # The rig file: what the pipeline believes about the hardware (intrinsics, mirrors,
+    # hand-eye, target, tip), written by `humanpt calibrate` or `humanpt rig init`.  A
+    # relative path is relative to this config file.  Empty: the nominal design rig.
+    rig: str = ""
 
     def __post_init__(self):
         if not self.cell or "/" in self.cell or "*" in self.cell:
@@ -285,6 +336,25 @@ class ConfigFile:
     runtime: RuntimeConfig
     sections: dict[str, dict[str, Any]]
     profiles: dict[str, tuple[str, ...]]
+
+    def rig_path(self) -> Path | None:
+        """The rig file ``[runtime] rig`` names (relative to the config file), or None."""
+        if not self.runtime.rig:
+            return None
+        p = Path(self.runtime.rig).expanduser()
+        if not p.is_absolute() and self.source not in ("<defaults>", ""):
+            p = Path(self.source).resolve().parent / p
+        return p
+
+    def rig(self) -> Any:
+        """The validated rig (:class:`humanpt.geometry.rig.Rig`): the file ``[runtime] rig``
+        names, or the nominal design rig when it names none.  ConfigError for a missing or
+        bad file, naming the field."""
+        from humanpt.geometry.rig import Rig
+        from humanpt.runtime.rigfile import load_rig
+
+        p = self.rig_path()
+        return Rig() if p is None else load_rig(p)
 
     def component(self, name: str, cls: type) -> Any:
         """The validated config of component ``name`` (defaults when its section is absent)."""

@@ -145,6 +145,10 @@ class Core:
     # Components whose liveliness this core is told about (``liveliness`` inputs).
     watch: ClassVar[tuple[str, ...]] = ()
     _port_of: ClassVar[dict[str, Port]] = {PARAM_PORT.topic: PARAM_PORT}
+    # Whether the core reads the rig (what the pipeline believes about the hardware,
+    # :class:`humanpt.geometry.rig.Rig`): it is then built as ``cls(config, rig=...)``
+    # (:meth:`create`) and defaults to the nominal rig when given none.
+    uses_rig: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -154,10 +158,13 @@ class Core:
         _check_ports(cls)
         cls._port_of = {p.topic: p for p in cls.ports}
 
-    def __init__(self, config: Any):
+    def __init__(self, config: Any, rig: Any = None):
         if not isinstance(config, self.config_type):
             raise TypeError(f"{type(self).__name__} needs a {self.config_type.__name__}, got {type(config).__name__}")
         self.config = config
+        # The rig the core was started with (None for a core that needs none and was given
+        # none); every shell records it, and replay rebuilds the core with it.
+        self.rig = rig
         # The config the core started with: the hard limit of its ``stricter`` parameters.
         self.start_config = config
         self._seq: dict[str, int] = defaultdict(int)
@@ -167,6 +174,30 @@ class Core:
             p.topic: self._bind(p) for p in self.ports}
 
     # -- what shells call -------------------------------------------------------------
+    @classmethod
+    def create(cls, config: Any, rig: Any = None) -> Core:
+        """A core of this class from its config and the cell's rig (recorded by the shells
+        with every core; only a core that ``uses_rig`` reads it)."""
+        if cls.uses_rig:
+            return cls(config, rig=rig)
+        core = cls(config)
+        core.rig = rig
+        return core
+
+    def recording_metadata(self, shell: str, **extra: Any) -> dict[str, Any]:
+        """What every shell writes into this core's recording: the component, its core
+        class and config, the rig (JSON) and the software version, plus ``extra``."""
+        import humanpt
+        from humanpt.runtime.config import to_table as _table
+
+        meta: dict[str, Any] = {"component": self.name, "core": f"{type(self).__module__}:{type(self).__qualname__}",
+                                "config": _table(self.config), "version": humanpt.__version__, "shell": shell}
+        if self.rig is not None:
+            from humanpt.runtime.rigfile import rig_to_json
+
+            meta["rig"] = rig_to_json(self.rig)
+        return {**meta, **extra}
+
     def tick_period_ns(self) -> int | None:
         """Period of the ``tick`` input this core wants, or None for no ticks."""
         return None

@@ -40,12 +40,10 @@ from typing import Protocol
 import zenoh
 from google.protobuf.message import DecodeError
 
-import humanpt
-from humanpt.runtime.bus import liveliness_key, params_key, zenoh_config
-from humanpt.runtime.config import RuntimeConfig, to_table
+from humanpt.runtime.bus import liveliness_key, params_key, rig_key, zenoh_config
+from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import IN, OUT, Recorder
-from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import header
@@ -167,6 +165,12 @@ class LiveShell:
         def cb(sample: zenoh.Sample) -> None:
             self._q.put_bus(short, sample.payload.to_bytes())
         return cb
+
+    def _on_rig_query(self, query: zenoh.Query) -> None:
+        """Serve the rig this component runs with (JSON; ``humanpt rig show``)."""
+        from humanpt.runtime.rigfile import rig_to_json
+
+        query.reply(query.key_expr, rig_to_json(self.core.rig))
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
@@ -323,9 +327,8 @@ class LiveShell:
         if self.run_dir is not None and self.rt.record:
             self.recorder = Recorder(
                 self.run_dir / f"{name}.mcap",
-                {"component": name, "core": class_path(type(self.core)), "config": to_table(self.core.config),
-                 "version": humanpt.__version__, "start_time_ns": time.time_ns(), "shell": "live",
-                 "cell": self.cell, "host": socket.gethostname(), "pid": os.getpid()},
+                self.core.recording_metadata("live", start_time_ns=time.time_ns(), cell=self.cell,
+                                             host=socket.gethostname(), pid=os.getpid()),
                 chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s,
                 background=self.rt.record_thread)
             log.info("%s: recording to %s", name, self.recorder.path)
@@ -341,6 +344,8 @@ class LiveShell:
                 for a in self.adapters:
                     a.start(self._put_local)
                 qbl = session.declare_queryable(params_key(self.cell, name), self._on_query)
+                rig_qbl = (None if self.core.rig is None else
+                           session.declare_queryable(rig_key(self.cell, name), self._on_rig_query))
                 ticker = threading.Thread(target=self._tick_loop, name=f"{name}-tick", daemon=True)
                 ticker.start()
                 # Last: the liveliness token means "ready" (adapters, e.g. viz's server, and the
@@ -358,6 +363,8 @@ class LiveShell:
                 ticker.join(timeout=1.0)
                 self._sync_drops()
                 qbl.undeclare()
+                if rig_qbl is not None:
+                    rig_qbl.undeclare()
                 token.undeclare()
                 for w in watchers:
                     w.undeclare()

@@ -20,11 +20,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import humanpt
-from humanpt.runtime.config import to_table
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import IN, OUT, Recorder
-from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -106,15 +103,7 @@ class Lockstep:
             for c in cores:
                 self.recorders[c.name] = Recorder(
                     Path(run_dir) / f"{c.name}.mcap",
-                    {
-                        "component": c.name,
-                        "core": class_path(type(c)),
-                        "config": to_table(c.config),
-                        "version": humanpt.__version__,
-                        "start_time_ns": start_ns,
-                        "shell": "lockstep",
-                        "wall_start_time_ns": time.time_ns(),
-                    },
+                    c.recording_metadata("lockstep", start_time_ns=start_ns, wall_start_time_ns=time.time_ns()),
                     chunk_size=chunk_size,
                     background=True,
                 )

@@ -70,18 +70,18 @@ def core_class(name: str) -> type[Core]:
     return import_path(COMPONENTS[name])
 
 
-def adapters_for(name: str, config, run_dir=None) -> list:
+def adapters_for(name: str, config, run_dir=None, rig=None) -> list:
     """The live-shell adapters of component ``name`` (empty for most components).
 
     A factory that takes a ``run_dir`` keyword gets the run directory (to write files
-    beside the recordings)."""
+    beside the recordings), one that takes ``rig`` the cell's rig."""
     path = ADAPTERS.get(name)
     if not path:
         return []
     factory = import_path(path)
-    if "run_dir" in inspect.signature(factory).parameters:
-        return factory(config, run_dir=run_dir)
-    return factory(config)
+    params = inspect.signature(factory).parameters
+    kwargs = {k: v for k, v in (("run_dir", run_dir), ("rig", rig)) if k in params}
+    return factory(config, **kwargs)
 
 
 def config_types() -> dict[str, type]:

@@ -45,9 +45,31 @@ def build_core(rec: Recording) -> Core:
         raise RecordingError(
             f"{rec.path}: the recording names core class {path!r}, which is not a component of "
             f"this version ({', '.join(sorted(COMPONENTS))}); nothing named by a recording is imported")
-    cls = core_class(known[path])
+    return _rebuild(core_class(known[path]), rec)
+
+
+def recorded_rig(rec: Recording):
+    """The rig a recording was made with (:class:`humanpt.geometry.rig.Rig`), or None."""
+    from humanpt.runtime.config import ConfigError
+    from humanpt.runtime.rigfile import RIG_METADATA, rig_from_json
+
+    text = rec.metadata.get(RIG_METADATA)
+    if text is None:
+        return None
+    try:
+        return rig_from_json(text, f"{rec.path} (recorded rig)")
+    except ConfigError as e:
+        raise RecordingError(str(e)) from None
+
+
+def _rebuild(cls: type[Core], rec: Recording) -> Core:
+    """A fresh core of ``cls`` from the recording's config and rig."""
     cfg = build(cls.config_type, rec.config(), source=f"{rec.path} (recorded config)", section=rec.component)
-    return cls(cfg)
+    rig = recorded_rig(rec)
+    if cls.uses_rig and rig is None:
+        raise RecordingError(f"{rec.path}: recorded without a rig (an older humanpt kept the calibration "
+                             f"in the components' configs); record it again with this version")
+    return cls.create(cfg, rig)
 
 
 def factory_with(*classes: type[Core]) -> Callable[[Recording], Core]:
@@ -59,8 +81,7 @@ def factory_with(*classes: type[Core]) -> Callable[[Recording], Core]:
         cls = extra.get(rec.metadata.get("core", ""))
         if cls is None:
             return build_core(rec)
-        return cls(build(cls.config_type, rec.config(), source=f"{rec.path} (recorded config)",
-                         section=rec.component))
+        return _rebuild(cls, rec)
 
     return factory
 

@@ -25,11 +25,8 @@ from typing import Literal
 
 import numpy as np
 
-import humanpt
-from humanpt.runtime.config import to_table
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.runtime.recording import IN, OUT, Recorder
-from humanpt.runtime.registry import class_path
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 
@@ -127,16 +124,8 @@ class ThreadShell:
         if run_dir is not None:
             self.recorder = Recorder(
                 Path(run_dir) / f"{core.name}.mcap",
-                {
-                    "component": core.name,
-                    "core": class_path(type(core)),
-                    "config": to_table(core.config),
-                    "version": humanpt.__version__,
-                    "start_time_ns": time.time_ns(),
-                    "shell": "thread",
-                    "host": socket.gethostname(),
-                    "pid": os.getpid(),
-                },
+                core.recording_metadata("thread", start_time_ns=time.time_ns(), host=socket.gethostname(),
+                                        pid=os.getpid()),
             )
 
     def put(self, topic: str, msg) -> None:

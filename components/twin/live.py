@@ -6,7 +6,6 @@ processes over Zenoh, each recording its MCAP in the run directory (``humanpt de
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import signal
 import subprocess
@@ -23,6 +22,7 @@ from humanpt.geometry.transforms import invert_transform, transform_from_x, x_fr
 from humanpt.runtime import config as cfgmod
 from humanpt.runtime.bus import free_tcp_port, liveliness_key, open_tool_session
 from humanpt.runtime.config import to_table
+from humanpt.runtime.rigfile import write_rig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -35,37 +35,9 @@ __all__ = ["LIVE_COMPONENTS", "LiveResult", "live_sections", "run_live", "write_
 LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, (int, float)):
-        return repr(v)
-    if isinstance(v, str):
-        return json.dumps(v)
-    if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {v!r} to TOML")
-
-
 def write_toml(path: Path, sections: dict[str, dict]) -> None:
-    """Write {section: {key: value}} as the run's TOML config (nested tables as
-    ``[section.key]``; lists of tables and None values are left out)."""
-    lines = ["# written by humanpt demo: the configuration of this run", ""]
-    for name, table in sections.items():
-        lines.append(f"[{name}]")
-        for k, v in table.items():
-            if v is None or (isinstance(v, (list, tuple)) and v and isinstance(v[0], dict)):
-                continue
-            if isinstance(v, dict):
-                continue
-            lines.append(f"{k} = {_toml_value(v)}")
-        lines.append("")
-        for k, v in table.items():
-            if isinstance(v, dict):  # a nested config table, e.g. [sim_camera.psvs]
-                lines.append(f"[{name}.{k}]")
-                lines += [f"{kk} = {_toml_value(vv)}" for kk, vv in v.items() if vv is not None]
-                lines.append("")
-    path.write_text("\n".join(lines))
+    """Write {section: {key: value}} (nested tables too) as the run's TOML config."""
+    path.write_text("# written by humanpt demo: the configuration of this run\n\n" + cfgmod.dumps_toml(sections))
 
 
 def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
@@ -73,8 +45,8 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
     simulated Puma is mounted so that it starts where the camera sees the target, behind a
     pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
-    get only the ``overrides`` keys (so the defaults stay theirs), sim_camera its ``psvs``
-    only when overridden."""
+    get only the ``overrides`` keys (so the defaults stay theirs).  What the pipeline
+    believes is ``cfg.rig``, written by :func:`run_live` as ``rig.toml`` beside the config."""
     over = overrides or {}
     op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
@@ -91,12 +63,11 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     op = dataclasses.replace(op, start_delay_s=3.0)
     sections = {
         "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
-                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer"},
+                    "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer",
+                    "rig": "rig.toml"},
         "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
     }
-    if "psvs" not in over.get("sim_camera", {}):
-        sections["sim_camera"].pop("psvs", None)
     for name in ("perception", "pose_filter"):
         if over.get(name):
             sections[name] = over[name]
@@ -151,7 +122,9 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     cfg, sections = live_sections(cfg, run_dir, port, overrides)
     cfg_path = run_dir / "humanpt.toml"
     write_toml(cfg_path, sections)
+    write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believes in this run", overwrite=True)
     file_cfg = cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
+    file_cfg.rig()
     comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
     base = [sys.executable, "-m", "humanpt.cli.main"]
     procs: list[tuple[str, subprocess.Popen]] = []

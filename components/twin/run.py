@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.controller.config import ControllerConfig
+from humanpt.geometry.rig import Rig, flange_T_desired
 from humanpt.operator import OperatorConfig
 from humanpt.perception.config import PerceptionConfig
 from humanpt.pose_filter.config import PoseFilterConfig
@@ -24,7 +25,7 @@ from humanpt.schemas.convert import header
 from humanpt.sim_camera import SimCameraConfig
 
 from . import evaluate
-from .system import build_system, flange_T_desired_mm, operator_config
+from .system import build_system, flange_T_desired_mm, nominal_rig, operator_config
 from .world import TwinWorld
 
 __all__ = ["SECTIONS", "OverrideError", "SystemConfig", "RunResult", "Accuracy", "run", "accuracy", "scenario_duration_s",
@@ -74,27 +75,29 @@ class SystemConfig:
     perception: PerceptionConfig = field(default_factory=PerceptionConfig)
     pose_filter: PoseFilterConfig = field(default_factory=PoseFilterConfig)
     controller: ControllerConfig = field(default_factory=ControllerConfig)
+    # What the pipeline believes about the hardware (the twin's world may differ).
+    rig: Rig = field(default_factory=Rig)
 
     @classmethod
     def for_scenario(cls, scenario: str | OperatorConfig, seed: int = 0, overrides: dict[str, dict] | None = None,
-                     **base) -> SystemConfig:
+                     rig: Rig | None = None, **base) -> SystemConfig:
         """The configs for ``scenario`` (a built-in name, a scenario file or an
         OperatorConfig) and ``seed`` (operator and camera): ``base`` configs by section
         name (sim_camera, perception, pose_filter, controller; defaults for the rest),
         then ``overrides`` ({section: {key: value}}, operator too) applied and validated
-        (OverrideError). A scenario with a driver makes the controller record the tip
-        (``has_driver``, ``tob_t_tip_mm`` from the scenario) unless it already does."""
+        (OverrideError). ``rig``: what the pipeline believes (None: :func:`nominal_rig`,
+        the design values with the scenario's driver). A scenario with a driver makes the
+        controller record the tip (``has_driver``) unless it already does."""
         unknown = set(base) - set(SECTIONS[1:])
         if unknown:
             raise TypeError(f"SystemConfig.for_scenario: no base config {sorted(unknown)[0]!r}")
         op = with_overrides(operator_config(scenario, seed), overrides, "operator")
         cam = dataclasses.replace(base.pop("sim_camera", SimCameraConfig()), seed=seed)
-        cfg = cls(seed=seed, operator=op, sim_camera=cam, **base)
+        cfg = cls(seed=seed, operator=op, sim_camera=cam, rig=nominal_rig(op) if rig is None else rig, **base)
         cfg = dataclasses.replace(cfg, **{s: with_overrides(getattr(cfg, s), overrides, s) for s in SECTIONS[1:]})
         driver = op.build_scenario().driver_mm
         if driver is not None and not cfg.controller.has_driver:
-            cfg = dataclasses.replace(cfg, controller=dataclasses.replace(
-                cfg.controller, has_driver=True, tob_t_tip_mm=tuple(float(v) for v in driver)))
+            cfg = dataclasses.replace(cfg, controller=dataclasses.replace(cfg.controller, has_driver=True))
         return cfg
 
     def default_duration_s(self) -> float:
@@ -149,7 +152,7 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
     MCAP there. ``progress(now_s, duration_s)`` is called about 20 times during the run.
     The world is closed on return."""
     duration_s = config.default_duration_s() if duration_s is None else float(duration_s)
-    world = build_system(config.operator, seed=config.seed, controller=config.controller, robot=robot,
+    world = build_system(config.operator, seed=config.seed, controller=config.controller, robot=robot, rig=config.rig,
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
                          pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest)
     t0 = time.perf_counter()
@@ -186,14 +189,15 @@ class Accuracy:
     stopping: list[pb.Event]  # those stamped after ``stop_ns`` (the processes being stopped)
 
 
-def accuracy(src, controller: ControllerConfig, stop_ns: int | None = None) -> Accuracy:
+def accuracy(src, controller: ControllerConfig, flange_T_camera_mm: np.ndarray, stop_ns: int | None = None) -> Accuracy:
     """Judge ``src`` (a TwinWorld or a recorded run, :class:`evaluate.RunOutputs`) of a
-    controller configured by ``controller``: the recorded path against ground truth, the
-    servo error while the target moved, and the warnings (severity >= 3; those stamped
-    after ``stop_ns`` apart)."""
+    controller configured by ``controller`` on a camera truly at ``flange_T_camera_mm``
+    (the world's, (4, 4) mm): the recorded path against ground truth, the servo error
+    while the target moved (the target against the true desired point D), and the warnings
+    (severity >= 3; those stamped after ``stop_ns`` apart)."""
     start = evaluate.scenario_start_ns(src)
     which, err, _ = evaluate.path_truth_errors(src, after_ns=start)
-    t, e_mm, e_deg = evaluate.tracking_errors(src, flange_T_desired_mm(controller))
+    t, e_mm, e_deg = evaluate.tracking_errors(src, flange_T_desired(flange_T_camera_mm, controller.dz_mm))
     moving = t >= start if start else np.ones_like(t, dtype=bool)
     events = [pb.Event.FromString(o.data) for o in src.outputs() if o.topic.endswith("/events")]
     warn = [e for e in events if e.severity >= 3]

@@ -10,6 +10,7 @@ import numpy as np
 
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore, flange_T_desired_mm
+from humanpt.geometry.rig import Calibration, Rig, Tip, flange_T_desired
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig
 from humanpt.perception.config import PerceptionConfig
@@ -23,7 +24,7 @@ from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "flange_T_desired_mm", "operator_config", "puma_placement", "puma_cores",
+__all__ = ["build_system", "flange_T_desired_mm", "nominal_rig", "operator_config", "puma_placement", "puma_cores",
            "tracking_errors", "path_points", "truth_at"]
 
 
@@ -72,20 +73,20 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  controller: ControllerConfig | None = None, sim_camera: SimCameraConfig | None = None,
                  start_offset_mm_deg=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), robot_cores=None,
                  robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True,
-                 digest: bool = True) -> TwinWorld:
+                 digest: bool = True, rig: Rig | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
-    controller records the tip too.  ``robot``: ``standin`` (integrates commands) or
+    controller records the tip too.  ``rig``: what the pipeline believes (None: the
+    nominal rig with the scenario's driver, :func:`nominal_rig`).  ``robot``: ``standin`` (integrates commands) or
     ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
     ``digest=False``: no output hash (faster; for runs nobody compares)."""
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
-    driver = op.build_scenario().driver_mm
-    if driver is not None and not ctl.has_driver:
-        ctl = dataclasses.replace(ctl, has_driver=True,
-                                  tob_t_tip_mm=tuple(float(v) for v in driver))
+    rig = nominal_rig(op) if rig is None else rig
+    if op.build_scenario().driver_mm is not None and not ctl.has_driver:
+        ctl = dataclasses.replace(ctl, has_driver=True)
     standin = None
     wire = False
     if robot_cores is None:
@@ -110,8 +111,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             standin = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))
         else:
             raise ValueError(f"robot must be 'standin' or 'puma', got {robot!r}")
-    cores = [PerceptionCore(perception or PerceptionConfig()), PoseFilterCore(pose_filter or PoseFilterConfig()),
-             ControllerCore(ctl)]
+    cores = [PerceptionCore(perception or PerceptionConfig(), rig), PoseFilterCore(pose_filter or PoseFilterConfig(), rig),
+             ControllerCore(ctl, rig)]
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
     if wire:
@@ -120,8 +121,20 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
 
 
 def tracking_errors(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """True servo error per robot cycle of a built system (see evaluate.tracking_errors)."""
+    """True servo error per robot cycle of a built system (see evaluate.tracking_errors):
+    the target against the desired point D of the world's true camera."""
     ctl = next(c for c in world.extra if isinstance(c, ControllerCore))
-    return evaluate.tracking_errors(world, flange_T_desired_mm(ctl.config))
+    return evaluate.tracking_errors(world, flange_T_desired(world.camera.config.flange_T_camera, ctl.config.dz_mm))
+
+
+def nominal_rig(operator: OperatorConfig) -> Rig:
+    """What the twin's pipeline believes when nobody calibrated: the design values
+    (:class:`Rig`'s defaults, which the ideal world makes true) with the driver tip of the
+    tool the scenario's operator holds (its design length)."""
+    driver = operator.build_scenario().driver_mm
+    if driver is None:
+        return Rig()
+    return dataclasses.replace(Rig(), tip=Tip(tob_t_tip_mm=tuple(float(v) for v in driver),
+                                              calibration=Calibration(method="nominal", note="the scenario's driver")))
 
 

@@ -1,31 +1,25 @@
 """Configuration of the viz component (section ``[viz]``).
 
 Where the rerun data goes (``mode``), how much of the camera stream is shown, and the
-geometry the views need to draw what the messages do not carry: the hand-eye transform
-(where the camera frustum sits on the flange), the desired point D's distance, the PSVS
-(to project expected source positions into the complex image) and the target's shape.
-Defaults are the other components' defaults; ``humanpt view`` takes them from the run's
-recorded controller and perception configs instead.
+desired point D's distance.  The rest of the geometry the views need (the hand-eye
+transform: where the camera frustum sits on the flange; the PSVS: to project expected
+source positions into the complex image; the target's shape) is the rig's.  ``humanpt
+view`` takes d_z and the rig from the run's recordings.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
-import numpy as np
-
-from humanpt.geometry import DEFAULT_DZ_MM, DEFAULT_FLANGE_T_CAMERA_MM, PsvsParams, TargetModel
-from humanpt.geometry.config import PsvsConfig
-from humanpt.geometry.transforms import transform_from_x, x_from_transform
-from humanpt.runtime.config import Deg, Mm, Range, live
+from humanpt.geometry import DEFAULT_DZ_MM
+from humanpt.runtime.config import Range, live
 
 __all__ = ["VizConfig", "MODES"]
 
 MODES = ("spawn", "serve", "connect", "save")
 
-_FLANGE_T_CAMERA_X = tuple(float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM))
 
 
 @dataclass(frozen=True)
@@ -56,15 +50,11 @@ class VizConfig:
     # the sources' halos show at panel size (1: the raw image). Display only: what perception
     # sees and what is recorded are untouched.
     display_gamma: Annotated[float, Range(0.1, 1.0, "")] = 0.5
-    # Geometry the views need (the messages carry poses, not the rig).
-    # D's distance at start; the view follows the controller's dz_mm changes (its events).
+    # Geometry the views need beyond the rig (the messages carry poses; the hand-eye, the
+    # PSVS and the target come from the rig).  D's distance at start; the view follows the
+    # controller's dz_mm changes (its events).
     dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
-    flange_T_camera_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = _FLANGE_T_CAMERA_X
     cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
-    psvs: PsvsConfig = field(default_factory=PsvsConfig)
-    target_leg_mm: Annotated[float, Range(1, 1000, "mm")] = 40.0
-    target_base_mm: Annotated[float, Range(1, 1000, "mm")] = 30.0
-    source_diameter_mm: Annotated[float, Range(0.01, 1000, "mm")] = 5.0
     # The recorded path is drawn as line strips of at most this many points each (a new
     # strip starts when one is full, so a long path is not re-sent whole at every point).
     path_strip_points: Annotated[int, Range(2, 10000000, "points")] = 200
@@ -89,13 +79,7 @@ class VizConfig:
             or self.image_every < 1
         ):
             raise ValueError(f"viz.image_every must be an integer >= 1, got {self.image_every!r}")
-        for name in (
-            "dz_mm",
-            "cycle_period_ms",
-            "target_leg_mm",
-            "target_base_mm",
-            "source_diameter_mm",
-        ):
+        for name in ("dz_mm", "cycle_period_ms"):
             v = getattr(self, name)
             if (
                 isinstance(v, bool)
@@ -104,12 +88,6 @@ class VizConfig:
                 or v <= 0
             ):
                 raise ValueError(f"viz.{name} must be a finite number > 0, got {v!r}")
-        if len(self.flange_T_camera_x) != 6 or not all(
-            math.isfinite(v) for v in self.flange_T_camera_x
-        ):
-            raise ValueError(
-                "viz.flange_T_camera_x must be six finite numbers (x, y, z mm, yaw, pitch, roll deg)"
-            )
         if (
             isinstance(self.path_strip_points, bool)
             or not isinstance(self.path_strip_points, int)
@@ -118,24 +96,3 @@ class VizConfig:
             raise ValueError(
                 f"viz.path_strip_points must be an integer >= 2, got {self.path_strip_points!r}"
             )
-        if not isinstance(self.psvs, PsvsConfig):
-            raise ValueError(f"viz.psvs must be a PsvsConfig, got {type(self.psvs).__name__}")
-        try:
-            self.target_model()
-        except ValueError as e:
-            raise ValueError(f"viz: target: {e}") from None
-
-    # -- derived ---------------------------------------------------------------------------
-    def psvs_params(self) -> PsvsParams:
-        return self.psvs.params()
-
-    def target_model(self) -> TargetModel:
-        return TargetModel.isosceles(
-            self.target_leg_mm, self.target_base_mm, self.source_diameter_mm, None
-        )
-
-    def flange_T_camera_m(self) -> np.ndarray:
-        """(4, 4) hand-eye transform, translation in metres."""
-        T = transform_from_x(np.asarray(self.flange_T_camera_x, dtype=float))
-        T[:3, 3] *= 1e-3
-        return T

@@ -3,8 +3,9 @@
 Every component recording's outputs (``direction=out``) are merged in time order (like
 ``humanpt runs merge``, streaming: constant memory), passed through a :class:`VizCore`
 (the same choice of what to show as live) and logged with the same
-:class:`~humanpt.viz.logger.RerunLogger` and blueprint.  The view's geometry (d_z,
-hand-eye, PSVS, target) comes from the run's recorded controller and perception configs.
+:class:`~humanpt.viz.logger.RerunLogger` and blueprint.  The view's geometry comes from
+the run: d_z from the recorded controller config, the hand-eye, PSVS and target from the
+recorded rig.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from pathlib import Path
 import rerun as rr
 from mcap.reader import make_reader
 
+from humanpt.geometry.rig import Rig
 from humanpt.runtime.config import ConfigError, build, to_table
 from humanpt.runtime.recording import OUT, RecordingError, merge_entries, read_metadata
 from humanpt.schemas import topics
@@ -24,13 +26,11 @@ from humanpt.viz.config import VizConfig
 from humanpt.viz.core import SHOWN_TOPICS, VizCore
 from humanpt.viz.logger import RerunLogger
 
-__all__ = ["ConvertStats", "convert_run", "run_files", "viz_config_for_run"]
+__all__ = ["ConvertStats", "convert_run", "rig_for_run", "run_files", "viz_config_for_run"]
 
-# Keys of the view's geometry taken from the run's own components.
-_FROM_RUN = {
-    "controller": ("dz_mm", "flange_T_camera_x", "cycle_period_ms"),
-    "perception": ("psvs", "target_leg_mm", "target_base_mm", "source_diameter_mm"),
-}
+# Keys of the view's config taken from the run's own components (the rest of the geometry
+# is the run's recorded rig).
+_FROM_RUN = {"controller": ("dz_mm", "cycle_period_ms")}
 
 
 @dataclass
@@ -77,6 +77,28 @@ def viz_config_for_run(run_dir: str | Path, base: VizConfig | None = None) -> Vi
         return base or VizConfig()  # a run of an older layout: draw with the defaults
 
 
+def rig_for_run(run_dir: str | Path) -> Rig:
+    """The rig the run's pipeline used: the one recorded with its controller (else with
+    perception, the pose filter, any component); the nominal rig for a run without one."""
+    from humanpt.runtime.rigfile import RIG_METADATA, rig_from_json
+
+    found: dict[str, str] = {}
+    for f in run_files(run_dir):
+        try:
+            meta, _ = read_metadata(f)
+        except RecordingError:
+            continue
+        if RIG_METADATA in meta:
+            found.setdefault(meta.get("component", ""), meta[RIG_METADATA])
+    for name in ("controller", "perception", "pose_filter", *found):
+        if name in found:
+            try:
+                return rig_from_json(found[name], f"{run_dir} ({name}'s recorded rig)")
+            except ConfigError:
+                continue
+    return Rig()
+
+
 def _expected_outputs(path: Path) -> int | None:
     """Number of shown outputs in a closed recording (from its summary), None if unknown."""
     try:
@@ -106,6 +128,7 @@ def convert_run(
     rec: rr.RecordingStream,
     *,
     config: VizConfig | None = None,
+    rig: Rig | None = None,
     image_every: int = 1,
     progress: Callable[[ConvertStats], None] | None = None,
     progress_every: int = 2000,
@@ -113,6 +136,7 @@ def convert_run(
     """Log a recorded run to ``rec`` (whose sinks the caller set).
 
     ``config``: the view's config (default: from the run, :func:`viz_config_for_run`);
+    ``rig``: the geometry to draw with (default: the run's, :func:`rig_for_run`);
     ``image_every``: show every Nth image; ``progress(stats)`` is called every
     ``progress_every`` messages and at the end.
     """
@@ -122,7 +146,7 @@ def convert_run(
 
     cfg = dataclasses.replace(cfg, image_every=image_every)
     core = VizCore(cfg)
-    logger = RerunLogger(rec, cfg, recorded_timeline=True)
+    logger = RerunLogger(rec, cfg, rig=rig or rig_for_run(run_dir), recorded_timeline=True)
     rec.set_log_time_enabled(False)  # the conversion's wall clock means nothing here
     stats = ConvertStats(recordings=len(files))
     totals = [_expected_outputs(f) for f in files]

@@ -58,6 +58,7 @@ import numpy as np
 import rerun as rr
 
 from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
+from humanpt.geometry.rig import Rig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
 from humanpt.viz.config import VizConfig
@@ -151,14 +152,16 @@ class RerunLogger:
         rec: rr.RecordingStream,
         config: VizConfig | None = None,
         *,
+        rig: Rig | None = None,
         recorded_timeline: bool = False,
     ):
         self.rec = rec
         self.config = config or VizConfig()
+        self.rig = Rig() if rig is None else rig
         self.recorded_timeline = recorded_timeline
-        self.params = self.config.psvs_params()
-        self.sources_mm = self.config.target_model().source_positions_mm  # (3, 3) TOB frame
-        self.flange_T_camera = self.config.flange_T_camera_m()
+        self.params = self.rig.params()
+        self.sources_mm = self.rig.target_model().source_positions_mm  # (3, 3) TOB frame
+        self.flange_T_camera = self.rig.hand_eye.flange_T_camera_m()
         self.dz_mm = float(self.config.dz_mm)
         self._display_lut = display_lut(self.config.display_gamma)
         self.counts: dict[str, int] = {}
@@ -255,7 +258,7 @@ class RerunLogger:
             ENTITIES["sources"],
             rr.Points3D(
                 src_m,
-                radii=c.source_diameter_mm * 0.5e-3,
+                radii=self.rig.target.source_diameter_mm * 0.5e-3,
                 colors=FILTERED_RGB,
                 labels=list(_LABELS),
             ),
@@ -263,7 +266,7 @@ class RerunLogger:
         )
         rec.log(
             f"{ENTITIES['truth_tob']}/sources",
-            rr.Points3D(src_m, radii=c.source_diameter_mm * 0.5e-3, colors=TRUTH_RGB),
+            rr.Points3D(src_m, radii=self.rig.target.source_diameter_mm * 0.5e-3, colors=TRUTH_RGB),
             static=True,
         )
         rec.log(

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import rerun as rr
 
+from humanpt.geometry.rig import Rig
 from humanpt.schemas.topics import show_topic, shown_short
 from humanpt.viz.blueprint import blueprint
 from humanpt.viz.config import VizConfig
@@ -126,8 +127,9 @@ class ViewerAdapter:
 
     topics_out = tuple(show_topic(t) for t in SHOWN_TOPICS)
 
-    def __init__(self, config: VizConfig, run_dir: str | Path | None = None):
+    def __init__(self, config: VizConfig, run_dir: str | Path | None = None, rig: Rig | None = None):
         self.config = config
+        self.rig = rig
         self.rrd_path = config.rrd_path
         if config.mode == "save" and not self.rrd_path:
             self.rrd_path = str(Path(run_dir or ".") / "viz.rrd")
@@ -147,7 +149,7 @@ class ViewerAdapter:
                 e,
             )
             return
-        self.logger = RerunLogger(self.rec, self.config)
+        self.logger = RerunLogger(self.rec, self.config, rig=self.rig)
         log.info("viz: showing the run in %s", where)
 
     def write(self, topic: str, msg) -> None:
@@ -162,6 +164,7 @@ class ViewerAdapter:
             self.rec = None
 
 
-def adapters(config: VizConfig, run_dir=None) -> list:
-    """Registry factory: the viewer adapter (``save`` mode defaults to ``<run dir>/viz.rrd``)."""
-    return [ViewerAdapter(config, run_dir=run_dir)]
+def adapters(config: VizConfig, run_dir=None, rig: Rig | None = None) -> list:
+    """Registry factory: the viewer adapter (``save`` mode defaults to ``<run dir>/viz.rrd``;
+    the views draw the camera and the target as ``rig`` says)."""
+    return [ViewerAdapter(config, run_dir=run_dir, rig=rig)]

@@ -262,7 +262,8 @@ def test_driver_calibration_recovers_the_tip():
     np.testing.assert_allclose(res["tob_t_tip_mm"], tip_tob_m * 1e3, atol=0.01)
     np.testing.assert_allclose(res["world_p_pivot_mm"], pivot_w * 1e3, atol=0.01)
     np.testing.assert_allclose(res["paper_tob_t_tip_mm"], tip_tob_m * 1e3, atol=0.01)
-    np.testing.assert_allclose(core.config.tob_t_tip_mm, tip_tob_m * 1e3, atol=0.01)
+    np.testing.assert_allclose(core.rig.tip.tob_t_tip_mm, tip_tob_m * 1e3, atol=0.01)
+    assert core.rig.tip.calibration.method == "pivot" and core.rig.tip.calibration.sigma["tob_t_tip_mm"] < 0.01
     assert core.mode == pb.CONTROL_MODE_TRACK
 
 

@@ -153,7 +153,7 @@ line 236 1249 0 0 0 180
 
 def test_driver_calibration_recovers_the_twins_tip():
     op = OperatorConfig(scenario_text=PIVOT, start_delay_s=1.0)
-    w = build_system(op, seed=7, controller=ControllerConfig(has_driver=False, tob_t_tip_mm=(0.0, 0.0, 60.0),
+    w = build_system(op, seed=7, controller=ControllerConfig(has_driver=False,
                                                              calibration_samples=80))
     w.run_for(2.0)
     cmd = pb.Command(header=header(w.now_ns), component="controller", verb="calibrate",
@@ -169,4 +169,5 @@ def test_driver_calibration_recovers_the_twins_tip():
     # The paper's method (eq. 10-13, P' given) too.
     assert np.linalg.norm(np.array(res["paper_tob_t_tip_mm"]) - [3.0, -2.0, 62.0]) < 0.2, res
     core = next(c for c in w.extra if isinstance(c, ControllerCore))
-    assert core.config.has_driver and np.allclose(core.config.tob_t_tip_mm, res["tob_t_tip_mm"], atol=1e-3)
+    assert core.config.has_driver and np.allclose(core.rig.tip.tob_t_tip_mm, res["tob_t_tip_mm"], atol=1e-3)
+    assert core.rig.tip.calibration.method == "pivot"

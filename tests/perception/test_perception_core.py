@@ -179,14 +179,12 @@ def test_config_from_toml_validates_and_round_trips():
                 "method": "paper",
                 "threshold": 80,
                 "mask": [[0, 0, 10, 10]],
-                "psvs": {"baseline_mm": 95.0},
             }
         },
         "test.toml",
     )
     c = cfg.component("perception", PerceptionConfig)
     assert c.method == "paper" and c.threshold == 80.0 and c.mask == ((0, 0, 10, 10),)
-    assert c.params().baseline_mm == 95.0
     assert build(PerceptionConfig, to_table(c), source="t", section="perception") == c
     for bad in (
         {"threshold": -1},
@@ -194,7 +192,7 @@ def test_config_from_toml_validates_and_round_trips():
         {"mask": [[0, 0, 0, 5]]},
         {"min_depth_mm": 5000},
         {"paper_cross_px": [8]},
-        {"target_base_mm": 40.0},
+        {"psvs": {"baseline_mm": 95.0}},  # the PSVS is the rig's, not perception's
     ):
         with pytest.raises(ConfigError):
             from_dict({"perception": bad}, "test.toml", config_types())

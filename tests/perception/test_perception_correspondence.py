@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from humanpt.geometry import PsvsParams, TargetModel, eq4_points_mm, project, transform_points
-from humanpt.perception import FULL, LOST, POSITION_ONLY, Perception, PerceptionConfig, PsvsConfig
+from humanpt.geometry.config import PsvsConfig
+from humanpt.geometry.rig import Rig
+from humanpt.perception import FULL, LOST, POSITION_ONLY, Perception, PerceptionConfig
 from humanpt.perception.correspondence import epipolar_residual_px
 from tests.perception.drawing import pose, scene
 
@@ -132,10 +134,10 @@ def test_nothing_in_view_is_lost():
 
 def test_lens_distortion_is_removed_before_pairing_and_triangulation():
     params = PsvsParams(dist_coeffs=(-0.2, 0.1, 0.001, -0.001, 0.0))
-    cfg = PerceptionConfig(psvs=PsvsConfig(dist_coeffs=params.dist_coeffs))
+    rig = Rig(psvs=PsvsConfig(dist_coeffs=params.dist_coeffs))
     T = pose([40, 30, 560, 20, 10, 5])
     img, uv_r, uv_l = scene(T, params=params, seed=4)
-    result = Perception(cfg).measure(img)
+    result = Perception(PerceptionConfig(), rig).measure(img)
     assert result.match.status == FULL and _is_right(result, uv_r, uv_l)
     truth = transform_points(T, MODEL.source_positions_mm)
     assert np.abs(result.match.camera_p_mm - truth).max() < 0.3

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from google.protobuf.descriptor import FieldDescriptor
 
+from humanpt.geometry.rig import Rig
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.core import PoseFilterCore
 from humanpt.runtime.registry import COMPONENTS, core_class
@@ -100,7 +101,7 @@ def test_a_poisoned_measurement_does_not_poison_the_pose_filter(field, value):
     assert last.status == pb.TOB_STATUS_FULL
     # world_T_tob = world_T_flange (identity) @ flange_T_camera @ camera_T_tob (0, 0, 0.6 m);
     # flange_T_camera is a pure translation by default (x, y, z mm, yaw, pitch, roll = 0).
-    fx, fy, fz, *angles = PoseFilterConfig().flange_T_camera_x
-    assert angles == [0.0, 0.0, 0.0]
+    fx, fy, fz, *angles = Rig().hand_eye.flange_T_camera_x
+    assert list(angles) == [0.0, 0.0, 0.0]
     t = last.world_T_tob.translation
     np.testing.assert_allclose([t.x, t.y, t.z], [fx / 1e3, fy / 1e3, fz / 1e3 + 0.6], atol=1e-4)

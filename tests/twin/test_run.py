@@ -44,7 +44,7 @@ def test_a_scenario_with_a_driver_makes_the_controller_record_the_tip(tmp_path):
     scn = tmp_path / "tip.scn"
     scn.write_text(TIP_SCENARIO)
     cfg = SystemConfig.for_scenario(OperatorConfig(scenario_file=str(scn)))
-    assert cfg.controller.has_driver and cfg.controller.tob_t_tip_mm == (0.0, 0.0, 60.0)
+    assert cfg.controller.has_driver and cfg.rig.tip.tob_t_tip_mm == (0.0, 0.0, 60.0)
 
 
 def test_run_records_the_path_from_record_start_only():
