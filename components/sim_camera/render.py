@@ -41,6 +41,7 @@ column j) at (u, v) = (j, i)), DN (grey levels).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from functools import lru_cache
@@ -50,6 +51,7 @@ from scipy.special import ndtr
 from scipy.stats import poisson
 
 from humanpt.geometry import PsvsParams, distort_pixels
+from humanpt.geometry.transforms import interpolate_transform
 
 from .config import SimCameraConfig
 
@@ -242,12 +244,16 @@ def project_discs(
     exposure_ms: float,
     blur_sigma_px: float,
     near_mm: float = 10.0,
+    falloff_exponent: float = 0.0,
 ) -> Blobs:
     """Project every disc through both virtual cameras; keep the visible blobs (see the
     module docstring for what hides one). Blobs are ordered right view first, then left,
     each in disc order. Both views in one vectorised pass (eq. (2) and its Jacobian
     written out: the formulas of the geometry library's ``project_pinhole`` and
-    ``projection_jacobian``)."""
+    ``projection_jacobian``, with each virtual camera's own principal point and rotation).
+    ``falloff_exponent`` n > 0 dims each blob by ``cos(angle)^n``, the angle between the
+    disc's lit normal and the direction to that virtual camera (0: a Lambertian source,
+    the same radiance from every direction)."""
     width, height = params.image_size_px
     n = len(discs)
     views = [v for v in (0, 1) if view_gains[v] > 0] if n else []
@@ -258,12 +264,18 @@ def project_discs(
     rel = discs.centre_mm - np.array([c.centre_mm for c in cams])[:, None]
     dist = np.sqrt(np.einsum("vni,vni->vn", rel, rel))
     toward = -np.einsum("vni,ni->vn", rel, discs.axes[:, :, 2])  # lit normal . to-camera * dist
+    rotated = not all(c.is_parallel for c in cams)
+    if rotated:  # each view's own axes (a tilted mirror): R^T (P - O), as project_pinhole
+        rots = np.array([c.rotation for c in cams])  # (V, 3, 3)
+        rel = np.einsum("vni,vij->vnj", rel, rots)
     ok = (rel[:, :, 2] > near_mm) & (toward > 1e-6 * np.maximum(dist, 1e-12))
     ok &= (discs.dn_per_ms > 0) & (discs.occlusion_h > -1.0)
     keep = np.flatnonzero(ok)
     if keep.size == 0:
         return _no_blobs()
     row, disc = np.divmod(keep, n)
+    # brightness factor of each (view, disc): the source's angular fall-off cos^n
+    cos_view = (toward / np.maximum(dist, 1e-12)).reshape(-1).take(keep)
     rel = rel.reshape(-1, 3).take(keep, axis=0)
     per_row = not (len(cams) == 1 or _same_intrinsics(cams[0], cams[1]))
     if per_row:
@@ -287,15 +299,18 @@ def project_discs(
         sel = np.flatnonzero(near_image)
         if sel.size == 0:
             return _no_blobs()
-        inv_z, x, y, row, disc, uv_ideal = (a[sel] for a in (inv_z, x, y, row, disc, uv_ideal))
+        inv_z, x, y, row, disc, uv_ideal, cos_view = (
+            a[sel] for a in (inv_z, x, y, row, disc, uv_ideal, cos_view)
+        )
         if per_row:
             a_u, a_v, skew = a_u[sel], a_v[sel], skew[sel]
     # d(u, v)/d(s, t): eq. (2)'s Jacobian d(u, v)/d(x, y, z) times the disc's in-plane axes
     # P (columns e1, e2, in radii): du = (a_u (P_x - x P_z) + skew (P_y - y P_z)) / z,
     # dv = a_v (P_y - y P_z) / z, with x = X/Z, y = Y/Z.
-    plane = discs.axes.take(disc, axis=0)[:, :, :2] * (discs.radius_mm.take(disc) * inv_z)[
-        :, None, None
-    ]  # (k, 3, 2), divided by z
+    axes = discs.axes.take(disc, axis=0)[:, :, :2]  # (k, 3, 2) camera frame
+    if rotated:
+        axes = np.swapaxes(rots, 1, 2).take(row, axis=0) @ axes  # R^T e: the view's frame
+    plane = axes * (discs.radius_mm.take(disc) * inv_z)[:, None, None]  # (k, 3, 2), / z
     along_x = plane[:, 0] - x[:, None] * plane[:, 2]
     along_y = plane[:, 1] - y[:, None] * plane[:, 2]
     jac = np.empty((len(x), 2, 2))
@@ -322,11 +337,15 @@ def project_discs(
         if sel.size == 0:
             return _no_blobs()
         uv, jac, sigma, row, disc = uv[sel], jac[sel], sigma[sel], row[sel], disc[sel]
+        cos_view = cos_view[sel]
     view = np.array(views).take(row)
+    dn = discs.dn_per_ms.take(disc) * exposure_ms * np.asarray(view_gains, dtype=float).take(view)
+    if falloff_exponent > 0:
+        dn = dn * np.clip(cos_view, 0.0, 1.0) ** falloff_exponent
     return Blobs(
         uv,
         jac,
-        discs.dn_per_ms.take(disc) * exposure_ms * np.asarray(view_gains, dtype=float).take(view),
+        dn,
         sigma,
         discs.occlusion_h.take(disc),
         discs.occlusion_dir.take(disc, axis=0),
@@ -578,6 +597,94 @@ def _background_bank(seed: int, table: bytes, n_pixels: int) -> np.ndarray:
     return bank
 
 
+_FPN_KEY = 0x66706E  # the fixed pattern's own random stream ("fpn"), fixed per seed
+
+
+@lru_cache(maxsize=4)
+def _fixed_pattern_unit(seed: int, n_pixels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two standard-normal fields (n_pixels,) float32, read-only, drawn once per seed: the
+    shapes of the DSNU (offset) and PRNU (gain) patterns, scaled by the config's sizes (so
+    a larger ``dsnu_dn`` is the same pattern, stronger)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_FPN_KEY,)))
+    offset = rng.standard_normal(n_pixels, dtype=np.float32)
+    gain = rng.standard_normal(n_pixels, dtype=np.float32)
+    offset.flags.writeable = False
+    gain.flags.writeable = False
+    return offset, gain
+
+
+@lru_cache(maxsize=4)
+def _noise_bank(seed: int, mean_e: float, read_noise_e: float, full_well_e: float, n_pixels: int):
+    """``n_pixels + 2^20`` unquantised background charges (float32 electrons, read-only):
+    ``min(Poisson(mean_e), full_well) + N(0, read)``, independent draws - the background
+    bank of the fixed-pattern path, where every pixel has its own offset and gain and so
+    its own quantised distribution (:func:`_background_bank` holds one distribution)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_BANK_KEY, 1)))
+    size = n_pixels + _BANK_OFFSETS
+    bank = np.minimum(rng.poisson(mean_e, size), full_well_e).astype(np.float32)
+    if read_noise_e > 0:
+        bank += rng.normal(0.0, read_noise_e, size).astype(np.float32)
+    bank.flags.writeable = False
+    return bank
+
+
+def bloom_columns(
+    idx: np.ndarray,
+    charge_e: np.ndarray,
+    shape: tuple[int, int],
+    full_well_e: float,
+    spill: float,
+    background_e: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blooming: the charge above the full well of the pixels at flat (row-major) indices
+    ``idx`` (charges ``charge_e``, electrons) spills along their columns.
+
+    Each pixel over the well keeps ``full_well_e`` and passes ``spill`` of its excess on,
+    half up, half down; a neighbour takes what fits below its well and passes the rest
+    further; charge that leaves the image is lost (so is the remaining ``1 - spill``).
+    Pixels not in ``idx`` hold ``background_e``. Returns (the charges at ``idx``, now
+    <= full well; the flat indices of the other pixels that received charge; the charge
+    (e-) each received)."""
+    height, width = int(shape[0]), int(shape[1])
+    charge = np.asarray(charge_e, dtype=np.float64).copy()
+    over = charge > full_well_e
+    none = np.zeros(0, dtype=np.intp), np.zeros(0)
+    if spill <= 0 or not over.any():
+        return np.minimum(charge, full_well_e), *none
+    rows, cols = np.divmod(np.asarray(idx), width)
+    columns = np.unique(cols[over])
+    in_cols = np.isin(cols, columns)
+    excess = (charge - full_well_e).clip(0.0) * spill
+    per_col = np.zeros(len(columns))
+    np.add.at(per_col, np.searchsorted(columns, cols[over]), excess[over])
+    room = max(full_well_e - background_e, 1e-9)
+    reach = int(min(math.ceil(per_col.max() / room) + 1, height))
+    r0 = max(int(rows[in_cols].min()) - reach, 0)
+    r1 = min(int(rows[in_cols].max()) + reach, height - 1)
+    box = np.full((r1 - r0 + 1, len(columns)), float(background_e))
+    member = np.full(box.shape, -1, dtype=np.intp)
+    sel = np.flatnonzero(in_cols)
+    ri, ci = rows[sel] - r0, np.searchsorted(columns, cols[sel])
+    box[ri, ci] = charge[sel]
+    member[ri, ci] = sel
+    before = box.copy()
+    half = 0.5 * (box - full_well_e).clip(0.0) * spill
+    np.minimum(box, full_well_e, out=box)
+    for order in (range(box.shape[0]), range(box.shape[0] - 1, -1, -1)):  # down, then up
+        carry = np.zeros(box.shape[1])
+        for r in order:
+            take = np.minimum(full_well_e - box[r], carry)
+            box[r] += take
+            carry -= take
+            carry += half[r]
+    charge[sel] = box[ri, ci]
+    np.minimum(charge, full_well_e, out=charge)
+    gained = (box - before > 0) & (member < 0)
+    gr, gc = np.nonzero(gained)
+    other = (gr + r0) * width + columns[gc]
+    return charge, other, (box - before)[gr, gc]
+
+
 # --------------------------------------------------------------------------- renderer
 
 
@@ -601,6 +708,7 @@ class Renderer:
             c.full_well_e,
         )
         self._bank: np.ndarray | None = None  # built on the first noisy frame
+        self._fpn: tuple[np.ndarray, np.ndarray] | None = None  # built on first use
         e0 = np.minimum((np.zeros(1) + self.sky_dn) * c.gain_e_per_dn, c.full_well_e)
         self._flat_dn = np.clip(np.rint(c.black_level_dn + e0 / c.gain_e_per_dn), 0, 255).astype(
             np.uint8
@@ -696,10 +804,37 @@ class Renderer:
         return Discs.concat(parts)
 
     def blobs(self, discs: Discs) -> Blobs:
+        """The discs projected into both views (:func:`project_discs`), with the angular
+        fall-off of ``source_falloff_exponent`` and, when ``ghost_gain`` > 0, the beam
+        splitter's ghost: every blob of ``ghost_view`` again, ``ghost_gain`` times as
+        bright, shifted by ``ghost_offset_px`` (label + 100)."""
         c = self.config
-        return project_discs(
-            self.params, discs, self.view_gains, c.exposure_ms, c.blur_sigma_px, c.near_mm
+        blobs = project_discs(
+            self.params,
+            discs,
+            self.view_gains,
+            c.exposure_ms,
+            c.blur_sigma_px,
+            c.near_mm,
+            c.source_falloff_exponent,
         )
+        if c.ghost_gain > 0 and len(blobs):
+            sel = np.flatnonzero(blobs.view == VIEWS.index(c.ghost_view))
+            if sel.size:
+                ghost = Blobs(*(getattr(blobs, f)[sel] for f in Blobs.__dataclass_fields__))
+                ghost = dataclasses.replace(
+                    ghost,
+                    centre_px=ghost.centre_px + np.asarray(c.ghost_offset_px, dtype=float),
+                    dn=ghost.dn * c.ghost_gain,
+                    label=ghost.label + 100,
+                )
+                blobs = Blobs(
+                    *(
+                        np.concatenate([getattr(blobs, f), getattr(ghost, f)])
+                        for f in Blobs.__dataclass_fields__
+                    )
+                )
+        return blobs
 
     # -- images --------------------------------------------------------------------------
     def signal(self, blobs: Blobs) -> np.ndarray:
@@ -767,11 +902,34 @@ class Renderer:
             idx, value = idx[nz], value[nz]
         return idx, value
 
-    def expose(self, signal_dn: np.ndarray, frame_index: int) -> np.ndarray:
-        """The sensor: background, shot and read noise, full well, 8-bit quantisation and
-        saturation; (H, W) uint8. Noise from ``default_rng([seed, frame_index])``."""
+    def _pattern(self, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The fixed pattern (offset DN (n,), gain - 1 (n,)) of ``dsnu_dn`` and ``prnu``,
+        or None when both are 0."""
         c = self.config
-        if not c.noise:
+        if c.dsnu_dn == 0 and c.prnu == 0:
+            return None
+        if self._fpn is None or self._fpn[0].size != n:
+            unit_offset, unit_gain = _fixed_pattern_unit(c.seed, n)
+            offset = (unit_offset * np.float32(c.dsnu_dn)).astype(np.float64)
+            gain = np.maximum(unit_gain * np.float32(c.prnu), -1.0).astype(np.float64)
+            self._fpn = (offset, gain)
+        return self._fpn
+
+    def _charge(self, charge_e, idx, shape, background_e):
+        """Full well (and blooming): charges at ``idx`` capped at the well, plus the other
+        pixels that received blooming charge (flat indices, electrons)."""
+        c = self.config
+        if c.blooming > 0:
+            return bloom_columns(idx, charge_e, shape, c.full_well_e, c.blooming, background_e)
+        none = np.zeros(0, dtype=np.intp), np.zeros(0)
+        return np.minimum(charge_e, c.full_well_e), *none
+
+    def expose(self, signal_dn: np.ndarray, frame_index: int) -> np.ndarray:
+        """The sensor: background, shot and read noise, fixed pattern, full well (and
+        blooming), 8-bit quantisation and saturation; (H, W) uint8. Noise from
+        ``default_rng([seed, frame_index])``."""
+        c = self.config
+        if not c.noise and c.dsnu_dn == 0 and c.prnu == 0 and c.blooming == 0:
             g = c.gain_e_per_dn
             e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
             return np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
@@ -789,27 +947,61 @@ class Renderer:
         Noise: each frame's background is a run of :func:`_background_bank` (exact
         background grey levels, independent pixels) at an offset drawn from
         ``default_rng([seed, frame_index])``; the signal pixels get exact Poisson shot
-        noise and Gaussian read noise from the same generator."""
+        noise and Gaussian read noise from the same generator.
+
+        Fixed pattern (``dsnu_dn``, ``prnu`` > 0): the background is built from a bank of
+        unquantised charges (:func:`_noise_bank`), each pixel scaled by its gain (the
+        read noise too: 1 % of 0.25 DN) and offset, then quantised; signal pixels get
+        ``Poisson((signal + sky) gain_e_per_dn (1 + prnu_i))`` and the offset at readout.
+        Blooming (``blooming`` > 0): :func:`bloom_columns` before the read noise; a
+        background pixel that receives charge gets it on top of its grey level."""
         c = self.config
         g = c.gain_e_per_dn
         n = int(shape[0]) * int(shape[1])
+        pattern = self._pattern(n)
+        sky_e = self.sky_dn * g
         if not c.noise:
-            frame = np.full(n, self._flat_dn, dtype=np.uint8)
+            if pattern is None:
+                frame = np.full(n, self._flat_dn, dtype=np.uint8)
+            else:
+                bg_e = np.minimum(sky_e * (1.0 + pattern[1]), c.full_well_e)
+                frame = _grey(c.black_level_dn + pattern[0] + bg_e / g)
             if idx.size:
-                e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
-                frame[idx] = np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+                e = (signal_dn.astype(np.float64) + self.sky_dn) * g
+                if pattern is not None:
+                    e *= 1.0 + pattern[1][idx]
+                e, other, got_e = self._charge(e, idx, shape, sky_e)
+                dn = c.black_level_dn + e / g
+                frame[idx] = _grey(dn if pattern is None else dn + pattern[0][idx])
+                if other.size:
+                    frame[other] = _grey(frame[other] + got_e / g)
             return frame.reshape(shape)
         rng = np.random.default_rng([c.seed, int(frame_index)])
-        if self._bank is None or self._bank.size != n + _BANK_OFFSETS:
-            self._bank = _background_bank(c.seed, self._table.tobytes(), n)
-        offset = int(rng.integers(_BANK_OFFSETS))
-        frame = self._bank[offset : offset + n].copy()  # the background everywhere
+        if pattern is None:
+            if self._bank is None or self._bank.size != n + _BANK_OFFSETS:
+                self._bank = _background_bank(c.seed, self._table.tobytes(), n)
+            offset = int(rng.integers(_BANK_OFFSETS))
+            frame = self._bank[offset : offset + n].copy()  # the background everywhere
+        else:
+            bank = _noise_bank(c.seed, sky_e, c.read_noise_e, c.full_well_e, n)
+            offset = int(rng.integers(_BANK_OFFSETS))
+            bg_e = bank[offset : offset + n] * (1.0 + pattern[1])
+            frame = _grey(c.black_level_dn + pattern[0] + bg_e / g)
         if idx.size:
             mean_e = (signal_dn.astype(np.float64) + self.sky_dn) * g
-            e = np.minimum(rng.poisson(mean_e), c.full_well_e).astype(np.float64)
+            if pattern is not None:
+                mean_e *= 1.0 + pattern[1][idx]
+            other = np.zeros(0, dtype=np.intp)
+            if c.blooming > 0:
+                e, other, got_e = self._charge(rng.poisson(mean_e).astype(np.float64), idx, shape, sky_e)
+            else:
+                e = np.minimum(rng.poisson(mean_e), c.full_well_e).astype(np.float64)
             if c.read_noise_e > 0:
                 e += rng.normal(0.0, c.read_noise_e, idx.size)
-            frame[idx] = np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+            dn = c.black_level_dn + e / g
+            frame[idx] = _grey(dn if pattern is None else dn + pattern[0][idx])
+            if other.size:
+                frame[other] = _grey(frame[other] + got_e / g)
         return frame.reshape(shape)
 
     def render(
@@ -817,13 +1009,87 @@ class Renderer:
         camera_T_tob: np.ndarray | None,
         world_T_camera: np.ndarray | None = None,
         frame_index: int = 0,
+        camera_T_tob_end: np.ndarray | None = None,
+        world_T_camera_end: np.ndarray | None = None,
     ) -> np.ndarray:
         """One complex image (H, W) uint8 of the target at ``camera_T_tob`` (mm; None: no
         target in the scene): ``expose(signal(blobs(discs(...))), frame_index)``, byte for
-        byte, computed on the blobs' pixels only."""
-        idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
+        byte, computed on the blobs' pixels only.
+
+        Motion blur: with ``camera_T_tob_end`` and/or ``world_T_camera_end`` (mm) the
+        first two poses are those at the *start* of the exposure and these at its *end*;
+        the signal is integrated over the exposure (:meth:`exposure_signal_pixels`). The
+        image's truth is then the pose at mid-exposure,
+        ``interpolate_transform(start, end, 0.5)``. Without end poses: no motion, the
+        image of the given poses (as before)."""
+        if camera_T_tob_end is None and world_T_camera_end is None:
+            idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
+        else:
+            idx, value = self.exposure_signal_pixels(
+                (camera_T_tob, camera_T_tob_end), (world_T_camera, world_T_camera_end)
+            )
         width, height = self.params.image_size_px
         return self.expose_pixels(idx, value, frame_index, (height, width))
+
+    def exposure_signal_pixels(
+        self,
+        camera_T_tob: tuple[np.ndarray | None, np.ndarray | None],
+        world_T_camera: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`signal_pixels` integrated over the exposure: ``camera_T_tob`` and
+        ``world_T_camera`` are (start, end) pairs of poses (mm; an end of None: the start,
+        not moving), moving on the constant-velocity screw between them
+        (:func:`humanpt.geometry.transforms.interpolate_transform`).
+
+        The exposure is cut into N equal parts and each rendered at its middle, N so that
+        every blob moves at most ``motion_step_px`` from one to the next (N = 1, the pose
+        at mid-exposure, when the image moves less than that), and the N signals are
+        averaged: the blur of the motion, each sub-image with its own brightness, window
+        and coverage. Flat indices (ascending) and values, as :meth:`signal_pixels`."""
+        tob0, tob1 = camera_T_tob
+        cam0, cam1 = world_T_camera
+        tob1 = tob0 if tob1 is None else tob1
+        cam1 = cam0 if cam1 is None else cam1
+
+        def pose(a, b, f):
+            if a is None or b is None:
+                return a if b is None else b
+            return interpolate_transform(np.asarray(a, float), np.asarray(b, float), f)
+
+        start = self.blobs(self.discs(tob0, cam0))
+        end = self.blobs(self.discs(tob1, cam1))
+        n = 1
+        if len(start) and len(end):
+            key0 = start.view * 1_000_000 + start.disc * 1000 + start.label
+            key1 = end.view * 1_000_000 + end.disc * 1000 + end.label
+            common, i0, i1 = np.intersect1d(key0, key1, return_indices=True)
+            if common.size:
+                moved = np.linalg.norm(end.centre_px[i1] - start.centre_px[i0], axis=1).max()
+                n = max(1, math.ceil(moved / self.config.motion_step_px - 1e-9))
+        if n == 1:
+            return self.signal_pixels(self.blobs(self.discs(pose(tob0, tob1, 0.5), pose(cam0, cam1, 0.5))))
+        parts = [
+            self.signal_pixels(
+                self.blobs(self.discs(pose(tob0, tob1, (k + 0.5) / n), pose(cam0, cam1, (k + 0.5) / n)))
+            )
+            for k in range(n)
+        ]
+        idx = np.concatenate([p[0] for p in parts])
+        value = np.concatenate([p[1] for p in parts]).astype(np.float64)
+        if idx.size == 0:
+            return idx, value.astype(np.float32)
+        order = np.argsort(idx, kind="stable")
+        idx, value = idx[order], value[order]
+        first = np.empty(idx.size, dtype=bool)
+        first[0] = True
+        np.not_equal(idx[1:], idx[:-1], out=first[1:])
+        starts = np.flatnonzero(first)
+        return idx[starts], (np.add.reduceat(value, starts) / n).astype(np.float32)
+
+
+def _grey(dn: np.ndarray) -> np.ndarray:
+    """DN (float) -> 8-bit grey levels: round, clip at 0 and 255."""
+    return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
 
 
 def intensity_centroid(image: np.ndarray, background: float = 0.0) -> np.ndarray:
