@@ -7,7 +7,9 @@ Pipeline (one image):
    TOB, and a bright lamp - as :class:`Discs` (centre, in-plane axes, lit normal, radius,
    radiance, extra blur, occlusion).
 2. **Projection** (:meth:`Renderer.blobs`): each disc through each virtual camera (right,
-   left; eq. (1)-(3)) and the real lens's distortion. A disc is dropped from a view when it
+   left; eq. (1)-(3), each with its own principal point and rotation - a tilted mirror)
+   and the real lens's distortion; optionally dimmed by the source's angular fall-off
+   (``source_falloff_exponent``) and doubled by the beam splitter's ghost (``ghost_gain``). A disc is dropped from a view when it
    is behind (or nearer than ``near_mm`` to) that virtual camera, when its lit face looks
    away from it, or when its window misses the image. Around its projected centre a disc is
    the unit circle mapped by the local Jacobian ``J = d(u, v)/d(s, t)`` (pinhole and
@@ -22,7 +24,11 @@ Pipeline (one image):
    applied as a separable, normalised, symmetric kernel - it moves no centroid.
 5. **Sensor** (:meth:`Renderer.expose`): background (black level + ambient), shot noise
    (Poisson in electrons), read noise (Gaussian), full well, rounding to 8 bits, clipping
-   at 255. Views are superimposed by adding their signals before the sensor.
+   at 255. Views are superimposed by adding their signals before the sensor. Optional:
+   fixed-pattern noise (``dsnu_dn``, ``prnu``: one pattern per seed) and blooming along
+   the columns (``blooming``, :func:`bloom_columns`).
+6. **Exposure** (:meth:`Renderer.exposure_signal_pixels`): given the poses at the start
+   and end of the exposure, the signal is averaged over sub-exposures (motion blur).
 
 Speed: only small windows around each blob are rendered (:meth:`Renderer.signal_pixels`:
 the nonzero pixels, no full frame); coverage runs in the window that holds the ellipse and
@@ -192,7 +198,8 @@ class Blobs:
     ``d(u, v)/d(s, t)`` with (s, t) in disc radii; ``dn`` (m,) DN of a fully covered pixel
     at this exposure, after the view gain; ``sigma_px`` (m,) total blur; ``occlusion_h``,
     ``occlusion_dir`` as in :class:`Discs`; ``view`` (m,) 0 right, 1 left; ``disc`` (m,)
-    index into the discs; ``label`` (m,) the disc's label.
+    index into the discs; ``label`` (m,) the disc's label (100 + it for the splitter's
+    ghost of a blob).
     """
 
     centre_px: np.ndarray
@@ -709,6 +716,7 @@ class Renderer:
         )
         self._bank: np.ndarray | None = None  # built on the first noisy frame
         self._fpn: tuple[np.ndarray, np.ndarray] | None = None  # built on first use
+        self._fpn_background: tuple[np.ndarray, np.ndarray] | None = None
         e0 = np.minimum((np.zeros(1) + self.sky_dn) * c.gain_e_per_dn, c.full_well_e)
         self._flat_dn = np.clip(np.rint(c.black_level_dn + e0 / c.gain_e_per_dn), 0, 255).astype(
             np.uint8
@@ -985,8 +993,16 @@ class Renderer:
         else:
             bank = _noise_bank(c.seed, sky_e, c.read_noise_e, c.full_well_e, n)
             offset = int(rng.integers(_BANK_OFFSETS))
-            bg_e = bank[offset : offset + n] * (1.0 + pattern[1])
-            frame = _grey(c.black_level_dn + pattern[0] + bg_e / g)
+            if self._fpn_background is None or self._fpn_background[0].size != n:
+                self._fpn_background = (  # float32: a 307k-pixel frame in ~1 ms
+                    (c.black_level_dn + pattern[0]).astype(np.float32),
+                    ((1.0 + pattern[1]) / g).astype(np.float32),
+                )
+            base_dn, dn_per_e = self._fpn_background
+            bg_dn = bank[offset : offset + n] * dn_per_e
+            bg_dn += base_dn
+            np.rint(bg_dn, out=bg_dn)
+            frame = np.clip(bg_dn, 0, 255).astype(np.uint8)
         if idx.size:
             mean_e = (signal_dn.astype(np.float64) + self.sky_dn) * g
             if pattern is not None:
@@ -1052,9 +1068,14 @@ class Renderer:
         cam1 = cam0 if cam1 is None else cam1
 
         def pose(a, b, f):
-            if a is None or b is None:
+            if a is None or b is None or a is b:
                 return a if b is None else b
-            return interpolate_transform(np.asarray(a, float), np.asarray(b, float), f)
+            return interpolate_transform(
+                np.asarray(a, float), np.asarray(b, float), f, assume_valid=True
+            )
+
+        if _same_pose(tob0, tob1) and _same_pose(cam0, cam1):  # not moving: as render()
+            return self.signal_pixels(self.blobs(self.discs(tob0, cam0)))
 
         start = self.blobs(self.discs(tob0, cam0))
         end = self.blobs(self.discs(tob1, cam1))
@@ -1085,6 +1106,10 @@ class Renderer:
         np.not_equal(idx[1:], idx[:-1], out=first[1:])
         starts = np.flatnonzero(first)
         return idx[starts], (np.add.reduceat(value, starts) / n).astype(np.float32)
+
+
+def _same_pose(a, b) -> bool:
+    return a is b or (a is not None and b is not None and np.array_equal(a, b))
 
 
 def _grey(dn: np.ndarray) -> np.ndarray:
