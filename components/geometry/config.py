@@ -38,7 +38,12 @@ class PsvsConfig:
     alpha gives 2 alpha (:func:`humanpt.geometry.virtual_rotation_from_mirror_tilt_deg`);
     about y it pans the view (image shift -a_u tan(angle) along u: 0.05 deg = 0.87 px, a
     z bias of 4.6 mm at 645 mm with b = 90 mm), about x it tilts it (along v: the views leave their common
-    scan line). A hand-aligned mirror pair is good to ~0.01-0.05 deg."""
+    scan line). A hand-aligned mirror pair is good to ~0.01-0.05 deg.
+
+    ``splitter_thickness_mm`` (None: use ``m_mm``, ``l_mm``): the beam splitter's
+    thickness d, from which m and l follow by eq. (5), (6) at the paper's 45 deg and
+    n = 1.5 (m = 0.329 d, l = 0.378 d); give it or m, l, not both. A plate's tolerance is
+    ~0.05-0.1 mm."""
 
     image_width_px: Annotated[int, Range(1, 20000, "px")] = 640
     image_height_px: Annotated[int, Range(1, 20000, "px")] = 480
@@ -57,12 +62,21 @@ class PsvsConfig:
     dv0_left_px: OffsetPx = 0.0
     rotvec_right_deg: tuple[RotDeg, RotDeg, RotDeg] = (0.0, 0.0, 0.0)
     rotvec_left_deg: tuple[RotDeg, RotDeg, RotDeg] = (0.0, 0.0, 0.0)
+    splitter_thickness_mm: Annotated[float, Range(0.0, 20.0, "mm")] | None = None
 
     def __post_init__(self) -> None:
         self.params()  # PsvsParams validates every field and names it
 
     def params(self) -> PsvsParams:
         """The geometry library's :class:`PsvsParams`."""
+        m_mm, l_mm = self.m_mm, self.l_mm
+        if self.splitter_thickness_mm is not None:
+            if (m_mm, l_mm) != (_M_MM, _L_MM):
+                raise ValueError(
+                    "psvs.splitter_thickness_mm sets m_mm and l_mm (eq. (5), (6)): give "
+                    "either the thickness or m_mm, l_mm"
+                )
+            m_mm, l_mm = psvs_m_l_mm(self.splitter_thickness_mm, 45.0, 1.5, 1.0)
         return PsvsParams(
             image_size_px=(self.image_width_px, self.image_height_px),
             a_u=self.a_u,
@@ -71,8 +85,8 @@ class PsvsConfig:
             u0=self.u0,
             v0=self.v0,
             baseline_mm=self.baseline_mm,
-            m_mm=self.m_mm,
-            l_mm=self.l_mm,
+            m_mm=m_mm,
+            l_mm=l_mm,
             dist_coeffs=self.dist_coeffs,
             # no offset: None, the real camera's (u0, v0), as in PsvsParams
             u0_right=_shifted(self.u0, self.du0_right_px),

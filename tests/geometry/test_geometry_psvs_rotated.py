@@ -192,3 +192,12 @@ def test_config_offsets_and_rotations_reach_the_cameras():
     assert p.right_camera.is_parallel and not p.is_parallel
     # the defaults are the paper's PSVS, field for field
     assert PsvsConfig().params() == PsvsParams()
+
+
+def test_config_splitter_thickness_gives_m_and_l_of_eq5_eq6():
+    """The paper: d = 1 mm, 45 deg, n = 1.5 -> m = 0.329, l = 0.378 mm; both scale with d."""
+    p = PsvsConfig(splitter_thickness_mm=1.1).params()
+    assert (round(p.m_mm / 1.1, 3), round(p.l_mm / 1.1, 3)) == (0.329, 0.378)
+    assert PsvsConfig(splitter_thickness_mm=1.0).params() == PsvsParams()
+    with pytest.raises(ValueError, match="splitter_thickness_mm"):
+        PsvsConfig(splitter_thickness_mm=1.1, m_mm=0.5)
