@@ -75,6 +75,7 @@ VIEWS = ("right", "left")
 # A source's axes in the TOB frame: e1 = u, e2 = v, lit normal -w.
 _TOB_AXES = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]]).T
 _TOB_AXES.flags.writeable = False
+_MAX_SUBEXPOSURES = 64  # motion blur: sub-exposures of one image at most
 _MAX_HALF_WINDOW_PX = 400  # a blob wider than 800 px (a source ~1 cm from the lens) is dropped
 
 
@@ -1059,7 +1060,8 @@ class Renderer:
 
         The exposure is cut into N equal parts and each rendered at its middle, N so that
         every blob moves at most ``motion_step_px`` from one to the next (N = 1, the pose
-        at mid-exposure, when the image moves less than that), and the N signals are
+        at mid-exposure, when the image moves less than that; at most 64 - a blur longer
+        than 64 steps is sampled more coarsely), and the N signals are
         averaged: the blur of the motion, each sub-image with its own brightness, window
         and coverage. Flat indices (ascending) and values, as :meth:`signal_pixels`."""
         tob0, tob1 = camera_T_tob
@@ -1087,6 +1089,7 @@ class Renderer:
             if common.size:
                 moved = np.linalg.norm(end.centre_px[i1] - start.centre_px[i0], axis=1).max()
                 n = max(1, math.ceil(moved / self.config.motion_step_px - 1e-9))
+                n = min(n, _MAX_SUBEXPOSURES)
         if n == 1:
             return self.signal_pixels(self.blobs(self.discs(pose(tob0, tob1, 0.5), pose(cam0, cam1, 0.5))))
         parts = [
