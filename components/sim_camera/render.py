@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -1043,59 +1044,84 @@ class Renderer:
             idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
         else:
             idx, value = self.exposure_signal_pixels(
-                (camera_T_tob, camera_T_tob_end), (world_T_camera, world_T_camera_end)
+                (camera_T_tob, camera_T_tob if camera_T_tob_end is None else camera_T_tob_end),
+                (world_T_camera, world_T_camera if world_T_camera_end is None else world_T_camera_end),
             )
+        width, height = self.params.image_size_px
+        return self.expose_pixels(idx, value, frame_index, (height, width))
+
+    def render_exposure(
+        self,
+        camera_T_tob: Sequence[np.ndarray | None],
+        world_T_camera: Sequence[np.ndarray | None] | None = None,
+        frame_index: int = 0,
+    ) -> np.ndarray:
+        """One complex image (H, W) uint8 integrated over the exposure from K pose samples
+        equally spaced over it (start ... end; see :meth:`exposure_signal_pixels`)."""
+        idx, value = self.exposure_signal_pixels(camera_T_tob, world_T_camera)
         width, height = self.params.image_size_px
         return self.expose_pixels(idx, value, frame_index, (height, width))
 
     def exposure_signal_pixels(
         self,
-        camera_T_tob: tuple[np.ndarray | None, np.ndarray | None],
-        world_T_camera: tuple[np.ndarray | None, np.ndarray | None] = (None, None),
+        camera_T_tob: Sequence[np.ndarray | None],
+        world_T_camera: Sequence[np.ndarray | None] | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`signal_pixels` integrated over the exposure: ``camera_T_tob`` and
-        ``world_T_camera`` are (start, end) pairs of poses (mm; an end of None: the start,
-        not moving), moving on the constant-velocity screw between them
-        (:func:`humanpt.geometry.transforms.interpolate_transform`).
+        ``world_T_camera`` are sequences of K >= 1 poses (mm) at K instants equally spaced
+        over the exposure, the first at its start, the last at its end (None entries: no
+        target / no camera pose; ``world_T_camera`` None: none at all; a shorter sequence
+        of one pose: not moving). Between two samples a pose moves on the
+        constant-velocity screw (:func:`humanpt.geometry.transforms.interpolate_transform`):
+        give (start, end), or (start, middle, end) to have the truth at mid-exposure
+        rendered exactly when the image moves less than ``motion_step_px``.
 
         The exposure is cut into N equal parts and each rendered at its middle, N so that
         every blob moves at most ``motion_step_px`` from one to the next (N = 1, the pose
         at mid-exposure, when the image moves less than that; at most 64 - a blur longer
-        than 64 steps is sampled more coarsely), and the N signals are
-        averaged: the blur of the motion, each sub-image with its own brightness, window
-        and coverage. Flat indices (ascending) and values, as :meth:`signal_pixels`."""
-        tob0, tob1 = camera_T_tob
-        cam0, cam1 = world_T_camera
-        tob1 = tob0 if tob1 is None else tob1
-        cam1 = cam0 if cam1 is None else cam1
+        than 64 steps is sampled more coarsely), and the N signals are averaged: the blur
+        of the motion, each sub-image with its own brightness, window and coverage. Flat
+        indices (ascending) and values, as :meth:`signal_pixels`."""
+        tobs = list(camera_T_tob)
+        cams = [None] if world_T_camera is None else list(world_T_camera)
+        if not tobs or not cams:
+            raise ValueError("exposure_signal_pixels needs at least one pose sample")
 
-        def pose(a, b, f):
-            if a is None or b is None or a is b:
-                return a if b is None else b
-            return interpolate_transform(
-                np.asarray(a, float), np.asarray(b, float), f, assume_valid=True
-            )
+        def at(samples, f):
+            """The pose at the fraction f in [0, 1] of the exposure."""
+            if len(samples) == 1:
+                return samples[0]
+            x = f * (len(samples) - 1)
+            k = min(int(x), len(samples) - 2)
+            a, b, g = samples[k], samples[k + 1], x - k
+            if g == 0.0 or b is None:
+                return a
+            if g == 1.0 or a is None or a is b:
+                return b
+            return interpolate_transform(np.asarray(a, float), np.asarray(b, float), g, assume_valid=True)
 
-        if _same_pose(tob0, tob1) and _same_pose(cam0, cam1):  # not moving: as render()
-            return self.signal_pixels(self.blobs(self.discs(tob0, cam0)))
+        def still(samples):
+            return all(_same_pose(samples[0], q) for q in samples[1:])
 
-        start = self.blobs(self.discs(tob0, cam0))
-        end = self.blobs(self.discs(tob1, cam1))
-        n = 1
-        if len(start) and len(end):
-            key0 = start.view * 1_000_000 + start.disc * 1000 + start.label
-            key1 = end.view * 1_000_000 + end.disc * 1000 + end.label
-            common, i0, i1 = np.intersect1d(key0, key1, return_indices=True)
-            if common.size:
-                moved = np.linalg.norm(end.centre_px[i1] - start.centre_px[i0], axis=1).max()
-                n = max(1, math.ceil(moved / self.config.motion_step_px - 1e-9))
-                n = min(n, _MAX_SUBEXPOSURES)
+        if still(tobs) and still(cams):  # not moving: as render()
+            return self.signal_pixels(self.blobs(self.discs(tobs[0], cams[0])))
+        # how far the image moves: blob centres at every sample instant, path summed
+        k_max = max(len(tobs), len(cams))
+        fractions = np.linspace(0.0, 1.0, max(k_max, 2))
+        blobs = [self.blobs(self.discs(at(tobs, f), at(cams, f))) for f in fractions]
+        total = 0.0  # px: the largest blob displacement of each segment, summed
+        for b0, b1 in zip(blobs[:-1], blobs[1:], strict=True):
+            key0 = b0.view * 1_000_000 + b0.disc * 1000 + b0.label
+            key1 = b1.view * 1_000_000 + b1.disc * 1000 + b1.label
+            _, i0, i1 = np.intersect1d(key0, key1, return_indices=True)
+            if i0.size:
+                total += float(np.linalg.norm(b1.centre_px[i1] - b0.centre_px[i0], axis=1).max())
+        n = max(1, math.ceil(total / self.config.motion_step_px - 1e-9))
+        n = min(n, _MAX_SUBEXPOSURES)
         if n == 1:
-            return self.signal_pixels(self.blobs(self.discs(pose(tob0, tob1, 0.5), pose(cam0, cam1, 0.5))))
+            return self.signal_pixels(self.blobs(self.discs(at(tobs, 0.5), at(cams, 0.5))))
         parts = [
-            self.signal_pixels(
-                self.blobs(self.discs(pose(tob0, tob1, (k + 0.5) / n), pose(cam0, cam1, (k + 0.5) / n)))
-            )
+            self.signal_pixels(self.blobs(self.discs(at(tobs, (k + 0.5) / n), at(cams, (k + 0.5) / n))))
             for k in range(n)
         ]
         idx = np.concatenate([p[0] for p in parts])

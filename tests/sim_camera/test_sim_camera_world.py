@@ -209,3 +209,24 @@ def test_every_new_field_is_off_by_default():
     ) * 5
     p = cfg.params()
     assert p.is_parallel and p.left_camera.u0 == p.u0 and p.right_camera.v0 == p.v0
+
+
+def test_exposure_from_three_samples_renders_the_middle_exactly_or_follows_a_corner():
+    r = Renderer(SimCameraConfig())
+    start = camera_T_desired(645.0)
+
+    def moved(dx, dy):
+        return make_transform(np.eye(3), start[:3, 3] + (dx, dy, 0.0))
+
+    # a sub-step motion: the middle sample itself, byte for byte
+    small = [start, moved(0.01, 0.0), moved(0.03, 0.0)]
+    np.testing.assert_array_equal(r.render_exposure(small, None, 5), r.render(small[1], None, 5))
+    # an L-shaped path, 2 mm along x then 2 mm along y: the blur's centroid is the path's
+    # mean, (1.5, 0.5) mm from the start (equal halves with means (1, 0) and (2, 1))
+    quiet = Renderer(SimCameraConfig(noise=False))
+    idx, value = quiet.exposure_signal_pixels([start, moved(2.0, 0.0), moved(2.0, 2.0)])
+    blurred = np.zeros(480 * 640)
+    blurred[idx] = value
+    centres = quiet.blobs(quiet.discs(moved(1.5, 0.5))).centre_px
+    for (win, origin), uv in zip(_windows(blurred.reshape(480, 640), centres, 12), centres, strict=True):
+        np.testing.assert_allclose(intensity_centroid(win) + origin, uv, atol=0.02)
