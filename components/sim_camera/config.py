@@ -71,7 +71,10 @@ class SimCameraConfig:
       per ``seed``: the same pattern in every frame.
     * ``blooming`` (fraction; ~0.5-1): the share of the charge above ``full_well_e`` that
       spills into the neighbouring pixels of its column (half up, half down, on to the
-      next pixel while a neighbour is full); 0: the excess is lost (clipped), today.
+      next pixel while a neighbour is full); 0: the excess is lost (clipped), today. It acts
+      only on charge above the well: at the defaults the 8-bit output saturates first
+      (255 DN = 10 200 e- < 12 000 e-), so pair it with a well near 255 gain_e_per_dn or
+      a longer exposure.
     * ``motion_step_px``: with a pose at the start and at the end of the exposure the
       image is integrated over sub-exposures so that it moves at most this far between
       two (one sample, at mid-exposure, when it moves less).
