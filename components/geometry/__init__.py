@@ -35,6 +35,7 @@ from .psvs import (
     eq4_points_mm,
     in_image,
     intrinsic_matrix,
+    parallel_pixels,
     project,
     project_pinhole,
     projection_jacobian,
@@ -45,6 +46,7 @@ from .psvs import (
     triangulate_eq4,
     triangulate_lsq,
     virtual_camera_centres_mm,
+    virtual_rotation_from_mirror_tilt_deg,
 )
 from .rig import (
     DEFAULT_DZ_MM,
@@ -92,6 +94,7 @@ __all__ = [
     "eq4_points_mm",
     "in_image",
     "intrinsic_matrix",
+    "parallel_pixels",
     "project",
     "project_pinhole",
     "projection_jacobian",
@@ -102,6 +105,7 @@ __all__ = [
     "triangulate_eq4",
     "triangulate_lsq",
     "virtual_camera_centres_mm",
+    "virtual_rotation_from_mirror_tilt_deg",
     # distortion
     "distort_normalised",
     "distort_pixels",

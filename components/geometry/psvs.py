@@ -6,17 +6,25 @@ Frames and units
   its optical axis (into the scene), x along the image u axis, y along the image v axis.
   All 3D coordinates are in **millimetres**; image coordinates are in **pixels** of the
   complex image.
-* The PSVS makes two *virtual* cameras, parallel to the real one (same axes), with optical
+* The PSVS makes two *virtual* cameras, parallel to the real one (same axes; see R_k below), with optical
   centres given by eq. (3): right (virtual camera 1) ``O1 = (b/2, 0, -b/2)``, left
   (virtual camera 2) ``O2 = (-b/2 - m, 0, -b/2 + l)``; m and l come from refraction in the
   beam-splitter plate, eq. (5), (6).
 * Each virtual camera is a pinhole with the intrinsic matrix of eq. (1)::
 
-      u = u0_k + a_u X/Z + c Y/Z,   v = v0_k + a_v Y/Z,   (X, Y, Z) = P - O_k
+      u = u0_k + a_u X/Z + c Y/Z,   v = v0_k + a_v Y/Z,   (X, Y, Z) = R_k^T (P - O_k)
 
   which is exactly the inverse of eq. (2) (and, with eq. (3), of eq. (4)); the paper's
   equations carry no skew term, so the triangulators first remove the skew
   (``u - c (v - v0)/a_v``), which is a no-op for c = 0.
+* ``R_k = camera_R_virtual`` is the rotation of virtual camera k's axes in the camera frame:
+  identity in the paper's model (the mirrors perfectly aligned). A mirror tilted by alpha
+  about an axis in its plane rotates the virtual camera by 2 alpha about that axis
+  (:func:`virtual_rotation_from_mirror_tilt_deg`); the PSVS model takes the virtual
+  camera's rotation. Triangulation maps each view's ideal pixels through the rotation
+  homography ``A_k R_k A_k^-1`` into the parallel camera with the same centre and
+  intrinsics (:func:`parallel_pixels`), then applies the unchanged eq. (4)/(2); with
+  R_k = I nothing is mapped.
 * Lens distortion belongs to the one real lens: ideal complex-image pixels are distorted
   around the real camera's intrinsics (``u0, v0``) with OpenCV's model
   (:mod:`humanpt.geometry.distortion`). Triangulators take *ideal* (undistorted) pixels;
@@ -34,18 +42,21 @@ import numpy as np
 
 from .distortion import as_dist_coeffs, distort_pixels, undistort_pixels
 from .errors import GeometryError
+from .transforms import matrix_from_rotvec
 
 __all__ = [
     "refraction_angle_deg",
     "psvs_m_l_mm",
     "virtual_camera_centres_mm",
     "intrinsic_matrix",
+    "virtual_rotation_from_mirror_tilt_deg",
     "PinholeCamera",
     "PsvsParams",
     "project_pinhole",
     "projection_jacobian",
     "project",
     "in_image",
+    "parallel_pixels",
     "eq4_points_mm",
     "triangulate_eq4",
     "triangulate_eq2",
@@ -126,6 +137,24 @@ def intrinsic_matrix(a_u: float, a_v: float, u0: float, v0: float, skew: float =
     return np.array([[a_u, skew, u0], [0.0, a_v, v0], [0.0, 0.0, 1.0]], dtype=float)
 
 
+def virtual_rotation_from_mirror_tilt_deg(tilt_deg: float, axis=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """Rotation vector (3,), deg, of a virtual camera whose mirror is tilted by
+    ``tilt_deg`` about ``axis`` (3,), a direction in the mirror's plane, given in the
+    virtual camera's frame (i.e. the tilt axis seen through the mirrors after it).
+
+    Reflection in a mirror rotated by alpha about an axis a in its plane is
+    ``R_a(alpha) M R_a(-alpha) = R_a(2 alpha) M`` (M a = a): the virtual camera turns by
+    twice the tilt, ``2 alpha a``. Use the result as ``rotvec_right_deg`` /
+    ``rotvec_left_deg``. (The tilt also moves the virtual optical centre by about
+    2 alpha times the distance from the axis - 0.1 mm for 0.05 deg at 50 mm - which this
+    does not model: give it through the baseline, m or l.)"""
+    a = np.asarray(axis, dtype=float).reshape(3)
+    norm = np.linalg.norm(a)
+    if not (np.isfinite(norm) and norm > 0):
+        raise ValueError(f"axis must be a non-zero finite 3-vector, got {axis!r}")
+    return 2.0 * _finite("tilt_deg", tilt_deg) * a / norm
+
+
 # --------------------------------------------------------------------------- cameras
 
 
@@ -139,12 +168,19 @@ def _finite(name: str, value: float) -> float:
     return value
 
 
+_IDENTITY_3 = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
 @dataclass(frozen=True)
 class PinholeCamera:
-    """One camera of a parallel stereo pair (eq. (2)): axes parallel to the camera frame.
+    """One camera of a stereo pair (eq. (2)): axes parallel to the camera frame unless
+    rotated.
 
     ``a_u, a_v`` scale factors (px), ``u0, v0`` image centre (px), ``skew`` the eq. (1)
-    parameter c (px), ``centre_mm`` the optical centre (x0, y0, z0) in the camera frame (mm).
+    parameter c (px), ``centre_mm`` the optical centre (x0, y0, z0) in the camera frame (mm),
+    ``camera_R_virtual`` (3x3, rows) the rotation of this camera's axes in the camera frame
+    (identity: the parallel camera of the paper): a point P (camera frame) is at
+    ``R^T (P - O)`` in this camera's frame. Orthonormal with det +1 to 1e-9.
     """
 
     a_u: float
@@ -153,6 +189,7 @@ class PinholeCamera:
     v0: float
     centre_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
     skew: float = 0.0
+    camera_R_virtual: tuple[tuple[float, float, float], ...] = _IDENTITY_3
 
     def __post_init__(self) -> None:
         for name in ("a_u", "a_v"):
@@ -166,6 +203,17 @@ class PinholeCamera:
         if len(centre) != 3:
             raise ValueError(f"centre_mm must have 3 values, got {len(centre)}")
         object.__setattr__(self, "centre_mm", centre)
+        rot = np.asarray(self.camera_R_virtual, dtype=float)
+        if rot.shape != (3, 3) or not np.all(np.isfinite(rot)):
+            raise ValueError(f"camera_R_virtual must be a finite 3x3 matrix, got {rot.tolist()}")
+        if not (
+            np.allclose(rot @ rot.T, np.eye(3), rtol=0, atol=1e-9)
+            and abs(np.linalg.det(rot) - 1.0) < 1e-9
+        ):
+            raise ValueError(
+                f"camera_R_virtual must be a rotation (orthonormal, det +1), got {rot.tolist()}"
+            )
+        object.__setattr__(self, "camera_R_virtual", tuple(tuple(float(x) for x in r) for r in rot))
 
     @property
     def matrix(self) -> np.ndarray:
@@ -176,6 +224,16 @@ class PinholeCamera:
     def centre(self) -> np.ndarray:
         """Optical centre (3,) in mm, camera frame."""
         return np.array(self.centre_mm)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """``camera_R_virtual`` (3, 3) as an array."""
+        return np.array(self.camera_R_virtual)
+
+    @property
+    def is_parallel(self) -> bool:
+        """True when the axes are the camera frame's (R = I exactly): the paper's model."""
+        return self.camera_R_virtual == _IDENTITY_3
 
 
 _DEFAULT_M_MM, _DEFAULT_L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
@@ -193,7 +251,12 @@ class PsvsParams:
     ``left_camera``, so ``dataclasses.replace(params, u0=...)`` moves all of them.
 
     Fields: ``image_size_px`` (width, height); ``a_u, a_v, skew, u0, v0`` in px;
-    ``baseline_mm``, ``m_mm``, ``l_mm`` in mm; ``dist_coeffs`` OpenCV (k1, k2, p1, p2, k3).
+    ``baseline_mm``, ``m_mm``, ``l_mm`` in mm; ``dist_coeffs`` OpenCV (k1, k2, p1, p2, k3);
+    ``rotvec_right_deg``, ``rotvec_left_deg`` (3,) the rotation vector (deg, camera frame)
+    of each virtual camera's axes (``camera_R_virtual``; (0, 0, 0): parallel, as in the
+    paper). A rotation about y pans a view: its image shifts by ``-a_u tan(angle)`` px
+    along u; about x it tilts it (``+a_v tan(angle)`` along v); a mirror tilt of alpha is a
+    rotation of 2 alpha (:func:`virtual_rotation_from_mirror_tilt_deg`).
     """
 
     image_size_px: tuple[int, int] = (640, 480)
@@ -210,6 +273,8 @@ class PsvsParams:
     v0_right: float | None = None
     u0_left: float | None = None
     v0_left: float | None = None
+    rotvec_right_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rotvec_left_deg: tuple[float, float, float] = (0.0, 0.0, 0.0)
     _cameras: tuple = field(default=(), init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -241,6 +306,20 @@ class PsvsParams:
         object.__setattr__(
             self, "dist_coeffs", tuple(float(x) for x in as_dist_coeffs(self.dist_coeffs))
         )
+        rotations = []
+        for name in ("rotvec_right_deg", "rotvec_left_deg"):
+            vec = tuple(_finite(name, x) for x in np.asarray(getattr(self, name)).ravel())
+            if len(vec) != 3:
+                raise ValueError(f"PsvsParams.{name} must have 3 values, got {len(vec)}")
+            if math.hypot(*vec) > 30.0:
+                raise ValueError(
+                    f"PsvsParams.{name} = {vec} deg is not a small mirror misalignment "
+                    "(at most 30 deg)"
+                )
+            object.__setattr__(self, name, vec)
+            rotations.append(
+                _IDENTITY_3 if not any(vec) else matrix_from_rotvec(np.radians(vec))
+            )
         right_c, left_c = virtual_camera_centres_mm(self.baseline_mm, self.m_mm, self.l_mm)
 
         def pick(value, default):
@@ -254,6 +333,7 @@ class PsvsParams:
                 pick(self.v0_right, self.v0),
                 right_c,
                 self.skew,
+                rotations[0],
             ),
             PinholeCamera(
                 self.a_u,
@@ -262,6 +342,7 @@ class PsvsParams:
                 pick(self.v0_left, self.v0),
                 left_c,
                 self.skew,
+                rotations[1],
             ),
         )
         object.__setattr__(self, "_cameras", cams)
@@ -301,6 +382,11 @@ class PsvsParams:
     def has_distortion(self) -> bool:
         return any(self.dist_coeffs)
 
+    @property
+    def is_parallel(self) -> bool:
+        """Both virtual cameras parallel to the real one (no rotation): the paper's model."""
+        return self._cameras[0].is_parallel and self._cameras[1].is_parallel
+
 
 def in_image(params: PsvsParams, uv_px: np.ndarray, margin_px: float = 0.0) -> np.ndarray:
     """Boolean mask (...,): pixels (..., 2) inside the complex image, at least
@@ -334,11 +420,20 @@ def _pixels(uv_px, name: str) -> np.ndarray:
     return uv
 
 
+def _in_camera(camera: PinholeCamera, camera_p_mm) -> np.ndarray:
+    """``R^T (P - O)`` (..., 3): points in the (virtual) camera's own frame, mm."""
+    rel = _points(camera_p_mm) - camera.centre
+    if camera.is_parallel:
+        return rel
+    return rel @ camera.rotation  # row vectors: (R^T r)^T = r^T R
+
+
 def project_pinhole(camera: PinholeCamera, camera_p_mm: np.ndarray) -> np.ndarray:
     """Eq. (1)/(2) forward: points (..., 3) in the camera frame (mm) -> ideal pixels (..., 2)
-    of one parallel camera: ``u = u0 + a_u X/Z + c Y/Z``, ``v = v0 + a_v Y/Z`` with
-    ``(X, Y, Z) = P - O``. Raises :class:`GeometryError` for points not in front (Z <= 0)."""
-    rel = _points(camera_p_mm) - camera.centre
+    of one camera: ``u = u0 + a_u X/Z + c Y/Z``, ``v = v0 + a_v Y/Z`` with
+    ``(X, Y, Z) = R^T (P - O)`` (R = ``camera_R_virtual``, identity for the paper's parallel
+    cameras). Raises :class:`GeometryError` for points not in front (Z <= 0)."""
+    rel = _in_camera(camera, camera_p_mm)
     depth = rel[..., 2]
     if np.any(~(depth > 0)):
         raise GeometryError(
@@ -351,8 +446,9 @@ def project_pinhole(camera: PinholeCamera, camera_p_mm: np.ndarray) -> np.ndarra
 
 
 def projection_jacobian(camera: PinholeCamera, camera_p_mm: np.ndarray) -> np.ndarray:
-    """d(u, v)/d(x, y, z) of :func:`project_pinhole`, shape (..., 2, 3), px per mm."""
-    rel = _points(camera_p_mm) - camera.centre
+    """d(u, v)/d(x, y, z) of :func:`project_pinhole` (x, y, z in the camera frame), shape
+    (..., 2, 3), px per mm."""
+    rel = _in_camera(camera, camera_p_mm)
     x_, y_, z_ = rel[..., 0], rel[..., 1], rel[..., 2]
     jac = np.zeros(rel.shape[:-1] + (2, 3))
     jac[..., 0, 0] = camera.a_u / z_
@@ -360,7 +456,9 @@ def projection_jacobian(camera: PinholeCamera, camera_p_mm: np.ndarray) -> np.nd
     jac[..., 0, 2] = -(camera.a_u * x_ + camera.skew * y_) / z_**2
     jac[..., 1, 1] = camera.a_v / z_
     jac[..., 1, 2] = -camera.a_v * y_ / z_**2
-    return jac
+    if camera.is_parallel:
+        return jac
+    return jac @ camera.rotation.T  # d(R^T P)/dP = R^T
 
 
 def project(
@@ -382,6 +480,22 @@ def project(
 # --------------------------------------------------------------------------- triangulation
 
 
+def parallel_pixels(camera: PinholeCamera, uv_px: np.ndarray) -> np.ndarray:
+    """Ideal pixels (..., 2) seen by ``camera`` -> the pixels (..., 2) that the parallel
+    camera (same centre and intrinsics A, axes of the camera frame) sees for the same
+    rays: the homography ``A R A^-1`` (R = ``camera_R_virtual``). The input itself when
+    the camera is parallel. This is how every triangulator handles a rotated (mirror
+    tilted) virtual camera before eq. (4)/(2)."""
+    uv = _pixels(uv_px, "uv_px")
+    if camera.is_parallel:
+        return uv
+    a = camera.matrix
+    h = a @ camera.rotation @ np.linalg.inv(a)
+    ray = uv @ h[:, :2].T + h[:, 2]  # h @ (u, v, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return ray[..., :2] / ray[..., 2:3]
+
+
 def _deskewed_offsets(camera: PinholeCamera, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(u - u0 - c (v - v0)/a_v, v - v0): the centred pixel coordinates of eq. (2), with the
     skew of eq. (1) removed."""
@@ -400,7 +514,11 @@ def _check_disparity(denominator: np.ndarray) -> None:
 
 def _check_in_front(camera_p_mm: np.ndarray, *cameras: PinholeCamera) -> None:
     for cam in cameras:
-        depth = camera_p_mm[..., 2] - cam.centre_mm[2]
+        depth = (
+            camera_p_mm[..., 2] - cam.centre_mm[2]
+            if cam.is_parallel
+            else _in_camera(cam, camera_p_mm)[..., 2]
+        )
         if np.any(~(depth > 0)):
             raise GeometryError(
                 "triangulated point lies behind a virtual camera (depth "
@@ -419,6 +537,8 @@ def eq4_points_mm(params: PsvsParams, uv_right_px: np.ndarray, uv_left_px: np.nd
     algebraically; their mean is returned); ``y`` is the mean of the right-view
     ``(z + b/2)(v_R - v0R)/a_v`` and the left-view ``(z + b/2 - l)(v_L - v0L)/a_v``.
     Eq. (4) has no skew; a non-zero skew c is removed first (``u - c (v - v0)/a_v``).
+    Rotated virtual cameras: their pixels are first mapped into the parallel cameras
+    (:func:`parallel_pixels`).
     """
     return _eq4(params, _pixels(uv_right_px, "uv_right_px"), _pixels(uv_left_px, "uv_left_px"))[0]
 
@@ -426,6 +546,8 @@ def eq4_points_mm(params: PsvsParams, uv_right_px: np.ndarray, uv_left_px: np.nd
 def _eq4(params: PsvsParams, uv_r: np.ndarray, uv_l: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(points (..., 3), disparity denominator (...,)) of :func:`eq4_points_mm`."""
     a_u, a_v, b, m, l = params.a_u, params.a_v, params.baseline_mm, params.m_mm, params.l_mm
+    uv_r = parallel_pixels(params.right_camera, uv_r)
+    uv_l = parallel_pixels(params.left_camera, uv_l)
     du_r, dv_r = _deskewed_offsets(params.right_camera, uv_r)
     du_l, dv_l = _deskewed_offsets(params.left_camera, uv_l)
     denominator = du_l - du_r
@@ -462,9 +584,10 @@ def triangulate_eq2(
     or, with eq. (3), the PSVS (then it equals eq. (4)). Ideal pixels (..., 2) -> point
     (..., 3) in mm. ``z`` from the u coordinates; ``x`` and ``y`` are the means of the
     right- and left-view equations. Skew is removed first, as in :func:`triangulate_eq4`.
-    The cameras must be displaced along x (a horizontal baseline)."""
-    uv_r = _pixels(uv_right_px, "uv_right_px")
-    uv_l = _pixels(uv_left_px, "uv_left_px")
+    The cameras must be displaced along x (a horizontal baseline); rotated cameras are
+    first mapped into parallel ones (:func:`parallel_pixels`)."""
+    uv_r = parallel_pixels(right, _pixels(uv_right_px, "uv_right_px"))
+    uv_l = parallel_pixels(left, _pixels(uv_left_px, "uv_left_px"))
     du_r, dv_r = _deskewed_offsets(right, uv_r)
     du_l, dv_l = _deskewed_offsets(left, uv_l)
     (x0r, y0r, z0r), (x0l, y0l, z0l) = right.centre_mm, left.centre_mm
@@ -498,7 +621,9 @@ def triangulate_lsq(
     in the least-squares sense, each row weighted by ``a/(z - z0k)`` so that its residual is
     in pixels. With ``refine`` (default), Gauss-Newton then minimises the sum of squared
     pixel reprojection errors - the maximum-likelihood point for i.i.d. pixel noise. Ideal
-    pixels (..., 2) -> point (..., 3) in mm.
+    pixels (..., 2) -> point (..., 3) in mm. Rotated cameras: the linear steps use the
+    pixels mapped into the parallel cameras (:func:`parallel_pixels`), Gauss-Newton the
+    observed pixels with the rotated projection.
     """
     uv_r = _pixels(uv_right_px, "uv_right_px")
     uv_l = _pixels(uv_left_px, "uv_left_px")
@@ -509,7 +634,7 @@ def triangulate_lsq(
     p = triangulate_eq2(right, left, uv[0], uv[1])
     rows, rhs = [], []
     for k, cam in enumerate(cams):
-        du, dv = _deskewed_offsets(cam, uv[k])
+        du, dv = _deskewed_offsets(cam, parallel_pixels(cam, uv[k]))
         xn, yn = du / cam.a_u, dv / cam.a_v
         depth = p[..., 2] - cam.centre[2]
         wu, wv = cam.a_u / depth, cam.a_v / depth

@@ -48,6 +48,7 @@ from humanpt.geometry import (
     TargetModel,
     eq4_points_mm,
     label_sources,
+    parallel_pixels,
     tob_frame_from_points,
     triangle_sides_mm,
     triangulate,
@@ -138,12 +139,13 @@ def epipolar_residual_px(
     """Signed epipolar residual (...,) in px of candidate pairs (ideal px): the two y
     equations of eq. (4) agree when ``dv_R = dv_L (z + b/2 - l)/(z + b/2)`` (the left
     camera sits l further forward), so the residual is ``dv_R - dv_L (z + b/2 - l)/(z +
-    b/2)``. ``z_mm`` from eq. (4) when already known."""
+    b/2)``. ``z_mm`` from eq. (4) when already known. Rotated virtual cameras (tilted
+    mirrors in the rig): on the pixels mapped into the parallel cameras, as eq. (4)."""
     b, l = params.baseline_mm, params.l_mm
-    dv_r = uv_r[..., 1] - params.right_camera.v0
-    dv_l = uv_l[..., 1] - params.left_camera.v0
     if z_mm is None:
         z_mm = eq4_points_mm(params, uv_r, uv_l)[..., 2]
+    dv_r = parallel_pixels(params.right_camera, uv_r)[..., 1] - params.right_camera.v0
+    dv_l = parallel_pixels(params.left_camera, uv_l)[..., 1] - params.left_camera.v0
     with np.errstate(divide="ignore", invalid="ignore"):
         return dv_r - dv_l * (z_mm + b / 2.0 - l) / (z_mm + b / 2.0)
 

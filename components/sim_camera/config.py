@@ -24,6 +24,8 @@ from humanpt.geometry import (
 from humanpt.geometry.config import PsvsConfig
 from humanpt.runtime.config import Deg, Mm, Range, live
 
+Px = Annotated[float, Range(-100.0, 100.0, "px")]
+
 _M_MM, _L_MM = psvs_m_l_mm(1.0, 45.0, 1.5, 1.0)
 DEFAULT_FLANGE_T_CAMERA_MM_DEG: tuple[float, ...] = tuple(
     float(v) for v in x_from_transform(DEFAULT_FLANGE_T_CAMERA_MM)
@@ -53,6 +55,29 @@ class SimCameraConfig:
     is a Gaussian of ``blur_sigma_px``. Noise: shot noise (Poisson on electrons,
     ``gain_e_per_dn`` electrons per DN) and read noise (``read_noise_e``), a full well of
     ``full_well_e``, then 8-bit quantisation and saturation at 255.
+
+    The world's optics and sensor beyond the ideal (each off by default; realistic sizes
+    for a 2005-era analogue CCD camera in brackets):
+
+    * ``source_falloff_exponent`` n: a source's radiance falls off as cos(angle)^n with the
+      angle between its normal and the direction to each virtual camera (0: Lambertian,
+      today; LEDs behind a diffuser ~1-2).
+    * ``ghost_gain`` (fraction; ~0.03-0.05): a second, dimmer copy of the ``ghost_view``
+      (the left view passes the beam splitter, eq. (3)) from the splitter's second
+      surface, shifted by ``ghost_offset_px`` (u, v px; default (1.1, 0): the ~0.76 mm
+      lateral shift of a 1 mm plate at 45 deg, seen from ~690 mm, along the baseline).
+    * ``dsnu_dn`` (DN; ~0.5-1) and ``prnu`` (fraction; ~0.01): fixed-pattern noise - a
+      per-pixel offset (DN, at readout) and gain (multiplies the photo-charge) drawn once
+      per ``seed``: the same pattern in every frame.
+    * ``blooming`` (fraction; ~0.5-1): the share of the charge above ``full_well_e`` that
+      spills into the neighbouring pixels of its column (half up, half down, on to the
+      next pixel while a neighbour is full); 0: the excess is lost (clipped), today. It acts
+      only on charge above the well: at the defaults the 8-bit output saturates first
+      (255 DN = 10 200 e- < 12 000 e-), so pair it with a well near 255 gain_e_per_dn or
+      a longer exposure.
+    * ``motion_step_px``: with a pose at the start and at the end of the exposure the
+      image is integrated over sub-exposures so that it moves at most this far between
+      two (one sample, at mid-exposure, when it moves less).
 
     Clutter (all off by default): a mirror reflection of the sources in a shiny plane
     fixed to the TOB (``reflection_gain`` > 0; plane ``n . p = d`` in the TOB frame, mm,
@@ -88,6 +113,15 @@ class SimCameraConfig:
     gain_e_per_dn: Annotated[float, Range(1e-3, 1e6, "e-/DN")] = 40.0
     read_noise_e: Annotated[float, Range(0, 1e6, "e-")] = 10.0
     full_well_e: Annotated[float, Range(1, 1e9, "e-")] = 12_000.0
+    # the world's optics and sensor beyond the ideal (issue 16): every one off by default
+    source_falloff_exponent: Annotated[float, Range(0, 20, "")] = 0.0
+    ghost_gain: Annotated[float, Range(0, 1, "fraction")] = 0.0
+    ghost_offset_px: tuple[Px, Px] = (1.1, 0.0)
+    ghost_view: Literal["left", "right"] = "left"
+    dsnu_dn: Annotated[float, Range(0, 50, "DN")] = 0.0
+    prnu: Annotated[float, Range(0, 0.5, "fraction")] = 0.0
+    blooming: Annotated[float, Range(0, 1, "fraction")] = 0.0
+    motion_step_px: Annotated[float, Range(0.01, 10, "px")] = 0.3
     # clutter
     reflection_gain: Annotated[float, Range(0, 10, "")] = live(0.0, "brightness of the mirror images (0: off)")
     reflection_plane_tob: tuple[Annotated[float, Range(-1e4, 1e4, "unit normal, mm")], ...] = (1.0, 0.0, 0.0, 30.0)
@@ -126,6 +160,17 @@ class SimCameraConfig:
             _finite(own, name, value, nonneg=True)
             if value > 1:
                 raise ValueError(f"{own}.{name} is a transmission in [0, 1], got {value}")
+        for name in ("source_falloff_exponent", "ghost_gain", "dsnu_dn", "prnu", "blooming"):
+            _finite(own, name, getattr(self, name), nonneg=True)
+        for name in ("ghost_gain", "prnu", "blooming"):
+            if getattr(self, name) > 1:
+                raise ValueError(f"{own}.{name} is a fraction in [0, 1], got {getattr(self, name)}")
+        ghost = np.asarray(self.ghost_offset_px, dtype=float)
+        if ghost.shape != (2,) or not np.all(np.isfinite(ghost)):
+            raise ValueError(f"{own}.ghost_offset_px must be two finite numbers (u, v px)")
+        if self.ghost_view not in ("left", "right"):
+            raise ValueError(f"{own}.ghost_view must be 'left' or 'right', got {self.ghost_view!r}")
+        _finite(own, "motion_step_px", self.motion_step_px, positive=True)
         for name in ("blur_sigma_px", "read_noise_e", "reflection_gain", "reflection_blur_px"):
             _finite(own, name, getattr(self, name), nonneg=True)
         for name in ("gain_e_per_dn", "full_well_e", "lamp_diameter_mm", "near_mm"):

@@ -7,7 +7,9 @@ Pipeline (one image):
    TOB, and a bright lamp - as :class:`Discs` (centre, in-plane axes, lit normal, radius,
    radiance, extra blur, occlusion).
 2. **Projection** (:meth:`Renderer.blobs`): each disc through each virtual camera (right,
-   left; eq. (1)-(3)) and the real lens's distortion. A disc is dropped from a view when it
+   left; eq. (1)-(3), each with its own principal point and rotation - a tilted mirror)
+   and the real lens's distortion; optionally dimmed by the source's angular fall-off
+   (``source_falloff_exponent``) and doubled by the beam splitter's ghost (``ghost_gain``). A disc is dropped from a view when it
    is behind (or nearer than ``near_mm`` to) that virtual camera, when its lit face looks
    away from it, or when its window misses the image. Around its projected centre a disc is
    the unit circle mapped by the local Jacobian ``J = d(u, v)/d(s, t)`` (pinhole and
@@ -22,7 +24,11 @@ Pipeline (one image):
    applied as a separable, normalised, symmetric kernel - it moves no centroid.
 5. **Sensor** (:meth:`Renderer.expose`): background (black level + ambient), shot noise
    (Poisson in electrons), read noise (Gaussian), full well, rounding to 8 bits, clipping
-   at 255. Views are superimposed by adding their signals before the sensor.
+   at 255. Views are superimposed by adding their signals before the sensor. Optional:
+   fixed-pattern noise (``dsnu_dn``, ``prnu``: one pattern per seed) and blooming along
+   the columns (``blooming``, :func:`bloom_columns`).
+6. **Exposure** (:meth:`Renderer.exposure_signal_pixels`): given the poses at the start
+   and end of the exposure, the signal is averaged over sub-exposures (motion blur).
 
 Speed: only small windows around each blob are rendered (:meth:`Renderer.signal_pixels`:
 the nonzero pixels, no full frame); coverage runs in the window that holds the ellipse and
@@ -41,7 +47,9 @@ column j) at (u, v) = (j, i)), DN (grey levels).
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -50,6 +58,7 @@ from scipy.special import ndtr
 from scipy.stats import poisson
 
 from humanpt.geometry import PsvsParams, distort_pixels
+from humanpt.geometry.transforms import interpolate_transform
 
 from .config import SimCameraConfig
 
@@ -67,6 +76,7 @@ VIEWS = ("right", "left")
 # A source's axes in the TOB frame: e1 = u, e2 = v, lit normal -w.
 _TOB_AXES = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]]).T
 _TOB_AXES.flags.writeable = False
+_MAX_SUBEXPOSURES = 64  # motion blur: sub-exposures of one image at most
 _MAX_HALF_WINDOW_PX = 400  # a blob wider than 800 px (a source ~1 cm from the lens) is dropped
 
 
@@ -190,7 +200,8 @@ class Blobs:
     ``d(u, v)/d(s, t)`` with (s, t) in disc radii; ``dn`` (m,) DN of a fully covered pixel
     at this exposure, after the view gain; ``sigma_px`` (m,) total blur; ``occlusion_h``,
     ``occlusion_dir`` as in :class:`Discs`; ``view`` (m,) 0 right, 1 left; ``disc`` (m,)
-    index into the discs; ``label`` (m,) the disc's label.
+    index into the discs; ``label`` (m,) the disc's label (100 + it for the splitter's
+    ghost of a blob).
     """
 
     centre_px: np.ndarray
@@ -242,12 +253,16 @@ def project_discs(
     exposure_ms: float,
     blur_sigma_px: float,
     near_mm: float = 10.0,
+    falloff_exponent: float = 0.0,
 ) -> Blobs:
     """Project every disc through both virtual cameras; keep the visible blobs (see the
     module docstring for what hides one). Blobs are ordered right view first, then left,
     each in disc order. Both views in one vectorised pass (eq. (2) and its Jacobian
     written out: the formulas of the geometry library's ``project_pinhole`` and
-    ``projection_jacobian``)."""
+    ``projection_jacobian``, with each virtual camera's own principal point and rotation).
+    ``falloff_exponent`` n > 0 dims each blob by ``cos(angle)^n``, the angle between the
+    disc's lit normal and the direction to that virtual camera (0: a Lambertian source,
+    the same radiance from every direction)."""
     width, height = params.image_size_px
     n = len(discs)
     views = [v for v in (0, 1) if view_gains[v] > 0] if n else []
@@ -258,12 +273,18 @@ def project_discs(
     rel = discs.centre_mm - np.array([c.centre_mm for c in cams])[:, None]
     dist = np.sqrt(np.einsum("vni,vni->vn", rel, rel))
     toward = -np.einsum("vni,ni->vn", rel, discs.axes[:, :, 2])  # lit normal . to-camera * dist
+    rotated = not all(c.is_parallel for c in cams)
+    if rotated:  # each view's own axes (a tilted mirror): R^T (P - O), as project_pinhole
+        rots = np.array([c.rotation for c in cams])  # (V, 3, 3)
+        rel = np.einsum("vni,vij->vnj", rel, rots)
     ok = (rel[:, :, 2] > near_mm) & (toward > 1e-6 * np.maximum(dist, 1e-12))
     ok &= (discs.dn_per_ms > 0) & (discs.occlusion_h > -1.0)
     keep = np.flatnonzero(ok)
     if keep.size == 0:
         return _no_blobs()
     row, disc = np.divmod(keep, n)
+    # brightness factor of each (view, disc): the source's angular fall-off cos^n
+    cos_view = (toward / np.maximum(dist, 1e-12)).reshape(-1).take(keep)
     rel = rel.reshape(-1, 3).take(keep, axis=0)
     per_row = not (len(cams) == 1 or _same_intrinsics(cams[0], cams[1]))
     if per_row:
@@ -287,15 +308,18 @@ def project_discs(
         sel = np.flatnonzero(near_image)
         if sel.size == 0:
             return _no_blobs()
-        inv_z, x, y, row, disc, uv_ideal = (a[sel] for a in (inv_z, x, y, row, disc, uv_ideal))
+        inv_z, x, y, row, disc, uv_ideal, cos_view = (
+            a[sel] for a in (inv_z, x, y, row, disc, uv_ideal, cos_view)
+        )
         if per_row:
             a_u, a_v, skew = a_u[sel], a_v[sel], skew[sel]
     # d(u, v)/d(s, t): eq. (2)'s Jacobian d(u, v)/d(x, y, z) times the disc's in-plane axes
     # P (columns e1, e2, in radii): du = (a_u (P_x - x P_z) + skew (P_y - y P_z)) / z,
     # dv = a_v (P_y - y P_z) / z, with x = X/Z, y = Y/Z.
-    plane = discs.axes.take(disc, axis=0)[:, :, :2] * (discs.radius_mm.take(disc) * inv_z)[
-        :, None, None
-    ]  # (k, 3, 2), divided by z
+    axes = discs.axes.take(disc, axis=0)[:, :, :2]  # (k, 3, 2) camera frame
+    if rotated:
+        axes = np.swapaxes(rots, 1, 2).take(row, axis=0) @ axes  # R^T e: the view's frame
+    plane = axes * (discs.radius_mm.take(disc) * inv_z)[:, None, None]  # (k, 3, 2), / z
     along_x = plane[:, 0] - x[:, None] * plane[:, 2]
     along_y = plane[:, 1] - y[:, None] * plane[:, 2]
     jac = np.empty((len(x), 2, 2))
@@ -322,11 +346,15 @@ def project_discs(
         if sel.size == 0:
             return _no_blobs()
         uv, jac, sigma, row, disc = uv[sel], jac[sel], sigma[sel], row[sel], disc[sel]
+        cos_view = cos_view[sel]
     view = np.array(views).take(row)
+    dn = discs.dn_per_ms.take(disc) * exposure_ms * np.asarray(view_gains, dtype=float).take(view)
+    if falloff_exponent > 0:
+        dn = dn * np.clip(cos_view, 0.0, 1.0) ** falloff_exponent
     return Blobs(
         uv,
         jac,
-        discs.dn_per_ms.take(disc) * exposure_ms * np.asarray(view_gains, dtype=float).take(view),
+        dn,
         sigma,
         discs.occlusion_h.take(disc),
         discs.occlusion_dir.take(disc, axis=0),
@@ -578,6 +606,94 @@ def _background_bank(seed: int, table: bytes, n_pixels: int) -> np.ndarray:
     return bank
 
 
+_FPN_KEY = 0x66706E  # the fixed pattern's own random stream ("fpn"), fixed per seed
+
+
+@lru_cache(maxsize=4)
+def _fixed_pattern_unit(seed: int, n_pixels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two standard-normal fields (n_pixels,) float32, read-only, drawn once per seed: the
+    shapes of the DSNU (offset) and PRNU (gain) patterns, scaled by the config's sizes (so
+    a larger ``dsnu_dn`` is the same pattern, stronger)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_FPN_KEY,)))
+    offset = rng.standard_normal(n_pixels, dtype=np.float32)
+    gain = rng.standard_normal(n_pixels, dtype=np.float32)
+    offset.flags.writeable = False
+    gain.flags.writeable = False
+    return offset, gain
+
+
+@lru_cache(maxsize=4)
+def _noise_bank(seed: int, mean_e: float, read_noise_e: float, full_well_e: float, n_pixels: int):
+    """``n_pixels + 2^20`` unquantised background charges (float32 electrons, read-only):
+    ``min(Poisson(mean_e), full_well) + N(0, read)``, independent draws - the background
+    bank of the fixed-pattern path, where every pixel has its own offset and gain and so
+    its own quantised distribution (:func:`_background_bank` holds one distribution)."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_BANK_KEY, 1)))
+    size = n_pixels + _BANK_OFFSETS
+    bank = np.minimum(rng.poisson(mean_e, size), full_well_e).astype(np.float32)
+    if read_noise_e > 0:
+        bank += rng.normal(0.0, read_noise_e, size).astype(np.float32)
+    bank.flags.writeable = False
+    return bank
+
+
+def bloom_columns(
+    idx: np.ndarray,
+    charge_e: np.ndarray,
+    shape: tuple[int, int],
+    full_well_e: float,
+    spill: float,
+    background_e: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Blooming: the charge above the full well of the pixels at flat (row-major) indices
+    ``idx`` (charges ``charge_e``, electrons) spills along their columns.
+
+    Each pixel over the well keeps ``full_well_e`` and passes ``spill`` of its excess on,
+    half up, half down; a neighbour takes what fits below its well and passes the rest
+    further; charge that leaves the image is lost (so is the remaining ``1 - spill``).
+    Pixels not in ``idx`` hold ``background_e``. Returns (the charges at ``idx``, now
+    <= full well; the flat indices of the other pixels that received charge; the charge
+    (e-) each received)."""
+    height, width = int(shape[0]), int(shape[1])
+    charge = np.asarray(charge_e, dtype=np.float64).copy()
+    over = charge > full_well_e
+    none = np.zeros(0, dtype=np.intp), np.zeros(0)
+    if spill <= 0 or not over.any():
+        return np.minimum(charge, full_well_e), *none
+    rows, cols = np.divmod(np.asarray(idx), width)
+    columns = np.unique(cols[over])
+    in_cols = np.isin(cols, columns)
+    excess = (charge - full_well_e).clip(0.0) * spill
+    per_col = np.zeros(len(columns))
+    np.add.at(per_col, np.searchsorted(columns, cols[over]), excess[over])
+    room = max(full_well_e - background_e, 1e-9)
+    reach = int(min(math.ceil(per_col.max() / room) + 1, height))
+    r0 = max(int(rows[in_cols].min()) - reach, 0)
+    r1 = min(int(rows[in_cols].max()) + reach, height - 1)
+    box = np.full((r1 - r0 + 1, len(columns)), float(background_e))
+    member = np.full(box.shape, -1, dtype=np.intp)
+    sel = np.flatnonzero(in_cols)
+    ri, ci = rows[sel] - r0, np.searchsorted(columns, cols[sel])
+    box[ri, ci] = charge[sel]
+    member[ri, ci] = sel
+    before = box.copy()
+    half = 0.5 * (box - full_well_e).clip(0.0) * spill
+    np.minimum(box, full_well_e, out=box)
+    for order in (range(box.shape[0]), range(box.shape[0] - 1, -1, -1)):  # down, then up
+        carry = np.zeros(box.shape[1])
+        for r in order:
+            take = np.minimum(full_well_e - box[r], carry)
+            box[r] += take
+            carry -= take
+            carry += half[r]
+    charge[sel] = box[ri, ci]
+    np.minimum(charge, full_well_e, out=charge)
+    gained = (box - before > 0) & (member < 0)
+    gr, gc = np.nonzero(gained)
+    other = (gr + r0) * width + columns[gc]
+    return charge, other, (box - before)[gr, gc]
+
+
 # --------------------------------------------------------------------------- renderer
 
 
@@ -601,6 +717,8 @@ class Renderer:
             c.full_well_e,
         )
         self._bank: np.ndarray | None = None  # built on the first noisy frame
+        self._fpn: tuple[np.ndarray, np.ndarray] | None = None  # built on first use
+        self._fpn_background: tuple[np.ndarray, np.ndarray] | None = None
         e0 = np.minimum((np.zeros(1) + self.sky_dn) * c.gain_e_per_dn, c.full_well_e)
         self._flat_dn = np.clip(np.rint(c.black_level_dn + e0 / c.gain_e_per_dn), 0, 255).astype(
             np.uint8
@@ -696,10 +814,37 @@ class Renderer:
         return Discs.concat(parts)
 
     def blobs(self, discs: Discs) -> Blobs:
+        """The discs projected into both views (:func:`project_discs`), with the angular
+        fall-off of ``source_falloff_exponent`` and, when ``ghost_gain`` > 0, the beam
+        splitter's ghost: every blob of ``ghost_view`` again, ``ghost_gain`` times as
+        bright, shifted by ``ghost_offset_px`` (label + 100)."""
         c = self.config
-        return project_discs(
-            self.params, discs, self.view_gains, c.exposure_ms, c.blur_sigma_px, c.near_mm
+        blobs = project_discs(
+            self.params,
+            discs,
+            self.view_gains,
+            c.exposure_ms,
+            c.blur_sigma_px,
+            c.near_mm,
+            c.source_falloff_exponent,
         )
+        if c.ghost_gain > 0 and len(blobs):
+            sel = np.flatnonzero(blobs.view == VIEWS.index(c.ghost_view))
+            if sel.size:
+                ghost = Blobs(*(getattr(blobs, f)[sel] for f in Blobs.__dataclass_fields__))
+                ghost = dataclasses.replace(
+                    ghost,
+                    centre_px=ghost.centre_px + np.asarray(c.ghost_offset_px, dtype=float),
+                    dn=ghost.dn * c.ghost_gain,
+                    label=ghost.label + 100,
+                )
+                blobs = Blobs(
+                    *(
+                        np.concatenate([getattr(blobs, f), getattr(ghost, f)])
+                        for f in Blobs.__dataclass_fields__
+                    )
+                )
+        return blobs
 
     # -- images --------------------------------------------------------------------------
     def signal(self, blobs: Blobs) -> np.ndarray:
@@ -767,11 +912,34 @@ class Renderer:
             idx, value = idx[nz], value[nz]
         return idx, value
 
-    def expose(self, signal_dn: np.ndarray, frame_index: int) -> np.ndarray:
-        """The sensor: background, shot and read noise, full well, 8-bit quantisation and
-        saturation; (H, W) uint8. Noise from ``default_rng([seed, frame_index])``."""
+    def _pattern(self, n: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The fixed pattern (offset DN (n,), gain - 1 (n,)) of ``dsnu_dn`` and ``prnu``,
+        or None when both are 0."""
         c = self.config
-        if not c.noise:
+        if c.dsnu_dn == 0 and c.prnu == 0:
+            return None
+        if self._fpn is None or self._fpn[0].size != n:
+            unit_offset, unit_gain = _fixed_pattern_unit(c.seed, n)
+            offset = (unit_offset * np.float32(c.dsnu_dn)).astype(np.float64)
+            gain = np.maximum(unit_gain * np.float32(c.prnu), -1.0).astype(np.float64)
+            self._fpn = (offset, gain)
+        return self._fpn
+
+    def _charge(self, charge_e, idx, shape, background_e):
+        """Full well (and blooming): charges at ``idx`` capped at the well, plus the other
+        pixels that received blooming charge (flat indices, electrons)."""
+        c = self.config
+        if c.blooming > 0:
+            return bloom_columns(idx, charge_e, shape, c.full_well_e, c.blooming, background_e)
+        none = np.zeros(0, dtype=np.intp), np.zeros(0)
+        return np.minimum(charge_e, c.full_well_e), *none
+
+    def expose(self, signal_dn: np.ndarray, frame_index: int) -> np.ndarray:
+        """The sensor: background, shot and read noise, fixed pattern, full well (and
+        blooming), 8-bit quantisation and saturation; (H, W) uint8. Noise from
+        ``default_rng([seed, frame_index])``."""
+        c = self.config
+        if not c.noise and c.dsnu_dn == 0 and c.prnu == 0 and c.blooming == 0:
             g = c.gain_e_per_dn
             e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
             return np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
@@ -789,27 +957,69 @@ class Renderer:
         Noise: each frame's background is a run of :func:`_background_bank` (exact
         background grey levels, independent pixels) at an offset drawn from
         ``default_rng([seed, frame_index])``; the signal pixels get exact Poisson shot
-        noise and Gaussian read noise from the same generator."""
+        noise and Gaussian read noise from the same generator.
+
+        Fixed pattern (``dsnu_dn``, ``prnu`` > 0): the background is built from a bank of
+        unquantised charges (:func:`_noise_bank`), each pixel scaled by its gain (the
+        read noise too: 1 % of 0.25 DN) and offset, then quantised; signal pixels get
+        ``Poisson((signal + sky) gain_e_per_dn (1 + prnu_i))`` and the offset at readout.
+        Blooming (``blooming`` > 0): :func:`bloom_columns` before the read noise; a
+        background pixel that receives charge gets it on top of its grey level."""
         c = self.config
         g = c.gain_e_per_dn
         n = int(shape[0]) * int(shape[1])
+        pattern = self._pattern(n)
+        sky_e = self.sky_dn * g
         if not c.noise:
-            frame = np.full(n, self._flat_dn, dtype=np.uint8)
+            if pattern is None:
+                frame = np.full(n, self._flat_dn, dtype=np.uint8)
+            else:
+                bg_e = np.minimum(sky_e * (1.0 + pattern[1]), c.full_well_e)
+                frame = _grey(c.black_level_dn + pattern[0] + bg_e / g)
             if idx.size:
-                e = np.minimum((signal_dn.astype(np.float64) + self.sky_dn) * g, c.full_well_e)
-                frame[idx] = np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+                e = (signal_dn.astype(np.float64) + self.sky_dn) * g
+                if pattern is not None:
+                    e *= 1.0 + pattern[1][idx]
+                e, other, got_e = self._charge(e, idx, shape, sky_e)
+                dn = c.black_level_dn + e / g
+                frame[idx] = _grey(dn if pattern is None else dn + pattern[0][idx])
+                if other.size:
+                    frame[other] = _grey(frame[other] + got_e / g)
             return frame.reshape(shape)
         rng = np.random.default_rng([c.seed, int(frame_index)])
-        if self._bank is None or self._bank.size != n + _BANK_OFFSETS:
-            self._bank = _background_bank(c.seed, self._table.tobytes(), n)
-        offset = int(rng.integers(_BANK_OFFSETS))
-        frame = self._bank[offset : offset + n].copy()  # the background everywhere
+        if pattern is None:
+            if self._bank is None or self._bank.size != n + _BANK_OFFSETS:
+                self._bank = _background_bank(c.seed, self._table.tobytes(), n)
+            offset = int(rng.integers(_BANK_OFFSETS))
+            frame = self._bank[offset : offset + n].copy()  # the background everywhere
+        else:
+            bank = _noise_bank(c.seed, sky_e, c.read_noise_e, c.full_well_e, n)
+            offset = int(rng.integers(_BANK_OFFSETS))
+            if self._fpn_background is None or self._fpn_background[0].size != n:
+                self._fpn_background = (  # float32: a 307k-pixel frame in ~1 ms
+                    (c.black_level_dn + pattern[0]).astype(np.float32),
+                    ((1.0 + pattern[1]) / g).astype(np.float32),
+                )
+            base_dn, dn_per_e = self._fpn_background
+            bg_dn = bank[offset : offset + n] * dn_per_e
+            bg_dn += base_dn
+            np.rint(bg_dn, out=bg_dn)
+            frame = np.clip(bg_dn, 0, 255).astype(np.uint8)
         if idx.size:
             mean_e = (signal_dn.astype(np.float64) + self.sky_dn) * g
-            e = np.minimum(rng.poisson(mean_e), c.full_well_e).astype(np.float64)
+            if pattern is not None:
+                mean_e *= 1.0 + pattern[1][idx]
+            other = np.zeros(0, dtype=np.intp)
+            if c.blooming > 0:
+                e, other, got_e = self._charge(rng.poisson(mean_e).astype(np.float64), idx, shape, sky_e)
+            else:
+                e = np.minimum(rng.poisson(mean_e), c.full_well_e).astype(np.float64)
             if c.read_noise_e > 0:
                 e += rng.normal(0.0, c.read_noise_e, idx.size)
-            frame[idx] = np.clip(np.rint(c.black_level_dn + e / g), 0, 255).astype(np.uint8)
+            dn = c.black_level_dn + e / g
+            frame[idx] = _grey(dn if pattern is None else dn + pattern[0][idx])
+            if other.size:
+                frame[other] = _grey(frame[other] + got_e / g)
         return frame.reshape(shape)
 
     def render(
@@ -817,13 +1027,123 @@ class Renderer:
         camera_T_tob: np.ndarray | None,
         world_T_camera: np.ndarray | None = None,
         frame_index: int = 0,
+        camera_T_tob_end: np.ndarray | None = None,
+        world_T_camera_end: np.ndarray | None = None,
     ) -> np.ndarray:
         """One complex image (H, W) uint8 of the target at ``camera_T_tob`` (mm; None: no
         target in the scene): ``expose(signal(blobs(discs(...))), frame_index)``, byte for
-        byte, computed on the blobs' pixels only."""
-        idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
+        byte, computed on the blobs' pixels only.
+
+        Motion blur: with ``camera_T_tob_end`` and/or ``world_T_camera_end`` (mm) the
+        first two poses are those at the *start* of the exposure and these at its *end*;
+        the signal is integrated over the exposure (:meth:`exposure_signal_pixels`). The
+        image's truth is then the pose at mid-exposure,
+        ``interpolate_transform(start, end, 0.5)``. Without end poses: no motion, the
+        image of the given poses (as before)."""
+        if camera_T_tob_end is None and world_T_camera_end is None:
+            idx, value = self.signal_pixels(self.blobs(self.discs(camera_T_tob, world_T_camera)))
+        else:
+            idx, value = self.exposure_signal_pixels(
+                (camera_T_tob, camera_T_tob if camera_T_tob_end is None else camera_T_tob_end),
+                (world_T_camera, world_T_camera if world_T_camera_end is None else world_T_camera_end),
+            )
         width, height = self.params.image_size_px
         return self.expose_pixels(idx, value, frame_index, (height, width))
+
+    def render_exposure(
+        self,
+        camera_T_tob: Sequence[np.ndarray | None],
+        world_T_camera: Sequence[np.ndarray | None] | None = None,
+        frame_index: int = 0,
+    ) -> np.ndarray:
+        """One complex image (H, W) uint8 integrated over the exposure from K pose samples
+        equally spaced over it (start ... end; see :meth:`exposure_signal_pixels`)."""
+        idx, value = self.exposure_signal_pixels(camera_T_tob, world_T_camera)
+        width, height = self.params.image_size_px
+        return self.expose_pixels(idx, value, frame_index, (height, width))
+
+    def exposure_signal_pixels(
+        self,
+        camera_T_tob: Sequence[np.ndarray | None],
+        world_T_camera: Sequence[np.ndarray | None] | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`signal_pixels` integrated over the exposure: ``camera_T_tob`` and
+        ``world_T_camera`` are sequences of K >= 1 poses (mm) at K instants equally spaced
+        over the exposure, the first at its start, the last at its end (None entries: no
+        target / no camera pose; ``world_T_camera`` None: none at all; a shorter sequence
+        of one pose: not moving). Between two samples a pose moves on the
+        constant-velocity screw (:func:`humanpt.geometry.transforms.interpolate_transform`):
+        give (start, end), or (start, middle, end) to have the truth at mid-exposure
+        rendered exactly when the image moves less than ``motion_step_px``.
+
+        The exposure is cut into N equal parts and each rendered at its middle, N so that
+        every blob moves at most ``motion_step_px`` from one to the next (N = 1, the pose
+        at mid-exposure, when the image moves less than that; at most 64 - a blur longer
+        than 64 steps is sampled more coarsely), and the N signals are averaged: the blur
+        of the motion, each sub-image with its own brightness, window and coverage. Flat
+        indices (ascending) and values, as :meth:`signal_pixels`."""
+        tobs = list(camera_T_tob)
+        cams = [None] if world_T_camera is None else list(world_T_camera)
+        if not tobs or not cams:
+            raise ValueError("exposure_signal_pixels needs at least one pose sample")
+
+        def at(samples, f):
+            """The pose at the fraction f in [0, 1] of the exposure."""
+            if len(samples) == 1:
+                return samples[0]
+            x = f * (len(samples) - 1)
+            k = min(int(x), len(samples) - 2)
+            a, b, g = samples[k], samples[k + 1], x - k
+            if g == 0.0 or b is None:
+                return a
+            if g == 1.0 or a is None or a is b:
+                return b
+            return interpolate_transform(np.asarray(a, float), np.asarray(b, float), g, assume_valid=True)
+
+        def still(samples):
+            return all(_same_pose(samples[0], q) for q in samples[1:])
+
+        if still(tobs) and still(cams):  # not moving: as render()
+            return self.signal_pixels(self.blobs(self.discs(tobs[0], cams[0])))
+        # how far the image moves: blob centres at every sample instant, path summed
+        k_max = max(len(tobs), len(cams))
+        fractions = np.linspace(0.0, 1.0, max(k_max, 2))
+        blobs = [self.blobs(self.discs(at(tobs, f), at(cams, f))) for f in fractions]
+        total = 0.0  # px: the largest blob displacement of each segment, summed
+        for b0, b1 in zip(blobs[:-1], blobs[1:], strict=True):
+            key0 = b0.view * 1_000_000 + b0.disc * 1000 + b0.label
+            key1 = b1.view * 1_000_000 + b1.disc * 1000 + b1.label
+            _, i0, i1 = np.intersect1d(key0, key1, return_indices=True)
+            if i0.size:
+                total += float(np.linalg.norm(b1.centre_px[i1] - b0.centre_px[i0], axis=1).max())
+        n = max(1, math.ceil(total / self.config.motion_step_px - 1e-9))
+        n = min(n, _MAX_SUBEXPOSURES)
+        if n == 1:
+            return self.signal_pixels(self.blobs(self.discs(at(tobs, 0.5), at(cams, 0.5))))
+        parts = [
+            self.signal_pixels(self.blobs(self.discs(at(tobs, (k + 0.5) / n), at(cams, (k + 0.5) / n))))
+            for k in range(n)
+        ]
+        idx = np.concatenate([p[0] for p in parts])
+        value = np.concatenate([p[1] for p in parts]).astype(np.float64)
+        if idx.size == 0:
+            return idx, value.astype(np.float32)
+        order = np.argsort(idx, kind="stable")
+        idx, value = idx[order], value[order]
+        first = np.empty(idx.size, dtype=bool)
+        first[0] = True
+        np.not_equal(idx[1:], idx[:-1], out=first[1:])
+        starts = np.flatnonzero(first)
+        return idx[starts], (np.add.reduceat(value, starts) / n).astype(np.float32)
+
+
+def _same_pose(a, b) -> bool:
+    return a is b or (a is not None and b is not None and np.array_equal(a, b))
+
+
+def _grey(dn: np.ndarray) -> np.ndarray:
+    """DN (float) -> 8-bit grey levels: round, clip at 0 and 255."""
+    return np.clip(np.rint(dn), 0, 255).astype(np.uint8)
 
 
 def intensity_centroid(image: np.ndarray, background: float = 0.0) -> np.ndarray:

@@ -47,6 +47,19 @@ def test_eq4_and_the_epipolar_residual_for_projected_points():
     assert np.allclose(np.abs(epipolar_residual_px(params, uv_r, shifted)), 0.3, atol=0.01)
 
 
+def test_the_epipolar_residual_of_a_rig_with_tilted_mirrors():
+    """A rig whose left virtual camera is tilted 0.12 deg about x (a 0.06 deg mirror tilt):
+    its true pairs are off the common scan line by about a_v tan(0.12 deg) = 2.1 px, and
+    the residual, taken after the rig's rotation, is zero for them (issue 16)."""
+    params = PsvsParams(rotvec_left_deg=(0.12, 0.05, 0.0))
+    rng = np.random.default_rng(1)
+    p = rng.uniform([-200, -150, 300], [200, 150, 1800], size=(50, 3))
+    uv_r, uv_l = project(params, p)
+    np.testing.assert_allclose(eq4_points_mm(params, uv_r, uv_l), p, atol=1e-9)
+    assert np.abs(epipolar_residual_px(params, uv_r, uv_l)).max() < 1e-9
+    assert np.abs(epipolar_residual_px(PsvsParams(), uv_r, uv_l)).min() > 1.9
+
+
 @pytest.mark.parametrize("method", ["weighted", "paper"])
 def test_a_plain_view_is_full_labelled_and_accurate(method):
     T = pose([12, -8, 620, 10, 15, -12])

@@ -406,10 +406,13 @@ def test_blobs_follow_the_geometry_library():
         r.params,
         dataclasses.replace(r.params, skew=0.4),
         dataclasses.replace(r.params, u0_left=300.0, v0_left=250.0, v0_right=235.0, skew=0.3),
-    )  # one principal point or one per view; with and without skew
+        dataclasses.replace(
+            r.params, rotvec_right_deg=(0.2, -0.5, 0.1), rotvec_left_deg=(-0.3, 0.4, 1.0)
+        ),
+    )  # one principal point or one per view; with and without skew; rotated views
     rng = np.random.default_rng(4)
-    for i in range(60):
-        params = variants[i % 3]
+    for i in range(80):
+        params = variants[i % 4]
         discs = r.discs(_random_camera_T_tob(rng))
         blobs = render_module.project_discs(params, discs, r.view_gains, 1.0, 0.7)
         for k in range(len(blobs)):
