@@ -297,3 +297,40 @@ def test_the_evaluation_interpolates_the_truth_at_the_path_stamps_never_the_near
     np.testing.assert_allclose(x_from_transform(got[0]), [2.3, 0, 0, 2.3, 0, 0], atol=1e-9)
     np.testing.assert_allclose(x_from_transform(got[1]), [4, 0, 0, 4, 0, 0], atol=1e-9)
     np.testing.assert_allclose(x_from_transform(got[2]), [4, 0, 0, 4, 0, 0], atol=1e-9)  # held after the end
+
+
+class _Accelerating(_Commander):
+    """A scripted controller whose steps grow every cycle: the flange accelerates (and turns
+    faster and faster)."""
+
+    def _on_tick(self, t_ns, msg):
+        k = self.k
+        self.d_t_m = [2e-5 * k, -1e-5 * k, 0.0]
+        self.d_r_rad = [0.0, 0.0, math.radians(0.02 * k)]
+        return super()._on_tick(t_ns, msg)
+
+
+def test_the_camera_renders_the_accelerating_robot_at_its_true_pose_at_the_image_stamp():
+    """Every image's flange (sim_camera/truth) is the robot's truth interpolated at the
+    image's stamp between the samples around it (to 1e-9 mm), and the image is published
+    only once the robot's truth beyond the exposure exists: never an extrapolation."""
+    from humanpt.geometry.transforms import interpolate_transform
+
+    world = build_world("static", extra_cores=[_Accelerating([0, 0, 0], [0, 0, 0])])
+    world.run_for(1.0)
+    robot = world.truths("sim_robot/truth")
+    stamps = np.array([t for t, _ in robot])
+    steps = np.linalg.norm(np.diff([p["world_T_flange"][:3, 3] for _, p in robot], axis=0), axis=1)
+    assert steps[-1] > steps[5] + 0.5  # it accelerates
+    robot_known_at = {o.t_ns for o in world.outputs("sim_robot/truth")}
+    images = world.outputs("camera/image")
+    assert len(images) >= 29
+    for o, (stamp, poses) in zip(images, world.truths("sim_camera/truth"), strict=True):
+        i = int(np.searchsorted(stamps, stamp, side="left"))
+        (t0, a), (t1, b) = robot[i - 1], robot[i]
+        assert t0 < stamp <= t1 or stamp == 0
+        want = b["world_T_flange"] if stamp == t1 else interpolate_transform(
+            a["world_T_flange"], b["world_T_flange"], (stamp - t0) / (t1 - t0))
+        np.testing.assert_allclose(poses["world_T_flange"][:3, 3], want[:3, 3], atol=1e-9)
+        np.testing.assert_allclose(poses["world_T_flange"][:3, :3], want[:3, :3], atol=1e-12)
+        assert o.t_ns >= t1 + 0 and max(t for t in robot_known_at if t <= o.t_ns) >= stamp + 500_000
