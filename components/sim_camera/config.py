@@ -69,7 +69,9 @@ class SimCameraConfig:
     image's stamp is the capture time on the camera's clock, off the robot's clock by
     ``stamp_offset_ms`` (a constant offset; realistic: a few ms with NTP) plus
     ``stamp_jitter_ms`` (SD of a Gaussian error per frame; realistic ~1 ms); a frame is lost
-    with ``frame_drop_probability`` (realistic ~0.001-0.01).
+    with ``frame_drop_probability`` (realistic ~0.001-0.01). ``motion_blur``: render the
+    motion over the exposure (the renderer's start/end poses of the exposure) instead of
+    the poses at the capture instant (off: the ideal world; on in a realistic one).
     Randomness: ``np.random.default_rng([seed, frame_index])`` (image noise) and
     ``np.random.default_rng([seed, frame_index, 1])`` (stamp jitter, frame drops).
     """
@@ -112,6 +114,7 @@ class SimCameraConfig:
     stamp_offset_ms: Annotated[float, Range(-1000, 1000, "ms")] = 0.0
     stamp_jitter_ms: Annotated[float, Range(0, 1000, "ms")] = 0.0
     frame_drop_probability: Annotated[float, Range(0, 1, "")] = 0.0
+    motion_blur: bool = False
     near_mm: Annotated[float, Range(1e-3, 10000, "mm")] = 10.0
 
     def __post_init__(self) -> None:

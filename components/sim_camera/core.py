@@ -225,12 +225,27 @@ class SimCameraCore(Core):
         self.tob.forget_before(keep_ns)
         return out
 
+    def _camera_poses(self, t_ns: int) -> tuple[np.ndarray | None, np.ndarray]:
+        """(camera_T_tob or None without a target, world_T_camera), mm, at ``t_ns``."""
+        world_T_camera = self.flange.at(t_ns) @ self.flange_T_camera
+        world_T_tob = self.tob.at(t_ns)
+        if world_T_tob is None:
+            return None, world_T_camera
+        return invert_transform(world_T_camera) @ world_T_tob, world_T_camera
+
     def _render(self, cap: _Capture) -> list[Output]:
         world_T_flange = self.flange.at(cap.t_ns)
         world_T_tob = self.tob.at(cap.t_ns)
         world_T_camera = world_T_flange @ self.flange_T_camera
-        camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
-        pixels = cap.renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
+        if self.config.motion_blur:
+            # The renderer integrates from the poses at the start of the exposure to those at
+            # its end (linearly: an exposure is short against the truth's sample interval).
+            pixels = cap.renderer.render(
+                *self._camera_poses(cap.t_ns - cap.half_exposure_ns), cap.frame_index,
+                *self._camera_poses(cap.t_ns + cap.half_exposure_ns))
+        else:
+            camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
+            pixels = cap.renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
         truth = pb.Truth(header=self.next_header("sim_camera/truth", cap.t_ns, "world"))
         truth.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
         if world_T_tob is not None:

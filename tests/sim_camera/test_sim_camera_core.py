@@ -281,3 +281,30 @@ def test_the_image_is_rendered_from_the_truth_interpolated_at_its_stamp_while_ac
             extrapolated = interpolate_transform(Tp, T0, (stamp - tp) / (t0 - tp))
             moved_off += np.linalg.norm(extrapolated[:3, 3] - T[:3, 3]) > 1e-3
     assert moved_off >= 20  # the test can tell an extrapolation from the truth
+
+
+def test_motion_blur_hands_the_renderer_the_poses_at_the_start_and_end_of_the_exposure():
+    """With ``motion_blur`` the core renders the exposure from the poses at its start and
+    end (the renderer integrates between them); this needs the renderer of issue 16's
+    optics work (end poses), so it runs once that is merged."""
+    import inspect
+
+    if "camera_T_tob_end" not in inspect.signature(Renderer.render).parameters:
+        pytest.skip("the renderer takes no end poses yet (issue 16, optics)")
+    cfg = SimCameraConfig(noise=False, exposure_ms=20.0, motion_blur=True)
+    core = SimCameraCore(cfg)
+    flange0 = np.eye(4)
+    flange1 = transform_from_x(np.array([20.0, 0, 0, 0, 0, 0]))  # 20 mm in 100 ms
+    tob = DEFAULT_FLANGE_T_CAMERA_MM @ camera_T_desired(600.0)
+    core.step(0, "operator/truth", _truth(0, "world_T_tob", tob))
+    core.step(0, "operator/truth", _truth(100_000_000, "world_T_tob", tob))
+    _feed(core, 0, flange0)
+    core.step(50_000_000, "tick", _tick(50_000_000))
+    outs = _feed(core, 100_000_000, flange1)
+    # The exposure runs 40..60 ms: the flange from x = 8 to 12 mm (by hand).
+    start = transform_from_x(np.array([8.0, 0, 0, 0, 0, 0])) @ DEFAULT_FLANGE_T_CAMERA_MM
+    end = transform_from_x(np.array([12.0, 0, 0, 0, 0, 0])) @ DEFAULT_FLANGE_T_CAMERA_MM
+    direct = Renderer(cfg).render(np.linalg.inv(start) @ tob, start, 0, np.linalg.inv(end) @ tob, end)
+    np.testing.assert_array_equal(from_image(outs[0][1]), direct)
+    truth = from_pose(outs[1][1].world_T_flange)
+    np.testing.assert_allclose(truth[:3, 3] * 1000, [10.0, 0, 0], atol=1e-9)  # mid-exposure
