@@ -9,7 +9,17 @@ from typing import Annotated, Literal
 
 from humanpt.runtime.config import Range, live
 
-from .scenario import BUILTIN_SCENARIOS, Scenario, ScenarioError, builtin_scenario, parse_scenario
+from .scenario import (
+    BUILTIN_SCENARIOS,
+    Scenario,
+    ScenarioError,
+    Tremor,
+    TremorModel,
+    builtin_scenario,
+    parse_scenario,
+)
+
+HAND_TREMOR_STREAM = 13  # the operator's tremor waveform: default_rng([seed, 13])
 
 
 @dataclass(frozen=True)
@@ -34,6 +44,8 @@ class OperatorConfig:
     rate_hz: Annotated[float, Range(1, 10000, "Hz")] = 100.0
     start_delay_s: Annotated[float, Range(0, 3600, "s")] = 2.0
     seed: Annotated[int, Range(0, 2**63 - 1, "")] = 0
+    tremor_mm: Annotated[float, Range(0, 10, "mm")] = 0.0
+    tremor_deg: Annotated[float, Range(0, 10, "deg")] = 0.0
 
     def __post_init__(self) -> None:
         if self.scenario not in BUILTIN_SCENARIOS:
@@ -55,6 +67,8 @@ class OperatorConfig:
             ("speed_scale", 0.0, 100.0),
             ("rate_hz", 1e-3, 10_000.0),
             ("start_delay_s", 0.0, 1e6),
+            ("tremor_mm", 0.0, 10.0),
+            ("tremor_deg", 0.0, 10.0),
         ):
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
@@ -71,6 +85,12 @@ class OperatorConfig:
         if self.scenario_text:
             return parse_scenario(self.scenario_text, self.scenario_file or "scenario_text")
         return builtin_scenario(self.scenario, self.speed_mm_s, self.seed)
+
+    def hand_tremor(self) -> TremorModel | None:
+        """The operator's tremor (None when off)."""
+        if not (self.tremor_mm or self.tremor_deg):
+            return None
+        return TremorModel(Tremor(self.tremor_mm, self.tremor_deg, self.seed), HAND_TREMOR_STREAM)
 
     @property
     def tick_period_ns(self) -> int:

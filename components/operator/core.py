@@ -25,7 +25,7 @@ class OperatorCore(Core):
     def __init__(self, config: OperatorConfig):
         super().__init__(config)
         self.scenario = config.build_scenario()
-        self.trajectory = Trajectory(self.scenario)
+        self.trajectory = Trajectory(self.scenario, config.hand_tremor())
         self.first_ns: int | None = None
         self.last_ns = 0
         self.scenario_t_s = 0.0

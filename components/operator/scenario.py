@@ -416,10 +416,11 @@ def format_scenario(scenario: Scenario) -> str:
 class TremorModel:
     """Deterministic hand tremor: per axis a sum of sines - physiological tremor (8-12 Hz)
     and slow drift (0.2-1.5 Hz) - with seeded frequencies and phases, scaled to the RMS
-    amplitudes. A pure function of time, so it can be evaluated at any t."""
+    amplitudes. A pure function of time, so it can be evaluated at any t. ``stream``
+    separates independent waveforms of one seed (a scenario's own tremor: 7)."""
 
-    def __init__(self, tremor: Tremor):
-        rng = np.random.default_rng([tremor.seed, 7])
+    def __init__(self, tremor: Tremor, stream: int = 7):
+        rng = np.random.default_rng([tremor.seed, stream])
         freqs = np.concatenate(
             [rng.uniform(8.0, 12.0, (6, 3)), rng.uniform(0.2, 1.5, (6, 3))], axis=1
         )
@@ -463,8 +464,9 @@ class Trajectory:
     """A scenario in time. ``duration_s`` is when the last segment ends; afterwards the
     target holds the final pose. :meth:`pose` gives world_T_tob and world_T_tip."""
 
-    def __init__(self, scenario: Scenario):
+    def __init__(self, scenario: Scenario, hand_tremor: TremorModel | None = None):
         self.scenario = scenario
+        self.hand_tremor = hand_tremor  # the operator's own, on top of the scenario's
         self.tob_T_tip = scenario.tob_T_tip
         self.tip_T_tob = None if self.tob_T_tip is None else invert_transform(self.tob_T_tip)
         self.tremor = None if scenario.tremor is None else TremorModel(scenario.tremor)
@@ -534,9 +536,10 @@ class Trajectory:
         """(world_T_tob, world_T_tip or None), (4, 4) mm, at scenario time ``t_s``; the
         tremor (if any) is evaluated at ``tremor_t_s`` (default ``t_s``)."""
         path = self.path_pose(t_s)
-        if self.tremor is not None:
-            d_p, d_r = self.tremor.offset(t_s if tremor_t_s is None else tremor_t_s)
-            path = apply_step(path, d_p, d_r)
+        for tremor in (self.tremor, self.hand_tremor):
+            if tremor is not None:
+                d_p, d_r = tremor.offset(t_s if tremor_t_s is None else tremor_t_s)
+                path = apply_step(path, d_p, d_r)
         if self.scenario.path == "tip":
             return path @ self.tip_T_tob, path
         tip = None if self.tob_T_tip is None else path @ self.tob_T_tip

@@ -109,7 +109,9 @@ class PerceptionCore(Core):
         c = self.perception.config
         stamp = t_ns
         try:
-            stamp = image_stamp_ns(msg) or t_ns
+            # A stamp of 0 is a real capture time (a lock-step run starts at 0; the image of
+            # that capture now arrives later): only a missing stamp falls back to arrival.
+            stamp = image_stamp_ns(msg) if msg.HasField("timestamp") else t_ns
             prepared = prepare(
                 msg,
                 self.perception.size_px,

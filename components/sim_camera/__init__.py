@@ -5,18 +5,18 @@
 """
 
 from .config import PsvsConfig, SimCameraConfig
-from .core import SimCameraCore, interpolate_pose
+from .core import PoseTrack, SimCameraCore
 from .render import Blobs, Discs, Renderer, coverage, intensity_centroid, occlusion_offset
 
 __all__ = [
     "Blobs",
     "Discs",
+    "PoseTrack",
     "PsvsConfig",
     "Renderer",
     "SimCameraConfig",
     "SimCameraCore",
     "coverage",
     "intensity_centroid",
-    "interpolate_pose",
     "occlusion_offset",
 ]

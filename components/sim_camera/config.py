@@ -86,9 +86,19 @@ class SimCameraConfig:
     beyond a straight edge at ``occlusion_angle_deg`` in the TOB plane, covering
     ``occlusion_fraction`` of the disc, is hidden).
 
-    Timing: one image per ``1/fps`` s, rendered at the tick (capture) time from the truth
-    interpolated (or extrapolated by at most ``max_extrapolation_ms``) to it.
-    Randomness: ``np.random.default_rng([seed, frame_index])``.
+    Timing: one exposure per ``1/fps`` s, centred on the tick (the capture time). It is
+    rendered once both truths reach the end of the exposure, from the true trajectories
+    (piecewise linear / geodesic through the truth samples) at the capture time, never
+    extrapolated; a capture still without truth ``max_truth_wait_ms`` after its exposure
+    ended is dropped (event ``truth_late``). Timing errors of the world (all 0 = off): the
+    image's stamp is the capture time on the camera's clock, off the robot's clock by
+    ``stamp_offset_ms`` (a constant offset; realistic: a few ms with NTP) plus
+    ``stamp_jitter_ms`` (SD of a Gaussian error per frame; realistic ~1 ms); a frame is lost
+    with ``frame_drop_probability`` (realistic ~0.001-0.01). ``motion_blur``: render the
+    motion over the exposure (the renderer's start/end poses of the exposure) instead of
+    the poses at the capture instant (off: the ideal world; on in a realistic one).
+    Randomness: ``np.random.default_rng([seed, frame_index])`` (image noise) and
+    ``np.random.default_rng([seed, frame_index, 1])`` (stamp jitter, frame drops).
     """
 
     fps: Annotated[float, Range(0.1, 10000, "frames/s")] = 30.0
@@ -134,7 +144,11 @@ class SimCameraConfig:
     occlusion_fraction: Annotated[float, Range(0, 1, "")] = live(0.5, "hidden fraction of each occluded source")
     occlusion_angle_deg: Annotated[float, Range(-360, 360, "deg")] = live(0.0, "direction of the hidden side in the TOB plane")
     # timing
-    max_extrapolation_ms: Annotated[float, Range(0, 10000, "ms")] = 50.0
+    max_truth_wait_ms: Annotated[float, Range(0, 10000, "ms")] = 250.0
+    stamp_offset_ms: Annotated[float, Range(-1000, 1000, "ms")] = 0.0
+    stamp_jitter_ms: Annotated[float, Range(0, 1000, "ms")] = 0.0
+    frame_drop_probability: Annotated[float, Range(0, 1, "")] = 0.0
+    motion_blur: bool = False
     near_mm: Annotated[float, Range(1e-3, 10000, "mm")] = 10.0
 
     def __post_init__(self) -> None:
@@ -176,7 +190,14 @@ class SimCameraConfig:
         for name in ("gain_e_per_dn", "full_well_e", "lamp_diameter_mm", "near_mm"):
             _finite(own, name, getattr(self, name), positive=True)
         _finite(own, "lamp_dn_per_ms", self.lamp_dn_per_ms, nonneg=True)
-        _finite(own, "max_extrapolation_ms", self.max_extrapolation_ms, nonneg=True)
+        _finite(own, "max_truth_wait_ms", self.max_truth_wait_ms, nonneg=True)
+        _finite(own, "stamp_offset_ms", self.stamp_offset_ms)
+        _finite(own, "stamp_jitter_ms", self.stamp_jitter_ms, nonneg=True)
+        _finite(own, "frame_drop_probability", self.frame_drop_probability, nonneg=True)
+        if self.frame_drop_probability > 1:
+            raise ValueError(
+                f"{own}.frame_drop_probability must be in [0, 1], got {self.frame_drop_probability}"
+            )
         if self.blur_sigma_px > 20 or self.reflection_blur_px > 20:
             raise ValueError(f"{own}: blur sigmas must be at most 20 px")
         plane = np.asarray(self.reflection_plane_tob, dtype=float)

@@ -1,68 +1,109 @@
 """The simulated PSVS camera as a component core.
 
 Inputs: ``operator/truth`` (world_T_tob) and ``sim_robot/truth`` (world_T_flange), and a
-tick at ``fps``. On each tick it renders the complex image at the tick time (the capture
-time) from the two truths interpolated - or extrapolated by at most
-``max_extrapolation_ms`` - to that time, and publishes it on ``camera/image`` (mono8,
-stamp = capture, frame "camera") with the truth it used on ``sim_camera/truth``.
+tick at ``fps``. The truth is one thing: each stream's true trajectory is the piecewise
+linear (translation) / geodesic (rotation) path through its stamped samples (a sample
+stamped t is where the body is at t; before its first sample a body holds its first pose).
+A tick at t captures an exposure of ``exposure_ms`` centred on t (the capture stamp). The
+capture waits in a queue until both truths have samples at or beyond the end of the
+exposure, then the image is rendered from the truths interpolated to t - never
+extrapolated - and published on ``camera/image`` (mono8, frame "camera", stamp = the
+capture time plus the camera clock's error, ``stamp_offset_ms`` + ``stamp_jitter_ms``),
+with the truth it used on ``sim_camera/truth`` (stamp = the true capture time). A capture
+whose truth has not come ``max_truth_wait_ms`` after the exposure ended is dropped with a
+``truth_late`` event. A frame is lost with probability ``frame_drop_probability``.
 """
 
 from __future__ import annotations
 
+from bisect import bisect_left
+from collections import deque
+from dataclasses import dataclass
+
 import numpy as np
 
 from humanpt.geometry.transforms import interpolate_transform, invert_transform
-from humanpt.runtime.core import Core, Output, Port
+from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm
 
 from .config import SimCameraConfig
 from .render import Renderer
 
-__all__ = ["SimCameraCore", "PoseTrack", "interpolate_pose"]
+__all__ = ["SimCameraCore", "PoseTrack", "TIMING_STREAM"]
 
 _WAIT_GRACE_NS = 500_000_000  # no flange truth this long after the first tick: say so
-
-
-def interpolate_pose(
-    t_ns: int, t0_ns: int, a_T_b0: np.ndarray, t1_ns: int, a_T_b1: np.ndarray, max_extra_ns: int
-) -> np.ndarray:
-    """Pose (4, 4) at ``t_ns`` on the constant-velocity screw through two stamped poses
-    (linear in translation, geodesic in rotation). Beyond the two stamps it extrapolates by
-    at most ``max_extra_ns``, then holds."""
-    span = t1_ns - t0_ns
-    if span <= 0:
-        return np.array(a_T_b1, dtype=float)
-    s = (t_ns - t0_ns) / span
-    s = min(max(s, -max_extra_ns / span), 1.0 + max_extra_ns / span)
-    return interpolate_transform(a_T_b0, a_T_b1, s, assume_valid=True)
+TIMING_STREAM = 1  # frame timing draws: default_rng([seed, frame_index, TIMING_STREAM])
 
 
 class PoseTrack:
-    """The last two stamped poses of one truth stream (mm)."""
+    """Stamped poses of one truth stream (mm), in stamp order, and the true trajectory they
+    define: linear in translation and geodesic in rotation between neighbouring samples
+    (:func:`humanpt.geometry.transforms.interpolate_transform`); before the first sample the
+    first pose holds (the body stood still before its source started); never extrapolated
+    beyond the last sample. Keeps at most ``maxlen`` samples (older ones are pruned by
+    :meth:`forget_before`)."""
 
-    def __init__(self) -> None:
-        self.samples: list[tuple[int, np.ndarray]] = []
+    def __init__(self, maxlen: int | None = 4096) -> None:
+        self._stamps: deque[int] = deque(maxlen=maxlen)
+        self._poses: deque[np.ndarray] = deque(maxlen=maxlen)
+
+    def __len__(self) -> int:
+        return len(self._stamps)
+
+    @property
+    def last_ns(self) -> int | None:
+        return self._stamps[-1] if self._stamps else None
 
     def add(self, stamp_ns: int, a_T_b: np.ndarray) -> None:
-        if self.samples and stamp_ns <= self.samples[-1][0]:
-            if stamp_ns == self.samples[-1][0]:
-                self.samples[-1] = (stamp_ns, a_T_b)  # a repeat: the newer value wins
+        if self._stamps and stamp_ns <= self._stamps[-1]:
+            if stamp_ns == self._stamps[-1]:
+                self._poses[-1] = a_T_b  # a repeat: the newer value wins
                 return
-            self.samples.clear()  # time went backwards (a restarted source): start again
-        self.samples = [*self.samples[-1:], (stamp_ns, a_T_b)]
+            self._stamps.clear()  # time went backwards (a restarted source): start again
+            self._poses.clear()
+        self._stamps.append(int(stamp_ns))
+        self._poses.append(a_T_b)
 
-    def at(self, t_ns: int, max_extra_ns: int) -> np.ndarray | None:
-        if not self.samples:
+    def covers(self, t_ns: int) -> bool:
+        """Whether the trajectory is known at ``t_ns`` (a sample at or after it exists)."""
+        return bool(self._stamps) and self._stamps[-1] >= t_ns
+
+    def at(self, t_ns: int, hold: bool = False) -> np.ndarray | None:
+        """The pose (4, 4) at ``t_ns``; None when there is no sample, or when ``t_ns`` is
+        beyond the last one (unless ``hold``: then the last pose)."""
+        stamps, poses = self._stamps, self._poses
+        if not stamps:
             return None
-        if len(self.samples) == 1:
-            return self.samples[0][1]
-        (t0, p0), (t1, p1) = self.samples
-        return interpolate_pose(t_ns, t0, p0, t1, p1, max_extra_ns)
+        if t_ns >= stamps[-1]:
+            return poses[-1].copy() if t_ns == stamps[-1] or hold else None
+        i = bisect_left(stamps, t_ns)
+        if i == 0 or stamps[i] == t_ns:
+            return poses[i].copy()
+        t0, t1 = stamps[i - 1], stamps[i]
+        return interpolate_transform(poses[i - 1], poses[i], (t_ns - t0) / (t1 - t0), assume_valid=True)
+
+    def forget_before(self, t_ns: int) -> None:
+        """Drop the samples no longer needed for times >= ``t_ns`` (keeps the last one at
+        or before it)."""
+        while len(self._stamps) >= 2 and self._stamps[1] <= t_ns:
+            self._stamps.popleft()
+            self._poses.popleft()
+
+
+@dataclass(frozen=True)
+class _Capture:
+    t_ns: int  # true capture time: the middle of the exposure
+    frame_index: int
+    stamp_ns: int  # the image's stamp (capture time on the camera's clock)
+    half_exposure_ns: int
+    renderer: Renderer  # the settings at the capture (a live change applies to later ones)
 
 
 class SimCameraCore(Core):
-    """Renders the PSVS complex image of the twin's truth (see the module docstring)."""
+    """Renders the PSVS complex image of the twin's truth (see the module docstring).
+    Events: ``bad_truth``, ``waiting_for_truth`` (no flange truth 0.5 s after the first
+    tick), ``truth_late`` (captures dropped: their truth never came; 1st, 10th, 100th...)."""
 
     name = "sim_camera"
     config_type = SimCameraConfig
@@ -78,10 +119,12 @@ class SimCameraCore(Core):
         self.flange_T_camera = config.flange_T_camera
         self.tob = PoseTrack()
         self.flange = PoseTrack()
-        self.frame_index = 0
+        self.pending: deque[_Capture] = deque()
+        self.frame_index = 0  # counts captures (dropped ones too): the noise of frame k is fixed
         self.first_tick_ns: int | None = None
         self.warned_waiting = False
         self.bad_truths = 0
+        self.counts: dict[str, int] = {}
 
     def tick_period_ns(self) -> int | None:
         return self.config.tick_period_ns
@@ -89,14 +132,16 @@ class SimCameraCore(Core):
     def on_config_changed(self, old: SimCameraConfig, new: SimCameraConfig) -> None:
         self.renderer = Renderer(new)
 
+    # -- inputs -----------------------------------------------------------------------------
     def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
-        return self._capture(t_ns)
+        out = self._capture(t_ns)
+        return out + self._render_ready(t_ns)
 
     def _on_tob_truth(self, t_ns: int, msg: pb.Truth) -> list[Output]:
-        return self._truth(t_ns, "operator/truth", msg)
+        return self._truth(t_ns, "operator/truth", msg) + self._render_ready(t_ns)
 
     def _on_flange_truth(self, t_ns: int, msg: pb.Truth) -> list[Output]:
-        return self._truth(t_ns, "sim_robot/truth", msg)
+        return self._truth(t_ns, "sim_robot/truth", msg) + self._render_ready(t_ns)
 
     def _truth(self, t_ns: int, topic: str, msg: pb.Truth) -> list[Output]:
         field = "world_T_tob" if topic == "operator/truth" else "world_T_flange"
@@ -120,30 +165,89 @@ class SimCameraCore(Core):
         (self.tob if topic == "operator/truth" else self.flange).add(msg.header.stamp_ns, a_T_b)
         return []
 
+    # -- capture and render -----------------------------------------------------------------
+    def _half_exposure_ns(self) -> int:
+        return round(self.config.exposure_ms * 5e5)
+
     def _capture(self, t_ns: int) -> list[Output]:
+        """A tick: an exposure centred on ``t_ns`` joins the queue (unless the frame is
+        lost); captures whose truth is too late leave it."""
+        c = self.config
+        out: list[Output] = []
         if self.first_tick_ns is None:
             self.first_tick_ns = t_ns
-        extra_ns = round(self.config.max_extrapolation_ms * 1e6)
-        world_T_flange = self.flange.at(t_ns, extra_ns)
-        if world_T_flange is None:
-            if not self.warned_waiting and t_ns - self.first_tick_ns >= _WAIT_GRACE_NS:
-                self.warned_waiting = True
-                return [
-                    self.event(
-                        t_ns,
-                        pb.SEVERITY_WARNING,
-                        "waiting_for_truth",
-                        "no sim_robot/truth yet: the camera does not know where it is",
-                    )
-                ]
-            return []
-        world_T_tob = self.tob.at(t_ns, extra_ns)
-        world_T_camera = world_T_flange @ self.flange_T_camera
-        camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
-        pixels = self.renderer.render(camera_T_tob, world_T_camera, self.frame_index)
+        if not len(self.flange) and not self.warned_waiting and t_ns - self.first_tick_ns >= _WAIT_GRACE_NS:
+            self.warned_waiting = True
+            out.append(self.event(t_ns, pb.SEVERITY_WARNING, "waiting_for_truth",
+                                  "no sim_robot/truth yet: the camera does not know where it is"))
+        index = self.frame_index
         self.frame_index += 1
-        truth = pb.Truth(header=self.next_header("sim_camera/truth", t_ns, "world"))
+        stamp_ns, lost = t_ns, False
+        if c.stamp_offset_ms or c.stamp_jitter_ms or c.frame_drop_probability:
+            rng = np.random.default_rng([c.seed, index, TIMING_STREAM])
+            error_ms = c.stamp_offset_ms + c.stamp_jitter_ms * rng.standard_normal()
+            stamp_ns = max(t_ns + round(error_ms * 1e6), 0)
+            lost = bool(rng.random() < c.frame_drop_probability)
+        if lost:
+            self.counts["frames_dropped"] = self.counts.get("frames_dropped", 0) + 1
+        else:
+            self.pending.append(_Capture(t_ns, index, stamp_ns, self._half_exposure_ns(), self.renderer))
+        # Bounded: a capture whose truth has not come max_truth_wait_ms after its exposure
+        # ended is dropped (never rendered from an extrapolation).
+        wait_ns = round(c.max_truth_wait_ms * 1e6) + self._half_exposure_ns()
+        late = 0
+        while self.pending and t_ns - self.pending[0].t_ns > wait_ns:
+            self.pending.popleft()
+            late += 1
+        if late and len(self.flange):  # before any flange truth, waiting_for_truth says it
+            worth = [n for _ in range(late) if (n := count_decades(self.counts, "truth_late"))]
+            if worth:
+                out.append(self.event(
+                    t_ns, pb.SEVERITY_WARNING, "truth_late",
+                    f"dropped {late} capture(s): no truth at the end of the exposure within "
+                    f"{c.max_truth_wait_ms:g} ms (flange truth up to {self.flange.last_ns} ns, "
+                    f"target up to {self.tob.last_ns} ns; {self.counts['truth_late']} so far)"))
+        return out
+
+    def _ready(self, cap: _Capture) -> bool:
+        end_ns = cap.t_ns + cap.half_exposure_ns
+        return self.flange.covers(end_ns) and (not len(self.tob) or self.tob.covers(end_ns))
+
+    def _render_ready(self, t_ns: int) -> list[Output]:
+        out: list[Output] = []
+        while self.pending and self._ready(self.pending[0]):
+            out += self._render(self.pending.popleft())
+        if self.pending:
+            keep_ns = self.pending[0].t_ns - self.pending[0].half_exposure_ns
+        else:
+            keep_ns = t_ns - self._half_exposure_ns()
+        self.flange.forget_before(keep_ns)
+        self.tob.forget_before(keep_ns)
+        return out
+
+    def _camera_poses(self, t_ns: int) -> tuple[np.ndarray | None, np.ndarray]:
+        """(camera_T_tob or None without a target, world_T_camera), mm, at ``t_ns``."""
+        world_T_camera = self.flange.at(t_ns) @ self.flange_T_camera
+        world_T_tob = self.tob.at(t_ns)
+        if world_T_tob is None:
+            return None, world_T_camera
+        return invert_transform(world_T_camera) @ world_T_tob, world_T_camera
+
+    def _render(self, cap: _Capture) -> list[Output]:
+        world_T_flange = self.flange.at(cap.t_ns)
+        world_T_tob = self.tob.at(cap.t_ns)
+        world_T_camera = world_T_flange @ self.flange_T_camera
+        if self.config.motion_blur:
+            # The renderer integrates from the poses at the start of the exposure to those at
+            # its end (linearly: an exposure is short against the truth's sample interval).
+            pixels = cap.renderer.render(
+                *self._camera_poses(cap.t_ns - cap.half_exposure_ns), cap.frame_index,
+                *self._camera_poses(cap.t_ns + cap.half_exposure_ns))
+        else:
+            camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
+            pixels = cap.renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
+        truth = pb.Truth(header=self.next_header("sim_camera/truth", cap.t_ns, "world"))
         truth.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
         if world_T_tob is not None:
             truth.world_T_tob.CopyFrom(pose_from_mm(world_T_tob))
-        return [("camera/image", image(pixels, t_ns, "camera")), ("sim_camera/truth", truth)]
+        return [("camera/image", image(pixels, cap.stamp_ns, "camera")), ("sim_camera/truth", truth)]

@@ -8,7 +8,13 @@ from typing import Annotated, Literal
 import numpy as np
 
 from humanpt.runtime.config import Deg, Mm, Range
-from humanpt.sim_robot.kinematics import PumaKinematics, RobotModelConfig, UnreachableError
+from humanpt.sim_robot.kinematics import (
+    PumaKinematics,
+    RobotModelConfig,
+    TrueArm,
+    UnreachableError,
+    perturbed_geometry,
+)
 
 # Flange straight down in front of the robot, elbow up: (786.0, 190.0, -296.0) mm in the
 # base frame, yaw 0, pitch 0, roll 180 deg (puma762). Well inside every joint limit and
@@ -45,6 +51,10 @@ class SimRobotConfig:
     max_joint_speed_deg_s: Annotated[float, Range(1e-3, 1000, "deg/s")] = 250.0
     alter_on_start: bool = True
     event_interval_ms: Annotated[float, Range(0, 3600000, "ms")] = 1000.0
+    # the world's arm (truth; default: the nominal arm)
+    joint_offsets_deg: tuple[Annotated[float, Range(-5, 5, "deg")], ...] = (0.0,) * 6
+    link_length_errors_mm: tuple[Annotated[float, Range(-50, 50, "mm")], ...] = (0.0,) * 5
+    lag_time_constant_ms: Annotated[float, Range(0, 10000, "ms")] = 0.0
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.cycle_period_ms <= 1000.0:
@@ -67,6 +77,12 @@ class SimRobotConfig:
                 continue
             if len(value) != 6 or not np.all(np.isfinite(value)):
                 raise ValueError(f"{name} needs six finite values, got {value!r}")
+        for name, n, bound in (("joint_offsets_deg", 6, 5.0), ("link_length_errors_mm", 5, 50.0)):
+            value = getattr(self, name)
+            if len(value) != n or not np.all(np.isfinite(value)) or np.any(np.abs(value) > bound):
+                raise ValueError(f"{name} needs {n} finite values within +-{bound:g}, got {value!r}")
+        if not (np.isfinite(self.lag_time_constant_ms) and 0.0 <= self.lag_time_constant_ms <= 10000.0):
+            raise ValueError(f"lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}")
         self.start_joints_rad()  # raises ValueError when the start is not reachable
 
     @property
@@ -75,6 +91,16 @@ class SimRobotConfig:
 
     def kinematics(self) -> PumaKinematics:
         return PumaKinematics(RobotModelConfig(model=self.model))
+
+    @property
+    def ideal_arm(self) -> bool:
+        """Whether the world's arm is the nominal one (no joint offsets, no length errors)."""
+        return not any(self.joint_offsets_deg) and not any(self.link_length_errors_mm)
+
+    def true_arm(self) -> TrueArm:
+        """The world's physical arm (forward kinematics of the truth)."""
+        geometry = perturbed_geometry(self.kinematics().geometry, self.link_length_errors_mm)
+        return TrueArm(geometry, np.radians(np.asarray(self.joint_offsets_deg, dtype=float)))
 
     def start_joints_rad(self) -> np.ndarray:
         """(6,) the start joints (rad): start_joints_deg, or IK of start_pose_mm_deg."""

@@ -11,9 +11,14 @@ boundary, in this order:
    ``max_joint_speed_deg_s`` faults the controller, as a real one would: FAULT set, ALTER
    stopped, the arm stays where it is, an event. No correction at all: the arm stays put
    and the next STATUS carries CORRECTION_MISSED;
-2. count the cycle and send STATUS (cycle, status bits, base_T_flange from forward
-   kinematics, quantised by the codec);
-3. publish ``sim_robot/truth`` (world_T_flange, exact, stamp = the cycle time).
+2. the joints move towards their setpoint (at once, or with the first-order lag of
+   ``lag_time_constant_ms``); count the cycle and send STATUS (cycle, status bits,
+   base_T_flange from the nominal forward kinematics of the joints, quantised by the
+   codec to 0.01 mm and 0.01 deg);
+3. publish ``sim_robot/truth``: the true world_T_flange (the world's arm: nominal unless
+   ``joint_offsets_deg`` / ``link_length_errors_mm`` are set), exact, stamp = the cycle
+   time. It is where the flange is at that instant; between two cycles the flange moves on
+   the straight line / geodesic between them (the camera renders from that trajectory).
 
 A HOLD correction does not move; ALTER_OFF leaves ALTER after the cycle. ALTER comes back
 (and a FAULT clears) with ``console/command`` {component: sim_robot, verb: alter_on}, as
@@ -77,7 +82,12 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
         self.kin = config.kinematics()
-        self.q_rad = config.start_joints_rad()
+        self.q_rad = config.start_joints_rad()  # the joints (encoders)
+        self.q_setpoint_rad = self.q_rad.copy()  # where the corrections put them
+        self.true_arm = None if config.ideal_arm else config.true_arm()
+        # First-order lag: per cycle the joints cover this fraction of the way to the setpoint.
+        tau_ms = config.lag_time_constant_ms
+        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_period_ms / tau_ms)
         self._fk: tuple[bytes, np.ndarray] | None = None  # (q_rad bytes, base_T_flange)
         self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         cycle_ns = config.cycle_period_ns
@@ -125,7 +135,15 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
 
     @property
     def world_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) the flange in the world as the controller believes it (nominal), mm."""
         return self.world_T_base @ self._base_T_flange()
+
+    @property
+    def true_world_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) where the flange really is (the world's arm), mm."""
+        if self.true_arm is None:
+            return self.world_T_flange_mm
+        return self.world_T_base @ self.true_arm.forward(self.q_rad)
 
     def _base_T_flange(self) -> np.ndarray:
         """Forward kinematics of q, computed once per joint position (a cycle needs it up
@@ -224,6 +242,10 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         else:
             self._link(self._ctrl.poll(t_ns), t_ns, outs)
         self._apply_pending(t_ns, outs)
+        if self.lag_gain == 1.0:
+            self.q_rad = self.q_setpoint_rad
+        else:
+            self.q_rad = self.q_rad + self.lag_gain * (self.q_setpoint_rad - self.q_rad)
         self.cycle = (self.cycle + 1) & 0xFFFFFFFF
         self.counters["cycles"] += 1
         status = ControllerStatus.from_pose(self.cycle, self.status_bits(), self._base_T_flange())
@@ -231,7 +253,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         self._link(events, t_ns, outs)
         if self.link_running:
             self._sent_status = True
-        world_T_flange = self.world_T_flange_mm
+        world_T_flange = self.true_world_T_flange_mm
         world_T_flange[:3, 3] /= 1000.0
         outs.append(
             (
@@ -287,7 +309,9 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             )
 
     def _move(self, c: Correction, t_ns: int, outs: list[Output]) -> None:
-        T = self._base_T_flange()
+        # The correction moves the setpoint (ALTER accumulates onto the commanded path),
+        # in the controller's nominal kinematics.
+        T = self._base_T_flange() if self.lag_gain == 1.0 else self.kin.forward(self.q_setpoint_rad)
         delta = c.delta_T_mm()
         if self.config.alter_mode == "tool":
             target = T @ delta
@@ -296,11 +320,11 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             target[:3, :3] = delta[:3, :3] @ T[:3, :3]
             target[:3, 3] = T[:3, 3] + delta[:3, 3]
         try:
-            q = self.kin.inverse(target, self.q_rad)
+            q = self.kin.inverse(target, self.q_setpoint_rad)
         except UnreachableError as e:
             self._fault(t_ns, f"correction for cycle {c.echo_cycle} is unreachable: {e}", outs)
             return
-        steps = [abs(a - b) for a, b in zip(q.tolist(), self.q_rad.tolist(), strict=True)]
+        steps = [abs(a - b) for a, b in zip(q.tolist(), self.q_setpoint_rad.tolist(), strict=True)]
         step_deg = math.degrees(max(steps))
         max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_period_ms / 1000.0
         if step_deg > max_step_deg:
@@ -311,7 +335,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
                 outs,
             )
             return
-        self.q_rad = q
+        self.q_setpoint_rad = q
         self.applied.append((self.cycle, c))
 
     def _fault(self, t_ns: int, reason: str, outs: list[Output]) -> None:

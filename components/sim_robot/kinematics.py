@@ -495,3 +495,35 @@ class PumaKinematics:
         if T.shape != (4, 4) or not np.isfinite(T).all():
             raise ValueError(f"base_T_flange must be a finite 4x4 array, got shape {T.shape}")
         return T
+
+
+# --------------------------------------------------------------------------- the true arm
+
+
+def perturbed_geometry(geometry: PumaGeometry, length_errors_mm) -> PumaGeometry:
+    """``geometry`` with each length (d2, a2, a3, d4, d6, mm) off by ``length_errors_mm``
+    (5,): a real arm's links as built, against the nominal table."""
+    e = [float(v) for v in length_errors_mm]
+    if len(e) != 5:
+        raise ValueError(f"length errors need 5 values (d2, a2, a3, d4, d6 mm), got {len(e)}")
+    g = geometry
+    return PumaGeometry(d2_mm=g.d2_mm + e[0], a2_mm=g.a2_mm + e[1], a3_mm=g.a3_mm + e[2],
+                        d4_mm=g.d4_mm + e[3], d6_mm=g.d6_mm + e[4])
+
+
+class TrueArm:
+    """Forward kinematics of the physical arm that a nominal :class:`PumaKinematics` only
+    approximates: DH lengths ``geometry`` (mm) and a zero offset per joint
+    (``joint_offsets_rad`` (6,): the true DH angle is the encoder's angle plus the offset).
+    ``forward(q)`` is where the flange really is when the encoders read ``q``."""
+
+    def __init__(self, geometry: PumaGeometry, joint_offsets_rad) -> None:
+        self.dh = geometry.dh()
+        self.joint_offsets_rad = np.asarray(joint_offsets_rad, dtype=float).reshape(6)
+
+    def forward(self, q_rad: np.ndarray) -> np.ndarray:
+        """(4, 4) the true base_T_flange (mm) at encoder angles ``q_rad`` (6,)."""
+        T = np.eye(4)
+        for link, theta in zip(self.dh, np.asarray(q_rad, dtype=float) + self.joint_offsets_rad, strict=True):
+            T = T @ dh_transform(link, float(theta))
+        return T

@@ -18,7 +18,7 @@ from humanpt.runtime.lockstep import Delivered
 from humanpt.runtime.recording import iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
-from humanpt.sim_camera.core import interpolate_pose
+from humanpt.sim_camera.core import PoseTrack
 
 COORDS = ("x", "y", "z", "psi", "theta", "phi")
 
@@ -61,16 +61,21 @@ class RunOutputs:
         return truths_from(self.outputs(topic))
 
 
+def truth_track(src, field: str = "world_T_tob", topic: str = "operator/truth") -> PoseTrack:
+    """A truth stream's true trajectory (the one the camera renders from: linear and
+    geodesic between the stamped samples), mm."""
+    track = PoseTrack(maxlen=None)
+    for stamp, poses in src.truths(topic):
+        if field in poses:
+            track.add(stamp, poses[field])
+    return track
+
+
 def truth_at(src, stamps_ns, field: str = "world_T_tob", topic: str = "operator/truth") -> np.ndarray:
-    """(N, 4, 4) mm: a truth stream interpolated at the stamps."""
-    samples = src.truths(topic)
-    t = np.array([s for s, _ in samples], dtype=np.int64)
-    out = []
-    for ts in np.asarray(stamps_ns, dtype=np.int64):
-        i = int(np.clip(np.searchsorted(t, ts), 1, len(t) - 1))
-        (t0, a), (t1, b) = samples[i - 1], samples[i]
-        out.append(interpolate_pose(int(ts), t0, a[field], t1, b[field], 0))
-    return np.array(out)
+    """(N, 4, 4) mm: a truth stream's trajectory at the stamps (interpolated between the
+    samples around each stamp, never the nearest sample; held beyond the last one)."""
+    track = truth_track(src, field, topic)
+    return np.array([track.at(int(ts), hold=True) for ts in np.asarray(stamps_ns, dtype=np.int64)])
 
 
 def tracking_errors(src, flange_T_desired_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -6,7 +6,10 @@ exists, this core plays robot and gateway at once: it consumes ``controller/comm
 and on every cycle (28 ms) applies the latest command - clipped to the paper's step-
 controller limits, 100 mm/s and 60 deg/s - to the true flange pose, then publishes
 ``alter_gateway/robot_state`` (what the gateway would report) and ``sim_robot/truth``
-(what the camera simulator needs). No kinematics, no joint limits, no latency.
+(what the camera simulator needs): the pose at the cycle's stamp, reached by moving over
+the cycle that ends there. No kinematics, no joint limits, no latency - unless
+``lag_time_constant_ms`` > 0: then the commands move a setpoint and the flange follows it
+with a first-order lag (the reported pose is the lagging flange, as encoders measure it).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from humanpt.geometry import (
     DEFAULT_DZ_MM,
     DEFAULT_FLANGE_T_CAMERA_MM,
     apply_step,
+    interpolate_transform,
     transform_from_x,
     viewing_world_T_flange,
     x_from_transform,
@@ -67,7 +71,9 @@ class StandInRobotConfig:
     world_T_flange, mm, deg) when given, else the pose from which the camera (default
     hand-eye) sees the first target pose of the built-in scenario ``start_view`` at
     ``start_dz_mm`` on its axis. Per-cycle steps are clipped to ``max_speed_mm_s`` and
-    ``max_rate_deg_s``."""
+    ``max_rate_deg_s``. ``lag_time_constant_ms`` (default 0 = none; realistic ~10-30 ms):
+    per cycle the flange covers 1 - exp(-cycle/tau) of the way to its setpoint (linear in
+    translation, geodesic in rotation)."""
 
     cycle_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     start_flange_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] | None = None
@@ -75,12 +81,17 @@ class StandInRobotConfig:
     start_dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
     max_speed_mm_s: Annotated[float, Range(1e-3, 1000, "mm/s")] = 100.0
     max_rate_deg_s: Annotated[float, Range(1e-3, 1000, "deg/s")] = 60.0
+    lag_time_constant_ms: Annotated[float, Range(0, 10000, "ms")] = 0.0
 
     def __post_init__(self) -> None:
         for name in ("cycle_ms", "max_speed_mm_s", "max_rate_deg_s", "start_dz_mm"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f"standin_robot.{name} must be finite and > 0, got {value}")
+        if not (math.isfinite(self.lag_time_constant_ms) and 0 <= self.lag_time_constant_ms <= 10000):
+            raise ValueError(
+                f"standin_robot.lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}"
+            )
         if self.start_view not in BUILTIN_SCENARIOS:
             raise ValueError(
                 f"standin_robot.start_view must be one of {', '.join(BUILTIN_SCENARIOS)}"
@@ -113,7 +124,10 @@ class StandInRobotCore(Core):
 
     def __init__(self, config: StandInRobotConfig):
         super().__init__(config)
-        self.world_T_flange = config.start_world_T_flange  # mm
+        self.world_T_flange = config.start_world_T_flange  # mm, the true (and reported) flange
+        self.setpoint = self.world_T_flange  # mm, where the commands put it
+        tau_ms = config.lag_time_constant_ms
+        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_ms / tau_ms)
         self.cycle = 0
         self.pending: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.missed = 0
@@ -173,7 +187,11 @@ class StandInRobotCore(Core):
                     )
                 )
             self.clipping = clipped
-            self.world_T_flange = apply_step(self.world_T_flange, d_t_mm, d_r)
+            self.setpoint = apply_step(self.setpoint, d_t_mm, d_r)
+        if self.lag_gain == 1.0:
+            self.world_T_flange = self.setpoint
+        else:
+            self.world_T_flange = interpolate_transform(self.world_T_flange, self.setpoint, self.lag_gain)
         world_T_flange_m = self.world_T_flange.copy()
         world_T_flange_m[:3, 3] /= 1000.0
         state = pb.RobotState(

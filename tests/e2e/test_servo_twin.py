@@ -51,7 +51,12 @@ def test_arc_is_tracked_and_the_recorded_radius_is_246_mm(tmp_path):
     w.run_for(16.0)
     w.close()
     t, e_mm, e_deg = tracking_errors(w)
-    assert e_mm.max() < 1.0 and e_deg.max() < 1.0, (e_mm.max(), e_deg.max())
+    # The arc starts at 2 s with a step of the target's speed to 20 mm/s: while the servo
+    # catches up G runs ahead of D, by the speed times the loop's latency - an image leaves
+    # the camera once the robot's truth beyond it exists (up to one 28 ms cycle after its
+    # capture: issue 16), so up to ~1.5 mm; from 3 s on the tracking is ten times tighter.
+    assert e_mm.max() < 1.6 and e_deg.max() < 1.0, (e_mm.max(), e_deg.max())
+    assert e_mm[t > 3_000_000_000].max() < 0.2, e_mm[t > 3_000_000_000].max()
     _, xg, _ = path_points(w)
     assert len(xg) > 40
     radius = np.linalg.norm(xg[:, :2] - [147.5, 1378.5], axis=1)
@@ -164,8 +169,11 @@ def test_driver_calibration_recovers_the_twins_tip():
     assert done, [e.code for e in _events(w)]
     res = json.loads(done[0].text)
     err = np.linalg.norm(np.array(res["tob_t_tip_mm"]) - [3.0, -2.0, 62.0])
-    assert err < 0.2, res
-    assert np.linalg.norm(np.array(res["world_p_pivot_mm"]) - [236.0, 1249.0, 0.0]) < 0.2, res
+    # 0.23-0.24 mm over seeds 7-9 (0.14-0.19 before issue 16, when the camera extrapolated
+    # the flange and each image left at its capture instead of once the truth was known:
+    # the filtered poses the pivot fit uses now lag the pivoting target by more).
+    assert err < 0.3, res
+    assert np.linalg.norm(np.array(res["world_p_pivot_mm"]) - [236.0, 1249.0, 0.0]) < 0.3, res  # 0.25
     # The paper's method (eq. 10-13, P' given) too.
     assert np.linalg.norm(np.array(res["paper_tob_t_tip_mm"]) - [3.0, -2.0, 62.0]) < 0.2, res
     core = next(c for c in w.extra if isinstance(c, ControllerCore))

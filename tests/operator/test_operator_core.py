@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import x_from_transform
 from humanpt.operator import TABLE1_X_MM_DEG, OperatorConfig, OperatorCore, Trajectory
@@ -73,3 +74,57 @@ def test_moves_after_the_start_delay_at_the_live_pace_and_says_when_done():
     assert done[0].t_ns / 1e9 == pytest.approx(expected_done_s, abs=0.011)
     assert np.sum(stamps > expected_done_s + 0.02) > 50
     assert np.allclose(tips[stamps > expected_done_s + 0.02], tips[-1])  # holds at the end
+
+
+def _tremor_offsets(cfg: OperatorConfig, seconds: float = 20.0):
+    """(translation mm (N, 3), rotation deg (N, 3)) of the truth against the intended path
+    (the scenario's own, without the operator's tremor)."""
+    ls = Lockstep([OperatorCore(cfg)])
+    ls.run_until(round(seconds * 1e9))
+    intended = Trajectory(cfg.build_scenario())
+    d_t, d_r = [], []
+    for t in _truths(ls):
+        elapsed_s = t.header.stamp_ns / 1e9
+        scen_t = max(elapsed_s - cfg.start_delay_s, 0.0)
+        want, _ = intended.pose(scen_t, tremor_t_s=elapsed_s)
+        got = _mm(t.world_T_tob)
+        d_t.append(got[:3, 3] - want[:3, 3])
+        d_r.append(np.degrees(Rotation.from_matrix(got[:3, :3] @ want[:3, :3].T).as_rotvec()))
+    return np.array(d_t), np.array(d_r)
+
+
+def test_hand_tremor_on_any_scenario_has_the_configured_rms_and_is_seeded():
+    """0.2 mm and 0.25 deg RMS per axis on the static target (which has no tremor of its
+    own): the truth's offsets from the intended pose have those RMS values (within 15 %:
+    20 s of a sum of sines, the slow drift's periods reach 5 s), and most of the power is
+    at 8-12 Hz (physiological tremor) besides the drift; off by default."""
+    off_t, off_r = _tremor_offsets(OperatorConfig(rate_hz=400.0))
+    assert np.abs(off_t).max() < 1e-9 and np.abs(off_r).max() < 1e-9
+    cfg = OperatorConfig(rate_hz=400.0, tremor_mm=0.2, tremor_deg=0.25, seed=4)
+    d_t, d_r = _tremor_offsets(cfg)
+    np.testing.assert_allclose(np.sqrt(np.mean(d_t**2, axis=0)), 0.2, rtol=0.15)
+    np.testing.assert_allclose(np.sqrt(np.mean(d_r**2, axis=0)), 0.25, rtol=0.15)
+    spectrum = np.abs(np.fft.rfft(d_t[:, 0] - d_t[:, 0].mean())) ** 2
+    freqs = np.fft.rfftfreq(len(d_t), 1 / 400.0)
+    tremor_band = spectrum[(freqs >= 8) & (freqs <= 12)].sum()
+    drift_band = spectrum[freqs <= 1.5].sum()
+    assert (tremor_band + drift_band) / spectrum.sum() > 0.95 and tremor_band > 0.1 * spectrum.sum()
+    again, _ = _tremor_offsets(cfg)
+    np.testing.assert_array_equal(again, d_t)  # seeded
+    other, _ = _tremor_offsets(OperatorConfig(rate_hz=400.0, tremor_mm=0.2, tremor_deg=0.25, seed=5))
+    assert np.abs(other - d_t).max() > 0.05
+
+
+def test_hand_tremor_adds_to_a_scenario_tremor_without_repeating_it():
+    """freehand has its own 0.2 mm tremor from the same seed: the operator's is another
+    waveform (its own stream), so the two add in power: RMS ~ sqrt(0.2^2 + 0.2^2)."""
+    base = OperatorConfig(scenario="freehand", rate_hz=400.0, seed=2)
+    with_hand = OperatorConfig(scenario="freehand", rate_hz=400.0, seed=2, tremor_mm=0.2)
+    d_t, _ = _tremor_offsets(with_hand)  # the operator's tremor alone (intended = freehand's own)
+    assert np.sqrt(np.mean(d_t**2)) == pytest.approx(0.2, rel=0.15)
+    own = Trajectory(base.build_scenario()).tremor
+    hand = with_hand.hand_tremor()
+    ts = np.arange(0.0, 20.0, 1e-3)
+    a = np.array([own.offset(t)[0] for t in ts])
+    b = np.array([hand.offset(t)[0] for t in ts])
+    assert abs(np.corrcoef(a[:, 0], b[:, 0])[0, 1]) < 0.2  # independent waveforms

@@ -260,3 +260,77 @@ def test_other_robot_cores_can_replace_the_stand_in():
     assert world.robot is None
     world.run_for(0.2)
     assert len(world.images()) == 6
+
+
+def test_stand_in_robot_can_lag_its_commands_by_a_first_order_response():
+    """1 mm per cycle along x with tau = one cycle (28 ms): the flange trails its setpoint
+    by e_k = (1 - g)(e_(k-1) + 1 mm), g = 1 - 1/e, which settles at 1 / (e - 1) = 0.582 mm
+    (by hand); the reported pose is the lagging flange, and so is the truth."""
+    start = transform_from_x(np.array(DEFAULT_START_FLANGE_MM_DEG))
+    cfg = StandInRobotConfig(start_flange_mm_deg=DEFAULT_START_FLANGE_MM_DEG, lag_time_constant_ms=28.0)
+    world = build_world("static", robot=cfg, extra_cores=[_Commander([0.001, 0.0, 0.0], [0.0, 0.0, 0.0])])
+    world.run_for(0.56)  # twenty cycles after the first
+    x = _flange_track(world)[:, 0, 3] - start[0, 3]
+    setpoint = np.arange(len(x), dtype=float)  # 1 mm more every cycle from cycle 1 on
+    g, e = 1.0 - math.exp(-1.0), 0.0
+    expected = []
+    for k in range(len(x)):
+        e = 0.0 if k == 0 else (1.0 - g) * (e + 1.0)
+        expected.append(setpoint[k] - e)
+    np.testing.assert_allclose(x, expected, atol=1e-9)
+    assert setpoint[-1] - x[-1] == pytest.approx(1.0 / (math.e - 1.0), abs=1e-3)
+    truth = world.truths("sim_robot/truth")
+    assert truth[-1][1]["world_T_flange"][0, 3] - start[0, 3] == pytest.approx(x[-1], abs=1e-9)
+
+
+def test_the_evaluation_interpolates_the_truth_at_the_path_stamps_never_the_nearest():
+    """Truth samples 10 ms apart moving 1 mm and 1 deg per sample: at 3 ms after a sample
+    the truth is 0.3 mm and 0.3 deg on (by hand), not the nearest sample's pose."""
+    from humanpt.twin.evaluate import truth_at
+
+    class _Src:
+        def truths(self, topic):
+            return [(k * 10_000_000, {"world_T_tob": transform_from_x(np.array([k, 0, 0, k, 0, 0.0]))})
+                    for k in range(5)]
+
+    got = truth_at(_Src(), [23_000_000, 40_000_000, 55_000_000])
+    np.testing.assert_allclose(x_from_transform(got[0]), [2.3, 0, 0, 2.3, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(x_from_transform(got[1]), [4, 0, 0, 4, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(x_from_transform(got[2]), [4, 0, 0, 4, 0, 0], atol=1e-9)  # held after the end
+
+
+class _Accelerating(_Commander):
+    """A scripted controller whose steps grow every cycle: the flange accelerates (and turns
+    faster and faster)."""
+
+    def _on_tick(self, t_ns, msg):
+        k = self.k
+        self.d_t_m = [2e-5 * k, -1e-5 * k, 0.0]
+        self.d_r_rad = [0.0, 0.0, math.radians(0.02 * k)]
+        return super()._on_tick(t_ns, msg)
+
+
+def test_the_camera_renders_the_accelerating_robot_at_its_true_pose_at_the_image_stamp():
+    """Every image's flange (sim_camera/truth) is the robot's truth interpolated at the
+    image's stamp between the samples around it (to 1e-9 mm), and the image is published
+    only once the robot's truth beyond the exposure exists: never an extrapolation."""
+    from humanpt.geometry.transforms import interpolate_transform
+
+    world = build_world("static", extra_cores=[_Accelerating([0, 0, 0], [0, 0, 0])])
+    world.run_for(1.0)
+    robot = world.truths("sim_robot/truth")
+    stamps = np.array([t for t, _ in robot])
+    steps = np.linalg.norm(np.diff([p["world_T_flange"][:3, 3] for _, p in robot], axis=0), axis=1)
+    assert steps[-1] > steps[5] + 0.5  # it accelerates
+    robot_known_at = {o.t_ns for o in world.outputs("sim_robot/truth")}
+    images = world.outputs("camera/image")
+    assert len(images) >= 29
+    for o, (stamp, poses) in zip(images, world.truths("sim_camera/truth"), strict=True):
+        i = int(np.searchsorted(stamps, stamp, side="left"))
+        (t0, a), (t1, b) = robot[i - 1], robot[i]
+        assert t0 < stamp <= t1 or stamp == 0
+        want = b["world_T_flange"] if stamp == t1 else interpolate_transform(
+            a["world_T_flange"], b["world_T_flange"], (stamp - t0) / (t1 - t0))
+        np.testing.assert_allclose(poses["world_T_flange"][:3, 3], want[:3, 3], atol=1e-9)
+        np.testing.assert_allclose(poses["world_T_flange"][:3, :3], want[:3, :3], atol=1e-12)
+        assert o.t_ns >= t1 + 0 and max(t for t in robot_known_at if t <= o.t_ns) >= stamp + 500_000
