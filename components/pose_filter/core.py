@@ -62,6 +62,8 @@ class PoseFilterCore(Core):
         # calm process noise), started from the moving model, which runs on regardless.
         self.still_kf: PoseKalman | None = None
         self._waiting_said = False  # "waiting_for_robot" said once
+        # Measurements newer than the latest robot state: (time received, message).
+        self._pending: deque[tuple[int, pb.TobMeasurement]] = deque()
         self._slow_since_ns: int | None = None  # first measurement of the current slow run
         self._off_in_a_row = 0  # measurements off a still estimate, in a row
         # The latest offsets (mm, deg vectors) of measurements from the still estimate: a slow
@@ -89,7 +91,21 @@ class PoseFilterCore(Core):
     # ------------------------------------------------------------------------------------
     def _on_tob(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
         self._fresh = False
-        outs = self._on_measurement(t_ns, msg)
+        latest = self.robot.latest
+        if (self.config.wait_for_robot_ms > 0 and latest is not None
+                and msg.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
+                and msg.header.stamp_ns > latest[0]):
+            # The robot state of the image's instant is still on its way (a serial line's
+            # frame time, a bus hop): hold the measurement until it is in, so the robot pose
+            # is interpolated, not extrapolated from the states before (which is off
+            # whenever the robot accelerates).  Older held ones go first, in stamp order.
+            self._pending.append((t_ns, msg))
+            outs = self._release_pending(t_ns, keep=2)
+            return self._after_measurements(t_ns, outs)
+        outs = self._release_pending(t_ns, keep=0) + self._on_measurement(t_ns, msg)
+        return self._after_measurements(t_ns, outs)
+
+    def _after_measurements(self, t_ns: int, outs: list[Output]) -> list[Output]:
         if self._fresh and self._cycle is not None:
             # A new measurement: the state for the current cycle again, at once, so the
             # controller's command for the coming cycle uses it (image-to-command latency
@@ -128,7 +144,25 @@ class PoseFilterCore(Core):
                     self._state(t_ns, stamp_ns, msg.cycle)]
         self._backwards = 0
         self._cycle = (stamp_ns, msg.cycle)
-        return [self._state(t_ns, stamp_ns, msg.cycle)]
+        outs = self._release_pending(t_ns)
+        return [*outs, self._state(t_ns, stamp_ns, msg.cycle)]
+
+    # -- measurements waiting for the robot pose at their stamp ------------------------
+    def _release_pending(self, t_ns: int, keep: int | None = None) -> list[Output]:
+        """Use the held measurements that the robot states now bracket (interpolation), or
+        that waited ``wait_for_robot_ms``, or beyond the newest ``keep``: those extrapolate
+        as before."""
+        outs: list[Output] = []
+        wait_ns = self.config.wait_for_robot_ms * 1e6
+        latest = self.robot.latest
+        while self._pending:
+            t_in, m = self._pending[0]
+            bracketed = latest is not None and latest[0] >= m.header.stamp_ns
+            if not (bracketed or t_ns - t_in >= wait_ns or (keep is not None and len(self._pending) > keep)):
+                break
+            self._pending.popleft()
+            outs += self._on_measurement(t_ns, m)
+        return outs
 
     def _reject_robot_state(self, t_ns: int, why: str, text: str) -> list[Output]:
         """An event for the 1st, 10th, 100th... robot state rejected for ``why``."""

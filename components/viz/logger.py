@@ -226,7 +226,7 @@ class RerunLogger:
     # -- static scene -----------------------------------------------------------------------------
     def _log_static(self) -> None:
         self._static_done = True
-        rec, c = self.rec, self.config
+        rec = self.rec
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         F = self.flange_T_camera
         rec.log(

@@ -1,5 +1,8 @@
 """pose_filter core on scripted inputs: interpolation at the capture stamp, Kalman
-smoothing, gating, re-acquisition, position-only updates, angle wrap, loss, bad input."""
+smoothing, gating, re-acquisition, position-only updates, angle wrap, loss, bad input.
+The filter is built with ``wait_for_robot_ms=0`` (a measurement is used at once, robot pose
+extrapolated if need be) where a test reads its outputs right after a measurement; the
+wait itself has its own tests."""
 
 from __future__ import annotations
 
@@ -103,7 +106,7 @@ def test_kalman_matrices():
 
 
 def test_uses_the_robot_pose_at_the_capture_stamp():
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     truth = T_m(TARGET_X)
     w = World(core, moving_flange, lambda t: truth)
     w.run(0, 2_000_000_000)
@@ -115,7 +118,7 @@ def test_uses_the_robot_pose_at_the_capture_stamp():
 
 def test_static_target_converges_and_smooths_noise():
     # A calm process model (the target is still) and no prediction ahead: pure smoothing.
-    core = PoseFilterCore(PoseFilterConfig(accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0, predict_ahead_ms=0))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0, predict_ahead_ms=0))
     truth = T_m(TARGET_X)
     w = World(core, moving_flange, lambda t: truth, np.random.default_rng(3), sigma_mm=0.3, sigma_deg=0.8)
     w.run(0, 6_000_000_000)
@@ -129,7 +132,7 @@ def test_static_target_converges_and_smooths_noise():
 
 
 def test_prediction_ahead_follows_a_constant_velocity():
-    core = PoseFilterCore(PoseFilterConfig(predict_ahead_ms=56.0))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, predict_ahead_ms=56.0))
 
     def tob(t):
         return T_m((100 + 50 * t * 1e-9, 1200, 80, 5 * t * 1e-9, 0, 0))
@@ -145,7 +148,7 @@ def test_prediction_ahead_follows_a_constant_velocity():
 
 
 def test_outlier_is_gated_and_reported_then_a_real_jump_is_reacquired():
-    core = PoseFilterCore(PoseFilterConfig(reset_after_rejects=3))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, reset_after_rejects=3))
     truth = T_m(TARGET_X)
     w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
     w.run(0, 2_000_000_000)
@@ -165,7 +168,7 @@ def test_outlier_is_gated_and_reported_then_a_real_jump_is_reacquired():
 
 
 def test_position_only_updates_position_and_keeps_orientation():
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     truth = T_m(TARGET_X)
     w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
     w.run(0, 1_000_000_000)
@@ -184,7 +187,7 @@ def test_position_only_updates_position_and_keeps_orientation():
 
 
 def test_yaw_near_180_does_not_average_through_zero():
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     flange = T_m((200, 700, 80, 0, 0, 0))
     w = World(core, lambda t: flange, lambda t: truth)
     for k in range(60):
@@ -196,7 +199,7 @@ def test_yaw_near_180_does_not_average_through_zero():
 
 
 def test_lost_after_silence_and_bad_input_never_raises():
-    core = PoseFilterCore(PoseFilterConfig(lost_after_ms=100))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, lost_after_ms=100))
     truth = T_m(TARGET_X)
     w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
     w.run(0, 500_000_000)
@@ -225,7 +228,7 @@ def test_config_is_validated():
 
 def test_images_before_the_robots_first_state_are_dropped_with_one_info():
     """Start-up: the camera may see the target before the ALTER link is up."""
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     m = pb.TobMeasurement(header=header(1_000_000), status=pb.TOB_STATUS_FULL)
     m.camera_T_tob.CopyFrom(pose(T_m(TARGET_X)))
     first = core.step(1_000_001, "perception/tob", m)
@@ -238,7 +241,7 @@ def test_images_before_the_robots_first_state_are_dropped_with_one_info():
 def test_a_forged_future_robot_state_does_not_lock_out_the_real_ones():
     """The attack: one robot_state stamped in the future made the buffer refuse every real
     state after it (servo error 0.19 -> 73 mm while the status stayed FULL)."""
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     truth = T_m(TARGET_X)
     w = World(core, lambda t: T_m((200, 700, 80, 0, 0, 0)), lambda t: truth)
     w.run(0, 500_000_000)
@@ -258,7 +261,7 @@ def test_a_forged_future_robot_state_does_not_lock_out_the_real_ones():
 
 
 def test_a_robot_clock_that_steps_back_restarts_the_buffer():
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     flange = pose(np.eye(4))
     t = 10_000_000_000
     for k in range(5):
@@ -272,3 +275,50 @@ def test_a_robot_clock_that_steps_back_restarts_the_buffer():
         codes += [m.code for tp, m in outs if tp == "pose_filter/events"]
     assert codes == ["robot_state_rejected", "robot_clock_reset"]
     assert core.robot.latest[0] == back + 2 * 28_000_000
+
+
+def zigzag_flange(t_ns):
+    """A robot whose speed changes at every 28 ms cycle (as an ALTER-driven one does):
+    piecewise linear between the cycle stamps, 0 and 120 mm/s along x in turn."""
+    k, rest = divmod(int(t_ns), CYCLE_NS)
+    x = 120.0 * (k // 2) * CYCLE_NS * 1e-9 + (120.0 * rest * 1e-9 if k % 2 else 0.0)  # mean 60 mm/s
+    return T_m((200 + x, 700, 80, 0, 0, 0))
+
+
+class LateStates(World):
+    """Robot states reach the filter 11 ms after their stamp (a STATUS frame on a 38 400
+    baud line), measurements 5 ms after their image: a measurement usually arrives
+    before the state of the cycle after it."""
+
+    def run(self, t0_ns, t1_ns, measure=True):
+        events = [(tr + 11_000_000, 0, tr) for tr in range(t0_ns, t1_ns, CYCLE_NS)]
+        events += [(ti + 5_000_000, 1, ti) for ti in range(t0_ns + 7_000_000, t1_ns, FRAME_NS)]
+        for _, kind, stamp in sorted(events):
+            if kind == 0:
+                msg = pb.RobotState(header=header(stamp, self.cycle, "world"),
+                                    world_T_flange=pose(self.flange(stamp)), cycle=self.cycle)
+                self.cycle += 1
+                self._take(self.core.step(stamp + 11_000_000, "alter_gateway/robot_state", msg))
+            elif measure:
+                self.measurement(stamp)
+
+
+@pytest.mark.parametrize("wait_ms", [60.0, 0.0])
+def test_a_measurement_waits_for_the_robot_state_after_it(wait_ms):
+    # A still target seen exactly from a robot that changes speed every cycle: with the
+    # wait, the robot pose at each image is interpolated between the states around it,
+    # which is exact for this robot; without it, it is extrapolated from the two before,
+    # off by up to 120 mm/s x 28 ms ~ 3 mm whenever the speed changed in between.
+    target = T_m(TARGET_X)
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=wait_ms, still_detect=False))
+    w = LateStates(core, zigzag_flange, lambda t: target)
+    w.run(0, 1_500_000_000)
+    got = np.array([from_pose(s.world_T_tob_at_measurement)[:3, 3] for s in w.states
+                    if s.HasField("world_T_tob_at_measurement")])
+    assert len(got) > 30
+    err_mm = np.abs(got - target[:3, 3]).max() * 1e3
+    if wait_ms:
+        assert err_mm < 1e-6, err_mm
+        assert not [e for e in w.events if e.code == "no_robot_pose"]
+    else:
+        assert err_mm > 0.5, err_mm  # the check above can fail: the robot does need it

@@ -1,5 +1,8 @@
 """pose_filter: a still target is detected and averaged (zero-velocity updates, calm
-process noise), and released at once when it moves again."""
+process noise), and released at once when it moves again.
+The filter is built with ``wait_for_robot_ms=0`` (a measurement is used at once, robot pose
+extrapolated if need be) where a test reads its outputs right after a measurement; the
+wait itself has its own tests."""
 
 from __future__ import annotations
 
@@ -33,7 +36,7 @@ def _errors(w, truth_fn, since_ns):
 
 @pytest.mark.parametrize("detect", [True, False])
 def test_a_still_target_is_averaged(detect):
-    core = PoseFilterCore(PoseFilterConfig(still_detect=detect))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, still_detect=detect))
     truth = T_m(TARGET_X)
     w = World(core, still_flange, lambda t: truth, np.random.default_rng(7), **NOISE)
     w.run(0, 8_000_000_000)
@@ -51,7 +54,7 @@ def test_a_still_target_is_averaged(detect):
 
 
 def test_a_still_target_that_moves_is_followed_again_within_a_few_frames():
-    core = PoseFilterCore(PoseFilterConfig())
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     t_move = 4_000_000_000
 
     def tob(t):  # still, then 30 mm/s along x and 5 deg/s about z from t_move
@@ -88,7 +91,7 @@ def test_a_slow_drift_is_followed_about_as_well_as_by_the_plain_filter(speed_mm_
         return T_m((TARGET_X[0] + speed_mm_s * t * 1e-9, *TARGET_X[1:]))
 
     def errors(detect):
-        w = World(PoseFilterCore(PoseFilterConfig(still_detect=detect)), still_flange, tob,
+        w = World(PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, still_detect=detect)), still_flange, tob,
                   np.random.default_rng(7), **NOISE)
         w.run(0, 10_000_000_000)
         return np.abs(_errors(w, tob, 3_000_000_000)[:, 0])
