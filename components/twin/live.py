@@ -53,8 +53,8 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     robot, gateway = puma_cores(start)
     pty = str(run_dir / "alter.pty")
     start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
-    robot = dataclasses.replace(robot, pty_link=pty,
-                                start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
+    robot = cfg.robot_config("sim_robot", dataclasses.replace(
+        robot, pty_link=pty, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base))))
     # A pty delivers a STATUS at once (no 38 400 baud line time): its pose is for "now".
     gateway = dataclasses.replace(gateway, port=pty, status_delay_ms=0.0)
     # The operator starts with the rest (its start-up must not fall into the running servo

@@ -27,12 +27,16 @@ from humanpt.sim_camera import SimCameraConfig
 from . import evaluate
 from .system import build_system, flange_T_desired_mm, nominal_rig, operator_config
 from .world import TwinWorld
+from .worlds import World, merge_overrides
 
 __all__ = ["SECTIONS", "OverrideError", "SystemConfig", "RunResult", "Accuracy", "run", "accuracy", "scenario_duration_s",
            "flange_T_desired_mm"]
 
 # The configuration sections of a twin run, in the order ``--set`` names them.
-SECTIONS = ("operator", "sim_camera", "perception", "pose_filter", "controller")
+SECTIONS = ("operator", "sim_camera", "perception", "pose_filter", "controller", "sim_robot", "standin_robot")
+# The robots' sections: their configs are made when the system is built (where the robot
+# stands follows from the scenario), so their overrides are kept as tables until then.
+ROBOT_SECTIONS = ("sim_robot", "standin_robot")
 
 
 def scenario_duration_s(op: OperatorConfig) -> float:
@@ -42,11 +46,14 @@ def scenario_duration_s(op: OperatorConfig) -> float:
     return Trajectory(op.build_scenario()).duration_s
 
 
-def _merged(base: dict, over: dict) -> dict:
-    out = dict(base)
-    for k, v in over.items():
-        out[k] = _merged(base[k], v) if isinstance(v, dict) and isinstance(base.get(k), dict) else v
-    return out
+def _robot_config(section: str):
+    if section == "sim_robot":
+        from humanpt.sim_robot.config import SimRobotConfig
+
+        return SimRobotConfig()
+    from .standin import StandInRobotConfig
+
+    return StandInRobotConfig()
 
 
 class OverrideError(ConfigError):
@@ -59,7 +66,7 @@ def with_overrides(obj, overrides: dict[str, dict] | None, section: str):
     if not (overrides or {}).get(section):
         return obj
     try:
-        return build(type(obj), _merged(to_table(obj), overrides[section]), source="--set", section=section)
+        return build(type(obj), merge_overrides(to_table(obj), overrides[section]), source="--set", section=section)
     except ConfigError as e:
         raise OverrideError(str(e)) from None
 
@@ -77,28 +84,44 @@ class SystemConfig:
     controller: ControllerConfig = field(default_factory=ControllerConfig)
     # What the pipeline believes about the hardware (the twin's world may differ).
     rig: Rig = field(default_factory=Rig)
+    # The twin's world (its name and error sources; the operator's and sim_camera's parts
+    # are applied above, the robots' are ``robot_overrides``).
+    world: World = field(default_factory=World)
+    robot_overrides: dict[str, dict] = field(default_factory=dict)
 
     @classmethod
     def for_scenario(cls, scenario: str | OperatorConfig, seed: int = 0, overrides: dict[str, dict] | None = None,
-                     rig: Rig | None = None, **base) -> SystemConfig:
+                     rig: Rig | None = None, world: World | None = None, **base) -> SystemConfig:
         """The configs for ``scenario`` (a built-in name, a scenario file or an
         OperatorConfig) and ``seed`` (operator and camera): ``base`` configs by section
         name (sim_camera, perception, pose_filter, controller; defaults for the rest),
         then ``overrides`` ({section: {key: value}}, operator too) applied and validated
         (OverrideError). ``rig``: what the pipeline believes (None: :func:`nominal_rig`,
-        the design values with the scenario's driver). A scenario with a driver makes the
+        the design values with the scenario's driver). ``world``: the twin's truth
+        (:class:`humanpt.twin.worlds.World`, default ideal), applied under ``overrides``. A scenario with a driver makes the
         controller record the tip (``has_driver``) unless it already does."""
-        unknown = set(base) - set(SECTIONS[1:])
+        unknown = set(base) - set(SECTIONS[1:5])
         if unknown:
             raise TypeError(f"SystemConfig.for_scenario: no base config {sorted(unknown)[0]!r}")
+        world = World() if world is None else world
+        overrides = merge_overrides(world.overrides(), overrides or {})
         op = with_overrides(operator_config(scenario, seed), overrides, "operator")
         cam = dataclasses.replace(base.pop("sim_camera", SimCameraConfig()), seed=seed)
-        cfg = cls(seed=seed, operator=op, sim_camera=cam, rig=nominal_rig(op) if rig is None else rig, **base)
-        cfg = dataclasses.replace(cfg, **{s: with_overrides(getattr(cfg, s), overrides, s) for s in SECTIONS[1:]})
+        robots = {s: dict(overrides[s]) for s in ROBOT_SECTIONS if overrides.get(s)}
+        for s, table in robots.items():  # a bad key fails now, not when the system is built
+            with_overrides(_robot_config(s), {s: table}, s)
+        cfg = cls(seed=seed, operator=op, sim_camera=cam, rig=nominal_rig(op) if rig is None else rig, world=world,
+                  robot_overrides=robots, **base)
+        cfg = dataclasses.replace(cfg, **{s: with_overrides(getattr(cfg, s), overrides, s) for s in SECTIONS[1:5]})
         driver = op.build_scenario().driver_mm
         if driver is not None and not cfg.controller.has_driver:
             cfg = dataclasses.replace(cfg, controller=dataclasses.replace(cfg.controller, has_driver=True))
         return cfg
+
+    def robot_config(self, section: str, base=None):
+        """The ``sim_robot`` / ``standin_robot`` config ``base`` (default: the defaults)
+        with the world's and the user's overrides."""
+        return with_overrides(base if base is not None else _robot_config(section), self.robot_overrides, section)
 
     def default_duration_s(self) -> float:
         """The operator's start delay, the scenario, and 1.5 s to settle (the demo's default)."""
@@ -154,7 +177,8 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
     duration_s = config.default_duration_s() if duration_s is None else float(duration_s)
     world = build_system(config.operator, seed=config.seed, controller=config.controller, robot=robot, rig=config.rig,
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
-                         pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest)
+                         pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest,
+                         robot_overrides=config.robot_overrides)
     t0 = time.perf_counter()
     try:
         if record_from_s is not None:

@@ -73,12 +73,14 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  controller: ControllerConfig | None = None, sim_camera: SimCameraConfig | None = None,
                  start_offset_mm_deg=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), robot_cores=None,
                  robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True,
-                 digest: bool = True, rig: Rig | None = None) -> TwinWorld:
+                 digest: bool = True, rig: Rig | None = None,
+                 robot_overrides: dict[str, dict] | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
     controller records the tip too.  ``rig``: what the pipeline believes (None: the
-    nominal rig with the scenario's driver, :func:`nominal_rig`).  ``robot``: ``standin`` (integrates commands) or
+    nominal rig with the scenario's driver, :func:`nominal_rig`).  ``robot_overrides``:
+    {``sim_robot`` | ``standin_robot``: {key: value}} of the world's robot.  ``robot``: ``standin`` (integrates commands) or
     ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
     ``digest=False``: no output hash (faster; for runs nobody compares)."""
     op = operator_config(scenario, seed)
@@ -105,10 +107,12 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                 op, ctl.dz_mm, cam.flange_T_camera)))))
             start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
+            rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")
             robot_cores = [SimRobotCore(rcfg), AlterGatewayCore(gcfg)]
             wire = True
         elif robot == "standin":
             standin = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))
+            standin = _with_robot_overrides(standin, robot_overrides, "standin_robot")
         else:
             raise ValueError(f"robot must be 'standin' or 'puma', got {robot!r}")
     cores = [PerceptionCore(perception or PerceptionConfig(), rig), PoseFilterCore(pose_filter or PoseFilterConfig(), rig),
@@ -118,6 +122,17 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     if wire:
         world.lockstep.connect_serial("alter_gateway", "sim_robot", baud=robot_cores[1].config.baud)
     return world
+
+
+def _with_robot_overrides(cfg, overrides: dict[str, dict] | None, section: str):
+    from humanpt.runtime.config import build, to_table
+
+    from .worlds import merge_overrides
+
+    table = (overrides or {}).get(section)
+    if not table:
+        return cfg
+    return build(type(cfg), merge_overrides(to_table(cfg), table), source="world/--set", section=section)
 
 
 def tracking_errors(world: TwinWorld) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
