@@ -84,8 +84,10 @@ def _progress(now_s: float, duration_s: float) -> None:
 
 
 def run_lockstep(args, cfg, run_dir: Path) -> int:
+    from humanpt.runtime.rigfile import write_rig
     from humanpt.twin.run import run
 
+    write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believed in this run", overwrite=True)
     # Record once the target starts to move (the servo has acquired it by then).
     res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
               run_dir=run_dir, progress=_progress)
@@ -124,21 +126,33 @@ def run_live(args, cfg, run_dir: Path) -> int:
 
 def demo(args) -> int:
     from humanpt.cli.commands import run_stamp
+    from humanpt.runtime.rigfile import load_rig
     from humanpt.twin.run import SECTIONS, OverrideError, SystemConfig
+    from humanpt.twin.worlds import World
 
     over = parse_overrides(getattr(args, "set", None))
     unknown = set(over) - set(SECTIONS)
     if unknown:
         raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
-    try:  # a bad key or value fails here, before the run starts
-        cfg = SystemConfig.for_scenario(args.scenario, args.seed, over, controller=ControllerConfig(law=args.law))
-    except OverrideError as e:
+    try:  # a bad key or value, world or rig fails here, before the run starts
+        world = World.named(args.world)
+        rig = load_rig(args.rig) if getattr(args, "rig", None) else None
+        cfg = SystemConfig.for_scenario(args.scenario, args.seed, over, rig=rig, world=world,
+                                        controller=ControllerConfig(law=args.law))
+    except (OverrideError, cfgmod.ConfigError) as e:
         raise SystemExit(f"humanpt: {e}") from None
     label = Path(args.scenario).stem if Path(args.scenario).suffix else args.scenario
     run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{label}"
     run_dir.mkdir(parents=True, exist_ok=True)
     print(f"humanpt demo: scenario {label}, {'lock-step' if args.lockstep else 'live'}, recording to {run_dir}/",
           flush=True)
+    print(f"humanpt demo: world {cfg.world.name}"
+          + (f" ({len(cfg.world.sources)} error sources: {', '.join(cfg.world.sources)})" if cfg.world.sources else
+             " (the hardware is exactly as the rig says)")
+          + f"; the pipeline's rig: {args.rig or 'nominal'} ({cfg.rig.methods()})", flush=True)
+    (run_dir / "world.toml").write_text(
+        "# the twin's world in this run (humanpt demo --world " + str(args.world) + ")\n"
+        + cfgmod.dumps_toml({"name": cfg.world.name, "sources": list(cfg.world.sources), **cfg.world.extra}))
     if args.lockstep:
         return run_lockstep(args, cfg, run_dir)
     return run_live(args, cfg, run_dir)

@@ -64,9 +64,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
+    p.add_argument("--world", default="ideal", metavar="ideal|realistic|FILE",
+                   help="the twin's truth, which the pipeline does not know: ideal (default; the hardware is "
+                   "exactly as the rig says), realistic (every error source of a real cell of the paper's era: "
+                   "mirrors, intrinsics, hand-eye, sensor, timing, robot, tremor), or a world file (TOML; "
+                   "humanpt.twin.worlds)")
+    p.add_argument("--rig", metavar="FILE",
+                   help="what the pipeline believes about the hardware (a rig file, `humanpt rig init`); "
+                   "default: the nominal design values")
     p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
-                   help="override a config key of operator, sim_camera, perception, pose_filter or controller "
-                   "(VALUE in TOML; repeatable), e.g. --set sim_camera.fps=15 --set sim_camera.psvs.a_u=500")
+                   help="override a config key of operator, sim_camera, perception, pose_filter, controller, "
+                   "sim_robot or standin_robot (VALUE in TOML; repeatable; over the world's), e.g. "
+                   "--set sim_camera.fps=15 --set sim_camera.psvs.a_u=1003")
 
     p = sub.add_parser("experiment", help="the paper's Section 6 experiments on the twin, with its Tables 1-3",
                        description="Reproduce the paper's experiments on the digital twin in lock-step: static "
@@ -220,6 +229,31 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--speed", type=float, default=20.0, help="SPEED in percent (default 20)")
 
+    p = sub.add_parser("rig", help="the rig file: what the pipeline believes about the hardware",
+                       description="The rig is everything perception, the pose filter, the controller and viz "
+                       "believe about the hardware: camera intrinsics and distortion, the PSVS (each virtual "
+                       "camera's principal point and rotation, baseline, m, l), the hand-eye transform "
+                       "flange_T_camera, the target's triangle and the driver tip, each with how it was obtained "
+                       "(method, date, 1-sigma). One versioned TOML file named by [runtime] rig; the nominal "
+                       "design values when none is named. Every recording keeps the rig it ran with.")
+    rsub = p.add_subparsers(dest="rig_verb", metavar="ACTION")
+    q = rsub.add_parser("init", help="write the nominal rig (design values) to FILE")
+    q.add_argument("file")
+    q.add_argument("--overwrite", action="store_true", help="replace FILE (the old one is kept as FILE.bak)")
+    q = rsub.add_parser("check", help="validate a rig file (a bad field is named) and summarise it")
+    q.add_argument("file")
+    q = rsub.add_parser("show", help="print a rig file, or the rig the running components use",
+                        description="With FILE: print it as the tools write it. Without: ask every running "
+                        "component of the cell for its rig and say whether they all run with the same one "
+                        "(exit 1 when they do not, or when none answers).")
+    _add_common(q)
+    q.add_argument("file", nargs="?")
+    q.add_argument("--timeout", type=float, default=3.0)
+    q.add_argument("--json", action="store_true", help="also print every component's rig as JSON")
+    q = rsub.add_parser("diff", help="the values that differ between two rig files (exit 1 if any)")
+    q.add_argument("a")
+    q.add_argument("b")
+
     p = sub.add_parser("config", help="print the effective configuration, or check a file",
                        description="Print every section with its values (defaults where the file is silent); "
                        "with --check only validate and say OK.")
@@ -297,7 +331,8 @@ def main(argv: list[str] | None = None) -> int:
     tune_process()
     try:
         return _dispatch(ap, args)
-    except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError, ValueError) as e:
+    except (ConfigError, RecordingError, UnknownComponentError, FileNotFoundError, FileExistsError,
+            ValueError) as e:
         print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
         return 2
     except ConnectionError as e:  # no router where the config says: one line, not a traceback
@@ -326,6 +361,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     }.get(args.verb)
     if fn is not None:
         return fn(args)
+    if args.verb == "rig":
+        from humanpt.cli import rig as rig_cli
+
+        return rig_cli.run(args)
     if args.verb == "view":
         from humanpt.cli import view as view_cli
 

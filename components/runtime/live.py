@@ -170,7 +170,8 @@ class LiveShell:
         """Serve the rig this component runs with (JSON; ``humanpt rig show``)."""
         from humanpt.runtime.rigfile import rig_to_json
 
-        query.reply(query.key_expr, rig_to_json(self.core.rig))
+        # Reply on this component's own key (the query may be a wildcard over the cell).
+        query.reply(rig_key(self.cell, self.core.name), rig_to_json(self.core.rig))
 
     def _on_query(self, query: zenoh.Query) -> None:
         try:
