@@ -48,7 +48,7 @@ SPEC_FILE = "runs.toml"
 README_BEGIN = "<!-- reference-runs:begin (written by humanpt runs rerecord) -->"
 README_END = "<!-- reference-runs:end -->"
 # What a reference run keeps of the demo's run directory.
-KEEP = ("*.mcap", "humanpt.toml", "processes.log", "demo.txt", "paths/*.csv")
+KEEP = ("*.mcap", "humanpt.toml", "rig.toml", "world.toml", "processes.log", "demo.txt", "paths/*.csv")
 _NAME = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 
 
