@@ -229,6 +229,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--speed", type=float, default=20.0, help="SPEED in percent (default 20)")
 
+    from humanpt.cli import calibrate as calibrate_cli
+
+    calibrate_cli.add_parsers(sub)
+
     p = sub.add_parser("rig", help="the rig file: what the pipeline believes about the hardware",
                        description="The rig is everything perception, the pose filter, the controller and viz "
                        "believe about the hardware: camera intrinsics and distortion, the PSVS (each virtual "
@@ -361,6 +365,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     }.get(args.verb)
     if fn is not None:
         return fn(args)
+    if args.verb == "calibrate":
+        from humanpt.cli import calibrate as calibrate_cli
+
+        return calibrate_cli.run(args, ap)
     if args.verb == "rig":
         from humanpt.cli import rig as rig_cli
 

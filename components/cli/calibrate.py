@@ -1,0 +1,30 @@
+"""``humanpt calibrate camera|psvs|mirrors|hand-eye|tip``: each tool has its own module
+(``calibrate_<tool>.py`` with ``add_parser(subparsers)`` and ``run(args)``); this one
+registers them and dispatches."""
+
+from __future__ import annotations
+
+import importlib
+
+# tool name -> module of humanpt.cli
+TOOLS = {}
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("calibrate", help="calibrate the cell: camera, psvs, mirrors, hand-eye, tip",
+                       description="Calibrate the cell as the paper's HumanPT does: the camera (Zhang's method; "
+                       "OpenCV's corner detector or the paper's appendix one), the PSVS and its mirrors' "
+                       "alignment, hand-eye (AX = YB) and the driver tip. Each tool observes a live cell, "
+                       "a folder of images or the digital twin (whose truth it never reads) and writes the rig "
+                       "(humanpt rig --help).")
+    csub = p.add_subparsers(dest="calibrate_verb", metavar="TOOL")
+    for name, module in TOOLS.items():
+        importlib.import_module(f"humanpt.cli.{module}").add_parser(csub)
+
+
+def run(args, ap) -> int:
+    module = TOOLS.get(getattr(args, "calibrate_verb", None) or "")
+    if module is None:
+        ap.parse_args(["calibrate", "--help"])
+        return 2
+    return importlib.import_module(f"humanpt.cli.{module}").run(args)
