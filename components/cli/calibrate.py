@@ -18,7 +18,7 @@ def add_parsers(sub) -> None:
                        "a folder of images or the digital twin (whose truth it never reads) and writes the rig "
                        "(humanpt rig --help).")
     csub = p.add_subparsers(dest="calibrate_verb", metavar="TOOL")
-    for name, module in TOOLS.items():
+    for module in dict.fromkeys(TOOLS.values()):  # a module may add several tools
         importlib.import_module(f"humanpt.cli.{module}").add_parser(csub)
 
 

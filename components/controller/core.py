@@ -200,8 +200,11 @@ class ControllerCore(Core):
                     mode = pb.CONTROL_MODE_POSITION_ONLY
                 step = self._servo(world_T_flange, world_T_tob, v_tob, w_tob, position_only)
                 desired = law.desired_flange(world_T_tob, self.flange_T_desired)
-                if self.mode == pb.CONTROL_MODE_CALIBRATE and not position_only:
-                    outs += self._calibration_sample(t_ns, world_T_tob, world_T_flange)
+                if (self.mode == pb.CONTROL_MODE_CALIBRATE and not position_only and st.after_measurement
+                        and st.HasField("world_T_tob_at_measurement")):
+                    # The filter's pose at the image's instant: what was measured, with no
+                    # prediction in it (a predicted pose lags or leads the pivoting target).
+                    outs += self._calibration_sample(t_ns, from_pose(st.world_T_tob_at_measurement), world_T_flange)
         elif self.mode == pb.CONTROL_MODE_RETURN and self.start_world_T_flange is not None:
             step, desired = self._goto(world_T_flange, self.start_world_T_flange)
         elif self.mode == pb.CONTROL_MODE_PLAYBACK:

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-from humanpt.runtime.config import Range, live
+from humanpt.runtime.config import Mm, Range, live
 
 from .scenario import (
     BUILTIN_SCENARIOS,
@@ -46,6 +47,10 @@ class OperatorConfig:
     seed: Annotated[int, Range(0, 2**63 - 1, "")] = 0
     tremor_mm: Annotated[float, Range(0, 10, "mm")] = 0.0
     tremor_deg: Annotated[float, Range(0, 10, "deg")] = 0.0
+    # The true driver tip's offset (TOB frame, mm) from the scenario's design value: a needle
+    # a little bent or not quite seated (0: as designed). The pipeline's rig knows only the
+    # design value until the tip is calibrated.
+    driver_error_mm: tuple[Mm, Mm, Mm] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         if self.scenario not in BUILTIN_SCENARIOS:
@@ -80,11 +85,21 @@ class OperatorConfig:
         except ScenarioError as e:
             raise ValueError(str(e)) from None
 
-    def build_scenario(self) -> Scenario:
-        """The scenario this config describes (the file's text, else the built-in)."""
+    def design_scenario(self) -> Scenario:
+        """The scenario as designed (the file's text, else the built-in): its driver is the
+        design value a nominal rig believes."""
         if self.scenario_text:
             return parse_scenario(self.scenario_text, self.scenario_file or "scenario_text")
         return builtin_scenario(self.scenario, self.speed_mm_s, self.seed)
+
+    def build_scenario(self) -> Scenario:
+        """The scenario the operator truly performs: the design, with the true driver tip
+        (``driver_error_mm`` added)."""
+        s = self.design_scenario()
+        if s.driver_mm is None or not any(self.driver_error_mm):
+            return s
+        return dataclasses.replace(s, driver_mm=tuple(float(a + b) for a, b in zip(s.driver_mm, self.driver_error_mm,
+                                                                                     strict=True)))
 
     def hand_tremor(self) -> TremorModel | None:
         """The operator's tremor (None when off)."""

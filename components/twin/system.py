@@ -146,7 +146,7 @@ def nominal_rig(operator: OperatorConfig) -> Rig:
     """What the twin's pipeline believes when nobody calibrated: the design values
     (:class:`Rig`'s defaults, which the ideal world makes true) with the driver tip of the
     tool the scenario's operator holds (its design length)."""
-    driver = operator.build_scenario().driver_mm
+    driver = operator.design_scenario().driver_mm
     if driver is None:
         return Rig()
     return dataclasses.replace(Rig(), tip=Tip(tob_t_tip_mm=tuple(float(v) for v in driver),

@@ -110,6 +110,8 @@ ERROR_SOURCES: tuple[ErrorSource, ...] = (
     ErrorSource("robot_lag", "the arm lags its command", "first order, 20 ms",
                 {"sim_robot": {"lag_time_constant_ms": 20.0}, "standin_robot": {"lag_time_constant_ms": 20.0}}),
     # operator
+    ErrorSource("tip", "the driver's true tip off its design value (a needle slightly bent)",
+                "(0.3, -0.2, 0.4) mm", {"operator": {"driver_error_mm": [0.3, -0.2, 0.4]}}),
     ErrorSource("tremor", "the operator's hand trembles", "0.2 mm, 0.2 deg RMS",
                 {"operator": {"tremor_mm": 0.2, "tremor_deg": 0.2}}),
 )

@@ -78,7 +78,9 @@ class Rig:
                 header=header(t, self.k, "world"), world_T_flange=pose(self.flange), cycle=self.k))
             T, v, w = self.tob_fn(t)
             st = pb.TobState(header=header(t, self.k, "world"), world_T_tob=pose(T), status=self.status_fn(self.k),
-                             linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k)
+                             linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k,
+                             # as the filter says right after a new measurement (one per cycle here)
+                             after_measurement=True, world_T_tob_at_measurement=pose(T), measurement_stamp_ns=t)
             outs = self.core.step(t + 1, "pose_filter/tob_state", st)
             self.outs += outs
             for cmd in (m for tp, m in outs if tp == "controller/command"):

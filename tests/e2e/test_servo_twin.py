@@ -169,13 +169,12 @@ def test_driver_calibration_recovers_the_twins_tip():
     assert done, [e.code for e in _events(w)]
     res = json.loads(done[0].text)
     err = np.linalg.norm(np.array(res["tob_t_tip_mm"]) - [3.0, -2.0, 62.0])
-    # 0.23-0.24 mm over seeds 7-9 (0.14-0.19 before issue 16, when the camera extrapolated
-    # the flange and each image left at its capture instead of once the truth was known:
-    # the filtered poses the pivot fit uses now lag the pivoting target by more).
-    assert err < 0.3, res
+    # 0.11-0.13 mm over seeds 7-9: the controller fits the filter's pose at each image's
+    # instant (a predicted pose lagged the pivoting target: 0.23-0.24 mm).
+    assert err < 0.2, res
     assert np.linalg.norm(np.array(res["world_p_pivot_mm"]) - [236.0, 1249.0, 0.0]) < 0.3, res  # 0.25
     # The paper's method (eq. 10-13, P' given) too.
-    assert np.linalg.norm(np.array(res["paper_tob_t_tip_mm"]) - [3.0, -2.0, 62.0]) < 0.2, res
+    assert np.linalg.norm(np.array(res["paper_tob_t_tip_mm"]) - [3.0, -2.0, 62.0]) < 0.1, res  # 0.015-0.021
     core = next(c for c in w.extra if isinstance(c, ControllerCore))
     assert core.config.has_driver and np.allclose(core.rig.tip.tob_t_tip_mm, res["tob_t_tip_mm"], atol=1e-3)
     assert core.rig.tip.calibration.method == "pivot"
