@@ -67,7 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--world", default="ideal", metavar="ideal|realistic|FILE",
                    help="the twin's truth, which the pipeline does not know: ideal (default; the hardware is "
                    "exactly as the rig says), realistic (every error source of a real cell of the paper's era: "
-                   "mirrors, intrinsics, hand-eye, sensor, timing, robot, tremor), or a world file (TOML; "
+                   "mirrors, intrinsics, hand-eye, sensor, timing, robot, tremor), ideal+SOURCE+... (only "
+                   "those error sources, e.g. ideal+focal+stamp_offset), or a world file (TOML; "
                    "humanpt.twin.worlds)")
     p.add_argument("--rig", metavar="FILE",
                    help="what the pipeline believes about the hardware (a rig file, `humanpt rig init`); "

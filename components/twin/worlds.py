@@ -170,14 +170,18 @@ class World:
 
     @classmethod
     def named(cls, spec: str) -> World:
-        """``ideal``, ``realistic`` or a world file (:func:`load_world`)."""
+        """``ideal``, ``realistic``, ``ideal+SOURCE+SOURCE...`` (the ideal world with these
+        error sources on, e.g. ``ideal+focal+tip``) or a world file (:func:`load_world`)."""
         if spec == "ideal":
             return cls.ideal()
+        if spec.startswith("ideal+"):
+            return cls.only(*spec.split("+")[1:])
         if spec == "realistic":
             return cls.realistic()
         if Path(spec).suffix or Path(spec).exists():
             return load_world(spec)
-        raise ConfigError(f"--world {spec!r}: not 'ideal', 'realistic' or a world file (.toml)")
+        raise ConfigError(f"--world {spec!r}: not 'ideal', 'realistic', 'ideal+SOURCE...' ({', '.join(_BY_NAME)}) "
+                          "or a world file (.toml)")
 
 
 def load_world(path: str | Path) -> World:

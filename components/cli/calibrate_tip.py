@@ -1,0 +1,107 @@
+"""``humanpt calibrate tip``: the driver tip (Section 4.1) into the rig's ``[tip]``.
+
+On a live cell (``--config``): asks the running controller to ``calibrate`` (the operator
+then pivots the target on its needle's tip held on a fixed point), waits for its result and
+writes it into the rig.  ``--twin``: the same on the digital twin."""
+
+from __future__ import annotations
+
+import queue
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+from humanpt.calibration.tip import TipResult, apply_to_rig, tip_result_from_event
+from humanpt.geometry.rig import Rig
+from humanpt.runtime.rigfile import load_rig, write_rig
+
+
+def add_parser(csub) -> None:
+    q = csub.add_parser("tip", help="the driver tip (pivot the target on its needle) into the rig",
+                        description="Calibrate the driver's tip P in the TOB frame (the paper's Section 4.1): the "
+                        "operator keeps the needle's tip on a fixed point and turns the target about it; the "
+                        "controller fits the tip (least-squares pivot) and this writes it into the rig's [tip]. "
+                        "Live (--config: the running controller) or on the digital twin (--twin).")
+    q.add_argument("--rig", default="rig.toml", help="the rig file to update (created from the nominal rig if "
+                   "absent; the old one kept as .bak) (default rig.toml)")
+    q.add_argument("--dry-run", action="store_true", help="calibrate and report, write nothing")
+    q.add_argument("--samples", type=int, default=80, help="distinct poses to fit (default 80, >= 6)")
+    q.add_argument("--twin", action="store_true", help="on the digital twin instead of a live cell")
+    q.add_argument("--world", default="ideal", help="twin: ideal, realistic or a world file (default ideal)")
+    q.add_argument("--seed", type=int, default=0, help="twin: seed (default 0)")
+    q.add_argument("--config", "-c", metavar="FILE", help="live: the cell's config file")
+    q.add_argument("--timeout", type=float, default=120.0, help="live: seconds to wait for the result (default 120)")
+
+
+def _read_rig(path: Path) -> Rig:
+    return load_rig(path) if path.exists() else Rig()
+
+
+def _live(args) -> TipResult:
+    from humanpt.cli.commands import load_cfg
+    from humanpt.cli.console import Console
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas import topics
+
+    cfg = load_cfg(args)
+    con = Console(cfg)
+    try:
+        events: queue.Queue = queue.Queue()
+        sub = con.session.declare_subscriber(topics.TOPICS["controller/events"].key(cfg.runtime.cell),
+                                             lambda s: events.put(s.payload.to_bytes()))
+        try:
+            if con.command("calibrate", {"samples": args.samples}) != 0:
+                raise ValueError("the controller refused to calibrate")
+            print("pivot the target on its needle's tip now (turn it +-20 deg about two axes)", file=sys.stderr)
+            deadline = time.monotonic() + args.timeout
+            while time.monotonic() < deadline:
+                try:
+                    ev = pb.Event.FromString(events.get(timeout=1.0))
+                except queue.Empty:
+                    continue
+                if ev.code == "calibration_done":
+                    return tip_result_from_event(ev.text)
+                if ev.code == "calibration_failed":
+                    raise ValueError(f"the controller's calibration failed: {ev.text}")
+            raise ValueError(f"no result within {args.timeout:g} s (is the target in view and turning?)")
+        finally:
+            sub.undeclare()
+    finally:
+        con.close()
+
+
+def run(args) -> int:
+    if args.samples < 6:
+        raise ValueError("--samples must be >= 6 (the pivot fit has 6 unknowns)")
+    rig_path = Path(args.rig)
+    rig = _read_rig(rig_path)  # a bad rig fails before anything moves
+    if args.twin:
+        from humanpt.twin.cal_tip import TipCalibrationError, calibrate_tip_on_twin
+        from humanpt.twin.worlds import World
+
+        try:
+            result, report, truth = calibrate_tip_on_twin(
+                World.named(args.world), rig, args.seed, args.samples,
+                progress=lambda now, end: print(f"\r  twin {now:4.0f} / {end:.0f} s", end="", file=sys.stderr))
+        except TipCalibrationError as e:
+            print(file=sys.stderr)
+            raise ValueError(str(e)) from None
+        print(file=sys.stderr)
+    else:
+        if not args.config:
+            raise ValueError("give --config FILE (a live cell) or --twin")
+        result = _live(args)
+        report = [f"tip: tob_t_tip = ({', '.join(f'{v:.3f}' for v in result.tob_t_tip_mm)}) mm +- "
+                  f"{result.sigma_mm:.3f} mm ({result.samples} poses, residual RMS {result.residual_rms_mm:.3f} mm)"]
+        truth = []
+    for line in report + truth:
+        print(line)
+    if args.dry_run:
+        print("dry run: the rig is unchanged")
+        return 0
+    date = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    write_rig(rig_path, apply_to_rig(rig, result, date), "written by humanpt calibrate tip", overwrite=True)
+    print(f"wrote the tip into {rig_path}" + (" (the old rig kept as .bak)" if rig_path.with_name(
+        rig_path.name + ".bak").exists() else ""))
+    return 0
