@@ -53,8 +53,9 @@ def build_parser() -> argparse.ArgumentParser:
                        "path is recorded. Live by default (every component a process over Zenoh); --lockstep runs "
                        "the same cores in one process on virtual time. Prints where the recordings and the path "
                        "file are, and an accuracy table against ground truth.")
-    p.add_argument("--scenario", "-s", default="arc",
-                   help="static, arc, trapezium, freehand, or a scenario file (default arc)")
+    p.add_argument("--scenario", "-s",
+                   help="static, arc, trapezium, freehand, or a scenario file (default arc; with --calibrate "
+                   "trapezium)")
     p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
     p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
     p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
@@ -64,8 +65,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
-    p.add_argument("--world", default="ideal", metavar="ideal|realistic|FILE",
-                   help="the twin's truth, which the pipeline does not know: ideal (default; the hardware is "
+    p.add_argument("--world", metavar="ideal|realistic|FILE",
+                   help="the twin's truth, which the pipeline does not know: ideal (default; with --calibrate "
+                   "realistic; the hardware is "
                    "exactly as the rig says), realistic (every error source of a real cell of the paper's era: "
                    "mirrors, intrinsics, hand-eye, sensor, timing, robot, tremor), ideal+SOURCE+... (only "
                    "those error sources, e.g. ideal+focal+stamp_offset), or a world file (TOML; "
@@ -73,6 +75,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rig", metavar="FILE",
                    help="what the pipeline believes about the hardware (a rig file, `humanpt rig init`); "
                    "default: the nominal design values")
+    p.add_argument("--calibrate", action="store_true",
+                   help="the welder's whole job, lock-step: calibrate the camera, the PSVS and mirrors, hand-eye "
+                   "and the tip against the twin (its truth hidden), teach the seam, play the path back on the "
+                   "robot; prints each calibrated value against the twin's truth, the taught path and the "
+                   "played-back tool path against the seam (default scenario trapezium, world realistic)")
     p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",
                    help="override a config key of operator, sim_camera, perception, pose_filter, controller, "
                    "sim_robot or standin_robot (VALUE in TOML; repeatable; over the world's), e.g. "

@@ -1,0 +1,191 @@
+"""Calibrate, then teach, then play back: the welder's whole job on the twin (issue 17.5).
+
+Stages, each observing the twin's world through the same components a real cell uses and
+never reading its truth except to report against it:
+
+1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. driver tip: each writes
+   its part of the rig (a stage whose tool is missing or fails is reported and skipped:
+   the rig keeps what it had);
+5. teach: the operator moves the target along the seam, the servo follows, the path of the
+   driver's tip is recorded with the calibrated rig;
+6. play back: the robot's tool follows the recorded path; the tool's true path (the world's
+   flange, through the torch) is measured against the seam.
+
+The seam is the scenario as designed (no tremor, the design's path); distances to it are
+taken to the nearest point of the seam (a welder judges where the torch went, not when).
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+from humanpt.controller.config import ControllerConfig
+from humanpt.controller.core import ControllerCore
+from humanpt.geometry.rig import Rig
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.operator.scenario import Trajectory
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
+
+from . import evaluate
+from .run import SystemConfig
+from .system import build_system, nominal_rig, operator_config
+from .worlds import World
+
+__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm"]
+
+# stage -> (module of humanpt.twin, entry point): each returns (result, report, truth) and has
+# an ``apply_to_rig(rig, result, date)`` in humanpt.calibration.<name>.
+STAGES: dict[str, tuple[str, str, str]] = {
+    "camera": ("cal_camera", "calibrate_camera_on_twin", "camera"),
+    "psvs": ("cal_psvs", "calibrate_psvs_on_twin", "psvs"),
+    "hand-eye": ("cal_handeye", "calibrate_hand_eye_on_twin", "handeye"),
+    "tip": ("cal_tip", "calibrate_tip_on_twin", "tip"),
+}
+
+
+@dataclass
+class StageResult:
+    name: str
+    ok: bool
+    seconds: float
+    report: list[str] = field(default_factory=list)
+    truth: list[str] = field(default_factory=list)
+    error: str = ""
+
+
+@dataclass
+class TeachResult:
+    """What the job gave: the stages, the rig it ended with, the taught path's and the
+    played-back tool's distances to the seam (mm), and where things were written."""
+
+    stages: list[StageResult]
+    rig: Rig
+    taught_mm: np.ndarray  # (N,) tip of the taught path to the seam
+    played_mm: np.ndarray  # (M,) the tool's true position during playback to the seam
+    taught_truth: evaluate.Stats | None  # the taught path against the truth at its stamps
+    warnings: list[str]
+    run_dir: Path | None
+    seconds: float
+
+
+def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
+    """Distance (N,) of each point (N, 3) to the polyline ``seam_mm`` (K, 3), mm."""
+    p = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    a, b = seam_mm[:-1], seam_mm[1:]
+    ab = b - a
+    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    out = np.empty(len(p))
+    for i, q in enumerate(p):
+        s = np.clip(np.einsum("ij,ij->i", q - a, ab) / ab2, 0.0, 1.0)
+        out[i] = np.min(np.linalg.norm(a + s[:, None] * ab - q, axis=1))
+    return out
+
+
+def _seam(op) -> np.ndarray:
+    """The seam as designed (K, 3) mm: the scenario's path every 0.5 mm or so, no tremor."""
+    traj = Trajectory(op.design_scenario())
+    n = max(200, int(traj.duration_s * 40))
+    return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
+
+
+def _run_stage(name: str, world: World, rig: Rig, seed: int, progress) -> tuple[Rig, StageResult]:
+    module, entry, lib = STAGES[name]
+    t0 = time.perf_counter()
+    try:
+        fn = getattr(importlib.import_module(f"humanpt.twin.{module}"), entry)
+        apply = importlib.import_module(f"humanpt.calibration.{lib}").apply_to_rig
+    except (ImportError, AttributeError) as e:
+        return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
+    try:
+        result, report, truth = fn(world, rig, seed, progress=progress)
+    except Exception as e:  # noqa: BLE001 - a failed stage is a result: the rig keeps what it had
+        return rig, StageResult(name, False, time.perf_counter() - t0, error=f"{type(e).__name__}: {e}")
+    date = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return apply(rig, result, date), StageResult(name, True, time.perf_counter() - t0, list(report), list(truth))
+
+
+def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
+                         stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
+                         run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
+                         progress: Callable[[str, float, float], None] | None = None) -> TeachResult:
+    """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
+    the nominal one). ``progress(stage, done, total)`` is called as each stage goes."""
+    t_start = time.perf_counter()
+    world = World.realistic() if world is None else world
+    op = operator_config(scenario, seed)
+    rig = nominal_rig(op) if rig is None else rig
+    results = []
+    for name in stages:
+        rig, res = _run_stage(name, world, rig, seed,
+                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None)
+        results.append(res)
+    # -- teach
+    cfg = SystemConfig.for_scenario(scenario, seed, rig=rig, world=world,
+                                    controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s))
+    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma", rig=cfg.rig,
+                     sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
+                     run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
+    teach_s = cfg.default_duration_s()
+    try:
+        w.run_until(round(cfg.operator.start_delay_s * 1e9))
+        w.lockstep.inject(w.now_ns, "controller", "console/command",
+                          pb.Command(header=header(w.now_ns), component="controller", verb="record_start"))
+        step = 1.0
+        while w.now_ns < teach_s * 1e9:
+            w.run_for(step)
+            if progress:
+                progress("teach", w.now_ns / 1e9, teach_s)
+        w.lockstep.inject(w.now_ns, "controller", "console/command",
+                          pb.Command(header=header(w.now_ns), component="controller", verb="record_stop"))
+        w.run_for(0.1)
+        start_ns = evaluate.scenario_start_ns(w)
+        _, x_g, x_tip = evaluate.path_points(w)
+        _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
+        taught = x_tip if x_tip is not None else x_g
+        seam = _seam(cfg.operator)
+        taught_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in taught]), seam)
+        # -- play back: the tool follows the recorded path; judge the tool's TRUE path
+        ctl = next(c for c in w.extra if isinstance(c, ControllerCore))
+        tool_mm = ctl.flange_T_tool.copy()
+        tool_mm[:3, 3] *= 1e3
+        n_before = len(w.outputs("sim_robot/truth"))
+        w.lockstep.inject(w.now_ns, "controller", "console/command",
+                          pb.Command(header=header(w.now_ns), component="controller", verb="playback",
+                                     args_json=json.dumps({"speed_mm_s": playback_speed_mm_s})))
+        length_mm = float(np.sum(np.linalg.norm(np.diff(seam, axis=0), axis=1)))
+        play_s = 15.0 + length_mm / playback_speed_mm_s
+        t_play0 = w.now_ns
+        done = False
+        seen = len(w.lockstep.outputs)
+        while not done and w.now_ns - t_play0 < play_s * 1e9:
+            w.run_for(1.0)
+            if progress:
+                progress("play back", (w.now_ns - t_play0) / 1e9, play_s)
+            new, seen = w.lockstep.outputs[seen:], len(w.lockstep.outputs)  # only what came since
+            done = any(o.topic == "controller/events" and pb.Event.FromString(o.data).code == "playback_done"
+                       for o in new)
+        truths = w.truths("sim_robot/truth")[n_before:]
+        tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
+        # from the first time the tool reaches the path's start (after the approach)
+        first = np.array([transform_from_x(taught[0])[:3, 3]])
+        near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 1.0)[0]
+        tips = tips[near[0]:] if len(near) else tips[:0]
+        played_mm = seam_distances_mm(tips, seam) if len(tips) else np.zeros(0)
+        warnings = [f"{e.source}: {e.code}" for e in (pb.Event.FromString(o.data) for o in w.outputs()
+                                                      if o.topic.endswith("/events")) if e.severity >= 3]
+        if not done:
+            warnings.append(f"controller: playback not done after {play_s:.0f} s")
+    finally:
+        w.close()
+    stats = evaluate.Stats.of(err) if len(err) else None
+    return TeachResult(results, rig, taught_mm, played_mm, stats, warnings,
+                       Path(run_dir) if run_dir else None, time.perf_counter() - t_start)
