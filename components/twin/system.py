@@ -74,13 +74,16 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  start_offset_mm_deg=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), robot_cores=None,
                  robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True,
                  digest: bool = True, rig: Rig | None = None,
-                 robot_overrides: dict[str, dict] | None = None) -> TwinWorld:
+                 robot_overrides: dict[str, dict] | None = None,
+                 mount_world_T_flange_mm: np.ndarray | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
     controller records the tip too.  ``rig``: what the pipeline believes (None: the
     nominal rig with the scenario's driver, :func:`nominal_rig`).  ``robot_overrides``:
-    {``sim_robot`` | ``standin_robot``: {key: value}} of the world's robot.  ``robot``: ``standin`` (integrates commands) or
+    {``sim_robot`` | ``standin_robot``: {key: value}} of the world's robot.
+    ``mount_world_T_flange_mm``: the Puma's comfortable flange pose (4, 4) mm, where it is
+    mounted around (default: the start pose).  ``robot``: ``standin`` (integrates commands) or
     ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
     ``digest=False``: no output hash (faster; for runs nobody compares)."""
     op = operator_config(scenario, seed)
@@ -102,9 +105,11 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             from humanpt.alter_gateway.core import AlterGatewayCore
             from humanpt.sim_robot.core import SimRobotCore
 
-            # The robot is mounted so that it starts where the camera sees the target.
-            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(start_flange_for(
-                op, ctl.dz_mm, cam.flange_T_camera)))))
+            # The robot is mounted so that it starts where the camera sees the target (or
+            # around ``mount_world_T_flange_mm``, e.g. between viewing and welding the seam).
+            mount = (start_flange_for(op, ctl.dz_mm, cam.flange_T_camera) if mount_world_T_flange_mm is None
+                     else np.asarray(mount_world_T_flange_mm, dtype=float))
+            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(mount))))
             start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
             rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")

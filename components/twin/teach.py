@@ -30,7 +30,7 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.geometry.rig import Rig
-from humanpt.geometry.transforms import transform_from_x
+from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
@@ -38,7 +38,11 @@ from humanpt.schemas.convert import header
 from . import evaluate
 from .run import SystemConfig
 from .system import build_system, nominal_rig, operator_config
+from .world import start_flange_for
 from .worlds import World
+
+# Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
+MOUNT_FRACTION = 0.5
 
 __all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm"]
 
@@ -131,9 +135,19 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, rig=rig, world=world,
                                     controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s))
+    # The Puma is mounted so that both where it watches the seam (the camera d_z from the
+    # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
+    # around the flange pose half way between the two, over the middle of the seam.
+    view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
+    first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
+    weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+    mount = view.copy()
+    mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
+        _seam(cfg.operator).mean(axis=0) - first[:3, 3])
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma", rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
-                     run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
+                     run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
+                     mount_world_T_flange_mm=mount)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
