@@ -7,7 +7,9 @@ from __future__ import annotations
 import importlib
 
 # tool name -> module of humanpt.cli
-TOOLS = {}
+TOOLS = {
+    "camera": "calibrate_camera",
+}
 
 
 def add_parsers(sub) -> None:
