@@ -387,7 +387,9 @@ def calibrate_view(detections: Sequence[ViewDetection], image_size_px: tuple[int
 def apply_to_rig(rig: Rig, result: CameraCalibration, date: str) -> Rig:
     """The rig with its camera part replaced by ``result`` (see the module docstring for
     the convention): a_u, a_v, skew 0, u0, v0 (right view), dist, du0/dv0 of the left view
-    relative to the right; ``psvs_calibration`` = Calibration('zhang', date, note, sigma)."""
+    relative to the right; ``psvs_calibration`` = Calibration('zhang', date, note, sigma)
+    with sigma of a_u, a_v, u0, v0, du0_left_px, dv0_left_px (px) and dist_coeffs (k1's;
+    the note gives each coefficient's)."""
     if not result.views:
         raise CalibrationError("no calibrated view to write")
     main = result.main()
@@ -410,11 +412,15 @@ def apply_to_rig(rig: Rig, result: CameraCalibration, date: str) -> Rig:
         sr = result.views["right"].sigma if "right" in result.views else {"u0": 0.0, "v0": 0.0}
         sigma["du0_left_px"] = math.hypot(sl.get("u0", 0.0), sr.get("u0", 0.0))
         sigma["dv0_left_px"] = math.hypot(sl.get("v0", 0.0), sr.get("v0", 0.0))
-    for k, v in main.sigma.items():
-        if k in _DIST_NAMES:
-            sigma.pop(k, None)
-            sigma[f"dist_{k}"] = v
-    note = (f"views {'+'.join(result.views)}, detector {main.detector}, "
+    # the rig's sigma is one value per field: dist_coeffs gets k1's (the dominant term),
+    # the note lists every coefficient's
+    dist_sigma = {k: v for k, v in main.sigma.items() if k in _DIST_NAMES}
+    for k in dist_sigma:
+        sigma.pop(k, None)
+    if "k1" in dist_sigma:
+        sigma["dist_coeffs"] = dist_sigma["k1"]
+    note = (f"views {'+'.join(result.views)}, detector {main.detector}, distortion {main.dist_model} (sigma "
+            + ", ".join(f"{k} {v:.2g}" for k, v in dist_sigma.items()) + "), "
             + ", ".join(f"{v}: {c.rms_px:.3f} px RMS over {len(c.view_names)} views" for v, c in result.views.items()))
     try:
         new_psvs = dataclasses.replace(psvs, **changes)

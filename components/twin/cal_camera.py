@@ -35,8 +35,9 @@ from .worlds import World
 
 __all__ = ["plan_board_poses", "render_views", "world_camera", "calibrate_camera_on_twin", "TWIN_BOARD"]
 
-TWIN_BOARD = Chessboard(cols=9, rows=6, square_mm=25.0)
-"""The board the twin shows: 9 x 6 inner corners, 25 mm squares (a printed A3 sheet)."""
+TWIN_BOARD = Chessboard(cols=11, rows=8, square_mm=20.0)
+"""The board the twin shows: 11 x 8 inner corners, 20 mm squares (240 x 180 mm of pattern: a printed
+A3 sheet; more corners per view than the 9 x 6 OpenCV sample, hence a tighter fit)."""
 
 Progress = Callable[[int, int], None]
 
