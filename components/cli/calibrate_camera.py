@@ -38,6 +38,11 @@ def add_parser(csub) -> None:
                      "the view --view (default: the right one)")
     src.add_argument("--left-images", metavar="DIR", help="images of the board through the LEFT view (with "
                      "--images for the right view: both are calibrated)")
+    src.add_argument("--live", action="store_true", help="the camera component's images (camera/image over "
+                     "Zenoh, --config/--cell/--connect): press Enter to capture the next frame, q to finish; one "
+                     "view per run (--view right, then --view left)")
+    src.add_argument("--save", metavar="DIR", help="with --live: also write the captured frames there (png), "
+                     "for a later --images run")
     src.add_argument("--twin", action="store_true", help="observe the digital twin (it renders the board through "
                      "the world's true optics and sensor; the estimate never reads its truth)")
     src.add_argument("--world", default="realistic", metavar="ideal|realistic|FILE",
@@ -68,6 +73,11 @@ def add_parser(csub) -> None:
     p.add_argument("--rig", default="rig.toml", metavar="FILE",
                    help="the rig file to update (created from the nominal rig if absent; the old one kept as .bak)")
     p.add_argument("--dry-run", action="store_true", help="estimate and report, write nothing")
+    lv = p.add_argument_group("live (--live)")
+    lv.add_argument("--config", "-c", metavar="FILE", help="TOML config file ([runtime] cell and router)")
+    lv.add_argument("--cell", help="cell name; overrides [runtime] cell")
+    lv.add_argument("--connect", action="append", metavar="ENDPOINT", help="router endpoint; overrides [runtime] connect")
+    lv.add_argument("--frame-timeout-s", type=float, default=5.0, help="wait this long for a frame after Enter (5 s)")
 
 
 def _board(args):
@@ -145,6 +155,93 @@ def _from_images(args, rig, settings) -> tuple[CameraCalibration, list[str], lis
     return result, lines, []
 
 
+def _mono(msg):
+    """A foxglove.RawImage -> (h, w) uint8 grey."""
+    import cv2
+    import numpy as np
+
+    from humanpt.schemas.convert import from_image
+
+    pixels = np.asarray(from_image(msg))
+    if pixels.ndim == 3 and msg.encoding in ("rgb8", "rgba8"):
+        pixels = cv2.cvtColor(pixels, cv2.COLOR_RGB2GRAY if pixels.shape[2] == 3 else cv2.COLOR_RGBA2GRAY)
+    elif pixels.ndim == 3:
+        pixels = cv2.cvtColor(pixels, cv2.COLOR_BGR2GRAY if pixels.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
+    return np.ascontiguousarray(pixels, dtype=np.uint8)
+
+
+def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list[str], list[str]]:
+    """Capture views from the camera component: each line read (Enter) takes the NEXT frame
+    of camera/image (the board has stopped moving by then), detects the board at once and
+    says so; 'q' (or the end of the input) finishes and calibrates."""
+    import threading
+
+    import cv2
+    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+
+    from humanpt.cli.commands import load_cfg
+    from humanpt.runtime.bus import open_tool_session
+    from humanpt.schemas import topics
+
+    view = args.view or "right"
+    if view == "both":
+        raise CalibrationError("--live calibrates one view per run: --view right (left mirror covered), "
+                               "then --view left")
+    if args.detector == "both":
+        raise CalibrationError("--live: one detector (opencv or paper); compare them later on --save'd images")
+    board = _board(args)
+    cfg = load_cfg(args)
+    key = f"{topics.KEY_PREFIX}/{cfg.runtime.cell}/camera/image"
+    cond = threading.Condition()
+    state = {"n": 0, "payload": None}
+
+    def on_frame(sample) -> None:
+        with cond:
+            state["n"] += 1
+            state["payload"] = sample.payload.to_bytes()
+            cond.notify_all()
+
+    save = Path(args.save) if args.save else None
+    if save is not None:
+        save.mkdir(parents=True, exist_ok=True)
+    images, dets = [], []
+    other = "left" if view == "right" else "right"
+    print(f"live: {key}; cover the {other} mirror, hold the board still, Enter = capture, q = finish",
+          file=sys.stderr, flush=True)
+    with open_tool_session(cfg.runtime) as session:
+        sub = session.declare_subscriber(key, on_frame)
+        try:
+            for line in (sys.stdin if lines is None else lines):
+                if line.strip().lower() in ("q", "quit"):
+                    break
+                with cond:
+                    seen = state["n"]
+                    if not cond.wait_for(lambda s=seen: state["n"] > s, timeout=args.frame_timeout_s):
+                        raise CalibrationError(f"no frame on {key} within {args.frame_timeout_s:g} s "
+                                               "(is the camera component up?)")
+                    payload = state["payload"]
+                grey = _mono(RawImage.FromString(payload))
+                name = f"live-{len(images):02d}"
+                images.append((name, grey))
+                d = detect_views([(name, grey)], board, args.detector)[0]
+                dets.append(d)
+                if save is not None:
+                    cv2.imwrite(str(save / f"{name}.png"), grey)
+                print(f"{name}: " + (f"board found ({len(d.image_px)} corners)" if d.image_px is not None
+                                     else "no board") + f", edge blur {d.blur_px:.2f} px", file=sys.stderr, flush=True)
+        finally:
+            sub.undeclare()
+    if not images:
+        raise CalibrationError("no frames captured (press Enter to capture a view)")
+    h, w = images[0][1].shape
+    if (w, h) != tuple(rig.psvs.params().image_size_px):
+        raise CalibrationError(f"camera/image is {w} x {h} px, the rig's camera is "
+                               f"{rig.psvs.image_width_px} x {rig.psvs.image_height_px} px")
+    cal = calibrate_view(dets, (w, h), view, settings, args.detector)
+    result = CameraCalibration({view: cal})
+    return result, report_lines(result, {view: dets}), []
+
+
 def run(args) -> int:
     from humanpt.geometry.rig import Rig
     from humanpt.runtime.rigfile import load_rig, write_rig
@@ -154,7 +251,11 @@ def run(args) -> int:
         rig = load_rig(rig_path) if rig_path.exists() else Rig()
         settings = CameraSettings(min_views=args.min_views, max_blur_px=args.max_blur_px,
                                   min_coverage=args.min_coverage, dist_model=args.dist_model)
-        if args.twin:
+        if sum(bool(x) for x in (args.twin, args.live, args.images or args.left_images)) > 1:
+            raise CalibrationError("one source: --images, --live or --twin")
+        if args.live:
+            result, lines, truth = _from_live(args, rig, settings)
+        elif args.twin:
             if args.images or args.left_images:
                 raise CalibrationError("--twin or --images, not both")
             if args.board != "chessboard":

@@ -135,3 +135,64 @@ def test_charuco_detector():
     h, _ = cv2.findHomography(obj[:, :2], uv)
     proj = cv2.perspectiveTransform(obj[:, None, :2].astype(np.float64), h).reshape(-1, 2)
     assert np.abs(proj - uv).max() < 1.0  # a binary synthetic image: no subpixel edges
+
+
+def test_live_captures_the_next_frame_of_the_camera_on_each_enter(board_images, router, tmp_path, monkeypatch,
+                                                                   capsys, calibrate):
+    """--live over a real router: a publisher plays the camera (each of the 8 views in turn,
+    ~50 frames/s); each Enter captures the next frame, q finishes; the rig is written and the
+    captured frames are saved."""
+    import io
+    import threading
+
+    from humanpt.schemas.convert import image
+    from tests.conftest import zenoh_client
+
+    port, cfg = router
+    views = _images(board_images)
+    current = {"k": 0}
+    stop = threading.Event()
+
+    def camera():
+        with zenoh_client(port) as s:
+            pub = s.declare_publisher("humanpt/test/camera/image")
+            while not stop.wait(0.02):
+                pub.put(image(views[current["k"]], 0).SerializeToString())
+
+    t = threading.Thread(target=camera, daemon=True)
+    t.start()
+
+    class Keys(io.StringIO):
+        """Enter for each view, after the camera shows it; then q."""
+
+        def __iter__(self):
+            for k in range(len(views)):
+                current["k"] = k
+                yield "\n"
+            yield "q\n"
+
+    monkeypatch.setattr("sys.stdin", Keys())
+    rig_file = tmp_path / "rig.toml"
+    try:
+        rc = calibrate("--live", "--config", cfg, "--rig", rig_file, "--save", tmp_path / "saved")
+    finally:
+        stop.set()
+        t.join(5)
+    err = capsys.readouterr().err
+    assert rc == 0, err
+    assert err.count("board found") >= 6
+    assert len(list((tmp_path / "saved").glob("live-*.png"))) == len(views)
+    rig = load_rig(rig_file)
+    assert rig.psvs_calibration.method == "zhang" and rig.psvs.a_u == pytest.approx(1000.0, rel=5e-3)
+
+
+def test_live_without_a_camera_says_so(router, tmp_path, monkeypatch, capsys, calibrate):
+    import io
+
+    port, cfg = router
+    monkeypatch.setattr("sys.stdin", io.StringIO("\n"))
+    rig_file = write_rig(tmp_path / "rig.toml", Rig())
+    before = rig_file.read_bytes()
+    assert calibrate("--live", "--config", cfg, "--rig", rig_file, "--frame-timeout-s", "0.5") == 2
+    assert "no frame on humanpt/test/camera/image" in capsys.readouterr().err
+    assert rig_file.read_bytes() == before
