@@ -167,7 +167,8 @@ def calibrate_camera_on_twin(world: World, rig: Rig, seed: int, progress: Progre
             detections[d][v] = dets
             timing[d].extend(x.seconds for x in dets)
             corner_err[d][v] = _corner_error_px(dets, truth_uv)
-            results[d][v] = calibrate_view(dets, truth.image_size_px, v, settings, d)
+            h, w = images[0][1].shape  # the images' size (what a real folder would give)
+            results[d][v] = calibrate_view(dets, (w, h), v, settings, d)
     main = "opencv" if "opencv" in detectors else detectors[0]
     result = CameraCalibration(dict(results[main]))
     report = [f"camera calibration on the twin (world {world.name}, seed {seed}): board {board.cols} x {board.rows} "
