@@ -15,8 +15,8 @@ Rig convention (:func:`apply_to_rig`): the rig's ``psvs.u0, v0`` are the RIGHT v
 principal point (and the centre of the lens distortion), ``du0_right_px = dv0_right_px =
 0``, and ``du0_left_px, dv0_left_px`` are the LEFT view's principal point minus the right
 view's. ``a_u``, ``a_v`` and the distortion are the lens's, shared by both views: taken
-from the right view when it was calibrated (the left's are reported beside them), else
-from the left. The skew stays 0 (OpenCV's model has none; a modern sensor has none).
+a_u, a_v the inverse-variance mean of both views' when both were calibrated (else the
+one view's), the distortion from the right view when it was calibrated, else the left. The skew stays 0 (OpenCV's model has none; a modern sensor has none).
 
 Units: px (image), mm (board). Image points (n, 2) float, pixel centres at integers.
 """
@@ -397,6 +397,13 @@ def apply_to_rig(rig: Rig, result: CameraCalibration, date: str) -> Rig:
     changes: dict = {"a_u": main.a_u, "a_v": main.a_v, "skew": 0.0,
                      "dist_coeffs": tuple(float(v) for v in main.dist_coeffs)}
     sigma = {k: v for k, v in main.sigma.items()}
+    if len(result.views) == 2:  # one lens: both views' focal lengths, weighted by 1 / sigma^2
+        for f in ("a_u", "a_v"):
+            vals = [(getattr(c, f), c.sigma.get(f, 0.0)) for c in result.views.values()]
+            if all(sd > 0 for _, sd in vals):
+                w = [1.0 / sd**2 for _, sd in vals]
+                changes[f] = sum(wi * v for wi, (v, _) in zip(w, vals, strict=True)) / sum(w)
+                sigma[f] = 1.0 / math.sqrt(sum(w))
     if "right" in result.views:
         right = result.views["right"]
         changes.update(u0=right.u0, v0=right.v0, du0_right_px=0.0, dv0_right_px=0.0)

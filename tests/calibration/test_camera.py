@@ -137,13 +137,15 @@ def test_apply_to_rig_convention():
     new = apply_to_rig(rig, CameraCalibration({"right": _view("right", 321.0, 239.0, 1003.0),
                                                "left": _view("left", 321.5, 238.0, 1002.0)}), "2026-11-23")
     ps = new.psvs
-    assert (ps.a_u, ps.u0, ps.v0, ps.skew) == (1003.0, 321.0, 239.0, 0.0)  # the right view's
+    assert (ps.u0, ps.v0, ps.skew) == (321.0, 239.0, 0.0)  # the right view's
+    # one lens: the two views' focal lengths, weighted by their variances (equal here)
+    assert ps.a_u == pytest.approx(1002.5) and new.psvs_calibration.sigma["a_u"] == pytest.approx(0.4 / np.sqrt(2))
     assert ps.du0_left_px == pytest.approx(0.5) and ps.dv0_left_px == pytest.approx(-1.0)
     assert ps.dist_coeffs[0] == -0.01
     assert new.params().left_camera.u0 == pytest.approx(321.5)
     cal = new.psvs_calibration
     assert cal.method == "zhang" and cal.date == "2026-11-23"
-    assert cal.sigma["a_u"] == 0.4 and cal.sigma["dist_coeffs"] == 0.001
+    assert cal.sigma["dist_coeffs"] == 0.001
     assert "k1 0.001" in cal.note
     assert cal.sigma["du0_left_px"] == pytest.approx(np.hypot(0.2, 0.2))
     assert new.hand_eye == rig.hand_eye and new.tip == rig.tip  # only the camera part changes
