@@ -8,6 +8,7 @@ import importlib
 
 # tool name -> module of humanpt.cli
 TOOLS = {
+    "camera": "calibrate_camera",
     "tip": "calibrate_tip",
 }
 
