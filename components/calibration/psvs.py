@@ -58,6 +58,7 @@ __all__ = [
     "estimate_psvs",
     "apply_to_rig",
     "report_lines",
+    "views_from_measurements",
 ]
 
 MIN_VIEWS = 6
@@ -327,10 +328,16 @@ def apply_to_rig(rig: Rig, result: PsvsEstimate, date: str, note: str = "") -> R
     psvs = dataclasses.replace(psvs, **kw)
     old = rig.psvs_calibration
     method = "psvs-ba" if old.method in ("", "nominal") else f"{old.method}+psvs-ba"
-    text = (f"psvs: bundle adjustment of {result.n_views} views, {result.rms_px:.3f} px RMS"
+    s = result.sigma
+    rot_sigma = [s[f"rotvec_left_deg_{a}"] for a in "xyz"]
+    text = (f"psvs: bundle adjustment of {result.n_views} views, {result.rms_px:.3f} px RMS; 1-sigma of "
+            f"rotvec_left_deg x, y, z: {rot_sigma[0]:.5f}, {rot_sigma[1]:.5f}, {rot_sigma[2]:.5f} deg"
             + (f"; {note}" if note else ""))
+    # the rig file keeps one sigma per field: a rotation vector's is its largest component's
+    sigma = {"rotvec_left_deg": float(max(rot_sigma))}
+    sigma.update({k: float(s[k]) for k in ("baseline_mm", "l_mm") if k in s})
     cal = Calibration(method=method, date=date, note=f"{old.note}; {text}" if old.note else text,
-                      sigma={**old.sigma, **{k: float(v) for k, v in result.sigma.items()}})
+                      sigma={**old.sigma, **sigma})
     return dataclasses.replace(rig, psvs=psvs, psvs_calibration=cal)
 
 
@@ -353,7 +360,27 @@ def report_lines(rig: Rig, result: PsvsEstimate) -> list[str]:
     if result.fit_l:
         out.append(f"  l               {result.l_mm:10.4f} mm  +- {result.sigma['l_mm']:.4f}")
     rms = result.view_rms_px
-    order = np.argsort(result.depth_mm)
-    out.append("  per view (by depth): " + ", ".join(
-        f"{result.depth_mm[i]:.0f} mm {rms[i]:.3f} px" + ("" if result.used[i] else " DROPPED") for i in order))
+    worst = np.argsort(np.nan_to_num(rms, nan=np.inf))[::-1][:3]
+    out.append(f"  per view: median {np.nanmedian(rms):.3f} px, worst "
+               + ", ".join(f"#{i} ({result.depth_mm[i]:.0f} mm) {rms[i]:.3f} px" for i in worst if np.isfinite(rms[i]))
+               + (f"; dropped {int(np.sum(~result.used))}: " + ", ".join(f"#{i}" for i in np.flatnonzero(~result.used))
+                  if not np.all(result.used) else ""))
     return out
+
+
+def views_from_measurements(measurements) -> StereoViews:
+    """:class:`StereoViews` from perception's ``TobMeasurement`` messages (an iterable):
+    the FULL ones (three pairs, labelled A, B, C), their pairs' right and left centres;
+    every other measurement is skipped (a target seen by one view only gives no pair)."""
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    right, left, stamps = [], [], []
+    for m in measurements:
+        if m.status != pb.TOB_STATUS_FULL or len(m.pairs) != 3:
+            continue
+        c = np.array([(p.u, p.v) for p in m.centers_px], dtype=float)
+        right.append(c[[p.right for p in m.pairs]])
+        left.append(c[[p.left for p in m.pairs]])
+        stamps.append(m.header.stamp_ns)
+    return StereoViews(np.array(right).reshape(-1, 3, 2), np.array(left).reshape(-1, 3, 2),
+                       np.array(stamps, dtype=np.int64))
