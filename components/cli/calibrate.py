@@ -7,7 +7,10 @@ from __future__ import annotations
 import importlib
 
 # tool name -> module of humanpt.cli
-TOOLS = {}
+TOOLS = {
+    "psvs": "calibrate_psvs",
+    "mirrors": "calibrate_psvs",
+}
 
 
 def add_parsers(sub) -> None:
