@@ -283,7 +283,7 @@ def estimate_psvs(rig: Rig, views: StereoViews, *, fit_baseline: bool = True, fi
         poses[used] = p_used
         view_rms = np.full(len(views), np.nan)
         view_rms[used] = np.sqrt(np.mean(r**2, axis=1))
-        limit = max(1.0, 5.0 * float(np.nanmedian(view_rms)))
+        limit = max(0.2, 5.0 * float(np.nanmedian(view_rms)))  # px: a mismatched source, not noise
         bad = used & (view_rms > limit)
         if not bad.any() or used.sum() - bad.sum() < min_views:
             break
