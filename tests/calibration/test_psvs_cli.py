@@ -61,3 +61,20 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, case,
            and "the twin, world" not in line]
     assert len(err) == 1, err
     assert rig.read_text() == before and not (tmp_path / "rig.toml.bak").exists()
+
+
+def test_a_recording_of_perception_is_checked_and_one_depth_refused(tmp_path, capsys, cli_main):
+    # A real cell's input: perception's recording. The static scenario holds the target at
+    # one depth: the mirrors check reads the tilt (x), the PSVS calibration refuses.
+    from humanpt.twin.run import SystemConfig, run
+    from humanpt.twin.worlds import World
+
+    world = World("tilt x", (), {"sim_camera": {"psvs": {"rotvec_left_deg": [0.05, 0.0, 0.0]}}})
+    run(SystemConfig.for_scenario("static", 0, world=world), robot="standin", duration_s=1.0, run_dir=tmp_path / "rec")
+    rec = str(tmp_path / "rec" / "perception.mcap")
+    rig = tmp_path / "rig.toml"
+    assert cli_main(["calibrate", "mirrors", "--recording", rec, "--rig", str(rig)]) == 1
+    out = capsys.readouterr().out
+    assert "left view tilt about x: +0.050" in out and "turn the left outer mirror about its horizontal axis" in out
+    assert cli_main(["calibrate", "psvs", "--recording", rec, "--rig", str(rig)]) == 2
+    assert "one depth only" in capsys.readouterr().err and not rig.exists()
