@@ -12,8 +12,8 @@ the right one) by small angles (w_x, w_y, w_z) rad about the camera's x, y, z gi
     r = a_v [ w_x (1 + y^2)  -  w_z x  -  w_y x y ]
 
 a constant part (tilt about x), a part linear in u (roll about z) and a weak saddle (pan
-about y: 0.1 px at the image's corner for 0.1 deg). The three are fitted by linear least
-squares; a principal point off in v looks exactly like a tilt about x (and is treated like
+about y: 0.1 px at the image's corner for 0.1 deg). Tilt and roll are fitted by linear
+least squares, after the saddle of the pan read from the target's size is removed; a principal point off in v looks exactly like a tilt about x (and is treated like
 one: both are removed by turning the mirror or by ``humanpt calibrate psvs``).
 
 The pan shows in depth, not in the vertical disparity: it is read from the target's known
@@ -137,8 +137,18 @@ def check_mirrors(rig: Rig, views: StereoViews, *, budget_mm: float = 0.1, depth
     x = (left[:, 0] - params.left_camera.u0) / params.a_u
     y = (left[:, 1] - params.left_camera.v0) / params.a_v
     design = params.a_v * np.stack([1.0 + y**2, -x * y, -x], axis=1)  # w_x, w_y, w_z
-    full_pan_fit = np.ptp(x) > 0.2 and np.ptp(y) > 0.2  # the saddle needs spread in both
-    cols = [0, 1, 2] if full_pan_fit else [0, 2]
+    # The pan's saddle is too weak to fit (0.1 px at the corner for 0.1 deg) and would
+    # only add its variance to the roll's: it is read from the target's size below, and
+    # that pan's (small) saddle is removed from r first.
+    cols = [0, 2]
+    est: PsvsEstimate | None = None
+    if pan:
+        try:
+            est = estimate_psvs(rig, views, fit_baseline=False)
+        except CalibrationError:
+            est = None
+    pan_rad = 0.0 if est is None else np.radians(est.rotvec_left_deg[1] - rig.psvs.rotvec_left_deg[1])
+    r = r - design[:, 1] * pan_rad
     coef, *_ = np.linalg.lstsq(design[:, cols], r, rcond=None)
     resid = r - design[:, cols] @ coef
     dof = max(len(r) - len(cols), 1)
@@ -147,13 +157,9 @@ def check_mirrors(rig: Rig, views: StereoViews, *, budget_mm: float = 0.1, depth
     sigma = np.full(3, np.nan)
     turn[cols] = np.degrees(coef)
     sigma[cols] = np.degrees(np.sqrt(np.diag(cov)))
-    if pan:
-        try:
-            est: PsvsEstimate = estimate_psvs(rig, views, fit_baseline=False)
-            turn[1] = est.rotvec_left_deg[1] - rig.psvs.rotvec_left_deg[1]
-            sigma[1] = est.sigma["rotvec_left_deg_y"]
-        except CalibrationError:
-            pass
+    if est is not None:
+        turn[1] = est.rotvec_left_deg[1] - rig.psvs.rotvec_left_deg[1]
+        sigma[1] = est.sigma["rotvec_left_deg_y"]
     th = thresholds_deg(rig, budget_mm, depth_mm, field_mm)
     limit = np.array([th.tilt_x_deg, th.pan_y_deg, th.roll_z_deg])
     passed = np.abs(np.nan_to_num(turn, nan=0.0)) <= limit

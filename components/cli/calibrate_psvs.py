@@ -25,6 +25,7 @@ def _common(p) -> None:
     p.add_argument("--world", default="ideal", help="with --twin: ideal, realistic or a world file (default ideal)")
     p.add_argument("--seed", type=int, default=0, help="with --twin: the seed of the poses and the noise")
     p.add_argument("--poses", type=int, default=36, help="with --twin: camera poses around the still target (default 36)")
+    p.add_argument("--frames", type=int, default=6, help="with --twin: images per pose (default 6)")
 
 
 def add_parser(csub) -> None:
@@ -75,6 +76,8 @@ def run(args) -> int:
         return _fail(tool, str(e))
     if args.poses < psvs.MIN_VIEWS // 2:
         return _fail(tool, f"--poses {args.poses}: too few poses (need at least {psvs.MIN_VIEWS // 2})")
+    if args.frames < 1:
+        return _fail(tool, f"--frames {args.frames}: at least one image per pose")
     date = datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     truth: list[str] = []
     try:
@@ -88,10 +91,12 @@ def run(args) -> int:
                   file=sys.stderr)
             if tool == "psvs":
                 est, report, truth = cal_psvs.calibrate_psvs_on_twin(world, rig, args.seed, _progress,
-                                                                     n_poses=args.poses, fit_l=args.fit_l, date=date)
+                                                                     n_poses=args.poses, frames_per_pose=args.frames,
+                                                                     fit_l=args.fit_l, date=date)
             else:
                 check, report, truth = cal_psvs.check_mirrors_on_twin(world, rig, args.seed, _progress,
-                                                                      n_poses=args.poses, budget_mm=args.budget)
+                                                                      n_poses=args.poses, frames_per_pose=args.frames,
+                                                                      budget_mm=args.budget)
         else:
             from humanpt.runtime import recording
 

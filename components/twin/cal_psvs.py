@@ -57,7 +57,7 @@ def plan_camera_T_tob(n_poses: int = 36, seed: int = 0, depth_mm: tuple[float, f
     out = np.empty((n_poses, 4, 4))
     for k in range(n_poses):
         z = depth_mm[0] + (depth_mm[1] - depth_mm[0]) * k / max(n_poses - 1, 1)
-        x = rng.uniform(-0.14, 0.14) * z  # the two views are ~b apart: both must stay inside
+        x = rng.uniform(-0.18, 0.18) * z  # the two views are ~b apart: both must stay inside
         y = rng.uniform(-0.25, 0.25) * z
         rot = matrix_from_rotvec(np.radians(rng.uniform(-15.0, 15.0, 3)))
         out[k] = make_transform(rot, np.array([x, y, z]))
@@ -146,7 +146,7 @@ def truth_lines_psvs(world: World, rig_before: Rig, rig_after: Rig, seed: int) -
 
 
 def calibrate_psvs_on_twin(world: World, rig: Rig, seed: int = 0, progress: Progress | None = None, *,
-                           n_poses: int = 36, frames_per_pose: int = 2, fit_l: bool = False,
+                           n_poses: int = 36, frames_per_pose: int = 6, fit_l: bool = False,
                            date: str = "") -> tuple[PsvsEstimate, list[str], list[str]]:
     """``humanpt calibrate psvs --twin``: gather the views (:func:`gather_views`),
     estimate (:func:`humanpt.calibration.psvs.estimate_psvs`). Returns (estimate,
@@ -162,7 +162,7 @@ def calibrate_psvs_on_twin(world: World, rig: Rig, seed: int = 0, progress: Prog
 
 
 def check_mirrors_on_twin(world: World, rig: Rig, seed: int = 0, progress: Progress | None = None, *,
-                          n_poses: int = 36, frames_per_pose: int = 2, budget_mm: float = 0.1
+                          n_poses: int = 36, frames_per_pose: int = 6, budget_mm: float = 0.1
                           ) -> tuple[mirrors_mod.MirrorCheck, list[str], list[str]]:
     """``humanpt calibrate mirrors --twin``: gather the views, check the mirrors against
     the rig (:func:`humanpt.calibration.mirrors.check_mirrors`). Returns (check, report

@@ -100,7 +100,7 @@ def test_a_wrong_pair_is_dropped():
 def test_twin_mirror_tilt_is_calibrated_and_the_path_error_goes(tmp_path):
     world = World.only("mirror_tilt")
     true_rot = virtual_rotation_from_mirror_tilt_deg(0.05)  # (0, 0.1, 0) deg
-    est, report, truth = calibrate_psvs_on_twin(world, Rig(), seed=1)
+    est, report, truth = calibrate_psvs_on_twin(world, Rig(), seed=1, frames_per_pose=2)
     assert len(report) > 3 and any("against the twin's truth" in line for line in truth)
     np.testing.assert_allclose(est.rotvec_left_deg, true_rot, atol=0.003)
     rig = apply_to_rig(Rig(), est, "twin")

@@ -19,7 +19,7 @@ def test_psvs_writes_the_rig_and_mirrors_then_pass(tmp_path, capsys, cli_main):
     main = cli_main
     rig = tmp_path / "rig.toml"
     world = _world(tmp_path)
-    args = ["--twin", "--world", world, "--rig", str(rig), "--poses", "16"]
+    args = ["--twin", "--world", world, "--rig", str(rig), "--poses", "16", "--frames", "2"]
     assert main(["calibrate", "mirrors", *args]) == 1  # the nominal rig: the pan fails
     out = capsys.readouterr().out
     assert "pan about y" in out and "FAIL" in out and not rig.exists()
