@@ -10,6 +10,8 @@ import importlib
 TOOLS = {
     "camera": "calibrate_camera",
     "tip": "calibrate_tip",
+    "psvs": "calibrate_psvs",
+    "mirrors": "calibrate_psvs",
 }
 
 

@@ -81,6 +81,9 @@ class PerceptionConfig:
     max_area_ratio: Annotated[float, Range(1, 1000, "")] = 2.5
     # bad images
     max_saturated_fraction: Annotated[float, Range(0, 1, "")] = 0.25
+    # mirror drift watch: the running median of v_L - v_R of FULL measurements (rig model)
+    drift_warn_px: Annotated[float, Range(0.01, 1000, "px")] = 0.5
+    drift_window: Annotated[int, Range(1, 100000, "measurements")] = 30
 
     def __post_init__(self) -> None:
         own = "perception"
@@ -144,5 +147,7 @@ class PerceptionConfig:
         if not lo < 1 < hi:
             raise ValueError(f"{own}.size_ratio_range must bracket 1, got {self.size_ratio_range}")
         _check(own, "max_saturated_fraction", self.max_saturated_fraction, positive=True)
+        _check(own, "drift_warn_px", self.drift_warn_px, positive=True)
+        _check(own, "drift_window", self.drift_window, positive=True, integer=True)
         if self.max_saturated_fraction > 1:
             raise ValueError(f"{own}.max_saturated_fraction must be in (0, 1]")

@@ -12,7 +12,13 @@ Per image (Section 4, steps 1-7):
 3. publish a :class:`TobMeasurement`: every accepted centre, the pairs (ordered A, B, C
    when FULL), the points in the camera frame (metres), ``camera_T_tob`` when FULL,
    ``visible`` (sources paired), ``quality``, ``method``, ``status``;
-4. an info event ``tob_status`` whenever the status changes (full, position only, lost).
+4. an info event ``tob_status`` whenever the status changes (full, position only, lost);
+5. the mirror drift watch: the vertical disparity ``v_L - v_R`` of each FULL measurement's
+   pairs in the rig's model (distortion removed, through the rig's rotations; 0 for mirrors
+   the rig describes), a running median over ``drift_window`` measurements; above
+   ``drift_warn_px`` (well below ``epipolar_tol_px``, where pairs are lost) a
+   ``mirror_drift`` warning, once, then again only when it has grown by half the threshold
+   more; a ``mirror_drift_ok`` info when it is back under 80 % of the threshold.
 
 The core never raises out of ``step``: an unexpected error while measuring gives a LOST
 measurement and an error event. It never reads the clock, so ``processing_s`` is 0 - a
@@ -20,6 +26,8 @@ measured time would make replays differ; ``humanpt bench perception`` measures t
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
@@ -30,7 +38,15 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import image_stamp_ns, pose
 
 from .config import PerceptionConfig
-from .correspondence import FULL, LOST, POSITION_ONLY, Match, lost
+from .correspondence import (
+    FULL,
+    LOST,
+    POSITION_ONLY,
+    Match,
+    epipolar_residual_px,
+    ideal_pixels,
+    lost,
+)
 from .image import BadImage, prepare
 from .pipeline import Perception, Result
 
@@ -90,6 +106,8 @@ class PerceptionCore(Core):
         self._bad_code: str | None = None
         self._bad_count = 0
         self._status: str | None = None
+        self._drift: deque[float] = deque(maxlen=config.drift_window)
+        self._drift_warned_px: float | None = None  # |median| at the last mirror_drift warning
         self.counters = {
             "images": 0,
             "bad_images": 0,
@@ -100,6 +118,8 @@ class PerceptionCore(Core):
 
     def on_config_changed(self, old: PerceptionConfig, new: PerceptionConfig) -> None:
         self.perception = Perception(new, self.rig)
+        if new.drift_window != old.drift_window:
+            self._drift = deque(self._drift, maxlen=new.drift_window)
         self._anchor = None  # search the whole image with the new settings
 
     # -- input -------------------------------------------------------------------------
@@ -160,7 +180,36 @@ class PerceptionCore(Core):
                 )
             )
             return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
+        outputs += self._watch_drift(t_ns, result)
         return outputs + self._publish(t_ns, stamp, result.blobs.uv_px, result.match)
+
+    def _watch_drift(self, t_ns: int, result: Result) -> list[Output]:
+        """The mirror drift watch (module docstring, step 5)."""
+        match = result.match
+        if match.status != FULL or not len(match.pairs):
+            return []
+        params = self.perception.params
+        uv = ideal_pixels(params, result.blobs.uv_px)
+        right, left = match.pairs[:, 0], match.pairs[:, 1]
+        # epipolar_residual_px is v_R - v_L (scaled): the vertical disparity is its negative
+        self._drift.append(-float(np.mean(epipolar_residual_px(params, uv[right], uv[left]))))
+        c = self.perception.config
+        if len(self._drift) < min(c.drift_window, 10):
+            return []
+        level = float(np.median(self._drift))
+        size = abs(level)
+        warned = self._drift_warned_px
+        if size > c.drift_warn_px and (warned is None or size >= warned + 0.5 * c.drift_warn_px):
+            self._drift_warned_px = size
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "mirror_drift",
+                               f"perception: the mirrors drift: vertical disparity v_L - v_R {level:+.2f} px "
+                               f"(limit {c.drift_warn_px:g} px; pairs are lost at {c.epipolar_tol_px:g} px): "
+                               "check them (humanpt calibrate mirrors)")]
+        if warned is not None and size < 0.8 * c.drift_warn_px:
+            self._drift_warned_px = None
+            return [self.event(t_ns, pb.SEVERITY_INFO, "mirror_drift_ok",
+                               f"perception: vertical disparity back in range ({level:+.2f} px)")]
+        return []
 
     def _measure(self, gray: np.ndarray) -> Result:
         p = self.perception

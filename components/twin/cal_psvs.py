@@ -1,0 +1,182 @@
+"""The PSVS calibration and the mirrors check on the digital twin (issue 17).
+
+How the views are gathered: the target stands still in the world; a planned set of camera
+poses around it (depths 450-800 mm, the target spread over the image and turned up to
+15 deg, a fixed seeded plan) is what the robot would move the camera to. For each pose
+the twin's own camera core (:class:`humanpt.sim_camera.core.SimCameraCore`, configured
+by the world: its optics, mirrors, sensor) gets the flange's and the target's truth and a
+tick, and renders ``frames_per_pose`` images; perception
+(:class:`humanpt.perception.core.PerceptionCore`, configured by the *rig*) measures them.
+The estimators (:mod:`humanpt.calibration.psvs`, :mod:`humanpt.calibration.mirrors`) see
+only perception's FULL measurements. The robot's motion between poses is not simulated
+(the views are still, as a robot stopping at each pose gives). The world's truth is read
+only to report the estimate against it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import numpy as np
+
+from humanpt.calibration import mirrors as mirrors_mod
+from humanpt.calibration import psvs as psvs_mod
+from humanpt.calibration.psvs import CalibrationError, PsvsEstimate, StereoViews
+from humanpt.geometry.psvs import project, triangulate
+from humanpt.geometry.rig import Rig
+from humanpt.geometry.transforms import (
+    compose,
+    invert_transform,
+    make_transform,
+    matrix_from_rotvec,
+)
+from humanpt.perception.config import PerceptionConfig
+from humanpt.perception.core import PerceptionCore
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header, pose_from_mm
+from humanpt.sim_camera.core import SimCameraCore
+
+from .run import SystemConfig
+from .worlds import World
+
+__all__ = ["plan_camera_T_tob", "gather_views", "calibrate_psvs_on_twin", "check_mirrors_on_twin",
+           "truth_lines_psvs"]
+
+Progress = Callable[[float, float], None]
+
+WORLD_T_TOB_MM = make_transform(np.eye(3), np.array([800.0, 0.0, 300.0]))
+"""Where the still target stands (any place: only camera_T_tob matters to the camera)."""
+
+
+def plan_camera_T_tob(n_poses: int = 36, seed: int = 0, depth_mm: tuple[float, float] = (450.0, 800.0)) -> np.ndarray:
+    """(n, 4, 4) target poses in the camera frame (mm): depths evenly over ``depth_mm``,
+    the target's centre within 60 % of each view's half-field, turned by up to 15 deg about
+    each axis (seeded)."""
+    rng = np.random.default_rng([seed, 17])
+    out = np.empty((n_poses, 4, 4))
+    for k in range(n_poses):
+        z = depth_mm[0] + (depth_mm[1] - depth_mm[0]) * k / max(n_poses - 1, 1)
+        x = rng.uniform(-0.18, 0.18) * z  # the two views are ~b apart: both must stay inside
+        y = rng.uniform(-0.25, 0.25) * z
+        rot = matrix_from_rotvec(np.radians(rng.uniform(-15.0, 15.0, 3)))
+        out[k] = make_transform(rot, np.array([x, y, z]))
+    return out
+
+
+def gather_views(world: World, rig: Rig, seed: int = 0, n_poses: int = 36, frames_per_pose: int = 2,
+                 progress: Progress | None = None, perception: PerceptionConfig | None = None) -> StereoViews:
+    """Render the planned poses (:func:`plan_camera_T_tob`) with the world's camera and
+    measure them with perception on the rig (module docstring): the FULL measurements'
+    centres as :class:`StereoViews`."""
+    cfg = SystemConfig.for_scenario("static", seed=seed, rig=rig, world=world)
+    cam_cfg = dataclasses.replace(cfg.sim_camera, seed=seed)
+    camera = SimCameraCore(cam_cfg)
+    percept = PerceptionCore(perception or cfg.perception, rig)
+    # The robot is told where to put the flange by the rig's hand-eye (all it knows); the
+    # camera is then truly at the world's, so the target's true pose differs slightly.
+    flange_T_camera_rig = rig.hand_eye.flange_T_camera_mm()
+    period_ns = cam_cfg.tick_period_ns
+    measurements: list[pb.TobMeasurement] = []
+    plan = plan_camera_T_tob(n_poses, seed)
+    t_ns = 0
+    for k, camera_T_tob in enumerate(plan):
+        world_T_flange = compose(WORLD_T_TOB_MM, invert_transform(camera_T_tob), invert_transform(flange_T_camera_rig))
+        for _ in range(frames_per_pose):
+            t_ns += period_ns
+            outs = []
+            for stamp in (t_ns - period_ns // 2, t_ns + period_ns // 2):  # the still poses around the exposure
+                truth = pb.Truth(header=header(stamp, 0, "world"))
+                truth.world_T_tob.CopyFrom(pose_from_mm(WORLD_T_TOB_MM))
+                outs += camera.step(stamp, "operator/truth", truth)
+                flange = pb.Truth(header=header(stamp, 0, "world"))
+                flange.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
+                outs += camera.step(stamp, "sim_robot/truth", flange)
+                if stamp < t_ns:
+                    outs += camera.step(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=period_ns))
+            for topic, msg in outs:
+                if topic == "camera/image":
+                    for ptopic, pmsg in percept.step(t_ns + period_ns // 2, "camera/image", msg):
+                        if ptopic == "perception/tob":
+                            measurements.append(pmsg)
+        if progress is not None:
+            progress(k + 1, len(plan))
+    return psvs_mod.views_from_measurements(measurements)
+
+
+def _true_rig(world: World, rig: Rig, seed: int) -> Rig:
+    """The rig a perfect calibration would write: the world's camera optics (for the
+    report against the truth only)."""
+    cfg = SystemConfig.for_scenario("static", seed=seed, rig=rig, world=world)
+    return dataclasses.replace(rig, psvs=cfg.sim_camera.psvs)
+
+
+def depth_errors_mm(believed: Rig, true: Rig, depths_mm=(450.0, 600.0, 800.0), field_mm: float = 50.0) -> np.ndarray:
+    """(len(depths), 3) error (mm) of points triangulated with ``believed`` from their
+    exact images through ``true``: for each depth the worst |error| over a 5 x 5 grid
+    within ``field_mm`` of the axis, of x, y, z."""
+    g = np.linspace(-field_mm, field_mm, 5)
+    out = []
+    for z in depths_mm:
+        pts = np.array([(x, y, z) for x in g for y in g])
+        uv_r, uv_l = project(true.params(), pts)
+        est = triangulate(believed.params(), uv_r, uv_l)
+        out.append(np.max(np.abs(est - pts), axis=0))
+    return np.array(out)
+
+
+def truth_lines_psvs(world: World, rig_before: Rig, rig_after: Rig, seed: int) -> list[str]:
+    """The estimate against the world's truth: the views' rotations, principal points and
+    baseline, and what each rig gets wrong in triangulated points."""
+    true = _true_rig(world, rig_before, seed)
+    t, a = true.psvs, rig_after.psvs
+    out = [f"against the twin's truth (world {world.name!r}):",
+           f"  left view rotation: calibrated ({', '.join(f'{v:+.4f}' for v in a.rotvec_left_deg)}) deg, "
+           f"true ({', '.join(f'{v:+.4f}' for v in t.rotvec_left_deg)}) deg (right view true "
+           f"({', '.join(f'{v:+.4f}' for v in t.rotvec_right_deg)}))",
+           f"  true left principal point off by ({t.du0_left_px:+.2f}, {t.dv0_left_px:+.2f}) px "
+           f"(= a pan of {np.degrees(-t.du0_left_px / t.a_u):+.4f} deg, a tilt of {np.degrees(t.dv0_left_px / t.a_v):+.4f} deg)",
+           f"  baseline: calibrated {a.baseline_mm:.4f} mm, true {t.baseline_mm:.4f} mm (b + m: "
+           f"{rig_after.params().baseline_mm + rig_after.params().m_mm:.4f} vs {true.params().baseline_mm + true.params().m_mm:.4f})"]
+    for name, r in (("before", rig_before), ("after", rig_after)):
+        err = depth_errors_mm(r, true)
+        out.append(f"  worst point error with the rig {name:6s} (x, y, z mm, within 50 mm of the axis): "
+                   + "; ".join(f"{z:.0f} mm: {e[0]:.3f} {e[1]:.3f} {e[2]:.3f}" for z, e in zip((450, 600, 800), err, strict=True)))
+    return out
+
+
+def calibrate_psvs_on_twin(world: World, rig: Rig, seed: int = 0, progress: Progress | None = None, *,
+                           n_poses: int = 36, frames_per_pose: int = 6, fit_l: bool = False,
+                           date: str = "") -> tuple[PsvsEstimate, list[str], list[str]]:
+    """``humanpt calibrate psvs --twin``: gather the views (:func:`gather_views`),
+    estimate (:func:`humanpt.calibration.psvs.estimate_psvs`). Returns (estimate,
+    report lines, lines against the world's truth); :func:`humanpt.calibration.psvs.apply_to_rig`
+    writes it into the rig. Raises CalibrationError when the views cannot give it."""
+    views = gather_views(world, rig, seed, n_poses, frames_per_pose, progress)
+    est = psvs_mod.estimate_psvs(rig, views, fit_l=fit_l)
+    report = [f"views: {len(views)} FULL measurements of {n_poses * frames_per_pose} images "
+              f"({n_poses} poses around a still target, world {world.name!r}, seed {seed})"]
+    report += psvs_mod.report_lines(rig, est)
+    after = psvs_mod.apply_to_rig(rig, est, date or "twin")
+    return est, report, truth_lines_psvs(world, rig, after, seed)
+
+
+def check_mirrors_on_twin(world: World, rig: Rig, seed: int = 0, progress: Progress | None = None, *,
+                          n_poses: int = 36, frames_per_pose: int = 6, budget_mm: float = 0.1
+                          ) -> tuple[mirrors_mod.MirrorCheck, list[str], list[str]]:
+    """``humanpt calibrate mirrors --twin``: gather the views, check the mirrors against
+    the rig (:func:`humanpt.calibration.mirrors.check_mirrors`). Returns (check, report
+    lines, lines against the world's truth)."""
+    views = gather_views(world, rig, seed, n_poses, frames_per_pose, progress)
+    if len(views) == 0:
+        raise CalibrationError("no view had the target in both halves of the image")
+    check = mirrors_mod.check_mirrors(rig, views, budget_mm=budget_mm)
+    true = _true_rig(world, rig, seed).psvs
+    rel = np.subtract(true.rotvec_left_deg, true.rotvec_right_deg) - np.subtract(
+        rig.psvs.rotvec_left_deg, rig.psvs.rotvec_right_deg)
+    pp = np.array([np.degrees(true.dv0_left_px / true.a_v), np.degrees(-true.du0_left_px / true.a_u), 0.0])
+    truth = [f"against the twin's truth (world {world.name!r}): the left view turned beyond the rig by "
+             f"x {rel[0]:+.4f}, y {rel[1]:+.4f}, z {rel[2]:+.4f} deg"
+             + (f" (plus its principal point, worth x {pp[0]:+.4f}, y {pp[1]:+.4f} deg)" if np.any(pp) else "")]
+    return check, [f"views: {len(views)} FULL measurements ({n_poses} poses, world {world.name!r}, seed {seed})"]\
+        + mirrors_mod.report_lines(check), truth
