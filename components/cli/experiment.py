@@ -107,7 +107,7 @@ def budget(args) -> int:
 
     def progress(i: int, n: int, row) -> None:
         what = row.status if not row.ran or not row.n else (
-            f"|ME xyz| {float(np.linalg.norm(row.me[:3])):.3f} mm"
+            f"|ME xyz| {float(np.linalg.norm(row.me[:3])):.3f} mm, RMS xyz {float(np.linalg.norm(row.rms[:3])):.3f} mm"
             + (f", warned: {', '.join(row.warnings)}" if row.warnings else ""))
         print(f"  [{i}/{n}] {row.source}: {what} ({row.wall_s:.1f} s)", file=sys.stderr, flush=True)
 

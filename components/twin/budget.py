@@ -60,11 +60,12 @@ class IssueFigure:
 
 
 # Issue 16's table ("error injected into the twin only" -> "effect on the recorded path").
-# The biases are a mean error (ME): a hand-eye offset moves the whole path, a wrong focal
-# length or a tilted mirror scales or shifts the depth.
+# A hand-eye error moves each point by a fixed amount along a flange axis, which turns with
+# the flange along the arc: its size is the RMS of the 3D error (the mean of a turning
+# vector is shorter).  A wrong focal length or a tilted mirror biases the depth (ME z).
 ISSUE_FIGURES: dict[str, IssueFigure] = {
-    "hand_eye_mm": IssueFigure("0.5 mm", "|ME xyz| mm", lambda r: _norm3(r.me), 0.5, 0.5),
-    "hand_eye_deg": IssueFigure("0.9-1.05 mm", "|ME xyz| mm", lambda r: _norm3(r.me), 0.9, 1.05),
+    "hand_eye_mm": IssueFigure("0.5 mm", "RMS xyz mm", lambda r: _norm3(r.rms), 0.5, 0.5),
+    "hand_eye_deg": IssueFigure("0.9-1.05 mm", "RMS xyz mm", lambda r: _norm3(r.rms), 0.9, 1.05),
     "focal": IssueFigure("z 1.9 mm", "|ME z| mm", lambda r: abs(float(r.me[2])), 1.9, 1.9),
     "mirror_tilt": IssueFigure("z 7.7-8.1 mm", "|ME z| mm", lambda r: abs(float(r.me[2])), 7.7, 8.1),
     # A constant offset between the camera's and the robot's clocks: the pose filter pairs
