@@ -309,9 +309,10 @@ def plot(rows: Sequence[BudgetRow], path: str | Path, title: str = "") -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
 
     path = Path(path)
-    names = [r.source for r in rows]
+    names = [r.source + (" *" if r.warned else "") for r in rows]
     pos = np.array([_norm3(r.rms) if r.n else np.nan for r in rows])
     ang = np.array([float(np.max(r.rms[3:])) if r.n else np.nan for r in rows])
     y = np.arange(len(rows))
@@ -324,11 +325,17 @@ def plot(rows: Sequence[BudgetRow], path: str | Path, title: str = "") -> Path:
         ax.set_xscale("log")
         for i in np.flatnonzero(~ok):
             ax.text(lo, i, f" {rows[i].status}", va="center", fontsize=8, color="tab:red")
+        ideal = [v for r, v in zip(rows, vals, strict=True) if r.source == "ideal" and np.isfinite(v)]
+        if ideal:
+            ax.axvline(ideal[0], color="k", ls="--", lw=1, label="ideal world")
+            ax.legend(loc="lower right", fontsize=8)
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(label)
         ax.grid(axis="x", which="both", alpha=0.3)
     axes[0].set_yticks(y, names)
     axes[0].invert_yaxis()
-    fig.suptitle(title or "humanpt experiment budget: effect of each error source on the recorded path")
+    fig.suptitle((title or "humanpt experiment budget: effect of each error source on the recorded path")
+                 + ("\n(* the pipeline warned)" if any(r.warned for r in rows) else ""))
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
