@@ -5,7 +5,7 @@ the rig (what the pipeline believes) at its nominal values every time.
 Each run's recorded path is judged against ground truth (:func:`humanpt.twin.run.accuracy`):
 ME, RMS and MaxE per coordinate of X (x, y, z mm; psi, theta, phi deg), whether the
 pipeline warned (warning and error events of perception, pose_filter, controller and
-alter_gateway, while the scenario ran: the twin's own events are not warnings to a user,
+alter_gateway, while the path was recorded: the twin's own events are not warnings to a user,
 and start-up ones are listed apart), and how often perception
 saw the whole target.  A run that fails or records nothing is a row that says so, never
 the end of the budget.  ``humanpt experiment budget`` prints :func:`format_table`, writes
@@ -97,8 +97,8 @@ class BudgetRow:
     me: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
     rms: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
     maxe: np.ndarray = field(default_factory=lambda: np.full(6, np.nan))
-    # "component: code" -> count of the pipeline's warnings and errors while the scenario
-    # ran (from the operator's scenario_started), and before it (start-up)
+    # "component: code" -> count of the pipeline's warnings and errors while the path was
+    # recorded (from the operator's start delay), and before (start-up)
     warnings: dict[str, int] = field(default_factory=dict)
     startup_warnings: dict[str, int] = field(default_factory=dict)
     full_fraction: float = float("nan")  # of perception's measurements, those with the full target
@@ -185,9 +185,11 @@ def run_world(world: World, scenario: str = "arc", seed: int = 0, robot: str = "
         return row
     row.wall_s = time.perf_counter() - t0
     row.which, row.n = acc.which, acc.path.n
-    # Warnings while the scenario ran; those before (the servo's first steps onto the
-    # target, e.g. the gateway clamping the acquisition step) are the same in every world.
-    start = evaluate.scenario_start_ns(res.world)
+    # Warnings while the path was recorded (from the operator's start delay: its
+    # scenario_started event is stamped when the scenario is loaded); those before (the
+    # servo's first steps onto the target, e.g. the gateway clamping the acquisition step)
+    # come in any world.
+    start = max(evaluate.scenario_start_ns(res.world), round(cfg.operator.start_delay_s * 1e9))
     mine = [e for e in acc.warnings if e.source in PIPELINE]
     row.warnings = dict(Counter(f"{e.source}: {e.code}" for e in mine if e.header.stamp_ns >= start))
     row.startup_warnings = dict(Counter(f"{e.source}: {e.code}" for e in mine if e.header.stamp_ns < start))
