@@ -323,7 +323,7 @@ def plot(rows: Sequence[BudgetRow], path: str | Path, title: str = "") -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from matplotlib.ticker import NullFormatter
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
     path = Path(path)
     names = [r.source + (" *" if r.warned else "") for r in rows]
@@ -343,6 +343,8 @@ def plot(rows: Sequence[BudgetRow], path: str | Path, title: str = "") -> Path:
         if ideal:
             ax.axvline(ideal[0], color="k", ls="--", lw=1, label="ideal world")
             ax.legend(loc="lower right", fontsize=8)
+        ax.xaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
         ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel(label)
         ax.grid(axis="x", which="both", alpha=0.3)
