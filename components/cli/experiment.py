@@ -6,6 +6,10 @@ gives the paper's statistics: ME, MAE, MaxE and SD of x, y, z, psi, theta, phi, 
 paper computed them and against ground truth, with the paper's perception method and the
 default one side by side, beside the paper's published tables.  Plots like Figures 7-9
 are saved as PNG.
+
+``humanpt experiment budget``: the error budget of the twin's world (issue 16,
+:mod:`humanpt.twin.budget`): the scenario on the ideal world, with each error source
+alone, then with all of them; a table, ``budget.csv`` and ``budget.png``.
 """
 
 from __future__ import annotations
@@ -72,7 +76,56 @@ def plots(name: str, results: dict, out: Path) -> Path:
     return path
 
 
+def budget(args) -> int:
+    """``humanpt experiment budget``: run :func:`humanpt.twin.budget.run_budget`, print its
+    table, save ``budget.csv``, ``budget.txt`` and (unless ``--no-plots``) ``budget.png``."""
+    import sys
+
+    from humanpt.cli.commands import run_stamp
+    from humanpt.runtime.config import ConfigError
+    from humanpt.twin import budget as bud
+
+    for flag in ("set", "record"):
+        if getattr(args, flag, None):
+            raise ValueError(f"--{flag} does not apply to the budget (its worlds are the error sources; "
+                             "the rig stays nominal)")
+    only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
+    todo = bud.plan(args.robot, only)  # ValueError naming an unknown source, before anything runs
+    try:  # a bad scenario is the user's mistake: say so once, not as a failed row per source
+        from humanpt.twin.run import SystemConfig
+
+        SystemConfig.for_scenario(args.scenario, args.seed)
+    except (ConfigError, OSError, ValueError) as e:
+        raise SystemExit(f"humanpt: --scenario {args.scenario}: {e}") from None
+    if args.duration is not None and args.duration <= 0:
+        raise ValueError(f"--duration must be > 0, got {args.duration}")
+    out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-budget"
+    out.mkdir(parents=True, exist_ok=True)
+    for s, skip in todo:
+        if skip:
+            print(f"  {s.name}: {skip} (--robot {args.robot})", file=sys.stderr, flush=True)
+
+    def progress(i: int, n: int, row) -> None:
+        what = row.status if not row.ran or not row.n else (
+            f"|ME xyz| {float(np.linalg.norm(row.me[:3])):.3f} mm, RMS xyz {float(np.linalg.norm(row.rms[:3])):.3f} mm"
+            + (f", warned: {', '.join(row.warnings)}" if row.warnings else ""))
+        print(f"  [{i}/{n}] {row.source}: {what} ({row.wall_s:.1f} s)", file=sys.stderr, flush=True)
+
+    rows = bud.run_budget(args.scenario, args.seed, args.robot, only, args.duration, progress)
+    text = bud.format_table(rows, args.scenario, args.seed, args.robot)
+    print(text)
+    (out / "budget.txt").write_text(text + "\n")
+    files = [bud.write_csv(rows, out / "budget.csv")]
+    if not args.no_plots:
+        files.append(bud.plot(rows, out / "budget.png", f"humanpt experiment budget: {args.scenario}, seed "
+                              f"{args.seed}, robot {args.robot} (recorded path against ground truth)"))
+    print(f"results: {', '.join(str(f) for f in files)}")
+    return 0
+
+
 def experiment(args) -> int:
+    if args.name == "budget":
+        return budget(args)
     from humanpt.cli.commands import run_stamp
     from humanpt.cli.demo import parse_overrides
     from humanpt.twin.experiment import run_experiment

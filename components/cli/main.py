@@ -85,13 +85,18 @@ def build_parser() -> argparse.ArgumentParser:
                    "sim_robot or standin_robot (VALUE in TOML; repeatable; over the world's), e.g. "
                    "--set sim_camera.fps=15 --set sim_camera.psvs.a_u=1003")
 
-    p = sub.add_parser("experiment", help="the paper's Section 6 experiments on the twin, with its Tables 1-3",
+    p = sub.add_parser("experiment", help="the paper's Section 6 experiments on the twin, with its Tables 1-3; "
+                       "the error budget",
                        description="Reproduce the paper's experiments on the digital twin in lock-step: static "
                        "(Table 1, Figure 7), arc (the rotating base, Table 2, Figure 8), trapezium (the needle "
                        "along a trapezium's edges, Table 3, Figure 9). Prints ME, MAE, MaxE, SD of x, y, z, psi, "
                        "theta, phi computed as the paper did and against ground truth, for the paper's perception "
-                       "method and the default one, beside the published tables; saves a figure as PNG.")
-    p.add_argument("name", choices=["static", "arc", "trapezium"])
+                       "method and the default one, beside the published tables; saves a figure as PNG. budget: the error "
+                       "budget of the twin's world (each error source alone, then all together).")
+    p.add_argument("name", choices=["static", "arc", "trapezium", "budget"],
+                   help="budget: the error budget (issue 16): --scenario once on the ideal world, once per "
+                        "error source of the twin's world alone, then all together, the rig nominal; prints "
+                        "each one's effect on the recorded path and saves budget.csv and budget.png")
     p.add_argument("--method", choices=["both", "paper", "weighted"], default="both",
                    help="perception method(s) (default both, side by side)")
     p.add_argument("--seed", type=int, default=0, help="the twin's seed (noise, operator tremor)")
@@ -109,6 +114,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(repeatable), e.g. --set pose_filter.still_detect=false")
     p.add_argument("--speed-scale", type=float, default=1.0,
                    help="arc/trapezium: pace of the operator (default 1; the paper's speeds)")
+    p.add_argument("--scenario", default="arc",
+                   help="budget: the scenario (a built-in name or a scenario file; default arc)")
+    p.add_argument("--only", metavar="A,B,...",
+                   help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
+    p.add_argument("--duration", type=float,
+                   help="budget: seconds of twin time per run (default: the scenario's, as the demo)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
