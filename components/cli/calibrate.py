@@ -7,7 +7,9 @@ from __future__ import annotations
 import importlib
 
 # tool name -> module of humanpt.cli
-TOOLS = {}
+TOOLS = {
+    "hand-eye": "calibrate_handeye",
+}
 
 
 def add_parsers(sub) -> None:
