@@ -446,7 +446,9 @@ class CollectorSettings:
     measurements are averaged. ``min_measurements``: fewer FULL measurements in that
     window and the pose is skipped (target not seen). ``reach_tol_mm``/``reach_tol_deg``:
     how far the robot may end from the planned pose (a gateway clamp ends it elsewhere).
-    ``still_mm``: the flange must move less than this during the window."""
+    ``still_mm``: the flange must move less than this during the window.
+    ``max_missed_in_a_row``: after this many poses in a row not reached, give up (the
+    robot is not moving at all)."""
 
     move_timeout_s: float = 8.0
     settle_s: float = 0.3
@@ -455,6 +457,7 @@ class CollectorSettings:
     reach_tol_mm: float = 1.0
     reach_tol_deg: float = 0.2
     still_mm: float = 0.05
+    max_missed_in_a_row: int = 3
 
 
 @dataclass
@@ -538,7 +541,12 @@ class PoseCollector:
         """The next console command for the controller, if one is due."""
         cmd, self._pending = self._pending, None
         if cmd is None and self.state == "moving" and t_ns - self._since > self.s.move_timeout_s * 1e9:
-            self._skip(t_ns, f"not reached in {self.s.move_timeout_s:g} s (unreachable or clamped by the gateway)")
+            self._missed = getattr(self, "_missed", 0) + 1
+            if self._missed >= self.s.max_missed_in_a_row:
+                self.end(f"{self._missed} poses in a row not reached in {self.s.move_timeout_s:g} s each: "
+                         "the robot is not following (unreachable, clamped or not in ALTER)")
+            else:
+                self._skip(t_ns, f"not reached in {self.s.move_timeout_s:g} s (unreachable or clamped by the gateway)")
             return self.poll(t_ns)
         if cmd is None and self.state == "settling" and t_ns - self._since >= self.s.settle_s * 1e9:
             self.state, self._since = "averaging", t_ns
@@ -577,7 +585,7 @@ class PoseCollector:
 
     def on_controller_event(self, t_ns: int, code: str, text: str) -> None:
         if code == "playback_done" and self.state == "moving":
-            self.state, self._since = "settling", t_ns
+            self.state, self._since, self._missed = "settling", t_ns, 0
         elif code == "command" and text.startswith("hold") and self.state in ("moving", "settling", "averaging"):
             self.stop("stopped by a console command (hold/stop)")
         elif code == "bad_command" and self.state == "moving":

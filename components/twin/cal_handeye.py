@@ -80,6 +80,9 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         for o in ls.outputs:
             if o.topic == "alter_gateway/robot_state":
                 start = _mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
+            elif o.topic == "alter_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
+                raise HandEyeError(f"the robot faulted before the calibration could start "
+                                   f"({pb.Event.FromString(o.data).text}); nothing written")
         ls.outputs.clear()
         if start is None:
             raise HandEyeError("no robot state from the gateway in the first second: is the robot up?")

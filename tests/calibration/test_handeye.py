@@ -235,3 +235,11 @@ def test_a_console_stop_ends_the_collection(poses):
     tool = transform_from_x(np.array(args["points"][0]))
     assert verb == "playback" and pose_difference(tool @ invert_transform(transform_from_x([0, 0, 200, 0, 0, 0])),
                                                   poses[0])[0] < 1e-4
+
+
+def test_a_robot_that_follows_no_pose_ends_the_collection(poses):
+    c = PoseCollector(poses[:6], np.eye(4), CollectorSettings(move_timeout_s=1.0, max_missed_in_a_row=3))
+    cmds = _drive(c, [(0.1 * k, "robot", poses[0]) for k in range(60)])
+    assert c.done and not c.aborted and c.samples == []
+    assert [v for v, _ in cmds] == ["playback", "playback", "playback", "hold"]
+    assert "3 poses in a row not reached" in c.notes[-1]
