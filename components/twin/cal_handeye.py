@@ -54,12 +54,13 @@ def _mm(T_m: np.ndarray) -> np.ndarray:
 def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
                                *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
                                max_twin_s: float = 240.0, world_overrides: dict | None = None,
-                               ) -> tuple[HandEyeResult, list[str], list[str]]:
+                               pairs_out: str | None = None) -> tuple[HandEyeResult, list[str], list[str]]:
     """Calibrate the hand-eye transform on the twin: ``world`` (the truth), ``rig`` (what
     the pipeline believes; its hand-eye is only the planning guess), ``seed`` (camera
     noise). ``progress(poses done, poses planned)`` after each pose. ``n_poses``: poses
     planned (the start pose included). ``world_overrides``: extra {section: {key: value}}
-    of the twin (tests: a robot that cannot reach).
+    of the twin (tests: a robot that cannot reach). ``pairs_out``: also write the collected
+    pairs there (JSON, what ``humanpt calibrate hand-eye --pairs`` reads).
 
     Returns (result, report lines, truth lines: the estimate against the world's true
     ``flange_T_camera``). Raises :class:`HandEyeError` when too few poses were collected
@@ -124,8 +125,14 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         why = "; ".join(notes[-3:]) or "no pose measured"
         raise HandEyeError(f"too few poses collected: {len(samples)} of {len(poses)} ({why}); AX = YB needs at least "
                            "3 with rotations about two axes; nothing written")
-    result = solve_ax_yb(np.array([s.world_T_flange_mm for s in samples]),
-                         np.array([s.camera_T_target_mm for s in samples]))
+    A = np.array([s.world_T_flange_mm for s in samples])
+    B = np.array([s.camera_T_target_mm for s in samples])
+    if pairs_out:
+        from pathlib import Path
+
+        Path(pairs_out).write_text(json.dumps([{"world_T_flange": a.tolist(), "camera_T_target": b.tolist()}
+                                               for a, b in zip(A, B, strict=True)], indent=1))
+    result = solve_ax_yb(A, B)
     report = [f"hand-eye on the twin (world {world.name}, seed {seed}): {len(samples)} of {len(poses)} poses "
               f"collected in {twin_s:.1f} s of twin time ({wall_s:.1f} s wall)"]
     report += [f"  {n}" for n in notes]
