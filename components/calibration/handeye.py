@@ -1,19 +1,20 @@
 """Hand-eye calibration AX = YB (the paper's (c), citing Zhuang, Roth and Sudhakar 1994).
 
 The robot holds the PSVS on its flange and looks at a target fixed in the world from N
-poses. Pose i gives ``A_i = world_T_flange_i`` (the robot's state) and ``B_i =
-camera_T_target_i`` (the PSVS's measurement of the target, averaged while still); the
-unknowns are ``X = flange_T_camera`` (the hand-eye transform the rig stores) and ``Y =
-world_T_target``::
+poses. Pose i gives ``A_i = world_T_flange_i`` (the robot's state) and the PSVS's
+measurement ``camera_T_target_i`` (averaged while still); the unknowns are ``X =
+flange_T_camera`` (the hand-eye transform the rig stores) and ``Y = world_T_target``.
+With ``B_i = target_T_camera_i`` (the measurement inverted)::
 
-    A_i X = Y B_i        (world_T_flange @ flange_T_camera @ camera_T_target = world_T_target)
+    A_i X = Y B_i        (world_T_flange @ flange_T_camera = world_T_target @ target_T_camera)
 
 :func:`solve_ax_yb` solves it in two steps: a closed-form start (Shah 2013: the rotations
 from the null space of ``[R_B_i (x) R_A_i, -I9]`` by SVD, each projected onto SO(3), then
 the translations by linear least squares), then nonlinear least squares
 (``scipy.optimize.least_squares``) on each pose's rotation and translation residual of
-``B_i`` against ``inv(X) inv(A_i) Y``, weighted by their spread. The 1-sigma of X is the
-Gauss-Newton covariance at the solution, scaled by the residuals. When the installed
+``B_i`` against ``inv(X) inv(A_i) Y``, each camera axis weighted by its own spread. The
+1-sigma of X is the larger of the Gauss-Newton covariance (scaled by the residuals) and
+the jackknife's (leave one pose out; from 5 poses). When the installed
 OpenCV has them (4.x; 5.0 does not export them) ``cv2.calibrateRobotWorldHandEye``
 (AX = ZB) and ``cv2.calibrateHandEye`` (AX = XB on relative motions) cross-check X.
 
@@ -228,7 +229,8 @@ def _perturb(T: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 def solve_ax_yb(world_T_flange_mm, camera_T_target_mm, *, outlier_factor: float = 5.0,
                 cross_check: bool = True, min_axis_angle_deg: float = 5.0) -> HandEyeResult:
-    """Solve ``A_i X = Y B_i`` for X = flange_T_camera and Y = world_T_target.
+    """Solve ``A_i X = Y B_i`` for X = flange_T_camera and Y = world_T_target (B_i the
+    inverse of the measurement).
 
     ``world_T_flange_mm`` (N, 4, 4): the robot's flange poses (A). ``camera_T_target_mm``
     (N, 4, 4): the target measured in the camera frame at each (B). Raises
@@ -261,11 +263,16 @@ def solve_ax_yb(world_T_flange_mm, camera_T_target_mm, *, outlier_factor: float 
             except HandEyeError:
                 pass  # without it the motion degenerates: keep every pose
     sigma = _x_sigma(X, cov)
+    if used.sum() >= 5:
+        # Per-pose errors of a real measurement are not independent noise (a pose's bias
+        # stays however long it is averaged), so the Gauss-Newton sigma can be too small:
+        # take the larger of it and the jackknife's (leave one pose out).
+        sigma = np.maximum(sigma, _jackknife_sigma(A[used], B[used], X, Y))
     checks, note = (opencv_cross_check(A[used], B[used]) if cross_check else ({}, "not asked for"))
     return HandEyeResult(X, Y, sigma, e_mm, e_deg, used, X0, checks, note)
 
 
-def _refine(A, B, X0, Y0):
+def _refine(A, B, X0, Y0, passes: int = 4):
     """Nonlinear least squares from (X0, Y0); returns X, Y and the covariance (12, 12) of
     the steps (X rot rad, X trans mm, Y rot rad, Y trans mm).
 
@@ -284,7 +291,7 @@ def _refine(A, B, X0, Y0):
         return np.concatenate([(et / s_t).ravel(), (er / s_r).ravel()])
 
     p = np.zeros(12)
-    for _ in range(4):
+    for _ in range(passes):
         sol = least_squares(f, p, method="lm", x_scale="jac")
         p = sol.x
         et, er = _residuals(A, B, _perturb(X0, p[:6]), _perturb(Y0, p[6:]))
@@ -300,6 +307,21 @@ def _refine(A, B, X0, Y0):
     # and the steps are small, so it is X's about the solution.
     cov = s2 * np.linalg.pinv(J.T @ J)
     return X, Y, cov
+
+
+def _jackknife_sigma(A: np.ndarray, B: np.ndarray, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """1-sigma (6,) of X's X-vector (mm, deg) by the jackknife: refit without each pose
+    in turn (from the full solution), ``sqrt((n - 1) / n * sum (x_i - mean)^2)``."""
+    n = len(A)
+    xs = []
+    for i in range(n):
+        keep = np.arange(n) != i
+        Xi, _, _ = _refine(A[keep], B[keep], X, Y, passes=1)
+        xs.append(x_from_transform(Xi))
+    xs = np.array(xs)
+    d = xs - xs.mean(axis=0)
+    d[:, 3:] = (d[:, 3:] + 180.0) % 360.0 - 180.0
+    return np.sqrt((n - 1) / n * np.sum(d**2, axis=0))
 
 
 def _x_sigma(X: np.ndarray, cov: np.ndarray) -> np.ndarray:

@@ -32,7 +32,7 @@ def add_parser(csub) -> None:
     p.add_argument("--twin", action="store_true", help="observe the digital twin (its truth is only reported)")
     p.add_argument("--world", default="realistic", help="the twin's world: ideal, realistic or a world file")
     p.add_argument("--seed", type=int, default=0, help="the twin's seed")
-    p.add_argument("--poses", type=int, default=None, help="poses to plan (default 10; at least 3)")
+    p.add_argument("--poses", type=int, default=None, help="poses to plan (default 12; at least 3)")
     p.add_argument("--pairs", default=None, help="solve from a JSON file of collected pairs: "
                    "[{\"world_T_flange\": 4x4 mm, \"camera_T_target\": 4x4 mm}, ...] (what --save-pairs writes)")
     p.add_argument("--live", action="store_true", help="drive a running cell (controller, gateway, robot, "
@@ -103,7 +103,7 @@ def run(args) -> int:
             cfg = load_cfg(args)
             if not rig_path.exists():
                 rig = cfg.rig()
-            A, B, notes = collect_live(cfg, rig, args.poses or 10, args.timeout)
+            A, B, notes = collect_live(cfg, rig, args.poses or 12, args.timeout)
             _save_pairs(args.save_pairs, A, B)
             result = solve_ax_yb(A, B)
             report = [f"hand-eye on the live cell {cfg.runtime.cell}: {len(A)} poses collected",

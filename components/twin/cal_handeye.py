@@ -39,7 +39,7 @@ from .worlds import World
 
 __all__ = ["calibrate_hand_eye_on_twin", "DEFAULT_POSES"]
 
-DEFAULT_POSES = 10
+DEFAULT_POSES = 12
 # The TOB sits on a fixture: no hand holds it (whatever the world's operator does).
 FIXTURE = {"operator": {"tremor_mm": 0.0, "tremor_deg": 0.0}}
 STEP_S = 0.05  # how often the collector is asked for its next command (twin time)
