@@ -14,7 +14,7 @@ the translations by linear least squares), then nonlinear least squares
 (``scipy.optimize.least_squares``) on each pose's rotation and translation residual of
 ``B_i`` against ``inv(X) inv(A_i) Y``, each camera axis weighted by its own spread. The
 1-sigma of X is the larger of the Gauss-Newton covariance (scaled by the residuals) and
-the jackknife's (leave one pose out; from 5 poses). When the installed
+the jackknife's (leave one pose out; from 4 poses). When the installed
 OpenCV has them (4.x; 5.0 does not export them) ``cv2.calibrateRobotWorldHandEye``
 (AX = ZB) and ``cv2.calibrateHandEye`` (AX = XB on relative motions) cross-check X.
 
@@ -263,7 +263,7 @@ def solve_ax_yb(world_T_flange_mm, camera_T_target_mm, *, outlier_factor: float 
             except HandEyeError:
                 pass  # without it the motion degenerates: keep every pose
     sigma = _x_sigma(X, cov)
-    if used.sum() >= 5:
+    if used.sum() >= 4:
         # Per-pose errors of a real measurement are not independent noise (a pose's bias
         # stays however long it is averaged), so the Gauss-Newton sigma can be too small:
         # take the larger of it and the jackknife's (leave one pose out).
