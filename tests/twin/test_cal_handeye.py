@@ -126,3 +126,23 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, cli_
     err = [s for s in capsys.readouterr().err.splitlines() if s.strip()]
     assert len(err) == 1 and message in err[0], err
     assert rig.read_bytes() == before and not (tmp_path / "rig.toml.bak").exists()
+
+
+def test_the_puma_check_drops_moves_through_the_wrist_singularity():
+    from humanpt.calibration.handeye import plan_poses
+    from humanpt.twin.cal_handeye import puma_move_check
+    from humanpt.twin.run import SystemConfig
+    from humanpt.twin.system import puma_cores
+    from humanpt.twin.world import start_flange_for
+
+    cfg = SystemConfig.for_scenario("static")
+    start = start_flange_for(cfg.operator, 600.0, cfg.sim_camera.flange_T_camera)
+    _, gateway = puma_cores(start)
+    check = puma_move_check(gateway.world_T_base_mm_deg)
+    unchecked, _ = plan_poses(start, Rig().hand_eye.flange_T_camera_mm(), 600.0, n_poses=12, seed=0)
+    refused = [check(start, p) for p in unchecked[1:]]
+    # tilts of 10-20 deg from the Puma's start (q5 = 25 deg) cross the wrist singularity
+    assert any(r and "singularity" in r for r in refused)
+    checked, notes = plan_poses(start, Rig().hand_eye.flange_T_camera_mm(), 600.0, n_poses=12, seed=0, check=check)
+    assert len(checked) == 12 and any("singularity" in n for n in notes)
+    assert all(check(a, b) is None for a, b in zip(checked[:-1], checked[1:], strict=True))
