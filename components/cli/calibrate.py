@@ -12,6 +12,7 @@ TOOLS = {
     "tip": "calibrate_tip",
     "psvs": "calibrate_psvs",
     "mirrors": "calibrate_psvs",
+    "hand-eye": "calibrate_handeye",
 }
 
 

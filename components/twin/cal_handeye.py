@@ -1,0 +1,204 @@
+"""Hand-eye calibration (AX = YB) observed on the lock-step twin.
+
+The twin's world (:class:`humanpt.twin.worlds.World`) with the simulated Puma behind the
+ALTER link (sim_robot + alter_gateway), the TOB on a fixture (the static scenario, without
+the operator's tremor: nobody holds it) and the pipeline (perception, pose filter,
+controller) on the given rig. The robot moves itself through poses planned around the
+target (:func:`humanpt.calibration.handeye.plan_poses`) with the controller's ``playback``
+verb, waits still, and averages perception's ``camera_T_tob`` and the gateway's robot
+state (:class:`humanpt.calibration.handeye.PoseCollector`). The estimate uses only what a
+real cell has (robot states, measurements, the rig); the world's true hand-eye is read
+only to report the error against it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from humanpt.calibration.handeye import (
+    CollectorSettings,
+    HandEyeError,
+    HandEyeResult,
+    PoseCollector,
+    plan_poses,
+    pose_difference,
+    solve_ax_yb,
+)
+from humanpt.geometry.rig import Rig
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose, header
+
+from .run import SystemConfig
+from .system import build_system
+from .worlds import World
+
+__all__ = ["calibrate_hand_eye_on_twin", "DEFAULT_POSES"]
+
+DEFAULT_POSES = 12
+# The TOB sits on a fixture: no hand holds it (whatever the world's operator does).
+FIXTURE = {"operator": {"tremor_mm": 0.0, "tremor_deg": 0.0}}
+STEP_S = 0.05  # how often the collector is asked for its next command (twin time)
+
+
+def _mm(T_m: np.ndarray) -> np.ndarray:
+    T = np.array(T_m, dtype=float)
+    T[:3, 3] *= 1e3
+    return T
+
+
+def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
+                               *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
+                               max_twin_s: float = 240.0, world_overrides: dict | None = None,
+                               pairs_out: str | None = None) -> tuple[HandEyeResult, list[str], list[str]]:
+    """Calibrate the hand-eye transform on the twin: ``world`` (the truth), ``rig`` (what
+    the pipeline believes; its hand-eye is only the planning guess), ``seed`` (camera
+    noise). ``progress(poses done, poses planned)`` after each pose. ``n_poses``: poses
+    planned (the start pose included). ``world_overrides``: extra {section: {key: value}}
+    of the twin (tests: a robot that cannot reach). ``pairs_out``: also write the collected
+    pairs there (JSON, what ``humanpt calibrate hand-eye --pairs`` reads).
+
+    Returns (result, report lines, truth lines: the estimate against the world's true
+    ``flange_T_camera``). Raises :class:`HandEyeError` when too few poses were collected
+    or the motion is degenerate; nothing is written anywhere."""
+    from humanpt.twin.worlds import merge_overrides
+
+    cfg = SystemConfig.for_scenario("static", seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
+                                    rig=rig, world=world)
+    sys_ = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma", rig=rig,
+                        sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
+                        keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
+    ls = sys_.lockstep
+    t_wall = time.perf_counter()
+    try:
+        # Let the servo settle on the target, then plan from where the robot says it is.
+        sys_.run_for(1.0)
+        start = None
+        for o in ls.outputs:
+            if o.topic == "alter_gateway/robot_state":
+                start = _mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
+            elif o.topic == "alter_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
+                raise HandEyeError(f"the robot faulted before the calibration could start "
+                                   f"({pb.Event.FromString(o.data).text}); nothing written")
+        ls.outputs.clear()
+        if start is None:
+            raise HandEyeError("no robot state from the gateway in the first second: is the robot up?")
+        gateway = next(c for c in ls.cores if c.name == "alter_gateway").config
+        poses, plan_notes = plan_poses(start, rig.hand_eye.flange_T_camera_mm(), cfg.controller.dz_mm,
+                                       n_poses=n_poses, envelope_min_mm=gateway.envelope_min_mm,
+                                       envelope_max_mm=gateway.envelope_max_mm,
+                                       check=puma_move_check(gateway.world_T_base_mm_deg), seed=seed)
+        collector = PoseCollector(poses, transform_from_x(np.asarray(cfg.controller.flange_T_tool_x)), settings)
+        cmd = collector.start(ls.now_ns)
+        end_ns = ls.now_ns + round(max_twin_s * 1e9)
+        finished = 0
+        while True:
+            if cmd is not None:
+                ls.inject(ls.now_ns, "controller", "console/command",
+                          pb.Command(header=header(ls.now_ns), component="controller", verb=cmd[0],
+                                     args_json=json.dumps(cmd[1])))
+            if collector.done:
+                break
+            if ls.now_ns >= end_ns:
+                collector.stop(f"out of time ({max_twin_s:g} s of twin time)")
+                continue
+            sys_.run_for(STEP_S)
+            _feed(collector, ls.outputs)
+            ls.outputs.clear()  # the images are not needed once measured
+            cmd = collector.poll(ls.now_ns)
+            if progress is not None and collector.progress()[0] != finished:
+                finished = collector.progress()[0]
+                progress(*collector.progress())
+        twin_s = ls.now_ns * 1e-9
+    finally:
+        sys_.close()
+    wall_s = time.perf_counter() - t_wall
+    notes = plan_notes + collector.notes
+    if collector.aborted:
+        raise HandEyeError(f"collection stopped: {collector.aborted}; nothing written")
+    samples = collector.samples
+    if len(samples) < 3:
+        why = "; ".join(notes[-3:]) or "no pose measured"
+        raise HandEyeError(f"too few poses collected: {len(samples)} of {len(poses)} ({why}); AX = YB needs at least "
+                           "3 with rotations about two axes; nothing written")
+    A = np.array([s.world_T_flange_mm for s in samples])
+    B = np.array([s.camera_T_target_mm for s in samples])
+    if pairs_out:
+        from pathlib import Path
+
+        Path(pairs_out).write_text(json.dumps([{"world_T_flange": a.tolist(), "camera_T_target": b.tolist()}
+                                               for a, b in zip(A, B, strict=True)], indent=1))
+    result = solve_ax_yb(A, B)
+    report = [f"hand-eye on the twin (world {world.name}, seed {seed}): {len(samples)} of {len(poses)} poses "
+              f"collected in {twin_s:.1f} s of twin time ({wall_s:.1f} s wall)"]
+    report += [f"  {n}" for n in notes]
+    report += ["  pose  measurements  spread mm (camera_T_target about its mean)"]
+    report += [f"  {s.index:4d}  {s.measurements:12d}  {s.spread_mm:.4f}" for s in samples]
+    report += result.summary_lines()
+    truth = sys_.camera.config.flange_T_camera  # the world's truth: reported, never estimated from
+    return result, report, truth_lines(result, truth, rig)
+
+
+def puma_move_check(world_T_base_mm_deg, model: str = "puma762", min_wrist_deg: float = 8.0,
+                    max_step_deg: float = 3.0, samples: int = 40) -> Callable[[np.ndarray, np.ndarray], str | None]:
+    """The robot's own test of a planned move (the nominal Puma model where the gateway
+    believes the base is, as a real cell's planner would use its robot's model): the
+    straight move from one flange pose to the next (world, mm) must stay reachable, keep
+    the wrist (q5) ``min_wrist_deg`` from its singularity and never jump more than
+    ``max_step_deg`` in a joint between ``samples`` points (a branch flip)."""
+    from humanpt.geometry.transforms import interpolate_transform, invert_transform
+    from humanpt.sim_robot.config import SimRobotConfig
+    from humanpt.sim_robot.kinematics import UnreachableError
+
+    robot = SimRobotConfig(model=model)
+    kin = robot.kinematics()
+    base_T_world = invert_transform(transform_from_x(np.asarray(world_T_base_mm_deg, dtype=float)))
+    q_home = robot.start_joints_rad()
+
+    def check(a: np.ndarray, b: np.ndarray) -> str | None:
+        try:
+            q = kin.inverse(base_T_world @ a, q_home)
+            for s in np.linspace(0.0, 1.0, samples)[1:]:
+                qn = kin.inverse(base_T_world @ interpolate_transform(a, b, s), q)
+                if np.degrees(np.abs(qn - q)).max() > max_step_deg:
+                    return "the move flips a joint (a singularity on the way)"
+                if abs(np.degrees(qn[4])) < min_wrist_deg:
+                    return f"the move passes within {min_wrist_deg:g} deg of the wrist singularity"
+                q = qn
+        except UnreachableError as e:
+            return f"unreachable ({e})"
+        return None
+
+    return check
+
+
+def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig: Rig) -> list[str]:
+    """The estimate and the rig's value against the twin's true hand-eye."""
+    dt, da = pose_difference(result.flange_T_camera_mm, np.asarray(true_flange_T_camera_mm, dtype=float))
+    dt0, da0 = pose_difference(rig.hand_eye.flange_T_camera_mm(), np.asarray(true_flange_T_camera_mm, dtype=float))
+    x = x_from_transform(np.asarray(true_flange_T_camera_mm, dtype=float))
+    return [f"against the twin's truth: flange_T_camera true = [{', '.join(f'{v:.4f}' for v in x)}] (mm, deg)",
+            f"  estimate off by {dt:.4f} mm, {da:.4f} deg (acceptance: 0.2 mm, 0.05 deg); "
+            f"the rig before was off by {dt0:.4f} mm, {da0:.4f} deg"]
+
+
+def _feed(collector: PoseCollector, outputs) -> None:
+    for o in outputs:
+        if o.topic == "alter_gateway/robot_state":
+            msg = pb.RobotState.FromString(o.data)
+            collector.on_robot_state(o.t_ns, _mm(from_pose(msg.world_T_flange)))
+        elif o.topic == "perception/tob":
+            msg = pb.TobMeasurement.FromString(o.data)
+            full = msg.status == pb.TOB_STATUS_FULL
+            collector.on_measurement(o.t_ns, _mm(from_pose(msg.camera_T_tob)) if full else None)
+        elif o.topic == "alter_gateway/events":
+            msg = pb.Event.FromString(o.data)
+            if msg.code == "robot_fault":
+                collector.end(f"the robot faulted ({msg.text})")
+        elif o.topic == "controller/events":
+            msg = pb.Event.FromString(o.data)
+            collector.on_controller_event(o.t_ns, msg.code, msg.text)
