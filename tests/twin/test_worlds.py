@@ -99,7 +99,7 @@ def test_demo_runs_a_realistic_world_and_keeps_rig_and_world(tmp_path):
     r = run_cli("demo", "--lockstep", "--world", "realistic", "--duration", "6", "--run-dir", str(tmp_path),
                 timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
-    assert f"world realistic ({len(ERROR_SOURCES)} error sources" in r.stdout and "recorded path of G" in r.stdout, r.stdout
+    assert f"world realistic ({len(World.realistic().sources)} error sources" in r.stdout and "recorded path of G" in r.stdout, r.stdout
     assert load_world(tmp_path / "world.toml") == World.realistic().__class__(
         "realistic", World.realistic().sources, {})
     from humanpt.runtime.rigfile import load_rig
