@@ -28,7 +28,7 @@ not even a refinement - it is the paper's method, to be compared with OpenCV's.
    (the board's outer corners, one square beyond the inner ones, are dropped).
 
 The result is pixel-quantised (the mean of a few pixel centres): typically 0.2-0.5 px from
-the truth, against ~0.03 px for OpenCV's saddle-point refinement (README_camera.md).
+the truth, against ~0.03 px for OpenCV's saddle-point refinement (README.md).
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ Observability of the pan (the parameter that costs most): a pan of the left view
 shifts its image by ``-a_u w`` px, i.e. a disparity offset, which a baseline change mimics
 except for how it varies with depth; the target's known size at several depths separates
 the two, and at the working depth their *combination* (what the depth depends on) is
-measured directly by the target's size. See README_psvs.md for the measured figures.
+measured directly by the target's size. See README.md for the measured figures.
 """
 
 from __future__ import annotations

@@ -120,9 +120,14 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress) -> tuple[
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
                          stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
+                         robot: str = "standin",
                          progress: Callable[[str, float, float], None] | None = None) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
-    the nominal one). ``progress(stage, done, total)`` is called as each stage goes."""
+    the nominal one). ``progress(stage, done, total)`` is called as each stage goes.
+    ``robot`` teaches and plays back: ``standin`` (default) or ``puma``. (The simulated
+    Puma's wrist meets its singularity on the way from watching the seam, 700 mm off, to
+    welding it at every mounting tried: playing back on it needs a joint-space approach,
+    not the controller's straight line.)"""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
     op = operator_config(scenario, seed)
@@ -144,10 +149,10 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     mount = view.copy()
     mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
         _seam(cfg.operator).mean(axis=0) - first[:3, 3])
-    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma", rig=cfg.rig,
+    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
-                     mount_world_T_flange_mm=mount)
+                     mount_world_T_flange_mm=mount if robot == "puma" else None)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
@@ -171,7 +176,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         ctl = next(c for c in w.extra if isinstance(c, ControllerCore))
         tool_mm = ctl.flange_T_tool.copy()
         tool_mm[:3, 3] *= 1e3
-        n_before = len(w.outputs("sim_robot/truth"))
+        truth_topic = "sim_robot/truth"  # the stand-in publishes its truth there too
+        n_before = len(w.outputs(truth_topic))
         w.lockstep.inject(w.now_ns, "controller", "console/command",
                           pb.Command(header=header(w.now_ns), component="controller", verb="playback",
                                      args_json=json.dumps({"speed_mm_s": playback_speed_mm_s})))
@@ -187,7 +193,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
             new, seen = w.lockstep.outputs[seen:], len(w.lockstep.outputs)  # only what came since
             done = any(o.topic == "controller/events" and pb.Event.FromString(o.data).code == "playback_done"
                        for o in new)
-        truths = w.truths("sim_robot/truth")[n_before:]
+        truths = w.truths(truth_topic)[n_before:]
         tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
         # from the first time the tool reaches the path's start (after the approach)
         first = np.array([transform_from_x(taught[0])[:3, 3]])

@@ -47,7 +47,7 @@ def test_board_points_and_pattern():
 
 
 def test_charuco_is_in_this_opencv():
-    # cv2.aruco.CharucoBoard / CharucoDetector: OpenCV >= 4.7 and 5.0 (README_camera.md)
+    # cv2.aruco.CharucoBoard / CharucoDetector: OpenCV >= 4.7 and 5.0 (README.md)
     assert charuco_available()
 
 
