@@ -152,8 +152,8 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
     lines = ["calibration (estimates; against the twin's truth, which the tools never read)"]
     for s in res.stages:
         if s.ok:
-            lines += [f"  [{s.name}] {s.seconds:.0f} s"] + [f"    {r}" for r in s.report] + \
-                     [f"    truth: {t}" for t in s.truth]
+            lines += [f"  [{s.name}] {s.seconds:.0f} s"] + [f"    {r}" for r in s.report if _summary_line(r)] + \
+                     [f"    truth: {t.strip()}" for t in s.truth]
         else:
             lines.append(f"  [{s.name}] SKIPPED: {s.error} (the rig keeps its previous {s.name} values)")
     lines.append(f"  the rig now: {res.rig.methods()}")
@@ -177,6 +177,12 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
     lines.append(f"\ndone in {res.seconds:.0f} s" + (f"; recordings of the teach-and-play run: {res.run_dir}"
                                                      if res.run_dir else ""))
     return "\n".join(lines)
+
+
+def _summary_line(line: str) -> bool:
+    """A stage's report without its per-view / per-pose rows (the tool prints them all)."""
+    s = line.strip()
+    return bool(s) and not (s[0].isdigit() or s.startswith(("right-", "left-", "planned pose", "pose ", "view ")))
 
 
 def evaluate_format(stats) -> str:

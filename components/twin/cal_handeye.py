@@ -54,12 +54,15 @@ def _mm(T_m: np.ndarray) -> np.ndarray:
 def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
                                *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
                                max_twin_s: float = 240.0, world_overrides: dict | None = None,
-                               pairs_out: str | None = None) -> tuple[HandEyeResult, list[str], list[str]]:
+                               pairs_out: str | None = None, robot: str = "puma"
+                               ) -> tuple[HandEyeResult, list[str], list[str]]:
     """Calibrate the hand-eye transform on the twin: ``world`` (the truth), ``rig`` (what
     the pipeline believes; its hand-eye is only the planning guess), ``seed`` (camera
     noise). ``progress(poses done, poses planned)`` after each pose. ``n_poses``: poses
     planned (the start pose included). ``world_overrides``: extra {section: {key: value}}
-    of the twin (tests: a robot that cannot reach). ``pairs_out``: also write the collected
+    of the twin (tests: a robot that cannot reach). ``robot``: ``puma`` (the simulated Puma
+    behind the ALTER gateway, with the world's kinematics) or ``standin`` (exact kinematics,
+    no joints: the robot the teach-and-play run uses). ``pairs_out``: also write the collected
     pairs there (JSON, what ``humanpt calibrate hand-eye --pairs`` reads).
 
     Returns (result, report lines, truth lines: the estimate against the world's true
@@ -69,7 +72,7 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
 
     cfg = SystemConfig.for_scenario("static", seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
                                     rig=rig, world=world)
-    sys_ = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma", rig=rig,
+    sys_ = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=rig,
                         sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                         keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
     ls = sys_.lockstep
@@ -87,11 +90,16 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         ls.outputs.clear()
         if start is None:
             raise HandEyeError("no robot state from the gateway in the first second: is the robot up?")
-        gateway = next(c for c in ls.cores if c.name == "alter_gateway").config
+        if robot == "puma":
+            gateway = next(c for c in ls.cores if c.name == "alter_gateway").config
+            box = (gateway.envelope_min_mm, gateway.envelope_max_mm)
+            check = puma_move_check(gateway.world_T_base_mm_deg)
+        else:  # the stand-in: no joints; the demo's envelope around the start
+            box = (tuple(float(v) for v in start[:3, 3] - 900.0), tuple(float(v) for v in start[:3, 3] + 900.0))
+            check = None
         poses, plan_notes = plan_poses(start, rig.hand_eye.flange_T_camera_mm(), cfg.controller.dz_mm,
-                                       n_poses=n_poses, envelope_min_mm=gateway.envelope_min_mm,
-                                       envelope_max_mm=gateway.envelope_max_mm,
-                                       check=puma_move_check(gateway.world_T_base_mm_deg), seed=seed)
+                                       n_poses=n_poses, envelope_min_mm=box[0], envelope_max_mm=box[1],
+                                       check=check, seed=seed)
         collector = PoseCollector(poses, transform_from_x(np.asarray(cfg.controller.flange_T_tool_x)), settings)
         cmd = collector.start(ls.now_ns)
         end_ns = ls.now_ns + round(max_twin_s * 1e9)

@@ -29,6 +29,7 @@ import numpy as np
 
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
+from humanpt.controller.pathfile import smooth
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.operator.scenario import Trajectory
@@ -101,7 +102,7 @@ def _seam(op) -> np.ndarray:
     return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
 
 
-def _run_stage(name: str, world: World, rig: Rig, seed: int, progress) -> tuple[Rig, StageResult]:
+def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
     t0 = time.perf_counter()
     try:
@@ -110,7 +111,8 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress) -> tuple[
     except (ImportError, AttributeError) as e:
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
-        result, report, truth = fn(world, rig, seed, progress=progress)
+        kw = {"robot": robot} if name == "hand-eye" else {}  # calibrate the arm that will weld
+        result, report, truth = fn(world, rig, seed, progress=progress, **kw)
     except Exception as e:  # noqa: BLE001 - a failed stage is a result: the rig keeps what it had
         return rig, StageResult(name, False, time.perf_counter() - t0, error=f"{type(e).__name__}: {e}")
     date = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
@@ -120,7 +122,7 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress) -> tuple[
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
                          stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
-                         robot: str = "standin",
+                         robot: str = "standin", smooth_path: bool = True,
                          progress: Callable[[str, float, float], None] | None = None) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one). ``progress(stage, done, total)`` is called as each stage goes.
@@ -135,7 +137,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     results = []
     for name in stages:
         rig, res = _run_stage(name, world, rig, seed,
-                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None)
+                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot)
         results.append(res)
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, rig=rig, world=world,
@@ -167,7 +169,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           pb.Command(header=header(w.now_ns), component="controller", verb="record_stop"))
         w.run_for(0.1)
         start_ns = evaluate.scenario_start_ns(w)
-        _, x_g, x_tip = evaluate.path_points(w)
+        stamps, x_g, x_tip = evaluate.path_points(w)
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
         seam = _seam(cfg.operator)
@@ -178,9 +180,13 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         tool_mm[:3, 3] *= 1e3
         truth_topic = "sim_robot/truth"  # the stand-in publishes its truth there too
         n_before = len(w.outputs(truth_topic))
+        # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so
+        # that the hand's tremor is not played back.
+        points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
         w.lockstep.inject(w.now_ns, "controller", "console/command",
                           pb.Command(header=header(w.now_ns), component="controller", verb="playback",
-                                     args_json=json.dumps({"speed_mm_s": playback_speed_mm_s})))
+                                     args_json=json.dumps({"speed_mm_s": playback_speed_mm_s,
+                                                           "points": points.round(4).tolist()})))
         length_mm = float(np.sum(np.linalg.norm(np.diff(seam, axis=0), axis=1)))
         play_s = 15.0 + length_mm / playback_speed_mm_s
         t_play0 = w.now_ns
