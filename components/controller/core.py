@@ -370,6 +370,11 @@ class ControllerCore(Core):
         step, desired = self._goto(world_T_flange, target, v_ff=v)
         if step.error_translation_m < self.config.playback_max_lag_mm * 1e-3:
             pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * self.dt)
+        else:
+            # The carrot waits for the lagging robot: then no feed-forward either, or the
+            # robot would settle v / K past the waiting carrot (5 mm at 20 mm/s, K = 4/s),
+            # beyond the lag that lets the carrot go on: playback would never end.
+            step, desired = self._goto(world_T_flange, target)
         done = pb_["pos"] >= pb_["s"][-1] and step.error_translation_m < 0.1e-3
         return step, desired, done
 

@@ -178,3 +178,20 @@ def test_driver_calibration_recovers_the_twins_tip():
     core = next(c for c in w.extra if isinstance(c, ControllerCore))
     assert core.config.has_driver and np.allclose(core.rig.tip.tob_t_tip_mm, res["tob_t_tip_mm"], atol=1e-3)
     assert core.rig.tip.calibration.method == "pivot"
+
+
+def test_playback_ends_when_the_robot_lags_behind_the_carrot():
+    # A sluggish arm (first-order lag of 150 ms) falls more than playback_max_lag_mm behind
+    # the carrot on the way; the carrot then waits. With the path's feed-forward still on,
+    # the arm settled v / K = 5 mm past the waiting carrot for ever (found by the
+    # calibrate-then-teach demo in the realistic world); now the playback ends.
+    ctl = ControllerConfig(record_on_start=True, recording_delay_cycles=3, playback_speed_mm_s=40.0)
+    w = build_system("arc", seed=6, controller=ctl, robot_overrides={"standin_robot": {"lag_time_constant_ms": 150.0}})
+    w.run_for(9.0)
+    cmd = pb.Command(header=header(w.now_ns), component="controller", verb="playback",
+                     args_json=json.dumps({"speed_mm_s": 40.0}))
+    w.lockstep.inject(w.now_ns, "controller", "console/command", cmd)
+    w.run_for(30.0)
+    lag = [pb.ControllerStatus.FromString(o.data).error_translation_m for o in w.outputs("controller/status")]
+    assert max(lag) > ctl.playback_max_lag_mm * 1e-3  # it did fall behind (the case under test)
+    assert "playback_done" in [e.code for e in _events(w)]
