@@ -26,7 +26,8 @@ def add_parser(csub) -> None:
     q.add_argument("--rig", default="rig.toml", help="the rig file to update (created from the nominal rig if "
                    "absent; the old one kept as .bak) (default rig.toml)")
     q.add_argument("--dry-run", action="store_true", help="calibrate and report, write nothing")
-    q.add_argument("--samples", type=int, default=80, help="distinct poses to fit (default 80, >= 6)")
+    q.add_argument("--samples", type=int, help="distinct poses to fit (>= 6; default: 300 on the twin, the "
+                   "controller's calibration_samples live)")
     q.add_argument("--twin", action="store_true", help="on the digital twin instead of a live cell")
     q.add_argument("--world", default="ideal", help="twin: ideal, realistic or a world file (default ideal)")
     q.add_argument("--seed", type=int, default=0, help="twin: seed (default 0)")
@@ -51,7 +52,7 @@ def _live(args) -> TipResult:
         sub = con.session.declare_subscriber(topics.TOPICS["controller/events"].key(cfg.runtime.cell),
                                              lambda s: events.put(s.payload.to_bytes()))
         try:
-            if con.command("calibrate", {"samples": args.samples}) != 0:
+            if con.command("calibrate", {"samples": args.samples} if args.samples else {}) != 0:
                 raise ValueError("the controller refused to calibrate")
             print("pivot the target on its needle's tip now (turn it +-20 deg about two axes)", file=sys.stderr)
             deadline = time.monotonic() + args.timeout
@@ -72,7 +73,7 @@ def _live(args) -> TipResult:
 
 
 def run(args) -> int:
-    if args.samples < 6:
+    if args.samples is not None and args.samples < 6:
         raise ValueError("--samples must be >= 6 (the pivot fit has 6 unknowns)")
     rig_path = Path(args.rig)
     rig = _read_rig(rig_path)  # a bad rig fails before anything moves
@@ -82,7 +83,7 @@ def run(args) -> int:
 
         try:
             result, report, truth = calibrate_tip_on_twin(
-                World.named(args.world), rig, args.seed, args.samples,
+                World.named(args.world), rig, args.seed, args.samples or 300,
                 progress=lambda now, end: print(f"\r  twin {now:4.0f} / {end:.0f} s", end="", file=sys.stderr))
         except TipCalibrationError as e:
             print(file=sys.stderr)

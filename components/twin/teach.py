@@ -75,6 +75,7 @@ class TeachResult:
     stages: list[StageResult]
     rig: Rig
     taught_mm: np.ndarray  # (N,) tip of the taught path to the seam
+    smoothed_mm: np.ndarray  # (N,) the same after RTS smoothing (what is played back)
     played_mm: np.ndarray  # (M,) the tool's true position during playback to the seam
     taught_truth: evaluate.Stats | None  # the taught path against the truth at its stamps
     warnings: list[str]
@@ -183,6 +184,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so
         # that the hand's tremor is not played back.
         points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
+        smoothed_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in points]), seam)
         w.lockstep.inject(w.now_ns, "controller", "console/command",
                           pb.Command(header=header(w.now_ns), component="controller", verb="playback",
                                      args_json=json.dumps({"speed_mm_s": playback_speed_mm_s,
@@ -213,5 +215,5 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     finally:
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
-    return TeachResult(results, rig, taught_mm, played_mm, stats, warnings,
+    return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start)

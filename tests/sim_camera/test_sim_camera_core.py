@@ -285,12 +285,7 @@ def test_the_image_is_rendered_from_the_truth_interpolated_at_its_stamp_while_ac
 
 def test_motion_blur_hands_the_renderer_the_poses_at_the_start_and_end_of_the_exposure():
     """With ``motion_blur`` the core renders the exposure from the poses at its start and
-    end (the renderer integrates between them); this needs the renderer of issue 16's
-    optics work (end poses), so it runs once that is merged."""
-    import inspect
-
-    if "camera_T_tob_end" not in inspect.signature(Renderer.render).parameters:
-        pytest.skip("the renderer takes no end poses yet (issue 16, optics)")
+    end (the renderer integrates between them)."""
     cfg = SimCameraConfig(noise=False, exposure_ms=20.0, motion_blur=True)
     core = SimCameraCore(cfg)
     flange0 = np.eye(4)
