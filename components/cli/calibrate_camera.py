@@ -174,6 +174,7 @@ def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list
     """Capture views from the camera component: each line read (Enter) takes the NEXT frame
     of camera/image (the board has stopped moving by then), detects the board at once and
     says so; 'q' (or the end of the input) finishes and calibrates."""
+    import queue
     import threading
 
     import cv2
@@ -181,6 +182,7 @@ def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list
 
     from humanpt.cli.commands import load_cfg
     from humanpt.runtime.bus import open_tool_session
+    from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas import topics
 
     view = args.view or "right"
@@ -206,13 +208,37 @@ def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list
         save.mkdir(parents=True, exist_ok=True)
     images, dets = [], []
     other = "left" if view == "right" else "right"
-    print(f"live: {key}; cover the {other} mirror, hold the board still, Enter = capture, q = finish",
+    print(f"live: {key}; cover the {other} mirror, hold the board still, Enter (or `humanpt console capture`) "
+          "= capture, q (or `humanpt console capture --finish`) = finish",
           file=sys.stderr, flush=True)
+    # Enter / q at this terminal, or `humanpt console capture [--finish]` from any machine.
+    requests: queue.Queue = queue.Queue()
+    taken = threading.Event()  # the last request is done: read the next line (one at a time)
+    taken.set()
+
+    def read_lines() -> None:
+        for line in (sys.stdin if lines is None else lines):
+            requests.put(line)
+            taken.clear()
+            taken.wait()
+        requests.put(None)  # the end of the input: finish
+
+    def on_console(sample) -> None:
+        try:
+            cmd = pb.Command.FromString(sample.payload.to_bytes())
+        except Exception:  # noqa: BLE001 - a bad message on the bus is not ours to stop on
+            return
+        if cmd.component == "calibrate" and cmd.verb in ("capture", "finish"):
+            requests.put("q" if cmd.verb == "finish" else "\n")
+
     with open_tool_session(cfg.runtime) as session:
         sub = session.declare_subscriber(key, on_frame)
+        console = session.declare_subscriber(topics.TOPICS["console/command"].key(cfg.runtime.cell), on_console)
+        threading.Thread(target=read_lines, name="calibrate-input", daemon=True).start()
         try:
-            for line in (sys.stdin if lines is None else lines):
-                if line.strip().lower() in ("q", "quit"):
+            while True:
+                line = requests.get()
+                if line is None or line.strip().lower() in ("q", "quit"):
                     break
                 with cond:
                     seen = state["n"]
@@ -229,8 +255,10 @@ def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list
                     cv2.imwrite(str(save / f"{name}.png"), grey)
                 print(f"{name}: " + (f"board found ({len(d.image_px)} corners)" if d.image_px is not None
                                      else "no board") + f", edge blur {d.blur_px:.2f} px", file=sys.stderr, flush=True)
+                taken.set()  # this view is done: the next line may be read
         finally:
             sub.undeclare()
+            console.undeclare()
     if not images:
         raise CalibrationError("no frames captured (press Enter to capture a view)")
     h, w = images[0][1].shape

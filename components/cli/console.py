@@ -355,6 +355,21 @@ class Console:
             self.say(f"({comp} did not answer: its options are not shown)")
         return 0 if not missing else 1
 
+    def tell(self, verb: str, component: str) -> int:
+        """Publish a Command to a tool that answers on no topic (``humanpt calibrate camera
+        --live`` listens for ``capture``): it must be listening, else ConsoleError."""
+        deadline = time.monotonic() + self.timeout_s
+        while not self._pub.matching_status.matching:
+            if time.monotonic() > deadline:
+                raise ConsoleError(f"nobody listens to console/command in cell {self.cell} "
+                                   f"(is `humanpt calibrate camera --live` running?)")
+            time.sleep(0.05)
+        self._seq += 1
+        self._pub.put(pb.Command(header=pb.Header(stamp_ns=time.time_ns(), seq=self._seq), component=component,
+                                 verb=verb, args_json="{}").SerializeToString())
+        self.say(f"sent {verb!r} to {component}")
+        return 0
+
     def command(self, verb: str, args: dict | None = None, component: str = "controller") -> int:
         """Publish a Command and wait for the component's answering event."""
         events: queue.Queue = queue.Queue()
@@ -543,6 +558,14 @@ def _add_actions(asub) -> dict[str, str]:
     q.add_argument("--samples", type=int, help="N (default: the controller's calib-samples option)")
     q.add_argument("--pivot", metavar="X,Y,Z", help="P' in the world frame, mm")
     q = action(
+        "capture",
+        help="camera calibration: capture the next frame (humanpt calibrate camera --live)",
+        description="Tell a running `humanpt calibrate camera --live` to capture the camera's next "
+        "frame as a calibration view (as Enter at its terminal does); --finish ends the capture "
+        "and calibrates (as q does).",
+    )
+    q.add_argument("--finish", action="store_true", help="end the capture and calibrate")
+    q = action(
         "playback",
         help="replay the recorded path (or a path file) with the tool",
         description="The tool tip follows the path just recorded, or the path in FILE (a path "
@@ -619,6 +642,8 @@ def _do(con: Console, a) -> int:
 
             args["points"] = pathfile.read(a.file).points(a.point).tolist()
         return con.command("playback", args)
+    if v == "capture":
+        return con.tell("finish" if a.finish else "capture", component="calibrate")
     if v == "reset-fault":
         return con.command("reset_fault", {"operator": operator_name()}, component="alter_gateway")
     if v == "alter":

@@ -196,3 +196,61 @@ def test_live_without_a_camera_says_so(router, tmp_path, monkeypatch, capsys, ca
     assert calibrate("--live", "--config", cfg, "--rig", rig_file, "--frame-timeout-s", "0.5") == 2
     assert "no frame on humanpt/test/camera/image" in capsys.readouterr().err
     assert rig_file.read_bytes() == before
+
+
+def test_live_captures_on_the_consoles_capture_command(board_images, router, tmp_path, monkeypatch, calibrate):
+    """The issue's other way: `humanpt console capture` (from any machine) captures a view,
+    `capture --finish` ends; the terminal stays silent (its input never ends here)."""
+    import io
+    import threading
+
+    from humanpt.cli.console import Console
+    from humanpt.runtime.config import load
+    from humanpt.schemas.convert import image
+    from tests.conftest import wait_for, zenoh_client
+
+    port, cfg = router
+    views = _images(board_images)
+    current = {"k": 0}
+    stop = threading.Event()
+
+    def camera():
+        with zenoh_client(port) as s:
+            pub = s.declare_publisher("humanpt/test/camera/image")
+            while not stop.wait(0.02):
+                pub.put(image(views[current["k"]], 0).SerializeToString())
+
+    class Silent:
+        """A terminal nobody types at (until the test ends)."""
+
+        def __iter__(self):
+            stop.wait()
+            return iter(())
+
+    monkeypatch.setattr("sys.stdin", Silent())
+    rig_file, saved = tmp_path / "rig.toml", tmp_path / "saved"
+    result = {}
+    threads = [threading.Thread(target=camera, daemon=True),
+               threading.Thread(target=lambda: result.setdefault("rc", calibrate(
+                   "--live", "--config", cfg, "--rig", rig_file, "--save", saved)), daemon=True)]
+    for t in threads:
+        t.start()
+    said = io.StringIO()
+    con = Console(load(cfg), out=said)
+    try:
+        for k in range(len(views)):
+            current["k"] = k
+            seen = len(list(saved.glob("live-*.png"))) if saved.exists() else 0
+            con.tell("capture", component="calibrate")
+            wait_for(lambda s=seen: saved.exists() and len(list(saved.glob("live-*.png"))) > s, 20,
+                     f"view {k} captured")
+        con.tell("finish", component="calibrate")
+        threads[1].join(60)
+    finally:
+        con.close()
+        stop.set()
+        threads[0].join(5)
+    assert result.get("rc") == 0
+    assert len(list(saved.glob("live-*.png"))) == len(views)
+    assert load_rig(rig_file).psvs_calibration.method == "zhang"
+    assert said.getvalue().count("sent 'capture' to calibrate") == len(views)
