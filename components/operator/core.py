@@ -15,7 +15,8 @@ __all__ = ["OperatorCore"]
 
 class OperatorCore(Core):
     """On every tick: advance scenario time by the tick's duration x ``speed_scale`` (after
-    ``start_delay_s``), publish the pose there. Events: ``scenario_started``,
+    ``start_delay_s``), publish the pose there. Events: ``scenario_started`` (at the first
+    tick after the start delay: the target starts to move),
     ``scenario_done`` (when the last segment ends; the target then holds still)."""
 
     name = "operator"
@@ -30,6 +31,7 @@ class OperatorCore(Core):
         self.last_ns = 0
         self.scenario_t_s = 0.0
         self.done = False
+        self.started = False
 
     def tick_period_ns(self) -> int | None:
         return self.config.tick_period_ns
@@ -38,6 +40,10 @@ class OperatorCore(Core):
         out: list[Output] = []
         if self.first_ns is None:
             self.first_ns = self.last_ns = t_ns
+        if not self.started and t_ns - self.first_ns >= self.config.start_delay_s * 1e9:
+            # When the target starts to move (after the start delay), not when the operator
+            # came up: what "while the target moved" is measured from.
+            self.started = True
             s = self.scenario
             out.append(
                 self.event(

@@ -42,9 +42,9 @@ def test_static_truth_at_the_configured_rate():
         if o.topic == "operator/events"
     ]
     assert events == [
-        (0, "scenario_started"),
-        (2_000_000_000, "scenario_done"),
-    ]  # after the start delay
+        (2_000_000_000, "scenario_started"),  # when the target starts to move: after the delay
+        (2_000_000_000, "scenario_done"),  # (a still scenario is done at once)
+    ]
 
 
 def test_moves_after_the_start_delay_at_the_live_pace_and_says_when_done():
@@ -58,6 +58,9 @@ def test_moves_after_the_start_delay_at_the_live_pace_and_says_when_done():
     stamps = np.array([t.header.stamp_ns for t in truths]) / 1e9
     assert np.sum(stamps <= 0.5) == 51  # 0 ... 0.5 s
     assert np.allclose(tips[stamps <= 0.5], tips[0])  # holding still during the delay
+    started = [o.t_ns for o in ls.outputs if o.topic == "operator/events"
+               and pb.Event.FromString(o.data).code == "scenario_started"]
+    assert started == [500_000_000]  # said when the motion starts, not at the first tick
     speed = np.linalg.norm(np.diff(tips, axis=0), axis=1) / np.diff(stamps)
     mid = (stamps[1:] > 0.6) & (stamps[1:] < 1.4)
     fast = (stamps[1:] > 1.6) & (stamps[1:] < 2.5)
