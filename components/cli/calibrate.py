@@ -16,6 +16,22 @@ TOOLS = {
 }
 
 
+def add_rig_args(p) -> None:
+    """``--rig FILE`` and ``--dry-run``: every tool writes its part of one rig file."""
+    p.add_argument("--rig", default="rig.toml", metavar="FILE",
+                   help="the rig file to update (default rig.toml; created from the nominal rig if absent; the old "
+                   "one kept as .bak)")
+    p.add_argument("--dry-run", action="store_true", help="estimate and report, write nothing")
+
+
+def add_world_args(p) -> None:
+    """``--world`` and ``--seed`` of a tool's ``--twin``: one default for every tool (the
+    realistic world: what a tool is for), as ``humanpt demo --calibrate`` uses."""
+    p.add_argument("--world", default="realistic", metavar="ideal|realistic|ideal+SOURCE...|FILE",
+                   help="with --twin: the twin's world (default realistic; humanpt demo --help)")
+    p.add_argument("--seed", type=int, default=0, help="with --twin: the twin's seed (poses, noise; default 0)")
+
+
 def add_parsers(sub) -> None:
     p = sub.add_parser("calibrate", help="calibrate the cell: camera, psvs, mirrors, hand-eye, tip",
                        description="Calibrate the cell as the paper's HumanPT does: the camera (Zhang's method; "

@@ -19,6 +19,7 @@ from humanpt.calibration.camera import (
     detect_views,
     report_lines,
 )
+from humanpt.cli.calibrate import add_rig_args, add_world_args
 from humanpt.runtime.config import ConfigError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
@@ -45,9 +46,7 @@ def add_parser(csub) -> None:
                      "for a later --images run")
     src.add_argument("--twin", action="store_true", help="observe the digital twin (it renders the board through "
                      "the world's true optics and sensor; the estimate never reads its truth)")
-    src.add_argument("--world", default="realistic", metavar="ideal|realistic|FILE",
-                     help="the twin's world (default realistic)")
-    src.add_argument("--seed", type=int, default=0, help="the twin's seed: board poses and sensor noise")
+    add_world_args(src)
     src.add_argument("--views", type=int, default=20, metavar="N", help="board poses per view on the twin (20)")
     p.add_argument("--view", choices=("right", "left", "both"), default=None,
                    help="which virtual camera (twin default: both; --images default: right)")
@@ -70,9 +69,7 @@ def add_parser(csub) -> None:
     s.add_argument("--min-views", type=int, default=6, help="fewer usable views are refused (6)")
     s.add_argument("--max-blur-px", type=float, default=2.0, help="images with a larger edge blur are dropped (2 px)")
     s.add_argument("--min-coverage", type=float, default=0.35, help="fraction of the image the boards must cover")
-    p.add_argument("--rig", default="rig.toml", metavar="FILE",
-                   help="the rig file to update (created from the nominal rig if absent; the old one kept as .bak)")
-    p.add_argument("--dry-run", action="store_true", help="estimate and report, write nothing")
+    add_rig_args(p)
     lv = p.add_argument_group("live (--live)")
     lv.add_argument("--config", "-c", metavar="FILE", help="TOML config file ([runtime] cell and router)")
     lv.add_argument("--cell", help="cell name; overrides [runtime] cell")

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.cli.calibrate import add_rig_args, add_world_args
+
 __all__ = ["add_parser", "run"]
 
 
@@ -26,12 +28,9 @@ def add_parser(csub) -> None:
         "at each while still, and AX = YB (Zhuang et al. 1994; closed form, then least squares) gives "
         "flange_T_camera with its 1-sigma, written to the rig's [hand_eye]. OpenCV's calibrateRobotWorldHandEye "
         "and calibrateHandEye cross-check it when the installed OpenCV has them.")
-    p.add_argument("--rig", default="rig.toml", help="the rig file to update (created from the nominal rig if "
-                   "absent; the old one is kept as .bak)")
-    p.add_argument("--dry-run", action="store_true", help="estimate and report; write nothing")
+    add_rig_args(p)
     p.add_argument("--twin", action="store_true", help="observe the digital twin (its truth is only reported)")
-    p.add_argument("--world", default="realistic", help="the twin's world: ideal, realistic or a world file")
-    p.add_argument("--seed", type=int, default=0, help="the twin's seed")
+    add_world_args(p)
     p.add_argument("--poses", type=int, default=None, help="poses to plan (default 12; at least 3)")
     p.add_argument("--pairs", default=None, help="solve from a JSON file of collected pairs: "
                    "[{\"world_T_flange\": 4x4 mm, \"camera_T_target\": 4x4 mm}, ...] (what --save-pairs writes)")

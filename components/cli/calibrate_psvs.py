@@ -11,19 +11,18 @@ import datetime
 import sys
 from pathlib import Path
 
+from humanpt.cli.calibrate import add_rig_args, add_world_args
+
 TOOL_NAMES = ("psvs", "mirrors")
 
 
 def _common(p) -> None:
-    p.add_argument("--rig", default="rig.toml",
-                   help="the rig file to start from (default rig.toml; created from the nominal rig if absent)")
-    p.add_argument("--dry-run", action="store_true", help="estimate and report, write nothing")
+    add_rig_args(p)
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--twin", action="store_true", help="observe the digital twin (its truth only in the report)")
     src.add_argument("--recording", metavar="MCAP",
                      help="perception's recording (its perception/tob measurements) of the target at several depths")
-    p.add_argument("--world", default="ideal", help="with --twin: ideal, realistic or a world file (default ideal)")
-    p.add_argument("--seed", type=int, default=0, help="with --twin: the seed of the poses and the noise")
+    add_world_args(p)
     p.add_argument("--poses", type=int, default=36, help="with --twin: camera poses around the still target (default 36)")
     p.add_argument("--frames", type=int, default=6, help="with --twin: images per pose (default 6)")
 

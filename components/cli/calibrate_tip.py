@@ -13,6 +13,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from humanpt.calibration.tip import TipResult, apply_to_rig, tip_result_from_event
+from humanpt.cli.calibrate import add_rig_args, add_world_args
 from humanpt.geometry.rig import Rig
 from humanpt.runtime.rigfile import load_rig, write_rig
 
@@ -23,14 +24,11 @@ def add_parser(csub) -> None:
                         "operator keeps the needle's tip on a fixed point and turns the target about it; the "
                         "controller fits the tip (least-squares pivot) and this writes it into the rig's [tip]. "
                         "Live (--config: the running controller) or on the digital twin (--twin).")
-    q.add_argument("--rig", default="rig.toml", help="the rig file to update (created from the nominal rig if "
-                   "absent; the old one kept as .bak) (default rig.toml)")
-    q.add_argument("--dry-run", action="store_true", help="calibrate and report, write nothing")
+    add_rig_args(q)
     q.add_argument("--samples", type=int, help="distinct poses to fit (>= 6; default: 300 on the twin, the "
                    "controller's calibration_samples live)")
     q.add_argument("--twin", action="store_true", help="on the digital twin instead of a live cell")
-    q.add_argument("--world", default="ideal", help="twin: ideal, realistic or a world file (default ideal)")
-    q.add_argument("--seed", type=int, default=0, help="twin: seed (default 0)")
+    add_world_args(q)
     q.add_argument("--config", "-c", metavar="FILE", help="live: the cell's config file")
     q.add_argument("--timeout", type=float, default=120.0, help="live: seconds to wait for the result (default 120)")
 

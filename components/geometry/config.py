@@ -1,5 +1,6 @@
-"""The PSVS geometry as configuration keys (``[sim_camera.psvs]``, ``[perception.psvs]``):
-one dataclass, so the simulated camera and perception always mean the same thing."""
+"""The PSVS geometry as configuration keys: the rig's ``[psvs]`` (what the pipeline
+believes) and ``[sim_camera.psvs]`` (the twin's truth): one dataclass, so both always mean
+the same thing."""
 
 from __future__ import annotations
 

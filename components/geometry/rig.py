@@ -1,7 +1,9 @@
-"""The rig: where the PSVS sits on the flange, and where the servo wants the target.
+"""The rig: what the pipeline believes about the hardware (:class:`Rig`: the PSVS, the
+hand-eye transform, the target, the driver tip, each with how it was obtained), and where
+the servo wants the target. The file format: :mod:`humanpt.runtime.rigfile`.
 
-``DEFAULT_FLANGE_T_CAMERA_MM`` is the one default hand-eye transform (``F T_C`` of the
-paper, Section 4) that every component uses unless configured otherwise: the camera's
+``DEFAULT_FLANGE_T_CAMERA_MM`` is the nominal hand-eye transform (``F T_C`` of the
+paper, Section 4), the rig's default until hand-eye calibration writes another: the camera's
 axes parallel to the flange's (optical axis along the flange z axis) and its optical
 centre 60 mm off the tool axis along flange y and 100 mm out along flange z. The paper
 measures its own by hand-eye calibration [42]; this value is an assumption.
@@ -23,7 +25,13 @@ from humanpt.runtime.config import Deg, Mm, Range
 from .config import PsvsConfig
 from .psvs import PsvsParams
 from .target import TargetModel
-from .transforms import compose, invert_transform, make_transform
+from .transforms import (
+    compose,
+    invert_transform,
+    make_transform,
+    transform_from_x,
+    x_from_transform,
+)
 
 __all__ = [
     "RIG_VERSION",
@@ -103,8 +111,6 @@ class Calibration:
 
 
 def _x6(T: np.ndarray) -> tuple[float, ...]:
-    from .transforms import x_from_transform
-
     return tuple(float(v) for v in x_from_transform(T))
 
 
@@ -119,8 +125,6 @@ class HandEye:
 
     def flange_T_camera_mm(self) -> np.ndarray:
         """(4, 4), translation in mm."""
-        from .transforms import transform_from_x
-
         return transform_from_x(np.asarray(self.flange_T_camera_x, dtype=float))
 
     def flange_T_camera_m(self) -> np.ndarray:

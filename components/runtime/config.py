@@ -361,6 +361,18 @@ class ConfigFile:
         return build(cls, self.sections.get(name, {}), source=self.source, section=name)
 
 
+def read_toml(path: str | Path, kind: str = "config", hint: str = "") -> dict[str, Any]:
+    """A TOML file's tables; ConfigError ``FILE: no such <kind> file<hint>`` or ``FILE: not
+    valid TOML: ...`` (the config, rig and world files all read this way)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ConfigError(f"{p}: no such {kind} file{hint}")
+    try:
+        return tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+
+
 def load(path: str | Path | None, known_sections: Mapping[str, type] | None = None) -> ConfigFile:
     """Load and validate a TOML config file; ``None`` gives the defaults.
 
@@ -372,14 +384,8 @@ def load(path: str | Path | None, known_sections: Mapping[str, type] | None = No
         data: dict[str, Any] = {}
         source = "<defaults>"
     else:
-        p = Path(path)
-        source = str(p)
-        if not p.is_file():
-            raise ConfigError(f"{source}: no such config file")
-        try:
-            data = tomllib.loads(p.read_text())
-        except tomllib.TOMLDecodeError as e:
-            raise ConfigError(f"{source}: not valid TOML: {e}") from e
+        source = str(Path(path))
+        data = read_toml(path)
     return from_dict(data, source, known_sections)
 
 

@@ -188,10 +188,10 @@ class Core:
         """What every shell writes into this core's recording: the component, its core
         class and config, the rig (JSON) and the software version, plus ``extra``."""
         import humanpt
-        from humanpt.runtime.config import to_table as _table
+        from humanpt.runtime.registry import class_path  # (the registry imports this module)
 
-        meta: dict[str, Any] = {"component": self.name, "core": f"{type(self).__module__}:{type(self).__qualname__}",
-                                "config": _table(self.config), "version": humanpt.__version__, "shell": shell}
+        meta: dict[str, Any] = {"component": self.name, "core": class_path(type(self)),
+                                "config": to_table(self.config), "version": humanpt.__version__, "shell": shell}
         if self.rig is not None:
             from humanpt.runtime.rigfile import rig_to_json
 

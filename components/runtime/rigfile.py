@@ -28,6 +28,7 @@ queryable and in every MCAP's metadata (``rig``).
 from __future__ import annotations
 
 import json
+import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -37,7 +38,7 @@ import numpy as np
 from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.rig import RIG_VERSION, Calibration, HandEye, Rig, TargetGeometry, Tip
 from humanpt.geometry.transforms import x_from_transform
-from humanpt.runtime.config import ConfigError, build, dumps_toml, to_table
+from humanpt.runtime.config import ConfigError, build, dumps_toml, read_toml, to_table
 
 __all__ = ["load_rig", "rig_from_table", "rig_to_table", "rig_to_toml", "write_rig", "rig_to_json",
            "rig_from_json", "RIG_METADATA"]
@@ -50,8 +51,8 @@ _PARTS: dict[str, type] = {"psvs": PsvsConfig, "hand_eye": HandEye, "target": Ta
 
 def _calibration(table: Mapping[str, Any], source: str, section: str) -> Calibration:
     cal = build(Calibration, table, source=source, section=f"{section}.calibration")
+    names = {f for f in _PARTS[section].__dataclass_fields__ if f != "calibration"}
     for key in cal.sigma:
-        names = {f for f in _PARTS[section].__dataclass_fields__ if f != "calibration"}
         if key not in names:
             raise ConfigError(f"{source}: [{section}.calibration] sigma: {key!r} is not a field of "
                               f"[{section}] ({', '.join(sorted(names))})")
@@ -154,16 +155,8 @@ def rig_from_json(text: str, source: str = "<rig json>") -> Rig:
 
 def load_rig(path: str | Path) -> Rig:
     """Read and validate a rig file (ConfigError naming the file and the field)."""
-    import tomllib
-
-    p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"{p}: no such rig file (write the nominal one with `humanpt rig init {p}`)")
-    try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{p}: not valid TOML: {e}") from None
-    return rig_from_table(data, str(p))
+    data = read_toml(path, "rig", f" (write the nominal one with `humanpt rig init {path}`)")
+    return rig_from_table(data, str(Path(path)))
 
 
 def write_rig(path: str | Path, rig: Rig, comment: str = "", *, overwrite: bool = False) -> Path:
@@ -172,7 +165,7 @@ def write_rig(path: str | Path, rig: Rig, comment: str = "", *, overwrite: bool 
     then saved beside it as ``<name>.bak``."""
     p = Path(path)
     text = rig_to_toml(rig, comment)
-    rig_from_table(__import__("tomllib").loads(text), f"{p} (as written)")  # what we write reads back
+    rig_from_table(tomllib.loads(text), f"{p} (as written)")  # what we write reads back
     if p.exists():
         if not overwrite:
             raise FileExistsError(f"{p} exists (overwrite it with --overwrite; the old one is kept as "

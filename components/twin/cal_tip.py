@@ -23,17 +23,20 @@ from .run import SystemConfig
 from .system import build_system
 from .worlds import World
 
-__all__ = ["PIVOT_SCENARIO", "calibrate_tip_on_twin"]
+__all__ = ["pivot_scenario", "calibrate_tip_on_twin"]
 
-# The operator holds the needle's tip on a point of the table and turns the target about it,
-# +-20 deg about two axes, slowly (5 deg/s), as a welder would. The fit takes 300 poses
-# 0.5 deg apart: the hand's tremor averages out (80 poses 1.5 deg apart: 0.2-0.45 mm off
-# the true tip with 0.2 mm / 0.2 deg of tremor; 300: 0.08 mm).
-PIVOT_SCENARIO = """scenario pivot
-driver {x} {y} {z}
+def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0) -> str:
+    """The scenario text of a pivot: the operator holds the needle's tip (``driver_mm``, TOB
+    frame) on a point of the table and turns the target about it, +-20 deg about two axes,
+    slowly, as a welder would. At 5 deg/s (the default) the fit gets 300 poses 0.5 deg apart
+    and the hand's tremor averages out (80 poses 1.5 deg apart: 0.2-0.45 mm off the true tip
+    with 0.2 mm / 0.2 deg of tremor; 300: 0.08 mm)."""
+    x, y, z = driver_mm
+    return f"""scenario pivot
+driver {x:g} {y:g} {z:g}
 path tip
 start 236 1249 0 0 0 180
-angular_speed 5
+angular_speed {angular_speed_deg_s:g}
 dwell 1.5
 line 236 1249 0 20 0 180
 line 236 1249 0 20 20 180
@@ -54,7 +57,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
     """Pivot the twin's target (design driver ``driver_mm``, the world's true one may
     differ) and fit its tip with the pipeline on ``rig``. Returns (result, report lines,
     lines against the twin's truth). Raises TipCalibrationError when it does not finish."""
-    text = PIVOT_SCENARIO.format(x=driver_mm[0], y=driver_mm[1], z=driver_mm[2])
+    text = pivot_scenario(driver_mm)
     cfg = SystemConfig.for_scenario(OperatorConfig(scenario_text=text, start_delay_s=1.0), seed, rig=rig, world=world,
                                     controller=ControllerConfig(has_driver=False, calibration_samples=samples,
                                                                            calibration_min_spread_deg=0.5))

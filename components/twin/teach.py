@@ -147,11 +147,12 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
     # around the flange pose half way between the two, over the middle of the seam.
     view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
+    seam = _seam(cfg.operator)
     first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
     weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
     mount = view.copy()
     mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
-        _seam(cfg.operator).mean(axis=0) - first[:3, 3])
+        seam.mean(axis=0) - first[:3, 3])
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
@@ -173,7 +174,6 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         stamps, x_g, x_tip = evaluate.path_points(w)
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
-        seam = _seam(cfg.operator)
         taught_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in taught]), seam)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
         ctl = next(c for c in w.extra if isinstance(c, ControllerCore))

@@ -22,7 +22,6 @@ either lists the sources it switches on (``sources = ["focal", "tremor"]``, or
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Any
 
 from humanpt.geometry.psvs import virtual_rotation_from_mirror_tilt_deg
 from humanpt.geometry.rig import Rig
-from humanpt.runtime.config import ConfigError
+from humanpt.runtime.config import ConfigError, read_toml
 
 __all__ = ["WORLD_SECTIONS", "ErrorSource", "ERROR_SOURCES", "World", "load_world", "merge_overrides"]
 
@@ -192,12 +191,7 @@ class World:
 def load_world(path: str | Path) -> World:
     """Read a world file (see the module docstring); ConfigError naming the problem."""
     p = Path(path)
-    if not p.is_file():
-        raise ConfigError(f"{p}: no such world file")
-    try:
-        data = tomllib.loads(p.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as e:
-        raise ConfigError(f"{p}: not valid TOML: {e}") from None
+    data = read_toml(p, "world")
     name = data.pop("name", p.stem)
     sources = data.pop("sources", [])
     if sources == "all":

@@ -137,6 +137,21 @@ def test_charuco_detector():
     assert np.abs(proj - uv).max() < 1.0  # a binary synthetic image: no subpixel edges
 
 
+def _camera(port, views, current, stop):
+    """A camera component's stand-in: publishes ``views[current["k"]]`` on camera/image
+    every 20 ms until ``stop``; returns the function to run in a thread."""
+    from humanpt.schemas.convert import image
+    from tests.conftest import zenoh_client
+
+    def camera():
+        with zenoh_client(port) as s:
+            pub = s.declare_publisher("humanpt/test/camera/image")
+            while not stop.wait(0.02):
+                pub.put(image(views[current["k"]], 0).SerializeToString())
+
+    return camera
+
+
 def test_live_captures_the_next_frame_of_the_camera_on_each_enter(board_images, router, tmp_path, monkeypatch,
                                                                    capsys, calibrate):
     """--live over a real router: a publisher plays the camera (each of the 8 views in turn,
@@ -145,19 +160,12 @@ def test_live_captures_the_next_frame_of_the_camera_on_each_enter(board_images, 
     import io
     import threading
 
-    from humanpt.schemas.convert import image
-    from tests.conftest import zenoh_client
 
     port, cfg = router
     views = _images(board_images)
     current = {"k": 0}
     stop = threading.Event()
-
-    def camera():
-        with zenoh_client(port) as s:
-            pub = s.declare_publisher("humanpt/test/camera/image")
-            while not stop.wait(0.02):
-                pub.put(image(views[current["k"]], 0).SerializeToString())
+    camera = _camera(port, views, current, stop)
 
     t = threading.Thread(target=camera, daemon=True)
     t.start()
@@ -206,19 +214,13 @@ def test_live_captures_on_the_consoles_capture_command(board_images, router, tmp
 
     from humanpt.cli.console import Console
     from humanpt.runtime.config import load
-    from humanpt.schemas.convert import image
-    from tests.conftest import wait_for, zenoh_client
+    from tests.conftest import wait_for
 
     port, cfg = router
     views = _images(board_images)
     current = {"k": 0}
     stop = threading.Event()
-
-    def camera():
-        with zenoh_client(port) as s:
-            pub = s.declare_publisher("humanpt/test/camera/image")
-            while not stop.wait(0.02):
-                pub.put(image(views[current["k"]], 0).SerializeToString())
+    camera = _camera(port, views, current, stop)
 
     class Silent:
         """A terminal nobody types at (until the test ends)."""

@@ -16,6 +16,7 @@ from humanpt.operator import OperatorConfig
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
+from humanpt.twin.cal_tip import pivot_scenario
 from humanpt.twin.system import build_system, path_points, tracking_errors
 
 pytestmark = pytest.mark.timeout(300)
@@ -141,19 +142,7 @@ def test_playback_follows_the_recorded_path():
     assert len(d) > 100 and max(d) < 0.5, max(d)
 
 
-PIVOT = """scenario pivot
-driver 3 -2 62
-path tip
-start 236 1249 0 0 0 180
-angular_speed 10
-dwell 1.5
-line 236 1249 0 20 0 180
-line 236 1249 0 20 20 180
-line 236 1249 0 -20 20 160
-line 236 1249 0 -20 -20 200
-line 236 1249 0 20 -20 160
-line 236 1249 0 0 0 180
-"""
+PIVOT = pivot_scenario((3.0, -2.0, 62.0), angular_speed_deg_s=10.0)  # the twin's own pivot, faster
 
 
 def test_driver_calibration_recovers_the_twins_tip():
