@@ -91,8 +91,8 @@ def filter_errors(world, after_ns: int | None = None) -> FilterErrors:
                         codes.count("manoeuvre"), gap)
 
 
-def run_scenario(scenario, speed_mm_s: float = 0.0, *, seed: int = 0, pose_filter=None, robot: str = "puma",
-                 world: str = "ideal", tail_s: float = 0.5):
+def run_scenario(scenario, speed_mm_s: float = 0.0, *, seed: int = 0, pose_filter=None, perception=None,
+                 robot: str = "puma", world: str = "ideal", tail_s: float = 0.5):
     """The closed loop on the lock-step twin through ``scenario`` (a built-in name, scenario
     text, or an OperatorConfig) at ``speed_mm_s`` (a built-in's; 0: its default), to its end
     plus ``tail_s``; ``robot``: ``puma`` (as ``humanpt demo --lockstep``) or ``standin``;
@@ -107,7 +107,7 @@ def run_scenario(scenario, speed_mm_s: float = 0.0, *, seed: int = 0, pose_filte
         op = OperatorConfig(scenario_text=scenario, speed_mm_s=speed_mm_s)
     else:
         op = OperatorConfig(scenario=scenario, speed_mm_s=speed_mm_s)
-    base = {} if pose_filter is None else {"pose_filter": pose_filter}
+    base = {k: v for k, v in (("pose_filter", pose_filter), ("perception", perception)) if v is not None}
     cfg = SystemConfig.for_scenario(op, seed, world=World.named(world), **base)
     return run(cfg, robot=robot, duration_s=op.start_delay_s + scenario_duration_s(op) + tail_s).world
 

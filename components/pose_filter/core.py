@@ -16,6 +16,7 @@ as ``pose_filter/tob_state`` for that cycle (the controller re-commands the cycl
 
 from __future__ import annotations
 
+import math
 from collections import deque
 
 import numpy as np
@@ -23,7 +24,7 @@ import numpy as np
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
-from humanpt.pose_filter.kalman import PoseKalman
+from humanpt.pose_filter.kalman import PoseIMM, PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.schemas import humanpt_pb2 as pb
@@ -31,6 +32,7 @@ from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
 TOPIC_STATE = "pose_filter/tob_state"
 STILL_DRIFT_WINDOW = 15  # measurements (0.5 s at 30 images/s) whose mean offset shows a drift
+MANOEUVRE_EVENT_NS = 1_000_000_000  # at most one "manoeuvre" event per second
 
 
 class PoseFilterCore(Core):
@@ -49,8 +51,18 @@ class PoseFilterCore(Core):
         self._backwards = 0  # robot states in a row stamped before the latest one
         self._rejected_states: dict[str, int] = {}
         self._build(config)
-        self.kf = PoseKalman(self._accel, self._ang_accel)
+        self.kf: PoseIMM | PoseKalman = (
+            PoseIMM(self._noises, config.manoeuvre_every_s, config.manoeuvre_lasts_s) if config.imm
+            else PoseKalman(self._accel, self._ang_accel))
         self.rejects_in_a_row = 0
+        # The latest measurements gated out in a row (stamp ns, world_T_tob): the filter
+        # restarts on them only if they agree with each other (the target really jumped),
+        # never on a burst of inconsistent wrong poses (wrong pairings, reflections).
+        self._rejected: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=config.reset_after_rejects)
+        self._manoeuvring = False  # a manoeuvre mode probability above 0.5
+        self._manoeuvre_said_ns: int | None = None
+        self._manoeuvres_unsaid = 0
+        self.manoeuvres = 0
         self.gated_total = 0
         self.accepted = 0
         self.last_measurement_ns: int | None = None
@@ -74,7 +86,11 @@ class PoseFilterCore(Core):
         self.flange_T_camera_m = self.rig.hand_eye.flange_T_camera_m()
         self._accel = c.accel_sigma_mm_s2 * 1e-3
         self._ang_accel = np.radians(c.ang_accel_sigma_deg_s2)
-        self.R_pose = np.diag([(c.sigma_position_mm * 1e-3) ** 2] * 3 + [np.radians(c.sigma_rotation_deg) ** 2] * 3)
+        self._noises = ((self._accel, self._ang_accel),
+                        (c.manoeuvre_accel_sigma_mm_s2 * 1e-3, np.radians(c.manoeuvre_ang_accel_sigma_deg_s2)))
+        # Variances of a full pose in the camera frame: p across, across, along; r tilt, tilt, spin.
+        self._var_pose_camera = np.array([(c.sigma_position_mm * 1e-3) ** 2] * 2 + [(c.sigma_depth_mm * 1e-3) ** 2]
+                                         + [np.radians(c.sigma_rotation_deg) ** 2] * 2 + [np.radians(c.sigma_spin_deg) ** 2])
         self.R_position = np.eye(3) * (c.sigma_position_only_mm * 1e-3) ** 2
         # Zero-velocity pseudo-measurement noise: a still target's speed is ~0 to this.
         self.R_still = np.diag([(0.01e-3) ** 2] * 3 + [np.radians(0.01) ** 2] * 3)
@@ -82,9 +98,13 @@ class PoseFilterCore(Core):
 
     def on_config_changed(self, old, new) -> None:
         self._build(new)
+        if isinstance(self.kf, PoseIMM):
+            self.kf.set_noises(self._noises, new.manoeuvre_every_s, new.manoeuvre_lasts_s)
         for kf in (self.kf, self.still_kf):
-            if kf is not None:
+            if isinstance(kf, PoseKalman):
                 kf.accel_sigma, kf.ang_accel_sigma = self._accel, self._ang_accel
+        if new.reset_after_rejects != self._rejected.maxlen:
+            self._rejected = deque(self._rejected, maxlen=new.reset_after_rejects)
         if self.still_kf is not None:
             self.still_kf.q_scale = new.still_q_scale
 
@@ -224,7 +244,7 @@ class PoseFilterCore(Core):
         try:
             if msg.status == pb.TOB_STATUS_FULL:
                 world_T_tob = world_T_camera @ from_pose(msg.camera_T_tob)
-                return self._update_full(t_ns, stamp, world_T_tob)
+                return self._update_full(t_ns, stamp, world_T_tob, self._pose_noise(world_T_camera[:3, :3], msg.method))
             points = np.array([from_vector3(p) for p in msg.points_camera_m], dtype=float)
             if points.size == 0 or not np.all(np.isfinite(points)):
                 return []
@@ -233,7 +253,16 @@ class PoseFilterCore(Core):
         except MessageError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_measurement", str(e))]
 
-    def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray) -> list[Output]:
+    def _pose_noise(self, world_R_camera: np.ndarray, method: int) -> np.ndarray:
+        """(6, 6) covariance (m^2, rad^2, world frame) of a full pose measured by a camera
+        turned as ``world_R_camera`` with perception method ``method``."""
+        var = self._var_pose_camera * (self.config.paper_noise_scale ** 2 if method == pb.PERCEPTION_METHOD_PAPER else 1.0)
+        R = np.zeros((6, 6))
+        for k in (0, 3):
+            R[k:k + 3, k:k + 3] = (world_R_camera * var[k:k + 3]) @ world_R_camera.T
+        return R
+
+    def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray, R_pose: np.ndarray) -> list[Output]:
         if not self.kf.initialised:
             self.kf.reset(stamp, world_T_tob)
             self._end_still()
@@ -242,12 +271,12 @@ class PoseFilterCore(Core):
         if self.last_measurement_ns is not None and stamp - self.last_measurement_ns > self.config.lost_after_ms * 1e6:
             self._end_still()  # lost and found again: not known to be still any more
         self.kf.predict_to(stamp)
-        gate = self.kf.update_pose(world_T_tob, self.R_pose, self.config.gate_chi2_pose)
+        gate = self.kf.update_pose(world_T_tob, R_pose, self.config.gate_chi2_pose)
         # (The still check reads only the still filter and whether the moving one gated.)
         outs = self._check_still_moved(t_ns, stamp, world_T_tob, inside=gate.accepted)
-        outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, world_T_tob)
+        outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, (world_T_tob, R_pose))
         if gate.accepted:
-            outs += self._still_update(t_ns, stamp, world_T_tob)
+            outs += self._still_update(t_ns, stamp, world_T_tob, R_pose)
         return outs
 
     # -- a still target ---------------------------------------------------------------
@@ -299,14 +328,14 @@ class PoseFilterCore(Core):
         self._end_still()
         return [self.event(t_ns, pb.SEVERITY_INFO, "target_moving", "the still target moves: full motion model")]
 
-    def _still_update(self, t_ns: int, stamp: int, world_T_tob: np.ndarray) -> list[Output]:
+    def _still_update(self, t_ns: int, stamp: int, world_T_tob: np.ndarray, R_pose: np.ndarray) -> list[Output]:
         c = self.config
         if not c.still_detect:
             self._end_still()
             return []
         if self.still_kf is not None:
             self.still_kf.predict_to(stamp)
-            self.still_kf.update_pose(world_T_tob, self.R_pose, np.inf)
+            self.still_kf.update_pose(world_T_tob, R_pose, np.inf)
             self.still_kf.update_zero_velocity(self.R_still)
             return []
         v = self.kf.x[6:12]
@@ -320,7 +349,7 @@ class PoseFilterCore(Core):
         if stamp - self._slow_since_ns < c.still_after_ms * 1e6:
             return []
         self._off_in_a_row = 0
-        self.still_kf = self.kf.copy()
+        self.still_kf = self.kf.collapsed()
         self._pose_at_measurement = None
         self.still_kf.q_scale = c.still_q_scale
         self.still_kf.update_zero_velocity(self.R_still)
@@ -342,25 +371,68 @@ class PoseFilterCore(Core):
                                        self.config.gate_chi2_position)
         return moved + self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
 
-    def _after_gate(self, t_ns, stamp, gate, status, world_T_tob) -> list[Output]:
+    def _after_gate(self, t_ns, stamp, gate, status, pose) -> list[Output]:
+        """``pose``: (world_T_tob, its (6, 6) covariance) of a full measurement, or None."""
         if gate.accepted:
             self._accepted(stamp, status)
-            return []
+            return self._manoeuvre_event(t_ns)
         self.gated_total += 1
         self.rejects_in_a_row += 1
         outs = [self.event(t_ns, pb.SEVERITY_WARNING, "outlier",
                            f"measurement at {stamp} ns gated out (Mahalanobis^2 {gate.mahalanobis2:.1f}); "
                            f"{self.rejects_in_a_row} in a row")]
-        if self.rejects_in_a_row >= self.config.reset_after_rejects and world_T_tob is not None:
-            self.kf.reset(stamp, world_T_tob)
+        if pose is None:
+            return outs
+        self._rejected.append((stamp, *pose))
+        if self.rejects_in_a_row >= self.config.reset_after_rejects and self._consistent(self._rejected):
+            first_ns, first, _ = self._rejected[0]
+            self.kf.reset(first_ns, first)
+            for ts, T, R in list(self._rejected)[1:]:  # re-run them: it starts with their motion
+                self.kf.predict_to(ts)
+                self.kf.update_pose(T, R, math.inf)
             self._end_still()
             self._accepted(stamp, status)
             outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "filter_reset",
-                                   "the target moved beyond the gate repeatedly: filter restarted on it"))
+                                   f"the target moved beyond the gate {self.config.reset_after_rejects} times in a row, "
+                                   "consistently: filter restarted on it"))
         return outs
+
+    def _consistent(self, measurements) -> bool:
+        """Whether poses [(stamp ns, world_T_tob, covariance)] form one track: a
+        manoeuvring-model filter started on the first one gates none of the others out."""
+        c = self.config
+        (t0, T0, _), *rest = measurements
+        kf = PoseKalman(*self._noises[1])
+        kf.reset(t0, T0)
+        for ts, T, R in rest:
+            kf.predict_to(ts)
+            if not kf.update_pose(T, R, c.gate_chi2_pose).accepted:
+                return False
+        return True
+
+    def _manoeuvre_event(self, t_ns: int) -> list[Output]:
+        """``manoeuvre`` (info) when a manoeuvre mode becomes the likelier one: at most one a
+        second, counting those in between."""
+        if not isinstance(self.kf, PoseIMM):
+            return []
+        p_trans, p_rot = self.kf.manoeuvre_probability
+        now = max(p_trans, p_rot) > 0.5
+        started, self._manoeuvring = now and not self._manoeuvring, now
+        if not started:
+            return []
+        self.manoeuvres += 1
+        if self._manoeuvre_said_ns is not None and t_ns - self._manoeuvre_said_ns < MANOEUVRE_EVENT_NS:
+            self._manoeuvres_unsaid += 1
+            return []
+        what = " and ".join(w for w, p in (("moves", p_trans), ("turns", p_rot)) if p > 0.5)
+        more = f" ({self._manoeuvres_unsaid} more since the last report)" if self._manoeuvres_unsaid else ""
+        self._manoeuvre_said_ns, self._manoeuvres_unsaid = t_ns, 0
+        return [self.event(t_ns, pb.SEVERITY_INFO, "manoeuvre",
+                           f"the target {what} abruptly: the manoeuvring model follows it{more}")]
 
     def _accepted(self, stamp: int, status: int) -> None:
         self.rejects_in_a_row = 0
+        self._rejected.clear()
         self.accepted += 1
         self.last_measurement_ns = stamp
         self.last_status = status

@@ -15,6 +15,18 @@ constant-velocity transition, Q the discrete white-noise-acceleration model; fil
 
 A still target (see the core) is averaged by a copy of the filter that gets
 zero-velocity pseudo-measurements and a process noise scaled by ``q_scale``.
+
+:class:`PoseIMM` follows manoeuvres: an interacting multiple model (Blom and Bar-Shalom)
+of two constant-velocity models, calm and manoeuvring (a white acceleration as large as
+a hand's sudden start, stop or turn), each a filterpy ``KalmanFilter`` of the same state.
+The translation block (p, v) and the rotation block (r, w) of every model are
+uncorrelated (F, Q, H and R are block-diagonal between them), so each block has its own
+mode probabilities and is mixed on its own: a sudden turn of a steadily moving torch is a
+manoeuvre of the rotation only. Both models share the reference rotation, re-centred on
+the combined estimate after every update. (filterpy's ``IMMEstimator`` is not used: it
+mixes with a fixed switching matrix computed at the update, so neither a varying frame
+interval nor a gated measurement, after which the next prediction must start from the
+predicted mode probabilities, fits it; nor does its one set of mode probabilities.)
 """
 
 from __future__ import annotations
@@ -25,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from filterpy.kalman import KalmanFilter
+from scipy.special import logsumexp
 
 from humanpt.geometry.transforms import matrix_from_rotvec, rotvec_from_matrix
 
@@ -32,6 +45,10 @@ I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
 H_POSITION = np.hstack([I3, np.zeros((3, 9))])  # measures p only
 H_VELOCITY = np.hstack([np.zeros((6, 6)), np.eye(6)])  # "measures" v and w (zero-velocity update)
+# The translation (p, v) and rotation (r, w) blocks of the state, and their rows in a pose
+# measurement (p, r): the IMM mixes each on its own.
+BLOCKS = (np.array([0, 1, 2, 6, 7, 8]), np.array([3, 4, 5, 9, 10, 11]))
+MEAS_ROWS = (np.arange(0, 3), np.arange(3, 6))
 
 
 def _block_indices(blocks) -> tuple[np.ndarray, np.ndarray]:
@@ -179,6 +196,10 @@ class PoseKalman:
         self._recentre()
         self.version += 1
 
+    def collapsed(self) -> PoseKalman:
+        """A single-model filter in this state (as :meth:`PoseIMM.collapsed`): a copy."""
+        return self.copy()
+
     def copy(self) -> PoseKalman:
         """An independent filter in the same state."""
         other = PoseKalman.__new__(PoseKalman)
@@ -195,6 +216,211 @@ class PoseKalman:
         F = transition(dt)
         x = F @ self.x
         P = F @ self.P @ F.T + self.q_scale * process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
+        return self._transform(x), x[6:12].copy(), P
+
+    def predicted_pose(self, t_ns: int) -> np.ndarray:
+        """The world_T_tob of :meth:`predicted` alone."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
+        return self._transform(transition(dt) @ self.x)
+
+    def _transform(self, x: np.ndarray) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = self.rotation(x)
+        T[:3, 3] = x[0:3]
+        return T
+
+
+def switching_matrix(dt_s: float, calm_mean_s: float, manoeuvre_mean_s: float) -> np.ndarray:
+    """(2, 2) Markov mode transition over ``dt_s``: M[i, j] = P(mode j at the end | mode i
+    at the start), modes (calm, manoeuvre) lasting ``calm_mean_s`` / ``manoeuvre_mean_s``
+    on average (exponentially distributed)."""
+    to_manoeuvre = -math.expm1(-dt_s / calm_mean_s)
+    to_calm = -math.expm1(-dt_s / manoeuvre_mean_s)
+    return np.array([[1.0 - to_manoeuvre, to_manoeuvre], [to_calm, 1.0 - to_calm]])
+
+
+def _combine(mu: np.ndarray, xs: list[np.ndarray], Ps: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Moment-matched mixture: sum mu_j x_j and sum mu_j (P_j + dx_j dx_j^T)."""
+    x = sum(m * xj for m, xj in zip(mu, xs, strict=True))
+    P = sum(m * (Pj + np.outer(xj - x, xj - x)) for m, xj, Pj in zip(mu, xs, Ps, strict=True))
+    return x, P
+
+
+class PoseIMM:
+    """Filter of world_T_tob that follows manoeuvres (see the module docstring); the
+    interface of :class:`PoseKalman`. ``noises``: (accel m/s^2, angular accel rad/s^2) of
+    the calm and of the manoeuvring model; ``calm_mean_s`` / ``manoeuvre_mean_s``: how long
+    each mode lasts on average. ``x`` (12,), ``P`` (12, 12): the combined estimate;
+    ``mu`` (2 blocks, 2 modes): the mode probabilities of the translation and the rotation."""
+
+    def __init__(self, noises: tuple[tuple[float, float], tuple[float, float]], calm_mean_s: float,
+                 manoeuvre_mean_s: float, init_sd: np.ndarray | None = None):
+        self.noises = tuple(noises)
+        self.calm_mean_s, self.manoeuvre_mean_s = calm_mean_s, manoeuvre_mean_s
+        self.init_sd = np.repeat([0.01, 0.05, 0.3, 1.0], 3) if init_sd is None else init_sd
+        self.kfs = [KalmanFilter(dim_x=12, dim_z=6) for _ in self.noises]
+        self.mu = np.tile(self._stationary(), (2, 1))
+        self.R_ref = np.eye(3)
+        self.t_ns: int | None = None
+        self.version = 0
+        self._cache: tuple[int, np.ndarray, np.ndarray] | None = None
+
+    def _stationary(self) -> np.ndarray:
+        """The long-run share of each mode."""
+        calm, man = self.calm_mean_s, self.manoeuvre_mean_s
+        return np.array([calm, man]) / (calm + man)
+
+    # -- the combined estimate --------------------------------------------------------
+    def _combined(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._cache is None or self._cache[0] != self.version:
+            x, P = self._mix_blocks(self.mu, [kf.x for kf in self.kfs], [kf.P for kf in self.kfs])
+            self._cache = (self.version, x, P)
+        return self._cache[1], self._cache[2]
+
+    @staticmethod
+    def _mix_blocks(mu: np.ndarray, xs: list[np.ndarray], Ps: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        x, P = np.zeros(12), np.zeros((12, 12))
+        for b, idx in enumerate(BLOCKS):
+            xb, Pb = _combine(mu[b], [xj[idx] for xj in xs], [Pj[np.ix_(idx, idx)] for Pj in Ps])
+            x[idx] = xb
+            P[np.ix_(idx, idx)] = Pb
+        return x, P
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._combined()[0]
+
+    @property
+    def P(self) -> np.ndarray:
+        return self._combined()[1]
+
+    @property
+    def initialised(self) -> bool:
+        return self.t_ns is not None
+
+    @property
+    def manoeuvre_probability(self) -> tuple[float, float]:
+        """(translation, rotation): the probability that the target manoeuvres."""
+        return float(self.mu[0, 1]), float(self.mu[1, 1])
+
+    def set_noises(self, noises, calm_mean_s: float, manoeuvre_mean_s: float) -> None:
+        self.noises = tuple(noises)
+        self.calm_mean_s, self.manoeuvre_mean_s = calm_mean_s, manoeuvre_mean_s
+
+    # -- filtering -------------------------------------------------------------------
+    def reset(self, t_ns: int, world_T_tob: np.ndarray) -> None:
+        """Start again at a measured pose with zero velocity."""
+        for kf in self.kfs:
+            kf.x = np.zeros(12)
+            kf.x[0:3] = world_T_tob[:3, 3]
+            kf.P = np.diag(self.init_sd**2)
+        self.mu = np.tile(self._stationary(), (2, 1))
+        self.R_ref = world_T_tob[:3, :3].copy()
+        self.t_ns = int(t_ns)
+        self.version += 1
+
+    def predict_to(self, t_ns: int) -> None:
+        """Mix the models (per block) and advance each to ``t_ns`` (no-op for t_ns <= now);
+        the mode probabilities become the predicted ones."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
+        if dt <= 0:
+            return
+        M = switching_matrix(dt, self.calm_mean_s, self.manoeuvre_mean_s)
+        xs = [kf.x.copy() for kf in self.kfs]
+        Ps = [kf.P.copy() for kf in self.kfs]
+        for b, idx in enumerate(BLOCKS):
+            cbar = self.mu[b] @ M  # predicted mode probabilities
+            omega = M * self.mu[b][:, None] / cbar[None, :]  # omega[i, j] = P(was i | is j)
+            ix = np.ix_(idx, idx)
+            for j, kf in enumerate(self.kfs):
+                x0, P0 = _combine(omega[:, j], [xi[idx] for xi in xs], [Pi[ix] for Pi in Ps])
+                kf.x[idx] = x0
+                kf.P[ix] = P0
+            self.mu[b] = cbar
+        F = transition(dt)
+        for kf, (accel, ang_accel) in zip(self.kfs, self.noises, strict=True):
+            kf.predict(F=F, Q=process_noise(dt, accel, ang_accel))
+        self.t_ns = int(t_ns)
+        self.version += 1
+
+    def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
+        x = self.x if x is None else x
+        return matrix_from_rotvec(x[3:6]) @ self.R_ref
+
+    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+        """Update with a full pose; ``R_meas`` (6, 6) its covariance (m^2, rad^2), no
+        correlation between position and rotation."""
+        ys = []
+        for kf in self.kfs:
+            y = np.empty(6)
+            y[0:3] = world_T_tob[:3, 3] - kf.x[0:3]
+            y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation(kf.x).T, assume_valid=True)
+            ys.append(y)
+        return self._update(ys, H_POSE, R_meas, gate_chi2, blocks=(0, 1))
+
+    def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+        """Update the position only; ``R_meas`` (3, 3) in m^2."""
+        ys = [np.asarray(world_p_m, dtype=float) - kf.x[0:3] for kf in self.kfs]
+        return self._update(ys, H_POSITION, R_meas, gate_chi2, blocks=(0,))
+
+    def _update(self, ys: list[np.ndarray], H: np.ndarray, R: np.ndarray, gate_chi2: float,
+                blocks: tuple[int, ...]) -> Gate:
+        # Per block and model: the Mahalanobis distance and the log likelihood of the
+        # innovation. The measurement is inside the gate if, per block, the model it
+        # fits best puts it there: a real manoeuvre is not an outlier.
+        d2 = np.zeros((2, len(self.kfs)))
+        loglik = np.zeros((2, len(self.kfs)))
+        for j, (kf, y) in enumerate(zip(self.kfs, ys, strict=True)):
+            S = H @ kf.P @ H.T + R
+            for b in blocks:
+                rows = MEAS_ROWS[b]
+                Sb, yb = S[np.ix_(rows, rows)], y[rows]
+                d2[b, j] = float(yb @ np.linalg.solve(Sb, yb))
+                sign, logdet = np.linalg.slogdet(2.0 * math.pi * Sb)
+                loglik[b, j] = -0.5 * (d2[b, j] + logdet) if sign > 0 else -math.inf
+        best = float(sum(d2[b].min() for b in blocks))
+        if not best <= gate_chi2:  # a NaN distance is not inside the gate either
+            return Gate(False, best)
+        for kf, y in zip(self.kfs, ys, strict=True):
+            kf.update(H @ kf.x + y, R=R, H=H)
+        for b in blocks:
+            logmu = np.log(np.maximum(self.mu[b], 1e-300)) + loglik[b]
+            self.mu[b] = np.exp(logmu - logsumexp(logmu))
+        self._recentre()
+        return Gate(True, best)
+
+    def _recentre(self) -> None:
+        """The shared reference onto the combined rotation; each model's small rotation
+        re-expressed about it."""
+        self.version += 1
+        R_new = self.rotation()
+        for kf in self.kfs:
+            kf.x[3:6] = rotvec_from_matrix(self.rotation(kf.x) @ R_new.T, assume_valid=True)
+        self.R_ref = R_new
+        self.version += 1
+
+    def collapsed(self) -> PoseKalman:
+        """A single-model filter (the calm model's noise) in the combined state: where a
+        still target is averaged."""
+        calm = self.noises[0]
+        out = PoseKalman(calm[0], calm[1])
+        out.init_sd = self.init_sd.copy()
+        out.kf.x = self.x.copy()
+        out.kf.P = self.P.copy()
+        out.R_ref = self.R_ref.copy()
+        out.t_ns = self.t_ns
+        out._recentre()
+        return out
+
+    def predicted(self, t_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`PoseKalman.predicted`: (world_T_tob (4, 4) m, velocity (6,), covariance
+        (12, 12)) of the combined estimate at ``t_ns``, each model predicted on its own and
+        combined with the current mode probabilities; the filter is not changed."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
+        F = transition(dt)
+        xs = [F @ kf.x for kf in self.kfs]
+        Ps = [F @ kf.P @ F.T + process_noise(abs(dt), a, aa) for kf, (a, aa) in zip(self.kfs, self.noises, strict=True)]
+        x, P = self._mix_blocks(self.mu, xs, Ps)
         return self._transform(x), x[6:12].copy(), P
 
     def predicted_pose(self, t_ns: int) -> np.ndarray:

@@ -117,8 +117,10 @@ def test_uses_the_robot_pose_at_the_capture_stamp():
 
 
 def test_static_target_converges_and_smooths_noise():
-    # A calm process model (the target is still) and no prediction ahead: pure smoothing.
-    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0, predict_ahead_ms=0))
+    # A calm process model (the target is still), the noise the world below adds, and no
+    # prediction ahead: pure smoothing.
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0, predict_ahead_ms=0,
+                                           sigma_position_mm=0.3, sigma_depth_mm=0.3, sigma_rotation_deg=0.8, sigma_spin_deg=0.8))
     truth = T_m(TARGET_X)
     w = World(core, moving_flange, lambda t: truth, np.random.default_rng(3), sigma_mm=0.3, sigma_deg=0.8)
     w.run(0, 6_000_000_000)
