@@ -91,6 +91,8 @@ class PoseFilterCore(Core):
         # Variances of a full pose in the camera frame: p across, across, along; r tilt, tilt, spin.
         self._var_pose_camera = np.array([(c.sigma_position_mm * 1e-3) ** 2] * 2 + [(c.sigma_depth_mm * 1e-3) ** 2]
                                          + [np.radians(c.sigma_rotation_deg) ** 2] * 2 + [np.radians(c.sigma_spin_deg) ** 2])
+        self._var_pose_paper = np.array([(c.paper_sigma_position_mm * 1e-3) ** 2] * 3
+                                        + [np.radians(c.paper_sigma_rotation_deg) ** 2] * 3)
         self.R_position = np.eye(3) * (c.sigma_position_only_mm * 1e-3) ** 2
         # Zero-velocity pseudo-measurement noise: a still target's speed is ~0 to this.
         self.R_still = np.diag([(0.01e-3) ** 2] * 3 + [np.radians(0.01) ** 2] * 3)
@@ -256,7 +258,7 @@ class PoseFilterCore(Core):
     def _pose_noise(self, world_R_camera: np.ndarray, method: int) -> np.ndarray:
         """(6, 6) covariance (m^2, rad^2, world frame) of a full pose measured by a camera
         turned as ``world_R_camera`` with perception method ``method``."""
-        var = self._var_pose_camera * (self.config.paper_noise_scale ** 2 if method == pb.PERCEPTION_METHOD_PAPER else 1.0)
+        var = self._var_pose_paper if method == pb.PERCEPTION_METHOD_PAPER else self._var_pose_camera
         R = np.zeros((6, 6))
         for k in (0, 3):
             R[k:k + 3, k:k + 3] = (world_R_camera * var[k:k + 3]) @ world_R_camera.T
