@@ -7,6 +7,7 @@ import logging
 import sys
 
 from humanpt import __version__
+from humanpt.operator.scenario import BUILTIN_SCENARIOS
 from humanpt.runtime.config import ConfigError
 from humanpt.runtime.recording import RecordingError
 from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
@@ -54,8 +55,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "the same cores in one process on virtual time. Prints where the recordings and the path "
                        "file are, and an accuracy table against ground truth.")
     p.add_argument("--scenario", "-s",
-                   help="static, arc, trapezium, freehand, or a scenario file (default arc; with --calibrate "
+                   help=f"{', '.join(BUILTIN_SCENARIOS)}, or a scenario file (default arc; with --calibrate "
                    "trapezium)")
+    p.add_argument("--speed", type=float, metavar="MM_S",
+                   help="the operator's speed along a built-in scenario, mm/s (default: the scenario's, 20; "
+                   "issue 18's hard cases are meant for 20 and 60)")
     p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
     p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
     p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
