@@ -273,7 +273,11 @@ class PoseFilterCore(Core):
         if self.last_measurement_ns is not None and stamp - self.last_measurement_ns > self.config.lost_after_ms * 1e6:
             self._end_still()  # lost and found again: not known to be still any more
         self.kf.predict_to(stamp)
-        gate = self.kf.update_pose(world_T_tob, R_pose, self.config.gate_chi2_pose)
+        # Right after a gated measurement only the calm model may let one in: the manoeuvring
+        # model's reach grows with the gap (~20 mm after five frames), so a burst of wrong
+        # poses would get in; a real jump is caught by the restart on consistent rejects.
+        gate = self.kf.update_pose(world_T_tob, R_pose, self.config.gate_chi2_pose,
+                                   manoeuvre_gates=self.rejects_in_a_row == 0)
         # (The still check reads only the still filter and whether the moving one gated.)
         outs = self._check_still_moved(t_ns, stamp, world_T_tob, inside=gate.accepted)
         outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, (world_T_tob, R_pose))
@@ -370,7 +374,7 @@ class PoseFilterCore(Core):
             k = int(np.argmin(np.linalg.norm(world_sources - p, axis=1)))
             g.append(p - T_pred[:3, :3] @ self.tob_p_sources_m[k])
         gate = self.kf.update_position(np.mean(g, axis=0), self.R_position / len(g),
-                                       self.config.gate_chi2_position)
+                                       self.config.gate_chi2_position, manoeuvre_gates=self.rejects_in_a_row == 0)
         return moved + self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
 
     def _after_gate(self, t_ns, stamp, gate, status, pose) -> list[Output]:

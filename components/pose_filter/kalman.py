@@ -166,15 +166,18 @@ class PoseKalman:
         self.R_ref = self.rotation()
         self.kf.x[3:6] = 0.0
 
-    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
-        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2)."""
+    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
+                    manoeuvre_gates: bool = True) -> Gate:
+        """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2).
+        (``manoeuvre_gates``: as :meth:`PoseIMM.update_pose`; one model here.)"""
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
         y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation().T, assume_valid=True)
         return self._update(y, H_POSE, R_meas, gate_chi2)
 
-    def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+    def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
+                        manoeuvre_gates: bool = True) -> Gate:
         """Update the position only; ``R_meas`` (3, 3) in m^2."""
         y = np.asarray(world_p_m, dtype=float) - self.x[0:3]
         return self._update(y, H_POSITION, R_meas, gate_chi2)
@@ -231,12 +234,13 @@ class PoseKalman:
 
 
 def switching_matrix(dt_s: float, calm_mean_s: float, manoeuvre_mean_s: float) -> np.ndarray:
-    """(2, 2) Markov mode transition over ``dt_s``: M[i, j] = P(mode j at the end | mode i
-    at the start), modes (calm, manoeuvre) lasting ``calm_mean_s`` / ``manoeuvre_mean_s``
-    on average (exponentially distributed)."""
-    to_manoeuvre = -math.expm1(-dt_s / calm_mean_s)
-    to_calm = -math.expm1(-dt_s / manoeuvre_mean_s)
-    return np.array([[1.0 - to_manoeuvre, to_manoeuvre], [to_calm, 1.0 - to_calm]])
+    """(2, 2) mode transition over ``dt_s``: M[i, j] = P(mode j at the end | mode i at the
+    start), modes (calm, manoeuvre) lasting ``calm_mean_s`` / ``manoeuvre_mean_s`` on average
+    (a continuous-time Markov chain: over a long gap, the long-run shares)."""
+    a, b = 1.0 / calm_mean_s, 1.0 / manoeuvre_mean_s  # rates calm -> manoeuvre, manoeuvre -> calm
+    s = a + b
+    left = -math.expm1(-s * dt_s)  # 1 - exp(-s dt)
+    return np.array([[1.0 - a / s * left, a / s * left], [b / s * left, 1.0 - b / s * left]])
 
 
 def _combine(mu: np.ndarray, xs: list[np.ndarray], Ps: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -347,24 +351,27 @@ class PoseIMM:
         x = self.x if x is None else x
         return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
-    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+    def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
+                    manoeuvre_gates: bool = True) -> Gate:
         """Update with a full pose; ``R_meas`` (6, 6) its covariance (m^2, rad^2), no
-        correlation between position and rotation."""
+        correlation between position and rotation. ``manoeuvre_gates``: whether the
+        manoeuvring model may let the measurement in (else the calm one alone decides)."""
         ys = []
         for kf in self.kfs:
             y = np.empty(6)
             y[0:3] = world_T_tob[:3, 3] - kf.x[0:3]
             y[3:6] = rotvec_from_matrix(world_T_tob[:3, :3] @ self.rotation(kf.x).T, assume_valid=True)
             ys.append(y)
-        return self._update(ys, H_POSE, R_meas, gate_chi2, blocks=(0, 1))
+        return self._update(ys, H_POSE, R_meas, gate_chi2, (0, 1), manoeuvre_gates)
 
-    def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float) -> Gate:
+    def update_position(self, world_p_m: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
+                        manoeuvre_gates: bool = True) -> Gate:
         """Update the position only; ``R_meas`` (3, 3) in m^2."""
         ys = [np.asarray(world_p_m, dtype=float) - kf.x[0:3] for kf in self.kfs]
-        return self._update(ys, H_POSITION, R_meas, gate_chi2, blocks=(0,))
+        return self._update(ys, H_POSITION, R_meas, gate_chi2, (0,), manoeuvre_gates)
 
     def _update(self, ys: list[np.ndarray], H: np.ndarray, R: np.ndarray, gate_chi2: float,
-                blocks: tuple[int, ...]) -> Gate:
+                blocks: tuple[int, ...], manoeuvre_gates: bool) -> Gate:
         # Per block and model: the Mahalanobis distance and the log likelihood of the
         # innovation. The measurement is inside the gate if, per block, the model it
         # fits best puts it there: a real manoeuvre is not an outlier.
@@ -378,7 +385,8 @@ class PoseIMM:
                 d2[b, j] = float(yb @ np.linalg.solve(Sb, yb))
                 sign, logdet = np.linalg.slogdet(2.0 * math.pi * Sb)
                 loglik[b, j] = -0.5 * (d2[b, j] + logdet) if sign > 0 else -math.inf
-        best = float(sum(d2[b].min() for b in blocks))
+        gating = d2 if manoeuvre_gates else d2[:, :1]
+        best = float(sum(gating[b].min() for b in blocks))
         if not best <= gate_chi2:  # a NaN distance is not inside the gate either
             return Gate(False, best)
         for kf, y in zip(self.kfs, ys, strict=True):
