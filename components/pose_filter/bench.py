@@ -38,7 +38,7 @@ class FilterErrors:
     rot_deg: np.ndarray
     resets: int
     outliers: int
-    maneuvers: int
+    manoeuvres: int
     max_gap_ms: float  # longest interval between accepted measurements while moving
 
     def maxe(self) -> np.ndarray:
@@ -55,7 +55,7 @@ class FilterErrors:
         return (f"pos max {self.pos_mm.max():6.3f} rms {np.sqrt(np.mean(self.pos_mm ** 2)):6.3f} mm | "
                 f"rot max {rot.max():6.3f} rms {np.sqrt(np.mean(rot ** 2)):6.3f} deg | "
                 f"MaxE xyz {m[0]:.3f} {m[1]:.3f} {m[2]:.3f} mm ypr {m[3]:.3f} {m[4]:.3f} {m[5]:.3f} deg | "
-                f"resets {self.resets} outliers {self.outliers} manoeuvres {self.maneuvers} "
+                f"resets {self.resets} outliers {self.outliers} manoeuvres {self.manoeuvres} "
                 f"gap {self.max_gap_ms:.0f} ms; {np.count_nonzero(~self.full)} position-only")
 
 
