@@ -13,13 +13,14 @@ class PoseFilterConfig:
     """``[pose_filter]``: world_T_tob from measurements and robot states, Kalman-filtered.
     The hand-eye transform and the target's triangle come from the rig."""
 
-    # Measurement noise of a full pose, in the camera frame (a stereo pose is far less
-    # certain along the camera's axis and in its tilt than across the axis and about it),
-    # turned into the world with the camera's pose at the image. What the filter sees is
-    # the camera's noise plus the robot's pose at the image (its lag, the image stamps):
-    # in the twin's realistic world, closed loop, 1-sigma 0.05 mm across, 0.11 mm along,
-    # 0.5 deg tilt, 0.04 deg spin, with tails to 0.27 mm, 0.5 mm, 2 deg, 0.15 deg.
-    sigma_position_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.15, "1-sigma noise of a measured position across the camera's axis")
+    # Measurement noise of a full pose, in the camera frame, turned into the world with the
+    # camera's pose at the image: a stereo pose is far surer of its turn about the camera's
+    # axis than of its tilt. What the filter sees is the camera's noise plus the robot's
+    # pose at the image (its lag, the image stamps): in the twin's realistic world, closed
+    # loop, 1-sigma 0.05 mm across, 0.11 mm along, 0.5 deg tilt, 0.04 deg about the axis,
+    # with tails to 0.27 mm, 0.5 mm, 2 deg, 0.15 deg. A noise much below those lets the
+    # manoeuvring model follow the robot's lag (spikes of 1-3 mm on the realistic world).
+    sigma_position_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.3, "1-sigma noise of a measured position across the camera's axis")
     sigma_depth_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.3, "1-sigma noise of a measured position along the camera's axis")
     sigma_rotation_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.8, "1-sigma noise of a measured orientation about axes across the camera's axis (tilt)")
     sigma_spin_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.1, "1-sigma noise of a measured orientation about the camera's axis")
@@ -29,8 +30,8 @@ class PoseFilterConfig:
     paper_sigma_rotation_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.8, "1-sigma noise of an orientation measured by the paper's method")
     sigma_position_only_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(1.5, "1-sigma noise of a position from one or two sources")
     # Process noise: white acceleration (how hard the operator's hand can change speed).
-    accel_sigma_mm_s2: Annotated[float, Range(1e-3, 1e5, "mm/s^2")] = live(30.0, "white-acceleration noise of the target (hand)")
-    ang_accel_sigma_deg_s2: Annotated[float, Range(1e-3, 1e5, "deg/s^2")] = live(3.0, "white angular-acceleration noise (the hand turns smoothly)")
+    accel_sigma_mm_s2: Annotated[float, Range(1e-3, 1e5, "mm/s^2")] = live(100.0, "white-acceleration noise of the target (hand)")
+    ang_accel_sigma_deg_s2: Annotated[float, Range(1e-3, 1e5, "deg/s^2")] = live(10.0, "white angular-acceleration noise (the hand turns smoothly)")
     # Manoeuvres (an interacting multiple model): a second, manoeuvring model whose white
     # acceleration covers a hand's sudden start, stop, corner or turn; per block
     # (translation, rotation) the filter mixes the calm model above and this one by how

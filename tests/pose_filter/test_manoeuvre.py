@@ -154,12 +154,13 @@ def test_a_consistent_jump_is_still_reacquired_with_its_motion():
 
 
 def test_the_manoeuvre_event_is_rate_limited():
-    """A target that starts and stops every 0.2 s: a manoeuvre each time, at most one event
-    a second, the next one counting those not reported."""
+    """A target that starts and stops moving (60 mm/s) and turning (90 deg/s) every 0.2 s:
+    a manoeuvre each time, at most one event a second, the next one counting those not
+    reported."""
     def jerky(t_ns):
         k, rest = divmod(t_ns, 200_000_000)
-        x = 60.0 * 0.2 * (k // 2) + (60.0 * rest * 1e-9 if k % 2 else 0.0)
-        return T_m((TARGET_X[0] + x, *TARGET_X[1:]))
+        s = 0.2 * (k // 2) + (rest * 1e-9 if k % 2 else 0.0)  # seconds of motion so far
+        return T_m((TARGET_X[0] + 60 * s, TARGET_X[1], TARGET_X[2], TARGET_X[3] + 90 * s, *TARGET_X[4:]))
 
     core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
     w = World(core, still_flange, jerky, np.random.default_rng(8), **NOISE)
