@@ -28,6 +28,7 @@ class PoseFilterConfig:
     # are not white: its own isotropic noise (the values tuned for it before the above).
     paper_sigma_position_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(0.3, "1-sigma noise of a position measured by the paper's method")
     paper_sigma_rotation_deg: Annotated[float, Range(1e-4, 45, "deg")] = live(0.8, "1-sigma noise of an orientation measured by the paper's method")
+    paper_manoeuvres: bool = live(False, "follow manoeuvres with the paper's method too (its errors, to 3 deg, look like manoeuvres)")
     sigma_position_only_mm: Annotated[float, Range(1e-4, 100, "mm")] = live(1.5, "1-sigma noise of a position from one or two sources")
     # Process noise: white acceleration (how hard the operator's hand can change speed).
     accel_sigma_mm_s2: Annotated[float, Range(1e-3, 1e5, "mm/s^2")] = live(100.0, "white-acceleration noise of the target (hand)")

@@ -58,7 +58,7 @@ class PoseFilterCore(Core):
         # The latest measurements gated out in a row (stamp ns, world_T_tob): the filter
         # restarts on them only if they agree with each other (the target really jumped),
         # never on a burst of inconsistent wrong poses (wrong pairings, reflections).
-        self._rejected: deque[tuple[int, np.ndarray, np.ndarray]] = deque(maxlen=config.reset_after_rejects)
+        self._rejected: deque[tuple[int, np.ndarray, np.ndarray, bool]] = deque(maxlen=config.reset_after_rejects)
         self._manoeuvring = False  # a manoeuvre mode probability above 0.5
         self._manoeuvre_said_ns: int | None = None
         self._manoeuvres_unsaid = 0
@@ -246,7 +246,10 @@ class PoseFilterCore(Core):
         try:
             if msg.status == pb.TOB_STATUS_FULL:
                 world_T_tob = world_T_camera @ from_pose(msg.camera_T_tob)
-                return self._update_full(t_ns, stamp, world_T_tob, self._pose_noise(world_T_camera[:3, :3], msg.method))
+                # The paper's method's errors (to 3 deg, not white) look like manoeuvres.
+                calm_only = msg.method == pb.PERCEPTION_METHOD_PAPER and not self.config.paper_manoeuvres
+                return self._update_full(t_ns, stamp, world_T_tob, self._pose_noise(world_T_camera[:3, :3], msg.method),
+                                         calm_only)
             points = np.array([from_vector3(p) for p in msg.points_camera_m], dtype=float)
             if points.size == 0 or not np.all(np.isfinite(points)):
                 return []
@@ -264,9 +267,10 @@ class PoseFilterCore(Core):
             R[k:k + 3, k:k + 3] = (world_R_camera * var[k:k + 3]) @ world_R_camera.T
         return R
 
-    def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray, R_pose: np.ndarray) -> list[Output]:
+    def _update_full(self, t_ns: int, stamp: int, world_T_tob: np.ndarray, R_pose: np.ndarray,
+                     calm_only: bool = False) -> list[Output]:
         if not self.kf.initialised:
-            self.kf.reset(stamp, world_T_tob)
+            self.kf.reset(stamp, world_T_tob, calm_only)
             self._end_still()
             self._accepted(stamp, pb.TOB_STATUS_FULL)
             return [self.event(t_ns, pb.SEVERITY_INFO, "filter_start", "filter started on a full pose")]
@@ -277,10 +281,10 @@ class PoseFilterCore(Core):
         # model's reach grows with the gap (~20 mm after five frames), so a burst of wrong
         # poses would get in; a real jump is caught by the restart on consistent rejects.
         gate = self.kf.update_pose(world_T_tob, R_pose, self.config.gate_chi2_pose,
-                                   manoeuvre_gates=self.rejects_in_a_row == 0)
+                                   manoeuvre_gates=self.rejects_in_a_row == 0, calm_only=calm_only)
         # (The still check reads only the still filter and whether the moving one gated.)
         outs = self._check_still_moved(t_ns, stamp, world_T_tob, inside=gate.accepted)
-        outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, (world_T_tob, R_pose))
+        outs += self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_FULL, (world_T_tob, R_pose, calm_only))
         if gate.accepted:
             outs += self._still_update(t_ns, stamp, world_T_tob, R_pose)
         return outs
@@ -378,7 +382,7 @@ class PoseFilterCore(Core):
         return moved + self._after_gate(t_ns, stamp, gate, pb.TOB_STATUS_POSITION_ONLY, None)
 
     def _after_gate(self, t_ns, stamp, gate, status, pose) -> list[Output]:
-        """``pose``: (world_T_tob, its (6, 6) covariance) of a full measurement, or None."""
+        """``pose``: (world_T_tob, its (6, 6) covariance, calm_only) of a full measurement, or None."""
         if gate.accepted:
             self._accepted(stamp, status)
             return self._manoeuvre_event(t_ns)
@@ -391,11 +395,11 @@ class PoseFilterCore(Core):
             return outs
         self._rejected.append((stamp, *pose))
         if self.rejects_in_a_row >= self.config.reset_after_rejects and self._consistent(self._rejected):
-            first_ns, first, _ = self._rejected[0]
-            self.kf.reset(first_ns, first)
-            for ts, T, R in list(self._rejected)[1:]:  # re-run them: it starts with their motion
+            first_ns, first, _, calm = self._rejected[0]
+            self.kf.reset(first_ns, first, calm)
+            for ts, T, R, calm in list(self._rejected)[1:]:  # re-run them: it starts with their motion
                 self.kf.predict_to(ts)
-                self.kf.update_pose(T, R, math.inf)
+                self.kf.update_pose(T, R, math.inf, calm_only=calm)
             self._end_still()
             self._accepted(stamp, status)
             outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "filter_reset",
@@ -404,13 +408,13 @@ class PoseFilterCore(Core):
         return outs
 
     def _consistent(self, measurements) -> bool:
-        """Whether poses [(stamp ns, world_T_tob, covariance)] form one track: a
+        """Whether poses [(stamp ns, world_T_tob, covariance, calm_only)] form one track: a
         manoeuvring-model filter started on the first one gates none of the others out."""
         c = self.config
-        (t0, T0, _), *rest = measurements
+        (t0, T0, *_), *rest = measurements
         kf = PoseKalman(*self._noises[1])
         kf.reset(t0, T0)
-        for ts, T, R in rest:
+        for ts, T, R, _ in rest:
             kf.predict_to(ts)
             if not kf.update_pose(T, R, c.gate_chi2_pose).accepted:
                 return False

@@ -138,7 +138,7 @@ class PoseKalman:
     def initialised(self) -> bool:
         return self.t_ns is not None
 
-    def reset(self, t_ns: int, world_T_tob: np.ndarray) -> None:
+    def reset(self, t_ns: int, world_T_tob: np.ndarray, calm_only: bool = False) -> None:
         """Start again at a measured pose with zero velocity."""
         self.kf.x = np.zeros(12)
         self.kf.x[0:3] = world_T_tob[:3, 3]
@@ -167,9 +167,9 @@ class PoseKalman:
         self.kf.x[3:6] = 0.0
 
     def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
-                    manoeuvre_gates: bool = True) -> Gate:
+                    manoeuvre_gates: bool = True, calm_only: bool = False) -> Gate:
         """Update with a full pose; ``R_meas`` (6, 6) is its covariance (m^2, rad^2).
-        (``manoeuvre_gates``: as :meth:`PoseIMM.update_pose`; one model here.)"""
+        (``manoeuvre_gates``, ``calm_only``: as :meth:`PoseIMM.update_pose`; one model here.)"""
         y = np.empty(6)
         y[0:3] = world_T_tob[:3, 3] - self.x[0:3]
         # Rotation innovation: the rotation vector from predicted to measured (wrapped).
@@ -312,13 +312,14 @@ class PoseIMM:
         self.calm_mean_s, self.manoeuvre_mean_s = calm_mean_s, manoeuvre_mean_s
 
     # -- filtering -------------------------------------------------------------------
-    def reset(self, t_ns: int, world_T_tob: np.ndarray) -> None:
-        """Start again at a measured pose with zero velocity."""
+    def reset(self, t_ns: int, world_T_tob: np.ndarray, calm_only: bool = False) -> None:
+        """Start again at a measured pose with zero velocity (``calm_only``: see
+        :meth:`update_pose`)."""
         for kf in self.kfs:
             kf.x = np.zeros(12)
             kf.x[0:3] = world_T_tob[:3, 3]
             kf.P = np.diag(self.init_sd**2)
-        self.mu = np.tile(self._stationary(), (2, 1))
+        self.mu = np.tile([1.0, 0.0] if calm_only else self._stationary(), (2, 1))
         self.R_ref = world_T_tob[:3, :3].copy()
         self.t_ns = int(t_ns)
         self.version += 1
@@ -352,10 +353,17 @@ class PoseIMM:
         return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
-                    manoeuvre_gates: bool = True) -> Gate:
+                    manoeuvre_gates: bool = True, calm_only: bool = False) -> Gate:
         """Update with a full pose; ``R_meas`` (6, 6) its covariance (m^2, rad^2), no
         correlation between position and rotation. ``manoeuvre_gates``: whether the
-        manoeuvring model may let the measurement in (else the calm one alone decides)."""
+        manoeuvring model may let the measurement in (else the calm one alone decides);
+        ``calm_only``: a measurement that cannot tell a manoeuvre from its own errors: the
+        calm model alone gates it and gives the estimate (the mode probabilities are set
+        to calm), as the single calm filter would."""
+        if calm_only:
+            self.mu[:] = [1.0, 0.0]
+            self.version += 1
+            manoeuvre_gates = False
         ys = []
         for kf in self.kfs:
             y = np.empty(6)
@@ -392,6 +400,8 @@ class PoseIMM:
         for kf, y in zip(self.kfs, ys, strict=True):
             kf.update(H @ kf.x + y, R=R, H=H)
         for b in blocks:
+            if self.mu[b, 1] == 0.0:  # calm only (update_pose's calm_only)
+                continue
             logmu = np.log(np.maximum(self.mu[b], 1e-300)) + loglik[b]
             self.mu[b] = np.exp(logmu - logsumexp(logmu))
         self._recentre()

@@ -172,3 +172,36 @@ def test_the_manoeuvre_event_is_rate_limited():
     assert np.all(np.diff(stamps) >= 1_000_000_000)
     assert "more since the last report" in events[-1].text
     assert all(e.severity == pb.SEVERITY_INFO for e in events)
+
+
+class PaperWorld(World):
+    """Measurements from the paper's perception method."""
+
+    def measurement(self, t_ns, world_T_tob=None, status=pb.TOB_STATUS_FULL, points_tob_m=None):
+        step = self.core.step
+
+        def paper_step(t, topic, msg):
+            msg.method = pb.PERCEPTION_METHOD_PAPER
+            return step(t, topic, msg)
+
+        self.core.step = paper_step
+        try:
+            super().measurement(t_ns, world_T_tob, status, points_tob_m)
+        finally:
+            self.core.step = step
+
+
+def test_the_papers_method_is_filtered_by_the_calm_model_alone():
+    """Its errors (to 3 deg, not white) look like manoeuvres: by default its measurements
+    are filtered as by the calm model alone (to rounding: the still filter starts from the
+    combined estimate)."""
+    runs = []
+    for imm in (True, False):
+        core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, imm=imm))
+        w = PaperWorld(core, still_flange, corner_then_stop, np.random.default_rng(9), sigma_mm=0.2, sigma_deg=0.8)
+        w.run(0, 3_000_000_000)
+        runs.append((np.array([from_pose(s.world_T_tob) for s in w.states if s.HasField("world_T_tob")]),
+                     [e.code for e in w.events]))
+    (a, codes_imm), (b, codes_calm) = runs
+    assert len(a) > 100 and codes_imm == codes_calm and "manoeuvre" not in codes_imm
+    np.testing.assert_allclose(a, b, atol=1e-9)
