@@ -38,6 +38,8 @@ def load_cfg(args) -> cfgmod.ConfigFile:
         changes["cell"] = args.cell
     if getattr(args, "connect", None):
         changes["connect"] = tuple(args.connect)
+    if getattr(args, "identity", None):
+        changes["identity"] = args.identity
     if changes:
         try:
             rt = dataclasses.replace(cfg.runtime, **changes)
@@ -80,6 +82,13 @@ def router(args) -> int:
     with session:
         print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
               flush=True)
+        if cfg.runtime.security == "mtls":
+            from humanpt.runtime import security
+
+            certs = security.identities(security.pki_dir_of(cfg.runtime))
+            print(f"humanpt router: mTLS (CA and certificates in {security.pki_dir_of(cfg.runtime)}); access "
+                  f"control default deny, allowing {', '.join(c.name for c in certs if c.role not in ('ca', 'router'))}"
+                  f" (`humanpt pki acl` prints it)", flush=True)
         while not stop.wait(0.5):
             pass
     print("humanpt router: stopped", flush=True)
@@ -115,7 +124,7 @@ def run_component(args) -> int:
 
 
 def _endpoint_addr(ep: str) -> tuple[str, int] | None:
-    if not ep.startswith("tcp/"):
+    if not ep.startswith(("tcp/", "tls/")):
         return None
     host, _, port = ep[4:].rpartition(":")
     host = host.strip("[]")

@@ -28,6 +28,7 @@ examples:
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
   humanpt bench faults                            the attacks of issue 14 against a live twin
+  humanpt pki init && humanpt pki show            the cell's CA and certificates ([runtime] security = "mtls")
 """
 
 
@@ -36,6 +37,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cell", help="cell name (one robot with its sensors); overrides [runtime] cell")
     p.add_argument("--connect", action="append", metavar="ENDPOINT",
                    help="router endpoint, e.g. tcp/192.168.1.10:7447 (repeatable); overrides [runtime] connect")
+    p.add_argument("--as", dest="identity", metavar="NAME",
+                   help="under mTLS, the certificate a tool presents (default [runtime] identity, else tool: "
+                   "read-only; an operator's may command)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -198,10 +202,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--component", help="component name (default: every recording in the run)")
 
     from humanpt.cli import console as console_cli
+    from humanpt.cli import pki as pki_cli
     from humanpt.cli import view as view_cli
 
     view_cli.add_parser(sub)
     console_cli.add_parser(sub, _add_common)
+    pki_cli.add_parser(sub, _add_common)
 
     p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
@@ -410,6 +416,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         from humanpt.cli import console as console_cli
 
         return console_cli.run(args)
+    if args.verb == "pki":
+        from humanpt.cli import pki as pki_cli
+
+        return pki_cli.run(args, ap)
     if args.verb == "runs":
         if args.runs_verb == "merge":
             return commands.runs_merge(args)
