@@ -80,11 +80,13 @@ def router(args) -> int:
         print(f"humanpt router: cannot listen on {', '.join(listen)}: {e}", file=sys.stderr)
         return 1
     with session:
-        print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
-              flush=True)
         if cfg.runtime.security == "mtls":
             from humanpt.runtime import security
 
+            listen = tuple(security.tls_endpoint(e) for e in listen)
+        print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
+              flush=True)
+        if cfg.runtime.security == "mtls":
             certs = security.identities(security.pki_dir_of(cfg.runtime))
             print(f"humanpt router: mTLS (CA and certificates in {security.pki_dir_of(cfg.runtime)}); access "
                   f"control default deny, allowing {', '.join(c.name for c in certs if c.role not in ('ca', 'router'))}"
