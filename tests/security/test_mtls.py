@@ -222,3 +222,23 @@ def test_no_certificate_no_session(cell, tmp_path):
         zenoh_config(rt, identity="pose_filter")
     with pytest.raises(security.PkiError, match="humanpt pki init"):
         zenoh_config(dataclasses.replace(rt, pki=str(tmp_path / "none")), identity="controller")
+
+
+def test_a_certificate_the_router_does_not_hold_may_do_nothing(cell):
+    """Issued by the cell's CA after the router started (its access control lists the
+    certificates it held then): the client connects, but even its own key is refused."""
+    rt, _, _ = cell
+    security.issue(security.pki_dir_of(rt), "sim_robot")
+    truth = topics.TOPICS["sim_robot/truth"].key(CELL)
+    observer = Inbox()
+    with session(rt, "tool") as watcher, session(rt, "sim_robot") as late, session(rt, "controller") as ctl:
+        sub = watcher.declare_subscriber(f"humanpt/{CELL}/**", observer)
+        late.put(truth, b"late")
+        late.liveliness().get(liveliness_key(CELL, "*"), timeout=1.0)  # a round trip after the put
+        pub = ctl.declare_publisher(COMMAND)
+        wait_matching(pub)
+        pub.put(command(7))  # reaches the watcher after anything the router let through before
+        assert observer.wait_for(lambda k, v: v == command(7)), "the controller's command never arrived"
+        sub.undeclare()
+        pub.undeclare()
+    assert [k for k, _ in observer.items if k == truth] == [], "an identity the router does not know published"
