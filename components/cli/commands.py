@@ -355,8 +355,11 @@ def param(args) -> int:
                                    payload=json.dumps({"set": sets}), timeout=args.timeout))
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
     if not bodies:
-        print(f"humanpt param: no component {args.component!r} answered in cell {cfg.runtime.cell} "
-              f"within {args.timeout:g} s (is it running?)", file=sys.stderr)
+        rt = cfg.runtime
+        why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
+               f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
+        print(f"humanpt param: no component {args.component!r} answered in cell {rt.cell} "
+              f"within {args.timeout:g} s (is it running?{why})", file=sys.stderr)
         return 1
     body = bodies[0]
     for r in body.get("results", []):

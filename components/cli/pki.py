@@ -85,7 +85,10 @@ def run(args, ap: argparse.ArgumentParser) -> int:
             print(f"humanpt pki: issued {c.name} (role {c.role}{hosts}) in {d}/{c.name}.pem, key {c.name}.key "
                   f"(0600); valid until {c.not_after:%Y-%m-%d %H:%M} UTC")
         elif args.pki_verb == "show":
-            print(security.show(d))
+            from humanpt.cli.commands import load_cfg
+
+            rt = load_cfg(args).runtime
+            print(security.show(d, connect=rt.connect if rt.security == "mtls" or args.config else ()))
         elif args.pki_verb == "acl":
             sys.stdout.write(security.acl_json5(cell, security.identities(d)))
     except security.PkiError as e:

@@ -27,6 +27,7 @@ from __future__ import annotations
 import datetime as dt
 import ipaddress
 import json
+import logging
 import os
 import re
 from dataclasses import dataclass
@@ -40,6 +41,8 @@ RESERVED = ("ca",)
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 DEFAULT_DIR = "pki"
 DEFAULT_TOOL_IDENTITY = "tool"
+
+log = logging.getLogger("humanpt.security")
 
 # Components of the twin that publish, in the twin, what a real part of the cell
 # publishes (the topic table names the real part): the simulated camera renders the
@@ -279,9 +282,39 @@ def identities(pki_dir: str | Path) -> list[CertInfo]:
     return [cert_info(d / CA_CERT)] + [cert_info(p) for p in others]
 
 
-def show(pki_dir: str | Path, now: dt.datetime | None = None) -> str:
+SOON_DAYS = 30  # a certificate that expires within this is worth a warning
+
+
+def problems(pki_dir: str | Path, connect: tuple[str, ...] = (), now: dt.datetime | None = None) -> list[str]:
+    """What would stop or soon stop a cell running on this PKI: expired or soon expiring
+    certificates, a key readable by others, no router certificate, or a router endpoint
+    in ``connect`` whose host the router's certificate does not name (clients verify it)."""
+    d = Path(pki_dir)
+    now = now or dt.datetime.now(dt.UTC)
+    rows = identities(d)
+    out = []
+    for c in rows:
+        key = d / (CA_KEY if c.role == "ca" else f"{c.name}.key")
+        if c.expired(now):
+            out.append(f"{c.name}: expired {c.not_after:%Y-%m-%d} (re-issue: humanpt pki issue {c.name} --force)")
+        elif (c.not_after - now).days < SOON_DAYS:
+            out.append(f"{c.name}: expires in {(c.not_after - now).days} days")
+        if key.exists() and key.stat().st_mode & 0o077:
+            out.append(f"{key}: readable by others (mode {_mode(key)}; chmod 600)")
+    routers = [c for c in rows if c.role == "router"]
+    if not routers:
+        out.append("no router certificate (humanpt pki issue router --host <its address>)")
+    for ep in connect:
+        host = ep.split("/", 1)[-1].rsplit(":", 1)[0].strip("[]")
+        if routers and all(host not in c.hosts for c in routers):
+            out.append(f"the router's certificate does not name {host!r} (endpoint {ep}): clients will refuse it; "
+                       f"humanpt pki issue router --host {host} --force")
+    return out
+
+
+def show(pki_dir: str | Path, now: dt.datetime | None = None, connect: tuple[str, ...] = ()) -> str:
     """``humanpt pki show``: the CA and each certificate, its role, expiry, hosts, and
-    whether its key is there with safe permissions."""
+    whether its key is there with safe permissions; then :func:`problems`."""
     d = Path(pki_dir)
     now = now or dt.datetime.now(dt.UTC)
     rows = identities(d)
@@ -295,6 +328,7 @@ def show(pki_dir: str | Path, now: dt.datetime | None = None) -> str:
         state = "EXPIRED" if c.expired(now) else f"{left} d"
         lines.append(f"{c.name:<22} {c.role:<10} {c.not_after:%Y-%m-%d %H:%M:%S} {state:>8}  {key_s:<5} "
                      f"{', '.join(c.hosts)}")
+    lines += [f"problem: {p}" for p in problems(d, connect, now)]
     return "\n".join(lines)
 
 
@@ -336,6 +370,11 @@ def tls_section(pki_dir: str | Path, name: str) -> dict:
     root, ``name``'s certificate to listen and to connect, mutual authentication, the
     server's name verified on connect, links closed when a certificate expires."""
     ca, cert, key = identity_files(pki_dir, name)
+    c = cert_info(cert)
+    left = c.not_after - dt.datetime.now(dt.UTC)
+    if left < dt.timedelta(days=SOON_DAYS):  # an expired one is refused by the peer: say why here
+        log.warning("certificate %s %s", cert, "has EXPIRED" if left.total_seconds() < 0 else
+                    f"expires in {left.days} days ({c.not_after:%Y-%m-%d} UTC)")
     return {"root_ca_certificate": str(ca.resolve()),
             "listen_certificate": str(cert.resolve()), "listen_private_key": str(key.resolve()),
             "connect_certificate": str(cert.resolve()), "connect_private_key": str(key.resolve()),

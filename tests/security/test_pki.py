@@ -165,3 +165,18 @@ def test_runtime_config_for_mtls(tmp_path):
     assert load(f).runtime.pki == str(tmp_path / "certs")  # relative to the config file
     assert security.tls_endpoint("tcp/10.0.0.1:7447") == "tls/10.0.0.1:7447"
     assert RuntimeConfig().security == "none"
+
+
+def test_show_names_what_would_stop_the_cell(tmp_path):
+    now = dt.datetime(2026, 1, 1, tzinfo=dt.UTC)
+    security.init_ca(tmp_path, "c", now=now)
+    assert any("no router certificate" in p for p in security.problems(tmp_path, now=now))
+    security.issue(tmp_path, "router", hosts=("10.0.0.1",), now=now)
+    security.issue(tmp_path, "controller", days=10, now=now)
+    assert security.problems(tmp_path, ("tls/10.0.0.1:7447", "tcp/127.0.0.1:7447"), now=now) == [
+        "controller: expires in 10 days"]
+    os.chmod(tmp_path / "controller.key", 0o644)
+    found = security.problems(tmp_path, ("tcp/server.local:7447",), now=now + dt.timedelta(days=11))
+    assert any("controller: expired" in p for p in found)
+    assert any("controller.key: readable by others" in p for p in found)
+    assert any("does not name 'server.local'" in p for p in found)
