@@ -74,11 +74,22 @@ def router(args) -> int:
     listen = tuple(args.listen) if args.listen else cfg.runtime.listen
     conf = zenoh_config(cfg.runtime, mode="router", listen=listen, connect=())
     stop = stop_on_signals()
+    watch = reporter = None
+    if cfg.runtime.security == "mtls" and cfg.runtime.report_denied:  # before zenoh.open: it sets zenoh's logging
+        from humanpt.runtime.security import DenialReporter, DenialWatch
+
+        reporter = DenialReporter(cfg.runtime.cell)
+        watch = DenialWatch(reporter)
+        watch.start()
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as e:
         print(f"humanpt router: cannot listen on {', '.join(listen)}: {e}", file=sys.stderr)
+        if watch is not None:
+            watch.stop()
         return 1
+    if reporter is not None:
+        reporter.attach(session)
     with session:
         if cfg.runtime.security == "mtls":
             from humanpt.runtime import security
@@ -93,6 +104,8 @@ def router(args) -> int:
                   f" (`humanpt pki acl` prints it)", flush=True)
         while not stop.wait(0.5):
             pass
+    if watch is not None:
+        watch.stop()
     print("humanpt router: stopped", flush=True)
     return 0
 

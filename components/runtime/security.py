@@ -30,6 +30,9 @@ import json
 import logging
 import os
 import re
+import sys
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -505,3 +508,119 @@ def acl_json5(cell: str, certs: list[CertInfo]) -> str:
     out += [f"      {json.dumps(x)}," for x in acl["policies"]]
     out += ["    ],", "  },", "}"]
     return "\n".join(out) + "\n"
+
+
+# -- refused attempts -------------------------------------------------------------------------
+# Zenoh 1.10 says that its access control refused a message only in a trace line
+# (zenoh::net::routing::interceptor::access_control), written to stdout by its logger, e.g.
+# "... on Interface(lo)+CertCommonName(perception)+Transport(Tls)+... is unauthorized to
+# Put (ingress) on humanpt/cell0/controller/command".
+ACL_LOG_TARGET = "zenoh::net::routing::interceptor::access_control"
+_DENIED_RE = re.compile(r"is unauthorized to (\w+) \((\w+)\) on (\S+)")
+_CN_RE = re.compile(r"CertCommonName\(([^)]*)\)")
+_ANSI_RE = re.compile(r"\x1b\[[0-9;]*m")
+
+
+@dataclass(frozen=True)
+class Denial:
+    """One message the router's access control refused."""
+
+    cn: str  # the certificate's common name ("" when the link had none)
+    message: str  # zenoh's name of the message: Put, DeclareSubscriber, LivelinessToken...
+    flow: str  # ingress | egress
+    key: str  # its key expression
+
+
+def parse_denial(line: str) -> Denial | None:
+    """The refusal a line of zenoh's access-control trace reports, or None."""
+    line = _ANSI_RE.sub("", line)
+    m = _DENIED_RE.search(line)
+    if m is None:
+        return None
+    cn = _CN_RE.search(line)
+    return Denial(cn=cn.group(1) if cn else "", message=m.group(1), flow=m.group(2), key=m.group(3))
+
+
+class DenialWatch:
+    """Reads zenoh's access-control trace in this process and calls ``on_denied`` for each
+    refusal; every other line of stdout goes on to the real stdout, the allowed-message
+    trace is dropped.  :meth:`start` must come before the process's first ``zenoh.open``
+    (it sets zenoh's logging, once per process; ``RUST_LOG``, when set, wins) and replaces
+    file descriptor 1 by a pipe; :meth:`stop` puts it back."""
+
+    def __init__(self, on_denied: Callable[[Denial], None]):
+        self.on_denied = on_denied
+        self._orig_fd: int | None = None
+        self._thread: threading.Thread | None = None
+
+    def start(self) -> None:
+        import zenoh
+
+        sys.stdout.flush()
+        self._orig_fd = os.dup(1)
+        r, w = os.pipe()
+        os.dup2(w, 1)
+        os.close(w)
+        self._thread = threading.Thread(target=self._pump, args=(r,), name="acl-denials", daemon=True)
+        self._thread.start()
+        zenoh.init_log_from_env_or(f"warn,{ACL_LOG_TARGET}=trace")
+
+    def _pump(self, fd: int) -> None:
+        with os.fdopen(fd, "rb") as f:
+            for raw in f:
+                line = raw.decode(errors="replace")
+                d = parse_denial(line)
+                if d is not None:
+                    try:
+                        self.on_denied(d)
+                    except Exception:  # noqa: BLE001 - a failing report must not stop the pump
+                        log.exception("reporting a refused attempt")
+                elif ACL_LOG_TARGET not in line:
+                    os.write(self._orig_fd, raw)
+
+    def stop(self) -> None:
+        """Stdout back to where it was (the pipe closes; the pump reads to its end)."""
+        if self._orig_fd is None:
+            return
+        sys.stdout.flush()
+        os.dup2(self._orig_fd, 1)  # the pipe's last writer closes: the pump sees its end
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        os.close(self._orig_fd)
+        self._orig_fd = None
+
+
+class DenialReporter:
+    """What the router does with a refused attempt: a log line and a warning event on
+    ``router/events`` (once :meth:`attach` gave it the router's session), for the 1st,
+    10th, 100th... refusal of each (identity, message, key), so a flood stays a trickle."""
+
+    def __init__(self, cell: str):
+        self.cell = cell
+        self.counts: dict[tuple[str, str, str], int] = {}
+        self._session = None
+        self._lock = threading.Lock()
+
+    def attach(self, session) -> None:
+        self._session = session
+
+    def __call__(self, d: Denial) -> None:
+        import time
+
+        from humanpt.runtime.core import count_decades
+        from humanpt.schemas import humanpt_pb2 as pb
+        from humanpt.schemas import topics
+        from humanpt.schemas.convert import header
+
+        with self._lock:
+            n = count_decades(self.counts, (d.cn, d.message, d.key))
+        if n is None:
+            return
+        who = repr(d.cn) if d.cn else "a link without a certificate name"
+        text = (f"router: access control refused {d.message} ({d.flow}) on {d.key} from {who} "
+                f"({n} so far)")
+        log.warning("%s", text)
+        if self._session is not None:
+            ev = pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_WARNING, source="router",
+                          code="access_denied", text=text)
+            self._session.put(topics.TOPICS["router/events"].key(self.cell), ev.SerializeToString())
