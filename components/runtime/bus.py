@@ -34,6 +34,9 @@ def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[st
     eps = rt.connect if connect is None else connect
     if listen is None and mode == "peer":
         listen = rt.peer_listen
+    if mtls and mode == "peer":
+        raise ValueError('security = "mtls" needs client sessions: peers would link to each other around the '
+                         "router's access control")
     if mtls:
         eps = tuple(security.tls_endpoint(e) for e in eps)
         listen = None if listen is None else tuple(security.tls_endpoint(e) for e in listen)
