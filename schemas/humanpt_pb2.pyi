@@ -122,7 +122,7 @@ class Pair(_message.Message):
     def __init__(self, right: _Optional[int] = ..., left: _Optional[int] = ..., residual_px: _Optional[float] = ...) -> None: ...
 
 class TobMeasurement(_message.Message):
-    __slots__ = ("header", "centers_px", "pairs", "points_camera_m", "camera_T_tob", "visible", "quality", "method", "status", "processing_s")
+    __slots__ = ("header", "centers_px", "pairs", "points_camera_m", "camera_T_tob", "visible", "quality", "method", "status", "processing_s", "degraded", "degraded_sources", "degraded_reason", "source_brightness")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     CENTERS_PX_FIELD_NUMBER: _ClassVar[int]
     PAIRS_FIELD_NUMBER: _ClassVar[int]
@@ -133,6 +133,10 @@ class TobMeasurement(_message.Message):
     METHOD_FIELD_NUMBER: _ClassVar[int]
     STATUS_FIELD_NUMBER: _ClassVar[int]
     PROCESSING_S_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_SOURCES_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_REASON_FIELD_NUMBER: _ClassVar[int]
+    SOURCE_BRIGHTNESS_FIELD_NUMBER: _ClassVar[int]
     header: Header
     centers_px: _containers.RepeatedCompositeFieldContainer[Point2]
     pairs: _containers.RepeatedCompositeFieldContainer[Pair]
@@ -143,7 +147,11 @@ class TobMeasurement(_message.Message):
     method: PerceptionMethod
     status: TobStatus
     processing_s: float
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., centers_px: _Optional[_Iterable[_Union[Point2, _Mapping]]] = ..., pairs: _Optional[_Iterable[_Union[Pair, _Mapping]]] = ..., points_camera_m: _Optional[_Iterable[_Union[Vector3, _Mapping]]] = ..., camera_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., visible: _Optional[int] = ..., quality: _Optional[float] = ..., method: _Optional[_Union[PerceptionMethod, str]] = ..., status: _Optional[_Union[TobStatus, str]] = ..., processing_s: _Optional[float] = ...) -> None: ...
+    degraded: bool
+    degraded_sources: _containers.RepeatedScalarFieldContainer[int]
+    degraded_reason: str
+    source_brightness: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., centers_px: _Optional[_Iterable[_Union[Point2, _Mapping]]] = ..., pairs: _Optional[_Iterable[_Union[Pair, _Mapping]]] = ..., points_camera_m: _Optional[_Iterable[_Union[Vector3, _Mapping]]] = ..., camera_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., visible: _Optional[int] = ..., quality: _Optional[float] = ..., method: _Optional[_Union[PerceptionMethod, str]] = ..., status: _Optional[_Union[TobStatus, str]] = ..., processing_s: _Optional[float] = ..., degraded: _Optional[bool] = ..., degraded_sources: _Optional[_Iterable[int]] = ..., degraded_reason: _Optional[str] = ..., source_brightness: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class AlterStatus(_message.Message):
     __slots__ = ("alter_active", "tool_mode", "cumulative", "arm_power", "fault")

@@ -28,6 +28,7 @@ photon and read noise only (a few thousandths of a pixel for the default twin).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -110,9 +111,7 @@ def detect_weighted(
     ]
     rejected = len(shapes) - len(cand)
     if len(cand) == 0:
-        return Blobs(
-            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
-        )
+        return dataclasses.replace(EMPTY, rejected=rejected)
     if len(cand) > max_blobs:
         cand = np.array(cand)
         order = np.argsort(-shapes.area[cand], kind="stable")[:max_blobs]
@@ -192,10 +191,17 @@ def detect_weighted(
     myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
     mxy = (wdx * dy).sum(axis=(1, 2)) / safe
     peak = np.where(aperture, win - local_bg[:, None, None], -np.inf).max(axis=(1, 2))
+    # Background noise of the flux and of the moments' anisotropy (for the blob checks):
+    # sigma per aperture pixel, plus the local background's error over the whole aperture
+    # (the sources' own shot noise is left out: the background's dominates faint blobs).
+    n_ap = aperture.sum(axis=(1, 2))
+    flux_sd = sigma * np.sqrt(n_ap + n_ap**2 / np.maximum(n_ring, 1))
+    half_diff = np.where(aperture, 0.5 * (dx * dx - dy * dy), 0.0)
+    aniso_sd = sigma * np.sqrt((half_diff**2).sum(axis=(1, 2))) / safe
     # Shape checks per blob, the array formulas' operations on plain floats.
-    uv, areas, sizes, elongations, peaks = [], [], [], [], []
+    uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
     c0 = centroid.tolist()
-    for i, (fl, pk, a, b, c, u, v) in enumerate(
+    for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
         zip(
             flux.tolist(),
             peak.tolist(),
@@ -204,6 +210,8 @@ def detect_weighted(
             mxy.tolist(),
             cx.tolist(),
             cy.tolist(),
+            flux_sd.tolist(),
+            aniso_sd.tolist(),
             strict=True,
         )
     ):
@@ -226,12 +234,13 @@ def detect_weighted(
             sizes.append(size)
             elongations.append(elongation)
             peaks.append(pk)
+            fluxes.append(fl)
+            moments.append((a, b, c))
+            noise.append((fsd, asd))
         else:
             rejected += 1
     if not uv:
-        return Blobs(
-            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
-        )
+        return dataclasses.replace(EMPTY, rejected=rejected)
     return Blobs(
         np.array(uv),
         np.array(areas),
@@ -239,4 +248,7 @@ def detect_weighted(
         np.array(elongations),
         np.array(peaks),
         rejected,
+        np.array(fluxes),
+        np.array(moments).reshape(-1, 3),
+        np.array(noise).reshape(-1, 2),
     )
