@@ -24,11 +24,17 @@ with its prediction and with the others:
   ``sqrt(((D_uu - D_vv)/2)^2 + D_uv^2)`` in units of the disc's own variance
   ``|det J| / 4``, grows when a straight edge cuts the disc or a neighbour touches it.
 
-A source is **degraded** when its brightness ratio is below ``1 - flux_tol`` or above
-``1 / (1 - flux_tol)``, when its views disagree by more than ``view_tol`` (log ratio), or
-when either view's anisotropy exceeds ``shape_tol``. The references are medians of three,
-so one bad source is found; two sources covered alike make the third look too bright (it
-is flagged instead: still not silently trusted, but the wrong one).
+A source is **degraded** when a figure is off its ideal (brightness 1, view ratio 0,
+anisotropy 0) by more than ``sqrt(tol^2 + (noise_k sd)^2)``: ``tol`` (``flux_tol``,
+``view_tol``, ``shape_tol``) for what the model leaves out (the sources' angular
+fall-off, the lens distortion, pixel sampling), ``sd`` the figure's SD from the image's
+background noise (its histogram's sigma over the blob's aperture and over the local
+background ring: the weighted method's :class:`~humanpt.perception.blobs.Blobs` ``noise``),
+so that far, faint blobs are not flagged for their noise. The paper method measures
+binary areas and shapes (pixel locking, no noise figure): its limits are
+``paper_factor`` times wider. The references are medians of three, so one bad source is
+found; two sources covered alike make the third look too bright (it is flagged instead:
+still not silently trusted, but the wrong one).
 
 What then (``degraded_policy``):
 
@@ -80,7 +86,7 @@ class CheckSettings:
     view_tol: float = 0.05
     shape_tol: float = 0.15
     noise_k: float = 5.0
-    tol_factor: float = 1.0
+    tol_factor: float = 1.0  # every limit times this (the paper method's paper_factor)
 
 
 @dataclass(frozen=True)
@@ -91,7 +97,9 @@ class SourceCheck:
     ``view_log_ratio`` log(q_right / q_left) minus the median source's; ``anisotropy``
     the larger of the two views' (dimensionless); ``degraded`` the flagged sources
     (indices 0 = A, 1 = B, 2 = C, ascending); ``reason`` one line for a person ("" when
-    nothing is flagged)."""
+    nothing is flagged); ``sd`` (3 checks, 3 sources) the background noise's SDs of the
+    three figures (0 for the paper method); ``limits`` (3 checks, 3 sources) what each
+    figure may differ from its ideal (1, 0, 0)."""
 
     brightness: np.ndarray
     view_log_ratio: np.ndarray
@@ -159,12 +167,13 @@ def check_sources(
         b, v, a = float(brightness[k]), float(view_log_ratio[k]), float(anisotropy[k])
         if not abs(b - 1.0) <= limits[0, k]:  # (NaN fails too)
             more = " (merged?)" if b > 1.0 else ""
-            why.append(f"{100.0 * b:.0f} % of its expected brightness{more} (limit {100.0 * limits[0, k]:.0f} %)")
+            why.append(f"{100.0 * b:.0f} % of its expected brightness{more} "
+                       f"(within {100.0 * limits[0, k]:.0f} % of 100 % allowed)")
         if not abs(v) <= limits[1, k]:
             why.append(f"its two views differ by {100.0 * (math.exp(v) - 1.0):+.0f} % "
-                       f"(limit {100.0 * limits[1, k]:.0f} %)")
+                       f"(log ratio {v:+.2f}, {limits[1, k]:.2f} allowed)")
         if not a <= limits[2, k]:
-            why.append(f"shape off its ellipse by {a:.2f} (limit {limits[2, k]:.2f})")
+            why.append(f"shape off its ellipse by {a:.2f} ({limits[2, k]:.2f} allowed)")
         if why:
             degraded.append(k)
             reasons.append(f"{SOURCE_NAMES[k]}: " + ", ".join(why))

@@ -94,7 +94,7 @@ class PerceptionConfig:
     degraded_noise_k: Annotated[float, Range(0, 100, "noise SDs")] = live(
         5.0, "the noise's allowance: this many SDs of the background noise's effect")
     degraded_paper_factor: Annotated[float, Range(1, 100, "")] = live(
-        3.0, "the paper method's limits are this many times wider (binary areas and shapes)")
+        3.5, "the paper method's limits are this many times wider (binary areas and shapes)")
     degraded_clear_frames: Annotated[int, Range(1, 100000, "measurements")] = 5
     # bad images
     max_saturated_fraction: Annotated[float, Range(0, 1, "")] = 0.25

@@ -158,7 +158,7 @@ def test_parameters_change_at_run_time_through_param_inputs():
         "degraded_view_tol": 0.05,
         "degraded_shape_tol": 0.15,
         "degraded_noise_k": 5.0,
-        "degraded_paper_factor": 3.0,
+        "degraded_paper_factor": 3.5,
     }
 
 
