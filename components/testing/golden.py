@@ -110,6 +110,7 @@ UNIT_RULES: list[tuple[str, str]] = [
     (r"^rotation$", "quaternion"),  # Pose.rotation
     (r"^covariance$", "covariance"),
     (r"^quality$", "ratio"),
+    (r"_fraction$", "ratio"),
 ]
 
 
