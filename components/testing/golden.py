@@ -111,6 +111,7 @@ UNIT_RULES: list[tuple[str, str]] = [
     (r"^covariance$", "covariance"),
     (r"^quality$", "ratio"),
     (r"_fraction$", "ratio"),
+    (r"^source_brightness$", "ratio"),  # TobMeasurement: brightness for its size, ~1
 ]
 
 
