@@ -110,6 +110,11 @@ class SourceCheck:
     limits: np.ndarray | None = None
 
 
+def _median3(x: np.ndarray) -> np.ndarray:
+    """The median along the first axis of length 3 (np.median's overhead is ~30 us)."""
+    return x.sum(axis=0) - x.max(axis=0) - x.min(axis=0)
+
+
 def _disc_jacobians(params: PsvsParams, match: Match, radius_mm: float) -> np.ndarray:
     """(3, 2, 2, 2): per source A, B, C and view (right, left) ``d(u, v)/d(s, t)`` of the
     source's disc ((s, t) in radii along the TOB's u and v axes, camera frame), px. The
@@ -134,17 +139,18 @@ def check_sources(
     flux = blobs.flux_dn[idx]  # (3, 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         q = flux / (math.pi * det)
-        rel = q / np.median(q, axis=0)
+        rel = q / _median3(q)
         brightness = np.sqrt(rel[:, 0] * rel[:, 1])
         views = np.log(q[:, 0] / q[:, 1])
-        view_log_ratio = views - np.median(views)
+        view_log_ratio = views - _median3(views)
         # the second moments left after the predicted disc's: blur (isotropic) + damage
         m = blobs.moments_px2[idx]  # (3, 2, 3)
         disc = np.einsum("...ij,...kj->...ik", jac, jac) / 4.0  # (3, 2, 2, 2)
         rest = m - np.stack([disc[..., 0, 0], disc[..., 1, 1], disc[..., 0, 1]], axis=-1)
         # what all six blobs share (the blur, blooming along the columns, motion blur) is
         # not damage: the median blob's rest is taken off
-        d_uu, d_vv, d_uv = np.moveaxis(rest - np.median(rest.reshape(6, 3), axis=0), -1, 0)
+        six = np.sort(rest.reshape(6, 3), axis=0)
+        d_uu, d_vv, d_uv = np.moveaxis(rest - 0.5 * (six[2] + six[3]), -1, 0)  # (median of 6)
         aniso = np.hypot(0.5 * (d_uu - d_vv), d_uv) / (det / 4.0)
         anisotropy = aniso.max(axis=1)
         if blobs.noise is not None:

@@ -112,9 +112,9 @@ def detect_paper(
 
 def _shape_moments(mask: np.ndarray) -> tuple[float, float, float]:
     """Central second moments (m_uu, m_vv, m_uv) of a binary shape's pixel centres, px^2."""
-    v, u = np.nonzero(mask)
-    du, dv = u - u.mean(), v - v.mean()
-    return float(du @ du) / len(u), float(dv @ dv) / len(u), float(du @ dv) / len(u)
+    m = cv2.moments(mask.view(np.uint8), binaryImage=True)
+    n = m["m00"]
+    return m["mu20"] / n, m["mu02"] / n, m["mu11"] / n
 
 
 def pair_by_scan_line(uv_px: np.ndarray, tol_px: float, max_pairs: int = 3) -> np.ndarray:

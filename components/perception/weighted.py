@@ -191,13 +191,15 @@ def detect_weighted(
     myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
     mxy = (wdx * dy).sum(axis=(1, 2)) / safe
     peak = np.where(aperture, win - local_bg[:, None, None], -np.inf).max(axis=(1, 2))
-    # Background noise of the flux and of the moments' anisotropy (for the blob checks):
-    # sigma per aperture pixel, plus the local background's error over the whole aperture
-    # (the sources' own shot noise is left out: the background's dominates faint blobs).
-    n_ap = aperture.sum(axis=(1, 2))
+    # Background noise of the flux and of the moments' anisotropy (for the blob checks),
+    # over a circular aperture of radius R (~pi R^2 pixels): sigma per aperture pixel plus
+    # the local background's error over the whole aperture; the anisotropy's two parts
+    # ((m_uu - m_vv)/2, m_uv) each sigma sqrt(sum ((dx^2 - dy^2)/2)^2) / flux, the sum
+    # ~ pi R^6 / 12. (The sources' own shot noise is left out: the background's dominates
+    # faint blobs.)
+    n_ap = np.pi * r_ap**2
     flux_sd = sigma * np.sqrt(n_ap + n_ap**2 / np.maximum(n_ring, 1))
-    half_diff = np.where(aperture, 0.5 * (dx * dx - dy * dy), 0.0)
-    aniso_sd = sigma * np.sqrt((half_diff**2).sum(axis=(1, 2))) / safe
+    aniso_sd = sigma * np.sqrt(np.pi / 12.0) * r_ap**3 / safe
     # Shape checks per blob, the array formulas' operations on plain floats.
     uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
     c0 = centroid.tolist()
