@@ -19,8 +19,9 @@ with its prediction and with the others:
   of the three sources (the mirrors' gain ratio divides out): something in front of one
   view only, or a reflection touching one view's blob, breaks it.
 * **shape**: the blob's second moments ``M`` (intensity-weighted; the paper method: its
-  binary shape's) minus the predicted disc's ``J J^T / 4`` leave the blur, which is
-  isotropic and the same for every blob; the **anisotropy** of the rest,
+  binary shape's) minus the predicted disc's ``J J^T / 4`` leave what the optics add -
+  the blur, blooming along the columns, motion blur - which all six blobs share, so the
+  median of the six rests is taken off too; the **anisotropy** of what remains,
   ``sqrt(((D_uu - D_vv)/2)^2 + D_uv^2)`` in units of the disc's own variance
   ``|det J| / 4``, grows when a straight edge cuts the disc or a neighbour touches it.
 
@@ -31,8 +32,8 @@ fall-off, the lens distortion, pixel sampling), ``sd`` the figure's SD from the 
 background noise (its histogram's sigma over the blob's aperture and over the local
 background ring: the weighted method's :class:`~humanpt.perception.blobs.Blobs` ``noise``),
 so that far, faint blobs are not flagged for their noise. The paper method measures
-binary areas and shapes (pixel locking, no noise figure): its limits are
-``paper_factor`` times wider. The references are medians of three, so one bad source is
+binary areas and shapes (pixel locking, no noise figure): its limits are ``tol_factor``
+(``PerceptionConfig.degraded_paper_factor``) times wider. The references are medians of three, so one bad source is
 found; two sources covered alike make the third look too bright (it is flagged instead:
 still not silently trusted, but the wrong one).
 
@@ -174,7 +175,7 @@ def check_sources(
         if not abs(b - 1.0) <= limits[0, k]:  # (NaN fails too)
             more = " (merged?)" if b > 1.0 else ""
             why.append(f"{100.0 * b:.0f} % of its expected brightness{more} "
-                       f"(within {100.0 * limits[0, k]:.0f} % of 100 % allowed)")
+                       f"(±{100.0 * limits[0, k]:.0f} % allowed)")
         if not abs(v) <= limits[1, k]:
             why.append(f"its two views differ by {100.0 * (math.exp(v) - 1.0):+.0f} % "
                        f"(log ratio {v:+.2f}, {limits[1, k]:.2f} allowed)")

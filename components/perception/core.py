@@ -18,7 +18,13 @@ Per image (Section 4, steps 1-7):
    the rig describes), a running median over ``drift_window`` measurements; above
    ``drift_warn_px`` (well below ``epipolar_tol_px``, where pairs are lost) a
    ``mirror_drift`` warning, once, then again only when it has grown by half the threshold
-   more; a ``mirror_drift_ok`` info when it is back under 80 % of the threshold.
+   more; a ``mirror_drift_ok`` info when it is back under 80 % of the threshold;
+6. the blob checks (:mod:`humanpt.perception.checks`, in :class:`Perception`): a FULL
+   measurement's sources are checked against the measured pose; the message carries
+   ``degraded``, ``degraded_sources``, ``degraded_reason``, ``source_brightness``; a
+   ``source_degraded`` warning when a source is first found degraded (again only when
+   another one joins), a ``source_ok`` info after ``degraded_clear_frames`` checked
+   measurements without one.
 
 The core never raises out of ``step``: an unexpected error while measuring gives a LOST
 measurement and an error event. It never reads the clock, so ``processing_s`` is 0 - a

@@ -2,7 +2,8 @@
 
 :class:`Perception` holds what follows from a :class:`PerceptionConfig` and the rig
 (:class:`humanpt.geometry.rig.Rig`: PSVS parameters, target model; plus the mask image and
-the correspondence settings) and measures prepared images; the core
+the correspondence settings) and measures prepared images - detection, correspondence, the
+blob checks and their policy (:mod:`humanpt.perception.checks`); the core
 (:mod:`humanpt.perception.core`) adds the message plumbing, the region of interest and
 the events. Benchmarks and tests use it directly.
 """
