@@ -18,15 +18,14 @@ from humanpt.perception import PerceptionConfig, PerceptionCore
 from humanpt.perception.checks import rebuild_point
 from humanpt.perception.correspondence import FULL, POSITION_ONLY
 from humanpt.perception.pipeline import Perception
-from humanpt.runtime.config import build, to_table
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, image
 from humanpt.sim_camera import Discs, SimCameraConfig
 from humanpt.sim_camera.render import Renderer
-from humanpt.testing.perception_eval import standard_cases
+from humanpt.testing.perception_eval import realistic_sim_config, standard_cases
 from humanpt.twin.run import SystemConfig, run
 from humanpt.twin.system import build_system, tracking_errors
-from humanpt.twin.worlds import World, merge_overrides
+from humanpt.twin.worlds import World
 
 MODEL = TargetModel.isosceles()
 # Poses near those of the built-in scenarios (G ~600 mm ahead, tilted a little; X: mm, then
@@ -48,12 +47,6 @@ def _render(sim: SimCameraConfig, camera_T_tob: np.ndarray, frame: int = 0, extr
 def _covered(fraction: float, source: int, angle_deg: float) -> SimCameraConfig:
     return dataclasses.replace(SimCameraConfig(seed=5), occluded_sources=(source,),
                                occlusion_fraction=fraction, occlusion_angle_deg=angle_deg)
-
-
-def _realistic_sim() -> SimCameraConfig:
-    table = World.realistic().overrides()["sim_camera"]
-    return build(SimCameraConfig, merge_overrides(to_table(SimCameraConfig()), table),
-                 source="test", section="sim_camera")
 
 
 # --------------------------------------------------------------------------- images
@@ -141,7 +134,7 @@ def test_no_flag_on_the_scenarios_poses_ideal_or_realistic_optics_either_method(
     # the ideal world and the realistic one's optics and sensor (fall-off, blooming, ghost,
     # 2005-era noise, fixed pattern, distortion, focal, splitter, mirror tilt)
     cases = standard_cases(15, seed=2)
-    for sim in (SimCameraConfig(seed=2), _realistic_sim()):
+    for sim in (SimCameraConfig(seed=2), realistic_sim_config(2)):
         r = Renderer(sim)
         perceptions = [Perception(PerceptionConfig(method=m)) for m in ("weighted", "paper")]
         checked = 0
