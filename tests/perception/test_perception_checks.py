@@ -294,3 +294,40 @@ def test_closed_loop_realistic_world_no_flag_on_quick_torch_turns():
     assert not any(m.degraded for m in tobs), [m.degraded_reason for m in tobs if m.degraded][:3]
     events = [pb.Event.FromString(o.data) for o in result.world.outputs("perception/events")]
     assert not any(e.code == "source_degraded" for e in events)
+
+
+@pytest.mark.timeout(120)
+def test_closed_loop_timed_10_and_20_percent_covers_start_and_end_events():
+    # the scenario keyword `cover`: C 10 % covered from 1 s to 2.5 s into the motion, B 20 %
+    # from 3 s to 4 s; each flagged within 3 frames of its start, cleared after its end
+    text = """scenario covers
+driver 0 0 60
+path tip
+start 186.132 1248.772 0 0 15 180
+line 286.132 1248.772 0
+dwell 1
+cover C 0.1 from 1 to 2.5 angle 200
+cover B 0.2 from 3 to 4 angle 45
+"""
+    w = build_system(OperatorConfig(scenario_text=text), seed=2)
+    w.run_for(9.0)
+    cover = {}
+    for out in w.outputs("sim_camera/truth"):
+        truth = pb.Truth.FromString(out.data)
+        cover[truth.header.stamp_ns] = tuple(truth.cover_fraction) or (0.0, 0.0, 0.0)
+    tobs = [pb.TobMeasurement.FromString(o.data) for o in w.outputs("perception/tob")]
+    covered = [next((k for k in range(3) if cover[m.header.stamp_ns][k] > 0), None) for m in tobs]
+    flagged = [tuple(m.degraded_sources) for m in tobs]
+    assert all(m.status == pb.TOB_STATUS_FULL for m in tobs)
+    for source in (2, 1):
+        frames = [i for i, c in enumerate(covered) if c == source]
+        assert len(frames) > 25
+        first = next(i for i in frames if flagged[i])
+        assert first - frames[0] < 3 and all(flagged[i] == (source,) for i in frames[first - frames[0]:])
+    # nothing else flagged: not before, between or after the covers
+    assert all(not flagged[i] for i, c in enumerate(covered) if c is None)
+    events = [pb.Event.FromString(o.data) for o in w.outputs("perception/events")]
+    codes = [e.code for e in events if e.code.startswith("source_")]
+    assert codes == ["source_degraded", "source_ok", "source_degraded", "source_ok"], codes
+    texts = [e.text for e in events if e.code == "source_degraded"]
+    assert "source(s) C " in texts[0] and "source(s) B " in texts[1]
