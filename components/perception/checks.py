@@ -144,7 +144,7 @@ def check_sources(
         brightness = np.sqrt(rel[:, 0] * rel[:, 1])
         views = np.log(q[:, 0] / q[:, 1])
         view_log_ratio = views - _median3(views)
-        # the second moments left after the predicted disc's: blur (isotropic) + damage
+        # the second moments left after the predicted disc's: what the optics add + damage
         m = blobs.moments_px2[idx]  # (3, 2, 3)
         disc = np.einsum("...ij,...kj->...ik", jac, jac) / 4.0  # (3, 2, 2, 2)
         rest = m - np.stack([disc[..., 0, 0], disc[..., 1, 1], disc[..., 0, 1]], axis=-1)
