@@ -6,7 +6,8 @@ the current one to ``<path_dir>/NAME`` (a plain name, checked by the core; an ex
 only with ``"overwrite": true``).  Nothing is ever truncated: a restarted controller in the
 same run directory continues the numbering after the files already there.  What a save did
 comes back to the core as a ``path_file`` input and goes out as an event (``path_saved`` or
-``save_failed``).  The files are in mm and degrees (see pathfile.py).
+``save_failed``).  The files are in mm and degrees, with each point's held-orientation
+flag and covariance (see pathfile.py).
 """
 
 from __future__ import annotations
@@ -32,6 +33,17 @@ def x_mm_deg(p: pb.Pose) -> np.ndarray:
     T = from_pose(p)
     T[:3, 3] *= 1e3
     return x_from_transform(T)
+
+
+def covariance_mm_deg(msg: pb.PathPoint) -> dict:
+    """A path point's held flag and covariances (3, 3) in mm^2 and deg^2 (None: not
+    recorded), as :func:`pathfile.row` takes them."""
+    def cov(values, scale):
+        return np.asarray(values, dtype=float).reshape(3, 3) * scale if len(values) == 9 else None
+
+    return {"orientation_held": msg.orientation_held, "cov_g_mm2": cov(msg.position_covariance_m2, 1e6),
+            "cov_r_deg2": cov(msg.rotation_covariance_rad2, np.degrees(1.0) ** 2),
+            "cov_tip_mm2": cov(msg.tip_position_covariance_m2, 1e6)}
 
 
 class PathWriter:
@@ -64,7 +76,7 @@ class PathWriter:
             except FileExistsError:  # never truncate a path file
                 continue
         self._w = csv.writer(self._f)
-        self._w.writerow(pathfile.header(with_tip))
+        self._w.writerow(pathfile.header(with_tip, with_covariance=True))
         self._f.flush()
         log.info("recording path to %s", self.current)
 
@@ -103,7 +115,8 @@ class PathWriter:
         if self._w is None:
             self._open(msg.has_tip)
         tip = x_mm_deg(msg.world_T_tip) if msg.has_tip else None
-        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, x_mm_deg(msg.world_T_tob), tip))
+        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, x_mm_deg(msg.world_T_tob), tip,
+                                      **covariance_mm_deg(msg)))
         self._f.flush()
 
     def close(self) -> None:
