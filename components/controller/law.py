@@ -130,11 +130,23 @@ def position_first(
         # largest s with |v_d + s c| <= v_max (s = 0 satisfies it)
         s = 1.0 if cc == 0.0 else min(1.0, (-vc + np.sqrt(max(vc * vc - cc * (nv * nv - v_max * v_max), 0.0))) / cc)
         sat = sat or s < 1.0
-    d_r = (w_par + s * w_perp) * dt_s
-    # D moves by d_t + (exp(d_r) - I) r: choose d_t so that it moves by v_d dt exactly.
-    d_t = v_d * dt_s - (apply_step(np.eye(4), np.zeros(3), d_r)[:3, :3] - np.eye(3)) @ r
-    d_t, d_r, clipped = saturate(d_t, d_r, max_step_m, max_step_rad)
-    return d_t, d_r, sat or clipped, s
+
+    def step(s: float) -> tuple[np.ndarray, np.ndarray]:
+        d_r = (w_par + s * w_perp) * dt_s
+        # D moves by d_t + (exp(d_r) - I) r: choose d_t so that it moves by v_d dt exactly.
+        return v_d * dt_s - (apply_step(np.eye(4), np.zeros(3), d_r)[:3, :3] - np.eye(3)) @ r, d_r
+
+    d_t, d_r = step(s)
+    if norm3(d_t) > max_step_m * (1 + 1e-12):
+        # s came from the first-order swing; the exact one is a little larger: bisect s
+        # (s = 0 is feasible: the rotation about the flange-D line does not move D).
+        lo, hi = 0.0, s
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if norm3(step(mid)[0]) <= max_step_m else (lo, mid)
+        s, sat = lo, True
+        d_t, d_r = step(s)
+    return d_t, d_r, sat, s
 
 
 def thetau_step(
@@ -159,14 +171,26 @@ def thetau_step(
 ) -> Step:
     """Default law; with ``position_only`` only the translation of D towards G is servoed.
     ``saturation``: ``scale`` (the flange's pose servoed, the step shrunk by norm to the
-    limits) or ``position_first`` (D servoed onto G, the flange turning about D, the
-    orientation lagging when the limits bind: :func:`position_first`)."""
-    if saturation == "position_first":
+    limits) or ``position_first`` (the same while within the limits; a step beyond them is
+    replaced by D servoed onto G, the flange turning about D and the orientation lagging:
+    :func:`position_first`)."""
+    if saturation not in SATURATIONS:
+        raise ValueError(f"saturation must be one of {SATURATIONS}, got {saturation!r}")
+    step = _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
+                       max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
+                       still_rad_s)
+    if saturation == "position_first" and step.saturated:
+        # Within the limits both agree on where to go; beyond them, D's motion comes first.
         return _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s,
                                     k_t, k_r, dt_s, max_step_m, max_step_rad, feed_forward, position_only,
                                     deadband_m, deadband_rad, still_m_s, still_rad_s)
-    if saturation != "scale":
-        raise ValueError(f"saturation must be one of {SATURATIONS}, got {saturation!r}")
+    return step
+
+
+def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
+                max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
+                still_rad_s) -> Step:
+    """The thetau law, its step scaled by norm to the limits (``saturation = "scale"``)."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     e_t, e_r = pose_error(world_T_flange, world_T_fd)
     v = k_t * e_t
@@ -199,8 +223,8 @@ def _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob, w
                          still_m_s, still_rad_s) -> Step:
     """The thetau law with D, not the flange origin, servoed onto G: D's velocity
     ``k_t (G - D) + v_G`` and the rotation ``k_r theta-u + w_G`` (both feed-forwards),
-    combined by :func:`position_first`. Unsaturated it converges like ``scale`` does (the
-    same final pose), with G held at the image centre while the orientation corrects."""
+    combined by :func:`position_first`: G held at the image centre while the orientation
+    catches up."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     _, e_r = pose_error(world_T_flange, world_T_fd)
     world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]

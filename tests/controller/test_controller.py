@@ -116,13 +116,11 @@ def test_commands_each_cycle_one_ahead_from_the_predicted_flange(ahead):
     cycle k's step leads to; every cycle then has its command in time."""
     core = ControllerCore(ControllerConfig(command_ahead=ahead))
     rig = Rig(core, start_flange(TARGET_X, (20, -10, 15), (3, -2, 4)), static(T_m(TARGET_X)))
-    # 75 cycles: from this offset (64 mm) D goes to G first, at the speed limit, and the
-    # orientation follows (saturation position_first; scale converges both in 60 cycles).
-    rig.step(75)
+    rig.step(60)
     cmds = rig.of("controller/command")
-    assert [c.cycle for c in cmds] == (list(range(1, 76)) if ahead else list(range(75)))
+    assert [c.cycle for c in cmds] == (list(range(1, 61)) if ahead else list(range(60)))
     # Ahead, only the very first cycle goes unanswered (the robot holds it).
-    assert rig.answered == ([False] + [True] * 74 if ahead else [True] * 75)
+    assert rig.answered == ([False] + [True] * 59 if ahead else [True] * 60)
     # Each command was worked out from where the robot's flange really is in the cycle it
     # commands: the error it reports (|G - D| and the angle between G and D, D = flange @
     # flange_T_desired) is the one at the robot's own flange in that cycle.
