@@ -39,6 +39,11 @@ class ControllerConfig:
     # whole step (the flange falls behind and G drifts out of the image).
     saturation: Literal["position_first", "scale"] = live(
         "position_first", "at the speed limits: keep G at D and let the orientation lag, or scale the whole step")
+    # position_first takes over once G is this far from D (within it the step is scaled as
+    # with "scale": the orientation keeps its priority while G is near the image centre;
+    # 10 mm at 600 mm is ~17 px in the image).
+    position_first_beyond_mm: Annotated[float, Range(0, 1000, "mm")] = live(
+        10.0, "position_first: engage once |G - D| exceeds this")
     cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Command cycle k + 1 as soon as the state of cycle k is in (from where cycle k's step
     # will have put the flange): the gateway then answers each STATUS at once instead of

@@ -145,6 +145,7 @@ class ControllerCore(Core):
         self.cal_pivot_mm: np.ndarray | None = None
         self.playback: dict | None = None
         self.saturated_cycles = 0
+        self._position_first = False  # the last step was position_first's (law.thetau_step's hysteresis)
         self._last_cycle: int | None = None
         self._sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # cycle -> the step last sent for it
         self._derive(config)
@@ -251,6 +252,7 @@ class ControllerCore(Core):
             outs.append(self.event(t_ns, pb.SEVERITY_INFO, "mode", f"mode {pb.ControlMode.Name(mode)}"))
             self._last_mode = mode
         self.saturated_cycles += int(step.saturated)
+        self._position_first = step.position_first
         cmd = pb.FlangeCommand(header=self.next_header(T_CMD, stamp, "world"), cycle=cycle,
                                d_translation_m=vector3(step.d_translation_m),
                                d_rotation_rad=vector3(step.d_rotation_rad), mode=mode,
@@ -312,7 +314,8 @@ class ControllerCore(Core):
                                feed_forward=c.feed_forward, position_only=position_only,
                                deadband_m=c.deadband_mm * 1e-3, deadband_rad=np.radians(c.deadband_deg),
                                still_m_s=c.still_mm_s * 1e-3, still_rad_s=np.radians(c.still_deg_s),
-                               saturation=c.saturation)
+                               saturation=c.saturation, position_first_beyond_m=c.position_first_beyond_mm * 1e-3,
+                               engaged=self._position_first)
 
     def _goto(self, world_T_flange, world_T_target, v_ff=None):
         """A saturated step towards a flange pose (no vision)."""

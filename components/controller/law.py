@@ -52,6 +52,7 @@ class Step:
     # The fraction of the demanded rotation that swings D (its part across the line from the
     # flange to D) actually commanded: < 1 when position_first let the orientation lag.
     rotation_scale: float = 1.0
+    position_first: bool = False  # made by position_first (not by the scaled thetau law)
 
 
 def saturate(
@@ -168,19 +169,27 @@ def thetau_step(
     still_m_s: float = 0.0,
     still_rad_s: float = 0.0,
     saturation: str = "scale",
+    position_first_beyond_m: float = 0.0,
+    engaged: bool = False,
 ) -> Step:
     """Default law; with ``position_only`` only the translation of D towards G is servoed.
     ``saturation``: ``scale`` (the flange's pose servoed, the step shrunk by norm to the
-    limits) or ``position_first`` (the same while within the limits; a step beyond them is
+    limits) or ``position_first`` (the same while within the limits, or while |G - D| is
+    within ``position_first_beyond_m``; a step beyond the limits with G farther from D is
     replaced by D servoed onto G, the flange turning about D and the orientation lagging:
-    :func:`position_first`)."""
+    :func:`position_first`). ``engaged``: the previous step was position_first's; it
+    stays so while the limits bind, whatever |G - D| (hysteresis: no chatter at the band)."""
     if saturation not in SATURATIONS:
         raise ValueError(f"saturation must be one of {SATURATIONS}, got {saturation!r}")
     step = _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
                        max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
                        still_rad_s)
-    if saturation == "position_first" and step.saturated:
-        # Within the limits both agree on where to go; beyond them, D's motion comes first.
+    if saturation == "position_first" and step.saturated and (engaged or step.error_translation_m
+                                                              > position_first_beyond_m):
+        # Within the limits both agree on where to go; beyond them, once G has fallen away
+        # from D, D's motion comes first. (Within the band the orientation keeps its
+        # priority: a noisy orientation, e.g. the paper's perception, saturates the old
+        # law now and then by the 0.7 m lever; letting it lag biases that perception.)
         return _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s,
                                     k_t, k_r, dt_s, max_step_m, max_step_rad, feed_forward, position_only,
                                     deadband_m, deadband_rad, still_m_s, still_rad_s)
@@ -240,7 +249,7 @@ def _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob, w
     if norm3(e_gd) < deadband_m and norm3(v_tob) < still_m_s and not np.any(w):
         v_d = np.zeros(3)
     d_t, d_r, sat, s = position_first(world_T_flange, flange_T_desired, v_d, w, dt_s, max_step_m, max_step_rad)
-    return Step(d_t, d_r, sat, norm3(e_gd), norm3(e_r), s)
+    return Step(d_t, d_r, sat, norm3(e_gd), norm3(e_r), s, True)
 
 
 def fov_margin_px(params, camera_T_tob_mm: np.ndarray, tob_p_sources_mm: np.ndarray) -> float:

@@ -136,3 +136,30 @@ def test_the_controller_rejects_a_bad_saturation_and_reports_the_servo():
     assert (s.cycles, s.max_error_mm, s.min_fov_margin_px, s.max_image_error_px) == (5, 5.0, 195.0, 5.0)
     assert (s.saturated_cycles, s.lagging_cycles, s.min_rotation_scale) == (3, 2, 0.5)
     assert "field of view margin min 195 px" in s.line()
+
+
+def test_position_first_engages_beyond_the_band_and_holds_while_the_limits_bind():
+    """thetau_step: a saturated step with G within ``position_first_beyond_m`` of D is the
+    scaled one (as ``scale``); beyond it, or once engaged, position_first's."""
+    F = np.eye(4)
+    fd = _flange_T_d()
+
+    def step(g_off_m, **kw):
+        G = F @ fd
+        G = G.copy()
+        G[:3, 3] += [g_off_m, 0.0, 0.0]
+        # The target moving at 60 mm/s, turning at 60 deg/s, tilted 30 deg from D's frame:
+        # following it would swing the flange (700 mm from D) far beyond 100 mm/s.
+        args = dict(v_tob_m_s=np.array([0.06, 0.0, 0.0]), w_tob_rad_s=np.radians([0.0, 0.0, 60.0]),
+                    k_t=4.0, k_r=4.0, dt_s=DT, max_step_m=MAX_M, max_step_rad=MAX_RAD)
+        G[:3, :3] = Rotation.from_euler("y", 30, degrees=True).as_matrix()
+        return law.thetau_step(F, G, fd, **args, **kw)
+
+    scaled = step(0.005, saturation="scale")
+    assert scaled.saturated and not scaled.position_first
+    within = step(0.005, saturation="position_first", position_first_beyond_m=0.01)
+    np.testing.assert_array_equal(within.d_translation_m, scaled.d_translation_m)
+    beyond = step(0.015, saturation="position_first", position_first_beyond_m=0.01)
+    assert beyond.position_first and beyond.rotation_scale < 1.0
+    held = step(0.005, saturation="position_first", position_first_beyond_m=0.01, engaged=True)
+    assert held.position_first
