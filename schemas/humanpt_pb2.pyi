@@ -280,18 +280,22 @@ class PathPoint(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., index: _Optional[int] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., orientation_held: _Optional[bool] = ..., position_covariance_m2: _Optional[_Iterable[float]] = ..., rotation_covariance_rad2: _Optional[_Iterable[float]] = ..., tip_position_covariance_m2: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class Truth(_message.Message):
-    __slots__ = ("header", "world_T_tob", "has_tip", "world_T_tip", "world_T_flange")
+    __slots__ = ("header", "world_T_tob", "has_tip", "world_T_tip", "world_T_flange", "cover_fraction", "cover_angle_rad")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
     HAS_TIP_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TIP_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_FLANGE_FIELD_NUMBER: _ClassVar[int]
+    COVER_FRACTION_FIELD_NUMBER: _ClassVar[int]
+    COVER_ANGLE_RAD_FIELD_NUMBER: _ClassVar[int]
     header: Header
     world_T_tob: Pose
     has_tip: bool
     world_T_tip: Pose
     world_T_flange: Pose
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., world_T_flange: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
+    cover_fraction: _containers.RepeatedScalarFieldContainer[float]
+    cover_angle_rad: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., world_T_flange: _Optional[_Union[Pose, _Mapping]] = ..., cover_fraction: _Optional[_Iterable[float]] = ..., cover_angle_rad: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class Event(_message.Message):
     __slots__ = ("header", "severity", "source", "code", "text")

@@ -228,6 +228,8 @@ def demo(args) -> int:
         run_dir.mkdir(parents=True, exist_ok=True)
         return run_calibrate(args, run_dir)
     over = parse_overrides(getattr(args, "set", None))
+    if getattr(args, "speed", None) is not None:  # --speed: the operator's, as --set operator.speed_mm_s
+        over.setdefault("operator", {})["speed_mm_s"] = args.speed
     unknown = set(over) - set(SECTIONS)
     if unknown:
         raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")

@@ -85,7 +85,8 @@ def budget(args) -> int:
     from humanpt.runtime.config import ConfigError
     from humanpt.twin import budget as bud
 
-    for flag in ("set", "record"):
+    args.scenario = args.scenario or "arc"
+    for flag in ("set", "record", "speeds", "world"):
         if getattr(args, flag, None):
             raise ValueError(f"--{flag} does not apply to the budget (its worlds are the error sources; "
                              "the rig stays nominal)")
@@ -123,9 +124,56 @@ def budget(args) -> int:
     return 0
 
 
+def hard(args) -> int:
+    """``humanpt experiment hard``: :func:`humanpt.twin.hard.run_cases`, its table on stdout
+    and in ``hard.txt``; exit status 1 when a case fails issue 18's acceptance."""
+    import sys
+
+    from humanpt.cli.commands import run_stamp
+    from humanpt.cli.demo import parse_overrides
+    from humanpt.runtime.config import ConfigError
+    from humanpt.twin import hard as hc
+    from humanpt.twin.run import SystemConfig
+    from humanpt.twin.worlds import World
+
+    scenarios = [s.strip() for s in args.scenario.split(",") if s.strip()] if args.scenario else hc.HARD_SCENARIOS
+    try:
+        speeds = ([float(v) for v in args.speeds.split(",") if v.strip()] if args.speeds
+                  else list(hc.HARD_SPEEDS_MM_S))
+    except ValueError:
+        raise SystemExit(f"humanpt: --speeds: numbers (mm/s) separated by commas, got {args.speeds!r}") from None
+    if not speeds or not all(0 < v <= 1000 for v in speeds):
+        raise SystemExit(f"humanpt: --speeds: each within (0, 1000] mm/s, got {args.speeds!r}")
+    over = parse_overrides(getattr(args, "set", None))
+    try:
+        world = World.named(args.world or "ideal")
+        for s in scenarios:  # a bad scenario or key is the user's mistake: said once, before any run
+            SystemConfig.for_scenario(s, args.seed, over, world=world)
+    except (ConfigError, OSError, ValueError) as e:
+        raise SystemExit(f"humanpt: {e}") from None
+    out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-hard"
+    out.mkdir(parents=True, exist_ok=True)
+
+    def progress(i: int, n: int, label: str) -> None:
+        print(f"  [{i}/{n}] {label} done", file=sys.stderr, flush=True)
+
+    cases = hc.run_cases(scenarios, speeds, args.seed, world, args.robot, over, progress)
+    text = (f"humanpt experiment hard: world {world.name}, seed {args.seed}, robot {args.robot}\n"
+            + hc.format_cases(cases))
+    print(text)
+    (out / "hard.txt").write_text(text + "\n")
+    print(f"results: {out / 'hard.txt'}")
+    return 0 if all(c.passes() for c in cases) else 1
+
+
 def experiment(args) -> int:
     if args.name == "budget":
         return budget(args)
+    if args.name == "hard":
+        return hard(args)
+    for flag in ("scenario", "speeds", "world"):
+        if getattr(args, flag, None):
+            raise SystemExit(f"humanpt: --{flag} applies to experiment budget or hard, not {args.name}")
     from humanpt.cli.commands import run_stamp
     from humanpt.cli.demo import parse_overrides
     from humanpt.twin.experiment import run_experiment

@@ -7,6 +7,7 @@ import logging
 import sys
 
 from humanpt import __version__
+from humanpt.operator.scenario import BUILTIN_SCENARIOS
 from humanpt.runtime.config import ConfigError
 from humanpt.runtime.recording import RecordingError
 from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
@@ -54,8 +55,11 @@ def build_parser() -> argparse.ArgumentParser:
                        "the same cores in one process on virtual time. Prints where the recordings and the path "
                        "file are, and an accuracy table against ground truth.")
     p.add_argument("--scenario", "-s",
-                   help="static, arc, trapezium, freehand, or a scenario file (default arc; with --calibrate "
+                   help=f"{', '.join(BUILTIN_SCENARIOS)}, or a scenario file (default arc; with --calibrate "
                    "trapezium)")
+    p.add_argument("--speed", type=float, metavar="MM_S",
+                   help="the operator's speed along a built-in scenario, mm/s (default: the scenario's, 20; "
+                   "issue 18's hard cases are meant for 20 and 60)")
     p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
     p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
     p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
@@ -93,10 +97,12 @@ def build_parser() -> argparse.ArgumentParser:
                        "theta, phi computed as the paper did and against ground truth, for the paper's perception "
                        "method and the default one, beside the published tables; saves a figure as PNG. budget: the error "
                        "budget of the twin's world (each error source alone, then all together).")
-    p.add_argument("name", choices=["static", "arc", "trapezium", "budget"],
+    p.add_argument("name", choices=["static", "arc", "trapezium", "budget", "hard"],
                    help="budget: the error budget (issue 16): --scenario once on the ideal world, once per "
                         "error source of the twin's world alone, then all together, the rig nominal; prints "
-                        "each one's effect on the recorded path and saves budget.csv and budget.png")
+                        "each one's effect on the recorded path and saves budget.csv and budget.png. "
+                        "hard: issue 18's abrupt, occluded and fast cases (scurve, abrupt, occluded, partial at "
+                        "20 and 60 mm/s, or --scenario/--speeds), judged against ground truth; saves hard.txt")
     p.add_argument("--method", choices=["both", "paper", "weighted"], default="both",
                    help="perception method(s) (default both, side by side)")
     p.add_argument("--seed", type=int, default=0, help="the twin's seed (noise, operator tremor)")
@@ -114,8 +120,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(repeatable), e.g. --set pose_filter.still_detect=false")
     p.add_argument("--speed-scale", type=float, default=1.0,
                    help="arc/trapezium: pace of the operator (default 1; the paper's speeds)")
-    p.add_argument("--scenario", default="arc",
-                   help="budget: the scenario (a built-in name or a scenario file; default arc)")
+    p.add_argument("--scenario",
+                   help="budget: the scenario (a built-in name or a scenario file; default arc); hard: "
+                        "comma-separated scenarios (default scurve,abrupt,occluded,partial)")
+    p.add_argument("--speeds", metavar="V,V,...", help="hard: the operator's speeds, mm/s (default 20,60)")
+    p.add_argument("--world", metavar="ideal|realistic|FILE",
+                   help="hard: the twin's world (default ideal, as issue 18's acceptance)")
     p.add_argument("--only", metavar="A,B,...",
                    help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
     p.add_argument("--duration", type=float,

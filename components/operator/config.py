@@ -37,7 +37,7 @@ class OperatorConfig:
     ``rate_hz``. ``seed`` shapes the freehand seam and its tremor.
     """
 
-    scenario: Literal["static", "arc", "trapezium", "freehand"] = "static"
+    scenario: Literal["static", "arc", "trapezium", "freehand", "scurve", "abrupt", "occluded", "partial"] = "static"
     scenario_file: str = ""
     scenario_text: str = ""
     speed_mm_s: Annotated[float, Range(0, 1000, "mm/s")] = 0.0

@@ -1,7 +1,10 @@
 """The operator as a component core: moves the target along a scenario and publishes the
-truth (world_T_tob, and world_T_tip with a driver) on ``operator/truth`` at a fixed rate."""
+truth (world_T_tob, and world_T_tip with a driver, and the scenario's covers of the
+sources) on ``operator/truth`` at a fixed rate."""
 
 from __future__ import annotations
+
+import math
 
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
@@ -66,6 +69,10 @@ class OperatorCore(Core):
         if world_T_tip is not None:
             truth.has_tip = True
             truth.world_T_tip.CopyFrom(pose_from_mm(world_T_tip))
+        cover = self.trajectory.cover(self.scenario_t_s)
+        if cover is not None:  # (only scenarios with covers: the others' truth is unchanged)
+            truth.cover_fraction.extend(cover[0])
+            truth.cover_angle_rad.extend(math.radians(a) for a in cover[1])
         out.append(("operator/truth", truth))
         if (
             not self.done

@@ -2,11 +2,14 @@
 
 A :class:`Scenario` is a start pose and a list of segments (straight lines, circular arcs,
 dwells), each with its own speeds, optionally a driver (the needle tip P of eq. (9)) and a
-hand tremor. :class:`Trajectory` turns it into ``pose(t)``. Scenarios are written as text
-files (see ``README.md`` in this folder for the format; :func:`parse_scenario`,
-:func:`format_scenario`), and four are built in (:func:`builtin_scenario`): the paper's
-static target (Table 1), its rotating base (Section 6, Fig. 8), the trapezium seam
-(Fig. 9) and a freehand seam.
+hand tremor, and covers (the operator's hand or an obstacle hiding part of a source for a
+while). :class:`Trajectory` turns it into ``pose(t)`` and ``cover(t)``. Scenarios are
+written as text files (see ``README.md`` in this folder for the format;
+:func:`parse_scenario`, :func:`format_scenario`), and some are built in
+(:func:`builtin_scenario`): the paper's static target (Table 1), its rotating base
+(Section 6, Fig. 8), the trapezium seam (Fig. 9), a freehand seam, and the hard cases of
+issue 18: an S-curve with a sharp corner and a dwell, abrupt starts, stops and torch turns,
+a source hidden for 2 s, and a source partly covered.
 
 Frames and units: world frame, mm and degrees (X = x, y, z, yaw, pitch, roll, Z-Y-X as in
 the geometry library); transforms (4, 4) in mm. The path frame is the TOB frame (``path
@@ -38,6 +41,8 @@ __all__ = [
     "Arc",
     "Dwell",
     "Tremor",
+    "Cover",
+    "SOURCE_NAMES",
     "Scenario",
     "Trajectory",
     "TremorModel",
@@ -122,6 +127,22 @@ class Tremor:
 
 
 Segment = Line | Arc | Dwell
+SOURCE_NAMES = ("A", "B", "C")  # the TOB's sources, in the order of the target model
+
+
+@dataclass(frozen=True)
+class Cover:
+    """Part of source ``source`` (0 = A, 1 = B, 2 = C) hidden from scenario time ``start_s``
+    until ``end_s`` (s from the start of the motion; ``math.inf``: to the end): the part of
+    its disc beyond a straight edge, ``fraction`` of its area (1: all of it), the hidden side
+    at ``angle_deg`` in the TOB plane (0: along the TOB's u axis)."""
+
+    source: int
+    fraction: float
+    start_s: float
+    end_s: float = math.inf
+    angle_deg: float = 0.0
+    line: int = field(default=0, compare=False)
 
 
 @dataclass(frozen=True)
@@ -136,9 +157,12 @@ class Scenario:
     driver_mm: Vec3 | None = None
     path: Literal["tob", "tip"] = "tob"
     tremor: Tremor | None = None
+    covers: tuple[Cover, ...] = ()
 
     def __post_init__(self) -> None:
         _check_name(self.name)
+        for c in self.covers:
+            _check_cover(c)
         _check_finite("start", self.start_x_mm_deg, 6)
         if self.driver_mm is not None:
             _check_finite("driver", self.driver_mm, 3)
@@ -175,6 +199,16 @@ def _check_finite(what: str, values, n: int, line: int = 0) -> None:
     vals = tuple(values)
     if len(vals) != n or not all(isinstance(v, int | float) and math.isfinite(v) for v in vals):
         raise ScenarioError(f"{what} needs {n} finite numbers, got {vals!r}", line)
+
+
+def _check_cover(c: Cover) -> None:
+    if c.source not in (0, 1, 2) or isinstance(c.source, bool):
+        raise ScenarioError(f"cover: the source is A, B or C (0, 1, 2), got {c.source!r}", c.line)
+    _check_finite("cover", (c.fraction, c.start_s, c.angle_deg), 3, c.line)
+    if not 0.0 <= c.fraction <= 1.0:
+        raise ScenarioError(f"cover: the fraction must be within 0 and 1, got {c.fraction!r}", c.line)
+    if c.start_s < 0 or not (isinstance(c.end_s, int | float) and c.end_s > c.start_s):
+        raise ScenarioError(f"cover: needs 0 <= from < to, got from {c.start_s!r} to {c.end_s!r}", c.line)
 
 
 def _check_speeds(seg, line: int) -> None:
@@ -227,6 +261,7 @@ KEYWORDS = (
     "line",
     "arc",
     "dwell",
+    "cover",
 )
 _HEADER_KEYWORDS = ("scenario", "driver", "path", "tremor")
 
@@ -253,6 +288,7 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     start: tuple | None = None
     speed, angular = DEFAULT_SPEED_MM_S, DEFAULT_ANGULAR_SPEED_DEG_S
     segments: list[Segment] = []
+    covers: list[Cover] = []
     seen: dict[str, int] = {}
     path_line = 0
     try:
@@ -307,6 +343,8 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
                         f"start: expected 6 numbers x y z psi theta phi, got {len(args)}", no
                     )
                 start = tuple(_numbers(args, no, "start"))
+            elif key == "cover":
+                covers.append(_parse_cover(args, no))
             elif key in ("speed", "angular_speed"):
                 if len(args) != 1:
                     raise ScenarioError(f"{key}: expected one number", no)
@@ -342,7 +380,7 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             raise ScenarioError("no 'start' line: a scenario needs its first pose")
         if path == "tip" and driver is None:
             raise ScenarioError("'path tip' needs a driver ('driver <x> <y> <z>')", path_line)
-        return Scenario(start, tuple(segments), name, driver, path, tremor)
+        return Scenario(start, tuple(segments), name, driver, path, tremor, tuple(covers))
     except ScenarioError as e:
         raise ScenarioError(e.reason, e.line, source) from None
 
@@ -363,6 +401,30 @@ def _parse_arc(args: list[str], no: int, speed: float, angular: float) -> Arc:
         raise ScenarioError(usage, no)
     v = _numbers(args, no, "arc")
     return Arc(tuple(v[:3]), v[3], axis, orientation, speed, angular, no)
+
+
+def _parse_cover(args: list[str], no: int) -> Cover:
+    usage = "cover: expected <A|B|C> <fraction 0..1> from <s> [to <s>] [angle <deg>]"
+    if len(args) < 4 or args[2] != "from":
+        raise ScenarioError(usage, no)
+    if args[0] not in SOURCE_NAMES:
+        raise ScenarioError(f"cover: the source is A, B or C, got {args[0]!r}", no)
+    (fraction,) = _numbers(args[1:2], no, "cover fraction")
+    (start_s,) = _numbers(args[3:4], no, "cover from")
+    end_s, angle = math.inf, 0.0
+    rest = args[4:]
+    while rest:
+        if len(rest) < 2 or rest[0] not in ("to", "angle"):
+            raise ScenarioError(usage, no)
+        (v,) = _numbers(rest[1:2], no, f"cover {rest[0]}")
+        if rest[0] == "to":
+            end_s = v
+        else:
+            angle = v
+        rest = rest[2:]
+    c = Cover(SOURCE_NAMES.index(args[0]), fraction, start_s, end_s, angle, no)
+    _check_cover(c)
+    return c
 
 
 def _num(v: float) -> str:
@@ -407,6 +469,13 @@ def format_scenario(scenario: Scenario) -> str:
             out.append(text)
         else:
             out.append(f"dwell {_num(seg.duration_s)}")
+    for c in s.covers:
+        text = f"cover {SOURCE_NAMES[c.source]} {_num(c.fraction)} from {_num(c.start_s)}"
+        if c.end_s != math.inf:
+            text += f" to {_num(c.end_s)}"
+        if c.angle_deg:
+            text += f" angle {_num(c.angle_deg)}"
+        out.append(text)
     return "\n".join(out) + "\n"
 
 
@@ -510,6 +579,20 @@ class Trajectory:
             duration = max(duration, sweep / seg.angular_speed_deg_s)
         return duration, _arc_pose(seg, start, 1.0)
 
+    def cover(self, t_s: float) -> tuple[tuple[float, float, float], tuple[float, float, float]] | None:
+        """(hidden fraction of A, B, C; angle of each one's hidden side, deg) at scenario time
+        ``t_s``, or None when the scenario has no covers (several covers of one source at
+        once: the largest fraction counts)."""
+        covers = self.scenario.covers
+        if not covers:
+            return None
+        fraction = [0.0, 0.0, 0.0]
+        angle = [0.0, 0.0, 0.0]
+        for c in covers:
+            if c.start_s <= t_s < c.end_s and c.fraction > fraction[c.source]:
+                fraction[c.source], angle[c.source] = float(c.fraction), float(c.angle_deg)
+        return tuple(fraction), tuple(angle)
+
     def path_pose(self, t_s: float) -> np.ndarray:
         """Path-frame pose (4, 4), mm, at scenario time ``t_s`` (no tremor)."""
         if not self.pieces or t_s <= 0.0:
@@ -548,7 +631,7 @@ class Trajectory:
 
 # --------------------------------------------------------------------------- built-ins
 
-BUILTIN_SCENARIOS = ("static", "arc", "trapezium", "freehand")
+BUILTIN_SCENARIOS = ("static", "arc", "trapezium", "freehand", "scurve", "abrupt", "occluded", "partial")
 NEEDLE_MM = (0.0, 0.0, 60.0)  # the default TOB's needle (humanpt.geometry.TargetModel)
 
 
@@ -637,9 +720,74 @@ def _freehand(speed_mm_s: float, seed: int) -> Scenario:
     return Scenario(start, tuple(segs), "freehand", NEEDLE_MM, "tip", Tremor(0.2, 0.3, seed))
 
 
+def _table_point(dx_mm: float, dy_mm: float) -> tuple[float, float, float]:
+    """A point on the table (z = 0) offset from under the Table 1 position, mm."""
+    return (round(TABLE1_X_MM_DEG[0] + dx_mm, 3), round(TABLE1_X_MM_DEG[1] + dy_mm, 3), 0.0)
+
+
+TORCH_YPR_DEG = (0.0, 15.0, FACE_UP_ROLL_DEG)  # the trapezium's torch: tilted 15 deg, face up
+
+
+def _scurve(speed_mm_s: float) -> Scenario:
+    """An S-curve with a sharp corner and a dwell (issue 18): two quarter arcs of radius
+    60 mm in opposite senses with the torch following (its turning rate steps from
+    +v/r to -v/r between them), a straight run, a sharp 90 deg corner (a velocity step),
+    a 1 s dwell, then another 90 deg corner and a run; tip path at the trapezium's torch
+    angle."""
+    r = 60.0
+    x, y = -120.0, -60.0
+    segs: list[Segment] = [
+        Arc(_table_point(x, y + r), 90.0, speed_mm_s=speed_mm_s, angular_speed_deg_s=90.0),
+        Arc(_table_point(x + 2 * r, y + r), -90.0, speed_mm_s=speed_mm_s, angular_speed_deg_s=90.0),
+        Line(_table_point(x + 2 * r + 60, y + 2 * r), None, speed_mm_s),
+        Line(_table_point(x + 2 * r + 60, y + 2 * r - 60), None, speed_mm_s),
+        Dwell(1.0),
+        Line(_table_point(x + 2 * r + 120, y + 2 * r - 60), None, speed_mm_s),
+        Dwell(1.0),
+    ]
+    return Scenario((*_table_point(x, y), *TORCH_YPR_DEG), tuple(segs), "scurve", NEEDLE_MM, "tip")
+
+
+def _abrupt(speed_mm_s: float) -> Scenario:
+    """Abrupt motion (issue 18): an instant start at full speed, an instant stop, a
+    reversal, a quick torch turn on the spot (25 deg at 45 deg/s), a slow run then an
+    instant speed step to three times it while the torch turns back; tip path."""
+    v = speed_mm_s
+    yaw25 = (25.0, TORCH_YPR_DEG[1], TORCH_YPR_DEG[2])
+    segs: list[Segment] = [
+        Line(_table_point(0.0, 0.0), None, v),
+        Dwell(0.5),
+        Line(_table_point(-40.0, 0.0), None, v),
+        Line(_table_point(-40.0, 0.0), yaw25, v, 45.0),
+        Line(_table_point(-20.0, 20.0), None, v / 3),
+        Line(_table_point(100.0, 20.0), TORCH_YPR_DEG, v, 45.0),
+        Dwell(1.0),
+    ]
+    return Scenario((*_table_point(-100.0, 0.0), *TORCH_YPR_DEG), tuple(segs), "abrupt", NEEDLE_MM, "tip")
+
+
+def _occluded(speed_mm_s: float) -> Scenario:
+    """A straight seam 6 s long at any speed, source B hidden completely from 2 s to 4 s
+    into the motion (issue 18: position-only tracking and recording); tip path."""
+    half = 3.0 * speed_mm_s
+    segs: list[Segment] = [Line(_table_point(half, 0.0), None, speed_mm_s), Dwell(1.0)]
+    return Scenario((*_table_point(-half, 0.0), *TORCH_YPR_DEG), tuple(segs), "occluded", NEEDLE_MM, "tip",
+                    covers=(Cover(1, 1.0, 2.0, 4.0),))
+
+
+def _partial(speed_mm_s: float) -> Scenario:
+    """A straight seam 5 s long at any speed, source A 30 % covered (the hidden side towards
+    the TOB's +v) from 1 s into the motion to the end (issue 18: a partly covered source
+    must be flagged, not trusted); tip path."""
+    half = 2.5 * speed_mm_s
+    segs: list[Segment] = [Line(_table_point(half, 0.0), None, speed_mm_s), Dwell(1.0)]
+    return Scenario((*_table_point(-half, 0.0), *TORCH_YPR_DEG), tuple(segs), "partial", NEEDLE_MM, "tip",
+                    covers=(Cover(0, 0.3, 1.0, math.inf, 90.0),))
+
+
 def builtin_scenario(name: str, speed_mm_s: float = 0.0, seed: int = 0) -> Scenario:
     """One of :data:`BUILTIN_SCENARIOS`; ``speed_mm_s`` > 0 replaces the default speed
-    (arc 20 mm/s, trapezium 20 mm/s, freehand 15 mm/s on average)."""
+    (freehand 15 mm/s on average, the others 20 mm/s)."""
     if name == "static":
         return _static()
     if name == "arc":
@@ -648,4 +796,7 @@ def builtin_scenario(name: str, speed_mm_s: float = 0.0, seed: int = 0) -> Scena
         return _trapezium(speed_mm_s or DEFAULT_SPEED_MM_S)
     if name == "freehand":
         return _freehand(speed_mm_s or 15.0, seed)
+    hard = {"scurve": _scurve, "abrupt": _abrupt, "occluded": _occluded, "partial": _partial}
+    if name in hard:
+        return hard[name](speed_mm_s or DEFAULT_SPEED_MM_S)
     raise ScenarioError(f"no built-in scenario {name!r}; built in: {', '.join(BUILTIN_SCENARIOS)}")

@@ -9,13 +9,15 @@ capture waits in a queue until both truths have samples at or beyond the end of 
 exposure, then the image is rendered from the truths interpolated to t - never
 extrapolated - and published on ``camera/image`` (mono8, frame "camera", stamp = the
 capture time plus the camera clock's error, ``stamp_offset_ms`` + ``stamp_jitter_ms``),
-with the truth it used on ``sim_camera/truth`` (stamp = the true capture time). A capture
+with the sources covered as the operator's truth says at t (its ``cover_fraction``, on
+top of the configured static ``occluded_sources``), and with the truth it used on ``sim_camera/truth`` (stamp = the true capture time). A capture
 whose truth has not come ``max_truth_wait_ms`` after the exposure ended is dropped with a
 ``truth_late`` event. A frame is lost with probability ``frame_drop_probability``.
 """
 
 from __future__ import annotations
 
+import math
 from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass
@@ -119,6 +121,9 @@ class SimCameraCore(Core):
         self.flange_T_camera = config.flange_T_camera
         self.tob = PoseTrack()
         self.flange = PoseTrack()
+        # The operator's covers: (stamp ns, fractions A B C, angles rad), in stamp order; a
+        # cover holds from its truth's stamp until the next truth's (a step, not blended).
+        self.covers: deque[tuple[int, tuple[float, ...], tuple[float, ...]]] = deque(maxlen=4096)
         self.pending: deque[_Capture] = deque()
         self.frame_index = 0  # counts captures (dropped ones too): the noise of frame k is fixed
         self.first_tick_ns: int | None = None
@@ -161,9 +166,30 @@ class SimCameraCore(Core):
                     )
                 ]
             return []
+        if topic == "operator/truth" and (msg.cover_fraction or msg.cover_angle_rad or self.covers):
+            # (A truth without a cover after covers: nothing is covered any more.)
+            fraction = tuple(msg.cover_fraction) or (0.0, 0.0, 0.0)
+            angle = tuple(msg.cover_angle_rad) or (0.0, 0.0, 0.0)
+            if not (len(fraction) == len(angle) == 3 and all(0.0 <= f <= 1.0 for f in fraction)
+                    and all(math.isfinite(a) for a in angle)):
+                self.bad_truths += 1
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_truth",
+                                   f"ignored a cover of {topic}: 3 fractions in [0, 1] and 3 finite angles "
+                                   f"expected, got {list(fraction)}, {list(angle)} (so far {self.bad_truths})")]
+            while self.covers and self.covers[-1][0] >= msg.header.stamp_ns:
+                self.covers.pop()  # a repeat or a restarted source: the newer wins
+            self.covers.append((msg.header.stamp_ns, fraction, angle))
         a_T_b[:3, 3] *= 1000.0  # m -> mm
         (self.tob if topic == "operator/truth" else self.flange).add(msg.header.stamp_ns, a_T_b)
         return []
+
+    def _cover_at(self, t_ns: int) -> tuple[tuple[float, ...], tuple[float, ...]] | None:
+        """The operator's cover at ``t_ns`` (the latest at or before it), or None."""
+        while len(self.covers) >= 2 and self.covers[1][0] <= t_ns:
+            self.covers.popleft()  # captures come in time order: older covers are done
+        if not self.covers or self.covers[0][0] > t_ns:
+            return None
+        return self.covers[0][1], self.covers[0][2]
 
     # -- capture and render -----------------------------------------------------------------
     def _half_exposure_ns(self) -> int:
@@ -237,17 +263,22 @@ class SimCameraCore(Core):
         world_T_flange = self.flange.at(cap.t_ns)
         world_T_tob = self.tob.at(cap.t_ns)
         world_T_camera = world_T_flange @ self.flange_T_camera
+        cover = self._cover_at(cap.t_ns)
+        renderer = cap.renderer if cover is None else cap.renderer.covered(*cover)
         if self.config.motion_blur:
             # The renderer integrates from the poses at the start of the exposure to those at
             # its end (linearly: an exposure is short against the truth's sample interval).
-            pixels = cap.renderer.render(
+            pixels = renderer.render(
                 *self._camera_poses(cap.t_ns - cap.half_exposure_ns), cap.frame_index,
                 *self._camera_poses(cap.t_ns + cap.half_exposure_ns))
         else:
             camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
-            pixels = cap.renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
+            pixels = renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
         truth = pb.Truth(header=self.next_header("sim_camera/truth", cap.t_ns, "world"))
         truth.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
         if world_T_tob is not None:
             truth.world_T_tob.CopyFrom(pose_from_mm(world_T_tob))
+        if cover is not None:  # the cover this image was rendered with
+            truth.cover_fraction.extend(cover[0])
+            truth.cover_angle_rad.extend(cover[1])
         return [("camera/image", image(pixels, cap.stamp_ns, "camera")), ("sim_camera/truth", truth)]

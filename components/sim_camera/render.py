@@ -47,6 +47,7 @@ column j) at (u, v) = (j, i)), DN (grey levels).
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from collections.abc import Sequence
@@ -745,6 +746,35 @@ class Renderer:
         )
         for f in Discs._fields():
             getattr(self._sources, f).flags.writeable = False  # shared by every image
+        self._covers: dict[tuple, Renderer] = {}  # covered() copies, by cover
+
+    def covered(self, fraction: Sequence[float], angle_rad: Sequence[float]) -> Renderer:
+        """This renderer with the sources covered as the operator's truth says: per source
+        A, B, C the hidden ``fraction`` of its disc (0..1; 0 leaves the configured static
+        occlusion, ``occluded_sources``) and the direction ``angle_rad`` of the hidden side
+        in the TOB plane. Shares everything else (tables, noise banks) with this one; kept
+        per cover, so a cover held over many frames is built once."""
+        key = (tuple(float(f) for f in fraction), tuple(float(a) for a in angle_rad))
+        if not any(key[0]):
+            return self
+        hit = self._covers.get(key)
+        if hit is not None:
+            return hit
+        h = self._sources.occlusion_h.copy()
+        d = self._sources.occlusion_dir.copy()
+        for k, (f, a) in enumerate(zip(*key, strict=True)):
+            if f > 0.0:
+                h[k] = occlusion_offset(f)
+                d[k] = (math.cos(a), math.sin(a))
+        other = copy.copy(self)
+        other._sources = dataclasses.replace(self._sources, occlusion_h=h, occlusion_dir=d)
+        for f in ("occlusion_h", "occlusion_dir"):
+            getattr(other._sources, f).flags.writeable = False
+        other._covers = {}
+        if len(self._covers) > 64:  # a cover that changes every frame: do not hoard
+            self._covers.clear()
+        self._covers[key] = other
+        return other
 
     # -- scene ---------------------------------------------------------------------------
     def discs(
@@ -788,7 +818,7 @@ class Renderer:
                         c.source_dn_per_ms * c.reflection_gain,
                         c.reflection_blur_px,
                         h,
-                        self._occ_dir,
+                        src.occlusion_dir,
                         10 + np.arange(3),
                     )
                 )

@@ -110,6 +110,7 @@ UNIT_RULES: list[tuple[str, str]] = [
     (r"^rotation$", "quaternion"),  # Pose.rotation
     (r"^covariance$", "covariance"),
     (r"^quality$", "ratio"),
+    (r"_fraction$", "ratio"),
     (r"_m2$|_rad2$", "covariance"),  # PathPoint's 3x3 covariances (issue 18)
     (r"^rotation_scale$", "ratio"),  # ControllerStatus (issue 18)
 ]

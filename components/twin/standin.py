@@ -77,7 +77,7 @@ class StandInRobotConfig:
 
     cycle_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     start_flange_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] | None = None
-    start_view: Literal["static", "arc", "trapezium", "freehand"] = "static"
+    start_view: Literal["static", "arc", "trapezium", "freehand", "scurve", "abrupt", "occluded", "partial"] = "static"
     start_dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
     max_speed_mm_s: Annotated[float, Range(1e-3, 1000, "mm/s")] = 100.0
     max_rate_deg_s: Annotated[float, Range(1e-3, 1000, "deg/s")] = 60.0

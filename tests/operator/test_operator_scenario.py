@@ -14,6 +14,7 @@ from humanpt.geometry import transform_from_x, x_from_transform
 from humanpt.operator import (
     TABLE1_X_MM_DEG,
     Arc,
+    Cover,
     Dwell,
     Line,
     OperatorConfig,
@@ -50,6 +51,12 @@ def scenarios(draw):
     driver = draw(st.none() | vec3)
     path = draw(st.sampled_from(["tob", "tip"])) if driver is not None else "tob"
     tremor = draw(st.none() | st.builds(Tremor, pos, pos, st.integers(0, 2**31)))
+    covers = []
+    for _ in range(draw(st.integers(0, 3))):
+        start = draw(st.floats(0, 100))
+        end = draw(st.just(math.inf) | st.floats(start + 0.001, 200))
+        covers.append(Cover(draw(st.integers(0, 2)), draw(st.floats(0, 1)), start, end,
+                            draw(st.floats(-360, 360))))
     return Scenario(
         tuple(draw(st.lists(num, min_size=6, max_size=6))),
         tuple(draw(st.lists(segments(), max_size=8))),
@@ -57,6 +64,7 @@ def scenarios(draw):
         driver,
         path,
         tremor,
+        tuple(covers),
     )
 
 
@@ -86,6 +94,11 @@ def test_a_scenario_file_round_trips(scenario):
         ("path tip\nstart 0 0 0 0 0 0\n", 1, "'path tip' needs a driver"),
         ("tremor 0.1 0.2 x\nstart 0 0 0 0 0 0\n", 1, "seed 'x' is not an integer"),
         ("scenario two words\nstart 0 0 0 0 0 0\n", 1, "scenario: expected one name"),
+        ("start 0 0 0 0 0 0\ncover D 0.3 from 1\n", 2, "source is A, B or C, got 'D'"),
+        ("start 0 0 0 0 0 0\ncover A 1.3 from 1\n", 2, "fraction must be within 0 and 1"),
+        ("start 0 0 0 0 0 0\ncover A 0.3 from 2 to 1\n", 2, "needs 0 <= from < to"),
+        ("start 0 0 0 0 0 0\ncover A 0.3 at 2\n", 2, "cover: expected <A|B|C>"),
+        ("start 0 0 0 0 0 0\ncover A 0.3 from 1 angle\n", 2, "cover: expected <A|B|C>"),
     ],
 )
 def test_a_broken_scenario_is_rejected_with_its_line(text, line, fragment):
@@ -212,4 +225,52 @@ def test_the_readme_example_parses():
     )
     assert [type(g).__name__ for g in s.segments] == ["Line", "Line", "Arc", "Arc", "Dwell"]
     assert s.segments[3].orientation == "fixed" and s.segments[3].axis == (1.0, 0.0, 0.0)
+    assert s.covers == (Cover(1, 1.0, 2.0, 4.0), Cover(0, 0.3, 1.0, math.inf, 90.0))
     assert Trajectory(s).duration_s > 0
+
+
+def test_a_cover_hides_its_source_for_its_time_only():
+    s = parse_scenario("start 0 0 0 0 0 0\nline 100 0 0\ncover B 1 from 2 to 4\ncover A 0.3 from 3 angle 90\n"
+                       "cover A 0.5 from 3.5 to 3.7\n")
+    traj = Trajectory(s)
+    assert traj.cover(1.999) == ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    assert traj.cover(2.0) == ((0.0, 1.0, 0.0), (0.0, 0.0, 0.0))
+    assert traj.cover(3.0) == ((0.3, 1.0, 0.0), (90.0, 0.0, 0.0))
+    assert traj.cover(3.6) == ((0.5, 1.0, 0.0), (0.0, 0.0, 0.0))  # the larger of two at once
+    assert traj.cover(4.0) == ((0.3, 0.0, 0.0), (90.0, 0.0, 0.0))  # 'to' is exclusive; A to the end
+    assert Trajectory(parse_scenario("start 0 0 0 0 0 0\n")).cover(1.0) is None
+
+
+@pytest.mark.parametrize("speed", [20.0, 60.0])
+def test_the_hard_built_ins_keep_their_speeds_corners_and_covers(speed):
+    """issue 18's scenarios: the S-curve's quarter arcs in opposite senses (the torch turns
+    +90 then -90 deg) and its 90 deg corners; abrupt's instant stop and reversal; the
+    occluded seam hides B from 2 s to 4 s at any speed, partial covers A 30 % from 1 s."""
+    s = builtin_scenario("scurve", speed)
+    traj = Trajectory(s)
+    arcs = [g for g in s.segments if isinstance(g, Arc)]
+    assert [a.angle_deg for a in arcs] == [90.0, -90.0]
+    t = np.linspace(0, traj.duration_s, 4001)
+    tips = np.array([traj.pose(x)[1] for x in t])
+    step = np.linalg.norm(np.diff(tips[:, :3, 3], axis=0), axis=1) / np.diff(t)
+    moving = step > 1e-6
+    assert np.median(step[moving]) == pytest.approx(speed, rel=1e-3)
+    assert step.max() <= speed * (1 + 1e-6)
+    yaw = np.degrees(np.arctan2(tips[:, 1, 0], tips[:, 0, 0]))
+    assert yaw.max() - yaw[0] == pytest.approx(90.0, abs=0.2) and yaw[-1] == pytest.approx(yaw[0], abs=1e-6)
+    # the corner: the direction of travel turns by 90 deg within one sample
+    d = np.diff(tips[:, :2, 3], axis=0)[moving]
+    heading = np.degrees(np.arctan2(d[:, 1], d[:, 0]))
+    assert np.abs(np.diff(heading)).max() == pytest.approx(90.0, abs=1.0)
+    a = builtin_scenario("abrupt", speed)
+    assert any(isinstance(g, Dwell) for g in a.segments[:2])
+    ta = Trajectory(a)
+    x0 = ta.pose(ta.pieces[1].t0_s)[1][0, 3]
+    assert ta.pose(ta.pieces[2].t0_s + 0.5)[1][0, 3] < x0  # reversed after the stop
+    for name, covered, t_cover in (("occluded", (0.0, 1.0, 0.0), (2.0, 4.0)), ("partial", (0.3, 0.0, 0.0), (1.0, None))):
+        tr = Trajectory(builtin_scenario(name, speed))
+        assert tr.cover(t_cover[0] - 0.01)[0] == (0.0, 0.0, 0.0)
+        assert tr.cover(t_cover[0])[0] == covered
+        end = t_cover[1] if t_cover[1] is not None else tr.duration_s + 100
+        assert tr.cover(end - 0.01)[0] == covered
+        assert tr.duration_s > (t_cover[1] or t_cover[0]) + 1.0  # still moving after the cover ends

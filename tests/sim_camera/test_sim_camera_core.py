@@ -303,3 +303,50 @@ def test_motion_blur_hands_the_renderer_the_poses_at_the_start_and_end_of_the_ex
     np.testing.assert_array_equal(from_image(outs[0][1]), direct)
     truth = from_pose(outs[1][1].world_T_flange)
     np.testing.assert_allclose(truth[:3, 3] * 1000, [10.0, 0, 0], atol=1e-9)  # mid-exposure
+
+
+def _covered_image(cover_fraction, cover_angle_rad):
+    """The image of the target at D with the operator's truth carrying a cover."""
+    core = SimCameraCore(SimCameraConfig(noise=False))
+    flange = np.eye(4)
+    tob = flange @ DEFAULT_FLANGE_T_CAMERA_MM @ camera_T_desired(600.0)
+    core.step(0, "sim_robot/truth", _truth(0, "world_T_flange", flange))
+    msg = _truth(0, "world_T_tob", tob)
+    msg.cover_fraction.extend(cover_fraction)
+    msg.cover_angle_rad.extend(cover_angle_rad)
+    assert core.step(0, "operator/truth", msg) == []
+    core.step(10_000_000, "tick", _tick(10_000_000))
+    core.step(20_000_000, "operator/truth", _truth(20_000_000, "world_T_tob", tob))  # the cover ends
+    outs = core.step(20_000_000, "sim_robot/truth", _truth(20_000_000, "world_T_flange", flange))
+    assert outs[0][0] == "camera/image" and list(outs[1][1].cover_fraction) == list(cover_fraction)
+    core.step(40_000_000, "tick", _tick(40_000_000))
+    core.step(50_000_000, "operator/truth", _truth(50_000_000, "world_T_tob", tob))
+    later = core.step(50_000_000, "sim_robot/truth", _truth(50_000_000, "world_T_flange", flange))
+    return from_image(outs[0][1]), from_image(later[0][1]), np.linalg.inv(DEFAULT_FLANGE_T_CAMERA_MM) @ tob
+
+
+@pytest.mark.parametrize("source, fraction, angle_deg", [(1, 1.0, 0.0), (0, 0.3, 90.0)])
+def test_the_operators_cover_renders_as_the_configured_occlusion_for_its_time(source, fraction, angle_deg):
+    cover = [0.0, 0.0, 0.0]
+    cover[source] = fraction
+    angles = [0.0, 0.0, 0.0]
+    angles[source] = np.radians(angle_deg)
+    covered, after, camera_T_tob = _covered_image(cover, angles)
+    # The same scene with the static occlusion of the config (sim_camera's own, older path).
+    static = SimCameraConfig(noise=False, occluded_sources=(source,), occlusion_fraction=fraction,
+                             occlusion_angle_deg=angle_deg)
+    np.testing.assert_array_equal(covered, Renderer(static).render(camera_T_tob, DEFAULT_FLANGE_T_CAMERA_MM, 0))
+    # Once the truth's cover is gone, the uncovered target again.
+    plain = Renderer(SimCameraConfig(noise=False)).render(camera_T_tob, DEFAULT_FLANGE_T_CAMERA_MM, 0)
+    np.testing.assert_array_equal(after, plain)
+    assert not np.array_equal(covered, plain)
+
+
+def test_a_bad_cover_is_an_event_and_the_pose_is_still_used():
+    core = SimCameraCore(SimCameraConfig(noise=False))
+    msg = _truth(0, "world_T_tob", np.eye(4))
+    msg.cover_fraction.extend([0.0, 1.5, 0.0])
+    msg.cover_angle_rad.extend([0.0, 0.0, 0.0])
+    outs = core.step(0, "operator/truth", msg)
+    assert outs[0][1].code == "bad_truth" and "3 fractions in [0, 1]" in outs[0][1].text
+    assert not core.covers

@@ -76,6 +76,9 @@ HAND_START_FLANGES = {
                            [np.zeros((1, 3)), np.ones((1, 1))]]),
     # Seeded: its start tip pose is data; the flange follows by the rule above.
     "freehand": _hand_start_flange(builtin_scenario("freehand").start_x_mm_deg, tip_path=True),
+    # issue 18's hard cases: tip paths on the table at the trapezium's torch angle.
+    **{name: _hand_start_flange(builtin_scenario(name).start_x_mm_deg, tip_path=True)
+       for name in ("scurve", "abrupt", "occluded", "partial")},
 }
 
 
