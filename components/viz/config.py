@@ -59,10 +59,10 @@ class VizConfig:
     # strip starts when one is full, so a long path is not re-sent whole at every point).
     path_strip_points: Annotated[int, Range(2, 10000000, "points")] = 200
     # Each path point's position uncertainty is drawn as an ellipsoid of this many standard
-    # deviations, magnified (a 0.03 mm sd would be invisible among metres of robot): the
-    # half axes drawn are path_sigmas * path_sigma_magnify * sd.
+    # deviations, magnified (1: true size; the filter's ~1 mm sd is small beside a 0.5 m
+    # seam, a held orientation's tip tens of mm): half axes = path_sigmas * magnify * sd.
     path_sigmas: Annotated[float, Range(0.1, 10, "sd")] = 3.0
-    path_sigma_magnify: Annotated[float, Range(1, 10000, "")] = 10.0
+    path_sigma_magnify: Annotated[float, Range(0.01, 10000, "")] = 1.0
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:

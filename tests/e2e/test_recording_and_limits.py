@@ -211,6 +211,26 @@ def test_the_hard_scenarios_at_60_mm_s_keep_g_near_the_image_centre(scenario):
     assert rep.lagging_cycles > 10, rep.line()  # the limits did bind: the orientation lagged
 
 
+def test_the_reported_field_of_view_margin_is_the_true_one(turns):
+    """Each status's margin (the controller's estimate: its predicted flange, the filter's
+    target) against the one the truth gives: the robot's true flange in that cycle, the
+    operator's target at the status's stamp, the ideal world's camera."""
+    from humanpt.controller import law
+    from humanpt.geometry.rig import Rig
+
+    w = turns["position_first"]
+    rig = Rig()
+    sources = np.asarray(rig.target_model().source_positions_mm)
+    flange = {round(stamp / 28e6): p["world_T_flange"] for stamp, p in w.truths("sim_robot/truth")}
+    statuses = [st for st in (pb.ControllerStatus.FromString(o.data) for o in w.outputs("controller/status"))
+                if st.visible and st.cycle in flange]
+    targets = evaluate.truth_at(w, [st.header.stamp_ns for st in statuses])
+    d = [st.fov_margin_px - law.fov_margin_px(
+        rig.params(), np.linalg.inv(flange[st.cycle] @ w.camera.config.flange_T_camera) @ G, sources)
+         for st, G in zip(statuses, targets, strict=True)]
+    assert len(d) > 300 and np.median(np.abs(d)) < 0.2 and np.abs(d).max() < 5.0, (np.median(np.abs(d)), max(d))
+
+
 def test_position_first_changes_nothing_within_the_limits():
     """The arc (20 mm/s, 4.7 deg/s) never needs more than the limits: both settings command
     the same steps, bit for bit."""
