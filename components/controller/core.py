@@ -21,7 +21,11 @@ record_stop, save {"file", "overwrite"}, calibrate {"samples", "pivot_mm"}, play
 "speed_mm_s"}, stop.  Every command's arguments are checked (:func:`check_command`: known
 names, types, physical ranges, a plain file name for save); a bad one gets a ``bad_command``
 event and changes nothing.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
-point (G and, with a driver, the tip P) is published; the shell appends it to the path file.
+point (G and, with a driver, the tip P) is published, also with one or two sources (the
+orientation then flagged ``orientation_held``), with the filter's covariance; the shell
+appends it to the path file.  Each ``controller/status`` reports how much of the field of
+view was left (``fov_margin_px``) and G's offset in the image; at the speed limits the
+servo keeps G near D first (``saturation``, :func:`humanpt.controller.law.position_first`).
 """
 
 from __future__ import annotations
