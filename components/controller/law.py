@@ -111,7 +111,8 @@ def position_first(
     it is scaled by the largest s in [0, 1] that keeps the translation within
     ``max_step_m``: the orientation lags, D stays on G. When D's motion alone exceeds the
     limit it is scaled down and nothing swings D (s = 0). The step is exact for the robot's
-    ``R' = exp(d_rot) R, t' = t + d_t``: D moves by ``v_D dt`` (bar the final clip)."""
+    ``R' = exp(d_rot) R, t' = t + d_t``: D moves by ``v_D dt`` (s is found to first order,
+    then bisected down if the exact swing needs more translation than the limit)."""
     v_d, w = np.asarray(v_d_m_s, dtype=float), np.asarray(w_rad_s, dtype=float)
     v_max, w_max = max_step_m / dt_s, max_step_rad / dt_s
     sat = False
