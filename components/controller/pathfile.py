@@ -101,6 +101,33 @@ def fill_held_orientation(x: np.ndarray, held: np.ndarray, stamp_ns: np.ndarray 
     return x
 
 
+def from_path_points(points) -> Path6:
+    """A :class:`Path6` (mm, deg; held flags and covariances in mm^2, deg^2) of recorded
+    ``controller/path`` messages (humanpt.PathPoint, all with or all without a tip)."""
+    from humanpt.geometry.transforms import x_from_transform
+    from humanpt.schemas.convert import from_pose
+
+    def x(p):
+        T = from_pose(p)
+        T[:3, 3] *= 1e3
+        return x_from_transform(T)
+
+    def cov(values, scale):
+        return np.asarray(values, dtype=float).reshape(3, 3) * scale if len(values) == 9 else np.zeros((3, 3))
+
+    pts = list(points)
+    tip = bool(pts) and pts[0].has_tip
+    return Path6(
+        np.array([p.index for p in pts], dtype=int), np.array([p.header.stamp_ns for p in pts], dtype=np.int64),
+        np.array([x(p.world_T_tob) for p in pts]).reshape(-1, 6),
+        np.array([x(p.world_T_tip) for p in pts]).reshape(-1, 6) if tip else None,
+        orientation_held=np.array([p.orientation_held for p in pts], dtype=bool),
+        cov_g_mm2=np.array([cov(p.position_covariance_m2, 1e6) for p in pts]).reshape(-1, 3, 3),
+        cov_r_deg2=np.array([cov(p.rotation_covariance_rad2, np.degrees(1.0) ** 2) for p in pts]).reshape(-1, 3, 3),
+        cov_tip_mm2=(np.array([cov(p.tip_position_covariance_m2, 1e6) for p in pts]).reshape(-1, 3, 3)
+                     if tip else None))
+
+
 def _upper(m: np.ndarray) -> list[float]:
     return [float(m[i, j]) for i, j in _UPPER_IJ]
 

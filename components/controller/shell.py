@@ -19,31 +19,10 @@ import re
 import shutil
 from pathlib import Path
 
-import numpy as np
-
 from humanpt.controller import pathfile
-from humanpt.geometry.transforms import x_from_transform
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_pose
 
 log = logging.getLogger("humanpt.controller")
-
-
-def x_mm_deg(p: pb.Pose) -> np.ndarray:
-    T = from_pose(p)
-    T[:3, 3] *= 1e3
-    return x_from_transform(T)
-
-
-def covariance_mm_deg(msg: pb.PathPoint) -> dict:
-    """A path point's held flag and covariances (3, 3) in mm^2 and deg^2 (None: not
-    recorded), as :func:`pathfile.row` takes them."""
-    def cov(values, scale):
-        return np.asarray(values, dtype=float).reshape(3, 3) * scale if len(values) == 9 else None
-
-    return {"orientation_held": msg.orientation_held, "cov_g_mm2": cov(msg.position_covariance_m2, 1e6),
-            "cov_r_deg2": cov(msg.rotation_covariance_rad2, np.degrees(1.0) ** 2),
-            "cov_tip_mm2": cov(msg.tip_position_covariance_m2, 1e6)}
 
 
 class PathWriter:
@@ -114,9 +93,11 @@ class PathWriter:
             return
         if self._w is None:
             self._open(msg.has_tip)
-        tip = x_mm_deg(msg.world_T_tip) if msg.has_tip else None
-        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, x_mm_deg(msg.world_T_tob), tip,
-                                      **covariance_mm_deg(msg)))
+        p = pathfile.from_path_points([msg])
+        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, p.x_g[0], None if p.x_tip is None else p.x_tip[0],
+                                      orientation_held=bool(p.orientation_held[0]), cov_g_mm2=p.cov_g_mm2[0],
+                                      cov_r_deg2=p.cov_r_deg2[0],
+                                      cov_tip_mm2=None if p.cov_tip_mm2 is None else p.cov_tip_mm2[0]))
         self._f.flush()
 
     def close(self) -> None:

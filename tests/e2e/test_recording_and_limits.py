@@ -95,11 +95,17 @@ def test_the_path_file_keeps_the_flags_and_covariance(hidden_source, tmp_path):
     np.testing.assert_allclose(got.cov_r_deg2, cov_r, rtol=1e-5, atol=1e-12)
     cov_tip = np.array([np.reshape(p.tip_position_covariance_m2, (3, 3)) for p in pts]) * 1e6
     np.testing.assert_allclose(got.cov_tip_mm2, cov_tip, rtol=1e-5, atol=1e-12)
-    # Written back and read again: the same.
+    # Written back and read again: the same; and so is what a lock-step run writes
+    # (RunResult.write_path: pathfile.from_path_points).
     pathfile.write(tmp_path / "again.csv", got)
-    again = pathfile.read(tmp_path / "again.csv")
-    np.testing.assert_array_equal(again.orientation_held, got.orientation_held)
-    np.testing.assert_allclose(again.cov_r_deg2, got.cov_r_deg2, rtol=1e-5)
+    pathfile.write(tmp_path / "lockstep.csv", pathfile.from_path_points(pts))
+    for name in ("again.csv", "lockstep.csv"):
+        again = pathfile.read(tmp_path / name)
+        assert (tmp_path / name).read_text().splitlines()[0] == (tmp_path / "path-1.csv").read_text().splitlines()[0]
+        np.testing.assert_array_equal(again.orientation_held, got.orientation_held)
+        np.testing.assert_allclose(again.cov_r_deg2, got.cov_r_deg2, rtol=1e-5)
+        np.testing.assert_allclose(again.cov_tip_mm2, got.cov_tip_mm2, rtol=1e-5)
+        np.testing.assert_allclose(again.x_tip, got.x_tip, atol=1e-6)
 
 
 def test_the_viewer_draws_the_uncertainty_and_the_held_points(hidden_source, tmp_path):
