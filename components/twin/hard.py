@@ -73,10 +73,7 @@ def _events(world, code: str) -> list[pb.Event]:
 
 def orientation_held(point: pb.PathPoint) -> bool:
     """Whether a path point's orientation was held (position only), not measured."""
-    fields = point.DESCRIPTOR.fields_by_name
-    if "orientation_valid" in fields:
-        return not point.orientation_valid
-    return False
+    return point.orientation_held  # PathPoint.orientation_held (controller, issue 18)
 
 
 def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | None = None, robot: str = "puma",
