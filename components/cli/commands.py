@@ -558,10 +558,12 @@ def path_cmd(args) -> int:
         raise ValueError(f"{args.output}: exists; give --overwrite to replace it")
     p = pathfile.read(args.input)
     if args.path_verb == "smooth":
-        out = pathfile.Path6(p.index, p.stamp_ns, pathfile.smooth(p.x_g, p.stamp_ns, accel_sigma=args.accel,
-                                                                  meas_sigma=args.sigma),
-                             None if p.x_tip is None else pathfile.smooth(p.x_tip, p.stamp_ns,
-                                                                          accel_sigma=args.accel, meas_sigma=args.sigma))
+        # Held orientations filled in first (Path6.points); the flags and the filter's
+        # covariances are kept as recorded.
+        out = dataclasses.replace(
+            p, x_g=pathfile.smooth(p.points("G"), p.stamp_ns, accel_sigma=args.accel, meas_sigma=args.sigma),
+            x_tip=None if p.x_tip is None else pathfile.smooth(p.points("tip"), p.stamp_ns, accel_sigma=args.accel,
+                                                               meas_sigma=args.sigma))
         pathfile.write(args.output, out)
         print(f"humanpt path smooth: {len(p)} points -> {args.output}")
         return 0

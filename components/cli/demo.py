@@ -63,6 +63,11 @@ def report(src, cfg, run_dir: Path, wall_s: float, sim_s: float, mode: str,
         lines += ["", f"servo error |G - D| while the target moved: mean {acc.servo_mm.mean():.3f} mm, "
                   f"max {acc.servo_mm.max():.3f} mm; angle mean {acc.servo_deg.mean():.3f} deg, "
                   f"max {acc.servo_deg.max():.3f} deg"]
+    from humanpt.controller.servo_report import servo_summary
+
+    servo = servo_summary(src, evaluate.scenario_start_ns(src))
+    if servo.cycles:
+        lines.append(f"(the controller's own view while it moved) {servo.line()}")
     if acc.warnings:
         lines += ["", f"{len(acc.warnings)} warnings/errors, e.g.: "
                   + "; ".join(f"{e.source}: {e.code}" for e in acc.warnings[:5])]
