@@ -1,0 +1,76 @@
+"""``humanpt bench faults --secure`` (issue 19 item 5): the rows that need the cell under
+mTLS, against a live twin (router + seven processes, a throwaway PKI), and the acceptance
+words "a client with a valid non-controller certificate cannot move the robot", judged by
+the gateway's own recording and the simulated robot's truth, not by the bench alone."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from humanpt.runtime.recording import read
+from humanpt.schemas.convert import from_pose
+from tests.bench.test_faults import COLUMNS, leftovers, table
+from tests.conftest import run_cli
+
+SECURE_ROWS = {
+    "unauthorised": "unauthorised publisher (certified non-controller)",
+    "uncertified": "uncertified client",
+    "token": "rogue liveliness token 'controller', controller killed",
+}
+
+
+@pytest.mark.timeout(150)
+def test_secure_rows_held_recovered_nothing_lost(tmp_path):
+    run_dir = tmp_path / "run"
+    p = run_cli("bench", "faults", "--secure", "--only", ",".join(SECURE_ROWS), "--run-dir", str(run_dir),
+                timeout=130)
+    assert p.returncode == 0, p.stdout + p.stderr
+    rows = table(p.stdout)
+    assert list(rows) == list(SECURE_ROWS.values())
+    for fault, row in rows.items():
+        held = re.fullmatch(r"yes \(([\d.]+) / ([\d.]+) mm\)", row["robot held"])
+        assert held and float(held[1]) <= 1.05 * float(held[2]), (fault, row)
+        assert re.fullmatch(r"yes \(\d+ ms(; down \d+ ms)?\)", row["recovered"]), (fault, row)
+        assert row["data lost"] == "robot_state 0, tob_state 0", (fault, row)
+        assert not row["note"].startswith("UNEXPECTED"), (fault, row)
+    assert rows[SECURE_ROWS["unauthorised"]]["note"].startswith("0/20 rogue commands delivered")
+    assert rows[SECURE_ROWS["uncertified"]]["note"].startswith("3/3 refused")
+    assert "controller_gone" in rows[SECURE_ROWS["token"]]["note"]
+    assert leftovers(run_dir) == []
+
+    # The run was under mTLS, every process a client with its own certificate.
+    toml = (run_dir / "humanpt.toml").read_text()
+    assert 'security = "mtls"' in toml and 'mode = "client"' in toml
+    assert (run_dir / "pki" / "perception.pem").exists()
+    # A client with a valid non-controller certificate cannot move the robot: none of its
+    # commands (frame "bench-rogue") is among what the gateway received, in any segment...
+    gw = read(run_dir / "alter_gateway.mcap")
+    cmds = [e.decode() for e in gw.inputs if e.topic == "controller/command"]
+    assert len(cmds) > 100, "the gateway received (almost) no commands at all: nothing was judged"
+    assert [c.cycle for c in cmds if c.header.frame_id == "bench-rogue"] == []
+    # ...and the simulated robot never stepped more than the gateway's limit per cycle (the
+    # rogue's 1 mm steps would have shown only as motion; the static target keeps it still).
+    truth = [e.decode() for e in read(run_dir / "sim_robot.mcap").outputs if e.topic == "sim_robot/truth"]
+    xyz = np.array([from_pose(t.world_T_flange)[:3, 3] for t in truth])
+    assert len(xyz) > 100
+    assert 1e3 * np.linalg.norm(np.diff(xyz, axis=0), axis=1).max() <= 100.0 * 0.028 * 1.05
+    # The killed controller was started again: its recording goes on in a second segment.
+    assert (run_dir / "controller.mcap").exists() and (run_dir / "controller.1.mcap").exists()
+    restarted = read(run_dir / "controller.1.mcap")
+    assert len(restarted.inputs) > 0, "the restarted controller received nothing"
+
+
+def test_secure_rows_are_skipped_without_mtls(tmp_path):
+    """Without --secure the rows that need mTLS are skipped with the reason, and no twin is
+    started for them alone."""
+    p = run_cli("bench", "faults", "--only", "unauthorised,token", "--run-dir", str(tmp_path / "run"), timeout=30)
+    assert p.returncode == 0, p.stdout + p.stderr
+    rows = table(p.stdout)
+    assert list(rows) == [SECURE_ROWS["unauthorised"], SECURE_ROWS["token"]]
+    for row in rows.values():
+        assert row["note"] == "skipped: needs the cell under mTLS (humanpt bench faults --secure)", row
+        assert [row[c] for c in COLUMNS[1:5]] == ["-"] * 4
+    assert not (tmp_path / "run" / "humanpt.toml").exists()
