@@ -541,7 +541,7 @@ def attack_rogue_token(ctx: Ctx, row: FaultRow) -> None:
     row.note = (("controller killed: alter_gateway controller_gone" if gone else
                  "controller killed: NO controller_gone (masked)")
                 + ("; controller_back" if back else "; no controller_back")
-                + ("; router: access_denied LivelinessToken" if denied else "; no access_denied event"))
+                + ("; router: access_denied on its key" if denied else "; no access_denied event"))
 
 
 def attack_acl_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
