@@ -18,6 +18,17 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
   ``pose_filter/tob_state`` over the same window.
 
 Every wait has a timeout; what does not come is reported as "not observed".
+
+With ``secure=True`` (``--secure``, issue 19 item 5) the twin runs under mTLS with a
+throwaway PKI (:func:`humanpt.twin.live.run_live`); the bench's session presents the run's
+operator certificate, and each injection of :data:`ATTACKS` on a topic comes from a session
+presenting the certificate of that topic's publisher (an insider: these rows test what
+each component does with what the access control lets through). :data:`SECURE_ATTACKS`
+need it (skipped rows, with the reason, without): a certified non-controller's commands
+(never delivered), clients without a certificate of the cell (never connected), a rogue
+liveliness token named ``controller`` with the real controller killed (its death still
+seen by the gateway) and started again, and the bus flood from an identity not allowed
+to put on the command key (refused at the router; the gateway's robot states keep time).
 """
 
 from __future__ import annotations

@@ -74,3 +74,62 @@ def test_secure_rows_are_skipped_without_mtls(tmp_path):
         assert row["note"] == "skipped: needs the cell under mTLS (humanpt bench faults --secure)", row
         assert [row[c] for c in COLUMNS[1:5]] == ["-"] * 4
     assert not (tmp_path / "run" / "humanpt.toml").exists()
+
+
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize("report_denied", [
+    pytest.param(True, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
+        "the router's refusal reporter (runtime/security.py, [runtime] report_denied = true) stops the "
+        "router under a flood of refused puts while someone subscribes to router/events: the bench's "
+        "aclflood row; remove this mark with the fix"))),
+    False,
+])
+def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, report_denied):
+    """Issue 14 item 6 under mTLS, the router alone: 2 s of puts at full rate on the command
+    key from perception's certificate (refused at the router), a tool subscribed to every
+    event; afterwards the router must still route an allowed put (within 5 s)."""
+    import time
+
+    import zenoh
+
+    from humanpt.runtime import security
+    from humanpt.runtime.bus import zenoh_config
+    from humanpt.runtime.config import load
+    from humanpt.schemas import topics
+    from tests.conftest import free_port, wait_port, write_config
+    from tests.security.test_mtls import Inbox
+
+    pki = tmp_path / "pki"
+    security.init_ca(pki, "test")
+    for name in ("router", "perception", "alter_gateway", "tool"):
+        security.issue(pki, name)
+    port = free_port()
+    cfg = write_config(tmp_path / "cell.toml", port, extra=f'security = "mtls"\npki = "pki"\n'
+                       f'report_denied = {str(report_denied).lower()}\n')
+    procs.start("router", "--config", str(cfg))
+    wait_port(port)
+    rt = load(cfg).runtime
+    tob = topics.TOPICS["perception/tob"].key("test")
+    events, after = Inbox(), Inbox()
+    sessions = [zenoh.open(zenoh_config(rt, identity=n)) for n in ("alter_gateway", "tool", "perception")]
+    gw, tool, rogue = sessions
+    try:
+        gw.declare_subscriber(topics.TOPICS["controller/command"].key("test"), lambda s: None)
+        tool.declare_subscriber("humanpt/test/*/events", events)
+        tool.declare_subscriber(tob, after)
+        pub = rogue.declare_publisher(topics.TOPICS["controller/command"].key("test"))
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 2.0:
+            for _ in range(200):
+                pub.put(b"junk")
+        fresh = zenoh.open(zenoh_config(rt, identity="perception"))
+        sessions.append(fresh)
+        fresh.put(tob, b"after the flood")
+        routed = after.wait_for(lambda k, v: v == b"after the flood", timeout=5.0)
+    finally:
+        for x in sessions:  # a stuck router makes closing time out: not what is judged here
+            try:
+                x.close()
+            except zenoh.ZError:
+                pass
+    assert routed, "the router routed nothing after the flood"
