@@ -49,7 +49,7 @@ def test_console_events_shows_the_routers_refusals(secure_cell, procs):
         marker = pb.Event(severity=pb.SEVERITY_WARNING, source="alter_gateway", code="bench_marker", text="x")
         # Keep trying until the console shows the refusal (the router reports the 1st, 10th,
         # 100th... per identity/message/key; the console's subscription may come after the 1st).
-        out_lines: list[str] = []
+        buf = ""  # the console's output so far (a read may end mid-line)
         deadline = time.monotonic() + 25
         os.set_blocking(con.stdout.fileno(), False)
         sel = selectors.DefaultSelector()
@@ -61,16 +61,20 @@ def test_console_events_shows_the_routers_refusals(secure_cell, procs):
                 gw.put(gw_events, marker.SerializeToString())
             i += 1
             if sel.select(0.1):
-                chunk = con.stdout.read() or ""
-                out_lines += chunk.splitlines()
-            text = "\n".join(out_lines)
-            if "access_denied" in text and "bench_marker" in text:
+                buf += con.stdout.read() or ""
+            if shown(buf.splitlines(), command):
                 break
-    out = "\n".join(out_lines) + procs.stop(con)
+    out = buf + procs.stop(con)
     procs.stop(router)
-    denied = [line for line in out.splitlines() if line.startswith("event router WARNING access_denied:")]
-    assert any(f"on {command} from " in line and "Put" in line for line in denied), out
-    assert any(line.startswith("event alter_gateway WARNING bench_marker: x") for line in out.splitlines()), out
+    assert shown(out.splitlines(), command), out
+
+
+def shown(lines: list[str], command: str) -> bool:
+    """Whether the console printed the router's refusal of a Put on ``command`` and the
+    gateway's warning, each as an event line."""
+    return (any(line.startswith("event router WARNING access_denied:") and f"refused Put (ingress) on {command} from "
+                in line for line in lines)
+            and any(line.startswith("event alter_gateway WARNING bench_marker: x") for line in lines))
 
 
 def test_a_command_the_router_refuses_is_said_so(secure_cell):
