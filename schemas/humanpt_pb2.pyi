@@ -122,7 +122,7 @@ class Pair(_message.Message):
     def __init__(self, right: _Optional[int] = ..., left: _Optional[int] = ..., residual_px: _Optional[float] = ...) -> None: ...
 
 class TobMeasurement(_message.Message):
-    __slots__ = ("header", "centers_px", "pairs", "points_camera_m", "camera_T_tob", "visible", "quality", "method", "status", "processing_s")
+    __slots__ = ("header", "centers_px", "pairs", "points_camera_m", "camera_T_tob", "visible", "quality", "method", "status", "processing_s", "degraded", "degraded_sources", "degraded_reason", "source_brightness")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     CENTERS_PX_FIELD_NUMBER: _ClassVar[int]
     PAIRS_FIELD_NUMBER: _ClassVar[int]
@@ -133,6 +133,10 @@ class TobMeasurement(_message.Message):
     METHOD_FIELD_NUMBER: _ClassVar[int]
     STATUS_FIELD_NUMBER: _ClassVar[int]
     PROCESSING_S_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_SOURCES_FIELD_NUMBER: _ClassVar[int]
+    DEGRADED_REASON_FIELD_NUMBER: _ClassVar[int]
+    SOURCE_BRIGHTNESS_FIELD_NUMBER: _ClassVar[int]
     header: Header
     centers_px: _containers.RepeatedCompositeFieldContainer[Point2]
     pairs: _containers.RepeatedCompositeFieldContainer[Pair]
@@ -143,7 +147,11 @@ class TobMeasurement(_message.Message):
     method: PerceptionMethod
     status: TobStatus
     processing_s: float
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., centers_px: _Optional[_Iterable[_Union[Point2, _Mapping]]] = ..., pairs: _Optional[_Iterable[_Union[Pair, _Mapping]]] = ..., points_camera_m: _Optional[_Iterable[_Union[Vector3, _Mapping]]] = ..., camera_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., visible: _Optional[int] = ..., quality: _Optional[float] = ..., method: _Optional[_Union[PerceptionMethod, str]] = ..., status: _Optional[_Union[TobStatus, str]] = ..., processing_s: _Optional[float] = ...) -> None: ...
+    degraded: bool
+    degraded_sources: _containers.RepeatedScalarFieldContainer[int]
+    degraded_reason: str
+    source_brightness: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., centers_px: _Optional[_Iterable[_Union[Point2, _Mapping]]] = ..., pairs: _Optional[_Iterable[_Union[Pair, _Mapping]]] = ..., points_camera_m: _Optional[_Iterable[_Union[Vector3, _Mapping]]] = ..., camera_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., visible: _Optional[int] = ..., quality: _Optional[float] = ..., method: _Optional[_Union[PerceptionMethod, str]] = ..., status: _Optional[_Union[TobStatus, str]] = ..., processing_s: _Optional[float] = ..., degraded: _Optional[bool] = ..., degraded_sources: _Optional[_Iterable[int]] = ..., degraded_reason: _Optional[str] = ..., source_brightness: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class AlterStatus(_message.Message):
     __slots__ = ("alter_active", "tool_mode", "cumulative", "arm_power", "fault")
@@ -224,7 +232,7 @@ class TobState(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ..., world_T_tob_at_measurement: _Optional[_Union[Pose, _Mapping]] = ..., after_measurement: _Optional[bool] = ...) -> None: ...
 
 class ControllerStatus(_message.Message):
-    __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples", "cycle", "saturated", "world_T_desired")
+    __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples", "cycle", "saturated", "world_T_desired", "fov_margin_px", "image_error_px", "rotation_scale")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     MODE_FIELD_NUMBER: _ClassVar[int]
     VISIBLE_FIELD_NUMBER: _ClassVar[int]
@@ -237,6 +245,9 @@ class ControllerStatus(_message.Message):
     CYCLE_FIELD_NUMBER: _ClassVar[int]
     SATURATED_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_DESIRED_FIELD_NUMBER: _ClassVar[int]
+    FOV_MARGIN_PX_FIELD_NUMBER: _ClassVar[int]
+    IMAGE_ERROR_PX_FIELD_NUMBER: _ClassVar[int]
+    ROTATION_SCALE_FIELD_NUMBER: _ClassVar[int]
     header: Header
     mode: ControlMode
     visible: int
@@ -249,21 +260,32 @@ class ControllerStatus(_message.Message):
     cycle: int
     saturated: bool
     world_T_desired: Pose
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., visible: _Optional[int] = ..., error_translation_m: _Optional[float] = ..., error_rotation_rad: _Optional[float] = ..., cycle_misses: _Optional[int] = ..., recording: _Optional[bool] = ..., path_points: _Optional[int] = ..., calibration_samples: _Optional[int] = ..., cycle: _Optional[int] = ..., saturated: _Optional[bool] = ..., world_T_desired: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
+    fov_margin_px: float
+    image_error_px: float
+    rotation_scale: float
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., visible: _Optional[int] = ..., error_translation_m: _Optional[float] = ..., error_rotation_rad: _Optional[float] = ..., cycle_misses: _Optional[int] = ..., recording: _Optional[bool] = ..., path_points: _Optional[int] = ..., calibration_samples: _Optional[int] = ..., cycle: _Optional[int] = ..., saturated: _Optional[bool] = ..., world_T_desired: _Optional[_Union[Pose, _Mapping]] = ..., fov_margin_px: _Optional[float] = ..., image_error_px: _Optional[float] = ..., rotation_scale: _Optional[float] = ...) -> None: ...
 
 class PathPoint(_message.Message):
-    __slots__ = ("header", "index", "world_T_tob", "has_tip", "world_T_tip")
+    __slots__ = ("header", "index", "world_T_tob", "has_tip", "world_T_tip", "orientation_held", "position_covariance_m2", "rotation_covariance_rad2", "tip_position_covariance_m2")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     INDEX_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
     HAS_TIP_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TIP_FIELD_NUMBER: _ClassVar[int]
+    ORIENTATION_HELD_FIELD_NUMBER: _ClassVar[int]
+    POSITION_COVARIANCE_M2_FIELD_NUMBER: _ClassVar[int]
+    ROTATION_COVARIANCE_RAD2_FIELD_NUMBER: _ClassVar[int]
+    TIP_POSITION_COVARIANCE_M2_FIELD_NUMBER: _ClassVar[int]
     header: Header
     index: int
     world_T_tob: Pose
     has_tip: bool
     world_T_tip: Pose
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., index: _Optional[int] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
+    orientation_held: bool
+    position_covariance_m2: _containers.RepeatedScalarFieldContainer[float]
+    rotation_covariance_rad2: _containers.RepeatedScalarFieldContainer[float]
+    tip_position_covariance_m2: _containers.RepeatedScalarFieldContainer[float]
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., index: _Optional[int] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., orientation_held: _Optional[bool] = ..., position_covariance_m2: _Optional[_Iterable[float]] = ..., rotation_covariance_rad2: _Optional[_Iterable[float]] = ..., tip_position_covariance_m2: _Optional[_Iterable[float]] = ...) -> None: ...
 
 class Truth(_message.Message):
     __slots__ = ("header", "world_T_tob", "has_tip", "world_T_tip", "world_T_flange", "cover_fraction", "cover_angle_rad")

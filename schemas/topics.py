@@ -66,6 +66,9 @@ EVENT_PUBLISHERS = (
     "ponger",
 )
 _ROWS += [Topic(f"{c}/events", pb.Event, c, "events: safety actions, drops, mode changes") for c in EVENT_PUBLISHERS]
+# The router (not a component): attempts its access control refused (security = "mtls",
+# report_denied; humanpt.runtime.security.DenialWatch).
+_ROWS.append(Topic("router/events", pb.Event, "router", "access control: refused attempts (mTLS)"))
 
 # Local inputs: delivered by a shell to its own core, recorded, never published.
 LOCAL_TOPICS: dict[str, type[Message]] = {

@@ -38,6 +38,8 @@ def load_cfg(args) -> cfgmod.ConfigFile:
         changes["cell"] = args.cell
     if getattr(args, "connect", None):
         changes["connect"] = tuple(args.connect)
+    if getattr(args, "identity", None):
+        changes["identity"] = args.identity
     if changes:
         try:
             rt = dataclasses.replace(cfg.runtime, **changes)
@@ -72,16 +74,38 @@ def router(args) -> int:
     listen = tuple(args.listen) if args.listen else cfg.runtime.listen
     conf = zenoh_config(cfg.runtime, mode="router", listen=listen, connect=())
     stop = stop_on_signals()
+    watch = reporter = None
+    if cfg.runtime.security == "mtls" and cfg.runtime.report_denied:  # before zenoh.open: it sets zenoh's logging
+        from humanpt.runtime.security import DenialReporter, DenialWatch
+
+        reporter = DenialReporter(cfg.runtime.cell)
+        watch = DenialWatch(reporter)
+        watch.start()
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as e:
         print(f"humanpt router: cannot listen on {', '.join(listen)}: {e}", file=sys.stderr)
+        if watch is not None:
+            watch.stop()
         return 1
+    if reporter is not None:
+        reporter.attach(session)
     with session:
+        if cfg.runtime.security == "mtls":
+            from humanpt.runtime import security
+
+            listen = tuple(security.tls_endpoint(e) for e in listen)
         print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
               flush=True)
+        if cfg.runtime.security == "mtls":
+            certs = security.identities(security.pki_dir_of(cfg.runtime))
+            print(f"humanpt router: mTLS (CA and certificates in {security.pki_dir_of(cfg.runtime)}); access "
+                  f"control default deny, allowing {', '.join(c.name for c in certs if c.role not in ('ca', 'router'))}"
+                  f" (`humanpt pki acl` prints it)", flush=True)
         while not stop.wait(0.5):
             pass
+    if watch is not None:
+        watch.stop()
     print("humanpt router: stopped", flush=True)
     return 0
 
@@ -115,7 +139,7 @@ def run_component(args) -> int:
 
 
 def _endpoint_addr(ep: str) -> tuple[str, int] | None:
-    if not ep.startswith("tcp/"):
+    if not ep.startswith(("tcp/", "tls/")):
         return None
     host, _, port = ep[4:].rpartition(":")
     host = host.strip("[]")
@@ -344,8 +368,11 @@ def param(args) -> int:
                                    payload=json.dumps({"set": sets}), timeout=args.timeout))
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
     if not bodies:
-        print(f"humanpt param: no component {args.component!r} answered in cell {cfg.runtime.cell} "
-              f"within {args.timeout:g} s (is it running?)", file=sys.stderr)
+        rt = cfg.runtime
+        why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
+               f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
+        print(f"humanpt param: no component {args.component!r} answered in cell {rt.cell} "
+              f"within {args.timeout:g} s (is it running?{why})", file=sys.stderr)
         return 1
     body = bodies[0]
     for r in body.get("results", []):
@@ -531,10 +558,12 @@ def path_cmd(args) -> int:
         raise ValueError(f"{args.output}: exists; give --overwrite to replace it")
     p = pathfile.read(args.input)
     if args.path_verb == "smooth":
-        out = pathfile.Path6(p.index, p.stamp_ns, pathfile.smooth(p.x_g, p.stamp_ns, accel_sigma=args.accel,
-                                                                  meas_sigma=args.sigma),
-                             None if p.x_tip is None else pathfile.smooth(p.x_tip, p.stamp_ns,
-                                                                          accel_sigma=args.accel, meas_sigma=args.sigma))
+        # Held orientations filled in first (Path6.points); the flags and the filter's
+        # covariances are kept as recorded.
+        out = dataclasses.replace(
+            p, x_g=pathfile.smooth(p.points("G"), p.stamp_ns, accel_sigma=args.accel, meas_sigma=args.sigma),
+            x_tip=None if p.x_tip is None else pathfile.smooth(p.points("tip"), p.stamp_ns, accel_sigma=args.accel,
+                                                               meas_sigma=args.sigma))
         pathfile.write(args.output, out)
         print(f"humanpt path smooth: {len(p)} points -> {args.output}")
         return 0

@@ -28,6 +28,7 @@ examples:
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
   humanpt bench faults                            the attacks of issue 14 against a live twin
+  humanpt pki init && humanpt pki show            the cell's CA and certificates ([runtime] security = "mtls")
 """
 
 
@@ -36,6 +37,9 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cell", help="cell name (one robot with its sensors); overrides [runtime] cell")
     p.add_argument("--connect", action="append", metavar="ENDPOINT",
                    help="router endpoint, e.g. tcp/192.168.1.10:7447 (repeatable); overrides [runtime] connect")
+    p.add_argument("--as", dest="identity", metavar="NAME",
+                   help="under mTLS, the certificate a tool presents (default [runtime] identity, else tool: "
+                   "read-only; an operator's may command)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -69,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
+    p.add_argument("--secure", action="store_true",
+                   help="live only: under mTLS ([runtime] security = \"mtls\") with a throwaway PKI in the run "
+                   "directory's pki/; every process a client of the router, which enforces the access control")
     p.add_argument("--world", metavar="ideal|realistic|FILE",
                    help="the twin's truth, which the pipeline does not know: ideal (default; with --calibrate "
                    "realistic; the hardware is "
@@ -198,10 +205,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--component", help="component name (default: every recording in the run)")
 
     from humanpt.cli import console as console_cli
+    from humanpt.cli import pki as pki_cli
     from humanpt.cli import view as view_cli
 
     view_cli.add_parser(sub)
     console_cli.add_parser(sub, _add_common)
+    pki_cli.add_parser(sub, _add_common)
 
     p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
@@ -348,6 +357,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--scenario", dest="faults_scenario", default="static",
                    help="scenario of the live twin (default static)")
     q.add_argument("--run-dir", help="keep the twin's recordings here (default: a temporary directory, removed)")
+    q.add_argument("--secure", "--security-mtls", dest="secure", action="store_true",
+                   help="run the twin under mTLS with a throwaway PKI and add the rows that need it: unauthorised "
+                   "publisher, uncertified client, rogue liveliness token, flood from an identity not allowed "
+                   "to publish (without it those rows are skipped, with the reason)")
     return ap
 
 
@@ -410,6 +423,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         from humanpt.cli import console as console_cli
 
         return console_cli.run(args)
+    if args.verb == "pki":
+        from humanpt.cli import pki as pki_cli
+
+        return pki_cli.run(args, ap)
     if args.verb == "runs":
         if args.runs_verb == "merge":
             return commands.runs_merge(args)

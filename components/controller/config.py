@@ -33,6 +33,17 @@ class ControllerConfig:
     still_deg_s: Annotated[float, Range(0, 100, "deg/s")] = live(0.5, "the target counts as not turning below this rate")
     max_speed_mm_s: SpeedMmS = live(100.0, "translation speed limit (the paper's step controller)")
     max_rotation_deg_s: RateDegS = live(60.0, "rotation speed limit")
+    # What gives when the demanded flange motion exceeds those limits (a quick torch turn
+    # swings the flange, 700 mm from D, far faster than 100 mm/s): position_first keeps D on
+    # G (G at the image centre, at its depth) and lets the orientation lag; scale shrinks the
+    # whole step (the flange falls behind and G drifts out of the image).
+    saturation: Literal["position_first", "scale"] = live(
+        "position_first", "at the speed limits: keep G at D and let the orientation lag, or scale the whole step")
+    # position_first takes over once G is this far from D (within it the step is scaled as
+    # with "scale": the orientation keeps its priority while G is near the image centre;
+    # 10 mm at 600 mm is ~17 px in the image).
+    position_first_beyond_mm: Annotated[float, Range(0, 1000, "mm")] = live(
+        10.0, "position_first: engage once |G - D| exceeds this")
     cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Command cycle k + 1 as soon as the state of cycle k is in (from where cycle k's step
     # will have put the flange): the gateway then answers each STATUS at once instead of

@@ -21,7 +21,11 @@ record_stop, save {"file", "overwrite"}, calibrate {"samples", "pivot_mm"}, play
 "speed_mm_s"}, stop.  Every command's arguments are checked (:func:`check_command`: known
 names, types, physical ranges, a plain file name for save); a bad one gets a ``bad_command``
 event and changes nothing.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
-point (G and, with a driver, the tip P) is published; the shell appends it to the path file.
+point (G and, with a driver, the tip P) is published, also with one or two sources (the
+orientation then flagged ``orientation_held``), with the filter's covariance; the shell
+appends it to the path file.  Each ``controller/status`` reports how much of the field of
+view was left (``fov_margin_px``) and G's offset in the image; at the speed limits the
+servo keeps G near D first (``saturation``, :func:`humanpt.controller.law.position_first`).
 """
 
 from __future__ import annotations
@@ -86,6 +90,37 @@ def flange_T_desired_m(c: ControllerConfig, rig: Rig | None = None) -> np.ndarra
     return _m(flange_T_desired_mm(c, rig))
 
 
+def _pose_covariance(st: pb.TobState) -> np.ndarray | None:
+    """The (6, 6) covariance of [p (m), r (rad)] of a filter state (the upper-left block of
+    its [p, r, v, w] covariance), or None when it carries none (or a malformed one)."""
+    n = st.covariance_dim
+    if n < 6 or len(st.covariance) != n * n:
+        return None
+    return np.asarray(st.covariance, dtype=float).reshape(n, n)[:6, :6]
+
+
+def tip_position_covariance(cov_pr: np.ndarray, world_p_tip_from_g: np.ndarray) -> np.ndarray:
+    """(3, 3) covariance of the tip's position P = p + R t, from the (6, 6) covariance of
+    [p, r] (r: a small world-frame rotation, R' = exp(r) R) and the tip's offset from G in
+    the world frame, R t (3,): first order, dP = dp + dr x (R t) = [I, -[R t]x] [dp; dr]."""
+    a = np.asarray(world_p_tip_from_g, dtype=float)
+    skew = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    J = np.hstack([np.eye(3), -skew])
+    return J @ cov_pr @ J.T
+
+
+def _held_filled(path: list[pb.PathPoint]) -> np.ndarray:
+    """(N, 6) mm/deg of a recorded path (the tip's when recorded), held orientations
+    interpolated from the measured ones around them (pathfile.fill_held_orientation)."""
+    from humanpt.controller.pathfile import fill_held_orientation
+
+    x = np.array([x_from_transform(_mm(from_pose(p.world_T_tip if p.has_tip else p.world_T_tob)))
+                  for p in path]).reshape(-1, 6)
+    held = np.array([p.orientation_held for p in path], dtype=bool)
+    stamps = np.array([p.header.stamp_ns for p in path], dtype=np.int64)
+    return fill_held_orientation(x, held, stamps)
+
+
 class ControllerCore(Core):
     name = "controller"
     config_type = ControllerConfig
@@ -107,18 +142,23 @@ class ControllerCore(Core):
         self.recording = config.record_on_start
         self.path: list[pb.PathPoint] = []
         self.path_index = 0
+        self.path_last_stamp_ns: int | None = None
         self.cycles_since_point = 0
         self.cal_samples: list[tuple[np.ndarray, np.ndarray]] = []  # (world_T_tob m, world_T_flange m)
         self.cal_target = 0
         self.cal_pivot_mm: np.ndarray | None = None
         self.playback: dict | None = None
         self.saturated_cycles = 0
+        self._position_first = False  # the last step was position_first's (law.thetau_step's hysteresis)
         self._last_cycle: int | None = None
         self._sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # cycle -> the step last sent for it
         self._derive(config)
 
     def _derive(self, c: ControllerConfig) -> None:
         self.flange_T_camera = self.rig.hand_eye.flange_T_camera_m()
+        self.psvs = self.rig.params()
+        self.tob_p_sources_mm = np.asarray(self.rig.target_model().source_positions_mm, dtype=float)
+        self.camera_p_d_mm = np.array([0.0, 0.0, c.dz_mm])
         self.flange_T_desired = flange_T_desired_m(c, self.rig)
         self.flange_T_tool = _m(transform_from_x(np.asarray(c.flange_T_tool_x)))
         self.tob_T_tip = _m(self.rig.tip.tob_T_tip_mm())
@@ -216,6 +256,7 @@ class ControllerCore(Core):
             outs.append(self.event(t_ns, pb.SEVERITY_INFO, "mode", f"mode {pb.ControlMode.Name(mode)}"))
             self._last_mode = mode
         self.saturated_cycles += int(step.saturated)
+        self._position_first = step.position_first
         cmd = pb.FlangeCommand(header=self.next_header(T_CMD, stamp, "world"), cycle=cycle,
                                d_translation_m=vector3(step.d_translation_m),
                                d_rotation_rad=vector3(step.d_rotation_rad), mode=mode,
@@ -229,21 +270,33 @@ class ControllerCore(Core):
         # cycles, not states, for the recording delay.
         new_cycle = cycle != self._last_cycle
         self._last_cycle = cycle
-        if self.recording and valid and st.status == pb.TOB_STATUS_FULL and new_cycle:
-            self.cycles_since_point += 1
+        # Recording goes on with one or two sources (position-only): the position is still
+        # measured, the orientation held (flagged); the covariance says how well each is known.
+        if self.recording and valid and new_cycle:
+            self.cycles_since_point = min(self.cycles_since_point + 1, c.recording_delay_cycles)
             if self.cycles_since_point >= c.recording_delay_cycles:
-                self.cycles_since_point = 0
                 # The filter's estimate at its last measurement: no prediction in the path.
                 if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns:
-                    outs.append(self._path_point(st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)))
+                    at, T = st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)
                 else:
-                    outs.append(self._path_point(st.header.stamp_ns, from_pose(st.world_T_tob)))
+                    at, T = st.header.stamp_ns, from_pose(st.world_T_tob)
+                # One point per measurement (no image since the last point: wait for one).
+                if self.path_last_stamp_ns is None or at > self.path_last_stamp_ns:
+                    self.cycles_since_point = 0
+                    outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
+                                                 _pose_covariance(st)))
+        fov = img = 0.0
+        if valid:
+            camera_T_tob_mm = _mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
+            fov = law.fov_margin_px(self.psvs, camera_T_tob_mm, self.tob_p_sources_mm)
+            img = law.image_offset_px(self.psvs, camera_T_tob_mm[:3, 3], self.camera_p_d_mm)
         status = pb.ControllerStatus(
             header=self.next_header(T_STATUS, stamp, "world"), mode=mode,
             visible=3 if st.status == pb.TOB_STATUS_FULL else (1 if st.status == pb.TOB_STATUS_POSITION_ONLY else 0),
             error_translation_m=step.error_translation_m, error_rotation_rad=step.error_rotation_rad,
             recording=self.recording, path_points=len(self.path), calibration_samples=len(self.cal_samples),
-            cycle=cycle, saturated=step.saturated, world_T_desired=pose(desired))
+            cycle=cycle, saturated=step.saturated, world_T_desired=pose(desired), fov_margin_px=fov,
+            image_error_px=img, rotation_scale=step.rotation_scale)
         outs.append((T_STATUS, status))
         return outs
 
@@ -264,7 +317,9 @@ class ControllerCore(Core):
                                dt_s=self.dt, max_step_m=self.max_step_m, max_step_rad=self.max_step_rad,
                                feed_forward=c.feed_forward, position_only=position_only,
                                deadband_m=c.deadband_mm * 1e-3, deadband_rad=np.radians(c.deadband_deg),
-                               still_m_s=c.still_mm_s * 1e-3, still_rad_s=np.radians(c.still_deg_s))
+                               still_m_s=c.still_mm_s * 1e-3, still_rad_s=np.radians(c.still_deg_s),
+                               saturation=c.saturation, position_first_beyond_m=c.position_first_beyond_mm * 1e-3,
+                               engaged=self._position_first)
 
     def _goto(self, world_T_flange, world_T_target, v_ff=None):
         """A saturated step towards a flange pose (no vision)."""
@@ -276,12 +331,23 @@ class ControllerCore(Core):
         return law.Step(d_t, d_r, sat, float(np.linalg.norm(e_t)), float(np.linalg.norm(e_r))), world_T_target
 
     # -- recording ------------------------------------------------------------------------------
-    def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray) -> Output:
+    def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray, orientation_held: bool,
+                    cov_pr: np.ndarray | None) -> Output:
+        """A path point of G (and the tip) at ``stamp_ns``; ``cov_pr`` (6, 6): the filter's
+        covariance of [p (m), r (rad)] (world frame), None when the state carries none."""
         pt = pb.PathPoint(header=self.next_header(T_PATH, stamp_ns, "world"), index=self.path_index,
-                          world_T_tob=pose(world_T_tob), has_tip=self.config.has_driver)
+                          world_T_tob=pose(world_T_tob), has_tip=self.config.has_driver,
+                          orientation_held=orientation_held)
         if self.config.has_driver:
             pt.world_T_tip.CopyFrom(pose(world_T_tob @ self.tob_T_tip))
+        if cov_pr is not None:
+            pt.position_covariance_m2.extend(cov_pr[:3, :3].ravel().tolist())
+            pt.rotation_covariance_rad2.extend(cov_pr[3:, 3:].ravel().tolist())
+            if self.config.has_driver:
+                tip = tip_position_covariance(cov_pr, world_T_tob[:3, :3] @ self.tob_T_tip[:3, 3])
+                pt.tip_position_covariance_m2.extend(tip.ravel().tolist())
         self.path_index += 1
+        self.path_last_stamp_ns = stamp_ns
         self.path.append(pt)
         return T_PATH, pt
 
@@ -397,6 +463,7 @@ class ControllerCore(Core):
             return info("command", "return to the start pose")
         if verb == "record_start":
             self.recording, self.path, self.path_index, self.cycles_since_point = True, [], 0, 0
+            self.path_last_stamp_ns = None
             return info("record_started", json.dumps({"has_tip": self.config.has_driver}))
         if verb == "record_stop":
             self.recording = False
@@ -420,8 +487,7 @@ class ControllerCore(Core):
             if "points" in args:
                 pts = np.asarray(args["points"], dtype=float)
             else:
-                pts = np.array([x_from_transform(_mm(from_pose(p.world_T_tip if p.has_tip else p.world_T_tob)))
-                                for p in self.path]).reshape(-1, 6)
+                pts = _held_filled(self.path)
             if len(pts) < 1:
                 return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
                                    "playback: no points given and no path recorded")]

@@ -15,6 +15,12 @@ limits.  The robot applies it as :func:`humanpt.geometry.transforms.apply_step` 
   ``world_T_fd = world_T_tob @ inv(flange_T_D)``; the error is its translation and its
   rotation as theta-u (a rotation vector: no Euler singularity); feed-forward of the
   target's velocity removes the lag proportional to speed over gain.
+
+When the demanded flange motion exceeds the limits, ``saturation`` chooses what gives:
+``scale`` shrinks the whole step (translation and rotation each by norm: the flange falls
+behind the target, G drifts out of the image), ``position_first`` (default) keeps the
+desired point D on G - G at the image centre and at its depth - and lets the part of the
+rotation that would swing D lag (:func:`position_first`).
 """
 
 from __future__ import annotations
@@ -43,6 +49,10 @@ class Step:
     saturated: bool
     error_translation_m: float  # |G - D| (m)
     error_rotation_rad: float  # angle between the TOB frame and D's (rad)
+    # The fraction of the demanded rotation that swings D (its part across the line from the
+    # flange to D) actually commanded: < 1 when position_first let the orientation lag.
+    rotation_scale: float = 1.0
+    position_first: bool = False  # made by position_first (not by the scaled thetau law)
 
 
 def saturate(
@@ -79,6 +89,68 @@ def pose_error(
     return e_t, e_r
 
 
+SATURATIONS = ("position_first", "scale")
+
+
+def position_first(
+    world_T_flange: np.ndarray,
+    flange_T_desired: np.ndarray,
+    v_d_m_s: np.ndarray,
+    w_rad_s: np.ndarray,
+    dt_s: float,
+    max_step_m: float,
+    max_step_rad: float,
+) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    """The flange step (world frame, about the flange origin) that moves D at ``v_d_m_s``
+    (3,) and turns the flange at ``w_rad_s`` (3,) as far as the per-cycle limits allow,
+    D's motion first: ``(d_translation_m, d_rotation_rad, saturated, rotation_scale)``.
+
+    The flange turning at w swings D (at r = D - flange origin) by w x r, so the flange must
+    translate by v_D - w x r. The rotation about the line flange-D (w's part along r) costs
+    no translation and is kept (limited to ``max_step_rad`` with the rest); the part across
+    it is scaled by the largest s in [0, 1] that keeps the translation within
+    ``max_step_m``: the orientation lags, D stays on G. When D's motion alone exceeds the
+    limit it is scaled down and nothing swings D (s = 0). The step is exact for the robot's
+    ``R' = exp(d_rot) R, t' = t + d_t``: D moves by ``v_D dt`` (s is found to first order,
+    then bisected down if the exact swing needs more translation than the limit)."""
+    v_d, w = np.asarray(v_d_m_s, dtype=float), np.asarray(w_rad_s, dtype=float)
+    v_max, w_max = max_step_m / dt_s, max_step_rad / dt_s
+    sat = False
+    nw = norm3(w)
+    if nw > w_max:
+        w, sat = w * (w_max / nw), True
+    r = (world_T_flange @ flange_T_desired)[:3, 3] - world_T_flange[:3, 3]
+    u = r / norm3(r)
+    w_par = float(w @ u) * u
+    w_perp = w - w_par
+    c = -np.cross(w_perp, r)  # the flange velocity that cancels the swing of D by w_perp
+    nv = norm3(v_d)
+    if nv > v_max:
+        v_d, s, sat = v_d * (v_max / nv), 0.0, True
+    else:
+        cc, vc = float(c @ c), float(v_d @ c)
+        # largest s with |v_d + s c| <= v_max (s = 0 satisfies it)
+        s = 1.0 if cc == 0.0 else min(1.0, (-vc + np.sqrt(max(vc * vc - cc * (nv * nv - v_max * v_max), 0.0))) / cc)
+        sat = sat or s < 1.0
+
+    def step(s: float) -> tuple[np.ndarray, np.ndarray]:
+        d_r = (w_par + s * w_perp) * dt_s
+        # D moves by d_t + (exp(d_r) - I) r: choose d_t so that it moves by v_d dt exactly.
+        return v_d * dt_s - (apply_step(np.eye(4), np.zeros(3), d_r)[:3, :3] - np.eye(3)) @ r, d_r
+
+    d_t, d_r = step(s)
+    if norm3(d_t) > max_step_m * (1 + 1e-12):
+        # s came from the first-order swing; the exact one is a little larger: bisect s
+        # (s = 0 is feasible: the rotation about the flange-D line does not move D).
+        lo, hi = 0.0, s
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if norm3(step(mid)[0]) <= max_step_m else (lo, mid)
+        s, sat = lo, True
+        d_t, d_r = step(s)
+    return d_t, d_r, sat, s
+
+
 def thetau_step(
     world_T_flange: np.ndarray,
     world_T_tob: np.ndarray,
@@ -97,8 +169,38 @@ def thetau_step(
     deadband_rad: float = 0.0,
     still_m_s: float = 0.0,
     still_rad_s: float = 0.0,
+    saturation: str = "scale",
+    position_first_beyond_m: float = 0.0,
+    engaged: bool = False,
 ) -> Step:
-    """Default law; with ``position_only`` only the translation of D towards G is servoed."""
+    """Default law; with ``position_only`` only the translation of D towards G is servoed.
+    ``saturation``: ``scale`` (the flange's pose servoed, the step shrunk by norm to the
+    limits) or ``position_first`` (the same while within the limits, or while |G - D| is
+    within ``position_first_beyond_m``; a step beyond the limits with G farther from D is
+    replaced by D servoed onto G, the flange turning about D and the orientation lagging:
+    :func:`position_first`). ``engaged``: the previous step was position_first's; it
+    stays so while the limits bind, whatever |G - D| (hysteresis: no chatter at the band)."""
+    if saturation not in SATURATIONS:
+        raise ValueError(f"saturation must be one of {SATURATIONS}, got {saturation!r}")
+    step = _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
+                       max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
+                       still_rad_s)
+    if saturation == "position_first" and step.saturated and (engaged or step.error_translation_m
+                                                              > position_first_beyond_m):
+        # Within the limits both agree on where to go; beyond them, once G has fallen away
+        # from D, D's motion comes first. (Within the band the orientation keeps its
+        # priority: a noisy orientation, e.g. the paper's perception, saturates the old
+        # law now and then by the 0.7 m lever; letting it lag biases that perception.)
+        return _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s,
+                                    k_t, k_r, dt_s, max_step_m, max_step_rad, feed_forward, position_only,
+                                    deadband_m, deadband_rad, still_m_s, still_rad_s)
+    return step
+
+
+def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
+                max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
+                still_rad_s) -> Step:
+    """The thetau law, its step scaled by norm to the limits (``saturation = "scale"``)."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     e_t, e_r = pose_error(world_T_flange, world_T_fd)
     v = k_t * e_t
@@ -124,6 +226,68 @@ def thetau_step(
         v = np.zeros(3)
     d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
     return Step(d_t, d_r, sat, e_gd, norm3(e_r))
+
+
+def _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob, w_tob, k_t, k_r, dt_s,
+                         max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad,
+                         still_m_s, still_rad_s) -> Step:
+    """The thetau law with D, not the flange origin, servoed onto G: D's velocity
+    ``k_t (G - D) + v_G`` and the rotation ``k_r theta-u + w_G`` (both feed-forwards),
+    combined by :func:`position_first`: G held at the image centre while the orientation
+    catches up."""
+    world_T_fd = desired_flange(world_T_tob, flange_T_desired)
+    _, e_r = pose_error(world_T_flange, world_T_fd)
+    world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
+    e_gd = world_T_tob[:3, 3] - world_p_d
+    v_d = k_t * e_gd + (v_tob if feed_forward else 0.0)
+    w = k_r * e_r + (w_tob if feed_forward else 0.0)
+    if position_only:
+        w, e_r = np.zeros(3), np.zeros(3)
+    # Deadbands (as ``scale``): each part is left alone while its error is small and the
+    # target still.
+    if norm3(e_r) < deadband_rad and norm3(w_tob) < still_rad_s:
+        w = np.zeros(3)
+    if norm3(e_gd) < deadband_m and norm3(v_tob) < still_m_s and not np.any(w):
+        v_d = np.zeros(3)
+    d_t, d_r, sat, s = position_first(world_T_flange, flange_T_desired, v_d, w, dt_s, max_step_m, max_step_rad)
+    return Step(d_t, d_r, sat, norm3(e_gd), norm3(e_r), s, True)
+
+
+def fov_margin_px(params, camera_T_tob_mm: np.ndarray, tob_p_sources_mm: np.ndarray) -> float:
+    """How far inside the complex image the target's sources are: the smallest distance (px)
+    of their six images (three sources (3, 3) mm in the TOB frame, two views; the PSVS
+    model ``params``, :func:`humanpt.geometry.psvs.project`, distortion included) to the
+    image border (pixel centres at integers, the image spans [-0.5, size - 0.5]); negative
+    when one is outside; -10000 when one is behind a view's centre."""
+    from humanpt.geometry.errors import GeometryError
+    from humanpt.geometry.psvs import project
+
+    T = np.asarray(camera_T_tob_mm, dtype=float)
+    camera_p = np.asarray(tob_p_sources_mm, dtype=float) @ T[:3, :3].T + T[:3, 3]
+    try:
+        uv = np.concatenate(project(params, camera_p))
+    except GeometryError:
+        return FOV_BEHIND_PX
+    w, h = params.image_size_px
+    d = np.minimum(np.minimum(uv[:, 0] + 0.5, w - 0.5 - uv[:, 0]), np.minimum(uv[:, 1] + 0.5, h - 0.5 - uv[:, 1]))
+    return float(max(d.min(), FOV_BEHIND_PX))
+
+
+FOV_BEHIND_PX = -10000.0
+
+
+def image_offset_px(params, camera_p_g_mm: np.ndarray, camera_p_d_mm: np.ndarray) -> float:
+    """How far (px) G's image is from where G at D would appear, the larger of the two views
+    (ideal pixels, :func:`humanpt.geometry.psvs.project`); 10000 when G is behind a view."""
+    from humanpt.geometry.errors import GeometryError
+    from humanpt.geometry.psvs import project
+
+    try:
+        g_r, g_l = project(params, np.asarray(camera_p_g_mm, dtype=float), distort=False)
+        d_r, d_l = project(params, np.asarray(camera_p_d_mm, dtype=float), distort=False)
+    except GeometryError:
+        return -FOV_BEHIND_PX
+    return float(min(max(np.linalg.norm(g_r - d_r), np.linalg.norm(g_l - d_l)), -FOV_BEHIND_PX))
 
 
 def paper_step(

@@ -3,9 +3,18 @@
 CSV columns (a header line first)::
 
     index,stamp_ns,x_mm,y_mm,z_mm,psi_deg,theta_deg,phi_deg[,tip_x_mm,...,tip_phi_deg]
+    [,orientation_held,cov_xx_mm2,...,cov_zz_mm2,cov_rxx_deg2,...,cov_rzz_deg2[,cov_tip_xx_mm2,...]]
 
 X = (x, y, z, psi, theta, phi) is the state vector of the paper (§4): position of G (or of
 the driver tip P) in the world frame, yaw-pitch-roll Z-Y-X.
+
+Since issue 18 the recorder adds, per point: ``orientation_held`` (1: the orientation was
+held, not measured - one or two sources visible; the position is measured), and the
+filter's covariance as the 6 upper-triangle terms (xx, xy, xz, yy, yz, zz) of three
+symmetric 3x3 matrices, world frame: G's position (mm^2), the orientation as a small
+rotation vector about the world axes (deg^2; not the covariance of psi, theta, phi, which
+is singular at theta = +-90 deg), and, with a tip, the tip's position (mm^2). Files without
+these columns (older ones) still read: the fields are then None.
 """
 
 from __future__ import annotations
@@ -20,6 +29,10 @@ from filterpy.kalman import KalmanFilter, rts_smoother
 
 HEADER = ["index", "stamp_ns", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg"]
 TIP_HEADER = ["tip_x_mm", "tip_y_mm", "tip_z_mm", "tip_psi_deg", "tip_theta_deg", "tip_phi_deg"]
+_UPPER = ("xx", "xy", "xz", "yy", "yz", "zz")
+_UPPER_IJ = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+COV_HEADER = (["orientation_held"] + [f"cov_{k}_mm2" for k in _UPPER] + [f"cov_r{k}_deg2" for k in _UPPER])
+TIP_COV_HEADER = [f"cov_tip_{k}_mm2" for k in _UPPER]
 
 
 class PathFileError(ValueError):
@@ -28,42 +41,139 @@ class PathFileError(ValueError):
 
 @dataclass
 class Path6:
-    """A recorded path: stamps (N,) ns, X of G (N, 6), and X of the tip (N, 6) or None."""
+    """A recorded path: stamps (N,) ns, X of G (N, 6), and X of the tip (N, 6) or None;
+    ``orientation_held`` (N,) bool, ``cov_g_mm2``, ``cov_r_deg2`` (N, 3, 3) and
+    ``cov_tip_mm2`` (N, 3, 3) (with a tip) when recorded, else None (see the module doc)."""
 
     index: np.ndarray
     stamp_ns: np.ndarray
     x_g: np.ndarray
     x_tip: np.ndarray | None = None
+    orientation_held: np.ndarray | None = None
+    cov_g_mm2: np.ndarray | None = None
+    cov_r_deg2: np.ndarray | None = None
+    cov_tip_mm2: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.stamp_ns)
 
-    def points(self, which: str = "auto") -> np.ndarray:
-        """(N, 6) X of the tip if recorded (``auto``/``tip``), else of G."""
+    def points(self, which: str = "auto", held: str = "fill") -> np.ndarray:
+        """(N, 6) X of the tip if recorded (``auto``/``tip``), else of G. Held orientations
+        (``held="fill"``, default) are interpolated from the measured ones around them
+        (:func:`fill_held_orientation`), what playback and the VAL export use; ``"keep"``:
+        as recorded."""
         if which == "tip" or (which == "auto" and self.x_tip is not None):
             if self.x_tip is None:
                 raise PathFileError("this path has no driver tip columns")
-            return self.x_tip
-        return self.x_g
+            x = self.x_tip
+        else:
+            x = self.x_g
+        if held == "keep" or self.orientation_held is None or not np.any(self.orientation_held):
+            return x
+        return fill_held_orientation(x, self.orientation_held, self.stamp_ns)
 
 
-def row(index: int, stamp_ns: int, x_g: np.ndarray, x_tip: np.ndarray | None) -> list[str]:
+def fill_held_orientation(x: np.ndarray, held: np.ndarray, stamp_ns: np.ndarray | None = None) -> np.ndarray:
+    """(N, 6) mm/deg: the points ``x`` with each held orientation (``held`` (N,) True)
+    replaced by the geodesic interpolation, in time (``stamp_ns``, else by index), between
+    the nearest measured orientations before and after it; the nearest one alone at either
+    end. Positions are untouched; with no measured orientation at all, ``x`` is returned
+    as is (a copy)."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    x = np.array(x, dtype=float).reshape(-1, 6)
+    held = np.asarray(held, dtype=bool).reshape(-1)
+    if len(held) != len(x):
+        raise ValueError(f"held has {len(held)} entries for {len(x)} points")
+    good = np.flatnonzero(~held)
+    if not len(good) or len(good) == len(x):
+        return x
+    t = (np.arange(len(x), dtype=float) if stamp_ns is None
+         else (np.asarray(stamp_ns, dtype=np.int64) - int(stamp_ns[0])) * 1e-9)
+    rot = Rotation.from_euler("ZYX", x[good, 3:6], degrees=True)
+    bad = np.flatnonzero(held)
+    tb = np.clip(t[bad], t[good[0]], t[good[-1]])
+    if len(good) == 1:
+        filled = Rotation.concatenate([rot] * len(bad))
+    else:
+        filled = Slerp(t[good], rot)(tb)
+    x[bad, 3:6] = filled.as_euler("ZYX", degrees=True)
+    return x
+
+
+def from_path_points(points) -> Path6:
+    """A :class:`Path6` (mm, deg; held flags and covariances in mm^2, deg^2) of recorded
+    ``controller/path`` messages (humanpt.PathPoint, all with or all without a tip)."""
+    from humanpt.geometry.transforms import x_from_transform
+    from humanpt.schemas.convert import from_pose
+
+    def x(p):
+        T = from_pose(p)
+        T[:3, 3] *= 1e3
+        return x_from_transform(T)
+
+    def cov(values, scale):
+        return np.asarray(values, dtype=float).reshape(3, 3) * scale if len(values) == 9 else np.zeros((3, 3))
+
+    pts = list(points)
+    tip = bool(pts) and pts[0].has_tip
+    return Path6(
+        np.array([p.index for p in pts], dtype=int), np.array([p.header.stamp_ns for p in pts], dtype=np.int64),
+        np.array([x(p.world_T_tob) for p in pts]).reshape(-1, 6),
+        np.array([x(p.world_T_tip) for p in pts]).reshape(-1, 6) if tip else None,
+        orientation_held=np.array([p.orientation_held for p in pts], dtype=bool),
+        cov_g_mm2=np.array([cov(p.position_covariance_m2, 1e6) for p in pts]).reshape(-1, 3, 3),
+        cov_r_deg2=np.array([cov(p.rotation_covariance_rad2, np.degrees(1.0) ** 2) for p in pts]).reshape(-1, 3, 3),
+        cov_tip_mm2=(np.array([cov(p.tip_position_covariance_m2, 1e6) for p in pts]).reshape(-1, 3, 3)
+                     if tip else None))
+
+
+def _upper(m: np.ndarray) -> list[float]:
+    return [float(m[i, j]) for i, j in _UPPER_IJ]
+
+
+def _from_upper(v: np.ndarray) -> np.ndarray:
+    """(N, 6) upper triangles -> (N, 3, 3) symmetric."""
+    v = np.asarray(v, dtype=float).reshape(-1, 6)
+    m = np.zeros((len(v), 3, 3))
+    for k, (i, j) in enumerate(_UPPER_IJ):
+        m[:, i, j] = m[:, j, i] = v[:, k]
+    return m
+
+
+def row(index: int, stamp_ns: int, x_g: np.ndarray, x_tip: np.ndarray | None, *,
+        orientation_held: bool | None = None, cov_g_mm2: np.ndarray | None = None,
+        cov_r_deg2: np.ndarray | None = None, cov_tip_mm2: np.ndarray | None = None) -> list[str]:
+    """One CSV row; the covariance columns when ``orientation_held`` is given (the
+    covariances (3, 3) then too: NaN-free, zeros when unknown)."""
     vals = [str(int(index)), str(int(stamp_ns))] + [f"{v:.6f}" for v in x_g]
     if x_tip is not None:
         vals += [f"{v:.6f}" for v in x_tip]
+    if orientation_held is not None:
+        vals.append("1" if orientation_held else "0")
+        for m in (cov_g_mm2, cov_r_deg2) + ((cov_tip_mm2,) if x_tip is not None else ()):
+            vals += [f"{v:.6g}" for v in _upper(np.zeros((3, 3)) if m is None else np.asarray(m, dtype=float))]
     return vals
 
 
-def header(with_tip: bool) -> list[str]:
-    return HEADER + (TIP_HEADER if with_tip else [])
+def header(with_tip: bool, with_covariance: bool = False) -> list[str]:
+    return (HEADER + (TIP_HEADER if with_tip else [])
+            + ((COV_HEADER + (TIP_COV_HEADER if with_tip else [])) if with_covariance else []))
 
 
 def write(path: str | Path, p: Path6) -> None:
+    cov = p.orientation_held is not None
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(header(p.x_tip is not None))
+        w.writerow(header(p.x_tip is not None, cov))
         for i in range(len(p)):
-            w.writerow(row(p.index[i], p.stamp_ns[i], p.x_g[i], None if p.x_tip is None else p.x_tip[i]))
+            extra = {}
+            if cov:
+                extra = {"orientation_held": bool(p.orientation_held[i]),
+                         "cov_g_mm2": None if p.cov_g_mm2 is None else p.cov_g_mm2[i],
+                         "cov_r_deg2": None if p.cov_r_deg2 is None else p.cov_r_deg2[i],
+                         "cov_tip_mm2": None if p.cov_tip_mm2 is None else p.cov_tip_mm2[i]}
+            w.writerow(row(p.index[i], p.stamp_ns[i], p.x_g[i], None if p.x_tip is None else p.x_tip[i], **extra))
 
 
 def read(path: str | Path) -> Path6:
@@ -75,10 +185,12 @@ def read(path: str | Path) -> Path6:
     if not rows:
         raise PathFileError(f"{p}: empty file (no header line)")
     head = rows[0]
-    if head not in (HEADER, HEADER + TIP_HEADER):
+    if head not in [header(tip, cov) for tip in (False, True) for cov in (False, True)]:
         raise PathFileError(f"{p}:1: not a humanpt path header: {','.join(head)}")
+    tip = TIP_HEADER[0] in head
+    cov = COV_HEADER[0] in head
     n = len(head)
-    data = []
+    data, stamps = [], []
     for lineno, r in enumerate(rows[1:], start=2):
         if not r:
             continue
@@ -86,11 +198,20 @@ def read(path: str | Path) -> Path6:
             raise PathFileError(f"{p}:{lineno}: {len(r)} columns, expected {n}")
         try:
             data.append([float(v) for v in r])
+            stamps.append(int(r[1]))  # exact: wall-clock stamps (~1.8e18 ns) exceed a float's 53 bits
         except ValueError as e:
             raise PathFileError(f"{p}:{lineno}: {e}") from e
     a = np.array(data, dtype=float).reshape(-1, n)
-    return Path6(a[:, 0].astype(int), a[:, 1].astype(np.int64), a[:, 2:8],
-                 a[:, 8:14] if n == len(HEADER) + len(TIP_HEADER) else None)
+    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
+    if len(bad):
+        raise PathFileError(f"{p}: a value that is not a finite number on data row {int(bad[0]) + 1}")
+    out = Path6(a[:, 0].astype(int), np.array(stamps, dtype=np.int64), a[:, 2:8], a[:, 8:14] if tip else None)
+    if cov:
+        k = 14 if tip else 8
+        out.orientation_held = a[:, k] != 0
+        out.cov_g_mm2, out.cov_r_deg2 = _from_upper(a[:, k + 1:k + 7]), _from_upper(a[:, k + 7:k + 13])
+        out.cov_tip_mm2 = _from_upper(a[:, k + 13:k + 19]) if tip else None
+    return out
 
 
 def smooth(x: np.ndarray, stamp_ns: np.ndarray, *, accel_sigma: float = 200.0, meas_sigma: float = 0.3

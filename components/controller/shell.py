@@ -6,7 +6,8 @@ the current one to ``<path_dir>/NAME`` (a plain name, checked by the core; an ex
 only with ``"overwrite": true``).  Nothing is ever truncated: a restarted controller in the
 same run directory continues the numbering after the files already there.  What a save did
 comes back to the core as a ``path_file`` input and goes out as an event (``path_saved`` or
-``save_failed``).  The files are in mm and degrees (see pathfile.py).
+``save_failed``).  The files are in mm and degrees, with each point's held-orientation
+flag and covariance (see pathfile.py).
 """
 
 from __future__ import annotations
@@ -18,20 +19,10 @@ import re
 import shutil
 from pathlib import Path
 
-import numpy as np
-
 from humanpt.controller import pathfile
-from humanpt.geometry.transforms import x_from_transform
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import from_pose
 
 log = logging.getLogger("humanpt.controller")
-
-
-def x_mm_deg(p: pb.Pose) -> np.ndarray:
-    T = from_pose(p)
-    T[:3, 3] *= 1e3
-    return x_from_transform(T)
 
 
 class PathWriter:
@@ -64,7 +55,7 @@ class PathWriter:
             except FileExistsError:  # never truncate a path file
                 continue
         self._w = csv.writer(self._f)
-        self._w.writerow(pathfile.header(with_tip))
+        self._w.writerow(pathfile.header(with_tip, with_covariance=True))
         self._f.flush()
         log.info("recording path to %s", self.current)
 
@@ -102,8 +93,11 @@ class PathWriter:
             return
         if self._w is None:
             self._open(msg.has_tip)
-        tip = x_mm_deg(msg.world_T_tip) if msg.has_tip else None
-        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, x_mm_deg(msg.world_T_tob), tip))
+        p = pathfile.from_path_points([msg])
+        self._w.writerow(pathfile.row(msg.index, msg.header.stamp_ns, p.x_g[0], None if p.x_tip is None else p.x_tip[0],
+                                      orientation_held=bool(p.orientation_held[0]), cov_g_mm2=p.cov_g_mm2[0],
+                                      cov_r_deg2=p.cov_r_deg2[0],
+                                      cov_tip_mm2=None if p.cov_tip_mm2 is None else p.cov_tip_mm2[0]))
         self._f.flush()
 
     def close(self) -> None:

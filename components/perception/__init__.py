@@ -3,10 +3,13 @@ frame (Section 4, steps 1-7 of Pachidis et al.).
 
 Two methods: ``paper`` (the reference: threshold, 9 x 9 cross-template seeds, shape means,
 scan-line pairing, eq. (4)) and ``weighted`` (the default: background-subtracted weighted
-subpixel centroids, shape checks, scored correspondence). See ``README.md``.
+subpixel centroids, shape checks, scored correspondence). Both check each source's blobs
+of a FULL measurement against the measured pose (``checks``: a partly covered or merged
+source is flagged "degraded" and rebuilt, excluded or kept). See ``README.md``.
 """
 
 from .blobs import Blobs, Region, find_shapes
+from .checks import CheckSettings, SourceCheck, apply_policy, check_sources, rebuild_point
 from .config import METHODS, PerceptionConfig
 from .core import PerceptionCore, measurement_message
 from .correspondence import (
@@ -27,6 +30,11 @@ from .weighted import background_and_noise, detect_weighted
 __all__ = [
     "BadImage",
     "Blobs",
+    "CheckSettings",
+    "SourceCheck",
+    "apply_policy",
+    "check_sources",
+    "rebuild_point",
     "FULL",
     "LOST",
     "METHODS",

@@ -35,6 +35,13 @@ class Blobs:
     ``size_px`` (n,): diameter estimate along the major axis, px. ``elongation`` (n,):
     major/minor axis ratio (>= 1). ``peak_dn`` (n,): brightest pixel above the local
     background, DN. ``rejected``: candidate shapes that failed the checks.
+    ``flux_dn`` (n,): summed grey levels above the local background in the blob's
+    aperture, DN (the weighted method; the paper method: the binary shape's pixel count).
+    ``moments_px2`` (n, 3): the blob's central second moments (m_uu, m_vv, m_uv), px^2
+    (intensity-weighted by the weighted method, of the binary shape by the paper method).
+    ``noise`` (n, 2): the background noise's SD of the flux (DN) and of the moments'
+    anisotropy (px^2), the weighted method only. All three feed the blob checks
+    (:mod:`humanpt.perception.checks`).
     """
 
     uv_px: np.ndarray
@@ -43,6 +50,9 @@ class Blobs:
     elongation: np.ndarray
     peak_dn: np.ndarray
     rejected: int = 0
+    flux_dn: np.ndarray | None = None
+    moments_px2: np.ndarray | None = None
+    noise: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.uv_px.shape[0])
@@ -56,10 +66,16 @@ class Blobs:
             self.elongation[index],
             self.peak_dn[index],
             self.rejected,
+            None if self.flux_dn is None else self.flux_dn[index],
+            None if self.moments_px2 is None else self.moments_px2[index],
+            None if self.noise is None else self.noise[index],
         )
 
 
-EMPTY = Blobs(np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+EMPTY = Blobs(
+    np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 0, np.zeros(0),
+    np.zeros((0, 3)), np.zeros((0, 2)),
+)
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Configuration of the perception component (section ``[perception]``).
 
 Live parameters (``humanpt param perception KEY=VALUE``, or a ``param`` input): ``method``,
-``threshold``, ``invert``, ``mask``, ``track_roi``. Everything else is fixed at start.
+``threshold``, ``invert``, ``mask``, ``track_roi``, the blob checks' ``check_blobs``,
+``degraded_*`` (but ``degraded_clear_frames``). Everything else is fixed at start.
 
 Brightness is in DN (grey levels of an 8-bit image; a mono16 image is scaled to 8 bits
 first). Image coordinates are pixels of the complex image (u right, v down, pixel centres at
@@ -20,6 +21,7 @@ from humanpt.runtime.config import Range, live
 __all__ = ["PerceptionConfig", "METHODS"]
 
 METHODS = ("weighted", "paper")
+POLICIES = ("rebuild", "exclude", "keep")
 
 
 def _check(owner: str, name: str, value, *, positive=False, nonneg=False, integer=False):
@@ -79,6 +81,21 @@ class PerceptionConfig:
     epipolar_sigma_px: Annotated[float, Range(1e-6, 1000, "px")] = 0.05
     side_sigma_mm: Annotated[float, Range(1e-6, 1000, "mm")] = 0.5
     max_area_ratio: Annotated[float, Range(1, 1000, "")] = 2.5
+    # blob checks (issue 18): is each source of a FULL measurement seen whole? (checks.py)
+    check_blobs: bool = live(True, "check each source's blobs against the measured pose")
+    degraded_policy: Literal["rebuild", "exclude", "keep"] = live(
+        "rebuild", "a degraded source: rebuilt from the others (rebuild), dropped (exclude) or kept (keep)")
+    degraded_flux_tol: Annotated[float, Range(0, 1, "fraction")] = live(
+        0.05, "allowed brightness difference of a source from the others (plus the noise's)")
+    degraded_view_tol: Annotated[float, Range(0, 10, "log ratio")] = live(
+        0.05, "allowed brightness difference of a source's two views (plus the noise's)")
+    degraded_shape_tol: Annotated[float, Range(0, 100, "disc variances")] = live(
+        0.15, "allowed anisotropy of a blob beyond its predicted ellipse (plus the noise's)")
+    degraded_noise_k: Annotated[float, Range(0, 100, "noise SDs")] = live(
+        5.0, "the noise's allowance: this many SDs of the background noise's effect")
+    degraded_paper_factor: Annotated[float, Range(1, 100, "")] = live(
+        3.5, "the paper method's limits are this many times wider (binary areas and shapes)")
+    degraded_clear_frames: Annotated[int, Range(1, 100000, "measurements")] = 5
     # bad images
     max_saturated_fraction: Annotated[float, Range(0, 1, "")] = 0.25
     # mirror drift watch: the running median of v_L - v_R of FULL measurements (rig model)
@@ -146,6 +163,18 @@ class PerceptionConfig:
         _check(own, "size_ratio_range", hi, positive=True)
         if not lo < 1 < hi:
             raise ValueError(f"{own}.size_ratio_range must bracket 1, got {self.size_ratio_range}")
+        if not isinstance(self.check_blobs, bool):
+            raise ValueError(f"{own}.check_blobs must be true or false")
+        if self.degraded_policy not in POLICIES:
+            raise ValueError(f"{own}.degraded_policy must be one of {POLICIES}, got {self.degraded_policy!r}")
+        for name in ("degraded_flux_tol", "degraded_view_tol", "degraded_shape_tol", "degraded_noise_k"):
+            _check(own, name, getattr(self, name), nonneg=True)
+        if self.degraded_flux_tol >= 1:
+            raise ValueError(f"{own}.degraded_flux_tol must be below 1, got {self.degraded_flux_tol}")
+        _check(own, "degraded_paper_factor", self.degraded_paper_factor, positive=True)
+        if self.degraded_paper_factor < 1:
+            raise ValueError(f"{own}.degraded_paper_factor must be >= 1, got {self.degraded_paper_factor}")
+        _check(own, "degraded_clear_frames", self.degraded_clear_frames, positive=True, integer=True)
         _check(own, "max_saturated_fraction", self.max_saturated_fraction, positive=True)
         _check(own, "drift_warn_px", self.drift_warn_px, positive=True)
         _check(own, "drift_window", self.drift_window, positive=True, integer=True)

@@ -18,7 +18,13 @@ Per image (Section 4, steps 1-7):
    the rig describes), a running median over ``drift_window`` measurements; above
    ``drift_warn_px`` (well below ``epipolar_tol_px``, where pairs are lost) a
    ``mirror_drift`` warning, once, then again only when it has grown by half the threshold
-   more; a ``mirror_drift_ok`` info when it is back under 80 % of the threshold.
+   more; a ``mirror_drift_ok`` info when it is back under 80 % of the threshold;
+6. the blob checks (:mod:`humanpt.perception.checks`, in :class:`Perception`): a FULL
+   measurement's sources are checked against the measured pose; the message carries
+   ``degraded``, ``degraded_sources``, ``degraded_reason``, ``source_brightness``; a
+   ``source_degraded`` warning when a source is first found degraded (again only when
+   another one joins), a ``source_ok`` info after ``degraded_clear_frames`` checked
+   measurements without one.
 
 The core never raises out of ``step``: an unexpected error while measuring gives a LOST
 measurement and an error event. It never reads the clock, so ``processing_s`` is 0 - a
@@ -37,6 +43,7 @@ from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import image_stamp_ns, pose
 
+from .checks import SOURCE_NAMES, SourceCheck
 from .config import PerceptionConfig
 from .correspondence import (
     FULL,
@@ -62,10 +69,11 @@ _METHOD = {"paper": pb.PERCEPTION_METHOD_PAPER, "weighted": pb.PERCEPTION_METHOD
 
 
 def measurement_message(
-    header: pb.Header, method: str, uv_px: np.ndarray, match: Match
+    header: pb.Header, method: str, uv_px: np.ndarray, match: Match,
+    check: SourceCheck | None = None,
 ) -> pb.TobMeasurement:
-    """A :class:`TobMeasurement` from centres (n, 2) px and a :class:`Match` (mm inside,
-    metres in the message)."""
+    """A :class:`TobMeasurement` from centres (n, 2) px, a :class:`Match` (mm inside,
+    metres in the message) and the blob checks (``degraded*``, ``source_brightness``)."""
     uv = np.asarray(uv_px, dtype=float).reshape(-1, 2).tolist()
     pairs = zip(match.pairs.tolist(), match.residual_px.tolist(), strict=True)
     points = np.asarray(match.camera_p_mm, dtype=float).reshape(-1, 3).tolist()
@@ -82,6 +90,11 @@ def measurement_message(
         status=_STATUS[match.status],
         processing_s=0.0,
     )
+    if check is not None:
+        m.degraded = bool(check.degraded)
+        m.degraded_sources.extend(check.degraded)
+        m.degraded_reason = check.reason
+        m.source_brightness.extend(float(b) for b in check.brightness)
     if match.camera_T_tob is not None:
         t = np.array(match.camera_T_tob, dtype=float)
         t[:3, 3] /= 1000.0
@@ -108,6 +121,8 @@ class PerceptionCore(Core):
         self._status: str | None = None
         self._drift: deque[float] = deque(maxlen=config.drift_window)
         self._drift_warned_px: float | None = None  # |median| at the last mirror_drift warning
+        self._degraded: tuple[int, ...] = ()  # sources reported degraded (source_degraded)
+        self._clean = 0  # checked measurements without a degraded source since then
         self.counters = {
             "images": 0,
             "bad_images": 0,
@@ -181,11 +196,47 @@ class PerceptionCore(Core):
             )
             return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
         outputs += self._watch_drift(t_ns, result)
-        return outputs + self._publish(t_ns, stamp, result.blobs.uv_px, result.match)
+        outputs += self._watch_degraded(t_ns, result)
+        return outputs + self._publish(t_ns, stamp, result.blobs.uv_px, result.match, result.check)
+
+    def _watch_degraded(self, t_ns: int, result: Result) -> list[Output]:
+        """``source_degraded`` (warning) when a source is first found degraded or the set of
+        degraded sources grows; ``source_ok`` (info) after ``degraded_clear_frames``
+        checked measurements without one. Measurements that are not checked (not FULL)
+        change nothing."""
+        check = result.check
+        if check is None:
+            return []
+        c = self.perception.config
+        if check.degraded:
+            self._clean = 0
+            grown = set(check.degraded) - set(self._degraded)
+            if not grown:
+                return []
+            self._degraded = tuple(sorted(set(self._degraded) | grown))
+            action = {"rebuild": "rebuilt from the other two and the target model",
+                      "exclude": "left out (position only)",
+                      "keep": "kept as measured"}[c.degraded_policy]
+            if c.degraded_policy == "rebuild" and len(check.degraded) > 1:
+                action = "left out (position only: more than one degraded)"
+            names = ", ".join(SOURCE_NAMES[k] for k in self._degraded)
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "source_degraded",
+                               f"perception: source(s) {names} not seen whole: {check.reason}; "
+                               f"{action}")]
+        if not self._degraded:
+            return []
+        self._clean += 1
+        if self._clean < c.degraded_clear_frames:
+            return []
+        names = ", ".join(SOURCE_NAMES[k] for k in self._degraded)
+        self._degraded, self._clean = (), 0
+        return [self.event(t_ns, pb.SEVERITY_INFO, "source_ok",
+                           f"perception: source(s) {names} seen whole again "
+                           f"({c.degraded_clear_frames} checked measurements)")]
 
     def _watch_drift(self, t_ns: int, result: Result) -> list[Output]:
         """The mirror drift watch (module docstring, step 5)."""
-        match = result.match
+        match = result.paired
         if match.status != FULL or not len(match.pairs):
             return []
         params = self.perception.params
@@ -215,7 +266,7 @@ class PerceptionCore(Core):
         p = self.perception
         if p.config.track_roi and self._anchor is not None:
             result = p.measure(gray, p.roi_around(*self._anchor))
-            if result.match.status == FULL:
+            if result.paired.status == FULL:
                 self.counters["roi_hits"] += 1
                 self._remember(result)
                 return result
@@ -225,13 +276,15 @@ class PerceptionCore(Core):
         return result
 
     def _remember(self, result: Result) -> None:
-        if result.match.status == FULL:
-            used = result.match.pairs.ravel()
+        # (the sources found, also one the blob checks left out: the region keeps it)
+        if result.paired.status == FULL:
+            used = result.paired.pairs.ravel()
             self._anchor = (result.blobs.uv_px[used], result.blobs.size_px[used])
         else:
             self._anchor = None
 
-    def _publish(self, t_ns: int, stamp_ns: int, uv_px: np.ndarray, match: Match) -> list[Output]:
+    def _publish(self, t_ns: int, stamp_ns: int, uv_px: np.ndarray, match: Match,
+                 check: SourceCheck | None = None) -> list[Output]:
         outputs: list[Output] = []
         if match.status != self._status:
             before = self._status or "none"
@@ -247,6 +300,6 @@ class PerceptionCore(Core):
             self._status = match.status
         header = self.next_header(TOPIC, stamp_ns, "camera")
         outputs.insert(
-            0, (TOPIC, measurement_message(header, self.perception.config.method, uv_px, match))
+            0, (TOPIC, measurement_message(header, self.perception.config.method, uv_px, match, check))
         )
         return outputs

@@ -25,6 +25,8 @@ reference method.
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 
@@ -84,9 +86,7 @@ def detect_paper(
             break
     index = np.flatnonzero(seeded)
     if len(index) == 0:
-        return Blobs(
-            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, len(shapes)
-        )
+        return dataclasses.replace(EMPTY, rejected=len(shapes))
     area = shapes.area[index].astype(float)
     peak = np.array(
         [
@@ -105,7 +105,16 @@ def detect_paper(
         np.ones(len(index)),
         peak,
         len(shapes) - len(index),
+        area,  # the paper has no flux: its checks compare the binary areas
+        np.array([_shape_moments(shapes.masks[i]) for i in index]).reshape(-1, 3),
     )
+
+
+def _shape_moments(mask: np.ndarray) -> tuple[float, float, float]:
+    """Central second moments (m_uu, m_vv, m_uv) of a binary shape's pixel centres, px^2."""
+    m = cv2.moments(mask.view(np.uint8), binaryImage=True)
+    n = m["m00"]
+    return m["mu20"] / n, m["mu02"] / n, m["mu11"] / n
 
 
 def pair_by_scan_line(uv_px: np.ndarray, tol_px: float, max_pairs: int = 3) -> np.ndarray:

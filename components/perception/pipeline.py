@@ -2,7 +2,8 @@
 
 :class:`Perception` holds what follows from a :class:`PerceptionConfig` and the rig
 (:class:`humanpt.geometry.rig.Rig`: PSVS parameters, target model; plus the mask image and
-the correspondence settings) and measures prepared images; the core
+the correspondence settings) and measures prepared images - detection, correspondence, the
+blob checks and their policy (:mod:`humanpt.perception.checks`); the core
 (:mod:`humanpt.perception.core`) adds the message plumbing, the region of interest and
 the events. Benchmarks and tests use it directly.
 """
@@ -16,6 +17,7 @@ import numpy as np
 from humanpt.geometry.rig import Rig
 
 from .blobs import Blobs, Region, clip_region, full_region
+from .checks import CheckSettings, SourceCheck, apply_policy, check_sources
 from .config import PerceptionConfig
 from .correspondence import Match, MatchSettings, match_scan_line, match_scored
 from .image import mask_array
@@ -27,11 +29,21 @@ __all__ = ["Perception", "Result"]
 
 @dataclass(frozen=True)
 class Result:
-    """``blobs`` (all accepted), ``match`` and the ``region`` searched (u0, v0, u1, v1)."""
+    """``blobs`` (all accepted), ``match`` (what is published: after the blob checks'
+    policy) and the ``region`` searched (u0, v0, u1, v1); ``check`` the blob checks of a
+    FULL correspondence (None when not checked); ``found`` the correspondence before the
+    policy (``match`` when nothing was changed)."""
 
     blobs: Blobs
     match: Match
     region: Region
+    check: SourceCheck | None = None
+    found: Match | None = None
+
+    @property
+    def paired(self) -> Match:
+        """What the correspondence found (before the checks' policy)."""
+        return self.match if self.found is None else self.found
 
 
 class Perception:
@@ -55,6 +67,13 @@ class Perception:
             max_area_ratio=config.max_area_ratio,
             size_ratio_range=config.size_ratio_range,
             triangulation=config.triangulation,
+        )
+        self.check_settings = CheckSettings(
+            flux_tol=config.degraded_flux_tol,
+            view_tol=config.degraded_view_tol,
+            shape_tol=config.degraded_shape_tol,
+            noise_k=config.degraded_noise_k,
+            tol_factor=config.degraded_paper_factor if config.method == "paper" else 1.0,
         )
         # The largest half-extent a source can have: at the nearest working depth, seen by
         # the right camera, with the size tolerance.
@@ -101,7 +120,12 @@ class Perception:
         (see :func:`humanpt.perception.image.prepare`)."""
         region = self.full_region if region is None else clip_region(region, *self.size_px)
         blobs = self.detect(gray, region)
-        return Result(blobs, self.match(blobs), region)
+        match = self.match(blobs)
+        if not self.config.check_blobs:
+            return Result(blobs, match, region)
+        check = check_sources(blobs, match, self.params, self.model, self.check_settings)
+        checked = apply_policy(match, check, self.config.degraded_policy, self.model)
+        return Result(blobs, checked, region, check, None if checked is match else match)
 
     def roi_around(self, uv_px: np.ndarray, blob_size_px: np.ndarray) -> Region:
         """The region of interest around centres (k, 2): their bounding box grown by

@@ -28,6 +28,7 @@ photon and read noise only (a few thousandths of a pixel for the default twin).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import cv2
@@ -110,9 +111,7 @@ def detect_weighted(
     ]
     rejected = len(shapes) - len(cand)
     if len(cand) == 0:
-        return Blobs(
-            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
-        )
+        return dataclasses.replace(EMPTY, rejected=rejected)
     if len(cand) > max_blobs:
         cand = np.array(cand)
         order = np.argsort(-shapes.area[cand], kind="stable")[:max_blobs]
@@ -192,10 +191,19 @@ def detect_weighted(
     myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
     mxy = (wdx * dy).sum(axis=(1, 2)) / safe
     peak = np.where(aperture, win - local_bg[:, None, None], -np.inf).max(axis=(1, 2))
+    # Background noise of the flux and of the moments' anisotropy (for the blob checks),
+    # over a circular aperture of radius R (~pi R^2 pixels): sigma per aperture pixel plus
+    # the local background's error over the whole aperture; the anisotropy's two parts
+    # ((m_uu - m_vv)/2, m_uv) each sigma sqrt(sum ((dx^2 - dy^2)/2)^2) / flux, the sum
+    # ~ pi R^6 / 12. (The sources' own shot noise is left out: the background's dominates
+    # faint blobs.)
+    n_ap = np.pi * r_ap**2
+    flux_sd = sigma * np.sqrt(n_ap + n_ap**2 / np.maximum(n_ring, 1))
+    aniso_sd = sigma * np.sqrt(np.pi / 12.0) * r_ap**3 / safe
     # Shape checks per blob, the array formulas' operations on plain floats.
-    uv, areas, sizes, elongations, peaks = [], [], [], [], []
+    uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
     c0 = centroid.tolist()
-    for i, (fl, pk, a, b, c, u, v) in enumerate(
+    for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
         zip(
             flux.tolist(),
             peak.tolist(),
@@ -204,6 +212,8 @@ def detect_weighted(
             mxy.tolist(),
             cx.tolist(),
             cy.tolist(),
+            flux_sd.tolist(),
+            aniso_sd.tolist(),
             strict=True,
         )
     ):
@@ -226,12 +236,13 @@ def detect_weighted(
             sizes.append(size)
             elongations.append(elongation)
             peaks.append(pk)
+            fluxes.append(fl)
+            moments.append((a, b, c))
+            noise.append((fsd, asd))
         else:
             rejected += 1
     if not uv:
-        return Blobs(
-            EMPTY.uv_px, EMPTY.area_px, EMPTY.size_px, EMPTY.elongation, EMPTY.peak_dn, rejected
-        )
+        return dataclasses.replace(EMPTY, rejected=rejected)
     return Blobs(
         np.array(uv),
         np.array(areas),
@@ -239,4 +250,7 @@ def detect_weighted(
         np.array(elongations),
         np.array(peaks),
         rejected,
+        np.array(fluxes),
+        np.array(moments).reshape(-1, 3),
+        np.array(noise).reshape(-1, 2),
     )

@@ -11,24 +11,49 @@ from humanpt.schemas.topics import KEY_PREFIX
 
 
 def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[str, ...] | None = None,
-                 connect: tuple[str, ...] | None = None) -> zenoh.Config:
-    """A Zenoh config from the ``[runtime]`` section (client of the router by default; a
-    peer listens on ``peer_listen`` so the others can link to it directly).
+                 connect: tuple[str, ...] | None = None, identity: str | None = None) -> zenoh.Config:
+    """The Zenoh config of every session humanpt opens, from the ``[runtime]`` section
+    (client of the router by default; a peer listens on ``peer_listen`` so the others can
+    link to it directly).
 
     Multicast scouting is off unless ``multicast_scouting = true``: endpoints are explicit.
+
+    With ``security = "mtls"`` (:mod:`humanpt.runtime.security`): endpoints are TLS
+    (``tcp/`` taken as ``tls/``), the session presents the certificate of ``identity``
+    (a component's name; default ``router`` for a router, else ``[runtime] identity`` or
+    ``tool``) and accepts only peers certified by the cell's CA; a router also enforces
+    the access control generated from the topic table for the identities the PKI issued.
+    PkiError when the CA or the identity's certificate is missing.
     """
+    from humanpt.runtime import security
+
+    mode = mode or rt.mode
+    mtls = rt.security == "mtls"
     conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps(mode or rt.mode))
+    conf.insert_json5("mode", json.dumps(mode))
     eps = rt.connect if connect is None else connect
+    if listen is None and mode == "peer":
+        listen = rt.peer_listen
+    if mtls and mode == "peer":
+        raise ValueError('security = "mtls" needs client sessions: peers would link to each other around the '
+                         "router's access control")
+    if mtls:
+        eps = tuple(security.tls_endpoint(e) for e in eps)
+        listen = None if listen is None else tuple(security.tls_endpoint(e) for e in listen)
     if eps:
         conf.insert_json5("connect/endpoints", json.dumps(list(eps)))
-    if listen is None and (mode or rt.mode) == "peer":
-        listen = rt.peer_listen
     if listen is not None:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(rt.multicast_scouting))
     # A client waits this long for the router (it may still be starting), then fails clearly.
     conf.insert_json5("connect/timeout_ms", json.dumps(int(rt.connect_timeout_s * 1000)))
+    if mtls:
+        pki = security.pki_dir_of(rt)
+        name = identity or ("router" if mode == "router" else rt.identity or security.DEFAULT_TOOL_IDENTITY)
+        conf.insert_json5("transport/link/tls", json.dumps(security.tls_section(pki, name)))
+        if mode == "router":
+            conf.insert_json5("access_control", json.dumps(
+                security.access_control(rt.cell, security.identities(pki))))
     return conf
 
 
@@ -61,9 +86,14 @@ def open_tool_session(rt: RuntimeConfig) -> zenoh.Session:
     the router. As a peer every component would link to it and re-route when it comes and
     goes (a ~35 ms stall of the servo loop seen as the demo's session left is gone since;
     the cause was not isolated further). Raises ConnectionError naming the router."""
+    conf = zenoh_config(rt, mode="client")
     try:
-        return zenoh.open(zenoh_config(rt, mode="client"))
+        return zenoh.open(conf)
     except zenoh.ZError as e:
         why = str(e).split(" at /")[0].rstrip(".")  # Zenoh appends its Rust source location
-        raise ConnectionError(f"cannot reach the router at {', '.join(rt.connect)} ({why}). "
+        how = ""
+        if rt.security == "mtls":  # a refused certificate looks like a timeout: say which one was shown
+            how = (f" over mTLS as {rt.identity or 'tool'!r} (its certificate must be signed by the cell's CA, "
+                   f"be valid now, and the router's name must match one of its hosts)")
+        raise ConnectionError(f"cannot reach the router at {', '.join(rt.connect)}{how} ({why}). "
                               "Start one with `humanpt router` or pass --connect ENDPOINT.") from e

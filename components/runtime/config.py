@@ -318,10 +318,37 @@ class RuntimeConfig:
     # hand-eye, target, tip), written by `humanpt calibrate` or `humanpt rig init`.  A
     # relative path is relative to this config file.  Empty: the nominal design rig.
     rig: str = ""
+    # "mtls": every session (router, components, tools) runs over TLS with mutual
+    # authentication, each process with its own certificate from the cell's PKI (``pki``),
+    # and the router enforces access control generated from the topic table
+    # (humanpt.runtime.security).  tcp/ endpoints are then taken as tls/ on the same port.
+    security: Literal["none", "mtls"] = "none"
+    # The PKI directory (`humanpt pki init`): the CA and the certificates.  A relative path
+    # is relative to this config file; empty: pki/ in the working directory.
+    pki: str = ""
+    # The certificate a tool (topics, echo, console, param...) presents under mTLS; empty:
+    # "tool" (read-only).  `--as NAME` on the command line; an operator's certificate may
+    # command and set parameters.  Components always present their own name's certificate.
+    identity: str = ""
+    # mTLS: the router reports each attempt its access control refuses, as a warning event
+    # on router/events (the 1st, 10th, 100th... per identity, message and key) and a log
+    # line.  Zenoh says so only in a trace line of every message, allowed or not, which the
+    # router reads from its own stdout: ~5-7 us of router CPU per message (measured).
+    report_denied: bool = True
 
     def __post_init__(self):
         if not self.cell or "/" in self.cell or "*" in self.cell:
             raise ValueError(f"cell {self.cell!r} must be a non-empty name without '/' or '*'")
+        if self.security == "mtls":
+            if self.mode == "peer":
+                raise ValueError('security = "mtls" needs mode = "client": the router enforces access control, '
+                                 "and peers would link to each other around it")
+            for ep in (*self.connect, *self.listen):
+                if not (ep.startswith("tcp/") or ep.startswith("tls/")):
+                    raise ValueError(f'endpoint {ep!r}: with security = "mtls" endpoints are tcp/ (taken as tls/) '
+                                     f"or tls/")
+        if self.identity and ("/" in self.identity or "*" in self.identity):
+            raise ValueError(f"identity {self.identity!r} must be a certificate's name without '/' or '*'")
         if self.chunk_size < 1024:
             raise ValueError("chunk_size must be at least 1024 bytes")
         if self.flush_interval_s <= 0:
@@ -410,6 +437,11 @@ def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str,
             raise ConfigError(f"{source}: {name!r} must be a [section] (a table), got "
                               f"{type(table).__name__} {table!r}")
     runtime = build(RuntimeConfig, data.get("runtime", {}), source=source, section="runtime")
+    if runtime.pki and source not in ("<defaults>", "") and not Path(runtime.pki).expanduser().is_absolute() \
+            and Path(source).is_file():
+        # as the rig: a relative PKI directory is relative to the config file, so the
+        # processes `humanpt up` starts find it from any working directory
+        runtime = dataclasses.replace(runtime, pki=str(Path(source).resolve().parent / runtime.pki))
     profiles_raw = data.get("profiles", {})
     profiles = {k: coerce(tuple[str, ...], v, f"{source}: [profiles] {k}") for k, v in profiles_raw.items()}
     sections = {k: dict(v) for k, v in data.items() if k not in ("runtime", "profiles")}

@@ -152,7 +152,8 @@ class LiveShell:
         self.rt = rt
         self.cell = rt.cell
         self.run_dir = Path(run_dir) if run_dir is not None else None
-        self.zconf = zconf or zenoh_config(rt)
+        # under mTLS the component presents its own certificate (its name is its identity)
+        self.zconf = zconf or zenoh_config(rt, identity=core.name)
         self.counters = Counters()
         self.stop = threading.Event()
         self.ready = threading.Event()

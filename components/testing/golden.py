@@ -111,6 +111,9 @@ UNIT_RULES: list[tuple[str, str]] = [
     (r"^covariance$", "covariance"),
     (r"^quality$", "ratio"),
     (r"_fraction$", "ratio"),
+    (r"^source_brightness$", "ratio"),  # TobMeasurement: brightness for its size, ~1
+    (r"_m2$|_rad2$", "covariance"),  # PathPoint's 3x3 covariances (issue 18)
+    (r"^rotation_scale$", "ratio"),  # ControllerStatus (issue 18)
 ]
 
 

@@ -344,3 +344,78 @@ def format_table(results: dict[str, dict[str, Stats]]) -> str:
                 f"{s.pose_bound[0]:8.3f} {s.pose_bound[1]:7.3f}"
             )
     return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- blob checks
+
+
+def realistic_sim_config(seed: int = 0):
+    """The renderer's config of the twin's realistic world (its optics and sensor)."""
+    from humanpt.runtime.config import build, to_table
+    from humanpt.sim_camera import SimCameraConfig
+    from humanpt.twin.worlds import World, merge_overrides
+
+    table = merge_overrides(to_table(SimCameraConfig(seed=seed)), World.realistic().overrides()["sim_camera"])
+    return build(SimCameraConfig, table, source="realistic world", section="sim_camera")
+
+
+def check_rates(
+    cases: list[Case],
+    fractions=(0.0, 0.1, 0.2, 0.3),
+    methods: tuple[str, ...] = ("weighted", "paper"),
+    sim=None,
+    seed: int = 1,
+) -> dict[str, dict[float, tuple[int, int, int]]]:
+    """The blob checks (:mod:`humanpt.perception.checks`) on ``cases`` rendered with source
+    ``index % 3`` covered by ``fraction`` (the hidden side at a seeded random angle in the
+    TOB plane; ``sim`` the renderer's config, default the case's). Returns ``{method:
+    {fraction: (checked images, images with the covered source flagged - or, for 0, with any
+    flag -, images with another source flagged)}}``."""
+    from humanpt.sim_camera.render import Renderer
+
+    perceptions = {m: Perception(PerceptionConfig(method=m)) for m in methods}
+    out: dict[str, dict[float, tuple[int, int, int]]] = {m: {} for m in methods}
+    for fraction in fractions:
+        counts = {m: [0, 0, 0] for m in methods}
+        for k, case in enumerate(cases):
+            source = k % 3
+            angle = float(np.random.default_rng([seed, k]).uniform(0.0, 360.0))
+            base = sim or case.sim
+            cfg = dataclasses.replace(base, occluded_sources=(source,) if fraction else (),
+                                      occlusion_fraction=fraction or 0.5, occlusion_angle_deg=angle)
+            r = Renderer(cfg)
+            img = r.expose(r.signal(r.blobs(r.discs(case.camera_T_tob, case.world_T_camera))), case.frame_index)
+            for m, p in perceptions.items():
+                check = p.measure(img).check
+                if check is None:
+                    continue
+                c = counts[m]
+                c[0] += 1
+                if fraction:
+                    c[1] += source in check.degraded
+                    c[2] += any(s != source for s in check.degraded)
+                else:
+                    c[1] += bool(check.degraded)
+        for m in methods:
+            out[m][fraction] = tuple(counts[m])
+    return out
+
+
+def check_table(seed: int = 1) -> str:
+    """The perception README's table of the blob checks: ideal and realistic optics, both
+    methods, the scenarios' poses (15 each) and 200 random ones, 0/10/20/30 % covers.
+    ``python -c "from humanpt.testing.perception_eval import check_table; print(check_table())"``"""
+    from humanpt.sim_camera import SimCameraConfig
+
+    sets = {"scenarios": standard_cases(15, seed=seed), "random": random_cases(200, seed=seed)}
+    lines = ["optics     method    poses          n   0% (false)  10%   20%   30%   (wrong source)"]
+    for optics, sim in (("ideal", SimCameraConfig(seed=seed)), ("realistic", realistic_sim_config(seed))):
+        for set_name, cases in sets.items():
+            rates = check_rates(cases, sim=sim, seed=seed)
+            for method, by_fraction in rates.items():
+                n0, false, _ = by_fraction[0.0]
+                cells = [f"{100.0 * hit / max(n, 1):4.0f}%" for f, (n, hit, _) in by_fraction.items() if f]
+                wrong = sum(w for f, (_, _, w) in by_fraction.items() if f)
+                lines.append(f"{optics:10s} {method:9s} {set_name:10s} {n0:5d} {false:8d}      "
+                             + "  ".join(cells) + f"   {wrong}")
+    return "\n".join(lines)

@@ -157,10 +157,11 @@ class RunResult:
         """Write the recorded path as a path file (CSV, ``humanpt.controller.pathfile``)."""
         from humanpt.controller import pathfile
 
-        stamps, xg, xt = self.path_points()
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        pathfile.write(path, pathfile.Path6(np.arange(len(stamps)), stamps, xg, xt))
+        # With the held flags and the filter's covariances (issue 18), as the live shell writes.
+        pts = [pb.PathPoint.FromString(o.data) for o in self.world.outputs("controller/path")]
+        pathfile.write(path, pathfile.from_path_points(pts))
         return path
 
 

@@ -4,7 +4,8 @@ Left: the 3D world (robot flange, camera frustum, D, the filtered and measured t
 the recorded path as it grows, the twin's ground truth) over the event log and the
 controller's status.  Right: the complex image with detected centres, pairs, expected,
 desired and true source positions, over the time plots: tracking error, command, loop
-latency and tracking (visible sources, quality, missed ALTER cycles).  The time panel
+latency, tracking (visible sources, quality, missed ALTER cycles), the servo's field-of-view
+margin and the recorded path's uncertainty.  The time panel
 follows the ``stamp`` timeline (the data's own time).
 """
 
@@ -22,6 +23,8 @@ def blueprint() -> rrb.Blueprint:
     command = rrb.TimeSeriesView(name="Command (mm/s, deg/s)", origin="/plots/command")
     latency = rrb.TimeSeriesView(name="Loop latency (ms)", origin="/plots/latency")
     tracking = rrb.TimeSeriesView(name="Sources, quality, misses", origin="/plots/tracking")
+    servo = rrb.TimeSeriesView(name="Field of view margin, image offset (px)", origin="/plots/servo")
+    path = rrb.TimeSeriesView(name="Path uncertainty (mm, deg)", origin="/plots/path")
     events = rrb.TextLogView(name="Events", origin="/events")
     status = rrb.TextDocumentView(name="Status", origin="/status")
     return rrb.Blueprint(
@@ -30,7 +33,7 @@ def blueprint() -> rrb.Blueprint:
                 world, rrb.Horizontal(events, status, column_shares=[3, 1]), row_shares=[3, 1]
             ),
             rrb.Vertical(
-                image, error, command, rrb.Tabs(latency, tracking), row_shares=[3, 2, 2, 2]
+                image, error, command, rrb.Tabs(latency, tracking, servo, path), row_shares=[3, 2, 2, 2]
             ),
             column_shares=[1, 1],
         ),

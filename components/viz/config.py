@@ -58,6 +58,11 @@ class VizConfig:
     # The recorded path is drawn as line strips of at most this many points each (a new
     # strip starts when one is full, so a long path is not re-sent whole at every point).
     path_strip_points: Annotated[int, Range(2, 10000000, "points")] = 200
+    # Each path point's position uncertainty is drawn as an ellipsoid of this many standard
+    # deviations, magnified (1: true size; the filter's ~1 mm sd is small beside a 0.5 m
+    # seam, a held orientation's tip tens of mm): half axes = path_sigmas * magnify * sd.
+    path_sigmas: Annotated[float, Range(0.1, 10, "sd")] = 3.0
+    path_sigma_magnify: Annotated[float, Range(0.01, 10000, "")] = 1.0
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -87,6 +92,10 @@ class VizConfig:
                 or not math.isfinite(v)
                 or v <= 0
             ):
+                raise ValueError(f"viz.{name} must be a finite number > 0, got {v!r}")
+        for name in ("path_sigmas", "path_sigma_magnify"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0:
                 raise ValueError(f"viz.{name} must be a finite number > 0, got {v!r}")
         if (
             isinstance(self.path_strip_points, bool)

@@ -28,6 +28,12 @@ Entity paths (the blueprint's views are rooted at ``world``, ``image``, ``plots`
 ``world/desired_flange``               where the servo wants the flange (controller/status)
 ``world/path/<n>/g/<k>``               recorded path n (G), strips of ``path_strip_points``
 ``world/path/<n>/tip/<k>``             the driver tip P's path, when recorded
+``world/path/<n>/sigma/<k>``           the recorded point's (tip's, else G's) position
+                                       uncertainty: ellipsoids of ``path_sigmas`` standard
+                                       deviations, magnified ``path_sigma_magnify`` times;
+                                       held-orientation points in HELD_RGB
+``world/path/<n>/held/<k>``            points recorded with the orientation held
+                                       (one or two sources visible)
 ``world/truth/tob``, ``.../sources``   twin: the true target (operator/truth)
 ``world/truth/tip``                    twin: the true driver tip
 ``world/truth/flange``                 twin: the true flange (sim_robot/truth)
@@ -41,6 +47,10 @@ Entity paths (the blueprint's views are rooted at ``world``, ``image``, ``plots`
 ``plots/command/*``                    commanded flange velocity (mm/s, deg/s per axis)
 ``plots/latency/*``                    capture -> command, robot state -> command (ms)
 ``plots/tracking/*``                   visible sources, perception quality, missed ALTER cycles
+``plots/servo/*``                      field-of-view margin and G's image offset (px), the
+                                       commanded fraction of the rotation (controller/status)
+``plots/path/*``                       each path point's position sd (mm, largest axis) and
+                                       orientation sd (deg), held orientation (1)
 ``events/<component>``                 events (TextLog), console commands
 ``status``                             controller mode, recording, path points (TextDocument)
 =====================================  ================================================
@@ -56,6 +66,7 @@ from collections import deque
 
 import numpy as np
 import rerun as rr
+from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
 from humanpt.geometry.rig import Rig
@@ -74,6 +85,7 @@ DESIRED_RGB = (60, 220, 90)
 TRUTH_RGB = (230, 60, 230)
 PATH_RGB = (255, 230, 40)
 TIP_RGB = (255, 90, 90)
+HELD_RGB = (255, 60, 0)  # path points whose orientation was held, not measured
 PAIR_RGB = ((255, 80, 80), (80, 255, 80), (90, 140, 255))
 
 ENTITIES = {
@@ -107,6 +119,12 @@ ENTITIES = {
     "visible": "plots/tracking/visible",
     "quality": "plots/tracking/quality",
     "misses": "plots/tracking/missed_cycles",
+    "fov_margin": "plots/servo/fov_margin_px",
+    "image_error": "plots/servo/image_error_px",
+    "rotation_scale": "plots/servo/rotation_scale",
+    "path_sd_mm": "plots/path/position_sd_mm",
+    "path_sd_deg": "plots/path/orientation_sd_deg",
+    "path_held": "plots/path/orientation_held",
     "status": "status",
 }
 
@@ -178,6 +196,8 @@ class RerunLogger:
         self._path_n = 0
         self._path_g: list[list[float]] = []
         self._path_tip: list[list[float]] = []
+        self._path_sigma: list[tuple[list[float], list[float], list[float], bool]] = []  # centre, half sizes, quat
+        self._path_held: list[list[float]] = []
         self._last_index = -1
         self._status_text = ""
         self._static_done = False
@@ -457,6 +477,10 @@ class RerunLogger:
         self.rec.log(ENTITIES["error_r"], rr.Scalars(float(np.degrees(msg.error_rotation_rad))))
         if msg.HasField("world_T_desired"):
             self.rec.log(ENTITIES["desired_flange"], _transform(msg.world_T_desired))
+        if msg.visible:  # the field-of-view figures need a target
+            self.rec.log(ENTITIES["fov_margin"], rr.Scalars(msg.fov_margin_px))
+            self.rec.log(ENTITIES["image_error"], rr.Scalars(msg.image_error_px))
+            self.rec.log(ENTITIES["rotation_scale"], rr.Scalars(msg.rotation_scale))
         mode = pb.ControlMode.Name(msg.mode).removeprefix("CONTROL_MODE_")
         text = (
             f"## {mode}\n\n| | |\n|---|---|\n| visible sources | {msg.visible} |\n"
@@ -473,7 +497,7 @@ class RerunLogger:
     def _path(self, topic, msg: pb.PathPoint, t_ns) -> None:
         if self._path_n == 0 or msg.index <= self._last_index:
             self._path_n += 1
-            self._path_g, self._path_tip = [], []
+            self._path_g, self._path_tip, self._path_sigma, self._path_held = [], [], [], []
         self._last_index = msg.index
         self._time(msg.header.stamp_ns, t_ns)
         self._path_g.append(_translation(msg.world_T_tob))
@@ -481,6 +505,48 @@ class RerunLogger:
         if msg.has_tip:
             self._path_tip.append(_translation(msg.world_T_tip))
             self._log_strip("tip", self._path_tip, TIP_RGB)
+        self._path_uncertainty(msg)
+
+    def _path_uncertainty(self, msg: pb.PathPoint) -> None:
+        """The point's position covariance as an ellipsoid (k sigma, magnified), the held
+        orientation as a marker, and both sd's on the plots."""
+        at = msg.world_T_tip if msg.has_tip else msg.world_T_tob
+        cov = msg.tip_position_covariance_m2 if msg.has_tip else msg.position_covariance_m2
+        centre = _translation(at)
+        held = bool(msg.orientation_held)
+        if len(cov) == 9:
+            C = np.asarray(cov, dtype=float).reshape(3, 3)
+            evals, evecs = np.linalg.eigh(0.5 * (C + C.T))
+            sd = np.sqrt(np.clip(evals, 0.0, None))
+            if np.linalg.det(evecs) < 0:  # a proper rotation for the quaternion
+                evecs[:, 0] = -evecs[:, 0]
+            quat = Rotation.from_matrix(evecs).as_quat().tolist()  # x, y, z, w
+            half = (sd * self.config.path_sigmas * self.config.path_sigma_magnify).tolist()
+            self._path_sigma.append((centre, half, quat, held))
+            self._log_sigma_strip()
+            self.rec.log(ENTITIES["path_sd_mm"], rr.Scalars(float(sd.max()) * 1e3))
+        if len(msg.rotation_covariance_rad2) == 9:
+            R = np.asarray(msg.rotation_covariance_rad2, dtype=float).reshape(3, 3)
+            sd_deg = float(np.degrees(np.sqrt(max(np.linalg.eigvalsh(0.5 * (R + R.T)).max(), 0.0))))
+            self.rec.log(ENTITIES["path_sd_deg"], rr.Scalars(sd_deg))
+        self.rec.log(ENTITIES["path_held"], rr.Scalars(1.0 if held else 0.0))
+        if held:
+            self._path_held.append(centre)
+            n = self.config.path_strip_points
+            k = (len(self._path_held) - 1) // n
+            self.rec.log(f"{ENTITIES['path']}/{self._path_n}/held/{k}",
+                         rr.Points3D(self._path_held[k * n:], colors=HELD_RGB, radii=0.003))
+
+    def _log_sigma_strip(self) -> None:
+        n = self.config.path_strip_points
+        k = (len(self._path_sigma) - 1) // n
+        seg = self._path_sigma[k * n:]
+        self.rec.log(
+            f"{ENTITIES['path']}/{self._path_n}/sigma/{k}",
+            rr.Ellipsoids3D(centers=[c for c, _, _, _ in seg], half_sizes=[h for _, h, _, _ in seg],
+                            quaternions=[q for _, _, q, _ in seg],
+                            colors=[HELD_RGB if held else PATH_RGB for *_, held in seg], line_radii=0.0003),
+        )
 
     def _log_strip(self, which: str, points: list, rgb) -> None:
         n = self.config.path_strip_points

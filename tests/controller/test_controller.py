@@ -64,6 +64,7 @@ class Rig:
         self.pending: dict[int, pb.FlangeCommand] = {}
         self.answered: list[bool] = []
         self.at_cycle: dict[int, np.ndarray] = {}  # the robot's flange at the start of each cycle
+        self.covariance: np.ndarray | None = None  # the filter states' covariance, if any
 
     def command(self, verb, **args):
         msg = pb.Command(header=header(self.k * DT_NS), component="controller", verb=verb,
@@ -81,6 +82,9 @@ class Rig:
                              linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k,
                              # as the filter says right after a new measurement (one per cycle here)
                              after_measurement=True, world_T_tob_at_measurement=pose(T), measurement_stamp_ns=t)
+            if self.covariance is not None:  # (12, 12), as the filter publishes it
+                st.covariance.extend(np.ravel(self.covariance).tolist())
+                st.covariance_dim = 12
             outs = self.core.step(t + 1, "pose_filter/tob_state", st)
             self.outs += outs
             for cmd in (m for tp, m in outs if tp == "controller/command"):
@@ -350,3 +354,33 @@ def test_the_cycle_counter_wraps_without_losing_a_command():
                          cycle=k)
         cycles += [m.cycle for tp, m in core.step(t + 1, "pose_filter/tob_state", st) if tp == "controller/command"]
     assert cycles == [0xFFFFFFFF, 0, 1, 2]
+
+
+def test_position_only_cycles_are_recorded_held_and_playback_interpolates_them():
+    """Issue 18.2: with one or two sources the path goes on (orientation_held), with the
+    state's covariance; playback of the recorded path takes the held orientations from the
+    measured ones around them, not the (drifting) held ones."""
+    def drifting(t_ns):  # a still target whose *held* orientation the filter lets drift
+        T = T_m(TARGET_X)
+        k = round(t_ns / DT_NS)
+        if 20 <= k < 40:
+            T[:3, :3] = Rotation.from_euler("z", 3.0 * (k - 19), degrees=True).as_matrix() @ T[:3, :3]
+        return T, np.zeros(3), np.zeros(3)
+
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=1, has_driver=True, record_on_start=True))
+    rig = Rig(core, start_flange(TARGET_X), drifting,
+              status_fn=lambda k: pb.TOB_STATUS_POSITION_ONLY if 20 <= k < 40 else pb.TOB_STATUS_FULL)
+    cov = np.diag([1e-8, 2e-8, 3e-8, 1e-4, 2e-4, 3e-4, 1, 1, 1, 1, 1, 1])
+    rig.covariance = cov
+    rig.step(60)
+    pts = rig.of("controller/path")
+    held = [p.orientation_held for p in pts]
+    cycles = [p.header.stamp_ns // DT_NS for p in pts]
+    assert cycles == list(range(60)) and held == [20 <= k < 40 for k in cycles]  # none missing
+    np.testing.assert_allclose(np.reshape(pts[30].position_covariance_m2, (3, 3)), cov[:3, :3])
+    np.testing.assert_allclose(np.reshape(pts[30].rotation_covariance_rad2, (3, 3)), cov[3:6, 3:6])
+    assert len(pts[30].tip_position_covariance_m2) == 9
+    rig.command("playback", speed_mm_s=20.0)
+    tips = core.playback["tips"]
+    angles = [np.degrees(Rotation.from_matrix(t[:3, :3] @ T_m(TARGET_X)[:3, :3].T).magnitude()) for t in tips]
+    assert max(angles) < 1e-6, max(angles)  # the held (drifted by up to 60 deg) ones interpolated

@@ -157,3 +157,66 @@ def test_a_restarted_writer_continues_the_numbering_and_truncates_nothing(tmp_pa
     assert (paths / "path-1.csv").read_bytes() == before
     assert second.current == paths / "path-2.csv"
     assert len(pathfile.read(paths / "path-2.csv")) == 1
+
+
+def _cov_path(n=20, tip=True, seed=1):
+    p = _path(n, tip=tip, seed=seed)
+    rng = np.random.default_rng(seed)
+
+    def spd():
+        a = rng.normal(size=(n, 3, 3))
+        return np.einsum("nij,nkj->nik", a, a) * 0.01
+
+    p.orientation_held = rng.random(n) < 0.3
+    p.orientation_held[0] = False
+    p.cov_g_mm2, p.cov_r_deg2 = spd(), spd()
+    p.cov_tip_mm2 = spd() if tip else None
+    return p
+
+
+@pytest.mark.parametrize("tip", [True, False])
+def test_csv_round_trip_with_the_held_flag_and_covariance(tmp_path, tip):
+    p = _cov_path(tip=tip)
+    f = tmp_path / "c.csv"
+    pathfile.write(f, p)
+    head = f.read_text().splitlines()[0].split(",")
+    assert head == pathfile.header(tip, with_covariance=True) and "cov_rzz_deg2" in head
+    q = pathfile.read(f)
+    np.testing.assert_array_equal(q.orientation_held, p.orientation_held)
+    for name in ("cov_g_mm2", "cov_r_deg2") + (("cov_tip_mm2",) if tip else ()):
+        np.testing.assert_allclose(getattr(q, name), getattr(p, name), rtol=1e-5, atol=1e-12)
+    assert (q.cov_tip_mm2 is None) == (not tip)
+    # An old file (no such columns) still reads, without them.
+    old = tmp_path / "old.csv"
+    pathfile.write(old, _path(5, tip=tip))
+    o = pathfile.read(old)
+    assert o.orientation_held is None and o.cov_g_mm2 is None and len(o) == 5
+    # Not a number: refused, naming the row.
+    lines = f.read_text().splitlines()
+    lines[3] = lines[3].rsplit(",", 1)[0] + ",nan"
+    f.write_text("\n".join(lines) + "\n")
+    with pytest.raises(pathfile.PathFileError, match="not a finite number on data row 3"):
+        pathfile.read(f)
+
+
+def test_cli_smooth_and_val_fill_held_orientations(tmp_path, cli_main):
+    p = _cov_path(30, tip=False)
+    p.x_g[:, 3:] = [10.0, 5.0, 170.0]
+    p.x_g[p.orientation_held, 3] = 60.0  # held orientations drifted
+    p.orientation_held[-1] = False
+    f = tmp_path / "h.csv"
+    pathfile.write(f, p)
+    assert cli_main(["path", "val", str(f), str(tmp_path / "h.v2")]) == 0
+    text = (tmp_path / "h.v2").read_text()
+    from scipy.spatial.transform import Rotation
+
+    expect = Rotation.from_euler("ZYX", [10.0, 5.0, 170.0], degrees=True).as_euler("ZYZ", degrees=True)
+    for i in np.flatnonzero(p.orientation_held):  # every SET line has the measured orientation
+        line = text.splitlines()[3 + i]
+        got = [float(v) for v in line.split("TRANS(")[1].rstrip(")").split(",")[3:]]
+        np.testing.assert_allclose(got, expect, atol=2e-3)
+    assert cli_main(["path", "smooth", str(f), str(tmp_path / "s.csv")]) == 0
+    s = pathfile.read(tmp_path / "s.csv")
+    np.testing.assert_array_equal(s.orientation_held, p.orientation_held)
+    np.testing.assert_allclose(s.cov_g_mm2, p.cov_g_mm2, rtol=1e-5)
+    assert np.abs(s.x_g[:, 3] - 10.0).max() < 0.5  # smoothed through the filled orientations, not 60

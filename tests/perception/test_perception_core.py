@@ -152,6 +152,13 @@ def test_parameters_change_at_run_time_through_param_inputs():
         "invert": True,
         "mask": [],
         "track_roi": True,
+        "check_blobs": True,
+        "degraded_policy": "rebuild",
+        "degraded_flux_tol": 0.05,
+        "degraded_view_tol": 0.05,
+        "degraded_shape_tol": 0.15,
+        "degraded_noise_k": 5.0,
+        "degraded_paper_factor": 3.5,
     }
 
 

@@ -1,0 +1,51 @@
+"""A refused attempt is reported: ``[runtime] report_denied`` (default true) makes the router
+(``humanpt router``, a process of its own) publish a warning event on ``router/events``
+for what its access control refused (issue 19 item 2, "where zenoh allows")."""
+
+from __future__ import annotations
+
+import zenoh
+
+from humanpt.runtime import security
+from humanpt.runtime.bus import zenoh_config
+from humanpt.runtime.config import load
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas import topics
+from tests.conftest import free_port, wait_port, write_config
+from tests.security.test_mtls import Inbox
+
+
+def test_the_router_reports_what_it_refused(tmp_path, procs):
+    pki = tmp_path / "pki"
+    security.init_ca(pki, "test")
+    for name in ("router", "perception", "tool"):
+        security.issue(pki, name)
+    port = free_port()
+    cfg = write_config(tmp_path / "cell.toml", port, extra='security = "mtls"\npki = "pki"\n')
+    router = procs.start("router", "--config", str(cfg))
+    wait_port(port)
+    rt = load(cfg).runtime
+    events = Inbox()
+    command = topics.TOPICS["controller/command"].key("test")
+    with zenoh.open(zenoh_config(rt, identity="tool")) as tool, \
+            zenoh.open(zenoh_config(rt, identity="perception")) as rogue:
+        sub = tool.declare_subscriber(topics.TOPICS["router/events"].key("test"), events)
+
+        def reported(k, v) -> bool:
+            return "controller/command" in pb.Event.FromString(v).text
+
+        # The router reports the 1st, 10th, 100th... refusal: keep trying until one is seen
+        # (the tool's subscription may reach the router after the first).
+        for _ in range(150):
+            rogue.put(command, b"rogue")
+            if events.wait_for(reported, timeout=0.1):
+                break
+        assert events.wait_for(reported, timeout=5.0), "no event for the refused command"
+        sub.undeclare()
+    out = procs.stop(router)
+    evs = [pb.Event.FromString(v) for _, v in events.items]
+    first = evs[0]
+    assert first.code == "access_denied" and first.severity == pb.SEVERITY_WARNING and first.source == "router"
+    assert "'perception'" in first.text and "Put" in first.text
+    assert "listening on tls/" in out  # the router's own output still goes through
+    assert "is authorized" not in out  # zenoh's trace of allowed traffic does not
