@@ -66,7 +66,7 @@ class AlterGatewayConfig:
     # A command's stamp is the stamp of the robot_state it answers (gateway time, + one
     # cycle per cycle ahead); one further off than this is not the controller's answer to
     # this gateway's cycle (forged, replayed, another cell's): dropped (stamp_mismatch).
-    stamp_tolerance_ms: Annotated[float, Range(0.1, 1000, "ms")] = 20.0
+    stamp_tolerance_ms: Annotated[float, Range(0.1, 1000, "ms")] = 50.0
     # A second command stream (header.seq not continuing the bound controller session's:
     # a second controller session, a replay, a forger) holds the robot for this long after
     # its last command (controller_conflict).

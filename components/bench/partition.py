@@ -143,10 +143,11 @@ def late_commands(gateway_mcap: str | Path, stale_cycles: int) -> tuple[int, int
 
 def output_gaps(mcap: str | Path) -> dict[str, str]:
     """Topics whose outputs' ``header.seq`` in this recording does not count 0, 1, 2...
-    with no gap: topic -> what is wrong. Empty: the recording keeps all it produced."""
+    with no gap: topic -> what is wrong. Empty: the recording keeps all it produced.
+    (humanpt messages only: a foxglove image carries no sequence number.)"""
     seqs: dict[str, list[int]] = defaultdict(list)
     for e in iter_entries(mcap):
-        if e.direction == OUT and "/" in e.topic:
+        if e.direction == OUT and "/" in e.topic and e.schema.startswith("humanpt."):
             seqs[e.topic].append(e.decode().header.seq)
     bad = {}
     for topic, s in seqs.items():

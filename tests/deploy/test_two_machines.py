@@ -114,6 +114,10 @@ def write_config(d: Path) -> Path:
     ep = [f"tcp/{SERVER_IP}:{PORT}"]
     sections["runtime"] = {"cell": "two", "connect": ep, "listen": ep, "connect_timeout_s": 20.0,
                            "security": "mtls", "pki": str(d / "pki"), "rig": str(d / "rig.toml")}
+    # Room for a loaded machine (2 shared cores, 8 processes): a 0.3 s stall of the client
+    # with commands still trickling in late would latch a miss fault (not a partition's
+    # doing: a partition starves the gateway, which holds without a fault).
+    sections["alter_gateway"]["fault_after_missed"] = 30
     write_rig(d / "rig.toml", cfg.rig)
     write_toml(d / "cell.toml", sections)
     return d / "cell.toml"
@@ -180,11 +184,12 @@ def test_the_robot_holds_through_partitions_and_the_loop_resumes_by_itself(tmp_p
     late, acted = late_commands(gw_mcap, GW.stale_cycles)
     gw_events = events(gw_mcap, "alter_gateway/events")
     codes = [m.code for _, m in gw_events]
-    info = subprocess.run([HUMANPT, "runs", "info", str(run_s), str(run_c)], capture_output=True, text=True)
+    infos = [subprocess.run([HUMANPT, "runs", "info", str(r)], capture_output=True, text=True) for r in (run_s, run_c)]
     print("\n".join(h.line() for h in report))
     print(f"late commands: {late}, acted on: {acted}; gateway events: "
           f"{ {c: codes.count(c) for c in dict.fromkeys(codes)} }")
-    print(info.stdout)
+    for info in infos:  # what each side's subscribers missed (sequence gaps) shows here
+        print(info.stdout)
 
     # The robot was servoing, then held within the stale-command limit, to the restore.
     # Cut just after the command for the next cycle came: that cycle and stale_cycles reused
@@ -205,4 +210,5 @@ def test_the_robot_holds_through_partitions_and_the_loop_resumes_by_itself(tmp_p
     for run, comps in ((run_s, SERVER_COMPONENTS), (run_c, CLIENT_COMPONENTS)):
         for name in comps:
             assert output_gaps(run / f"{name}.mcap") == {}, f"{name}'s recording misses outputs"
-    assert info.returncode == 0, info.stderr
+    # (`runs info` exits non-zero when a subscriber missed messages, as partitions make them)
+    assert all("recordings with write losses: 0" in info.stdout for info in infos), [i.stdout for i in infos]
