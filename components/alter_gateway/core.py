@@ -557,7 +557,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self._missed = self._missed + missed if missed else 0
             if self._missed >= cfg.fault_after_missed:
                 quiet_ns = rx_ns - self._last_command_ns if self._last_command_ns is not None else None
-                if quiet_ns is None or quiet_ns >= self._missed * cfg.cycle_period_ns:
+                # (one cycle of slack: statuses jitter)
+                if quiet_ns is None or quiet_ns >= (self._missed - 1) * cfg.cycle_period_ns:
                     self._starve(rx_ns, k, quiet_ns, outs)
                 else:
                     self._raise_fault(

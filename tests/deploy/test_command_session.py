@@ -5,10 +5,12 @@ over a real pty; two controller sessions of this test, each a Zenoh client with 
 ``controller`` liveliness token. The first commands +0.5 mm along x every cycle; then a
 second session (a second controller, or a forger that read the robot states and stamps its
 commands right) commands -1 mm along y for the same cycles. Without the router's access
-control (plaintext here; under mTLS only a controller certificate may put there, see
-tests/security) the gateway itself must not follow it: it holds the robot while two streams
-speak (``controller_conflict``), never moves it along -y, and moves it again with the first
-session once the second is quiet (``conflict_cleared``). Its recording replays exactly.
+control (plaintext) the gateway itself must not follow it; under mTLS both sessions hold
+the controller's certificate (a duplicate or stolen one: the router lets both put, a
+non-controller certificate cannot, see tests/security), and the gateway must not follow
+it either. It holds the robot while two streams speak (``controller_conflict``), never
+moves it along -y, and moves it again with the first session once the second is quiet
+(``conflict_cleared``). Its recording replays exactly.
 """
 
 from __future__ import annotations
@@ -18,11 +20,14 @@ import threading
 
 import numpy as np
 import pytest
+import zenoh
 
-from humanpt.runtime.bus import liveliness_key
+from humanpt.runtime.bus import free_tcp_port, liveliness_key, zenoh_config
+from humanpt.runtime.config import RuntimeConfig
+from humanpt.runtime.security import init_ca, issue
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header, vector3
-from tests.conftest import run_cli, wait_for, write_config, zenoh_client
+from tests.conftest import run_cli, wait_for, wait_port, write_config
 
 COMMAND = "humanpt/test/controller/command"
 
@@ -32,8 +37,8 @@ class Controller:
     ``dp_m`` for the state's own cycle, stamped with its stamp, seq counting from
     ``seq0``) while ``speaking`` is set."""
 
-    def __init__(self, port: int, dp_m, seq0: int):
-        self.session = zenoh_client(port)
+    def __init__(self, rt: RuntimeConfig, dp_m, seq0: int):
+        self.session = zenoh.open(zenoh_config(rt, identity="controller"))
         self.token = self.session.liveliness().declare_token(liveliness_key("test", "controller"))
         self.pub = self.session.declare_publisher(COMMAND)
         self.dp_m, self.seq = dp_m, seq0
@@ -55,11 +60,21 @@ class Controller:
 
 
 @pytest.mark.timeout(120)
-def test_a_second_controller_session_holds_the_robot_and_never_moves_it(router, procs, tmp_path):
-    port, _ = router
+@pytest.mark.parametrize("security", ["none", "mtls"])
+def test_a_second_controller_session_holds_the_robot_and_never_moves_it(procs, tmp_path, security):
+    port = free_tcp_port()
     link = tmp_path / "alter-pty"
+    pki = tmp_path / "pki"
+    sec = f'security = "{security}"\npki = "{pki}"\n'
+    if security == "mtls":
+        init_ca(pki, "test")
+        for name in ("router", "alter_gateway", "sim_robot", "controller", "tool"):
+            issue(pki, name)
     cfg = write_config(tmp_path / "alter.toml", port,
-                       extra=f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n')
+                       extra=sec + f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n')
+    rt = RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",), security=security, pki=str(pki))
+    procs.start("router", "--config", str(cfg))
+    wait_port(port)
     run = tmp_path / "run"
     gw = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
@@ -72,13 +87,13 @@ def test_a_second_controller_session_holds_the_robot_and_never_moves_it(router, 
             codes.append(events.get().code)
         return code in codes
 
-    with zenoh_client(port) as watcher:
+    with zenoh.open(zenoh_config(rt, identity="tool")) as watcher:
         subs = [watcher.declare_subscriber("humanpt/test/sim_robot/truth", lambda s: truths.append(
                     from_pose(pb.Truth.FromString(s.payload.to_bytes()).world_T_flange)[:3, 3] * 1000.0)),
                 watcher.declare_subscriber("humanpt/test/alter_gateway/events", lambda s: events.put(
                     pb.Event.FromString(s.payload.to_bytes())))]
-        real = Controller(port, (0.0005, 0.0, 0.0), seq0=1000)  # it has been running a while
-        second = Controller(port, (0.0, -0.001, 0.0), seq0=0)  # a fresh second session
+        real = Controller(rt, (0.0005, 0.0, 0.0), seq0=1000)  # it has been running a while
+        second = Controller(rt, (0.0, -0.001, 0.0), seq0=0)  # a fresh second session
         try:
             real.speaking.set()
             wait_for(lambda: len(truths) >= 60, 30.0, "60 robot cycles")
