@@ -18,6 +18,17 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
   ``pose_filter/tob_state`` over the same window.
 
 Every wait has a timeout; what does not come is reported as "not observed".
+
+With ``secure=True`` (``--secure``, issue 19 item 5) the twin runs under mTLS with a
+throwaway PKI (:func:`humanpt.twin.live.run_live`); the bench's session presents the run's
+operator certificate, and each injection of :data:`ATTACKS` on a topic comes from a session
+presenting the certificate of that topic's publisher (an insider: these rows test what
+each component does with what the access control lets through). :data:`SECURE_ATTACKS`
+need it (skipped rows, with the reason, without): a certified non-controller's commands
+(never delivered), clients without a certificate of the cell (never connected), a rogue
+liveliness token named ``controller`` with the real controller killed (its death still
+seen by the gateway) and started again, and the bus flood from an identity not allowed
+to put on the command key (refused at the router; the gateway's robot states keep time).
 """
 
 from __future__ import annotations
@@ -39,7 +50,8 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import from_pose, header
 
-__all__ = ["ATTACKS", "QUICK", "FaultRow", "format_table", "loop_ok", "run_faults"]
+__all__ = ["ATTACKS", "QUICK", "QUICK_SECURE", "SECURE_ATTACKS", "FaultRow", "all_attacks", "format_table",
+           "loop_ok", "run_faults"]
 
 STEP_TOLERANCE = 1.05        # a flange step may exceed the gateway's limit by 5 % (rounding, quantising)
 RECOVERY_TIMEOUT_S = 10.0    # the loop must be back within this after an attack
@@ -66,10 +78,11 @@ class FaultRow:
     lost: dict[str, int] = field(default_factory=dict)  # short topic -> messages missing
     expected: bool = False               # the system answered the attack as it should (see each attack)
     note: str = ""
+    skipped: str = ""                    # why the attack was not run (e.g. it needs mTLS); "" when it ran
 
     @property
     def ok(self) -> bool:
-        return bool(self.expected and self.held and self.recovered)
+        return bool(self.skipped or (self.expected and self.held and self.recovered))
 
 
 class Monitor:
@@ -150,11 +163,25 @@ class Ctx:
     gateway_port: str
     cycle_s: float
     pubs: dict[str, object] = field(default_factory=dict)
+    rt: object = None                                       # the run's [runtime] (RuntimeConfig)
+    # Under mTLS: a session presenting the certificate of the identity named (opened once);
+    # None: one session does everything (no access control to pass).
+    as_identity: Callable[[str], object] | None = None
+    control: object = None                                  # the twin's LiveControl, or None
 
     def pub(self, short: str):
         if short not in self.pubs:
-            self.pubs[short] = self.session.declare_publisher(topics.TOPICS[short].key(self.cell))
+            self.pubs[short] = self.session_for(short).declare_publisher(topics.TOPICS[short].key(self.cell))
         return self.pubs[short]
+
+    def session_for(self, short: str):
+        """The session that puts on ``short``: under mTLS its publisher's (an insider: the
+        attacks of issue 14 test what each component does with what the access control lets
+        through; console commands are the operator's, the bench's own session), else the bench's."""
+        owner = topics.TOPICS[short].publisher
+        if self.as_identity is None or owner == "console":
+            return self.session
+        return self.as_identity(owner)
 
     def put(self, short: str, msg) -> None:
         self.pub(short).put(msg.SerializeToString())
@@ -347,6 +374,227 @@ ATTACKS: tuple[Attack, ...] = (
 QUICK = tuple(a.key for a in ATTACKS if a.key != "flood")
 
 
+# -- attacks that need the cell under mTLS (issue 19 item 5) ------------------------------------
+# The rogue insider: a process holding a valid certificate that is not the controller's
+# (perception's: a component of the cell, so the router knows it, with put rights of its own).
+ROGUE = "perception"
+ROGUE_FRAME = "bench-rogue"  # header.frame_id of the rogue's commands: what it sent, wherever seen
+NEEDS_MTLS = "needs the cell under mTLS (humanpt bench faults --secure)"
+
+
+def _timed_events(mon: Monitor, t0: float) -> list[tuple[float, pb.Event]]:
+    with mon.lock:
+        return [(t, ev) for t, ev in mon.events if t >= t0]
+
+
+def _denial_of(ev: pb.Event, key: str) -> bool:
+    """Whether ``ev`` is the router's access_denied of a message on exactly ``key`` (any
+    message: zenoh 1.10 reports a refused liveliness token as Put/Query/Reply/Delete on
+    its key; the identity is not always named on its fast path, so it is not required)."""
+    return ev.source == "router" and ev.code == "access_denied" and f" on {key} from " in ev.text
+
+
+def _router_denied(ctx: Ctx, t0: float, key: str, timeout_s: float = REACTION_TIMEOUT_S):
+    """(time, event) of the first :func:`_denial_of` ``key`` since ``t0``, or None after
+    ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        for t, ev in _timed_events(ctx.mon, t0):
+            if _denial_of(ev, key):
+                return t, ev
+        if time.monotonic() >= deadline:
+            return None
+        time.sleep(0.01)
+
+
+def _fence(ctx: Ctx, rogue) -> bool:
+    """Put an info event on the rogue's own events key and wait until the bench sees it: the
+    rogue's earlier messages went the same link before it, so the router has handled them."""
+    marker = f"fence {time.monotonic_ns()}"
+    pub = rogue.declare_publisher(topics.TOPICS[f"{ROGUE}/events"].key(ctx.cell))
+    try:
+        t0 = time.monotonic()
+        pub.put(pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_INFO, source=ROGUE,
+                         code="bench_fence", text=marker).SerializeToString())
+        deadline = t0 + REACTION_TIMEOUT_S
+        while time.monotonic() < deadline:
+            if any(ev.code == "bench_fence" and ev.text == marker for ev in ctx.mon.events_since(t0)):
+                return True
+            time.sleep(0.01)
+        return False
+    finally:
+        pub.undeclare()
+
+
+class _Seen:
+    """Commands on the command key, as the bench's session receives them, that ``pick``
+    selects (the bench's session sees every command the gateway could)."""
+
+    def __init__(self, ctx: Ctx, pick: Callable[[pb.FlangeCommand], bool]):
+        self.n = 0
+        self.pick = pick
+        self._sub = ctx.session.declare_subscriber(topics.TOPICS["controller/command"].key(ctx.cell), self)
+
+    def __call__(self, sample) -> None:
+        try:
+            if self.pick(pb.FlangeCommand.FromString(sample.payload.to_bytes())):
+                self.n += 1
+        except Exception:  # noqa: BLE001 -- junk is not a command either
+            pass
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+def attack_unauthorised(ctx: Ctx, row: FaultRow, n: int = 20) -> None:
+    """A certified non-controller (perception's certificate) puts ``n`` well-formed commands
+    (1 mm a cycle, the next cycles) on the command key: the router must refuse them: none
+    reaches any subscriber (the bench's own session, which sees every command the gateway
+    could), the router reports the refusal, the robot does not move by them."""
+    rogue = ctx.as_identity(ROGUE)
+    seen = _Seen(ctx, lambda c: c.header.frame_id == ROGUE_FRAME)
+    pub = rogue.declare_publisher(topics.TOPICS["controller/command"].key(ctx.cell))
+    try:
+        last = ctx.mon.latest("alter_gateway/robot_state")
+        cycle = (last[1].cycle + 1) if last else 0
+        t0 = time.monotonic()
+        for i in range(n):
+            cmd = pb.FlangeCommand(header=header(time.time_ns(), i, ROGUE_FRAME), cycle=cycle + i,
+                                   mode=pb.CONTROL_MODE_TRACK)
+            cmd.d_translation_m.x = 1e-3
+            pub.put(cmd.SerializeToString())
+        fenced = _fence(ctx, rogue)
+        hit = _router_denied(ctx, t0, topics.TOPICS["controller/command"].key(ctx.cell))
+    finally:
+        pub.undeclare()
+        seen.close()
+    row.expected = fenced and seen.n == 0
+    row.reaction_ms = _ms(hit and hit[0], t0)
+    row.note = (f"{seen.n}/{n} rogue commands delivered" + ("" if fenced else " (the fence never came)")
+                + ("; router: access_denied" if hit else "; no access_denied event from the router"))
+
+
+def _refused_within(conf) -> tuple[bool, float]:
+    """(whether ``zenoh.open(conf)`` failed, seconds it took)."""
+    import zenoh
+
+    t0 = time.monotonic()
+    try:
+        s = zenoh.open(conf)
+    except zenoh.ZError:
+        return True, time.monotonic() - t0
+    s.close()
+    return False, time.monotonic() - t0
+
+
+def _bare_client(endpoint: str, tls: dict | None):
+    """A client config written by hand, as an intruder would (not through humanpt's)."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("connect/timeout_ms", "1000")
+    if tls is not None:
+        conf.insert_json5("transport/link/tls", json.dumps(tls))
+    return conf
+
+
+def attack_uncertified(ctx: Ctx, row: FaultRow) -> None:
+    """Three clients without a certificate of the cell try to connect: TLS without a
+    certificate, plaintext TCP on the TLS port, a certificate of another CA (named
+    controller): each must be refused (zenoh.open fails within its 1 s connect timeout)."""
+    from humanpt.runtime import security
+
+    ep = ctx.rt.connect[0]
+    tls_ep = security.tls_endpoint(ep)
+    ca = str(security.pki_dir_of(ctx.rt) / security.CA_CERT)
+    with tempfile.TemporaryDirectory(prefix="humanpt-foreign-ca-") as foreign:
+        security.init_ca(foreign, ctx.rt.cell, days=31)
+        security.issue(foreign, "controller", days=31)
+        intruder = {**security.tls_section(foreign, "controller"), "root_ca_certificate": ca}
+        tries = {"no certificate": _bare_client(tls_ep, {"root_ca_certificate": ca}),
+                 "plaintext": _bare_client(ep.replace("tls/", "tcp/"), None),
+                 "another CA's": _bare_client(tls_ep, intruder)}
+        results = {k: _refused_within(c) for k, c in tries.items()}
+    refused = [k for k, (r, _) in results.items() if r]
+    row.expected = len(refused) == len(tries)
+    row.reaction_ms = 1e3 * max(t for _, t in results.values())
+    row.note = (f"{len(refused)}/{len(tries)} refused (slowest shown)" if row.expected else
+                f"CONNECTED: {', '.join(k for k in tries if k not in refused)}")
+
+
+def attack_rogue_token(ctx: Ctx, row: FaultRow) -> None:
+    """A certified non-controller declares a liveliness token named ``controller`` (zenoh
+    issue 1562); then the real controller is killed (SIGKILL): the gateway must still see
+    its death (controller_gone: the rogue token did not mask it) and hold; the controller
+    is started again and the loop must come back."""
+    from humanpt.runtime.bus import liveliness_key
+
+    if ctx.control is None:
+        row.note = "no handle on the twin's processes: cannot kill the controller"
+        return
+    rogue = ctx.as_identity(ROGUE)
+    t0 = time.monotonic()
+    token = rogue.liveliness().declare_token(liveliness_key(ctx.cell, "controller"))
+    try:
+        denied = _router_denied(ctx, t0, liveliness_key(ctx.cell, "controller"), timeout_s=2.0)
+        t_kill = time.monotonic()
+        ctx.control.kill("controller")
+        gone = ctx.mon.wait_event(t_kill, ("controller_gone",), "alter_gateway")
+    finally:
+        token.undeclare()
+        ctx.control.start("controller")
+    back = ctx.mon.wait_event(t_kill, ("controller_back",), "alter_gateway", timeout_s=60.0)
+    row.expected = gone is not None
+    row.reaction_ms = _ms(gone and gone[0], t_kill)
+    row.note = (("controller killed: alter_gateway controller_gone" if gone else
+                 "controller killed: NO controller_gone (masked)")
+                + ("; controller_back" if back else "; no controller_back")
+                + ("; router: access_denied on its key" if denied else "; no access_denied event"))
+
+
+def attack_acl_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
+    """The bus flood of issue 14 item 6 (2 s of junk commands at full rate) from an
+    identity not allowed to put on the command key (perception's): refused at the router,
+    the gateway's serial input must not be delayed (robot states keep their cycle, no fault)."""
+    rogue = ctx.as_identity(ROGUE)
+    flood_ctx = Ctx(ctx.session, ctx.mon, ctx.cell, ctx.gateway_port, ctx.cycle_s,
+                    pubs={"controller/command": rogue.declare_publisher(
+                        topics.TOPICS["controller/command"].key(ctx.cell))})
+    seen = _Seen(ctx, lambda c: c.cycle == 2**31)  # attack_flood's junk
+    t0 = time.monotonic()
+    try:
+        attack_flood(flood_ctx, row, seconds)
+    finally:
+        flood_ctx.pubs["controller/command"].undeclare()
+    fenced = _fence(ctx, rogue)
+    seen.close()
+    key = topics.TOPICS["controller/command"].key(ctx.cell)
+    denied = [(t, ev) for t, ev in _timed_events(ctx.mon, t0) if _denial_of(ev, key)]
+    row.expected = row.expected and fenced and seen.n == 0
+    row.reaction_ms = _ms(denied[0][0] if denied else None, t0)
+    row.note += (f"; {seen.n} junk commands delivered; router: {len(denied)} access_denied events "
+                 "(it reports the 1st, 10th, 100th...)")
+
+
+SECURE_ATTACKS: tuple[Attack, ...] = (
+    Attack("unauthorised", "unauthorised publisher (certified non-controller)", attack_unauthorised),
+    Attack("uncertified", "uncertified client", attack_uncertified),
+    Attack("token", "rogue liveliness token 'controller', controller killed", attack_rogue_token,
+           keeps_loop=False),
+    Attack("aclflood", "bus flood from an identity not allowed (2 s)", attack_acl_flood, keeps_loop=False),
+)
+# --quick under mTLS: all but the two floods (see QUICK).
+QUICK_SECURE = tuple(a.key for a in SECURE_ATTACKS if a.key != "aclflood")
+
+
+def all_attacks() -> tuple[Attack, ...]:
+    """Every attack: issue 14's (:data:`ATTACKS`), then those that need mTLS."""
+    return ATTACKS + SECURE_ATTACKS
+
+
 # -- the loop's health ----------------------------------------------------------------------
 def _finite_pose(p: pb.Pose) -> bool:
     v = (p.translation.x, p.translation.y, p.translation.z, p.rotation.x, p.rotation.y, p.rotation.z,
@@ -469,21 +717,35 @@ def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
 def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
                run_dir: str | Path | None = None, start_timeout_s: float = 90.0,
                on_row: Callable[[FaultRow], None] | None = None,
-               say: Callable[[str], None] = lambda text: None) -> tuple[list[FaultRow], str]:
-    """Run the attacks ``only`` (keys of :data:`ATTACKS`; default all) against a live twin
-    of ``scenario``; (rows, failure text or ""). The twin is stopped before this returns,
-    whatever happens; ``run_dir`` keeps its recordings (default: a temporary directory,
-    removed)."""
+               say: Callable[[str], None] = lambda text: None,
+               secure: bool = False) -> tuple[list[FaultRow], str]:
+    """Run the attacks ``only`` (keys of :func:`all_attacks`; default all) against a live
+    twin of ``scenario``; (rows, failure text or ""). The twin is stopped before this
+    returns, whatever happens; ``run_dir`` keeps its recordings (default: a temporary
+    directory, removed).  ``secure``: the twin under mTLS with a throwaway PKI
+    (:func:`humanpt.twin.live.run_live`), the bench's session an operator's, each
+    injection of issue 14 from the session of the key's publisher (an insider); without
+    it the attacks of :data:`SECURE_ATTACKS` give skipped rows."""
     from humanpt.runtime import config as cfgmod
     from humanpt.runtime.bus import open_tool_session
-    from humanpt.twin.live import run_live
+    from humanpt.twin.live import LiveControl, run_live
     from humanpt.twin.run import SystemConfig
 
-    attacks = [a for a in ATTACKS if only is None or a.key in only]
-    unknown = set(only or ()) - {a.key for a in ATTACKS}
+    every = all_attacks()
+    unknown = set(only or ()) - {a.key for a in every}
     if unknown:
         raise ValueError(f"unknown attack(s) {', '.join(sorted(unknown))}: choose from "
-                         f"{', '.join(a.key for a in ATTACKS)}")
+                         f"{', '.join(a.key for a in every)}")
+    chosen = [a for a in every if only is None or a.key in only]
+    skipped = [] if secure else [a for a in chosen if a in SECURE_ATTACKS]
+    attacks = [a for a in chosen if a not in skipped]
+    if not attacks:  # nothing to run: no twin
+        rows = [FaultRow(a.key, a.fault, skipped=NEEDS_MTLS) for a in skipped]
+        for row in rows:
+            if on_row is not None:
+                on_row(row)
+        return rows, ""
+    control = LiveControl()
     tmp = run_dir is None
     run_dir = Path(tempfile.mkdtemp(prefix="humanpt-faults-") if tmp else run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -493,7 +755,8 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     def live() -> None:
         try:
             result["live"] = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=3600.0,
-                                      stop=stop, on_started=lambda _c: started.set())
+                                      stop=stop, on_started=lambda _c: started.set(), secure=secure,
+                                      control=control)
         except BaseException as e:  # noqa: BLE001 -- reported by the caller
             result["error"] = e
         finally:
@@ -515,15 +778,17 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         gw = file_cfg.component("alter_gateway", AlterGatewayConfig)
         cycle_s = gw.cycle_period_ms * 1e-3
         limit_mm = gw.max_step_mm
+        as_identity, opened = _identity_sessions(file_cfg.runtime) if secure else (None, {})
         with open_tool_session(file_cfg.runtime) as session:
             mon = Monitor(session, file_cfg.runtime.cell)
-            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw.port, cycle_s)
+            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw.port, cycle_s, rt=file_cfg.runtime,
+                      as_identity=as_identity, control=control)
             try:
                 back, why = wait_loop(mon, cycle_s, start_timeout_s, stop=_dead(thread))
                 if back is None:
                     raise RuntimeError(f"the servo loop did not start within {start_timeout_s:g} s ({why}); "
                                        f"see {run_dir / 'processes.log'}")
-                say(f"loop running; {len(attacks)} attacks")
+                say(f"loop running; {len(attacks)} attacks" + (" under mTLS" if secure else ""))
                 for attack in attacks:
                     if not thread.is_alive():
                         raise RuntimeError(f"the live twin ended: {_live_failure(result)}")
@@ -535,6 +800,8 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
                 for p in ctx.pubs.values():
                     p.undeclare()
                 mon.close()
+                for s in opened.values():
+                    _close(s)
     except RuntimeError as e:
         failure = str(e)
     finally:
@@ -549,7 +816,38 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     live_fail = _live_failure(result)
     if live_fail and not failure:
         failure = f"the live twin reported: {live_fail}"
+    for a in skipped:
+        row = FaultRow(a.key, a.fault, skipped=NEEDS_MTLS)
+        rows.append(row)
+        if on_row is not None:
+            on_row(row)
     return rows, failure
+
+
+def _close(session) -> None:
+    """Close a session; one still sending a flood's backlog may time out: then let it go."""
+    import zenoh
+
+    try:
+        session.close()
+    except zenoh.ZError:
+        pass
+
+
+def _identity_sessions(rt) -> tuple[Callable[[str], object], dict[str, object]]:
+    """(a function giving a session that presents identity NAME's certificate, opened once;
+    the sessions it opened, to close)."""
+    import zenoh
+
+    from humanpt.runtime.bus import zenoh_config
+
+    opened: dict[str, object] = {}
+
+    def as_identity(name: str):
+        if name not in opened:
+            opened[name] = zenoh.open(zenoh_config(rt, identity=name))
+        return opened[name]
+    return as_identity, opened
 
 
 def _dead(thread: threading.Thread) -> threading.Event:
@@ -575,6 +873,8 @@ HEADERS = ("fault", "reaction", "robot held", "recovered", "data lost", "note")
 
 
 def row_cells(r: FaultRow) -> tuple[str, ...]:
+    if r.skipped:
+        return (r.fault, "-", "-", "-", "-", f"skipped: {r.skipped}")
     react = "not observed" if r.reaction_ms is None else f"{r.reaction_ms:.1f} ms"
     held = ("not observed" if r.held is None
             else f"{'yes' if r.held else 'NO'} ({r.max_step_mm:.2f} / {r.limit_mm:.2f} mm)")

@@ -95,6 +95,46 @@ REPLIES = {
 REFUSALS = ("bad_command", "save_failed", "bad_console_command")
 
 
+def format_event(ev: pb.Event) -> str:
+    """One line for an event of any component or of the router (under mTLS the router
+    publishes what its access control refused as ``access_denied`` warnings on
+    ``router/events``)."""
+    sev = pb.Severity.Name(ev.severity).removeprefix("SEVERITY_") if ev.severity in pb.Severity.values() \
+        else str(ev.severity)
+    return f"event {ev.source or '?'} {sev} {ev.code}: {ev.text}"
+
+
+class EventFeed:
+    """Every component's and the router's events (``humanpt/<cell>/*/events``), queued as
+    they arrive; :meth:`lines` gives those at or above ``min_severity`` as text."""
+
+    def __init__(self, session, cell: str, min_severity: int = pb.SEVERITY_WARNING):
+        self.queue: queue.Queue = queue.Queue()
+        self.min_severity = min_severity
+        self._sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/*/events",
+                                               lambda smp: self.queue.put(smp.payload.to_bytes()))
+
+    def events(self, timeout_s: float = 0.0) -> list[pb.Event]:
+        """The events arrived so far (waiting up to ``timeout_s`` for the first one)."""
+        out = []
+        try:
+            while True:
+                raw = self.queue.get(timeout=timeout_s) if timeout_s > 0 and not out else self.queue.get_nowait()
+                try:
+                    ev = pb.Event.FromString(raw)
+                except Exception:  # noqa: BLE001 - a bad payload is not the console's business
+                    continue
+                if ev.severity >= self.min_severity:
+                    out.append(ev)
+        except queue.Empty:
+            return out
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+    undeclare = close  # closed with the status's subscribers
+
+
 def operator_name() -> str:
     """Who is at this console: user@host (logged by the component that acts on a command)."""
     import getpass
@@ -371,12 +411,16 @@ class Console:
         return 0
 
     def command(self, verb: str, args: dict | None = None, component: str = "controller") -> int:
-        """Publish a Command and wait for the component's answering event."""
+        """Publish a Command and wait for the component's answering event (or the router's
+        access_denied of the command, under mTLS)."""
         events: queue.Queue = queue.Queue()
         sub = self.session.declare_subscriber(
             topics.TOPICS[f"{component}/events"].key(self.cell),
             lambda s: events.put(s.payload.to_bytes()),
         )
+        router_sub = self.session.declare_subscriber(
+            topics.TOPICS["router/events"].key(self.cell), lambda s: events.put(s.payload.to_bytes()))
+        own_key = topics.TOPICS["console/command"].key(self.cell)
         try:
             deadline = time.monotonic() + self.timeout_s
             while not self._pub.matching_status.matching:  # nobody would hear a command now
@@ -399,13 +443,21 @@ class Console:
             while True:
                 left = deadline - time.monotonic()
                 if left <= 0:
+                    rt = self.cfg.runtime
+                    why = (f"; under mTLS only an operator's certificate may command, this console presents "
+                           f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
                     raise ConsoleError(
                         f"the {component} did not answer {verb!r} within {self.timeout_s:g} s "
-                        "(is it running?)"
+                        f"(is it running?{why})"
                     )
                 try:
                     ev = pb.Event.FromString(events.get(timeout=left))
                 except queue.Empty:
+                    continue
+                if ev.source == "router":
+                    if ev.code == "access_denied" and f" on {own_key} from " in ev.text:
+                        self.say(f"REFUSED by the router: {ev.text}")
+                        return 1
                     continue
                 if ev.code in REFUSALS:
                     self.say(f"REJECTED by the {component}: {ev.text}")
@@ -415,6 +467,22 @@ class Console:
                     return 0
         finally:
             sub.undeclare()
+            router_sub.undeclare()
+
+    def events(self, duration_s: float | None = None, min_severity: int = pb.SEVERITY_WARNING) -> int:
+        """Print every component's and the router's events at or above ``min_severity`` as
+        they arrive, until Ctrl-C or ``duration_s``."""
+        feed = EventFeed(self.session, self.cell, min_severity)
+        end = time.monotonic() + duration_s if duration_s else None
+        try:
+            while end is None or time.monotonic() < end:
+                for ev in feed.events(timeout_s=0.2):
+                    self.say(format_event(ev))
+        except KeyboardInterrupt:
+            pass
+        finally:
+            feed.close()
+        return 0
 
     def status(
         self, follow: bool = False, interval_s: float = 0.5, duration_s: float | None = None
@@ -445,9 +513,13 @@ class Console:
                     return 1
                 return 0
             end = time.monotonic() + duration_s if duration_s else None
+            feed = EventFeed(self.session, self.cell)  # warnings and errors, the router's too
+            subs.append(feed)
             try:
                 while end is None or time.monotonic() < end:
                     time.sleep(interval_s)
+                    for ev in feed.events():
+                        self.say(format_event(ev))
                     self.say(board.line())
             except KeyboardInterrupt:
                 pass
@@ -490,7 +562,8 @@ def _add_actions(asub) -> dict[str, str]:
         help="mode, visible sources, error, cycle misses, recording",
         description="Print the live status once (or a line every --interval with --follow): "
         "controller mode, visible sources, |G-D| error (mm, deg), missed ALTER cycles, recording "
-        "and path points, from controller/status, alter_gateway/robot_state and perception/tob.",
+        "and path points, from controller/status, alter_gateway/robot_state and perception/tob; with "
+        "--follow also each warning or error event of a component or the router as it comes.",
     )
     q.add_argument(
         "--follow", "-f", action="store_true", help="a line every --interval until Ctrl-C"
@@ -502,6 +575,16 @@ def _add_actions(asub) -> dict[str, str]:
         help="seconds between lines with --follow (default 0.5)",
     )
     q.add_argument("--duration", type=float, help="stop following after this many seconds")
+    q = action(
+        "events",
+        help="follow the components' and the router's warnings and errors (access_denied...)",
+        description="Print each event of every component and of the router (humanpt/<cell>/*/events) "
+        "as it arrives, warnings and errors by default: under mTLS the router reports what its access "
+        "control refused as access_denied warnings on router/events (the 1st, 10th, 100th... per "
+        "identity, message and key). status --follow prints the same between its lines.",
+    )
+    q.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
+    q.add_argument("--all", action="store_true", help="info events too")
     q = action(
         "show",
         help="the GUI options' current values",
@@ -613,6 +696,8 @@ def _do(con: Console, a) -> int:
     v = a.console_verb
     if v == "status":
         return con.status(follow=a.follow, interval_s=a.interval, duration_s=a.duration)
+    if v == "events":
+        return con.events(a.duration, pb.SEVERITY_INFO if a.all else pb.SEVERITY_WARNING)
     if v == "show":
         return con.show()
     if v == "set":

@@ -117,10 +117,13 @@ def run_live(args, cfg, run_dir: Path) -> int:
         rt = cfgmod.load(run_dir / "humanpt.toml").runtime  # written by run_live before the start
         print(f"humanpt demo: router {', '.join(rt.listen)}, cell {rt.cell}; watch it with "
               f"`humanpt topics --config {run_dir / 'humanpt.toml'}` (or echo, console, view)", flush=True)
+        if rt.security == "mtls":
+            print(f"humanpt demo: mTLS, a throwaway PKI in {rt.pki}; every process a client of the router, "
+                  f"which enforces the access control; tools present {rt.identity!r} (operator)", flush=True)
 
     res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
               overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
-              progress=_progress)
+              progress=_progress, secure=getattr(args, "secure", False))
     print(file=sys.stderr)
     if res.failed:
         print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
@@ -258,5 +261,8 @@ def demo(args) -> int:
         "# the twin's world in this run (humanpt demo --world " + str(args.world) + ")\n"
         + cfgmod.dumps_toml({"name": cfg.world.name, "sources": list(cfg.world.sources), **cfg.world.extra}))
     if args.lockstep:
+        if getattr(args, "secure", False):
+            raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "
+                             "without a bus)")
         return run_lockstep(args, cfg, run_dir)
     return run_live(args, cfg, run_dir)

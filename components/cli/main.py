@@ -73,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
+    p.add_argument("--secure", action="store_true",
+                   help="live only: under mTLS ([runtime] security = \"mtls\") with a throwaway PKI in the run "
+                   "directory's pki/; every process a client of the router, which enforces the access control")
     p.add_argument("--world", metavar="ideal|realistic|FILE",
                    help="the twin's truth, which the pipeline does not know: ideal (default; with --calibrate "
                    "realistic; the hardware is "
@@ -354,6 +357,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--scenario", dest="faults_scenario", default="static",
                    help="scenario of the live twin (default static)")
     q.add_argument("--run-dir", help="keep the twin's recordings here (default: a temporary directory, removed)")
+    q.add_argument("--secure", "--security-mtls", dest="secure", action="store_true",
+                   help="run the twin under mTLS with a throwaway PKI and add the rows that need it: unauthorised "
+                   "publisher, uncertified client, rogue liveliness token, flood from an identity not allowed "
+                   "to publish (without it those rows are skipped, with the reason)")
     return ap
 
 

@@ -1,6 +1,13 @@
 """The whole system on the twin, live: the router, sim_robot behind a pty, alter_gateway,
 operator, sim_camera, perception, pose_filter and controller (and viz) as separate
 processes over Zenoh, each recording its MCAP in the run directory (``humanpt demo``).
+
+With ``secure=True`` (``humanpt demo --secure``) the run is a cell under mTLS (issue 19):
+a throwaway PKI in ``<run_dir>/pki`` (:func:`make_pki`: a CA valid 31 days (over the 30 days under which a certificate in use is warned about), a certificate
+per process, the router's, an operator's for the run's own commands and a read-only
+tool's), ``[runtime] security = "mtls"``, every process a client of the router (peer mode
+is refused under mTLS), the router enforcing the access control generated from the topic
+table.
 """
 
 from __future__ import annotations
@@ -30,9 +37,28 @@ from .run import SystemConfig
 from .system import puma_cores
 from .world import start_flange_for
 
-__all__ = ["LIVE_COMPONENTS", "LiveResult", "live_sections", "run_live", "write_toml"]
+__all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
+           "run_live", "write_toml"]
 
 LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
+PKI_DIR = "pki"                    # under the run directory, with --secure
+OPERATOR_IDENTITY = "demo-operator"  # the certificate the run's own session (and its tools) present
+TOOL_IDENTITY = "tool"             # a read-only tool's certificate (humanpt topics --as tool)
+
+
+def make_pki(run_dir: Path, cell: str, components: list[str] | tuple[str, ...]) -> Path:
+    """A throwaway PKI for one run in ``run_dir/pki``: a CA valid 31 days (over the 30 days under which a certificate in use is warned about), a certificate
+    for the router, each of ``components``, :data:`OPERATOR_IDENTITY` (role operator) and
+    :data:`TOOL_IDENTITY` (role tool).  Returns the directory."""
+    from humanpt.runtime import security
+
+    d = run_dir / PKI_DIR
+    security.init_ca(d, cell, days=31, force=True)
+    for name in ("router", *components):
+        security.issue(d, name, days=31, force=True)
+    security.issue(d, OPERATOR_IDENTITY, role="operator", days=31, force=True)
+    security.issue(d, TOOL_IDENTITY, role="tool", days=31, force=True)
+    return d
 
 
 def write_toml(path: Path, sections: dict[str, dict]) -> None:
@@ -41,12 +67,15 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
 
 
 def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
-                  overrides: dict[str, dict] | None = None) -> tuple[SystemConfig, dict[str, dict]]:
+                  overrides: dict[str, dict] | None = None,
+                  secure: bool = False) -> tuple[SystemConfig, dict[str, dict]]:
     """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
     simulated Puma is mounted so that it starts where the camera sees the target, behind a
     pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
     get only the ``overrides`` keys (so the defaults stay theirs).  What the pipeline
-    believes is ``cfg.rig``, written by :func:`run_live` as ``rig.toml`` beside the config."""
+    believes is ``cfg.rig``, written by :func:`run_live` as ``rig.toml`` beside the config.
+    ``secure``: mTLS with the PKI in ``run_dir/pki`` (:func:`make_pki`), client sessions,
+    the run's tools presenting :data:`OPERATOR_IDENTITY`'s certificate."""
     over = overrides or {}
     op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
@@ -68,6 +97,9 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
         "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
     }
+    if secure:
+        # Peers would link to each other around the router's access control: clients only.
+        sections["runtime"].update(mode="client", security="mtls", pki=PKI_DIR, identity=OPERATOR_IDENTITY)
     for name in ("perception", "pose_filter"):
         if over.get(name):
             sections[name] = over[name]
@@ -96,6 +128,50 @@ def _lower_priority(pid: int) -> None:
         pass
 
 
+class LiveControl:
+    """Handles on a running live twin for a bench or a test: a process stopped on purpose
+    (:meth:`kill`) is not counted as a failure of the run, and :meth:`start` starts it
+    again with the same command line (its recording then goes on in a new segment)."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.procs: list[tuple[str, subprocess.Popen]] = []
+        self.argv: dict[str, list[str]] = {}
+        self.down: set[str] = set()  # stopped on purpose, not yet started again
+        self._log = None
+
+    def _spawn(self, name: str, argv: list[str]) -> subprocess.Popen:
+        p = subprocess.Popen(argv, stdout=self._log, stderr=subprocess.STDOUT)
+        with self.lock:
+            self.argv[name] = argv
+            self.procs[:] = [(n, q) for n, q in self.procs if n != name] + [(name, p)]
+        return p
+
+    def pid(self, name: str) -> int | None:
+        with self.lock:
+            return next((p.pid for n, p in self.procs if n == name and p.poll() is None), None)
+
+    def kill(self, name: str, sig: int = signal.SIGKILL, timeout_s: float = 10.0) -> None:
+        """Send ``sig`` to ``name``'s process and wait for it to end (KeyError: no such process)."""
+        with self.lock:
+            p = next(p for n, p in self.procs if n == name)
+            self.down.add(name)
+        if p.poll() is None:
+            p.send_signal(sig)
+        p.wait(timeout=timeout_s)
+
+    def start(self, name: str) -> None:
+        """Start ``name`` again after :meth:`kill`, with its command line."""
+        self._spawn(name, self.argv[name])
+        with self.lock:
+            self.down.discard(name)
+
+    def dead(self) -> list[tuple[str, int]]:
+        """(name, exit status) of each process that ended, less those stopped on purpose."""
+        with self.lock:
+            return [(n, p.returncode) for n, p in self.procs if n not in self.down and p.poll() is not None]
+
+
 @dataclass
 class LiveResult:
     """A finished live run."""
@@ -111,52 +187,59 @@ class LiveResult:
 def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None, viewer: bool = False,
              duration_s: float | None = None, overrides: dict[str, dict] | None = None,
              stop: threading.Event | None = None, on_started: Callable[[list[str]], None] | None = None,
-             progress: Callable[[float, float], None] | None = None) -> LiveResult:
+             progress: Callable[[float, float], None] | None = None, secure: bool = False,
+             control: LiveControl | None = None) -> LiveResult:
     """Run ``cfg`` live (:func:`live_sections`; ``port``: the router's, a free one by
     default; ``viewer``: viz too) for ``duration_s`` of scenario (default: start delay +
     scenario + 1.5 s) after everything is up, recording the path from a second after
     that. ``stop`` ends the run early; ``on_started(components)`` once the processes are
-    spawned; ``progress(elapsed_s, total_s)`` about five times a second."""
+    spawned; ``progress(elapsed_s, total_s)`` about five times a second.  ``secure``: under
+    mTLS with a throwaway PKI in ``run_dir/pki`` (:func:`make_pki`).  ``control``: filled
+    with the processes, to stop and start one on purpose (:class:`LiveControl`)."""
     run_dir = Path(run_dir)
     port = port or free_tcp_port()
-    cfg, sections = live_sections(cfg, run_dir, port, overrides)
+    cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure)
+    comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
+    if secure:
+        make_pki(run_dir, sections["runtime"]["cell"], comps + ["operator"])
     cfg_path = run_dir / "humanpt.toml"
     write_toml(cfg_path, sections)
     write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believes in this run", overwrite=True)
     file_cfg = cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
     file_cfg.rig()
-    comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
     base = [sys.executable, "-m", "humanpt.cli.main"]
-    procs: list[tuple[str, subprocess.Popen]] = []
+    ctl = control or LiveControl()
+    procs = ctl.procs
     stop = stop or threading.Event()
     duration = duration_s or cfg.default_duration_s()
     failed: list[str] = []
     t0 = time.perf_counter()
     with open(run_dir / "processes.log", "w") as log:
+        ctl._log = log
         try:
-            procs.append(("router", subprocess.Popen(base + ["router", "--config", str(cfg_path)], stdout=log,
-                                                     stderr=subprocess.STDOUT)))
+            ctl._spawn("router", base + ["router", "--config", str(cfg_path)])
             time.sleep(0.5)
             for name in comps + ["operator"]:
-                p = subprocess.Popen(base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)],
-                                     stdout=log, stderr=subprocess.STDOUT)
+                p = ctl._spawn(name, base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)])
                 if name == "operator":
                     # The simulated operator (a stand-in for the human, not part of the
                     # system) runs at a lower priority.
                     _lower_priority(p.pid)
-                procs.append((name, p))
             if on_started is not None:
                 on_started(comps)
             if not _wait_alive(file_cfg, tuple(comps) + ("operator",), 60.0, procs):
                 failed.append("the components did not all come up within 60 s")
             else:
-                _drive(file_cfg, duration, procs, stop, failed, progress)
+                _drive(file_cfg, duration, ctl, stop, failed, progress)
         finally:
             stop_ns = time.time_ns()
-            for _, p in reversed(procs):
+            with ctl.lock:
+                ctl.down.update(n for n, _ in procs)  # from now on an exit is the stop's
+                ending = list(procs)
+            for _, p in reversed(ending):
                 if p.poll() is None:
                     p.send_signal(signal.SIGTERM)
-            for _, p in reversed(procs):
+            for _, p in reversed(ending):
                 try:
                     p.wait(timeout=15)
                 except subprocess.TimeoutExpired:
@@ -164,7 +247,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, stop_ns, failed)
 
 
-def _drive(file_cfg: cfgmod.ConfigFile, duration: float, procs, stop: threading.Event, failed: list[str],
+def _drive(file_cfg: cfgmod.ConfigFile, duration: float, ctl: LiveControl, stop: threading.Event, failed: list[str],
            progress: Callable[[float, float], None] | None) -> None:
     """Start the path recording a second after everything is up; watch the processes until
     ``duration`` + 1 s, a stop, or one of them exiting."""
@@ -185,7 +268,7 @@ def _drive(file_cfg: cfgmod.ConfigFile, duration: float, procs, stop: threading.
                 recording = True
             if el >= duration + 1.0:
                 break
-            dead = [(n, p.returncode) for n, p in procs if p.poll() is not None]
+            dead = ctl.dead()
             if dead:
                 failed += [f"{n} exited with {rc}" for n, rc in dead]
                 break
