@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -62,6 +63,14 @@ class AlterGatewayConfig:
     world_T_base_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0,) * 6
     # Repeated safety events of one code are rate-limited to one per interval.
     event_interval_ms: Annotated[float, Range(0, 3600000, "ms")] = 1000.0
+    # A command's stamp is the stamp of the robot_state it answers (gateway time, + one
+    # cycle per cycle ahead); one further off than this is not the controller's answer to
+    # this gateway's cycle (forged, replayed, another cell's): dropped (stamp_mismatch).
+    stamp_tolerance_ms: Annotated[float, Range(0.1, 1000, "ms")] = 50.0
+    # A second command stream (header.seq not continuing the bound controller session's:
+    # a second controller session, a replay, a forger) holds the robot for this long after
+    # its last command (controller_conflict).
+    conflict_hold_ms: Annotated[float, Range(0, 60000, "ms")] = 500.0
 
     def __post_init__(self) -> None:
         if not self.port:
@@ -121,6 +130,10 @@ class AlterGatewayConfig:
             raise ValueError(
                 "world_T_base_mm_deg needs six finite values (x, y, z mm, yaw, pitch, roll deg)"
             )
+        for name in ("stamp_tolerance_ms", "conflict_hold_ms"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{name} must be a finite value >= 0, got {v}")
         if self.event_interval_ms < 0:
             raise ValueError(f"event_interval_ms must be >= 0, got {self.event_interval_ms}")
 

@@ -74,6 +74,9 @@ _CYCLE_MOD = 1 << 32
 
 # Commands further ahead than this (cycles) are refused: the controller's cycle count is off.
 MAX_LEAD_CYCLES = 64
+# A controller session's commands count header.seq up by one each (gaps: messages lost);
+# a jump further than this, or back, is another stream.
+MAX_SEQ_GAP = 100_000
 # Command modes that mean "do not move".
 _ZERO_MODES = (pb.CONTROL_MODE_HOLD, pb.CONTROL_MODE_IDLE)
 
@@ -157,6 +160,18 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._stale = False  # in a stale episode (sending zero for want of a command)
         self._silent = False  # in a silence episode (link up, no STATUS)
         self._link_down = False
+        # Stamp of the last robot_state (gateway time): what the controller stamps its
+        # answer with; and of the last few cycles, to check a command's stamp against.
+        self._status_stamp_ns: int | None = None
+        self._cycle_stamps: dict[int, int] = {}
+        # The bound controller session's command stream (header.seq), per liveliness episode.
+        self._seq_last: int | None = None
+        self._seq_t_ns: int | None = None  # when its last command came
+        self._foreign_last: int | None = None  # the last seq of a second stream
+        self._conflict_until_ns = -1  # hold until then: a second stream was seen
+        self._in_conflict = False
+        self._last_command_ns: int | None = None  # when the last accepted command came
+        self._starved_since: int | None = None  # starvation hold: since when no command
         self._tx = bytearray()
         self.sent: deque[Sent] = deque(maxlen=100_000)
         self.counters: dict[str, int] = dict.fromkeys(
@@ -176,6 +191,10 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 "link_down",
                 "faults",
                 "reps",
+                "late_commands",
+                "stamp_mismatch",
+                "foreign_commands",
+                "starvations",
             ),
             0,
         )
@@ -263,6 +282,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._commands.clear()
         self._status = None
         self._status_t_ns = None
+        self._status_stamp_ns = None
+        self._cycle_stamps.clear()
         self._silent = False
         self._missed = 0
         # Cycle numbers restart: the watchdog re-arms with the first command of this session
@@ -328,12 +349,18 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 "(need frame world or tool and finite values)",
             )
             return
+        cfg = self.config
         ref = self._prev_cycle
         if ref is not None:
             lead = cycles_after(msg.cycle, ref)
-            if lead < -self.config.stale_cycles:
+            if lead < -cfg.stale_cycles:
+                # Late (a partition's backlog, a slow link): never acted on.
                 self.counters["commands_dropped"] += 1
-                return  # too old to ever be used
+                self.counters["late_commands"] += 1
+                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "late_command",
+                         f"command for cycle {msg.cycle} arrived {-lead} cycles after it (robot at cycle "
+                         f"{ref}): dropped, never acted on")
+                return
             if lead > MAX_LEAD_CYCLES:
                 self._bad_command(
                     outs,
@@ -341,6 +368,22 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                     f"command for cycle {msg.cycle} is {lead} cycles ahead of the robot (cycle {ref}); dropped",
                 )
                 return
+            # The controller stamps its answer with the stamp of the robot_state it answers
+            # (this gateway's time, + one cycle per cycle ahead): clock-free, exact.
+            stamp = msg.header.stamp_ns
+            expected = self._cycle_stamps.get(msg.cycle)
+            if expected is None and self._status_stamp_ns is not None:
+                expected = self._status_stamp_ns + lead * cfg.cycle_period_ns
+            if expected is not None and abs(stamp - expected) > cfg.stamp_tolerance_ms * 1e6:
+                self.counters["commands_dropped"] += 1
+                self.counters["stamp_mismatch"] += 1
+                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "stamp_mismatch",
+                         f"command for cycle {msg.cycle} stamped {(stamp - expected) / 1e6:+.1f} ms from that "
+                         f"cycle's robot_state (tolerance {cfg.stamp_tolerance_ms:g} ms): not an answer to "
+                         "this gateway's cycle; dropped")
+                return
+        if not self._in_stream(t_ns, msg.header.seq, msg.cycle, outs):
+            return
         cmd = Command(
             msg.cycle,
             frame,
@@ -350,6 +393,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             msg.request_alter_off,
         )
         self._commands[msg.cycle] = cmd
+        self._last_command_ns = t_ns
         if (
             len(self._commands) > 2 * MAX_LEAD_CYCLES
         ):  # bound the store (no status to prune against)
@@ -366,6 +410,52 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self.counters["commands_dropped"] += 1
         self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_command", text)
 
+    def _in_stream(self, t_ns: int, seq: int, cycle: int, outs: list[Output]) -> bool:
+        """Whether a command (header ``seq``) continues the bound controller session's
+        stream. The first command after the controller's token came binds its stream; a
+        command that does not continue it (seq back or far ahead: a second controller
+        session, a replay, a forger) is dropped and holds the robot for
+        ``conflict_hold_ms`` (``controller_conflict``). A second stream that goes on alone
+        for that long (the bound one silent: a controller restarted before its old token
+        expired) becomes the bound one (``controller_rebound``)."""
+        hold_ns = round(self.config.conflict_hold_ms * 1e6)
+        last = self._seq_last
+        if last is None or 0 < seq - last <= MAX_SEQ_GAP:
+            self._seq_last, self._seq_t_ns = seq, t_ns
+            return True
+        f = self._foreign_last
+        if (f is not None and 0 < seq - f <= MAX_SEQ_GAP
+                and (self._seq_t_ns is None or t_ns - self._seq_t_ns >= hold_ns)):
+            # The bound stream fell silent while this one went on: it is the controller now.
+            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "controller_rebound",
+                     f"the command stream bound to (seq {last}) is silent for "
+                     f"{(t_ns - (self._seq_t_ns or t_ns)) / 1e6:.0f} ms and another one goes on alone "
+                     f"(seq {seq}, cycle {cycle}): bound to it", limited=False)
+            self._seq_last, self._seq_t_ns, self._foreign_last = seq, t_ns, None
+            self._conflict_until_ns = -1
+            self._in_conflict = False
+            return True
+        self._foreign_last = seq
+        self.counters["commands_dropped"] += 1
+        self.counters["foreign_commands"] += 1
+        self._conflict_until_ns = t_ns + hold_ns
+        self._commands.clear()  # hold: nothing queued moves the robot while two streams speak
+        if not self._in_conflict:
+            self._in_conflict = True
+            self._ev(outs, t_ns, pb.SEVERITY_ERROR, "controller_conflict",
+                     f"a command (seq {seq}, cycle {cycle}) that does not continue the controller session's "
+                     f"stream (last seq {last}): a second controller session, a replay or a forger; holding "
+                     f"the robot until it is quiet for {self.config.conflict_hold_ms:g} ms", limited=False)
+        else:
+            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "foreign_command",
+                     f"command seq {seq} (cycle {cycle}) is not the bound stream's (last seq {last}): dropped")
+        return False
+
+    def _reset_stream(self) -> None:
+        self._seq_last = self._seq_t_ns = self._foreign_last = None
+        self._conflict_until_ns = -1
+        self._in_conflict = False
+
     def _on_liveliness(self, t_ns: int, msg: pb.Liveliness, outs: list[Output]) -> None:
         if msg.component != "controller":
             return
@@ -373,6 +463,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self._controller_gone = True
             self._armed = False
             self._commands.clear()
+            self._reset_stream()
             self._ev(
                 outs,
                 t_ns,
@@ -386,6 +477,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         elif msg.alive and self._controller_gone:
             self._controller_gone = False
             self._missed = 0
+            self._reset_stream()  # a new session (or the same after a partition): bind anew
             self._ev(
                 outs,
                 t_ns,
@@ -464,9 +556,14 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 )
             self._missed = self._missed + missed if missed else 0
             if self._missed >= cfg.fault_after_missed:
-                self._raise_fault(
-                    rx_ns, f"{self._missed} consecutive missed cycles (at cycle {k})", outs
-                )
+                quiet_ns = rx_ns - self._last_command_ns if self._last_command_ns is not None else None
+                # (one cycle of slack: statuses jitter)
+                if quiet_ns is None or quiet_ns >= (self._missed - 1) * cfg.cycle_period_ns:
+                    self._starve(rx_ns, k, quiet_ns, outs)
+                else:
+                    self._raise_fault(
+                        rx_ns, f"{self._missed} consecutive missed cycles (at cycle {k})", outs
+                    )
         # Robot-side transitions. ALTER_OFF is requested until the controller shows ALTER
         # off; ALTER on again after that is a new session started at the controller.
         if self._fault is not None:
@@ -487,6 +584,10 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             )
         self._status = status
         self._status_t_ns = rx_ns
+        self._status_stamp_ns = max(0, rx_ns - round(cfg.status_delay_ms * 1e6))
+        self._cycle_stamps[k] = self._status_stamp_ns
+        if len(self._cycle_stamps) > cfg.stale_cycles + 2:
+            del self._cycle_stamps[next(iter(self._cycle_stamps))]
         self._prev_cycle = k
         self._prev_fresh = None
         for c in [c for c in self._commands if cycles_after(c, k) < -cfg.stale_cycles]:
@@ -549,6 +650,14 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             return
         cfg = self.config
         hold = self._must_hold(status)
+        if hold is None and self._in_conflict:
+            if t_ns < self._conflict_until_ns:
+                hold = "conflict"
+            else:
+                self._in_conflict = False
+                self._ev(outs, t_ns, pb.SEVERITY_INFO, "conflict_cleared",
+                         f"no foreign command for {cfg.conflict_hold_ms:g} ms: the bound controller session's "
+                         "commands move the robot again", limited=False)
         cmd = self._commands.get(k)
         source = "fresh"
         if hold is None and cmd is None:
@@ -575,12 +684,17 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             self._stale = True
         elif self._stale and hold is None:
             self._stale = False
+            text = f"commands again from cycle {k}"
+            if self._starved_since is not None:
+                text += (f" after {(t_ns - self._starved_since) / 1e6:.0f} ms without any: resumed by itself "
+                         "(policy: a silent controller is held, not faulted; no reset needed)")
+                self._starved_since = None
             self._ev(
                 outs,
                 t_ns,
                 pb.SEVERITY_INFO,
                 "command_resumed",
-                f"commands again from cycle {k}",
+                text,
                 limited=False,
             )
         flags = CorrectionFlags(0)
@@ -652,7 +766,24 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             return Correction.hold(k, CorrectionFlags(0))
         return quantize(k, dp_b, rv_b, max_mm, max_deg)
 
-    # -- fault ----------------------------------------------------------------------------------
+    # -- starvation and fault -------------------------------------------------------------------
+    def _starve(self, t_ns: int, k: int, quiet_ns: int | None, outs: list[Output]) -> None:
+        """No command at all for ``fault_after_missed`` cycles: the controller is cut off
+        (a partition) or stalled. Policy: hold (zero corrections, ALTER stays on), no
+        latched fault; the watchdog disarms and re-arms with the next accepted command,
+        which resumes the robot by itself. Misses while commands keep coming (late
+        commands, the robot missing corrections, statuses lost) still latch a fault."""
+        self._armed = False
+        self._armed_from = None
+        self._missed = 0
+        self.counters["starvations"] += 1
+        self._starved_since = (t_ns - quiet_ns) if quiet_ns is not None else t_ns
+        quiet = f"{quiet_ns / 1e6:.0f} ms" if quiet_ns is not None else "ever"
+        self._ev(outs, t_ns, pb.SEVERITY_WARNING, "controller_silent",
+                 f"no command for {quiet} ({self.config.fault_after_missed} cycles, at cycle {k}): "
+                 "holding (zero corrections, ALTER stays on); resumes by itself with the controller's next "
+                 "in-sequence, fresh command (no reset needed)", limited=False)
+
     def _raise_fault(self, t_ns: int, reason: str, outs: list[Output]) -> None:
         if self._fault is not None:
             return
@@ -661,6 +792,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._armed = False
         self.counters["faults"] += 1
         action = "HOLD and ALTER off requested" if self.config.alter_off_on_fault else "HOLD"
+        action += ("; latched: the robot moves again only after ALTER is re-activated at the controller or "
+                   "the operator resets (humanpt console reset-fault)")
         self._ev(
             outs,
             t_ns,

@@ -104,6 +104,8 @@ def router(args) -> int:
                   f" (`humanpt pki acl` prints it)", flush=True)
         while not stop.wait(0.5):
             pass
+        if reporter is not None:
+            reporter.close()
     if watch is not None:
         watch.stop()
     print("humanpt router: stopped", flush=True)

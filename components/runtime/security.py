@@ -518,6 +518,9 @@ def acl_json5(cell: str, certs: list[CertInfo]) -> str:
 ACL_LOG_TARGET = "zenoh::net::routing::interceptor::access_control"
 _DENIED_RE = re.compile(r"is unauthorized to (\w+) \((\w+)\) on (\S+)")
 _CN_RE = re.compile(r"CertCommonName\(([^)]*)\)")
+_CACHING_RE = re.compile(r"caching permissions for `([^`]*)`")
+_THREAD_RE = re.compile(r"ThreadId\((\d+)\)")
+_RESULT_RE = re.compile(r"is (?:un)?authorized to .* on (\S+)")
 _ANSI_RE = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -561,14 +564,36 @@ class DenialWatch:
         r, w = os.pipe()
         os.dup2(w, 1)
         os.close(w)
+        # Never let zenoh wait on this pipe: its routing threads write the trace, and a
+        # flood of refused puts (a million a second) outruns any reader; a full pipe then
+        # drops lines (the counts of a flood are low) instead of stopping the router.
+        os.set_blocking(1, False)
         self._thread = threading.Thread(target=self._pump, args=(r,), name="acl-denials", daemon=True)
         self._thread.start()
         zenoh.init_log_from_env_or(f"warn,{ACL_LOG_TARGET}=trace")
 
     def _pump(self, fd: int) -> None:
+        # When a key is first declared, zenoh fills its permission cache for every message
+        # kind: "ACL (ingress): caching permissions for `K` ..." then one "is (un)authorized
+        # to <kind>" line per kind, in that thread. Those are not attempts: a subscriber's
+        # declaration would read as a refused Put, Query, Reply... (thread -> key being cached)
+        caching: dict[str, str] = {}
         with os.fdopen(fd, "rb") as f:
             for raw in f:
                 line = raw.decode(errors="replace")
+                if ACL_LOG_TARGET in line:
+                    plain = _ANSI_RE.sub("", line)
+                    thread = _THREAD_RE.search(plain)
+                    tid = thread.group(1) if thread else ""
+                    header = _CACHING_RE.search(plain)
+                    if header is not None:
+                        caching[tid] = header.group(1)
+                        continue
+                    result = _RESULT_RE.search(plain)
+                    if (result is not None and "Using cached result" not in plain
+                            and caching.get(tid) == result.group(1)):
+                        continue  # filling the cache, not a message
+                    caching.pop(tid, None)
                 d = parse_denial(line)
                 if d is not None:
                     try:
@@ -582,7 +607,10 @@ class DenialWatch:
         """Stdout back to where it was (the pipe closes; the pump reads to its end)."""
         if self._orig_fd is None:
             return
-        sys.stdout.flush()
+        try:
+            sys.stdout.flush()
+        except BlockingIOError:  # the pipe is full (a flood): what is left of it is dropped
+            pass
         os.dup2(self._orig_fd, 1)  # the pipe's last writer closes: the pump sees its end
         if self._thread is not None:
             self._thread.join(timeout=2.0)
@@ -595,21 +623,49 @@ class DenialReporter:
     ``router/events`` (once :meth:`attach` gave it the router's session), for the 1st,
     10th, 100th... refusal of each (identity, message, key), so a flood stays a trickle."""
 
+    QUEUE = 256  # events waiting to be published; beyond: dropped (and counted)
+
     def __init__(self, cell: str):
+        import queue
+
         self.cell = cell
         self.counts: dict[tuple[str, str, str], int] = {}
+        self.dropped = 0  # events the queue had no room for
         self._session = None
         self._lock = threading.Lock()
+        # Published from a thread of its own: the watch's pump must never wait on zenoh, whose
+        # routing writes its trace into the pump's pipe (a put from the pump deadlocks once
+        # the pipe is full: a flood of refused puts stopped the router).
+        self._queue: queue.Queue = queue.Queue(self.QUEUE)
+        self._thread: threading.Thread | None = None
 
     def attach(self, session) -> None:
         self._session = session
+        self._thread = threading.Thread(target=self._publish, name="acl-reports", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        """Stop publishing (before the session closes)."""
+        if self._thread is not None:
+            self._queue.put(None)
+            self._thread.join(timeout=2.0)
+            self._thread = None
+
+    def _publish(self) -> None:
+        from humanpt.schemas import topics
+
+        key = topics.TOPICS["router/events"].key(self.cell)
+        while (ev := self._queue.get()) is not None:
+            try:
+                self._session.put(key, ev.SerializeToString())
+            except Exception:  # noqa: BLE001 - the session closing: nothing more to report to
+                log.debug("router/events: could not publish", exc_info=True)
 
     def __call__(self, d: Denial) -> None:
         import time
 
         from humanpt.runtime.core import count_decades
         from humanpt.schemas import humanpt_pb2 as pb
-        from humanpt.schemas import topics
         from humanpt.schemas.convert import header
 
         with self._lock:
@@ -620,7 +676,12 @@ class DenialReporter:
         text = (f"router: access control refused {d.message} ({d.flow}) on {d.key} from {who} "
                 f"({n} so far)")
         log.warning("%s", text)
-        if self._session is not None:
+        if self._thread is not None:
+            import queue
+
             ev = pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_WARNING, source="router",
                           code="access_denied", text=text)
-            self._session.put(topics.TOPICS["router/events"].key(self.cell), ev.SerializeToString())
+            try:
+                self._queue.put_nowait(ev)
+            except queue.Full:
+                self.dropped += 1

@@ -42,6 +42,7 @@ class Rig:
         self.outs: list = []
         self.corrections: list[tuple[int, Correction]] = []
         self.robot_connected = True
+        self.seq = 0  # the controller session's header.seq: +1 per command
         self._to_gw: list[bytes] = []
         self._deliver(self.robot.start(0))
         self.step("tick", pb.Tick(header=header(0)))
@@ -100,15 +101,26 @@ class Rig:
         mode=pb.CONTROL_MODE_TRACK,
         alter_off: bool = False,
     ) -> list:
+        cycle = self.cycle if cycle is None else cycle
         cmd = pb.FlangeCommand(
-            header=header(self.t_ns, 0, frame),
-            cycle=self.cycle if cycle is None else cycle,
+            header=header(self.stamp_for(cycle), self.seq, frame),
+            cycle=cycle,
             d_translation_m=vector3(np.asarray(dp_mm, float) / 1000.0),
             d_rotation_rad=vector3(np.radians(np.asarray(rv_deg, float))),
             mode=mode,
             request_alter_off=alter_off,
         )
+        self.seq += 1
         return self.step("controller/command", cmd)
+
+    def stamp_for(self, cycle: int) -> int:
+        """What a controller stamps its command for ``cycle`` with: the stamp of the
+        gateway's last robot_state, + one cycle per cycle ahead (now, before any state)."""
+        states = self.states()
+        if not states:
+            return self.t_ns
+        last = states[-1]
+        return last.header.stamp_ns + (cycle - last.cycle) * CYCLE_NS
 
     def liveliness(self, alive: bool) -> list:
         return self.step(

@@ -304,9 +304,11 @@ def test_consecutive_missed_cycles_raise_a_fault_with_hold_and_alter_off_until_a
 def test_a_console_reset_clears_a_fault_and_without_alter_off_only_hold_is_sent():
     rig = _rig(fault_after_missed=2, alter_off_on_fault=False)
     rig.cycle_with_command(dp_mm=(1.0, 0, 0))
-    for _ in range(3):
+    for _ in range(3):  # commands keep coming, late: a servo loop that misses, a fault
         rig.status()
-        rig.advance(CYCLE_NS)
+        rig.advance(10 * MS)
+        rig.command(dp_mm=(1.0, 0, 0))
+        rig.advance(CYCLE_NS - 10 * MS)
     assert rig.gw.fault is not None and rig.last_correction().flags == HOLD
     # Only the operator clears a fault, by name (issue 14, item 1): a bare command is refused.
     outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault"))
@@ -542,3 +544,100 @@ def test_clamp_norm_keeps_the_direction_of_any_finite_step(v):
     assert math.isclose(math.hypot(*out), 2.8, rel_tol=1e-12)
     big = max(abs(x) for x in v)
     np.testing.assert_allclose(out / 2.8, np.array(v) / big / math.hypot(*(x / big for x in v)), atol=1e-12)
+
+
+# -- the command stream: session, stamps, late commands, starvation (issue 19, item 3) -------
+
+
+def test_a_silent_controller_is_held_without_a_fault_and_resumes_by_itself():
+    """No command at all (a partition): hold, ALTER stays on, no latched fault; the next
+    in-sequence fresh command moves the robot again, and the event says so."""
+    rig = _rig(fault_after_missed=5)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    for _ in range(40):  # 1.1 s without a command
+        rig.status()
+        rig.advance(CYCLE_NS)
+    assert rig.gw.fault is None and "fault" not in rig.codes()
+    silent = [e for e in rig.events() if e.code == "controller_silent"]
+    assert len(silent) == 1 and "resumes by itself" in silent[0].text
+    # held: every correction after the 3 reused ones is zero, and ALTER off is never asked
+    assert all(c.deltas == (0,) * 6 for _, c in rig.corrections[4:])
+    assert all(not c.flags & CorrectionFlags.ALTER_OFF for _, c in rig.corrections)
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0, 0])
+    resumed = rig.events()[-1]
+    assert resumed.code == "command_resumed" and "resumed by itself" in resumed.text
+
+
+def test_a_late_command_is_never_acted_on_and_reported():
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    old = rig.cycle
+    for _ in range(8):
+        rig.status()
+        rig.advance(CYCLE_NS)
+    n = len(rig.corrections)
+    outs = rig.command(cycle=old + 1, dp_mm=(2.0, 0, 0))  # a partition's backlog: 7 cycles late
+    assert rig.codes(outs) == ["late_command"]
+    rig.status()
+    rig.advance(CYCLE_NS)
+    assert rig.corrections[n][1].deltas == (0,) * 6  # the late step never reached the robot
+
+
+def test_a_command_stamped_off_its_cycle_is_dropped():
+    """The controller stamps its command with the stamp of the robot_state it answers:
+    one stamped a second away (forged, replayed from another run) is no answer to it."""
+    rig = _rig()
+    rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.status()
+    cmd = pb.FlangeCommand(header=header(rig.stamp_for(rig.cycle) + 1_000 * MS, rig.seq, "world"),
+                           cycle=rig.cycle, d_translation_m=pb.Vector3(x=0.002), mode=pb.CONTROL_MODE_TRACK)
+    rig.seq += 1
+    outs = rig.step("controller/command", cmd)
+    assert rig.codes(outs) == ["stamp_mismatch"]
+    rig.advance(CYCLE_NS)
+    assert rig.gw.sent[-1].source == "reused"  # the previous (real) step, never the forged 2 mm
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0, 0])
+
+
+def test_a_second_command_stream_holds_the_robot_until_it_is_quiet():
+    """Two controller sessions (or a forger) on the command key: the gateway stays bound to
+    the stream it follows and holds the robot while the other speaks; quiet again for
+    conflict_hold_ms, the bound stream moves the robot."""
+    rig = _rig(conflict_hold_ms=200.0)
+    for _ in range(5):
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.status()
+    forged = pb.FlangeCommand(header=header(rig.stamp_for(rig.cycle), 0, "world"), cycle=rig.cycle,
+                              d_translation_m=pb.Vector3(x=0.002), mode=pb.CONTROL_MODE_TRACK)
+    outs = rig.step("controller/command", forged)  # seq 0: a second session's first command
+    assert rig.codes(outs) == ["controller_conflict"]
+    rig.command(dp_mm=(1.0, 0, 0))  # the real one, same cycle
+    rig.advance(CYCLE_NS)
+    assert rig.gw.sent[-1].source == "conflict" and rig.last_correction().deltas == (0,) * 6
+    for _ in range(5):  # both speak: held throughout
+        rig.status()
+        forged.header.seq += 1
+        forged.header.stamp_ns = rig.stamp_for(rig.cycle)
+        forged.cycle = rig.cycle
+        rig.step("controller/command", forged)
+        rig.command(dp_mm=(1.0, 0, 0))
+        rig.advance(CYCLE_NS)
+        assert rig.last_correction().deltas == (0,) * 6
+    for _ in range(8):  # the second stream stopped: 224 ms later the bound one moves the robot
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    assert "conflict_cleared" in rig.codes()
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [1.0, 0, 0])
+    assert rig.gw.counters["foreign_commands"] == 6
+
+
+def test_a_restarted_controller_whose_old_token_lingers_is_bound_once_the_old_stream_is_silent():
+    rig = _rig(conflict_hold_ms=200.0)
+    rig.seq = 1000  # the old process had run a while
+    for _ in range(3):
+        rig.cycle_with_command(dp_mm=(1.0, 0, 0))
+    rig.seq = 0  # the old process died (its token lingers); a new one counts from 0
+    for _ in range(12):
+        rig.cycle_with_command(dp_mm=(0.5, 0, 0))
+    assert "controller_conflict" in rig.codes() and "controller_rebound" in rig.codes()
+    np.testing.assert_allclose(rig.last_correction().translation_mm, [0.5, 0, 0])

@@ -77,13 +77,7 @@ def test_secure_rows_are_skipped_without_mtls(tmp_path):
 
 
 @pytest.mark.timeout(60)
-@pytest.mark.parametrize("report_denied", [
-    pytest.param(True, marks=pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-        "the router's refusal reporter (runtime/security.py, [runtime] report_denied = true) stops the "
-        "router under a flood of refused puts while someone subscribes to router/events: the bench's "
-        "aclflood row; remove this mark with the fix"))),
-    False,
-])
+@pytest.mark.parametrize("report_denied", [True, False])
 def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, report_denied):
     """Issue 14 item 6 under mTLS, the router alone: 2 s of puts at full rate on the command
     key from perception's certificate (refused at the router), a tool subscribed to every

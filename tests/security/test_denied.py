@@ -49,3 +49,39 @@ def test_the_router_reports_what_it_refused(tmp_path, procs):
     assert "'perception'" in first.text and "Put" in first.text
     assert "listening on tls/" in out  # the router's own output still goes through
     assert "is authorized" not in out  # zenoh's trace of allowed traffic does not
+
+
+def test_declaring_a_subscriber_is_not_reported_as_refused_puts(tmp_path, procs):
+    """zenoh fills its permission cache for every message kind when a key is first
+    declared ("is unauthorized to Put/Query/Reply..." for a tool that only subscribes):
+    those lines are not attempts and must not be reported; a real refused put still is."""
+    pki = tmp_path / "pki"
+    security.init_ca(pki, "test")
+    for name in ("router", "perception", "tool"):
+        security.issue(pki, name)
+    port = free_port()
+    cfg = write_config(tmp_path / "cell.toml", port, extra='security = "mtls"\npki = "pki"\n')
+    router = procs.start("router", "--config", str(cfg))
+    wait_port(port)
+    rt = load(cfg).runtime
+    events = Inbox()
+    command = topics.TOPICS["controller/command"].key("test")
+
+    def refusals(n: int):  # perception's refused puts until the router reports the n-th
+        def seen(k, v) -> bool:
+            return f"'perception' ({n} so far)" in pb.Event.FromString(v).text
+        for _ in range(n + 50):
+            rogue.put(command, b"rogue")
+            if events.wait_for(seen, timeout=0.05):
+                return True
+        return events.wait_for(seen, timeout=5.0)
+
+    with zenoh.open(zenoh_config(rt, identity="tool")) as tool, \
+            zenoh.open(zenoh_config(rt, identity="perception")) as rogue:
+        tool.declare_subscriber(topics.TOPICS["router/events"].key("test"), events)
+        assert refusals(10)  # fence: the events reach the tool
+        tool.declare_subscriber(command, lambda s: None)  # allowed; the cache fill "denies" the rest
+        assert refusals(100)  # fence: the router has handled the declaration and reported since
+    procs.stop(router)
+    texts = [pb.Event.FromString(v).text for _, v in events.items]
+    assert not [t for t in texts if "'tool'" in t], texts
