@@ -348,6 +348,44 @@ def attack_reset_fault(ctx: Ctx, row: FaultRow) -> None:
     row.note = f"alter_gateway: {ev[0].code}" if ev else "no answer"
 
 
+PARTITION_S = 5.0  # the router frozen this long: shorter than zenoh's 10 s lease
+
+
+def attack_partition(ctx: Ctx, row: FaultRow, seconds: float = PARTITION_S) -> None:
+    """A network partition of the whole cell: the router, through which every message goes,
+    frozen (SIGSTOP) for ``seconds`` and let go (SIGCONT). The gateway, whose serial link to
+    the robot does not go through it, must hold on the controller's silence
+    (``controller_silent``: no latched fault) and resume by itself on the next command
+    (``command_resumed``); what subscribers missed shows as sequence gaps, each component's
+    own recording keeps what it produced. (Two machines cut by ``ip link set down`` in
+    network namespaces: tests/deploy/test_two_machines.py.)"""
+    import signal as sig
+
+    pid = ctx.control.pid("router") if ctx.control is not None else None
+    if pid is None:
+        row.note = "no handle on the twin's router process: cannot partition"
+        return
+    t0, wall0 = time.monotonic(), time.time_ns()
+    os.kill(pid, sig.SIGSTOP)
+    try:
+        time.sleep(seconds)  # the partition's length is the attack itself, not a wait for an event
+    finally:
+        os.kill(pid, sig.SIGCONT)
+    silent = ctx.mon.wait_event(t0, ("controller_silent",), "alter_gateway")
+    resumed = ctx.mon.wait_event(t0, ("command_resumed",), "alter_gateway", timeout_s=30.0)
+    faulted = ctx.mon.wait_event(t0, ("fault",), "alter_gateway", timeout_s=0.0)
+    row.expected = silent is not None and resumed is not None and faulted is None
+    # The hold is the gateway's: stamped by its clock when it happened, not when the
+    # monitor heard of it (after the partition).
+    row.reaction_ms = None if silent is None else (silent[1].header.stamp_ns - wall0) / 1e6
+    held_s = (None if silent is None or resumed is None
+              else (resumed[1].header.stamp_ns - silent[1].header.stamp_ns) / 1e9)
+    row.note = (f"router frozen {seconds:g} s; alter_gateway: "
+                + ("controller_silent" if silent else "NO controller_silent")
+                + (f", command_resumed (held {held_s:.2f} s)" if resumed else ", NO command_resumed")
+                + ("; FAULT latched" if faulted else ""))
+
+
 @dataclass(frozen=True)
 class Attack:
     """``keeps_loop``: the loop must stay up through the attack (tob_state FULL, servo error
@@ -585,9 +623,12 @@ SECURE_ATTACKS: tuple[Attack, ...] = (
     Attack("token", "rogue liveliness token 'controller', controller killed", attack_rogue_token,
            keeps_loop=False),
     Attack("aclflood", "bus flood from an identity not allowed (2 s)", attack_acl_flood, keeps_loop=False),
+    # Under mTLS every process is a client of the router (the plain demo's peers link to
+    # each other directly, around a frozen router).
+    Attack("partition", f"partition: the router frozen {PARTITION_S:g} s", attack_partition, keeps_loop=False),
 )
 # --quick under mTLS: all but the two floods (see QUICK).
-QUICK_SECURE = tuple(a.key for a in SECURE_ATTACKS if a.key != "aclflood")
+QUICK_SECURE = tuple(a.key for a in SECURE_ATTACKS if a.key not in ("aclflood", "partition"))
 
 
 def all_attacks() -> tuple[Attack, ...]:

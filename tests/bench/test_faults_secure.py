@@ -19,14 +19,15 @@ SECURE_ROWS = {
     "unauthorised": "unauthorised publisher (certified non-controller)",
     "uncertified": "uncertified client",
     "token": "rogue liveliness token 'controller', controller killed",
+    "partition": "partition: the router frozen 5 s",
 }
 
 
-@pytest.mark.timeout(150)
+@pytest.mark.timeout(180)
 def test_secure_rows_held_recovered_nothing_lost(tmp_path):
     run_dir = tmp_path / "run"
     p = run_cli("bench", "faults", "--secure", "--only", ",".join(SECURE_ROWS), "--run-dir", str(run_dir),
-                timeout=130)
+                timeout=160)
     assert p.returncode == 0, p.stdout + p.stderr
     rows = table(p.stdout)
     assert list(rows) == list(SECURE_ROWS.values())
@@ -39,6 +40,9 @@ def test_secure_rows_held_recovered_nothing_lost(tmp_path):
     assert rows[SECURE_ROWS["unauthorised"]]["note"].startswith("0/20 rogue commands delivered")
     assert rows[SECURE_ROWS["uncertified"]]["note"].startswith("3/3 refused")
     assert "controller_gone" in rows[SECURE_ROWS["token"]]["note"]
+    # The partition: the gateway held on the silence and resumed by itself (no latched fault).
+    note = rows[SECURE_ROWS["partition"]]["note"]
+    assert "controller_silent" in note and "command_resumed" in note and "FAULT" not in note, note
     assert leftovers(run_dir) == []
 
     # The run was under mTLS, every process a client with its own certificate.
