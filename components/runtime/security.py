@@ -24,6 +24,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import ipaddress
 import json
@@ -521,6 +522,7 @@ _CN_RE = re.compile(r"CertCommonName\(([^)]*)\)")
 _CACHING_RE = re.compile(r"caching permissions for `([^`]*)`")
 _THREAD_RE = re.compile(r"ThreadId\((\d+)\)")
 _RESULT_RE = re.compile(r"is (?:un)?authorized to .* on (\S+)")
+_ZID_RE = re.compile(r"\b([0-9a-f]{32})\b")
 _ANSI_RE = re.compile(r"\x1b\[[0-9;]*m")
 
 
@@ -578,6 +580,9 @@ class DenialWatch:
         # to <kind>" line per kind, in that thread. Those are not attempts: a subscriber's
         # declaration would read as a refused Put, Query, Reply... (thread -> key being cached)
         caching: dict[str, str] = {}
+        # A check from the permission cache ("Using cached result: <zid> is unauthorized...")
+        # names the session, not its certificate: the certificate seen with that zid before.
+        names: dict[str, str] = {}
         with os.fdopen(fd, "rb") as f:
             for raw in f:
                 line = raw.decode(errors="replace")
@@ -595,6 +600,17 @@ class DenialWatch:
                         continue  # filling the cache, not a message
                     caching.pop(tid, None)
                 d = parse_denial(line)
+                if ACL_LOG_TARGET in line:
+                    zid = _ZID_RE.search(_ANSI_RE.sub("", line))
+                    if zid is not None:
+                        if d is not None and d.cn:
+                            names[zid.group(1)] = d.cn
+                        elif d is not None and zid.group(1) in names:
+                            d = dataclasses.replace(d, cn=names[zid.group(1)])
+                        elif d is None and "CertCommonName(" in line:
+                            cn = _CN_RE.search(_ANSI_RE.sub("", line))
+                            if cn is not None:
+                                names[zid.group(1)] = cn.group(1)
                 if d is not None:
                     try:
                         self.on_denied(d)
