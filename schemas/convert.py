@@ -8,6 +8,7 @@ they read and raise :class:`MessageError` (a ``ValueError``) with a clear text.
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
@@ -214,3 +215,51 @@ def from_covariance(values, dim: int) -> np.ndarray:
     if a.size != dim * dim:
         raise MessageError(f"covariance has {a.size} values, expected {dim}x{dim}")
     return a.reshape(dim, dim)
+
+
+_FIELD_PART = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?")
+
+
+def message_field(msg, path: str):
+    """The value at ``path`` in a protobuf message: dotted field names, a repeated field
+    indexed ``name[i]`` (``pairs[0].residual_px``, ``world_T_tob.translation.x``); an enum
+    gives its value's name, a message its text form on one line. Raises MessageError naming
+    the part that is not there (an unknown field, an index beyond the list)."""
+    from google.protobuf import text_format
+    from google.protobuf.descriptor import FieldDescriptor
+
+    value, where = msg, msg.DESCRIPTOR.full_name
+    for part in path.split("."):
+        m = _FIELD_PART.fullmatch(part)
+        if m is None or not hasattr(value, "DESCRIPTOR"):
+            raise MessageError(f"{path!r}: {part!r} is not a field of {where}")
+        name, index = m.group(1), m.group(2)
+        fd = value.DESCRIPTOR.fields_by_name.get(name)
+        if fd is None:
+            known = ", ".join(value.DESCRIPTOR.fields_by_name)
+            raise MessageError(f"{path!r}: {where} has no field {name!r} (it has {known})")
+        value = getattr(value, name)
+        if index is not None:
+            if not hasattr(value, "__len__") or isinstance(value, str | bytes):
+                raise MessageError(f"{path!r}: {where}.{name} is not a list")
+            if int(index) >= len(value):
+                raise MessageError(f"{path!r}: {where}.{name} has {len(value)} entries, no [{index}]")
+            value = value[int(index)]
+        elif fd.type == FieldDescriptor.TYPE_ENUM and isinstance(value, int):
+            value = fd.enum_type.values_by_number[value].name if value in fd.enum_type.values_by_number else value
+        where = f"{where}.{part}"
+    if hasattr(value, "DESCRIPTOR"):
+        return text_format.MessageToString(value, as_one_line=True)
+    if hasattr(value, "__len__") and not isinstance(value, str | bytes):
+        return list(value)
+    return value
+
+
+def message_stamp_ns(msg) -> int | None:
+    """A message's stamp (ns): ``header.stamp_ns``, or a Foxglove image's ``timestamp``."""
+    fields = msg.DESCRIPTOR.fields_by_name
+    if "header" in fields:
+        return int(msg.header.stamp_ns)
+    if "timestamp" in fields:
+        return int(msg.timestamp.ToNanoseconds())
+    return None

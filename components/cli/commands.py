@@ -332,6 +332,20 @@ def echo(args) -> int:
         near = sorted(t for t in topics.TOPICS if short.split("/")[0] in t) or sorted(topics.TOPICS)
         raise ValueError(f"no topic {short!r} in this version (wildcards like '*/events' are fine); "
                          f"known: {', '.join(near)}")
+    fields = list(args.field or [])
+    if args.csv and not fields:
+        raise ValueError("--csv prints fields: name them with --field (e.g. --field header.stamp_ns)")
+    if fields and "*" not in key:  # a field the topic's type does not have: said before listening
+        from humanpt.schemas.convert import message_field
+
+        for f in fields:
+            _check_field_path(topics.message_type(short)(), f, message_field)
+    writer = None
+    if args.csv:
+        import csv
+
+        writer = csv.writer(sys.stdout)
+        writer.writerow(["stamp_ns", "key", *fields])
     q: _queue.Queue = _queue.Queue()
     stop = stop_on_signals()
     n = 0
@@ -345,11 +359,44 @@ def echo(args) -> int:
                 k, payload = q.get(timeout=0.1)
             except _queue.Empty:
                 continue
-            tname, text = _describe(k, payload, args.full)
-            print(f"--- {k} ({tname})\n{text}", end="", flush=True)
+            if fields:
+                row = _field_row(k, payload, fields)
+                if args.csv:
+                    writer.writerow(row)
+                else:
+                    print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
+                sys.stdout.flush()
+            else:
+                tname, text = _describe(k, payload, args.full)
+                print(f"--- {k} ({tname})\n{text}", end="", flush=True)
             n += 1
         sub.undeclare()
     return 0
+
+
+def _check_field_path(msg, path: str, message_field) -> None:
+    """ValueError when ``path`` names no field of ``msg``'s type (an index beyond an empty
+    list is fine: a message may have entries)."""
+    from humanpt.schemas.convert import MessageError
+
+    try:
+        message_field(msg, path)
+    except MessageError as e:
+        if "entries, no [" not in str(e):
+            raise ValueError(str(e)) from None
+
+
+def _field_row(key: str, payload: bytes, fields: list[str]) -> list:
+    """[stamp ns, key, value of each field] of one message (``message_field``); a message
+    that does not decode, or lacks a field, raises ValueError naming it."""
+    from humanpt.schemas.convert import message_field, message_stamp_ns
+
+    try:
+        _, short = topics.short_from_key(key)
+        msg = topics.message_type(short).FromString(payload)
+    except Exception as e:  # noqa: BLE001 - unknown topic or undecodable bytes: one message
+        raise ValueError(f"{key}: cannot decode: {e}") from None
+    return [message_stamp_ns(msg), key, *(message_field(msg, f) for f in fields)]
 
 
 def _parse_assignment(a: str) -> tuple[str, object]:

@@ -184,6 +184,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--count", "-n", type=int, help="stop after N messages")
     p.add_argument("--duration", type=float, help="stop after this many seconds")
     p.add_argument("--full", action="store_true", help="print image bytes too (default: summarised)")
+    p.add_argument("--field", "-f", action="append", metavar="PATH",
+                   help="print only this field, one line per message with its stamp (repeatable; dotted, "
+                        "lists indexed: world_T_tob.translation.x, pairs[0].residual_px, status)")
+    p.add_argument("--csv", action="store_true",
+                   help="with --field: CSV on stdout (stamp_ns, key, each field), e.g. > tob.csv")
 
     p = sub.add_parser("param", help="show or set a running component's live parameters",
                        description="Without KEY=VALUE: print the component's live parameters and counters. "
@@ -351,7 +356,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "per cycle against the gateway's limit), recovered, data lost (sequence gaps). Exit "
                         "status 1 if any attack was not seen, not held or not recovered.")
     q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
-                   "console, reset; default all)")
+                   "console, reset; with --secure also unauthorised, uncertified, token, aclflood, partition; "
+                   "default all)")
     q.add_argument("--quick", action="store_true", help="all but the bus flood (which takes both cores of a "
                    "small machine)")
     q.add_argument("--scenario", dest="faults_scenario", default="static",
@@ -366,7 +372,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
-    args = ap.parse_args(argv)
+    args, extra = ap.parse_known_args(argv)
+    if extra and args.verb == "param":
+        # KEY=VALUE after an option (humanpt param controller --timeout 2 a=1): argparse
+        # ends the positionals at the first option; take the rest as assignments too.
+        args.assignments = list(args.assignments) + [e for e in extra if "=" in e and not e.startswith("-")]
+        extra = [e for e in extra if not ("=" in e and not e.startswith("-"))]
+    if extra:
+        ap.error(f"unrecognized arguments: {' '.join(extra)}")
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     if not args.verb:

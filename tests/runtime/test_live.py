@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import queue
 import signal
@@ -108,7 +110,8 @@ def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(rou
         r = run_cli("param", "ponger", "prefix=PONG", "--config", str(cfg))
         assert r.returncode == 0, r.stderr
         assert '"prefix": "PONG"' in r.stdout
-        r = run_cli("param", "pinger", "period_ms=-5", "--config", str(cfg))
+        # (KEY=VALUE after an option too, as ros2 param takes it)
+        r = run_cli("param", "pinger", "--config", str(cfg), "period_ms=-5")
         assert r.returncode == 1 and "REJECTED" in r.stdout and "period_ms: -5.0 is outside its range" in r.stdout
         while not q.empty():
             q.get()
@@ -185,6 +188,17 @@ def test_topics_and_echo_show_live_traffic(router, procs, tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.count("--- humanpt/test/pinger/ping (humanpt.Tick)") == 2
     assert "period_ns: 100000000" in r.stdout
+    # Fields as CSV (ros2 topic echo --field, --csv): the header row, then one row per
+    # message with its stamp; consecutive ticks of the pinger's 100 ms period.
+    r = run_cli("echo", "pinger/ping", "--config", str(cfg), "--count", "3", "--duration", "10",
+                "--field", "period_ns", "--field", "header.seq", "--csv")
+    assert r.returncode == 0, r.stderr
+    rows = list(csv.reader(io.StringIO(r.stdout)))
+    assert rows[0] == ["stamp_ns", "key", "period_ns", "header.seq"] and len(rows) == 4, rows
+    assert all(row[1] == "humanpt/test/pinger/ping" and row[2] == "100000000" for row in rows[1:])
+    seqs = [int(row[3]) for row in rows[1:]]
+    stamps = [int(row[0]) for row in rows[1:]]
+    assert seqs == list(range(seqs[0], seqs[0] + 3)) and all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
 
 
 def test_peer_mode_links_components_directly_and_they_still_talk(router, procs, tmp_path):
