@@ -525,7 +525,7 @@ def _refused_within(conf) -> tuple[bool, float]:
     return False, time.monotonic() - t0
 
 
-def _bare_client(endpoint: str, tls: dict | None):
+def intruder_config(endpoint: str, tls: dict | None):
     """A client config written by hand, as an intruder would (not through humanpt's)."""
     import zenoh
 
@@ -552,9 +552,9 @@ def attack_uncertified(ctx: Ctx, row: FaultRow) -> None:
         security.init_ca(foreign, ctx.rt.cell, days=31)
         security.issue(foreign, "controller", days=31)
         intruder = {**security.tls_section(foreign, "controller"), "root_ca_certificate": ca}
-        tries = {"no certificate": _bare_client(tls_ep, {"root_ca_certificate": ca}),
-                 "plaintext": _bare_client(ep.replace("tls/", "tcp/"), None),
-                 "another CA's": _bare_client(tls_ep, intruder)}
+        tries = {"no certificate": intruder_config(tls_ep, {"root_ca_certificate": ca}),
+                 "plaintext": intruder_config(ep.replace("tls/", "tcp/"), None),
+                 "another CA's": intruder_config(tls_ep, intruder)}
         results = {k: _refused_within(c) for k, c in tries.items()}
     refused = [k for k, (r, _) in results.items() if r]
     row.expected = len(refused) == len(tries)

@@ -102,7 +102,36 @@ class Gate:
     mahalanobis2: float
 
 
-class PoseKalman:
+class _PoseEstimate:
+    """What both filters share: a state ``x`` (12,) [p, r, v, w] whose orientation is
+    ``exp(r) @ R_ref``, its time ``t_ns`` (None before the first measurement), and the pose
+    predicted from it by the constant-velocity transition."""
+
+    x: np.ndarray
+    R_ref: np.ndarray
+    t_ns: int | None
+
+    @property
+    def initialised(self) -> bool:
+        return self.t_ns is not None
+
+    def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
+        x = self.x if x is None else x
+        return matrix_from_rotvec(x[3:6]) @ self.R_ref
+
+    def predicted_pose(self, t_ns: int) -> np.ndarray:
+        """The world_T_tob of :meth:`predicted` alone."""
+        dt = (int(t_ns) - self.t_ns) * 1e-9
+        return self._transform(transition(dt) @ self.x)
+
+    def _transform(self, x: np.ndarray) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = self.rotation(x)
+        T[:3, 3] = x[0:3]
+        return T
+
+
+class PoseKalman(_PoseEstimate):
     """Filter of world_T_tob; times in ns, poses as (4, 4) transforms in metres.
 
     ``x`` (12,) and ``P`` (12, 12) are the state and its covariance (filterpy's); ``version``
@@ -134,10 +163,6 @@ class PoseKalman:
     def P(self) -> np.ndarray:
         return self.kf.P
 
-    @property
-    def initialised(self) -> bool:
-        return self.t_ns is not None
-
     def reset(self, t_ns: int, world_T_tob: np.ndarray, calm_only: bool = False) -> None:
         """Start again at a measured pose with zero velocity."""
         self.kf.x = np.zeros(12)
@@ -157,10 +182,6 @@ class PoseKalman:
         self.kf.predict(F=transition(dt), Q=Q * self.q_scale if self.q_scale != 1.0 else Q)
         self.t_ns = int(t_ns)
         self.version += 1
-
-    def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
-        x = self.x if x is None else x
-        return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def _recentre(self) -> None:
         self.R_ref = self.rotation()
@@ -221,16 +242,6 @@ class PoseKalman:
         P = F @ self.P @ F.T + self.q_scale * process_noise(abs(dt), self.accel_sigma, self.ang_accel_sigma)
         return self._transform(x), x[6:12].copy(), P
 
-    def predicted_pose(self, t_ns: int) -> np.ndarray:
-        """The world_T_tob of :meth:`predicted` alone."""
-        dt = (int(t_ns) - self.t_ns) * 1e-9
-        return self._transform(transition(dt) @ self.x)
-
-    def _transform(self, x: np.ndarray) -> np.ndarray:
-        T = np.eye(4)
-        T[:3, :3] = self.rotation(x)
-        T[:3, 3] = x[0:3]
-        return T
 
 
 def switching_matrix(dt_s: float, calm_mean_s: float, manoeuvre_mean_s: float) -> np.ndarray:
@@ -250,7 +261,7 @@ def _combine(mu: np.ndarray, xs: list[np.ndarray], Ps: list[np.ndarray]) -> tupl
     return x, P
 
 
-class PoseIMM:
+class PoseIMM(_PoseEstimate):
     """Filter of world_T_tob that follows manoeuvres (see the module docstring); the
     interface of :class:`PoseKalman`. ``noises``: (accel m/s^2, angular accel rad/s^2) of
     the calm and of the manoeuvring model; ``calm_mean_s`` / ``manoeuvre_mean_s``: how long
@@ -299,10 +310,6 @@ class PoseIMM:
         return self._combined()[1]
 
     @property
-    def initialised(self) -> bool:
-        return self.t_ns is not None
-
-    @property
     def manoeuvre_probability(self) -> tuple[float, float]:
         """(translation, rotation): the probability that the target manoeuvres."""
         return float(self.mu[0, 1]), float(self.mu[1, 1])
@@ -347,10 +354,6 @@ class PoseIMM:
             kf.predict(F=F, Q=process_noise(dt, accel, ang_accel))
         self.t_ns = int(t_ns)
         self.version += 1
-
-    def rotation(self, x: np.ndarray | None = None) -> np.ndarray:
-        x = self.x if x is None else x
-        return matrix_from_rotvec(x[3:6]) @ self.R_ref
 
     def update_pose(self, world_T_tob: np.ndarray, R_meas: np.ndarray, gate_chi2: float,
                     manoeuvre_gates: bool = True, calm_only: bool = False) -> Gate:
@@ -441,13 +444,3 @@ class PoseIMM:
         x, P = self._mix_blocks(self.mu, xs, Ps)
         return self._transform(x), x[6:12].copy(), P
 
-    def predicted_pose(self, t_ns: int) -> np.ndarray:
-        """The world_T_tob of :meth:`predicted` alone."""
-        dt = (int(t_ns) - self.t_ns) * 1e-9
-        return self._transform(transition(dt) @ self.x)
-
-    def _transform(self, x: np.ndarray) -> np.ndarray:
-        T = np.eye(4)
-        T[:3, :3] = self.rotation(x)
-        T[:3, 3] = x[0:3]
-        return T

@@ -23,6 +23,7 @@ acceptance on it.
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -69,14 +70,9 @@ class HardCase:
                 and self.g_maxe_mm <= max_mm and self.g_maxe_deg <= max_deg)
 
 
-def _events(world, code: str) -> list[pb.Event]:
-    evs = [pb.Event.FromString(o.data) for o in world.outputs() if o.topic.endswith("/events")]
-    return [e for e in evs if e.code == code]
-
-
-def orientation_held(point: pb.PathPoint) -> bool:
-    """Whether a path point's orientation was held (position only), not measured."""
-    return point.orientation_held  # PathPoint.orientation_held (controller, issue 18)
+def _event_counts(world) -> Counter:
+    """How many events of each code the run's components published."""
+    return Counter(pb.Event.FromString(o.data).code for o in world.outputs() if o.topic.endswith("/events"))
 
 
 def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | None = None, robot: str = "puma",
@@ -105,15 +101,16 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
             T = from_pose(p.world_T_tob)
             T[:3, 3] *= 1e3
             g_mm = max(g_mm, float(np.linalg.norm(T[:3, 3] - T_true[:3, 3])))
-            if orientation_held(p):
+            if p.orientation_held:  # position only: the orientation was held, not measured
                 held += 1
             else:
                 g_deg = max(g_deg, float(np.degrees(rotation_angle_rad(T[:3, :3] @ T_true[:3, :3].T))))
     t, e_mm, _ = evaluate.tracking_errors(w, flange_T_desired(cfg.sim_camera.flange_T_camera, cfg.controller.dz_mm))
     moving = (t >= start_ns) & (t <= end_ns)
+    codes = _event_counts(w)
     return HardCase(
         scenario=scenario, speed_mm_s=float(speed_mm_s),
-        filter_resets=len(_events(w, "filter_reset")), outliers=len(_events(w, "outlier")),
+        filter_resets=codes["filter_reset"], outliers=codes["outlier"],
         max_gap_frames=gap_frames, points=len(points), held_points=held, g_maxe_mm=g_mm, g_maxe_deg=g_deg,
         servo_max_mm=float(e_mm[moving].max()) if moving.any() else float("nan"),
         fov_margin_min_px=servo_summary(w, start_ns).min_fov_margin_px,
@@ -147,5 +144,4 @@ def format_cases(cases: list[HardCase]) -> str:
     return "\n".join(rows)
 
 
-__all__ = ["HARD_SCENARIOS", "HARD_SPEEDS_MM_S", "HardCase", "run_case", "run_cases", "format_cases",
-           "orientation_held"]
+__all__ = ["HARD_SCENARIOS", "HARD_SPEEDS_MM_S", "HardCase", "run_case", "run_cases", "format_cases"]

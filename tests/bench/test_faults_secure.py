@@ -85,7 +85,7 @@ def test_secure_rows_are_skipped_without_mtls(tmp_path):
 def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, report_denied):
     """Issue 14 item 6 under mTLS, the router alone: 2 s of puts at full rate on the command
     key from perception's certificate (refused at the router), a tool subscribed to every
-    event; afterwards the router must still route an allowed put (within 5 s)."""
+    event; afterwards the router must still route an allowed put (within 15 s)."""
     import time
 
     import zenoh
@@ -123,7 +123,8 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
         fresh = zenoh.open(zenoh_config(rt, identity="perception"))
         sessions.append(fresh)
         fresh.put(tob, b"after the flood")
-        routed = after.wait_for(lambda k, v: v == b"after the flood", timeout=5.0)
+        # (a stopped router never routes again; a loaded one may take a while to drain the flood)
+        routed = after.wait_for(lambda k, v: v == b"after the flood", timeout=15.0)
     finally:
         for x in sessions:  # a stuck router makes closing time out: not what is judged here
             try:

@@ -199,6 +199,19 @@ def test_bad_check_parameters_are_rejected():
 # --------------------------------------------------------------------------- closed loop
 
 
+def _full_measurements(w):
+    """Each perception/tob measurement of a lock-step run (each must be FULL) with the
+    error (3,) mm of its G against the truth of its image (camera frame)."""
+    truths = dict(w.truths("sim_camera/truth"))
+    flange_T_camera = w.camera.config.flange_T_camera
+    for out in w.outputs("perception/tob"):
+        m = pb.TobMeasurement.FromString(out.data)
+        p = truths[m.header.stamp_ns]
+        camera_T_tob = invert_transform(p["world_T_flange"] @ flange_T_camera) @ p["world_T_tob"]
+        assert m.status == pb.TOB_STATUS_FULL
+        yield m, from_pose(m.camera_T_tob)[:3, 3] * 1000.0 - camera_T_tob[:3, 3]
+
+
 def _arc_run(cover_from_s: float | None, fraction: float = 0.3):
     """The arc scenario (moving from 2 s on), closed loop, 6 s; source A ``fraction``
     covered from ``cover_from_s``. Per image: (stamp s, degraded, |G error| mm, G error)."""
@@ -209,16 +222,7 @@ def _arc_run(cover_from_s: float | None, fraction: float = 0.3):
         w.lockstep.set_param(t, "sim_camera", "occlusion_angle_deg", "30")
         w.lockstep.set_param(t, "sim_camera", "occluded_sources", "[0]")
     w.run_for(6.0)
-    truths = dict(w.truths("sim_camera/truth"))
-    flange_T_camera = w.camera.config.flange_T_camera
-    rows = []
-    for out in w.outputs("perception/tob"):
-        m = pb.TobMeasurement.FromString(out.data)
-        p = truths[m.header.stamp_ns]
-        camera_T_tob = invert_transform(p["world_T_flange"] @ flange_T_camera) @ p["world_T_tob"]
-        assert m.status == pb.TOB_STATUS_FULL
-        err = from_pose(m.camera_T_tob)[:3, 3] * 1000.0 - camera_T_tob[:3, 3]
-        rows.append((m.header.stamp_ns / 1e9, m.degraded, *err))
+    rows = [(m.header.stamp_ns / 1e9, m.degraded, *err) for m, err in _full_measurements(w)]
     events = [pb.Event.FromString(o.data) for o in w.outputs("perception/events")]
     return np.array(rows), events, tracking_errors(w)
 
@@ -256,16 +260,8 @@ def test_closed_loop_the_partial_scenario_is_flagged_within_3_frames_and_left_un
     for out in w.outputs("sim_camera/truth"):
         truth = pb.Truth.FromString(out.data)
         covered[truth.header.stamp_ns] = bool(truth.cover_fraction) and truth.cover_fraction[0] > 0
-    truths = dict(w.truths("sim_camera/truth"))
-    flange_T_camera = w.camera.config.flange_T_camera
-    rows = []
-    for out in w.outputs("perception/tob"):
-        m = pb.TobMeasurement.FromString(out.data)
-        p = truths[m.header.stamp_ns]
-        camera_T_tob = invert_transform(p["world_T_flange"] @ flange_T_camera) @ p["world_T_tob"]
-        assert m.status == pb.TOB_STATUS_FULL
-        err = from_pose(m.camera_T_tob)[:3, 3] * 1000.0 - camera_T_tob[:3, 3]
-        rows.append((covered[m.header.stamp_ns], m.degraded, list(m.degraded_sources) == [0], *err))
+    rows = [(covered[m.header.stamp_ns], m.degraded, list(m.degraded_sources) == [0], *err)
+            for m, err in _full_measurements(w)]
     rows = np.array(rows, dtype=float)
     cov = rows[:, 0] > 0
     assert cov.sum() > 100 and (~cov).sum() > 30  # covered for the last 4 s and more

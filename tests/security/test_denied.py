@@ -17,7 +17,9 @@ from tests.conftest import free_port, wait_port, write_config
 from tests.security.test_mtls import Inbox
 
 
-def test_the_router_reports_what_it_refused(tmp_path, procs):
+def _mtls_router(tmp_path, procs):
+    """A cell's PKI (router, perception, tool) and ``humanpt router`` under mTLS, reporting
+    refusals: (the runtime config, the router process)."""
     pki = tmp_path / "pki"
     security.init_ca(pki, "test")
     for name in ("router", "perception", "tool"):
@@ -26,7 +28,11 @@ def test_the_router_reports_what_it_refused(tmp_path, procs):
     cfg = write_config(tmp_path / "cell.toml", port, extra='security = "mtls"\npki = "pki"\n')
     router = procs.start("router", "--config", str(cfg))
     wait_port(port)
-    rt = load(cfg).runtime
+    return load(cfg).runtime, router
+
+
+def test_the_router_reports_what_it_refused(tmp_path, procs):
+    rt, router = _mtls_router(tmp_path, procs)
     events = Inbox()
     command = topics.TOPICS["controller/command"].key("test")
     with zenoh.open(zenoh_config(rt, identity="tool")) as tool, \
@@ -57,15 +63,7 @@ def test_declaring_a_subscriber_is_not_reported_as_refused_puts(tmp_path, procs)
     """zenoh fills its permission cache for every message kind when a key is first
     declared ("is unauthorized to Put/Query/Reply..." for a tool that only subscribes):
     those lines are not attempts and must not be reported; a real refused put still is."""
-    pki = tmp_path / "pki"
-    security.init_ca(pki, "test")
-    for name in ("router", "perception", "tool"):
-        security.issue(pki, name)
-    port = free_port()
-    cfg = write_config(tmp_path / "cell.toml", port, extra='security = "mtls"\npki = "pki"\n')
-    router = procs.start("router", "--config", str(cfg))
-    wait_port(port)
-    rt = load(cfg).runtime
+    rt, router = _mtls_router(tmp_path, procs)
     events = Inbox()
     command = topics.TOPICS["controller/command"].key("test")
 

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
-import json
 import threading
 
 import pytest
 import zenoh
 
+from humanpt.bench.faults import intruder_config
 from humanpt.runtime import security
 from humanpt.runtime.bus import free_tcp_port, liveliness_key, zenoh_config
 from humanpt.runtime.config import RuntimeConfig
@@ -56,14 +56,7 @@ def session(rt: RuntimeConfig, name: str) -> zenoh.Session:
 
 def bare_config(rt: RuntimeConfig, endpoint: str, tls: dict | None) -> zenoh.Config:
     """A client config by hand (what an intruder would write), not through humanpt's."""
-    conf = zenoh.Config()
-    conf.insert_json5("mode", '"client"')
-    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("connect/timeout_ms", "1000")
-    if tls is not None:
-        conf.insert_json5("transport/link/tls", json.dumps(tls))
-    return conf
+    return intruder_config(endpoint, tls)
 
 
 def command(seq: int) -> bytes:
