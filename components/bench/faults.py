@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.runtime import tables
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import from_pose, header
@@ -929,6 +930,4 @@ def row_cells(r: FaultRow) -> tuple[str, ...]:
 
 def format_table(rows: list[FaultRow]) -> str:
     """The rows as aligned plain text (one header line, one line per attack)."""
-    cells = [HEADERS] + [row_cells(r) for r in rows]
-    widths = [max(len(c[i]) for c in cells) for i in range(len(HEADERS))]
-    return "\n".join("  ".join(c[i].ljust(widths[i]) for i in range(len(HEADERS))).rstrip() for c in cells)
+    return tables.render(HEADERS, [row_cells(r) for r in rows], align="l" * len(HEADERS), rule=False)

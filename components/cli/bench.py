@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import sys
 
+from humanpt.runtime import tables
+
 
 def bench_runtime(args) -> int:
     from humanpt.bench.measure import measure_runtime
@@ -22,10 +24,7 @@ def bench_runtime(args) -> int:
     for w in writes:
         note = f"file/payload {w.file_over_payload:.2f}" if w.file_over_payload is not None else ""
         rows.append((f"MCAP write, {w.label}", f"{w.mb_s:.1f} MB/s", f"{w.msg_s:.0f} msg/s", note))
-    w = max(len(r[0]) for r in rows)
-    print(f"\n{'case':{w}s}  {'p50 / rate':>12s}  {'p99 / msgs':>12s}  note")
-    for r in rows:
-        print(f"{r[0]:{w}s}  {r[1]:>12s}  {r[2]:>12s}  {r[3]}")
+    print("\n" + tables.render(["case", "p50 / rate", "p99 / msgs", "note"], rows, align="lrrl"))
     return 0
 
 
@@ -37,11 +36,10 @@ def bench_render(args) -> int:
     n = b.frames
     print(f"humanpt bench render: {b.width_px}x{b.height_px}, 3 sources x 2 views at "
           f"600 mm, blur {b.blur_sigma_px} px, shot + read noise; {n} frames per case")
-    print(f"\n{'case':34s} {'frames/s':>10s} {'ms/frame':>10s}")
-    print(f"{'render (renderer alone)':34s} {1 / b.render_s:10.0f} {1e3 * b.render_s:10.3f}")
-    for name, t in b.stages_s.items():
-        print(f"{'  ' + name:34s} {'':>10s} {1e3 * t:10.3f}")
-    print(f"{'sim_camera core step (+ message)':34s} {1 / b.core_step_s:10.0f} {1e3 * b.core_step_s:10.3f}")
+    rows = [["render (renderer alone)", f"{1 / b.render_s:.0f}", f"{1e3 * b.render_s:.3f}"],
+            *(["  " + name, "", f"{1e3 * t:.3f}"] for name, t in b.stages_s.items()),
+            ["sim_camera core step (+ message)", f"{1 / b.core_step_s:.0f}", f"{1e3 * b.core_step_s:.3f}"]]
+    print("\n" + tables.render(["case", "frames/s", "ms/frame"], rows))
     return 0
 
 
@@ -56,9 +54,9 @@ def bench_perception(args) -> int:
     rows = measure_perception(n)
     print(f"humanpt bench perception: 640x480 twin images (random poses, 450-900 mm, default noise), "
           f"{n} per case, cv2 threads 1{pinned}")
-    print(f"\n{'method':9s} {'case':32s} {'images/s':>9s} {'p50 ms':>8s} {'p99 ms':>8s}")
-    for method, case, rate, p50, p99 in rows:
-        print(f"{method:9s} {case:32s} {rate:9.0f} {p50:8.3f} {p99:8.3f}")
+    print("\n" + tables.render(["method", "case", "images/s", "p50 ms", "p99 ms"],
+                               [[m, case, f"{rate:.0f}", f"{p50:.3f}", f"{p99:.3f}"] for m, case, rate, p50, p99 in rows],
+                               align="llrrr"))
     if not args.no_accuracy:
         print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
               "bound: geometry error model at the measured centre RMS):\n")
@@ -85,14 +83,15 @@ def bench_alter(args) -> int:
 
     rows = measure_alter(args.duration, periods, args.search_seconds, mode, progress=progress)
     print("")
-    print(f"{'period':>7s} {'run':>6s} {'cycles':>7s} {'on time':>8s} {'missed':>7s} {'reply p50':>10s} "
-          f"{'reply p99':>10s} {'jitter p99':>11s} {'38400 line':>11s}")
+    cells = []
     for r in rows:
         lat50 = f"{r.pct(50, r.latency_ms):.2f} ms" if r.latency_ms else "-"
         lat99 = f"{r.pct(99, r.latency_ms):.2f} ms" if r.latency_ms else "-"
         jit = f"{r.pct(99, r.jitter_ms):.2f} ms" if r.jitter_ms else "-"
-        print(f"{r.period_ms:5g} ms {r.duration_s:5g}s {r.cycles:7d} {r.on_time:8d} {r.missed:7d} {lat50:>10s} "
-              f"{lat99:>10s} {jit:>11s} {line_capacity(r.period_ms):>11s} {r.note}")
+        cells.append([f"{r.period_ms:g} ms", f"{r.duration_s:g} s", r.cycles, r.on_time, r.missed, lat50, lat99, jit,
+                      line_capacity(r.period_ms), r.note])
+    print(tables.render(["period", "run", "cycles", "on time", "missed", "reply p50", "reply p99", "jitter p99",
+                         "38400 line", "note"], cells, align="r" * 9 + "l"))
     best = shortest_sustained(rows)
     print("")
     print(f"shortest cycle period sustained without a miss: {f'{best:g} ms' if best else 'none of those tried'}"
@@ -111,11 +110,8 @@ def bench_all(args) -> int:
         on_figure=lambda f: print(f"  {f.name}: {f.value} {f.note}", file=sys.stderr, flush=True))
     if failure:
         print(failure, file=sys.stderr)
-    w = max(len(f.name) for f in figures)
     print(f"\nhumanpt bench (live run {args.live_seconds:g} s of {args.scenario}, {wall:.0f} s wall)\n")
-    print(f"{'figure':{w}s}  {'value':>20s}  note")
-    for f in figures:
-        print(f"{f.name:{w}s}  {f.value:>20s}  {f.note}")
+    print(tables.render(["figure", "value", "note"], [[f.name, f.value, f.note] for f in figures], align="lrl"))
     return 0
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.runtime import tables
 from humanpt.twin import evaluate
 
 # The paper's published Tables 1-3 (mm, deg); Table 2 and 3 have no SD row.
@@ -39,8 +40,8 @@ STATS = ("ME", "MAE", "MaxE", "SD")
 KINDS = ("paper", "truth")
 
 
-def _fmt_row(label: str, v) -> str:
-    return f"{label:44s}" + "".join(f"{x:10.4f}" for x in v)
+def _row(label: str, v) -> list[str]:
+    return [label, *(tables.number(float(x)) for x in v)]
 
 
 def plots(name: str, results: dict, out: Path) -> Path:
@@ -218,18 +219,19 @@ def experiment(args) -> int:
                                         for stat, a in per[kind].items()} for kind in KINDS}}
     how = "against the mean" if args.name == "static" else "against the known path"
     over_seeds = (f"; median over seeds {seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else f"; seed {seeds[0]}")
-    lines = [f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
-             f"(mm, deg; errors {how} as the paper computed them, and against ground truth{over_seeds})", "",
-             f"{'':44s}" + "".join(f"{c:>10s}" for c in evaluate.COORDS)]
+    title = (f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
+             f"(mm, deg; errors {how} as the paper computed them, and against ground truth{over_seeds})")
     names = {"paper": "paper's perception", "weighted": "default perception"}
+    rows: list = []
     for stat in ("ME", "MAE", "MaxE", "SD"):
         if stat in PAPER[args.name]:
-            lines.append(_fmt_row(f"{stat}  paper, Table {TABLE[args.name]} (published)", PAPER[args.name][stat]))
+            rows.append(_row(f"{stat}  paper, Table {TABLE[args.name]} (published)", PAPER[args.name][stat]))
         for m in methods:
-            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, {how}", results[m]["paper"][stat]))
+            rows.append(_row(f"{stat}  twin, {names[m]}, {how}", results[m]["paper"][stat]))
         for m in methods:
-            lines.append(_fmt_row(f"{stat}  twin, {names[m]}, vs ground truth", results[m]["truth"][stat]))
-        lines.append("")
+            rows.append(_row(f"{stat}  twin, {names[m]}, vs ground truth", results[m]["truth"][stat]))
+        rows.append(())
+    lines = [title, "", tables.render(["", *evaluate.COORDS], rows[:-1])]
     text = "\n".join(lines)
     print(text)
     (out / "table.txt").write_text(text + "\n")

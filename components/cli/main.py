@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 
 from humanpt import __version__
@@ -394,6 +395,11 @@ def main(argv: list[str] | None = None) -> int:
             ValueError) as e:
         print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # (a ConnectionError: caught first)
+        # The reader went away (``humanpt topics --table | head``): stop quietly, as a Unix
+        # tool killed by SIGPIPE would, and keep Python from complaining at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     except ConnectionError as e:  # no router where the config says: one line, not a traceback
         print(f"humanpt {args.verb}: {e}", file=sys.stderr)
         return 1

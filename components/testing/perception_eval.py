@@ -50,6 +50,7 @@ from humanpt.geometry import (
 from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.correspondence import FULL, LOST, POSITION_ONLY
 from humanpt.perception.pipeline import Perception
+from humanpt.runtime import tables
 
 __all__ = [
     "Case",
@@ -326,24 +327,19 @@ def _score(s: Stats, result, truth, true_points: np.ndarray, camera_T_tob: np.nd
 
 def format_table(results: dict[str, dict[str, Stats]]) -> str:
     """A text table of ``{set name: {method: Stats}}``."""
-    head = (
-        f"{'set':10s} {'method':9s} {'images':>6s} {'full':>5s} {'pos.':>4s} {'lost':>4s} "
-        f"{'wrong':>6s} {'centre RMS':>10s} {'3D RMS x, y, z (mm)':>22s} {'bound x, y, z (mm)':>22s} "
-        f"{'pose t, r (mm, deg)':>20s} {'bound t, r':>16s}"
-    )
-    lines = [head, "-" * len(head)]
+    header = ["set", "method", "images", "full", "pos.", "lost", "wrong", "centre RMS px",
+              "3D RMS x", "y", "z (mm)", "bound x", "y", "z (mm)", "pose RMS t mm", "r deg", "bound t", "r"]
+    rows = []
     for set_name, by_method in results.items():
         for method, s in by_method.items():
             rms = s.point_rms_mm
             bound = s.bound_mm if s.bound_mm is not None else np.full(3, math.nan)
-            lines.append(
-                f"{set_name:10s} {method:9s} {s.images:6d} {s.full:5d} {s.position_only:4d} {s.lost:4d} "
-                f"{100 * s.wrong_rate:5.1f}% {s.centre_rms_px:8.4f}px "
-                f"{rms[0]:7.4f} {rms[1]:7.4f} {rms[2]:6.3f} {bound[0]:7.4f} {bound[1]:7.4f} {bound[2]:6.3f} "
-                f"{s.translation_rms_mm:9.3f} {s.rotation_rms_deg:8.3f} "
-                f"{s.pose_bound[0]:8.3f} {s.pose_bound[1]:7.3f}"
-            )
-    return "\n".join(lines)
+            rows.append([set_name, method, s.images, s.full, s.position_only, s.lost, f"{100 * s.wrong_rate:.1f}%",
+                         f"{s.centre_rms_px:.4f}", *(tables.number(v) for v in rms[:2]), tables.number(rms[2], 3),
+                         *(tables.number(v) for v in bound[:2]), tables.number(bound[2], 3),
+                         tables.number(s.translation_rms_mm, 3), tables.number(s.rotation_rms_deg, 3),
+                         tables.number(s.pose_bound[0], 3), tables.number(s.pose_bound[1], 3)])
+    return tables.render(header, rows, align="ll" + "r" * (len(header) - 2))
 
 
 # --------------------------------------------------------------------------- blob checks

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.geometry.transforms import x_from_transform
+from humanpt.runtime import tables
 from humanpt.schemas import humanpt_pb2 as pb
 
 from . import evaluate
@@ -247,44 +248,45 @@ def _f(v: float, width: int = 7) -> str:
 def format_table(rows: Sequence[BudgetRow], scenario: str = "arc", seed: int = 0, robot: str = "puma") -> str:
     """The budget as text: sources and sizes; position ME/RMS/MaxE (mm); angle RMS/MaxE
     (deg) and warnings; issue 16's figures beside ours."""
-    name_w = max(14, *(len(r.source) for r in rows)) + 1
     lines = [f"humanpt experiment budget: scenario {scenario}, seed {seed}, robot {robot}; the rig nominal, "
-             "the world with one error source at a time; the recorded path against ground truth", "",
-             "sources"]
-    for r in rows:
-        lines.append(f"  {r.source:{name_w}s}{r.size}  ({r.what})")
+             "the world with one error source at a time; the recorded path against ground truth", ""]
+    lines.append(tables.render(["source", "size", "what"], [[r.source, r.size, r.what] for r in rows],
+                               align="lll", title="sources"))
     speeds = [r.speed_mm_s for r in rows if np.isfinite(r.speed_mm_s)]
     if speeds:
         lines += ["", f"the recorded point moved at {np.median(speeds):.1f} mm/s (median)"]
-    head = "".join(f"{c:>7s}" for c in ("x", "y", "z"))
-    lines += ["", f"position (mm)   {'':{name_w - 14}s}{'ME':^21s}  {'RMS':^21s}  {'MaxE':^21s}   n  target seen",
-              f"  {'source':{name_w}s}{head}  {head}  {head}"]
+    xyz = [f"{stat} {c}" for stat in ("ME", "RMS", "MaxE") for c in ("x", "y", "z")]
+    pos = []
     for r in rows:
         if not r.ran or not r.n:
-            lines.append(f"  {r.source:{name_w}s}{r.status}")
+            pos.append([r.source, r.status, *([""] * 10)])
             continue
-        nums = "  ".join("".join(_f(v) for v in a[:3]) for a in (r.me, r.rms, r.maxe))
-        lines.append(f"  {r.source:{name_w}s}{nums}{r.n:5d}  {100 * r.full_fraction:5.1f} %")
-    head = "".join(f"{c:>7s}" for c in ("psi", "theta", "phi"))
-    lines += ["", f"angles (deg)    {'':{name_w - 14}s}{'RMS':^21s}  {'MaxE':^21s}  pipeline warnings",
-              f"  {'source':{name_w}s}{head}  {head}"]
+        pos.append([r.source, *(_f(v).strip() for a in (r.me, r.rms, r.maxe) for v in a[:3]), r.n,
+                    f"{100 * r.full_fraction:.1f} %"])
+    lines += ["", tables.render(["source", *xyz, "n", "target seen"], pos,
+                                title="position (mm)")]
+    ang = []
     for r in rows:
         if not r.ran:
             continue
-        nums = ("  ".join("".join(_f(v) for v in a[3:]) for a in (r.rms, r.maxe)) if r.n
-                else f"{'(' + r.status + ')':44s}")
         warn = ", ".join(f"{k} x{c}" for k, c in r.warnings.items()) or "none"
         if r.startup_warnings:
             warn += " (start-up: " + ", ".join(f"{k} x{c}" for k, c in r.startup_warnings.items()) + ")"
-        lines.append(f"  {r.source:{name_w}s}{nums}  {warn}")
+        nums = ([_f(v).strip() for a in (r.rms, r.maxe) for v in a[3:]] if r.n
+                else [f"({r.status})", *([""] * 5)])
+        ang.append([r.source, *nums, warn])
+    heads = [f"{stat} {c}" for stat in ("RMS", "MaxE") for c in ("psi", "theta", "phi")]
+    lines += ["", tables.render(["source", *heads, "pipeline warnings"], ang, align="l" + "r" * 6 + "l",
+                                title="angles (deg)")]
     issue = [r for r in rows if r.source in ISSUE_FIGURES]
     if issue:
-        lines += ["", "against issue 16's table (same injected error)",
-                  f"  {'source':{name_w}s}{'issue 16':38s}{'measure':32s}{'ours':>8s}  within 1.5x"]
+        cmp = []
         for r in issue:
             fig, ours = r.issue()
             verdict = "-" if not np.isfinite(ours) else ("yes" if fig.within(ours) else "NO")
-            lines.append(f"  {r.source:{name_w}s}{fig.text:38s}{fig.measure:32s}{_f(ours, 8)}  {verdict}")
+            cmp.append([r.source, fig.text, fig.measure, _f(ours, 8).strip(), verdict])
+        lines += ["", tables.render(["source", "issue 16", "measure", "ours", "within 1.5x"], cmp, align="lllrr",
+                                    title="against issue 16's table (same injected error)")]
     return "\n".join(lines)
 
 

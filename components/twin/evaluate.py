@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
+from humanpt.runtime import tables
 from humanpt.runtime.lockstep import Delivered
 from humanpt.runtime.recording import iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
@@ -164,8 +165,5 @@ def scenario_start_ns(src) -> int:
 
 
 def format_stats(title: str, stats: Stats, unit_note: str = "mm, deg") -> str:
-    lines = [f"{title} (n = {stats.n}; {unit_note})",
-             f"{'':6s}" + "".join(f"{c:>10s}" for c in COORDS)]
-    for name, v in stats.rows():
-        lines.append(f"{name:6s}" + "".join(f"{x:10.4f}" for x in v))
-    return "\n".join(lines)
+    rows = [[name, *(tables.number(float(x)) for x in v)] for name, v in stats.rows()]
+    return tables.render(["", *COORDS], rows, title=f"{title} (n = {stats.n}; {unit_note})", rule=False)

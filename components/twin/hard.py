@@ -33,6 +33,7 @@ from humanpt.controller.config import ControllerConfig
 from humanpt.controller.servo_report import servo_summary
 from humanpt.geometry.rig import flange_T_desired
 from humanpt.geometry.transforms import rotation_angle_rad
+from humanpt.runtime import tables
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 
@@ -132,13 +133,12 @@ def run_cases(scenarios=HARD_SCENARIOS, speeds=HARD_SPEEDS_MM_S, seed: int = 0, 
 
 def format_cases(cases: list[HardCase]) -> str:
     """The table ``humanpt experiment hard`` prints."""
-    head = (f"{'scenario':10s} {'mm/s':>5s} {'resets':>6s} {'outliers':>8s} {'gap fr':>6s} {'points':>6s} "
-            f"{'held':>5s} {'G MaxE mm':>9s} {'deg':>6s} {'servo max mm':>12s} {'FOV margin px':>13s} {'pass':>5s}")
-    rows = [head, "-" * len(head)]
-    for c in cases:
-        rows.append(f"{c.scenario:10s} {c.speed_mm_s:5.0f} {c.filter_resets:6d} {c.outliers:8d} "
-                    f"{c.max_gap_frames:6.1f} {c.points:6d} {c.held_points:5d} {c.g_maxe_mm:9.3f} "
-                    f"{c.g_maxe_deg:6.3f} {c.servo_max_mm:12.2f} {c.fov_margin_min_px:13.0f} {'yes' if c.passes() else 'NO':>5s}")
+    header = ["scenario", "mm/s", "resets", "outliers", "gap fr", "points", "held", "G MaxE mm", "deg",
+              "servo max mm", "FOV margin px", "pass"]
+    rows = [[c.scenario, f"{c.speed_mm_s:.0f}", c.filter_resets, c.outliers, f"{c.max_gap_frames:.1f}", c.points,
+             c.held_points, f"{c.g_maxe_mm:.3f}", f"{c.g_maxe_deg:.3f}", f"{c.servo_max_mm:.2f}",
+             f"{c.fov_margin_min_px:.0f}", "yes" if c.passes() else "NO"] for c in cases]
+    rows = [tables.render(header, rows)]
     rows.append("acceptance (issue 18): no filter reset, no gap longer than 2 frames beyond the recording "
                 "interval, G within 0.5 mm and 0.5 deg of the truth (orientation over measured points)")
     return "\n".join(rows)
