@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.cli.progress import Bars
 from humanpt.controller.config import ControllerConfig
 from humanpt.runtime import config as cfgmod
 
@@ -86,19 +87,15 @@ def report(src, cfg, run_dir: Path, wall_s: float, sim_s: float, mode: str,
     return "\n".join(lines)
 
 
-def _progress(now_s: float, duration_s: float) -> None:
-    print(f"\r  {now_s:5.1f} / {duration_s:.1f} s", end="", file=sys.stderr, flush=True)
-
-
 def run_lockstep(args, cfg, run_dir: Path) -> int:
     from humanpt.runtime.rigfile import write_rig
     from humanpt.twin.run import run
 
     write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believed in this run", overwrite=True)
     # Record once the target starts to move (the servo has acquired it by then).
-    res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
-              run_dir=run_dir, progress=_progress)
-    print(file=sys.stderr)
+    with Bars("s") as bars:
+        res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
+                  run_dir=run_dir, progress=bars.stage("twin"))
     res.write_path(run_dir / "paths" / "path-1.csv")
     print(report(res.world, cfg, run_dir, res.wall_s, res.twin_s, "lock-step"))
     return 0
@@ -121,10 +118,10 @@ def run_live(args, cfg, run_dir: Path) -> int:
             print(f"humanpt demo: mTLS, a throwaway PKI in {rt.pki}; every process a client of the router, "
                   f"which enforces the access control; tools present {rt.identity!r} (operator)", flush=True)
 
-    res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
-              overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
-              progress=_progress, secure=getattr(args, "secure", False))
-    print(file=sys.stderr)
+    with Bars("s") as bars:
+        res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
+                  overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
+                  progress=bars.stage("live"), secure=getattr(args, "secure", False))
     if res.failed:
         print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
               file=sys.stderr)
@@ -132,26 +129,6 @@ def run_live(args, cfg, run_dir: Path) -> int:
     print(report(RunOutputs(run_dir), res.config, run_dir, res.wall_s, res.duration_s, "live",
                  stop_ns=res.stop_ns))
     return 0
-
-
-class StageProgress:
-    """A progress bar per stage on stderr (``stage [#####.....] done / total s``)."""
-
-    def __init__(self, stream=sys.stderr):
-        self.stream, self.stage = stream, None
-
-    def __call__(self, stage: str, done: float, total: float) -> None:
-        if stage != self.stage:
-            if self.stage is not None:
-                print(file=self.stream)
-            self.stage = stage
-        frac = min(max(done / total, 0.0), 1.0) if total > 0 else 1.0
-        bar = "#" * round(frac * 30)
-        print(f"\r  {stage:10s} [{bar:30s}] {done:5.1f} / {total:.0f} s", end="", file=self.stream, flush=True)
-
-    def end(self) -> None:
-        if self.stage is not None:
-            print(file=self.stream)
 
 
 def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
@@ -209,11 +186,11 @@ def run_calibrate(args, run_dir: Path) -> int:
     rig = load_rig(args.rig) if args.rig else None
     print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}; "
           f"recording the teach-and-play run to {run_dir}/", flush=True)
-    bar = StageProgress()
+    bar = Bars("s")
     try:
         res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar)
     finally:
-        bar.end()
+        bar.close()
     write_rig(run_dir / "rig.toml", res.rig, "the rig humanpt demo --calibrate ended with", overwrite=True)
     print(calibrate_report(res))
     print(f"calibrated rig: {run_dir / 'rig.toml'}")
