@@ -250,7 +250,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--timeout", type=float, default=180.0, metavar="S",
                    help="seconds a run may take beyond its twin time (default 180)")
 
-    p = sub.add_parser("path", help="recorded paths: smooth (RTS) or export as a VAL II program",
+    p = sub.add_parser("path", help="recorded paths: smooth (RTS), fit lines and arcs, export as a VAL II program",
                        description="Work offline on path files written while recording (CSV in mm and degrees: "
                        "<run dir>/paths/path-<n>.csv).")
     psub = p.add_subparsers(dest="path_verb", metavar="ACTION")
@@ -272,6 +272,22 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--speed", type=float, default=20.0, help="SPEED in percent (default 20)")
+
+    q = psub.add_parser("fit", help="the path as straight lines and circular arcs: a seam file and a plot",
+                        description="Split a path file into lines and arcs (corners where the direction changes, "
+                        "dwells, outliers rejected; the torch orientation per segment) and write a seam file "
+                        "(JSON, mm and deg) and a PNG of the path, the segments and the residuals.")
+    q.add_argument("input", help="a path file (CSV)")
+    q.add_argument("--output", "-o", help="the seam file (default: INPUT with .seam.json)")
+    q.add_argument("--plot", help="the picture (default: the seam file's name with .png)")
+    q.add_argument("--no-plot", action="store_true", help="write no picture")
+    q.add_argument("--tolerance", type=float, default=0.2, metavar="MM",
+                   help="RMS a segment may deviate from its line or arc beyond the path's noise (default 0.2)")
+    q.add_argument("--corner-deg", type=float, default=20.0, metavar="DEG",
+                   help="a direction change above this between segments is a corner (default 20)")
+    q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
+                   help="which point's path (default: the tip when recorded)")
+    q.add_argument("--overwrite", action="store_true", help="replace the outputs if they exist (never the input)")
 
     from humanpt.cli import calibrate as calibrate_cli
 
@@ -461,6 +477,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     if args.verb == "path":
         if args.path_verb in ("smooth", "val"):
             return commands.path_cmd(args)
+        if args.path_verb == "fit":
+            from humanpt.cli.seam import path_fit
+
+            return path_fit(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":

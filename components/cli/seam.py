@@ -1,0 +1,53 @@
+"""``humanpt path fit``: the taught path as lines and arcs (humanpt.seam), a seam file and
+a picture.  Parses and prints; the work is :func:`humanpt.seam.fit.fit_path`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from humanpt.runtime import tables
+
+
+def path_fit(args) -> int:
+    from humanpt.controller import pathfile
+    from humanpt.seam import seamfile
+    from humanpt.seam.fit import FitConfig, fit_path
+
+    src = Path(args.input)
+    out = Path(args.output) if args.output else src.with_suffix(".seam.json")
+    png = Path(args.plot) if args.plot else out.with_name(out.name.removesuffix(".json") + ".png")
+    for f in (out, png):
+        if f.exists() and f.resolve() == src.resolve():
+            raise ValueError(f"{f}: is the input; write the result to another file")
+        if f.exists() and not args.overwrite:
+            raise ValueError(f"{f}: exists; give --overwrite to replace it")
+    p = pathfile.read(src)
+    which = args.point
+    if which == "auto":
+        which = "tip" if p.x_tip is not None else "G"
+    x = p.points(which)
+    cov = p.cov_tip_mm2 if which == "tip" else p.cov_g_mm2
+    cfg = FitConfig(tolerance_mm=args.tolerance, corner_deg=args.corner_deg)
+    seam = fit_path(x, p.stamp_ns, cov, cfg, meta={"path": str(src), "point": which, "frame": "world"})
+    seamfile.write(out, seam, overwrite=args.overwrite)
+    rows = []
+    for i, s in enumerate(seam.segments):
+        shape = (f"r {s.radius_mm:.2f} mm, {s.sweep_deg:.1f} deg" if s.kind == "arc" else "")
+        rows.append([i, s.kind, f"{s.first}-{s.last}", f"{s.length_mm:.1f}", shape, f"{s.residual_rms_mm:.3f}",
+                     f"{s.residual_max_mm:.3f}", len(s.outliers)])
+    print(f"humanpt path fit: {len(x)} points of {which} -> {len(seam.segments)} segments, {len(seam.corners)} "
+          f"corners, {len(seam.dwells)} dwells, {len(seam.outliers)} outliers; residual RMS "
+          f"{seam.residual_rms_mm:.3f} mm (path noise {seam.noise_mm:.3f} mm, tolerance {cfg.tolerance_mm:g} mm)")
+    print(tables.render(["#", "kind", "points", "length mm", "shape", "RMS mm", "max mm", "outliers"], rows,
+                        align="rllrlrrr"))
+    if seam.corners:
+        print(tables.render(["corner", "x mm", "y mm", "z mm", "turn deg"],
+                            [[f"{c.before}/{c.after}", *(f"{v:.2f}" for v in c.point_mm), f"{c.angle_deg:.1f}"]
+                             for c in seam.corners]))
+    if not args.no_plot:
+        from humanpt.seam.plot import plot_seam
+
+        plot_seam(seam, x[:, :3], png, title=f"{src.name}: {which}")
+        print(f"plot: {png}")
+    print(f"seam: {out}")
+    return 0

@@ -1,0 +1,134 @@
+"""humanpt path fit (issue 21.1): lines, arcs, corners, dwells and outliers found on paths
+whose true shape is known by construction (or from the scenario's own geometry)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from humanpt.seam import seamfile
+from humanpt.seam.fit import FitConfig, FitError, distance_to_seam, fit_path
+from tests.conftest import ROOT, run_cli
+
+SPEED_MM_S, PERIOD_S = 20.0, 0.28  # the recorder's spacing at the paper's teaching speed
+
+
+def sample_polyline(vertices, rng, noise_mm=0.05, dwell_s=1.5):
+    """Points every SPEED*PERIOD mm along the polyline, Gaussian noise, a dwell at the end;
+    the torch at a constant 15 deg tilt.  -> (x (N, 6), stamp_ns (N,))."""
+    v = np.asarray(vertices, dtype=float)
+    step = SPEED_MM_S * PERIOD_S
+    pts = []
+    for a, b in zip(v[:-1], v[1:], strict=True):
+        n = max(1, int(np.linalg.norm(b - a) // step))
+        pts += [a + (b - a) * k / n for k in range(n)]
+    pts += [v[-1]] * int(dwell_s / PERIOD_S)
+    p = np.array(pts) + rng.normal(0, noise_mm, (len(pts), 3))
+    x = np.column_stack([p, np.tile([0.0, 15.0, 180.0], (len(p), 1))])
+    return x, (np.arange(len(p)) * PERIOD_S * 1e9).astype(np.int64)
+
+
+TRAPEZIUM = [(0, 0, 0), (451, 0, 0), (406, 45, 0), (45, 45, 0), (0, 0, 0)]  # Fig. 9: b1 451, b2 361, h 45
+
+
+def test_the_trapezium_is_four_lines_with_corners_at_its_vertices():
+    x, t = sample_polyline(TRAPEZIUM, np.random.default_rng(0))
+    seam = fit_path(x, t)
+    assert [s.kind for s in seam.segments] == ["line"] * 4
+    assert len(seam.corners) == 3  # the start and the end are no corners
+    for c, v in zip(seam.corners, TRAPEZIUM[1:4], strict=True):
+        assert np.linalg.norm(np.subtract(c.point_mm, v)) < 0.5, (c, v)
+    assert seam.residual_rms_mm < 0.2
+    assert [round(c.angle_deg) for c in seam.corners] == [135, 45, 45]
+    assert len(seam.dwells) == 1 and seam.dwells[0].duration_s >= 1.0
+    np.testing.assert_allclose(seam.segments[0].start_ypr_deg, [0.0, 15.0, 180.0], atol=0.01)
+
+
+def test_an_arc_and_a_line_with_the_arcs_radius():
+    r, centre = 60.0, np.array([100.0, 50.0, 0.0])
+    ang = np.linspace(math.radians(-90), 0.0, 16)  # a quarter arc, 5.9 mm apart
+    arc = centre + r * np.column_stack([np.cos(ang), np.sin(ang), np.zeros_like(ang)])
+    line = arc[-1] + np.outer(np.arange(1, 12) * 5.6, [0.0, 1.0, 0.0])  # tangent on, 62 mm
+    p = np.vstack([arc, line]) + np.random.default_rng(1).normal(0, 0.03, (len(arc) + len(line), 3))
+    x = np.column_stack([p, np.zeros((len(p), 3))])
+    seam = fit_path(x, (np.arange(len(p)) * 0.28e9).astype(np.int64))
+    kinds = [s.kind for s in seam.segments]
+    assert kinds == ["arc", "line"], kinds
+    a = seam.segments[0]
+    assert abs(a.radius_mm - r) < 0.005 * r and abs(a.sweep_deg - 90) < 5
+    np.testing.assert_allclose(a.centre_mm, centre, atol=0.5)
+    assert not seam.corners  # the line leaves the arc on its tangent
+
+
+def test_an_outlier_is_rejected_and_does_not_move_the_line():
+    rng = np.random.default_rng(2)
+    x, t = sample_polyline([(0, 0, 0), (200, 0, 0)], rng, dwell_s=0)
+    x[17, 1] += 4.0  # a reflection mistaken for a source, say
+    seam = fit_path(x, t)
+    assert [s.kind for s in seam.segments] == ["line"] and seam.outliers == (17,)
+    assert abs(seam.segments[0].start_mm[1]) < 0.05 and abs(seam.segments[0].end_mm[1]) < 0.05
+
+
+def test_distance_to_seam_by_hand():
+    x, t = sample_polyline([(0, 0, 0), (100, 0, 0)], np.random.default_rng(3), noise_mm=0.0, dwell_s=0)
+    seam = fit_path(x, t)
+    d = distance_to_seam(seam, np.array([[50.0, 3.0, 4.0], [-3.0, 4.0, 0.0]]))
+    np.testing.assert_allclose(d, [5.0, 5.0], atol=1e-6)  # 3-4-5, beside and beyond the end
+
+
+@pytest.mark.parametrize("x, says", [
+    (np.zeros((0, 6)), "0 points"),
+    (np.zeros((1, 6)), "1 point "),
+    (np.array([[0, 0, 0, 0, 0, 0], [1, np.nan, 0, 0, 0, 0], [2, 0, 0, 0, 0, 0]], float), "non-finite values at point 1"),
+    (np.zeros((3, 3)), "(N, 6)"),
+])
+def test_bad_paths_are_refused(x, says):
+    with pytest.raises(FitError, match=None) as e:
+        fit_path(x)
+    assert says in str(e.value)
+
+
+def test_bad_parameters_are_refused():
+    with pytest.raises(FitError, match="tolerance_mm"):
+        FitConfig(tolerance_mm=0.0)
+
+
+def test_the_seam_file_round_trips_and_names_a_bad_field(tmp_path):
+    x, t = sample_polyline(TRAPEZIUM, np.random.default_rng(4))
+    seam = fit_path(x, t, meta={"path": "synthetic", "point": "tip"})
+    f = seamfile.write(tmp_path / "s.json", seam)
+    back = seamfile.read(f)
+    assert back.segments == seam.segments and back.corners == seam.corners and back.dwells == seam.dwells
+    with pytest.raises(seamfile.SeamFileError, match="exists"):
+        seamfile.write(f, seam)
+    data = json.loads(f.read_text())
+    data["segments"][2]["end_mm"] = [1.0, "x", 2.0]
+    f.write_text(json.dumps(data))
+    with pytest.raises(seamfile.SeamFileError, match=r"segments\[2\]: end_mm"):
+        seamfile.read(f)
+
+
+def test_path_fit_on_the_recorded_arc(tmp_path):
+    # recordings/arc: the paper's rotating base, G on a radius of 246 mm (Section 6, Fig. 8)
+    src = tmp_path / "path.csv"
+    src.write_bytes((ROOT / "recordings" / "arc" / "paths" / "path-1.csv").read_bytes())
+    r = run_cli("path", "fit", str(src))
+    assert r.returncode == 0, r.stdout + r.stderr
+    seam = seamfile.read(tmp_path / "path.seam.json")
+    arcs = [s for s in seam.segments if s.kind == "arc"]
+    assert len(arcs) == 1 and abs(arcs[0].radius_mm - 246.0) < 0.005 * 246.0, seam.segments
+    assert (tmp_path / "path.seam.png").stat().st_size > 10_000
+    again = run_cli("path", "fit", str(src))
+    assert again.returncode == 2 and "exists" in again.stderr
+
+
+def test_path_fit_of_a_bad_path_writes_nothing(tmp_path):
+    src = tmp_path / "one.csv"
+    lines = (ROOT / "recordings" / "arc" / "paths" / "path-1.csv").read_text().splitlines()
+    src.write_text("\n".join(lines[:2]) + "\n")  # the header and one point
+    r = run_cli("path", "fit", str(src))
+    assert r.returncode == 2 and "1 point" in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["one.csv"]
