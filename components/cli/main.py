@@ -289,6 +289,23 @@ def build_parser() -> argparse.ArgumentParser:
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--overwrite", action="store_true", help="replace the outputs if they exist (never the input)")
 
+    q = psub.add_parser("retime", help="a seam in time: constant feed, bounded acceleration and jerk",
+                        description="Sample a seam file (from path fit) every controller cycle at a constant feed "
+                        "along each run between corners (a stop at each corner, the torch turned on the spot, a "
+                        "hold at each dwell), with cycloidal speed ramps that keep acceleration and jerk bounded, "
+                        "within the paper's 100 mm/s and 60 deg/s. Writes a CSV (t_s, x..phi, speed).")
+    q.add_argument("seam", help="a seam file (JSON)")
+    q.add_argument("--output", "-o", help="the timed CSV (default: SEAM's name with .timed.csv)")
+    q.add_argument("--speed", type=float, default=20.0, metavar="MM_S", help="feed along the seam (default 20)")
+    q.add_argument("--accel", type=float, default=200.0, metavar="MM_S2", help="acceleration limit (default 200)")
+    q.add_argument("--jerk", type=float, default=2000.0, metavar="MM_S3", help="jerk limit (default 2000)")
+    q.add_argument("--max-speed", type=float, default=100.0, metavar="MM_S", help="speed limit (default 100)")
+    q.add_argument("--max-angular", type=float, default=60.0, metavar="DEG_S",
+                   help="the torch's angular speed limit (default 60)")
+    q.add_argument("--cycle-ms", type=float, default=28.0, help="sample period, the controller's cycle (default 28)")
+    q.add_argument("--no-dwells", action="store_true", help="do not hold at the seam's dwells")
+    q.add_argument("--overwrite", action="store_true", help="replace the output if it exists (never the input)")
+
     from humanpt.cli import calibrate as calibrate_cli
 
     calibrate_cli.add_parsers(sub)
@@ -481,6 +498,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             from humanpt.cli.seam import path_fit
 
             return path_fit(args)
+        if args.path_verb == "retime":
+            from humanpt.cli.seam import path_retime
+
+            return path_retime(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":

@@ -51,3 +51,32 @@ def path_fit(args) -> int:
         print(f"plot: {png}")
     print(f"seam: {out}")
     return 0
+
+
+def path_retime(args) -> int:
+    from humanpt.seam import seamfile
+    from humanpt.seam.retime import RetimeConfig, peaks, retime, write_csv
+
+    src = Path(args.seam)
+    out = Path(args.output) if args.output else src.with_name(src.name.removesuffix(".json") + ".timed.csv")
+    if out.exists() and out.resolve() == src.resolve():
+        raise ValueError(f"{out}: is the input; write the result to another file")
+    if out.exists() and not args.overwrite:
+        raise ValueError(f"{out}: exists; give --overwrite to replace it")
+    seam = seamfile.read(src)
+    cfg = RetimeConfig(speed_mm_s=args.speed, accel_mm_s2=args.accel, jerk_mm_s3=args.jerk,
+                       max_speed_mm_s=args.max_speed, max_angular_deg_s=args.max_angular, cycle_ms=args.cycle_ms,
+                       dwells=not args.no_dwells)
+    timed = retime(seam, cfg)
+    write_csv(out, timed, overwrite=args.overwrite)
+    pk = peaks(timed)
+    print(f"humanpt path retime: {len(seam.segments)} segments in {len(timed.feeds_mm_s)} runs (a stop at each "
+          f"corner), {len(timed.t_s)} samples every {cfg.cycle_ms:g} ms, {timed.duration_s:.2f} s")
+    print(tables.render(["", "limit", "planned (samples)"], [
+        ["feed mm/s", f"{cfg.speed_mm_s:g}", ", ".join(f"{v:.2f}" for v in timed.feeds_mm_s)],
+        ["speed mm/s", f"{cfg.max_speed_mm_s:g}", f"{pk['speed_mm_s']:.2f}"],
+        ["acceleration mm/s^2", f"{cfg.accel_mm_s2:g}", f"{pk['accel_mm_s2']:.1f}"],
+        ["jerk mm/s^3", f"{cfg.jerk_mm_s3:g}", f"{pk['jerk_mm_s3']:.0f}"],
+        ["angular speed deg/s", f"{cfg.max_angular_deg_s:g}", f"{pk['angular_deg_s']:.2f}"]], align="lrl"))
+    print(f"timed path: {out}")
+    return 0

@@ -1,0 +1,109 @@
+"""humanpt path retime (issue 21.2): constant feed, bounded acceleration and jerk, a stop
+at each corner, the torch's angular limit, samples on the controller's cycle.  The
+samples are checked by finite differences here, against the limits given."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from humanpt.seam.fit import Corner, Dwell, FitConfig, Seam, Segment
+from humanpt.seam.retime import RetimeConfig, RetimeError, retime
+from tests.conftest import run_cli
+
+
+def line(a, b, ypr0=(0, 15, 180), ypr1=(0, 15, 180)) -> Segment:
+    return Segment("line", 0, 0, tuple(map(float, a)), tuple(map(float, b)), tuple(map(float, ypr0)),
+                   tuple(map(float, ypr1)), 0.0, 0.0, 10)
+
+
+def seam_of(segments, corners=(), dwells=()) -> Seam:
+    return Seam(tuple(segments), tuple(corners), tuple(dwells), (), 0.0, FitConfig(), 0)
+
+
+def diffs(timed):
+    dt = np.diff(timed.t_s)
+    v = np.diff(timed.x[:, :3], axis=0) / dt[:, None]
+    a = np.diff(v, axis=0) / dt[1:, None]
+    j = np.diff(a, axis=0) / dt[2:, None]
+    return dt, np.linalg.norm(v, axis=1), np.linalg.norm(a, axis=1), np.linalg.norm(j, axis=1)
+
+
+L_CORNER = seam_of([line((0, 0, 0), (100, 0, 0)), line((100, 0, 0), (100, 80, 0))],
+                   corners=[Corner((100.0, 0.0, 0.0), 90.0, 0, 1)])
+
+
+def test_feed_limits_and_the_stop_at_the_corner():
+    cfg = RetimeConfig(speed_mm_s=50, accel_mm_s2=300, jerk_mm_s3=3000, cycle_ms=28)
+    tm = retime(L_CORNER, cfg)
+    dt, v, a, j = diffs(tm)
+    np.testing.assert_allclose(dt, 0.028, atol=1e-12)  # every controller cycle
+    assert v.max() <= 50 * (1 + 1e-9) and v.max() > 49.9  # the feed is reached on both 80+ mm runs
+    assert a.max() <= 300 and j.max() <= 3000 * 1.05  # (finite differences of a smooth ramp)
+    np.testing.assert_allclose(tm.x[0, :3], [0, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(tm.x[-1, :3], [100, 80, 0], atol=1e-9)
+    at_corner = np.flatnonzero(np.linalg.norm(tm.x[:, :3] - [100, 0, 0], axis=1) < 1e-6)
+    assert len(at_corner) >= 1 and tm.speed_mm_s[at_corner].max() == 0.0  # it stops there
+    # the path between samples is the seam: every sample on one of the two lines
+    off = np.minimum(np.abs(tm.x[:, 1]) + np.abs(tm.x[:, 2]), np.abs(tm.x[:, 0] - 100) + np.abs(tm.x[:, 2]))
+    assert off.max() < 1e-9
+
+
+def test_the_torch_turn_lowers_the_feed_to_the_angular_limit():
+    turn = seam_of([line((0, 0, 0), (30, 0, 0), (0, 15, 180), (90, 15, 180))])
+    tm = retime(turn, RetimeConfig(speed_mm_s=100, accel_mm_s2=5000, jerk_mm_s3=1e6, max_angular_deg_s=60))
+    r = Rotation.from_euler("ZYX", tm.x[:, 3:], degrees=True)
+    w = np.degrees((r[:-1].inv() * r[1:]).magnitude()) / np.diff(tm.t_s)
+    assert w.max() <= 60 * (1 + 1e-6)
+    assert tm.feeds_mm_s[0] <= 60 * 30 / 90 + 1e-9  # 90 deg over 30 mm at 60 deg/s: 20 mm/s at most
+    np.testing.assert_allclose(tm.x[-1, 3:], [90, 15, 180], atol=1e-6)
+
+
+def test_a_corner_with_a_new_torch_angle_turns_on_the_spot_within_limits():
+    s = seam_of([line((0, 0, 0), (50, 0, 0)), line((50, 0, 0), (50, 50, 0), (20, 15, 180), (20, 15, 180))],
+                corners=[Corner((50.0, 0.0, 0.0), 90.0, 0, 1)])
+    tm = retime(s, RetimeConfig(max_angular_deg_s=30))
+    r = Rotation.from_euler("ZYX", tm.x[:, 3:], degrees=True)
+    w = np.degrees((r[:-1].inv() * r[1:]).magnitude()) / np.diff(tm.t_s)
+    turning = w > 1e-6
+    assert turning.any() and w.max() <= 30 * (1 + 1e-6)
+    moving = np.linalg.norm(np.diff(tm.x[:, :3], axis=0), axis=1) > 1e-9
+    assert not (turning & moving).any()  # it turns standing still at the corner
+
+
+def test_a_dwell_is_held():
+    s = seam_of([line((0, 0, 0), (40, 0, 0))], dwells=[Dwell((40.0, 0.0, 0.0), 0, 0, 1.5)])
+    tm = retime(s)
+    still = np.all(np.abs(tm.x[:, :3] - [40, 0, 0]) < 1e-9, axis=1)
+    assert tm.t_s[still][-1] - tm.t_s[still][0] >= 1.5
+    assert retime(s, RetimeConfig(dwells=False)).duration_s < tm.duration_s - 1.4
+
+
+def test_a_short_run_never_reaches_the_feed_but_keeps_the_limits():
+    tm = retime(seam_of([line((0, 0, 0), (5, 0, 0))]), RetimeConfig(speed_mm_s=100, accel_mm_s2=200))
+    _, v, a, _ = diffs(tm)
+    assert tm.feeds_mm_s[0] < 100 and a.max() <= 200
+    np.testing.assert_allclose(tm.x[-1, :3], [5, 0, 0], atol=1e-9)
+
+
+@pytest.mark.parametrize("kw, says", [({"speed_mm_s": 150}, "above max_speed"), ({"accel_mm_s2": 0}, "accel"),
+                                      ({"cycle_ms": math.nan}, "cycle_ms")])
+def test_bad_parameters_are_refused(kw, says):
+    with pytest.raises(RetimeError, match=says):
+        RetimeConfig(**kw)
+
+
+def test_cli_refuses_a_speed_above_the_limit_and_writes_nothing(tmp_path):
+    from humanpt.seam import seamfile
+
+    f = seamfile.write(tmp_path / "s.json", L_CORNER)
+    r = run_cli("path", "retime", str(f), "--speed", "150")
+    assert r.returncode == 2 and "above max_speed" in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json"]
+    ok = run_cli("path", "retime", str(f), "--speed", "40")
+    assert ok.returncode == 0, ok.stderr
+    rows = (tmp_path / "s.timed.csv").read_text().splitlines()
+    assert rows[0].startswith("index,t_s,x_mm") and len(rows) > 100
