@@ -88,6 +88,9 @@ REPLIES = {
     "save": ("path_saved", "save_failed"),  # what the controller's path writer did
     "calibrate": ("calibration_started",),
     "playback": ("playback_started",),
+    "playback_pause": ("playback_paused",),
+    "playback_resume": ("playback_resumed",),
+    "playback_rate": ("playback_rate",),
     "reset_fault": ("fault_cleared", "no_fault"),
     "alter_on": ("alter_on",),
     "alter_off": ("alter_off",),
@@ -650,18 +653,27 @@ def _add_actions(asub) -> dict[str, str]:
     q.add_argument("--finish", action="store_true", help="end the capture and calibrate")
     q = action(
         "playback",
-        help="replay the recorded path (or a path file) with the tool",
+        help="replay the recorded path (or a path file, or a seam) with the tool",
         description="The tool tip follows the path just recorded, or the path in FILE (a path "
-        "CSV written while recording, mm and degrees).",
+        "CSV written while recording, mm and degrees), or the seam in FILE (a .json seam file "
+        "from `humanpt path fit`: re-timed at --speed with a stop at each corner, see "
+        "`humanpt path retime`). pause, resume and rate act on a running playback.",
     )
-    q.add_argument("file", nargs="?", metavar="FILE.csv")
-    q.add_argument("--speed", type=float, help="tool speed, mm/s (default: the controller's)")
+    q.add_argument("file", nargs="?", metavar="FILE.csv|SEAM.json")
+    q.add_argument("--speed", type=float, help="tool speed (a seam's feed), mm/s (default: the controller's; "
+                   "a seam's 20)")
     q.add_argument(
         "--point",
         choices=["auto", "G", "tip"],
         default="auto",
         help="which point of FILE (default: the tip when recorded)",
     )
+    action("pause", help="pause a running playback (the tool stands on the path)",
+           description="Controller command: pause the playback; resume goes on from there.")
+    action("resume", help="resume a paused playback", description="Controller command: resume the playback.")
+    q = action("rate", help="play back faster or slower (0.05-2 x the playback's speed)",
+               description="Controller command: scale the running playback's speed (its timing, for a seam).")
+    q.add_argument("rate", type=float, help="factor, 0.05 to 2 (1: as planned)")
     for verb, text in (
         ("hold", "stop on the current location"),
         ("track", "track the target (visual servo)"),
@@ -690,6 +702,15 @@ def add_parser(sub, add_common) -> argparse.ArgumentParser:
     )
     _add_actions(p.add_subparsers(dest="console_verb", metavar="ACTION"))
     return p
+
+
+def seam_playback(seam_file: str, speed_mm_s: float | None) -> dict:
+    """The playback arguments of a seam file: re-timed at ``speed_mm_s`` (default 20)."""
+    from humanpt.seam import seamfile
+    from humanpt.seam.retime import RetimeConfig, playback_args, retime
+
+    timed = retime(seamfile.read(seam_file), RetimeConfig(speed_mm_s=speed_mm_s or 20.0))
+    return playback_args(timed)
 
 
 def _do(con: Console, a) -> int:
@@ -722,11 +743,17 @@ def _do(con: Console, a) -> int:
         args = {}
         if a.speed is not None:
             args["speed_mm_s"] = a.speed
-        if a.file:
+        if a.file and a.file.endswith(".json"):
+            args = seam_playback(a.file, a.speed)
+        elif a.file:
             from humanpt.controller import pathfile
 
             args["points"] = pathfile.read(a.file).points(a.point).tolist()
         return con.command("playback", args)
+    if v in ("pause", "resume"):
+        return con.command(f"playback_{v}")
+    if v == "rate":
+        return con.command("playback_rate", {"rate": a.rate})
     if v == "capture":
         return con.tell("finish" if a.finish else "capture", component="calibrate")
     if v == "reset-fault":

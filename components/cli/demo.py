@@ -152,8 +152,13 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
     lines += ["", "against the seam (distance to the intended seam; the paper's Table 3 MAE is "
               f"{' / '.join(f'{v:g}' for v in paper_mae)} mm in x / y / z)",
               row("taught path (the driver's tip)", res.taught_mm),
-              row("taught path, RTS-smoothed (what is played)", res.smoothed_mm),
-              row("played back (the torch's true path)", res.played_mm)]
+              row("taught path, RTS-smoothed" + (" (what is played)" if res.play == "smoothed" else ""),
+                  res.smoothed_mm)]
+    if res.fitted_mm is not None:
+        kinds = [sg.kind for sg in res.fitted.segments]
+        lines.append(row(f"taught seam, fitted: {kinds.count('line')} lines, {kinds.count('arc')} arcs"
+                         + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm))
+    lines.append(row("played back (the torch's true path)", res.played_mm))
     if res.taught_truth is not None:
         lines += ["", evaluate_format(res.taught_truth)]
     if res.warnings:

@@ -306,6 +306,23 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--no-dwells", action="store_true", help="do not hold at the seam's dwells")
     q.add_argument("--overwrite", action="store_true", help="replace the output if it exists (never the input)")
 
+    q = psub.add_parser("play", help="play a seam on the robot (the running cell's controller)",
+                        description="Send a seam file to the running controller as a playback: re-timed at "
+                        "--speed with a stop at each corner (humanpt path retime), through the normal command "
+                        "path; pause, resume and rate with `humanpt console pause|resume|rate R`. The run's "
+                        "recordings keep the robot's path: `humanpt path compare SEAM RUN_DIR`.")
+    q.add_argument("seam", help="a seam file (JSON, from path fit)")
+    q.add_argument("--speed", type=float, default=20.0, metavar="MM_S", help="feed along the seam (default 20)")
+    q.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the controller's answer")
+    _add_common(q)
+    q = psub.add_parser("compare", help="the tool's played path (from a run's recordings) against a seam",
+                        description="Read the robot's reported path during the run's last playback (robot "
+                        "states times the controller's tool) and report its distance to the seam and how much "
+                        "of the seam it covered.")
+    q.add_argument("seam", help="a seam file (JSON)")
+    q.add_argument("run", help="the run directory the playback was recorded in")
+    q.add_argument("--cover-mm", type=float, default=1.0, help="coverage radius, mm (default 1)")
+
     from humanpt.cli import calibrate as calibrate_cli
 
     calibrate_cli.add_parsers(sub)
@@ -498,10 +515,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             from humanpt.cli.seam import path_fit
 
             return path_fit(args)
-        if args.path_verb == "retime":
-            from humanpt.cli.seam import path_retime
+        if args.path_verb in ("retime", "play", "compare"):
+            from humanpt.cli import seam as seam_cli
 
-            return path_retime(args)
+            return getattr(seam_cli, f"path_{args.path_verb}")(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":

@@ -80,3 +80,30 @@ def path_retime(args) -> int:
         ["angular speed deg/s", f"{cfg.max_angular_deg_s:g}", f"{pk['angular_deg_s']:.2f}"]], align="lrl"))
     print(f"timed path: {out}")
     return 0
+
+
+def path_play(args) -> int:
+    """The seam played by the running cell's controller, as `humanpt console playback SEAM`."""
+    from humanpt.cli import console as console_cli
+
+    if not Path(args.seam).exists():
+        raise FileNotFoundError(f"{args.seam}: no such seam file")
+    args.console_verb, args.file, args.point = "playback", args.seam, "auto"
+    if not args.seam.endswith(".json"):
+        raise ValueError(f"{args.seam}: give a seam file (.json, from humanpt path fit)")
+    return console_cli.run(args)
+
+
+def path_compare(args) -> int:
+    from humanpt.seam import seamfile
+    from humanpt.seam.compare import compare, played_tool_path
+
+    seam = seamfile.read(args.seam)
+    played = played_tool_path(args.run)
+    c = compare(seam, played, cover_mm=args.cover_mm)
+    print(f"humanpt path compare: the tool's path as the robot reported it ({c.window}; {c.n} states) "
+          f"against {args.seam}")
+    print(tables.render(["", "mm"], [["RMS distance to the seam", f"{c.rms_mm:.3f}"],
+                                     ["95th percentile", f"{c.p95_mm:.3f}"], ["max", f"{c.max_mm:.3f}"],
+                                     [f"seam covered within {c.cover_mm:g} mm", f"{100 * c.covered:.1f} %"]]))
+    return 0

@@ -402,12 +402,25 @@ class ControllerCore(Core):
         return outs
 
     # -- playback -------------------------------------------------------------------------------
-    def _start_playback(self, points_mm_deg: np.ndarray, speed_mm_s: float) -> None:
+    def _start_playback(self, points_mm_deg: np.ndarray, speed_mm_s: float, times_s: np.ndarray | None = None
+                        ) -> None:
+        """Play ``points_mm_deg`` (N, 6) tool poses at ``speed_mm_s`` along them, or, with
+        ``times_s`` (N,) (a re-timed seam: humanpt path retime), reaching each point at its
+        time from the start (the feed, its ramps and stops are the timing's)."""
         tips = np.array([_m(transform_from_x(p)) for p in points_mm_deg])
         flanges = np.array([t @ invert_transform(self.flange_T_tool) for t in tips])
         seg = np.linalg.norm(np.diff(tips[:, :3, 3], axis=0), axis=1)
         self.playback = {"flanges": flanges, "tips": tips, "s": np.r_[0.0, np.cumsum(seg)], "pos": 0.0,
-                         "speed": speed_mm_s * 1e-3, "approach": True}
+                         "speed": speed_mm_s * 1e-3, "approach": True, "paused": False, "rate": 1.0,
+                         "times": None if times_s is None else np.asarray(times_s, dtype=float) - times_s[0],
+                         "tau": 0.0}
+
+    def _too_fast(self, points_mm_deg: np.ndarray, times_s: np.ndarray) -> bool:
+        """Would the timing move the tool faster than max_speed_mm_s anywhere (1 % slack)?"""
+        d = np.linalg.norm(np.diff(points_mm_deg[:, :3], axis=0), axis=1)
+        dt = np.diff(times_s)
+        moving = d > 1e-9
+        return bool(np.any(moving & (d > 1.01 * self.config.max_speed_mm_s * np.maximum(dt, 0.0))))
 
     def _carrot(self, s: float) -> tuple[np.ndarray, np.ndarray]:
         """The flange pose at arc length s (m) along the path, and the path's tool velocity."""
@@ -432,10 +445,24 @@ class ControllerCore(Core):
             if step.error_translation_m < 0.2e-3 and step.error_rotation_rad < np.radians(0.2):
                 pb_["approach"] = False
             return step, desired, False
+        if pb_["times"] is not None:  # timed: the carrot is where the timing says at tau
+            pb_["pos"] = float(np.interp(pb_["tau"], pb_["times"], pb_["s"]))
         target, v = self._carrot(pb_["pos"])
+        if pb_["times"] is not None:
+            ahead = float(np.interp(pb_["tau"] + self.dt * pb_["rate"], pb_["times"], pb_["s"]))
+            v = (self._carrot(ahead)[0][:3, 3] - target[:3, 3]) / self.dt if ahead > pb_["pos"] else np.zeros(3)
+        else:
+            v = v * pb_["rate"]
+        if pb_["paused"]:  # stand at the carrot: no feed-forward, no progress
+            step, desired = self._goto(world_T_flange, target)
+            return step, desired, False
         step, desired = self._goto(world_T_flange, target, v_ff=v)
         if step.error_translation_m < self.config.playback_max_lag_mm * 1e-3:
-            pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * self.dt)
+            if pb_["times"] is not None:
+                pb_["tau"] = min(pb_["times"][-1], pb_["tau"] + self.dt * pb_["rate"])
+                pb_["pos"] = float(np.interp(pb_["tau"], pb_["times"], pb_["s"]))
+            else:
+                pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * pb_["rate"] * self.dt)
         else:
             # The carrot waits for the lagging robot: then no feed-forward either, or the
             # robot would settle v / K past the waiting carrot (5 mm at 20 mm/s, K = 4/s),
@@ -491,9 +518,29 @@ class ControllerCore(Core):
             if len(pts) < 1:
                 return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
                                    "playback: no points given and no path recorded")]
-            self._start_playback(pts, speed)
+            times = args.get("times_s")
+            if times is not None and ("points" not in args or len(times) != len(pts)
+                                      or np.any(np.diff(np.asarray(times, dtype=float)) < 0)):
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
+                                   "playback: times_s needs points, one time per point, never decreasing")]
+            if times is not None and self._too_fast(pts, np.asarray(times, dtype=float)):
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
+                                   f"playback: the timing asks for more than max_speed_mm_s "
+                                   f"{self.config.max_speed_mm_s:g}")]
+            self._start_playback(pts, speed, None if times is None else np.asarray(times, dtype=float))
             self.mode = pb.CONTROL_MODE_PLAYBACK
-            return info("playback_started", f"{len(pts)} points at {speed:g} mm/s")
+            how = f"timed, {times[-1] - times[0]:.1f} s" if times is not None else f"at {speed:g} mm/s"
+            return info("playback_started", f"{len(pts)} points {how}")
+        if verb in ("playback_pause", "playback_resume", "playback_rate"):
+            if self.playback is None or self.mode != pb.CONTROL_MODE_PLAYBACK:
+                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"{verb}: no playback running")]
+            if verb == "playback_rate":
+                self.playback["rate"] = float(args.get("rate", 1.0))
+                return info("playback_rate", f"playback at {self.playback['rate']:g} x its speed")
+            self.playback["paused"] = verb == "playback_pause"
+            if self.playback["paused"]:
+                return info("playback_paused", "playback paused (standing on the path)")
+            return info("playback_resumed", "playback resumed")
         raise AssertionError(f"check_command let {verb!r} through")  # pragma: no cover
 
 
@@ -505,7 +552,10 @@ COMMAND_ARGS: dict[str, dict[str, Any]] = {
     "record_start": _NO_ARGS, "record_stop": _NO_ARGS,
     "save": {"file": str, "overwrite": bool},
     "calibrate": {"samples": Annotated[int, Range(6, 100_000, "samples")], "pivot_mm": tuple[Mm, Mm, Mm]},
-    "playback": {"points": tuple[tuple[Mm, Mm, Mm, Deg, Deg, Deg], ...], "speed_mm_s": SpeedMmS},
+    "playback": {"points": tuple[tuple[Mm, Mm, Mm, Deg, Deg, Deg], ...], "speed_mm_s": SpeedMmS,
+                 "times_s": tuple[Annotated[float, Range(0.0, 1e6, "s")], ...]},
+    "playback_pause": _NO_ARGS, "playback_resume": _NO_ARGS,
+    "playback_rate": {"rate": Annotated[float, Range(0.05, 2.0, "x")]},
 }
 # A saved path's name: a plain file name in the run's paths/ directory (no directories, no
 # dot files), so that a console command can never write elsewhere.
@@ -529,7 +579,7 @@ def check_command(verb: str, args_json: str) -> dict[str, Any]:
     if unknown:
         raise ConfigError(f"unknown argument {unknown[0]!r}; {verb} takes "
                           f"{', '.join(spec) if spec else 'no arguments'}")
-    if len(args.get("points", ())) > MAX_PLAYBACK_POINTS:
+    if len(args.get("points", ())) > MAX_PLAYBACK_POINTS or len(args.get("times_s", ())) > MAX_PLAYBACK_POINTS:
         raise ConfigError(f"points: at most {MAX_PLAYBACK_POINTS} points")
     checked = {k: coerce(spec[k], v, k) for k, v in args.items()}
     if verb == "save":

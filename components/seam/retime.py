@@ -23,7 +23,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.seam.fit import Seam, Segment
 
-__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "segment_point", "write_csv", "peaks"]
+__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "segment_point", "write_csv", "peaks", "playback_args"]
 
 CSV_HEADER = ("index", "t_s", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg", "speed_mm_s")
 
@@ -256,3 +256,13 @@ def write_csv(path, timed: Timed, overwrite: bool = False):
             w.writerow([k, f"{t:.6f}", *(f"{c:.6f}" for c in x), f"{v:.4f}"])
     os.replace(tmp, path)
     return path
+
+
+def playback_args(timed: Timed, max_points: int = 5000) -> dict:
+    """The controller's ``playback`` command arguments for a re-timed seam: the tool poses
+    (mm, deg) and their times (s), every sample, or every k-th (ends kept) when there are
+    more than ``max_points`` (linear in between: the carrot interpolates)."""
+    n = len(timed.t_s)
+    k = max(1, int(math.ceil(n / max_points)))
+    idx = np.unique(np.r_[np.arange(0, n, k), n - 1])
+    return {"points": np.round(timed.x[idx], 4).tolist(), "times_s": np.round(timed.t_s[idx], 6).tolist()}

@@ -35,6 +35,8 @@ from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
+from humanpt.seam.fit import Seam, fit_path, sample_segment
+from humanpt.seam.retime import RetimeConfig, playback_args, retime
 
 from . import evaluate
 from .run import SystemConfig
@@ -75,12 +77,15 @@ class TeachResult:
     stages: list[StageResult]
     rig: Rig
     taught_mm: np.ndarray  # (N,) tip of the taught path to the seam
-    smoothed_mm: np.ndarray  # (N,) the same after RTS smoothing (what is played back)
+    smoothed_mm: np.ndarray  # (N,) the same after RTS smoothing (played back with play="smoothed")
     played_mm: np.ndarray  # (M,) the tool's true position during playback to the seam
     taught_truth: evaluate.Stats | None  # the taught path against the truth at its stamps
     warnings: list[str]
     run_dir: Path | None
     seconds: float
+    fitted_mm: np.ndarray | None = None  # (K,) the fitted seam (lines and arcs, every 0.5 mm) to the seam
+    fitted: Seam | None = None  # humanpt path fit of the taught path
+    play: str = "seam"  # what was played back: "seam" (fitted, re-timed) or "smoothed"
 
 
 def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
@@ -123,7 +128,7 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
                          stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
-                         robot: str = "standin", smooth_path: bool = True,
+                         robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one). ``progress(stage, done, total)`` is called as each stage goes.
@@ -185,10 +190,17 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # that the hand's tremor is not played back.
         points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
         smoothed_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in points]), seam)
+        # ... and as lines and arcs (`humanpt path fit`): the seam the hand meant.
+        fitted = fit_path(np.asarray(taught, dtype=float), stamps,
+                          meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
+        fitted_mm = seam_distances_mm(np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments]), seam)
+        if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
+            args = playback_args(retime(fitted, RetimeConfig(speed_mm_s=playback_speed_mm_s)))
+        else:
+            args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
         w.lockstep.inject(w.now_ns, "controller", "console/command",
                           pb.Command(header=header(w.now_ns), component="controller", verb="playback",
-                                     args_json=json.dumps({"speed_mm_s": playback_speed_mm_s,
-                                                           "points": points.round(4).tolist()})))
+                                     args_json=json.dumps(args)))
         length_mm = float(np.sum(np.linalg.norm(np.diff(seam, axis=0), axis=1)))
         play_s = 15.0 + length_mm / playback_speed_mm_s
         t_play0 = w.now_ns
@@ -204,7 +216,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         truths = w.truths(truth_topic)[n_before:]
         tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
         # from the first time the tool reaches the path's start (after the approach)
-        first = np.array([transform_from_x(taught[0])[:3, 3]])
+        first = np.array([fitted.segments[0].start_mm if play == "seam" else transform_from_x(taught[0])[:3, 3]])
         near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 1.0)[0]
         tips = tips[near[0]:] if len(near) else tips[:0]
         played_mm = seam_distances_mm(tips, seam) if len(tips) else np.zeros(0)
@@ -216,4 +228,4 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
-                       Path(run_dir) if run_dir else None, time.perf_counter() - t_start)
+                       Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play)
