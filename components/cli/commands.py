@@ -271,7 +271,10 @@ def _describe(key: str, payload: bytes, full: bool = False) -> tuple[str, str]:
     return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg)
 
 
-def topics_cmd_table() -> int:
+def topics_cmd_table(as_json: bool = False) -> int:
+    if as_json:  # the same as schemas/topics.json
+        print(topics.table_json(), end="")
+        return 0
     print(f"{'key (humanpt/<cell>/...)':34s} {'type':26s} {'publisher':14s} description")
     for t in topics.TOPICS.values():
         print(f"{t.short:34s} {t.type.DESCRIPTOR.full_name:26s} {t.publisher:14s} {t.doc}")
@@ -280,8 +283,8 @@ def topics_cmd_table() -> int:
 
 
 def topics_cmd(args) -> int:
-    if args.table:
-        return topics_cmd_table()
+    if args.table or args.json:
+        return topics_cmd_table(args.json)
     cfg = load_cfg(args)
     cell = cfg.runtime.cell
     stats: dict[str, list] = defaultdict(lambda: [0, 0, None, None])  # count, bytes, first, last

@@ -174,6 +174,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("--duration", type=float, default=2.0, help="seconds to listen (default 2)")
     p.add_argument("--table", action="store_true", help="print the static topic table and exit (no network)")
+    p.add_argument("--json", action="store_true",
+                   help="the static topic table as JSON (schemas/topics.json: keys, protobuf types, .proto "
+                   "files, publishers), no network")
 
     p = sub.add_parser("echo", help="print decoded messages of a topic",
                        description="Subscribe to KEY and print each message decoded (like ros2 topic echo). "
