@@ -496,10 +496,27 @@ def runs_info(args) -> int:
             print(f"  note: {note}")
         bad |= bool(f.missing_inputs or f.notes)
     from humanpt.runtime.recording import losses_lines
+    from humanpt.runtime.runinfo import run_summary
 
     lost = losses_lines(args.run_dir)  # what a full disk (or another write error) cost
     for line in lost:
         print(line)
+    run = run_summary(args.run_dir, infos)
+    print(f"run: {run.duration_s:.1f} s, {len(infos)} recordings {run.recordings_bytes / 1e6:.2f} MB "
+          f"({run.mb_per_minute:.1f} MB/min), directory {run.total_bytes / 1e6:.2f} MB")
+    print(f"rig: {run.rig}")
+    if run.warnings:
+        print(f"warnings and errors published ({sum(run.warnings.values())}):")
+        for (comp, sev, code), n in sorted(run.warnings.items()):
+            print(f"  {comp:14s} {sev:8s} {code:28s} {n:6d}")
+    else:
+        print("warnings and errors published: none")
+    if run.dropped:
+        print(f"messages dropped by the shells ({sum(run.dropped.values())}):")
+        for (comp, topic), n in sorted(run.dropped.items()):
+            print(f"  {comp:14s} {topic:32s} {n:6d}")
+    else:
+        print("messages dropped by the shells: none")
     total = sum(f.missing_inputs for f in infos)
     print(f"humanpt runs info: {len(infos)} recordings; inputs missed: {total}; "
           f"recordings with write losses: {len(lost)}")
@@ -554,6 +571,143 @@ def runs_merge(args) -> int:
     for note in notes:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
     print(f"humanpt runs merge: {n} messages from {len(files)} recordings on {len(channels)} topics -> {out}")
+    return 0
+
+
+def _run_files(run: str) -> list[Path]:
+    """The .mcap recordings of a run directory, or the one file given."""
+    from humanpt.runtime.recording import RecordingError
+
+    path = Path(run)
+    if path.is_dir():
+        files = sorted(path.glob("*.mcap"))
+        if not files:
+            raise RecordingError(f"{path}: no .mcap recordings here")
+        return files
+    if path.exists():
+        return [path]
+    raise RecordingError(f"{path}: no such run directory or file")
+
+
+def _recorded_span_ns(files: list[Path]) -> int | None:
+    """Last minus first log time over ``files`` from their MCAP summaries (None when a file
+    has none: an unfinished recording)."""
+    from mcap.reader import make_reader
+
+    starts, ends = [], []
+    for f in files:
+        try:
+            with open(f, "rb") as fh:
+                stats = make_reader(fh).get_summary().statistics
+        except Exception:  # noqa: BLE001 - no summary (unfinished, damaged): the span is unknown
+            return None
+        if stats is None:
+            return None
+        if stats.message_count:
+            starts.append(stats.message_start_time)
+            ends.append(stats.message_end_time)
+    return max(ends) - min(starts) if starts else 0
+
+
+PLAY_CLOCK_TOPIC = "player/clock"
+
+
+def runs_play(args) -> int:
+    """Re-publish a recording's bus outputs at their recorded timing (``humanpt runs play``).
+
+    Every component's ``direction=out`` messages on bus topics (local topics never), merged
+    by log time, are put on ``humanpt/<cell>/<topic>`` of the live cell (``--cell``/config)
+    so that ``echo``, ``console status`` and the viewer see them; message k is put at
+    (t_k - t_0) / rate after the first.  ``--clock`` puts a ``player/clock`` Tick (header
+    stamp = the recording's time) every ``--clock-period`` of recorded time.
+    """
+    from humanpt.runtime.bus import declare_topic_publisher
+    from humanpt.runtime.recording import OUT, merge_entries
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    if not args.rate > 0:
+        raise ValueError(f"--rate {args.rate:g}: must be > 0 (1 = recorded speed, 2 = twice as fast)")
+    if not args.clock_period > 0:
+        raise ValueError(f"--clock-period {args.clock_period:g}: must be > 0 s")
+    files = _run_files(args.run)
+    wanted: set[str] | None = None
+    if args.topics:
+        wanted = {t.strip() for t in args.topics.split(",") if t.strip()}
+        unknown = sorted(t for t in wanted if t not in topics.TOPICS)
+        if unknown:
+            raise ValueError(f"--topics: {', '.join(unknown)} not in the topic table (short names such as "
+                             f"controller/status; `humanpt topics --table` lists them)")
+    cfg = load_cfg(args)
+    cell = cfg.runtime.cell
+    span_ns = _recorded_span_ns(files)
+    skipped: dict[str, str] = {}  # topic -> why it is not played
+
+    def keep(e) -> bool:
+        if e.direction != OUT or e.topic not in topics.TOPICS or (wanted is not None and e.topic not in wanted):
+            return False  # inputs, local topics (serial bytes, show: copies), topics not asked for
+        if e.schema != topics.TOPICS[e.topic].type.DESCRIPTOR.full_name:
+            skipped[e.topic] = f"recorded as {e.schema}, this version's type differs"
+            return False
+        return True
+
+    stop = stop_on_signals()
+    tty = sys.stderr.isatty()
+    n = rounds = 0
+    total = f" / {span_ns / 1e9:.1f}" if span_ns is not None else ""
+    with open_tool_session(cfg.runtime) as session:
+        pubs: dict[str, object] = {}
+        clock = declare_topic_publisher(session, cell, PLAY_CLOCK_TOPIC) if args.clock else None
+        clock_period_ns = int(args.clock_period * 1e9)
+        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cell} at x{args.rate:g}"
+              f"{', looping' if args.loop else ''}{', clock on ' + PLAY_CLOCK_TOPIC if clock else ''}; "
+              "Ctrl-C stops", file=sys.stderr, flush=True)
+        next_progress = time.monotonic()
+        while not stop.is_set():
+            notes: list[str] = []
+            t0 = wall0 = None
+            next_clock_ns = clock_seq = 0
+            played = 0
+            for t_ns, _f, e in merge_entries(files, notes, keep):
+                if t0 is None:
+                    t0, wall0, next_clock_ns = t_ns, time.monotonic(), t_ns
+                while clock is not None and next_clock_ns <= t_ns:  # the clock's ticks due before it
+                    if stop.wait(max(0.0, wall0 + (next_clock_ns - t0) / 1e9 / args.rate - time.monotonic())):
+                        break
+                    clock.put(pb.Tick(header=pb.Header(stamp_ns=next_clock_ns, seq=clock_seq, frame_id="recording"),
+                                      period_ns=clock_period_ns).SerializeToString())
+                    clock_seq += 1
+                    next_clock_ns += clock_period_ns
+                # wait on the stop event, not a sleep: Ctrl-C ends the wait at once
+                if stop.wait(max(0.0, wall0 + (t_ns - t0) / 1e9 / args.rate - time.monotonic())):
+                    break
+                pub = pubs.get(e.topic)
+                if pub is None:
+                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic)
+                pub.put(e.data)
+                n += 1
+                played += 1
+                now = time.monotonic()
+                if now >= next_progress:
+                    next_progress = now + 1.0
+                    print(f"{chr(13) if tty else ''}humanpt runs play: {(t_ns - t0) / 1e9:7.1f}{total} s recorded, "
+                          f"{n} messages{f', round {rounds + 1}' if args.loop else ''}",
+                          end="" if tty else "\n", file=sys.stderr, flush=True)
+            rounds += 1
+            for note in notes:
+                print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
+            if not args.loop or played == 0:
+                break
+        for pub in [*pubs.values(), *([clock] if clock else [])]:
+            pub.undeclare()
+    for topic, why in sorted(skipped.items()):
+        print(f"humanpt runs play: warning: {topic} not played: {why}", file=sys.stderr)
+    how = "stopped" if stop.is_set() else "done"
+    print(f"{chr(10) if tty else ''}humanpt runs play: {how}; {n} messages on {len(pubs)} topics"
+          f"{f' in {rounds} rounds' if args.loop else ''}", file=sys.stderr, flush=True)
+    if n == 0:
+        print("humanpt runs play: nothing to play (no bus outputs recorded"
+              f"{' on the topics asked for' if wanted else ''})", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -220,7 +220,7 @@ def build_parser() -> argparse.ArgumentParser:
     console_cli.add_parser(sub, _add_common)
     pki_cli.add_parser(sub, _add_common)
 
-    p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, rerecord)")
+    p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, play, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
     q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
                         description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
@@ -233,6 +233,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "topic's sequence numbers: a partition, a full queue), plus damage and restarts. Exit 1 "
                         "when any input was missed or a file is damaged.")
     q.add_argument("run_dir")
+    q = rsub.add_parser("play", help="re-publish a recording onto the live bus at its recorded timing",
+                        description="Put every component's recorded outputs on bus topics (never local ones: "
+                        "serial bytes, ticks) onto the live cell (--cell or [runtime] cell) at their recorded "
+                        "timing, scaled by --rate, so that humanpt echo, console status, topics and the viewer "
+                        "work on an old run (like ros2 bag play). Needs a router (--connect). Prints a progress "
+                        "line on stderr; Ctrl-C stops cleanly. Exit 1 when there was nothing to play.",
+                        epilog="example: humanpt runs play runs/<run> --rate 2 --topics controller/status,"
+                        "perception/tob --clock")
+    _add_common(q)
+    q.add_argument("run", help="a run directory or one component's .mcap file")
+    q.add_argument("--rate", "-r", type=float, default=1.0, help="speed factor (default 1: recorded timing)")
+    q.add_argument("--loop", "-l", action="store_true", help="start again at the end (until Ctrl-C)")
+    q.add_argument("--topics", metavar="T,...", help="only these short topics, comma-separated "
+                   "(e.g. controller/status,perception/tob; default: every bus topic recorded)")
+    q.add_argument("--clock", action="store_true", help="also publish the recording's time on player/clock "
+                   "(a Tick; header.stamp_ns = recorded time)")
+    q.add_argument("--clock-period", type=float, default=0.1, metavar="S",
+                   help="recorded seconds between clock ticks (default 0.1)")
     q = rsub.add_parser("list", help="list runs and their recordings")
     q.add_argument("dir", nargs="?", default="runs")
     q = rsub.add_parser("rerecord", help="re-record the reference runs (recordings/) live; show what changed",
@@ -450,6 +468,8 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             return commands.runs_info(args)
         if args.runs_verb == "list":
             return commands.runs_list(args)
+        if args.runs_verb == "play":
+            return commands.runs_play(args)
         if args.runs_verb == "rerecord":
             from humanpt.cli.rerecord import rerecord
 
