@@ -227,10 +227,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(topics as full Zenoh keys, time order), for Foxglove or rerun.")
     q.add_argument("run_dir")
     q.add_argument("out")
-    q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages",
+    q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages, "
+                        "duration, size, rig, warnings",
                         description="Per component recording of RUN_DIR: duration, size, messages per topic in "
                         "and out with their rates, and the messages it never received (gaps in each input "
-                        "topic's sequence numbers: a partition, a full queue), plus damage and restarts. Exit 1 "
+                        "topic's sequence numbers: a partition, a full queue), plus damage and restarts; then the run "
+                        "as a whole: duration, size and MB per minute, the rig it ran with, the warnings and "
+                        "errors its components published (by code) and the messages the shells dropped. Exit 1 "
                         "when any input was missed or a file is damaged.")
     q.add_argument("run_dir")
     q = rsub.add_parser("play", help="re-publish a recording onto the live bus at its recorded timing",
