@@ -285,6 +285,9 @@ def topics_cmd_table(as_json: bool = False) -> int:
 def topics_cmd(args) -> int:
     if args.table or args.json:
         return topics_cmd_table(args.json)
+    if args.hz:
+        return topics_hz(args)
+    duration = 2.0 if args.duration is None else args.duration
     cfg = load_cfg(args)
     cell = cfg.runtime.cell
     stats: dict[str, list] = defaultdict(lambda: [0, 0, None, None])  # count, bytes, first, last
@@ -303,11 +306,11 @@ def topics_cmd(args) -> int:
         sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
         alive = sorted(str(r.ok.key_expr).rsplit("/", 1)[-1]
                        for r in session.liveliness().get(liveliness_key(cell, "*")) if r.ok is not None)
-        time.sleep(args.duration)
+        time.sleep(duration)
         sub.undeclare()
     print(f"cell {cell}: components up: {', '.join(alive) or 'none'}")
     if not stats:
-        print(f"no messages in {args.duration:g} s")
+        print(f"no messages in {duration:g} s")
         return 0
     print(f"{'key':44s} {'type':26s} {'count':>7s} {'rate Hz':>8s} {'avg bytes':>10s}")
     for key in sorted(stats):
@@ -318,6 +321,65 @@ def topics_cmd(args) -> int:
         except topics.UnknownTopicError:
             tname = "?"
         print(f"{key:44s} {tname:26s} {count:7d} {rate:8.1f} {nbytes / count:10.0f}")
+    return 0
+
+
+def _type_of_key(key: str) -> str:
+    try:
+        return topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
+    except topics.UnknownTopicError:
+        return "?"
+
+
+def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
+    """The lines of one ``topics --hz`` refresh: per key, messages and bytes in the last
+    ``seconds`` as a rate (Hz) and a bandwidth (kB/s, 1 kB = 1000 bytes), then the total."""
+    lines = [f"{'key':44s} {'type':26s} {'rate Hz':>9s} {'kB/s':>10s} {'avg bytes':>10s}"]
+    for key in sorted(window):
+        count, nbytes = window[key]
+        lines.append(f"{key:44s} {_type_of_key(key):26s} {count / seconds:9.1f} {nbytes / seconds / 1e3:10.1f} "
+                     f"{(nbytes / count if count else 0):10.0f}")
+    count = sum(c for c, _ in window.values())
+    nbytes = sum(b for _, b in window.values())
+    lines.append(f"{'total':44s} {'':26s} {count / seconds:9.1f} {nbytes / seconds / 1e3:10.1f}")
+    return lines
+
+
+def topics_hz(args) -> int:
+    """``humanpt topics --hz``: rates and bandwidth per key over each --interval, until
+    --duration (if given) or Ctrl-C."""
+    if not args.interval > 0:
+        raise ValueError(f"--interval {args.interval:g}: must be > 0 s")
+    cfg = load_cfg(args)
+    cell = cfg.runtime.cell
+    lock = threading.Lock()
+    window: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # key -> [count, bytes] since the last print
+
+    def cb(sample):
+        with lock:
+            w = window[str(sample.key_expr)]
+            w[0] += 1
+            w[1] += len(sample.payload)
+
+    stop = stop_on_signals()
+    tty = sys.stdout.isatty()
+    with open_tool_session(cfg.runtime) as session:
+        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
+        start = last = time.monotonic()
+        end = start + args.duration if args.duration else None
+        while not stop.wait(args.interval if end is None else max(0.0, min(args.interval, end - time.monotonic()))):
+            now = time.monotonic()
+            with lock:
+                snap = {k: (c, b) for k, (c, b) in window.items()}
+                window.clear()
+            head = f"cell {cell}, {now - start:.1f} s: rates over the last {now - last:.1f} s"
+            body = hz_table(snap, now - last) if snap else ["no messages"]
+            # a terminal gets a table refreshed in place; a pipe a block per interval
+            print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
+            last = now
+            if end is not None and now >= end - 1e-3:
+                break
+        sub.undeclare()
     return 0
 
 

@@ -172,8 +172,13 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Listen for a while and print every topic seen with its type, publisher, "
                        "message count and rate, and the components whose liveliness tokens are up.")
     _add_common(p)
-    p.add_argument("--duration", type=float, default=2.0, help="seconds to listen (default 2)")
+    p.add_argument("--duration", type=float, help="seconds to listen (default 2; with --hz: "
+                   "until Ctrl-C unless given)")
     p.add_argument("--table", action="store_true", help="print the static topic table and exit (no network)")
+    p.add_argument("--hz", action="store_true",
+                   help="continuously: rate (Hz) and bandwidth (kB/s) per key over each --interval, like "
+                   "ros2 topic hz/bw (a table refreshed in place on a terminal, a block per interval in a pipe)")
+    p.add_argument("--interval", type=float, default=1.0, metavar="S", help="--hz: seconds per refresh (default 1)")
     p.add_argument("--json", action="store_true",
                    help="the static topic table as JSON (schemas/topics.json: keys, protobuf types, .proto "
                    "files, publishers), no network")
