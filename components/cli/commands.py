@@ -474,25 +474,142 @@ def _parse_assignment(a: str) -> tuple[str, object]:
         return key, value
 
 
-def param(args) -> int:
-    cfg = load_cfg(args)
-    sets = dict(_parse_assignment(a) for a in args.assignments)
-    with open_tool_session(cfg.runtime) as session:
-        replies = list(session.get(params_key(cfg.runtime.cell, args.component),
-                                   payload=json.dumps({"set": sets}), timeout=args.timeout))
+def _param_query(session, cfg, component: str, sets: dict, timeout: float) -> dict | None:
+    """One request to ``component``'s parameter queryable (``sets`` may be empty: a read);
+    its reply body, or None when no component answered."""
+    replies = list(session.get(params_key(cfg.runtime.cell, component), payload=json.dumps({"set": sets}),
+                               timeout=timeout))
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
-    if not bodies:
-        rt = cfg.runtime
-        why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
-               f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
-        print(f"humanpt param: no component {args.component!r} answered in cell {rt.cell} "
-              f"within {args.timeout:g} s (is it running?{why})", file=sys.stderr)
-        return 1
-    body = bodies[0]
+    return bodies[0] if bodies else None
+
+
+def _no_answer(cfg, component: str, timeout: float) -> int:
+    rt = cfg.runtime
+    why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
+           f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
+    print(f"humanpt param: no component {component!r} answered in cell {rt.cell} "
+          f"within {timeout:g} s (is it running?{why})", file=sys.stderr)
+    return 1
+
+
+def _param_action(args) -> tuple[str, str, list[str]]:
+    """(action, component, rest) of ``param``'s positionals: ``COMPONENT [KEY=VALUE...]``,
+    ``dump COMPONENT [FILE]`` or ``load COMPONENT FILE``."""
+    if args.component not in ("dump", "load"):
+        return "set", args.component, list(args.assignments)
+    rest = list(args.assignments)
+    if not rest:
+        raise ValueError(f"param {args.component}: name the component (humanpt param {args.component} COMPONENT"
+                         f"{' [FILE]' if args.component == 'dump' else ' FILE'})")
+    most = 2
+    if len(rest) > most or (args.component == "load" and len(rest) != 2):
+        raise ValueError(f"param {args.component}: expected COMPONENT {'[FILE]' if args.component == 'dump' else 'FILE'}"
+                         f", got {' '.join(rest)}")
+    return args.component, rest[0], rest[1:]
+
+
+def param(args) -> int:
+    action, component, rest = _param_action(args)
+    if action == "dump":
+        return param_dump(args, component, rest[0] if rest else None)
+    if action == "load":
+        return param_load(args, component, rest[0])
+    cfg = load_cfg(args)
+    sets = dict(_parse_assignment(a) for a in rest)
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, sets, args.timeout)
+    if body is None:
+        return _no_answer(cfg, component, args.timeout)
     for r in body.get("results", []):
         print(f"{'set' if r['ok'] else 'REJECTED'}: {r['text']}")
     print(json.dumps({"params": body.get("params"), "counters": body.get("counters")}, indent=2))
     return 0 if body.get("ok", False) else 1
+
+
+def param_dump(args, component: str, out: str | None) -> int:
+    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML (a ``[COMPONENT]``
+    section, which ``param load`` and a config file both read)."""
+    if out is not None and Path(out).exists() and not args.overwrite:
+        raise FileExistsError(f"{out}: exists; give --overwrite to replace it")
+    cfg = load_cfg(args)
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, {}, args.timeout)
+    if body is None:
+        return _no_answer(cfg, component, args.timeout)
+    text = (f"# live parameters of {component} in cell {cfg.runtime.cell}, {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
+            f"# humanpt param load {component} FILE sets them again\n"
+            + cfgmod.dumps_toml({component: body.get("params") or {}}))
+    if out is None:
+        print(text, end="")
+    else:
+        Path(out).write_text(text)
+        print(f"humanpt param: {len(body.get('params') or {})} live parameters of {component} -> {out}",
+              file=sys.stderr)
+    return 0
+
+
+def _param_file(path: str, component: str) -> dict:
+    """KEY -> value of a parameter file: a ``[COMPONENT]`` section (what ``param dump``
+    writes) or bare top-level keys."""
+    doc = cfgmod.read_toml(path, kind="parameter file")
+    if set(doc) == {component} and isinstance(doc[component], dict):
+        return doc[component]
+    sections = [k for k, v in doc.items() if isinstance(v, dict)]
+    if sections:
+        raise cfgmod.ConfigError(f"{path}: has section(s) {', '.join(sections)}; a parameter file for {component} "
+                                 f"holds [{component}] only, or bare KEY = VALUE lines")
+    return doc
+
+
+def param_load(args, component: str, path: str) -> int:
+    """``humanpt param load COMPONENT FILE``: set each parameter of FILE, all or none.
+
+    Checked here first against the component's live parameters and its config type (an
+    unknown or non-live key, a value out of range: ConfigError, nothing sent); a key the
+    component itself refuses (a safety limit it may only tighten) rolls back the keys it
+    had set, so the component is left as it was."""
+    values = _param_file(path, component)
+    if not values:
+        raise cfgmod.ConfigError(f"{path}: no parameters in it")
+    cfg = load_cfg(args)
+    try:
+        cls = core_class(component).config_type
+    except (UnknownComponentError, KeyError) as e:
+        raise cfgmod.ConfigError(f"unknown component {component!r}: {e}") from None
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, {}, args.timeout)
+        if body is None:
+            return _no_answer(cfg, component, args.timeout)
+        before = body.get("params") or {}
+        unknown = [k for k in values if k not in before]
+        if unknown:
+            raise cfgmod.ConfigError(f"{path}: {', '.join(map(repr, unknown))} not live parameter(s) of {component}; "
+                                     f"live: {', '.join(before)} (nothing set)")
+        obj = cfgmod.build(cls, before, source=f"{component}'s live parameters", section=component)
+        for k, v in values.items():  # in order, so checks between fields see the new values
+            try:
+                obj = cfgmod.replace_live(obj, k, json.dumps(v))
+            except cfgmod.ConfigError as e:
+                raise cfgmod.ConfigError(f"{path}: {e} (nothing set)") from None
+        body = _param_query(session, cfg, component, values, args.timeout)
+        if body is None:
+            return _no_answer(cfg, component, args.timeout)
+        results = body.get("results", [])
+        refused = [r for r in results if not r["ok"]]
+        if refused:
+            done = {r["key"]: before[r["key"]] for r in results if r["ok"]}
+            back = _param_query(session, cfg, component, done, args.timeout) if done else {"ok": True}
+            restored = back is not None and back.get("ok", False)
+            for r in refused:
+                print(f"REJECTED: {r['text']}", file=sys.stderr)
+            print(f"humanpt param load: {component} refused {len(refused)} of {len(values)}; "
+                  f"{'the others were set back' if restored else 'COULD NOT SET BACK ' + ', '.join(done)}"
+                  f" (nothing changed{'' if restored else '?'})", file=sys.stderr)
+            return 1
+    for r in results:
+        print(f"set: {r['text']}")
+    print(f"humanpt param load: {len(values)} parameters of {component} from {path}")
+    return 0
 
 
 # -- recordings ----------------------------------------------------------------------------

@@ -32,6 +32,11 @@ examples:
 """
 
 
+# Verbs whose options may come anywhere among their positionals (main() re-reads them with
+# that verb's parser's parse_intermixed_args).
+INTERMIXED: dict[str, argparse.ArgumentParser] = {}
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", "-c", metavar="FILE", help="TOML config file (default: built-in defaults)")
     p.add_argument("--cell", help="cell name (one robot with its sensors); overrides [runtime] cell")
@@ -198,13 +203,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", action="store_true",
                    help="with --field: CSV on stdout (stamp_ns, key, each field), e.g. > tob.csv")
 
-    p = sub.add_parser("param", help="show or set a running component's live parameters",
-                       description="Without KEY=VALUE: print the component's live parameters and counters. "
-                       "With KEY=VALUE (VALUE is JSON; a bare word is taken as a string): set them.")
+    p = sub.add_parser("param", help="show, set, dump or load a running component's live parameters",
+                       usage="humanpt param [options] COMPONENT [KEY=VALUE ...]\n"
+                       "       humanpt param [options] dump COMPONENT [FILE]\n"
+                       "       humanpt param [options] load COMPONENT FILE",
+                       description="COMPONENT alone: print its live parameters and counters. With KEY=VALUE (VALUE "
+                       "is JSON; a bare word is taken as a string): set them. dump: the live parameters as TOML "
+                       "(a [COMPONENT] section) on stdout or into FILE. load: set every parameter of FILE (what "
+                       "dump writes, or bare KEY = VALUE lines), all or none: an unknown, non-live or out-of-range "
+                       "key is refused before anything is sent, and keys the component refuses roll back the "
+                       "others. Options may come anywhere.",
+                       epilog="examples:\n  humanpt param controller gain=0.5 --timeout 2\n"
+                       "  humanpt param dump controller controller.toml\n"
+                       "  humanpt param load controller controller.toml",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(p)
-    p.add_argument("component")
-    p.add_argument("assignments", nargs="*", metavar="KEY=VALUE")
-    p.add_argument("--timeout", type=float, default=5.0)
+    p.add_argument("component", help=argparse.SUPPRESS)
+    p.add_argument("assignments", nargs="*", help=argparse.SUPPRESS)
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the component (default 5)")
+    p.add_argument("--overwrite", action="store_true", help="dump: replace FILE if it exists")
+    INTERMIXED["param"] = p
 
     p = sub.add_parser("replay", help="re-run a component on its recorded inputs and compare outputs",
                        description="Rebuild the component from its recording (core class and config), feed it "
@@ -402,11 +420,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args, extra = ap.parse_known_args(argv)
-    if extra and args.verb == "param":
-        # KEY=VALUE after an option (humanpt param controller --timeout 2 a=1): argparse
-        # ends the positionals at the first option; take the rest as assignments too.
-        args.assignments = list(args.assignments) + [e for e in extra if "=" in e and not e.startswith("-")]
-        extra = [e for e in extra if not ("=" in e and not e.startswith("-"))]
+    if extra and args.verb in INTERMIXED:
+        # Positionals after an option (humanpt param controller --timeout 2 a=1): argparse
+        # ends a subcommand's positionals at the first option; its own parser re-reads its
+        # words intermixed (a parser with subcommands cannot).
+        words = list(sys.argv[1:] if argv is None else argv)
+        rest = words[words.index(args.verb) + 1:]
+        args = INTERMIXED[args.verb].parse_intermixed_args(
+            rest, namespace=argparse.Namespace(verb=args.verb, verbose=args.verbose))
+        extra = []
     if extra:
         ap.error(f"unrecognized arguments: {' '.join(extra)}")
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
