@@ -127,12 +127,13 @@ def test_play_at_rate_puts_every_recorded_output_once(run_dir, router, proto_poo
     assert dict(counts) == want
 
 
-def test_play_refuses_bad_options(run_dir, router):
-    _, cfg = router
-    r = run_cli("runs", "play", str(run_dir), "--config", str(cfg), "--rate", "0")
-    assert r.returncode == 2 and "--rate 0: must be > 0" in r.stderr and len(r.stderr.splitlines()) == 1
-    r = run_cli("runs", "play", str(run_dir), "--config", str(cfg), "--topics", "controller/nothing")
-    assert r.returncode == 2 and "controller/nothing not in the topic table" in r.stderr
+def test_play_refuses_bad_options(run_dir, cli_main, capsys):
+    """Said before any connection (no router needed)."""
+    assert cli_main(["runs", "play", str(run_dir), "--rate", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "--rate 0: must be > 0" in err and len(err.splitlines()) == 1
+    assert cli_main(["runs", "play", str(run_dir), "--topics", "controller/nothing"]) == 2
+    assert "controller/nothing not in the topic table" in capsys.readouterr().err
 
 
 def test_live_shell_samples_carry_their_type(router, procs, proto_pool):
@@ -151,18 +152,18 @@ def test_live_shell_samples_carry_their_type(router, procs, proto_pool):
     assert schema == "humanpt.Event" and pong.source == "ponger"
 
 
-def test_runs_info_summarises_the_run(run_dir):
-    r = run_cli("runs", "info", str(run_dir))
-    assert r.returncode == 0, r.stdout + r.stderr
+def test_runs_info_summarises_the_run(run_dir, cli_main, capsys):
+    assert cli_main(["runs", "info", str(run_dir)]) == 0
+    r = capsys.readouterr()
     mcap_bytes = sum(f.stat().st_size for f in run_dir.glob("*.mcap"))
     # duration: the demo's 3 s of twin time (first to last message of any recording)
-    line = next(ln for ln in r.stdout.splitlines() if ln.startswith("run: "))
+    line = next(ln for ln in r.out.splitlines() if ln.startswith("run: "))
     dur = float(line.split()[1])
     assert 2.8 <= dur <= 3.0, line
     assert f"{mcap_bytes / 1e6:.2f} MB (" in line, line
     per_min = float(line.split("(")[1].split()[0])
     assert per_min == pytest.approx(mcap_bytes / 1e6 / (dur / 60), rel=0.02), line  # dur printed to 0.1 s
-    assert "rig: rig.toml: nominal (psvs nominal" in r.stdout
+    assert "rig: rig.toml: nominal (psvs nominal" in r.out
     # warnings: what the recordings hold, counted here with the mcap library's own decoder
     want: Counter = Counter()
     for f in run_dir.glob("*.mcap"):
@@ -172,16 +173,15 @@ def test_runs_info_summarises_the_run(run_dir):
                     want[msg.code] += 1
     if want:
         for code, n in want.items():
-            assert any(code in ln and ln.split()[-1] == str(n) for ln in r.stdout.splitlines()), (code, r.stdout)
+            assert any(code in ln and ln.split()[-1] == str(n) for ln in r.out.splitlines()), (code, r.out)
     else:
-        assert "warnings and errors published: none" in r.stdout
-    assert "messages dropped by the shells: none" in r.stdout
+        assert "warnings and errors published: none" in r.out
+    assert "messages dropped by the shells: none" in r.out
 
 
-def test_runs_merge_keeps_local_topics_apart(run_dir, tmp_path):
+def test_runs_merge_keeps_local_topics_apart(run_dir, tmp_path, cli_main):
     out = tmp_path / "merged.mcap"
-    r = run_cli("runs", "merge", str(run_dir), str(out))
-    assert r.returncode == 0, r.stdout + r.stderr
+    assert cli_main(["runs", "merge", str(run_dir), str(out)]) == 0
     with open(out, "rb") as fh:
         s = make_reader(fh).get_summary()
     counts = {c.topic: s.statistics.channel_message_counts.get(cid, 0) for cid, c in s.channels.items()}
@@ -194,7 +194,7 @@ def test_runs_merge_keeps_local_topics_apart(run_dir, tmp_path):
     assert counts["humanpt/cell0/controller/status"] == rec["controller/status"]
 
 
-def test_runs_info_counts_warnings_by_code_and_dropped_messages(tmp_path):
+def test_runs_info_counts_warnings_by_code_and_dropped_messages(tmp_path, cli_main, capsys):
     """A recording written here with known events and drops: the counts are these."""
     from humanpt.runtime.recording import OUT, Recorder
     from humanpt.schemas import humanpt_pb2 as pb
@@ -209,12 +209,12 @@ def test_runs_info_counts_warnings_by_code_and_dropped_messages(tmp_path):
                       pb.Event(header=pb.Header(seq=i), severity=sev, code=code))
         for i in range(4):
             rec.write_dropped(i, "perception/tob", b"")
-    r = run_cli("runs", "info", str(run))
-    assert r.returncode == 0, r.stdout + r.stderr
-    rows = {tuple(ln.split()) for ln in r.stdout.splitlines()}
+    assert cli_main(["runs", "info", str(run)]) == 0
+    r = capsys.readouterr()
+    rows = {tuple(ln.split()) for ln in r.out.splitlines()}
     assert ("controller", "warning", "stale_command", "3") in rows
     assert ("controller", "error", "core_error", "1") in rows
     assert not any("mode" in row for row in rows if "warning" in row or "error" in row)  # info is not counted
     assert ("controller", "perception/tob", "4") in rows
-    assert "messages dropped by the shells (4):" in r.stdout
-    assert "rig: none recorded" in r.stdout
+    assert "messages dropped by the shells (4):" in r.out
+    assert "rig: none recorded" in r.out
