@@ -15,7 +15,13 @@ from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
-from humanpt.runtime.bus import liveliness_key, open_tool_session, params_key, zenoh_config
+from humanpt.runtime.bus import (
+    liveliness_key,
+    open_tool_session,
+    params_key,
+    type_name_of,
+    zenoh_config,
+)
 from humanpt.runtime.registry import (
     COMPONENTS,
     PROFILES,
@@ -251,14 +257,40 @@ def up(args) -> int:
 
 
 # -- inspection ----------------------------------------------------------------------------
-def _describe(key: str, payload: bytes, full: bool = False) -> tuple[str, str]:
+def _class_by_name(type_name: str | None):
+    """The message class of a full protobuf type name known to this process (humanpt's and
+    Foxglove's messages), or None."""
+    if not type_name:
+        return None
+    from google.protobuf import descriptor_pool, message_factory
+
+    package, _, name = type_name.rpartition(".")
+    if package == "foxglove":  # Foxglove's classes register when imported: one module per message
+        import importlib
+
+        try:
+            importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2")
+        except ImportError:
+            return None
+    try:
+        return message_factory.GetMessageClass(descriptor_pool.Default().FindMessageTypeByName(type_name))
+    except KeyError:
+        return None
+
+
+def _describe(key: str, payload: bytes, full: bool = False, type_name: str | None = None) -> tuple[str, str]:
+    """(type name, text) of one sample: decoded by its topic's type, or, for a key not in the
+    topic table, by the type its encoding names (``type_name``, application/protobuf;<type>)."""
     from google.protobuf import text_format
 
     try:
         _, short = topics.short_from_key(key)
         cls = topics.message_type(short)
     except topics.UnknownTopicError:
-        return "?", f"<{len(payload)} bytes, not in the topic table>"
+        cls = _class_by_name(type_name)
+        if cls is None:
+            what = f"its encoding names {type_name}, unknown here" if type_name else "no type in its encoding"
+            return type_name or "?", f"<{len(payload)} bytes, not in the topic table; {what}>\n"
     msg = cls()
     try:
         msg.ParseFromString(payload)
@@ -415,13 +447,14 @@ def echo(args) -> int:
     stop = stop_on_signals()
     n = 0
     with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes())))
+        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes(),
+                                                                type_name_of(s.encoding))))
         deadline = time.monotonic() + args.duration if args.duration else None
         while not stop.is_set() and (args.count is None or n < args.count):
             if deadline and time.monotonic() >= deadline:
                 break
             try:
-                k, payload = q.get(timeout=0.1)
+                k, payload, type_name = q.get(timeout=0.1)
             except _queue.Empty:
                 continue
             if fields:
@@ -432,7 +465,7 @@ def echo(args) -> int:
                     print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
                 sys.stdout.flush()
             else:
-                tname, text = _describe(k, payload, args.full)
+                tname, text = _describe(k, payload, args.full, type_name)
                 print(f"--- {k} ({tname})\n{text}", end="", flush=True)
             n += 1
         sub.undeclare()
