@@ -303,13 +303,25 @@ def _describe(key: str, payload: bytes, full: bool = False, type_name: str | Non
     return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg)
 
 
+def table(head: list[str], rows: list[list[str]], align: str) -> list[str]:
+    """Lines of a text table whose columns fit their widest cell (``align``: one ``<`` or
+    ``>`` per column); the last column is not padded."""
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
+
+    def line(cells: list[str]) -> str:
+        out = [f"{c:{a}{w}s}" if i < len(cells) - 1 or a == ">" else c
+               for i, (c, a, w) in enumerate(zip(cells, align, widths, strict=True))]
+        return "  ".join(out).rstrip()
+
+    return [line(head), *(line(r) for r in rows)]
+
+
 def topics_cmd_table(as_json: bool = False) -> int:
     if as_json:  # the same as schemas/topics.json
         print(topics.table_json(), end="")
         return 0
-    print(f"{'key (humanpt/<cell>/...)':34s} {'type':26s} {'publisher':14s} description")
-    for t in topics.TOPICS.values():
-        print(f"{t.short:34s} {t.type.DESCRIPTOR.full_name:26s} {t.publisher:14s} {t.doc}")
+    rows = [[t.short, t.type.DESCRIPTOR.full_name, t.publisher, t.doc] for t in topics.TOPICS.values()]
+    print("\n".join(table(["key (humanpt/<cell>/...)", "type", "publisher", "description"], rows, "<<<<")))
     print(f"local inputs (never on the bus): {', '.join(topics.LOCAL_TOPICS)}")
     return 0
 
@@ -344,15 +356,12 @@ def topics_cmd(args) -> int:
     if not stats:
         print(f"no messages in {duration:g} s")
         return 0
-    print(f"{'key':44s} {'type':26s} {'count':>7s} {'rate Hz':>8s} {'avg bytes':>10s}")
+    rows = []
     for key in sorted(stats):
         count, nbytes, first, last = stats[key]
         rate = (count - 1) / (last - first) if count > 1 and last > first else 0.0
-        try:
-            tname = topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
-        except topics.UnknownTopicError:
-            tname = "?"
-        print(f"{key:44s} {tname:26s} {count:7d} {rate:8.1f} {nbytes / count:10.0f}")
+        rows.append([key, _type_of_key(key), str(count), f"{rate:.1f}", f"{nbytes / count:.0f}"])
+    print("\n".join(table(["key", "type", "count", "rate Hz", "avg bytes"], rows, "<<>>>")))
     return 0
 
 
@@ -366,15 +375,15 @@ def _type_of_key(key: str) -> str:
 def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
     """The lines of one ``topics --hz`` refresh: per key, messages and bytes in the last
     ``seconds`` as a rate (Hz) and a bandwidth (kB/s, 1 kB = 1000 bytes), then the total."""
-    lines = [f"{'key':44s} {'type':26s} {'rate Hz':>9s} {'kB/s':>10s} {'avg bytes':>10s}"]
+    rows = []
     for key in sorted(window):
         count, nbytes = window[key]
-        lines.append(f"{key:44s} {_type_of_key(key):26s} {count / seconds:9.1f} {nbytes / seconds / 1e3:10.1f} "
-                     f"{(nbytes / count if count else 0):10.0f}")
+        rows.append([key, _type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
+                     f"{(nbytes / count if count else 0):.0f}"])
     count = sum(c for c, _ in window.values())
     nbytes = sum(b for _, b in window.values())
-    lines.append(f"{'total':44s} {'':26s} {count / seconds:9.1f} {nbytes / seconds / 1e3:10.1f}")
-    return lines
+    rows.append(["total", "", f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}", ""])
+    return table(["key", "type", "rate Hz", "kB/s", "avg bytes"], rows, "<<>>>")
 
 
 def topics_hz(args) -> int:

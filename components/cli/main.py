@@ -445,6 +445,11 @@ def main(argv: list[str] | None = None) -> int:
             ValueError) as e:
         print(f"humanpt {args.verb}: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # stdout closed by the reader (`humanpt topics --table | head`): not an error of ours
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
+        return 0
     except ConnectionError as e:  # no router where the config says: one line, not a traceback
         print(f"humanpt {args.verb}: {e}", file=sys.stderr)
         return 1
