@@ -712,7 +712,7 @@ def runs_info(args) -> int:
                 missed = f"  MISSED {t.missing} in {t.gaps} gap(s), largest {t.largest_gap}"
             if t.restarts:
                 missed += f"  publisher restarted {t.restarts}x"
-            print(f"  {direction:3s} {topic:32s} {t.count:8d} msgs {t.rate_hz:8.1f} Hz{missed}")
+            print(f"  {direction:3s} {topic:32s} {t.schema:26s} {t.count:8d} msgs {t.rate_hz:8.1f} Hz{missed}")
         for note in f.notes:
             print(f"  note: {note}")
         bad |= bool(f.missing_inputs or f.notes)

@@ -36,6 +36,7 @@ class TopicInfo:
     gaps: int = 0  # places where the sequence jumps ahead
     largest_gap: int = 0
     restarts: int = 0  # the sequence started again (a publisher restarted)
+    schema: str = ""  # the full protobuf type name it was recorded with
 
     @property
     def rate_hz(self) -> float:
@@ -93,6 +94,7 @@ def file_info(path: str | Path) -> FileInfo:
         info.start_ns = e.t_ns if info.start_ns is None else info.start_ns
         info.end_ns = e.t_ns
         t = per[(e.direction, e.topic)]
+        t.schema = t.schema or e.schema
         t.count += 1
         t.first_ns = e.t_ns if t.first_ns is None else t.first_ns
         t.last_ns = e.t_ns

@@ -164,6 +164,8 @@ def test_runs_info_summarises_the_run(run_dir, cli_main, capsys):
     per_min = float(line.split("(")[1].split()[0])
     assert per_min == pytest.approx(mcap_bytes / 1e6 / (dur / 60), rel=0.02), line  # dur printed to 0.1 s
     assert "rig: rig.toml: nominal (psvs nominal" in r.out
+    # topics with the type they were recorded with
+    assert any(ln.split()[:3] == ["out", "camera/image", "foxglove.RawImage"] for ln in r.out.splitlines()), r.out
     # warnings: what the recordings hold, counted here with the mcap library's own decoder
     want: Counter = Counter()
     for f in run_dir.glob("*.mcap"):
