@@ -6,6 +6,14 @@ the network (``tick``, ``param``) have no slash.
 
 Bump :data:`SCHEMA_VERSION` on any change that makes old recordings decode differently
 (a renumbered field, a changed meaning); adding fields or topics does not need it.
+
+The same table as data, for clients in other languages: ``schemas/topics.json`` (key
+pattern, short name, full protobuf type name, the .proto file that defines it, publisher,
+doc; the local topics marked local; the event publishers).  It is generated from this
+module; after changing a row regenerate it with ONE command (tests/schemas fail while it
+is stale)::
+
+    python -m humanpt.schemas.topics --write      # or --json to print it
 """
 
 from __future__ import annotations
@@ -49,6 +57,8 @@ _ROWS = [
     Topic("console/command", pb.Command, "console", "operator commands (record, save, hold, ...)"),
     Topic("pinger/ping", pb.Tick, "pinger", "runtime self-test: a tick per period"),
     Topic("ponger/pong", pb.Event, "ponger", "runtime self-test: an event per ping"),
+    Topic("player/clock", pb.Tick, "player",
+          "humanpt runs play --clock: the recording's time (header.stamp_ns) every period_ns"),
 ]
 # Every component may publish events on "<component>/events".
 EVENT_PUBLISHERS = (
@@ -128,3 +138,64 @@ def all_types() -> list[type[Message]]:
     for cls in [t.type for t in _ROWS] + list(LOCAL_TOPICS.values()):
         seen.setdefault(cls.DESCRIPTOR.full_name, cls)
     return list(seen.values())
+
+
+TABLE_JSON = "topics.json"  # beside this module: schemas/topics.json
+
+
+def proto_file(cls: type[Message]) -> str:
+    """The .proto file defining ``cls``, relative to schemas/ (``humanpt.proto``,
+    ``foxglove/RawImage.proto``)."""
+    return cls.DESCRIPTOR.file.name
+
+
+def table_data() -> dict:
+    """The topic table as plain data (what schemas/topics.json holds)."""
+
+    def row(t: Topic) -> dict:
+        return {"short": t.short, "key": f"{KEY_PREFIX}/{{cell}}/{t.short}", "type": t.type.DESCRIPTOR.full_name,
+                "proto": proto_file(t.type), "publisher": t.publisher, "doc": t.doc, "local": False}
+
+    return {
+        "generated_by": "python -m humanpt.schemas.topics --write (from schemas/topics.py; do not edit)",
+        "schema_version": SCHEMA_VERSION,
+        "key_pattern": f"{KEY_PREFIX}/{{cell}}/{{component}}/{{topic}}",
+        "encoding": "application/protobuf;<type> (each Zenoh sample's encoding names its full type)",
+        "topics": [row(t) for t in TOPICS.values()],
+        "event_publishers": list(EVENT_PUBLISHERS),
+        "local_topics": [{"short": name, "type": cls.DESCRIPTOR.full_name, "proto": proto_file(cls),
+                          "local": True} for name, cls in LOCAL_TOPICS.items()],
+        "show_prefix": SHOW_PREFIX,
+    }
+
+
+def table_json() -> str:
+    """:func:`table_data` as the text of schemas/topics.json (stable: sorted nowhere, rows in
+    table order, two-space indent, a final newline)."""
+    import json
+
+    return json.dumps(table_data(), indent=2) + "\n"
+
+
+def _main(argv: list[str] | None = None) -> int:
+    import argparse
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(prog="python -m humanpt.schemas.topics",
+                                 description="The topic table as JSON (schemas/topics.json).")
+    g = ap.add_mutually_exclusive_group(required=True)
+    g.add_argument("--json", action="store_true", help="print it on stdout")
+    g.add_argument("--write", action="store_true", help=f"write schemas/{TABLE_JSON} (beside this module)")
+    args = ap.parse_args(argv)
+    text = table_json()
+    if args.json:
+        print(text, end="")
+        return 0
+    out = Path(__file__).with_name(TABLE_JSON)
+    out.write_text(text)
+    print(f"wrote {out} ({len(TOPICS)} topics, {len(LOCAL_TOPICS)} local)")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())

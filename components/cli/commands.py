@@ -15,7 +15,13 @@ from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
-from humanpt.runtime.bus import liveliness_key, open_tool_session, params_key, zenoh_config
+from humanpt.runtime.bus import (
+    liveliness_key,
+    open_tool_session,
+    params_key,
+    type_name_of,
+    zenoh_config,
+)
 from humanpt.runtime.registry import (
     COMPONENTS,
     PROFILES,
@@ -251,14 +257,40 @@ def up(args) -> int:
 
 
 # -- inspection ----------------------------------------------------------------------------
-def _describe(key: str, payload: bytes, full: bool = False) -> tuple[str, str]:
+def _class_by_name(type_name: str | None):
+    """The message class of a full protobuf type name known to this process (humanpt's and
+    Foxglove's messages), or None."""
+    if not type_name:
+        return None
+    from google.protobuf import descriptor_pool, message_factory
+
+    package, _, name = type_name.rpartition(".")
+    if package == "foxglove":  # Foxglove's classes register when imported: one module per message
+        import importlib
+
+        try:
+            importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2")
+        except ImportError:
+            return None
+    try:
+        return message_factory.GetMessageClass(descriptor_pool.Default().FindMessageTypeByName(type_name))
+    except KeyError:
+        return None
+
+
+def _describe(key: str, payload: bytes, full: bool = False, type_name: str | None = None) -> tuple[str, str]:
+    """(type name, text) of one sample: decoded by its topic's type, or, for a key not in the
+    topic table, by the type its encoding names (``type_name``, application/protobuf;<type>)."""
     from google.protobuf import text_format
 
     try:
         _, short = topics.short_from_key(key)
         cls = topics.message_type(short)
     except topics.UnknownTopicError:
-        return "?", f"<{len(payload)} bytes, not in the topic table>"
+        cls = _class_by_name(type_name)
+        if cls is None:
+            what = f"its encoding names {type_name}, unknown here" if type_name else "no type in its encoding"
+            return type_name or "?", f"<{len(payload)} bytes, not in the topic table; {what}>\n"
     msg = cls()
     try:
         msg.ParseFromString(payload)
@@ -271,17 +303,35 @@ def _describe(key: str, payload: bytes, full: bool = False) -> tuple[str, str]:
     return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg)
 
 
-def topics_cmd_table() -> int:
-    print(f"{'key (humanpt/<cell>/...)':34s} {'type':26s} {'publisher':14s} description")
-    for t in topics.TOPICS.values():
-        print(f"{t.short:34s} {t.type.DESCRIPTOR.full_name:26s} {t.publisher:14s} {t.doc}")
+def table(head: list[str], rows: list[list[str]], align: str) -> list[str]:
+    """Lines of a text table whose columns fit their widest cell (``align``: one ``<`` or
+    ``>`` per column); the last column is not padded."""
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(len(head))]
+
+    def line(cells: list[str]) -> str:
+        out = [f"{c:{a}{w}s}" if i < len(cells) - 1 or a == ">" else c
+               for i, (c, a, w) in enumerate(zip(cells, align, widths, strict=True))]
+        return "  ".join(out).rstrip()
+
+    return [line(head), *(line(r) for r in rows)]
+
+
+def topics_cmd_table(as_json: bool = False) -> int:
+    if as_json:  # the same as schemas/topics.json
+        print(topics.table_json(), end="")
+        return 0
+    rows = [[t.short, t.type.DESCRIPTOR.full_name, t.publisher, t.doc] for t in topics.TOPICS.values()]
+    print("\n".join(table(["key (humanpt/<cell>/...)", "type", "publisher", "description"], rows, "<<<<")))
     print(f"local inputs (never on the bus): {', '.join(topics.LOCAL_TOPICS)}")
     return 0
 
 
 def topics_cmd(args) -> int:
-    if args.table:
-        return topics_cmd_table()
+    if args.table or args.json:
+        return topics_cmd_table(args.json)
+    if args.hz:
+        return topics_hz(args)
+    duration = 2.0 if args.duration is None else args.duration
     cfg = load_cfg(args)
     cell = cfg.runtime.cell
     stats: dict[str, list] = defaultdict(lambda: [0, 0, None, None])  # count, bytes, first, last
@@ -300,21 +350,77 @@ def topics_cmd(args) -> int:
         sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
         alive = sorted(str(r.ok.key_expr).rsplit("/", 1)[-1]
                        for r in session.liveliness().get(liveliness_key(cell, "*")) if r.ok is not None)
-        time.sleep(args.duration)
+        time.sleep(duration)
         sub.undeclare()
     print(f"cell {cell}: components up: {', '.join(alive) or 'none'}")
     if not stats:
-        print(f"no messages in {args.duration:g} s")
+        print(f"no messages in {duration:g} s")
         return 0
-    print(f"{'key':44s} {'type':26s} {'count':>7s} {'rate Hz':>8s} {'avg bytes':>10s}")
+    rows = []
     for key in sorted(stats):
         count, nbytes, first, last = stats[key]
         rate = (count - 1) / (last - first) if count > 1 and last > first else 0.0
-        try:
-            tname = topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
-        except topics.UnknownTopicError:
-            tname = "?"
-        print(f"{key:44s} {tname:26s} {count:7d} {rate:8.1f} {nbytes / count:10.0f}")
+        rows.append([key, _type_of_key(key), str(count), f"{rate:.1f}", f"{nbytes / count:.0f}"])
+    print("\n".join(table(["key", "type", "count", "rate Hz", "avg bytes"], rows, "<<>>>")))
+    return 0
+
+
+def _type_of_key(key: str) -> str:
+    try:
+        return topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
+    except topics.UnknownTopicError:
+        return "?"
+
+
+def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
+    """The lines of one ``topics --hz`` refresh: per key, messages and bytes in the last
+    ``seconds`` as a rate (Hz) and a bandwidth (kB/s, 1 kB = 1000 bytes), then the total."""
+    rows = []
+    for key in sorted(window):
+        count, nbytes = window[key]
+        rows.append([key, _type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
+                     f"{(nbytes / count if count else 0):.0f}"])
+    count = sum(c for c, _ in window.values())
+    nbytes = sum(b for _, b in window.values())
+    rows.append(["total", "", f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}", ""])
+    return table(["key", "type", "rate Hz", "kB/s", "avg bytes"], rows, "<<>>>")
+
+
+def topics_hz(args) -> int:
+    """``humanpt topics --hz``: rates and bandwidth per key over each --interval, until
+    --duration (if given) or Ctrl-C."""
+    if not args.interval > 0:
+        raise ValueError(f"--interval {args.interval:g}: must be > 0 s")
+    cfg = load_cfg(args)
+    cell = cfg.runtime.cell
+    lock = threading.Lock()
+    window: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # key -> [count, bytes] since the last print
+
+    def cb(sample):
+        with lock:
+            w = window[str(sample.key_expr)]
+            w[0] += 1
+            w[1] += len(sample.payload)
+
+    stop = stop_on_signals()
+    tty = sys.stdout.isatty()
+    with open_tool_session(cfg.runtime) as session:
+        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
+        start = last = time.monotonic()
+        end = start + args.duration if args.duration else None
+        while not stop.wait(args.interval if end is None else max(0.0, min(args.interval, end - time.monotonic()))):
+            now = time.monotonic()
+            with lock:
+                snap = {k: (c, b) for k, (c, b) in window.items()}
+                window.clear()
+            head = f"cell {cell}, {now - start:.1f} s: rates over the last {now - last:.1f} s"
+            body = hz_table(snap, now - last) if snap else ["no messages"]
+            # a terminal gets a table refreshed in place; a pipe a block per interval
+            print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
+            last = now
+            if end is not None and now >= end - 1e-3:
+                break
+        sub.undeclare()
     return 0
 
 
@@ -350,13 +456,14 @@ def echo(args) -> int:
     stop = stop_on_signals()
     n = 0
     with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes())))
+        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes(),
+                                                                type_name_of(s.encoding))))
         deadline = time.monotonic() + args.duration if args.duration else None
         while not stop.is_set() and (args.count is None or n < args.count):
             if deadline and time.monotonic() >= deadline:
                 break
             try:
-                k, payload = q.get(timeout=0.1)
+                k, payload, type_name = q.get(timeout=0.1)
             except _queue.Empty:
                 continue
             if fields:
@@ -367,7 +474,7 @@ def echo(args) -> int:
                     print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
                 sys.stdout.flush()
             else:
-                tname, text = _describe(k, payload, args.full)
+                tname, text = _describe(k, payload, args.full, type_name)
                 print(f"--- {k} ({tname})\n{text}", end="", flush=True)
             n += 1
         sub.undeclare()
@@ -409,25 +516,142 @@ def _parse_assignment(a: str) -> tuple[str, object]:
         return key, value
 
 
-def param(args) -> int:
-    cfg = load_cfg(args)
-    sets = dict(_parse_assignment(a) for a in args.assignments)
-    with open_tool_session(cfg.runtime) as session:
-        replies = list(session.get(params_key(cfg.runtime.cell, args.component),
-                                   payload=json.dumps({"set": sets}), timeout=args.timeout))
+def _param_query(session, cfg, component: str, sets: dict, timeout: float) -> dict | None:
+    """One request to ``component``'s parameter queryable (``sets`` may be empty: a read);
+    its reply body, or None when no component answered."""
+    replies = list(session.get(params_key(cfg.runtime.cell, component), payload=json.dumps({"set": sets}),
+                               timeout=timeout))
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
-    if not bodies:
-        rt = cfg.runtime
-        why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
-               f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
-        print(f"humanpt param: no component {args.component!r} answered in cell {rt.cell} "
-              f"within {args.timeout:g} s (is it running?{why})", file=sys.stderr)
-        return 1
-    body = bodies[0]
+    return bodies[0] if bodies else None
+
+
+def _no_answer(cfg, component: str, timeout: float) -> int:
+    rt = cfg.runtime
+    why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
+           f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
+    print(f"humanpt param: no component {component!r} answered in cell {rt.cell} "
+          f"within {timeout:g} s (is it running?{why})", file=sys.stderr)
+    return 1
+
+
+def _param_action(args) -> tuple[str, str, list[str]]:
+    """(action, component, rest) of ``param``'s positionals: ``COMPONENT [KEY=VALUE...]``,
+    ``dump COMPONENT [FILE]`` or ``load COMPONENT FILE``."""
+    if args.component not in ("dump", "load"):
+        return "set", args.component, list(args.assignments)
+    rest = list(args.assignments)
+    if not rest:
+        raise ValueError(f"param {args.component}: name the component (humanpt param {args.component} COMPONENT"
+                         f"{' [FILE]' if args.component == 'dump' else ' FILE'})")
+    most = 2
+    if len(rest) > most or (args.component == "load" and len(rest) != 2):
+        raise ValueError(f"param {args.component}: expected COMPONENT {'[FILE]' if args.component == 'dump' else 'FILE'}"
+                         f", got {' '.join(rest)}")
+    return args.component, rest[0], rest[1:]
+
+
+def param(args) -> int:
+    action, component, rest = _param_action(args)
+    if action == "dump":
+        return param_dump(args, component, rest[0] if rest else None)
+    if action == "load":
+        return param_load(args, component, rest[0])
+    cfg = load_cfg(args)
+    sets = dict(_parse_assignment(a) for a in rest)
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, sets, args.timeout)
+    if body is None:
+        return _no_answer(cfg, component, args.timeout)
     for r in body.get("results", []):
         print(f"{'set' if r['ok'] else 'REJECTED'}: {r['text']}")
     print(json.dumps({"params": body.get("params"), "counters": body.get("counters")}, indent=2))
     return 0 if body.get("ok", False) else 1
+
+
+def param_dump(args, component: str, out: str | None) -> int:
+    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML (a ``[COMPONENT]``
+    section, which ``param load`` and a config file both read)."""
+    if out is not None and Path(out).exists() and not args.overwrite:
+        raise FileExistsError(f"{out}: exists; give --overwrite to replace it")
+    cfg = load_cfg(args)
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, {}, args.timeout)
+    if body is None:
+        return _no_answer(cfg, component, args.timeout)
+    text = (f"# live parameters of {component} in cell {cfg.runtime.cell}, {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
+            f"# humanpt param load {component} FILE sets them again\n"
+            + cfgmod.dumps_toml({component: body.get("params") or {}}))
+    if out is None:
+        print(text, end="")
+    else:
+        Path(out).write_text(text)
+        print(f"humanpt param: {len(body.get('params') or {})} live parameters of {component} -> {out}",
+              file=sys.stderr)
+    return 0
+
+
+def _param_file(path: str, component: str) -> dict:
+    """KEY -> value of a parameter file: a ``[COMPONENT]`` section (what ``param dump``
+    writes) or bare top-level keys."""
+    doc = cfgmod.read_toml(path, kind="parameter file")
+    if set(doc) == {component} and isinstance(doc[component], dict):
+        return doc[component]
+    sections = [k for k, v in doc.items() if isinstance(v, dict)]
+    if sections:
+        raise cfgmod.ConfigError(f"{path}: has section(s) {', '.join(sections)}; a parameter file for {component} "
+                                 f"holds [{component}] only, or bare KEY = VALUE lines")
+    return doc
+
+
+def param_load(args, component: str, path: str) -> int:
+    """``humanpt param load COMPONENT FILE``: set each parameter of FILE, all or none.
+
+    Checked here first against the component's live parameters and its config type (an
+    unknown or non-live key, a value out of range: ConfigError, nothing sent); a key the
+    component itself refuses (a safety limit it may only tighten) rolls back the keys it
+    had set, so the component is left as it was."""
+    values = _param_file(path, component)
+    if not values:
+        raise cfgmod.ConfigError(f"{path}: no parameters in it")
+    cfg = load_cfg(args)
+    try:
+        cls = core_class(component).config_type
+    except (UnknownComponentError, KeyError) as e:
+        raise cfgmod.ConfigError(f"unknown component {component!r}: {e}") from None
+    with open_tool_session(cfg.runtime) as session:
+        body = _param_query(session, cfg, component, {}, args.timeout)
+        if body is None:
+            return _no_answer(cfg, component, args.timeout)
+        before = body.get("params") or {}
+        unknown = [k for k in values if k not in before]
+        if unknown:
+            raise cfgmod.ConfigError(f"{path}: {', '.join(map(repr, unknown))} not live parameter(s) of {component}; "
+                                     f"live: {', '.join(before)} (nothing set)")
+        obj = cfgmod.build(cls, before, source=f"{component}'s live parameters", section=component)
+        for k, v in values.items():  # in order, so checks between fields see the new values
+            try:
+                obj = cfgmod.replace_live(obj, k, json.dumps(v))
+            except cfgmod.ConfigError as e:
+                raise cfgmod.ConfigError(f"{path}: {e} (nothing set)") from None
+        body = _param_query(session, cfg, component, values, args.timeout)
+        if body is None:
+            return _no_answer(cfg, component, args.timeout)
+        results = body.get("results", [])
+        refused = [r for r in results if not r["ok"]]
+        if refused:
+            done = {r["key"]: before[r["key"]] for r in results if r["ok"]}
+            back = _param_query(session, cfg, component, done, args.timeout) if done else {"ok": True}
+            restored = back is not None and back.get("ok", False)
+            for r in refused:
+                print(f"REJECTED: {r['text']}", file=sys.stderr)
+            print(f"humanpt param load: {component} refused {len(refused)} of {len(values)}; "
+                  f"{'the others were set back' if restored else 'COULD NOT SET BACK ' + ', '.join(done)}"
+                  f" (nothing changed{'' if restored else '?'})", file=sys.stderr)
+            return 1
+    for r in results:
+        print(f"set: {r['text']}")
+    print(f"humanpt param load: {len(values)} parameters of {component} from {path}")
+    return 0
 
 
 # -- recordings ----------------------------------------------------------------------------
@@ -488,15 +712,32 @@ def runs_info(args) -> int:
                 missed = f"  MISSED {t.missing} in {t.gaps} gap(s), largest {t.largest_gap}"
             if t.restarts:
                 missed += f"  publisher restarted {t.restarts}x"
-            print(f"  {direction:3s} {topic:32s} {t.count:8d} msgs {t.rate_hz:8.1f} Hz{missed}")
+            print(f"  {direction:3s} {topic:32s} {t.schema:26s} {t.count:8d} msgs {t.rate_hz:8.1f} Hz{missed}")
         for note in f.notes:
             print(f"  note: {note}")
         bad |= bool(f.missing_inputs or f.notes)
     from humanpt.runtime.recording import losses_lines
+    from humanpt.runtime.runinfo import run_summary
 
     lost = losses_lines(args.run_dir)  # what a full disk (or another write error) cost
     for line in lost:
         print(line)
+    run = run_summary(args.run_dir, infos)
+    print(f"run: {run.duration_s:.1f} s, {len(infos)} recordings {run.recordings_bytes / 1e6:.2f} MB "
+          f"({run.mb_per_minute:.1f} MB/min), directory {run.total_bytes / 1e6:.2f} MB")
+    print(f"rig: {run.rig}")
+    if run.warnings:
+        print(f"warnings and errors published ({sum(run.warnings.values())}):")
+        for (comp, sev, code), n in sorted(run.warnings.items()):
+            print(f"  {comp:14s} {sev:8s} {code:28s} {n:6d}")
+    else:
+        print("warnings and errors published: none")
+    if run.dropped:
+        print(f"messages dropped by the shells ({sum(run.dropped.values())}):")
+        for (comp, topic), n in sorted(run.dropped.items()):
+            print(f"  {comp:14s} {topic:32s} {n:6d}")
+    else:
+        print("messages dropped by the shells: none")
     total = sum(f.missing_inputs for f in infos)
     print(f"humanpt runs info: {len(infos)} recordings; inputs missed: {total}; "
           f"recordings with write losses: {len(lost)}")
@@ -551,6 +792,143 @@ def runs_merge(args) -> int:
     for note in notes:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
     print(f"humanpt runs merge: {n} messages from {len(files)} recordings on {len(channels)} topics -> {out}")
+    return 0
+
+
+def _run_files(run: str) -> list[Path]:
+    """The .mcap recordings of a run directory, or the one file given."""
+    from humanpt.runtime.recording import RecordingError
+
+    path = Path(run)
+    if path.is_dir():
+        files = sorted(path.glob("*.mcap"))
+        if not files:
+            raise RecordingError(f"{path}: no .mcap recordings here")
+        return files
+    if path.exists():
+        return [path]
+    raise RecordingError(f"{path}: no such run directory or file")
+
+
+def _recorded_span_ns(files: list[Path]) -> int | None:
+    """Last minus first log time over ``files`` from their MCAP summaries (None when a file
+    has none: an unfinished recording)."""
+    from mcap.reader import make_reader
+
+    starts, ends = [], []
+    for f in files:
+        try:
+            with open(f, "rb") as fh:
+                stats = make_reader(fh).get_summary().statistics
+        except Exception:  # noqa: BLE001 - no summary (unfinished, damaged): the span is unknown
+            return None
+        if stats is None:
+            return None
+        if stats.message_count:
+            starts.append(stats.message_start_time)
+            ends.append(stats.message_end_time)
+    return max(ends) - min(starts) if starts else 0
+
+
+PLAY_CLOCK_TOPIC = "player/clock"
+
+
+def runs_play(args) -> int:
+    """Re-publish a recording's bus outputs at their recorded timing (``humanpt runs play``).
+
+    Every component's ``direction=out`` messages on bus topics (local topics never), merged
+    by log time, are put on ``humanpt/<cell>/<topic>`` of the live cell (``--cell``/config)
+    so that ``echo``, ``console status`` and the viewer see them; message k is put at
+    (t_k - t_0) / rate after the first.  ``--clock`` puts a ``player/clock`` Tick (header
+    stamp = the recording's time) every ``--clock-period`` of recorded time.
+    """
+    from humanpt.runtime.bus import declare_topic_publisher
+    from humanpt.runtime.recording import OUT, merge_entries
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    if not args.rate > 0:
+        raise ValueError(f"--rate {args.rate:g}: must be > 0 (1 = recorded speed, 2 = twice as fast)")
+    if not args.clock_period > 0:
+        raise ValueError(f"--clock-period {args.clock_period:g}: must be > 0 s")
+    files = _run_files(args.run)
+    wanted: set[str] | None = None
+    if args.topics:
+        wanted = {t.strip() for t in args.topics.split(",") if t.strip()}
+        unknown = sorted(t for t in wanted if t not in topics.TOPICS)
+        if unknown:
+            raise ValueError(f"--topics: {', '.join(unknown)} not in the topic table (short names such as "
+                             f"controller/status; `humanpt topics --table` lists them)")
+    cfg = load_cfg(args)
+    cell = cfg.runtime.cell
+    span_ns = _recorded_span_ns(files)
+    skipped: dict[str, str] = {}  # topic -> why it is not played
+
+    def keep(e) -> bool:
+        if e.direction != OUT or e.topic not in topics.TOPICS or (wanted is not None and e.topic not in wanted):
+            return False  # inputs, local topics (serial bytes, show: copies), topics not asked for
+        if e.schema != topics.TOPICS[e.topic].type.DESCRIPTOR.full_name:
+            skipped[e.topic] = f"recorded as {e.schema}, this version's type differs"
+            return False
+        return True
+
+    stop = stop_on_signals()
+    tty = sys.stderr.isatty()
+    n = rounds = 0
+    total = f" / {span_ns / 1e9:.1f}" if span_ns is not None else ""
+    with open_tool_session(cfg.runtime) as session:
+        pubs: dict[str, object] = {}
+        clock = declare_topic_publisher(session, cell, PLAY_CLOCK_TOPIC) if args.clock else None
+        clock_period_ns = int(args.clock_period * 1e9)
+        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cell} at x{args.rate:g}"
+              f"{', looping' if args.loop else ''}{', clock on ' + PLAY_CLOCK_TOPIC if clock else ''}; "
+              "Ctrl-C stops", file=sys.stderr, flush=True)
+        next_progress = time.monotonic()
+        while not stop.is_set():
+            notes: list[str] = []
+            t0 = wall0 = None
+            next_clock_ns = clock_seq = 0
+            played = 0
+            for t_ns, _f, e in merge_entries(files, notes, keep):
+                if t0 is None:
+                    t0, wall0, next_clock_ns = t_ns, time.monotonic(), t_ns
+                while clock is not None and next_clock_ns <= t_ns:  # the clock's ticks due before it
+                    if stop.wait(max(0.0, wall0 + (next_clock_ns - t0) / 1e9 / args.rate - time.monotonic())):
+                        break
+                    clock.put(pb.Tick(header=pb.Header(stamp_ns=next_clock_ns, seq=clock_seq, frame_id="recording"),
+                                      period_ns=clock_period_ns).SerializeToString())
+                    clock_seq += 1
+                    next_clock_ns += clock_period_ns
+                # wait on the stop event, not a sleep: Ctrl-C ends the wait at once
+                if stop.wait(max(0.0, wall0 + (t_ns - t0) / 1e9 / args.rate - time.monotonic())):
+                    break
+                pub = pubs.get(e.topic)
+                if pub is None:
+                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic)
+                pub.put(e.data)
+                n += 1
+                played += 1
+                now = time.monotonic()
+                if now >= next_progress:
+                    next_progress = now + 1.0
+                    print(f"{chr(13) if tty else ''}humanpt runs play: {(t_ns - t0) / 1e9:7.1f}{total} s recorded, "
+                          f"{n} messages{f', round {rounds + 1}' if args.loop else ''}",
+                          end="" if tty else "\n", file=sys.stderr, flush=True)
+            rounds += 1
+            for note in notes:
+                print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
+            if not args.loop or played == 0:
+                break
+        for pub in [*pubs.values(), *([clock] if clock else [])]:
+            pub.undeclare()
+    for topic, why in sorted(skipped.items()):
+        print(f"humanpt runs play: warning: {topic} not played: {why}", file=sys.stderr)
+    how = "stopped" if stop.is_set() else "done"
+    print(f"{chr(10) if tty else ''}humanpt runs play: {how}; {n} messages on {len(pubs)} topics"
+          f"{f' in {rounds} rounds' if args.loop else ''}", file=sys.stderr, flush=True)
+    if n == 0:
+        print("humanpt runs play: nothing to play (no bus outputs recorded"
+              f"{' on the topics asked for' if wanted else ''})", file=sys.stderr)
+        return 1
     return 0
 
 

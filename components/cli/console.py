@@ -21,7 +21,12 @@ import sys
 import threading
 import time
 
-from humanpt.runtime.bus import liveliness_key, open_tool_session, params_key
+from humanpt.runtime.bus import (
+    declare_topic_publisher,
+    liveliness_key,
+    open_tool_session,
+    params_key,
+)
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 
@@ -338,7 +343,7 @@ class Console:
             self.session = open_tool_session(cfg.runtime)
         except ConnectionError as e:
             raise ConsoleError(str(e)) from e
-        self._pub = self.session.declare_publisher(topics.TOPICS["console/command"].key(self.cell))
+        self._pub = declare_topic_publisher(self.session, self.cell, "console/command")
 
     def close(self) -> None:
         try:

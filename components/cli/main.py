@@ -33,6 +33,11 @@ examples:
 """
 
 
+# Verbs whose options may come anywhere among their positionals (main() re-reads them with
+# that verb's parser's parse_intermixed_args).
+INTERMIXED: dict[str, argparse.ArgumentParser] = {}
+
+
 def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", "-c", metavar="FILE", help="TOML config file (default: built-in defaults)")
     p.add_argument("--cell", help="cell name (one robot with its sensors); overrides [runtime] cell")
@@ -173,8 +178,16 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Listen for a while and print every topic seen with its type, publisher, "
                        "message count and rate, and the components whose liveliness tokens are up.")
     _add_common(p)
-    p.add_argument("--duration", type=float, default=2.0, help="seconds to listen (default 2)")
+    p.add_argument("--duration", type=float, help="seconds to listen (default 2; with --hz: "
+                   "until Ctrl-C unless given)")
     p.add_argument("--table", action="store_true", help="print the static topic table and exit (no network)")
+    p.add_argument("--hz", action="store_true",
+                   help="continuously: rate (Hz) and bandwidth (kB/s) per key over each --interval, like "
+                   "ros2 topic hz/bw (a table refreshed in place on a terminal, a block per interval in a pipe)")
+    p.add_argument("--interval", type=float, default=1.0, metavar="S", help="--hz: seconds per refresh (default 1)")
+    p.add_argument("--json", action="store_true",
+                   help="the static topic table as JSON (schemas/topics.json: keys, protobuf types, .proto "
+                   "files, publishers), no network")
 
     p = sub.add_parser("echo", help="print decoded messages of a topic",
                        description="Subscribe to KEY and print each message decoded (like ros2 topic echo). "
@@ -191,13 +204,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--csv", action="store_true",
                    help="with --field: CSV on stdout (stamp_ns, key, each field), e.g. > tob.csv")
 
-    p = sub.add_parser("param", help="show or set a running component's live parameters",
-                       description="Without KEY=VALUE: print the component's live parameters and counters. "
-                       "With KEY=VALUE (VALUE is JSON; a bare word is taken as a string): set them.")
+    p = sub.add_parser("param", help="show, set, dump or load a running component's live parameters",
+                       usage="humanpt param [options] COMPONENT [KEY=VALUE ...]\n"
+                       "       humanpt param [options] dump COMPONENT [FILE]\n"
+                       "       humanpt param [options] load COMPONENT FILE",
+                       description="COMPONENT alone: print its live parameters and counters. With KEY=VALUE (VALUE "
+                       "is JSON; a bare word is taken as a string): set them. dump: the live parameters as TOML "
+                       "(a [COMPONENT] section) on stdout or into FILE. load: set every parameter of FILE (what "
+                       "dump writes, or bare KEY = VALUE lines), all or none: an unknown, non-live or out-of-range "
+                       "key is refused before anything is sent, and keys the component refuses roll back the "
+                       "others. Options may come anywhere.",
+                       epilog="examples:\n  humanpt param controller gain=0.5 --timeout 2\n"
+                       "  humanpt param dump controller controller.toml\n"
+                       "  humanpt param load controller controller.toml",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     _add_common(p)
-    p.add_argument("component")
-    p.add_argument("assignments", nargs="*", metavar="KEY=VALUE")
-    p.add_argument("--timeout", type=float, default=5.0)
+    p.add_argument("component", help=argparse.SUPPRESS)
+    p.add_argument("assignments", nargs="*", help=argparse.SUPPRESS)
+    p.add_argument("--timeout", type=float, default=5.0, help="seconds to wait for the component (default 5)")
+    p.add_argument("--overwrite", action="store_true", help="dump: replace FILE if it exists")
+    INTERMIXED["param"] = p
 
     p = sub.add_parser("replay", help="re-run a component on its recorded inputs and compare outputs",
                        description="Rebuild the component from its recording (core class and config), feed it "
@@ -218,19 +244,40 @@ def build_parser() -> argparse.ArgumentParser:
     console_cli.add_parser(sub, _add_common)
     pki_cli.add_parser(sub, _add_common)
 
-    p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, rerecord)")
+    p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, play, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
     q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
                         description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
                         "(topics as full Zenoh keys, time order), for Foxglove or rerun.")
     q.add_argument("run_dir")
     q.add_argument("out")
-    q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages",
+    q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages, "
+                        "duration, size, rig, warnings",
                         description="Per component recording of RUN_DIR: duration, size, messages per topic in "
                         "and out with their rates, and the messages it never received (gaps in each input "
-                        "topic's sequence numbers: a partition, a full queue), plus damage and restarts. Exit 1 "
+                        "topic's sequence numbers: a partition, a full queue), plus damage and restarts; then the run "
+                        "as a whole: duration, size and MB per minute, the rig it ran with, the warnings and "
+                        "errors its components published (by code) and the messages the shells dropped. Exit 1 "
                         "when any input was missed or a file is damaged.")
     q.add_argument("run_dir")
+    q = rsub.add_parser("play", help="re-publish a recording onto the live bus at its recorded timing",
+                        description="Put every component's recorded outputs on bus topics (never local ones: "
+                        "serial bytes, ticks) onto the live cell (--cell or [runtime] cell) at their recorded "
+                        "timing, scaled by --rate, so that humanpt echo, console status, topics and the viewer "
+                        "work on an old run (like ros2 bag play). Needs a router (--connect). Prints a progress "
+                        "line on stderr; Ctrl-C stops cleanly. Exit 1 when there was nothing to play.",
+                        epilog="example: humanpt runs play runs/<run> --rate 2 --topics controller/status,"
+                        "perception/tob --clock")
+    _add_common(q)
+    q.add_argument("run", help="a run directory or one component's .mcap file")
+    q.add_argument("--rate", "-r", type=float, default=1.0, help="speed factor (default 1: recorded timing)")
+    q.add_argument("--loop", "-l", action="store_true", help="start again at the end (until Ctrl-C)")
+    q.add_argument("--topics", metavar="T,...", help="only these short topics, comma-separated "
+                   "(e.g. controller/status,perception/tob; default: every bus topic recorded)")
+    q.add_argument("--clock", action="store_true", help="also publish the recording's time on player/clock "
+                   "(a Tick; header.stamp_ns = recorded time)")
+    q.add_argument("--clock-period", type=float, default=0.1, metavar="S",
+                   help="recorded seconds between clock ticks (default 0.1)")
     q = rsub.add_parser("list", help="list runs and their recordings")
     q.add_argument("dir", nargs="?", default="runs")
     q = rsub.add_parser("rerecord", help="re-record the reference runs (recordings/) live; show what changed",
@@ -424,11 +471,15 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
     args, extra = ap.parse_known_args(argv)
-    if extra and args.verb == "param":
-        # KEY=VALUE after an option (humanpt param controller --timeout 2 a=1): argparse
-        # ends the positionals at the first option; take the rest as assignments too.
-        args.assignments = list(args.assignments) + [e for e in extra if "=" in e and not e.startswith("-")]
-        extra = [e for e in extra if not ("=" in e and not e.startswith("-"))]
+    if extra and args.verb in INTERMIXED:
+        # Positionals after an option (humanpt param controller --timeout 2 a=1): argparse
+        # ends a subcommand's positionals at the first option; its own parser re-reads its
+        # words intermixed (a parser with subcommands cannot).
+        words = list(sys.argv[1:] if argv is None else argv)
+        rest = words[words.index(args.verb) + 1:]
+        args = INTERMIXED[args.verb].parse_intermixed_args(
+            rest, namespace=argparse.Namespace(verb=args.verb, verbose=args.verbose))
+        extra = []
     if extra:
         ap.error(f"unrecognized arguments: {' '.join(extra)}")
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
@@ -503,6 +554,8 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             return commands.runs_info(args)
         if args.runs_verb == "list":
             return commands.runs_list(args)
+        if args.runs_verb == "play":
+            return commands.runs_play(args)
         if args.runs_verb == "rerecord":
             from humanpt.cli.rerecord import rerecord
 

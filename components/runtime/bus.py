@@ -1,4 +1,11 @@
-"""Zenoh session configuration and the key expressions humanpt uses beside topics."""
+"""Zenoh session configuration, the key expressions humanpt uses beside topics, and the
+encoding of every sample put on a topic.
+
+Every sample humanpt puts on a topic carries the Zenoh encoding ``application/protobuf``
+with the message's full protobuf type name as its schema (``application/protobuf;humanpt.Tick``,
+:func:`topic_encoding`), so a client in any language decodes it from ``sample.encoding`` and
+the .proto files (schemas/humanpt.proto, schemas/foxglove/) without humanpt's topic table.
+"""
 
 from __future__ import annotations
 
@@ -55,6 +62,37 @@ def zenoh_config(rt: RuntimeConfig, *, mode: str | None = None, listen: tuple[st
             conf.insert_json5("access_control", json.dumps(
                 security.access_control(rt.cell, security.identities(pki))))
     return conf
+
+
+PROTOBUF_MIME = "application/protobuf"
+
+
+def topic_encoding(short: str) -> zenoh.Encoding:
+    """The encoding of samples on bus topic ``short``: ``application/protobuf;<full type
+    name>`` (UnknownTopicError for a topic not in the table)."""
+    from humanpt.schemas.topics import message_type
+
+    return zenoh.Encoding.APPLICATION_PROTOBUF.with_schema(message_type(short).DESCRIPTOR.full_name)
+
+
+def type_name_of(encoding: zenoh.Encoding) -> str | None:
+    """The protobuf type name a sample's encoding names, or None when it is not
+    ``application/protobuf;<name>`` (a publisher that set none, another format)."""
+    mime, sep, schema = str(encoding).partition(";")
+    return schema if mime == PROTOBUF_MIME and sep and schema else None
+
+
+def declare_topic_publisher(session: zenoh.Session, cell: str, short: str) -> zenoh.Publisher:
+    """A publisher on bus topic ``short`` of ``cell`` whose samples carry :func:`topic_encoding`
+    (a topic this version's table lacks: plain ``application/protobuf``, no schema)."""
+    from humanpt.schemas.topics import KEY_PREFIX as prefix
+    from humanpt.schemas.topics import UnknownTopicError
+
+    try:
+        encoding = topic_encoding(short)
+    except UnknownTopicError:
+        encoding = zenoh.Encoding.APPLICATION_PROTOBUF
+    return session.declare_publisher(f"{prefix}/{cell}/{short}", encoding=encoding)
 
 
 def free_tcp_port() -> int:

@@ -268,7 +268,10 @@ class LiveShell:
     def _publish(self, short: str, payload: bytes) -> None:
         pub = self._pubs.get(short)
         if pub is None:
-            pub = self._pubs[short] = self._session.declare_publisher(f"{topics.KEY_PREFIX}/{self.cell}/{short}")
+            from humanpt.runtime.bus import declare_topic_publisher
+
+            # application/protobuf;<type>: any client decodes it from the .proto (runtime/bus.py)
+            pub = self._pubs[short] = declare_topic_publisher(self._session, self.cell, short)
         pub.put(payload)
 
     def _publish_raw(self, short: str, msg) -> None:

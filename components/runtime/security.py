@@ -668,12 +668,13 @@ class DenialReporter:
             self._thread = None
 
     def _publish(self) -> None:
+        from humanpt.runtime.bus import topic_encoding
         from humanpt.schemas import topics
 
         key = topics.TOPICS["router/events"].key(self.cell)
         while (ev := self._queue.get()) is not None:
             try:
-                self._session.put(key, ev.SerializeToString())
+                self._session.put(key, ev.SerializeToString(), encoding=topic_encoding("router/events"))
             except Exception:  # noqa: BLE001 - the session closing: nothing more to report to
                 log.debug("router/events: could not publish", exc_info=True)
 

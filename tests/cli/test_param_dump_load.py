@@ -1,0 +1,91 @@
+"""`humanpt param dump/load` against a real pinger (live parameter period_ms, Range 1..60000 ms),
+with options among the positionals.  The CLI runs in this process (cli_main): a dozen calls."""
+
+from __future__ import annotations
+
+import json
+import tomllib
+
+from tests.conftest import wait_for
+
+
+def test_dump_then_load_all_or_nothing(router, procs, tmp_path, cli_main, capsys):
+    _, cfg = router
+    c = ["--config", str(cfg)]
+
+    def call(*argv: str) -> tuple[int, str, str]:
+        rc = cli_main(list(argv))
+        out = capsys.readouterr()
+        return rc, out.out, out.err
+
+    def period() -> float:
+        rc, out, err = call("param", "pinger", *c)
+        assert rc == 0, out + err
+        return json.loads(out[out.index("{"):])["params"]["period_ms"]
+
+    procs.start("pinger", *c, "--run-dir", str(tmp_path / "run"))
+    wait_for(lambda: call("param", "pinger", *c, "--timeout", "1")[0] == 0, 30, "the pinger's parameters")
+    dump = tmp_path / "pinger.toml"
+    # options before, between and after the positionals
+    rc, out, err = call("param", *c, "dump", "pinger", "--timeout", "5", str(dump))
+    assert rc == 0, out + err
+    assert tomllib.loads(dump.read_text()) == {"pinger": {"period_ms": 100.0}}  # PingerConfig's default
+    rc, _, err = call("param", "dump", "pinger", str(dump), *c)
+    assert rc == 2 and "exists; give --overwrite" in err  # never overwritten silently
+
+    good = tmp_path / "good.toml"
+    good.write_text("[pinger]\nperiod_ms = 50.0\n")
+    rc, out, err = call("param", "load", "pinger", str(good), *c)
+    assert rc == 0, out + err
+    assert period() == 50.0
+
+    for text, why in [("period_ms = 0.5\n", "period_ms"),  # below its Range (1 ms)
+                      ("period_ms = 80.0\nno_such_key = 1\n", "'no_such_key' not live parameter(s)"),
+                      ("[controller]\ngain = 1\n", "has section(s) controller")]:
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        rc, _, err = call("param", "load", "pinger", str(bad), *c)
+        assert rc == 2 and why in err and len(err.strip().splitlines()) == 1, err
+        assert "nothing set" in err or "section" in err
+        assert period() == 50.0  # nothing set
+
+    # the dump loads back: the value it held
+    rc, out, err = call("param", "load", *c, "pinger", str(dump))
+    assert rc == 0 and period() == 100.0, out + err
+    # KEY=VALUE after an option still sets
+    rc, out, err = call("param", "pinger", "--timeout", "5", "period_ms=70", *c)
+    assert rc == 0 and period() == 70.0, out + err
+
+
+def test_load_rolls_back_when_the_component_refuses_one(router, procs, tmp_path, cli_main, capsys):
+    """alter_gateway's safety limits may only become stricter at run time (the component
+    checks against the values it started with): a file tightening one and loosening another
+    leaves both as they were."""
+    _, cfg = router
+    with open(cfg, "a") as f:
+        f.write('\n[alter_gateway]\nport = "loop://"\n')  # pyserial's loopback: no robot needed
+    c = ["--config", str(cfg)]
+
+    def params() -> dict:
+        assert cli_main(["param", "alter_gateway", *c, "--timeout", "1"]) == 0
+        out = capsys.readouterr().out
+        return json.loads(out[out.index("{"):])["params"]
+
+    procs.start("alter_gateway", *c, "--run-dir", str(tmp_path / "run"))
+
+    def answering() -> bool:
+        ok = cli_main(["param", "alter_gateway", *c, "--timeout", "1"]) == 0
+        capsys.readouterr()
+        return ok
+
+    wait_for(answering, 30, "the gateway's parameters")
+    before = params()
+    f = tmp_path / "limits.toml"
+    f.write_text(f"[alter_gateway]\nstale_cycles = {before['stale_cycles'] - 1}\n"
+                 f"max_speed_mm_s = {before['max_speed_mm_s'] * 2}\n")
+    assert cli_main(["param", "load", "alter_gateway", str(f), *c]) == 1
+    err = capsys.readouterr().err
+    rejected = [ln for ln in err.splitlines() if ln.startswith("REJECTED")]
+    assert len(rejected) == 1 and "max_speed_mm_s" in rejected[0], err  # stale_cycles was set ...
+    assert "refused 1 of 2; the others were set back" in err, err  # ... and set back
+    assert params() == before
