@@ -384,3 +384,90 @@ def test_position_only_cycles_are_recorded_held_and_playback_interpolates_them()
     tips = core.playback["tips"]
     angles = [np.degrees(Rotation.from_matrix(t[:3, :3] @ T_m(TARGET_X)[:3, :3].T).magnitude()) for t in tips]
     assert max(angles) < 1e-6, max(angles)  # the held (drifted by up to 60 deg) ones interpolated
+
+
+def _timed_line(core):
+    """A 60 mm line along world x from where the tool is: 30 mm in 3 s, then 30 mm in 1 s
+    (10 then 30 mm/s), with the tool's orientation; points every 5 mm."""
+    rig = Rig(core, start_flange(TARGET_X), static(T_m(TARGET_X)))
+    tool = x_from_transform(T_mm(rig.flange @ core.flange_T_tool))
+    xs = np.arange(0.0, 60.1, 5.0)
+    times = np.where(xs <= 30, xs / 10.0, 3.0 + (xs - 30) / 30.0)
+    points = [[tool[0] + x, *tool[1:]] for x in xs]
+    return rig, points, times.tolist()
+
+
+def _play(rig, core, max_cycles=2000, on_cycle=None):
+    """Step until playback ends; (cycles from the approach's end to playback_done, tool tips)."""
+    started, tips = None, []
+    for k in range(max_cycles):
+        rig.step(1)
+        if on_cycle is not None:
+            on_cycle(k)
+        if core.mode != pb.CONTROL_MODE_PLAYBACK:
+            break
+        if not core.playback["approach"]:
+            started = k if started is None else started
+            tips.append((rig.flange @ core.flange_T_tool)[:3, 3] * 1e3)
+    assert "playback_done" in [m.code for m in rig.of("controller/events")]
+    return k - started, np.array(tips)
+
+
+def test_timed_playback_keeps_the_timing_and_rate_scales_it():
+    dt = ControllerConfig().cycle_period_ms * 1e-3
+    core = ControllerCore(ControllerConfig())
+    rig, points, times = _timed_line(core)
+    rig.command("playback", points=points, times_s=times)
+    cycles, tips = _play(rig, core)
+    assert abs(cycles * dt - 4.0) < 0.5, cycles * dt  # the timing's 4 s (plus settling)
+    v = np.linalg.norm(np.diff(tips, axis=0), axis=1) / dt
+    assert 8 < np.median(v[: int(2.5 / dt)]) < 12 and np.max(v) < 36  # 10 mm/s, then 30 (its lag allowed)
+    core = ControllerCore(ControllerConfig())
+    rig, points, times = _timed_line(core)
+    rig.command("playback", points=points, times_s=times)
+    rig.command("playback_rate", rate=2.0)
+    cycles, _ = _play(rig, core)
+    assert abs(cycles * dt - 2.0) < 0.5, cycles * dt
+
+
+def test_pause_stands_on_the_path_and_resume_goes_on():
+    core = ControllerCore(ControllerConfig())
+    rig, points, times = _timed_line(core)
+    rig.command("playback", points=points, times_s=times)
+    seen = {}
+
+    def pause_then_resume(k):
+        if core.playback and not core.playback["approach"]:
+            seen.setdefault("start", k)
+            if k == seen["start"] + 40:
+                rig.command("playback_pause")
+            if k == seen["start"] + 80:  # 40 cycles paused: the last 20 must not move
+                seen["still_mm"] = np.linalg.norm(rig.flange[:3, 3] - seen["at"]) * 1e3
+                rig.command("playback_resume")
+            if k == seen["start"] + 60:
+                seen["at"] = rig.flange[:3, 3].copy()
+
+    _play(rig, core, on_cycle=pause_then_resume)
+    codes = [m.code for m in rig.of("controller/events")]
+    assert codes.index("playback_paused") < codes.index("playback_resumed") < codes.index("playback_done")
+    assert seen["still_mm"] < 0.05
+
+
+@pytest.mark.parametrize("args, needle", [
+    ({"points": [[0, 0, 0, 0, 0, 0]] * 3, "times_s": [0, 1]}, "one time per point"),
+    ({"points": [[0, 0, 0, 0, 0, 0]] * 2, "times_s": [1, 0]}, "never decreasing"),
+    ({"points": [[0, 0, 0, 0, 0, 0], [50, 0, 0, 0, 0, 0]], "times_s": [0, 0.1]}, "max_speed_mm_s"),  # 500 mm/s
+    ({"times_s": [0, 1]}, "no points given"),
+])
+def test_bad_timings_are_refused(args, needle):
+    core = ControllerCore(ControllerConfig())
+    outs = core.step(0, "console/command", pb.Command(verb="playback", args_json=json.dumps(args)))
+    ev = [m for t, m in outs if t == "controller/events"]
+    assert [e.code for e in ev] == ["bad_command"] and needle in ev[0].text and core.playback is None
+
+
+def test_pause_without_a_playback_is_refused():
+    core = ControllerCore(ControllerConfig())
+    for verb in ("playback_pause", "playback_resume"):
+        outs = core.step(0, "console/command", pb.Command(verb=verb))
+        assert [m.code for t, m in outs if t == "controller/events"] == ["bad_command"]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from humanpt.operator.scenario import Line, builtin_scenario
 from humanpt.twin import teach
 from humanpt.twin.worlds import World
 
@@ -28,3 +29,14 @@ def test_teach_and_play_back_on_the_ideal_world(monkeypatch):
     assert len(res.taught_mm) > 100 and np.sqrt(np.mean(res.taught_mm ** 2)) < 0.3
     assert len(res.played_mm) > 500 and np.sqrt(np.mean(res.played_mm ** 2)) < 0.5
     assert not [w for w in res.warnings if "playback not done" in w]
+    # Issue 21: the taught path fitted (humanpt path fit) is 4 lines (one per edge) whose
+    # corners are within 0.5 mm of the trapezium's vertices (the scenario's own line ends),
+    # residual RMS under 0.2 mm; the fitted seam, played back re-timed, keeps the torch
+    # within 0.3 mm RMS of the true edges.
+    seam = res.fitted
+    assert [s.kind for s in seam.segments] == ["line"] * 4 and seam.residual_rms_mm < 0.2
+    vertices = np.array([seg.to_mm for seg in builtin_scenario("trapezium").segments if isinstance(seg, Line)])
+    for c in seam.corners:
+        assert np.min(np.linalg.norm(vertices - np.array(c.point_mm), axis=1)) < 0.5, c
+    assert len(seam.corners) == 3  # B, C, D: A is where the hand starts and ends (a dwell there)
+    assert res.play == "seam" and np.sqrt(np.mean(res.played_mm ** 2)) < 0.3
