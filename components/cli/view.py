@@ -66,8 +66,27 @@ def add_parser(sub) -> argparse.ArgumentParser:
         metavar="N",
         help="show every Nth camera image (default 1)",
     )
+    p.add_argument("--seam", action="append", metavar="FILE.json",
+                   help="also draw this seam file's segments and corners (humanpt path fit; repeatable; "
+                   "default: every paths/*.seam.json of the run)")
     p.add_argument("--no-progress", action="store_true", help="no progress line on stderr")
     return p
+
+
+def draw_seams(rec, files: list[Path]) -> int:
+    """Draw each seam file beside the recorded path (static); how many were drawn."""
+    import numpy as np
+
+    from humanpt.seam import seamfile
+    from humanpt.seam.fit import sample_segment
+    from humanpt.viz.logger import log_seam
+
+    for f in files:
+        seam = seamfile.read(f)
+        log_seam(rec, f.name.removesuffix(".json").replace(".", "_"), [sample_segment(s, 1.0) for s in seam.segments],
+                 [s.kind for s in seam.segments], np.array([c.point_mm for c in seam.corners]).reshape(-1, 3),
+                 [f"corner {c.angle_deg:.0f} deg" for c in seam.corners])
+    return len(files)
 
 
 class Progress:
@@ -134,6 +153,10 @@ def run(args) -> int:
                 file=sys.stderr,
             )
             return 2
+    seams = [Path(f) for f in args.seam] if args.seam else sorted((run_dir / "paths").glob("*.seam.json"))
+    for f in seams:
+        if not f.exists():
+            raise FileNotFoundError(f"{f}: no such seam file")
     base = VizConfig(grpc_port=args.port, **({"connect_url": args.viewer} if args.viewer else {}))
     cfg = viz_config_for_run(run_dir, base)
     try:
@@ -142,6 +165,13 @@ def run(args) -> int:
         raise RecordingError(f"cannot open the rerun {mode} sink: {e}") from e
     progress = Progress(enabled=not args.no_progress)
     try:
+        if seams:
+            from humanpt.seam.seamfile import SeamFileError
+
+            try:
+                draw_seams(rec, seams)
+            except SeamFileError as e:
+                raise RecordingError(str(e)) from None
         stats = convert_run(
             run_dir, rec, config=cfg, image_every=args.image_every, progress=progress
         )

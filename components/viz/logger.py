@@ -99,6 +99,7 @@ ENTITIES = {
     "sources": "world/tob/sources",
     "desired_flange": "world/desired_flange",
     "path": "world/path",
+    "seam": "world/seam",
     "truth_tob": "world/truth/tob",
     "truth_tip": "world/truth/tip",
     "truth_flange": "world/truth/flange",
@@ -622,6 +623,24 @@ class RerunLogger:
             "events/console",
             rr.TextLog(f"console -> {msg.component or 'all'}: {msg.verb}{args}", level="INFO"),
         )
+
+
+SEAM_LINE_RGB, SEAM_ARC_RGB, SEAM_CORNER_RGB = (60, 140, 255), (255, 150, 40), (255, 255, 255)
+
+
+def log_seam(rec: rr.RecordingStream, name: str, strips_mm: list[np.ndarray], kinds: list[str],
+             corners_mm: np.ndarray, corner_labels: list[str]) -> None:
+    """A fitted seam (``humanpt path fit``) beside the recorded path, static: each segment a
+    line strip (``strips_mm``: (k, 3) points in the world frame, mm; lines blue, arcs
+    orange) under ``world/seam/<name>/<i>``, the corners as labelled points."""
+    base = f"{ENTITIES['seam']}/{name}"
+    for i, (pts, kind) in enumerate(zip(strips_mm, kinds, strict=True)):
+        rec.log(f"{base}/{i}", rr.LineStrips3D([np.asarray(pts) * 1e-3], radii=0.0006,
+                                               colors=SEAM_LINE_RGB if kind == "line" else SEAM_ARC_RGB,
+                                               labels=[f"{i} {kind}"]), static=True)
+    if len(corners_mm):
+        rec.log(f"{base}/corners", rr.Points3D(np.asarray(corners_mm) * 1e-3, radii=0.002, colors=SEAM_CORNER_RGB,
+                                               labels=corner_labels), static=True)
 
 
 def _metres(T_mm: np.ndarray) -> np.ndarray:

@@ -289,3 +289,25 @@ def test_display_transfer_brightens_the_dark_complex_image():
     assert lut[64] == 128  # 255 * sqrt(64/255) = 127.75
     assert np.all(np.diff(lut.astype(int)) >= 0)  # monotone: the order of brightness is kept
     assert np.array_equal(display_lut(1.0), np.arange(256, dtype=np.uint8))  # 1: the raw image
+
+
+def test_view_draws_a_fitted_seam_beside_the_path(twin_run, tmp_path, cli_main):
+    # Issue 21.5: the seam's segments and corners beside the raw path.  A hand-made seam:
+    # an L of two lines with one corner (humanpt.seam's file format).
+    from humanpt.seam import seamfile
+    from humanpt.seam.fit import Corner, FitConfig, Seam, Segment
+
+    run_dir, _, _ = twin_run
+    seg = lambda a, b: Segment("line", 0, 5, a, b, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.01, 0.02, 6)  # noqa: E731
+    seam = Seam((seg((0.0, 0.0, 0.0), (100.0, 0.0, 0.0)), seg((100.0, 0.0, 0.0), (100.0, 50.0, 0.0))),
+                (Corner((100.0, 0.0, 0.0), 90.0, 0, 1),), (), (), 0.0, FitConfig(), 12)
+    f = seamfile.write(tmp_path / "l.seam.json", seam)
+    out = tmp_path / "seam.rrd"
+    assert cli_main(["view", str(run_dir), "--seam", str(f), "--save", str(out), "--no-progress"]) == 0
+    rows = _entities(out)
+    assert {"/world/seam/l_seam/0", "/world/seam/l_seam/1", "/world/seam/l_seam/corners"} <= set(rows), sorted(rows)
+    strips = _column(out, "/world/seam/l_seam/1", "LineStrips3D:strips")
+    assert strips, "no strip logged"
+    ends = np.array(strips[0][0])
+    np.testing.assert_allclose(ends[[0, -1]], [[0.1, 0.0, 0.0], [0.1, 0.05, 0.0]], atol=1e-9)  # mm -> m
+    assert cli_main(["view", str(run_dir), "--seam", str(tmp_path / "none.json"), "--save", str(out)]) == 2
