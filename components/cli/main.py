@@ -288,6 +288,29 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--overwrite", action="store_true", help="replace the outputs if they exist (never the input)")
+    q = psub.add_parser("export", help="a seam file as a robot program: VAL II, KUKA KRL, ABB RAPID, URScript, JSON",
+                        description="Write a program that moves the tool along a seam (humanpt path fit): a joint "
+                        "move to its start, then linear and circular moves (an arc through its midpoint), blended "
+                        "at tangent junctions, stopping exactly at corners. Poses in humanpt's world frame (the "
+                        "robot's base must be it); the tool is the seam's point in the TOB frame (the rig's tip). "
+                        "Frame conventions per format: components/seam/README.md, 'export'.")
+    q.add_argument("input", help="a seam file (JSON, humanpt path fit)")
+    q.add_argument("--format", "-f", required=True, choices=["val", "krl", "rapid", "urscript", "json"],
+                   help="val (VAL II), krl (KUKA), rapid (ABB), urscript (Universal Robots), json (neutral)")
+    q.add_argument("--output", "-o", help="the program (default: the seam's name with .v2/.src/.mod/.script/.json)")
+    q.add_argument("--speed", type=float, metavar="MM_S",
+                   help="feed along the seam, mm/s (default: the seam's feed if retimed, else 20)")
+    q.add_argument("--zone", "--blend", type=float, default=1.0, metavar="MM",
+                   help="blend radius at tangent junctions, mm (default 1; 0 stops exactly)")
+    q.add_argument("--corner-zone", type=float, default=0.0, metavar="MM",
+                   help="blend radius at corners, mm (default 0: stop exactly, fine)")
+    q.add_argument("--accel", type=float, default=500.0, metavar="MM_S2",
+                   help="tool acceleration for URScript's a, mm/s^2 (default 500)")
+    q.add_argument("--name", help="program name (default: the seam file's name)")
+    q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
+                   help="the tool point: the seam's (default); must match what the seam was fitted on")
+    q.add_argument("--rig", metavar="FILE", help="rig file whose tip (tob_T_tip) is the tool (default: nominal)")
+    q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
 
     from humanpt.cli import calibrate as calibrate_cli
 
@@ -481,6 +504,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             from humanpt.cli.seam import path_fit
 
             return path_fit(args)
+        if args.path_verb == "export":
+            from humanpt.cli.seam_export import path_export
+            return path_export(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":

@@ -1,0 +1,267 @@
+"""``humanpt path export``: each format's text against a committed golden file, and each
+program's poses parsed back (a regex per format, the format's own angle convention
+inverted with scipy) against the seam file's numbers within 0.01 mm / 0.01 deg.
+
+The seam is hand-made (``data/export-seam.json``): a line, a tangent arc (r 50 mm, 90
+deg), a line on from it, a 90 deg corner and a last line, the torch tilted and turning.
+Regenerate the goldens (after a deliberate change of a format, and read the diff):
+``python -m tests.seam.test_export --regenerate``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation, Slerp
+
+from humanpt.seam import seamfile
+from humanpt.seam.export import FORMATS, SUFFIXES, ExportOptions, export
+from humanpt.seam.fit import Corner, FitConfig, Seam, Segment
+from tests.conftest import run_cli
+
+DATA = Path(__file__).parent / "data"
+SEAM_FILE = DATA / "export-seam.json"
+TIP_MM = (0.0, 0.0, 60.0)  # the nominal rig's tob_t_tip (humanpt.geometry.rig.Tip)
+TOL_MM, TOL_DEG = 0.01, 0.01
+
+
+def hand_made_seam() -> Seam:
+    """The seam of the module doc, its numbers chosen by hand (mm, deg)."""
+    def seg(kind, a, b, ya, yb, **arc):
+        return Segment(kind, 0, 0, a, b, ya, yb, 0.0, 0.0, 10, **arc)
+
+    segs = (
+        seg("line", (0.0, 0.0, 0.0), (100.0, 0.0, 0.0), (0.0, 30.0, 180.0), (10.0, 30.0, 175.0)),
+        # centre (100, 50, 0), normal +z: from (100, 0, 0) a quarter turn to (150, 50, 0)
+        seg("arc", (100.0, 0.0, 0.0), (150.0, 50.0, 0.0), (10.0, 30.0, 175.0), (95.0, 25.0, 170.0),
+            centre_mm=(100.0, 50.0, 0.0), normal=(0.0, 0.0, 1.0), radius_mm=50.0, sweep_deg=90.0),
+        seg("line", (150.0, 50.0, 0.0), (150.0, 120.0, 10.0), (95.0, 25.0, 170.0), (100.0, 20.0, -175.0)),
+        seg("line", (150.0, 120.0, 10.0), (60.0, 120.0, 10.0), (-170.0, 20.0, -175.0), (-175.0, 35.0, 178.0)),
+    )
+    corner = Corner((150.0, 120.0, 10.0), 90.0, 2, 3)
+    return Seam(segs, (corner,), (), (), 0.0, FitConfig(), 40, {"path": "hand-made", "point": "tip",
+                                                                  "frame": "world"})
+
+
+def options() -> ExportOptions:
+    T = np.eye(4)
+    T[:3, 3] = TIP_MM
+    return ExportOptions(speed_mm_s=20.0, zone_mm=1.0, name="seam", point="tip", json_step_mm=5.0,
+                         tob_T_point_mm=tuple(map(tuple, T)), source="export-seam.json")
+
+
+def golden(fmt: str) -> Path:
+    return DATA / f"export-seam{SUFFIXES[fmt]}".replace(".json", ".program.json")
+
+
+def regenerate() -> None:
+    DATA.mkdir(exist_ok=True)
+    seamfile.write(SEAM_FILE, hand_made_seam(), overwrite=True)
+    seam = seamfile.read(SEAM_FILE)
+    for fmt in FORMATS:
+        golden(fmt).write_text(export(seam, fmt, options()))
+        print(golden(fmt))
+
+
+# ---------------------------------------------------------------------------- the seam's own numbers
+
+def seam_numbers() -> dict:
+    """From the seam FILE (not the exporter): the targets each program must reach, in
+    order: (position mm, rotation) of the start, every segment's end, and each arc's
+    midpoint (on the circle, half the sweep on from the start's direction; the torch half way on the geodesic between its end orientations, scipy's Slerp)."""
+    d = json.loads(SEAM_FILE.read_text())
+    segs = d["segments"]
+    def rot(ypr):
+        return Rotation.from_euler("ZYX", ypr, degrees=True)
+
+    ends = [(np.array(segs[0]["start_mm"]), rot(segs[0]["start_ypr_deg"]))]
+    vias = []
+    for s in segs:
+        r0, r1 = rot(s["start_ypr_deg"]), rot(s["end_ypr_deg"])
+        if s["kind"] == "arc":
+            # on the circle, half the sweep on from the start's direction (right-handed about the normal)
+            n, c = np.array(s["normal"]), np.array(s["centre_mm"])
+            u = np.array(s["start_mm"]) - c
+            u = u - (u @ n) * n
+            half = Rotation.from_rotvec(n * math.radians(s["sweep_deg"] / 2))
+            via_p = c + half.apply(u / np.linalg.norm(u) * s["radius_mm"])
+            vias.append((via_p, Slerp([0, 1], Rotation.concatenate([r0, r1]))(0.5)))
+        ends.append((np.array(s["end_mm"]), r1))
+    return {"ends": ends, "vias": vias, "kinds": [s["kind"] for s in segs], "corners": d["corners"]}
+
+
+# ---------------------------------------------------------------------------- parsers, one per format
+
+NUM = r"(-?\d+(?:\.\d+)?(?:[eE][+-]?\d+)?)"
+
+
+def _floats(s: str) -> list[float]:
+    return [float(v) for v in re.findall(NUM, s)]
+
+
+def parse_krl(text: str) -> list[tuple[str, list]]:
+    """[(PTP|LIN|CIRC, [(p mm, Rotation), ...])]: {X, Y, Z, A, B, C}, A B C about Z Y X."""
+    out = []
+    frame = r"\{X ([^,]+), Y ([^,]+), Z ([^,]+), A ([^,]+), B ([^,]+), C ([^}]+)\}"
+    for m in re.finditer(r"^(PTP|LIN|CIRC) (.*)$", text, re.M):
+        poses = [(np.array(v[:3], dtype=float), Rotation.from_euler("ZYX", np.array(v[3:], dtype=float),
+                                                                      degrees=True))
+                 for v in re.findall(frame, m.group(2))]
+        out.append((m.group(1), poses))
+    return out
+
+
+def parse_rapid(text: str) -> list[tuple[str, list]]:
+    """[(MoveJ|MoveL|MoveC, [(p mm, Rotation), ...])]: robtarget quaternions [w, x, y, z]."""
+    targets = {}
+    for m in re.finditer(r"CONST robtarget (\w+) := \[\[([^\]]+)\],\[([^\]]+)\]", text):
+        w, x, y, z = _floats(m.group(3))
+        targets[m.group(1)] = (np.array(_floats(m.group(2))), Rotation.from_quat([x, y, z, w]))
+    out = []
+    for m in re.finditer(r"^\s*(MoveJ|MoveL|MoveC) ([^;]+);", text, re.M):
+        names = [n.strip() for n in m.group(2).split(",")][:2 if m.group(1) == "MoveC" else 1]
+        out.append((m.group(1), [targets[n] for n in names]))
+    return out
+
+
+def parse_urscript(text: str) -> list[tuple[str, list]]:
+    """[(movej|movel|movec, [(p mm, Rotation), ...])]: p[x, y, z (m), rx, ry, rz (rad)]."""
+    out = []
+    for m in re.finditer(r"^\s*(movej|movel|movec)\((.*)\)$", text, re.M):
+        poses = []
+        for p in re.findall(r"p\[([^\]]+)\]", m.group(2)):
+            v = _floats(p)
+            poses.append((np.array(v[:3]) * 1000.0, Rotation.from_rotvec(v[3:])))
+        out.append((m.group(1), poses))
+    return out
+
+
+def parse_val(text: str) -> list[tuple[str, list]]:
+    """[(MOVE|MOVES, [(p mm, Rotation)])]: TRANS(x, y, z, o, a, t), O A T Euler Z-Y-Z."""
+    pts = {m.group(1): _floats(m.group(2)) for m in re.finditer(r"SET (\w+) = TRANS\(([^)]*)\)", text)}
+    return [(m.group(1), [(np.array(pts[m.group(2)][:3]),
+                           Rotation.from_euler("ZYZ", pts[m.group(2)][3:], degrees=True))])
+            for m in re.finditer(r"^\s*(MOVES?) (\w+)$", text, re.M)]
+
+
+def parse_json(text: str) -> list[tuple[str, list]]:
+    d = json.loads(text)
+    out = []
+    for m in d["moves"]:
+        poses = [m["via"]] if "via" in m else []
+        poses.append(m["target"])
+        out.append((m["kind"], [(np.array(p["x_mm"]), Rotation.from_euler("ZYX", p["ypr_deg"], degrees=True))
+                                for p in poses]))
+    return out
+
+
+PARSERS = {"krl": parse_krl, "rapid": parse_rapid, "urscript": parse_urscript, "val": parse_val,
+           "json": parse_json}
+
+
+def assert_pose(got, want, what: str) -> None:
+    dp = float(np.linalg.norm(got[0] - want[0]))
+    da = math.degrees((got[1].inv() * want[1]).magnitude())
+    assert dp < TOL_MM and da < TOL_DEG, f"{what}: {dp:.4f} mm, {da:.4f} deg off the seam"
+
+
+# ---------------------------------------------------------------------------- tests
+
+@pytest.fixture(scope="module")
+def seam() -> Seam:
+    return seamfile.read(SEAM_FILE)
+
+
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_golden_text(seam, fmt):
+    assert export(seam, fmt, options()) == golden(fmt).read_text()
+
+
+@pytest.mark.parametrize("fmt", ["krl", "rapid", "urscript", "json"])
+def test_round_trip_moves(seam, fmt):
+    """The program's moves: the approach to the start, then per segment a linear move to
+    its end, or a circular one through the arc's midpoint to its end."""
+    want = seam_numbers()
+    moves = PARSERS[fmt](export(seam, fmt, options()))
+    assert len(moves) == 1 + len(want["kinds"])
+    assert_pose(moves[0][1][0], want["ends"][0], f"{fmt} start")
+    vias = iter(want["vias"])
+    for i, (kind, (verb, poses)) in enumerate(zip(want["kinds"], moves[1:], strict=True)):
+        circ = {"krl": "CIRC", "rapid": "MoveC", "urscript": "movec", "json": "arc"}[fmt]
+        assert (verb == circ) == (kind == "arc"), f"{fmt} segment {i}: {verb} for a {kind}"
+        if kind == "arc":
+            assert_pose(poses[0], next(vias), f"{fmt} segment {i} via")
+        assert_pose(poses[-1], want["ends"][i + 1], f"{fmt} segment {i} end")
+
+
+def test_round_trip_val(seam):
+    """VAL II has no circular move: every segment end is a point of the program, in order,
+    and the points between lie on the arc (at its radius, in its plane)."""
+    want = seam_numbers()
+    moves = parse_val(export(seam, "val", options()))
+    assert moves[0][0] == "MOVE" and all(v == "MOVES" for v, _ in moves[1:])
+    poses = [p[0] for _, p in moves]
+    k = 0
+    for j, end in enumerate(want["ends"]):
+        while float(np.linalg.norm(poses[k][0] - end[0])) > TOL_MM:
+            k += 1  # points along an arc
+            assert k < len(poses), f"segment end {j} is not in the program"
+        assert_pose(poses[k], end, f"val end {j}")
+    d = json.loads(SEAM_FILE.read_text())["segments"][1]
+    arc_pts = [p for p, _ in poses if 100 < p[0] < 150 - 1e-6 and 0 < p[1] < 50]
+    assert len(arc_pts) >= 5
+    r = np.linalg.norm(np.array(arc_pts) - d["centre_mm"], axis=1)
+    assert np.all(np.abs(r - d["radius_mm"]) < TOL_MM)
+
+
+def test_blends(seam):
+    """Blended at the tangent junctions (line-arc, arc-line), stopping exactly at the
+    corner and at the end: KRL C_DIS, RAPID zonedata vs fine, URScript r."""
+    krl = [line for line in export(seam, "krl", options()).splitlines() if line.startswith(("LIN", "CIRC"))]
+    assert [line.endswith("C_DIS") for line in krl] == [True, True, False, False]
+    rapid = [m.group(1) for m in re.finditer(r"Move[LC] .*, vSeam, (\w+), tSeam", export(seam, "rapid", options()))]
+    assert rapid[2:] == ["fine", "fine"] and "fine" not in rapid[:2]
+    ur = [float(m.group(1)) for m in re.finditer(r"r=([\d.]+)", export(seam, "urscript", options()))]
+    assert ur == [0.001, 0.001, 0.0, 0.0]
+    assert "$VEL.CP = 0.020000" in export(seam, "krl", options())  # 20 mm/s in m/s
+
+
+def test_tool_is_the_rigs_tip(seam):
+    """The tool: the nominal rig's tip, 60 mm along the TOB's z."""
+    assert "$TOOL = {X 0.000, Y 0.000, Z 60.000, A 0.0000, B 0.0000, C 0.0000}" in export(seam, "krl", options())
+    assert "[TRUE,[[0.000,0.000,60.000],[1.0000000,0.0000000,0.0000000,0.0000000]]" in export(seam, "rapid",
+                                                                                                  options())
+    assert "set_tcp(p[0.0000000, 0.0000000, 0.0600000, " in export(seam, "urscript", options())
+
+
+def test_cli_writes_refuses_and_errs(tmp_path):
+    out = tmp_path / "seam.src"
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "-o", str(out), "--name", "seam")
+    assert r.returncode == 0, r.stderr
+    assert out.read_text() == golden("krl").read_text().replace(": export-seam.json", ": export-seam.json")
+    before = out.read_text()
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "rapid", "-o", str(out))
+    assert r.returncode != 0 and "exists" in r.stderr and out.read_text() == before
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "abb", "-o", str(tmp_path / "x"))
+    assert r.returncode != 0 and "invalid choice" in r.stderr and not (tmp_path / "x").exists()
+    empty = tmp_path / "empty.json"
+    empty.write_text(json.dumps({"format": "humanpt.seam", "version": 1, "segments": []}))
+    r = run_cli("path", "export", str(empty), "--format", "json", "-o", str(tmp_path / "e.json"))
+    assert r.returncode != 0 and "no segments" in r.stderr and not (tmp_path / "e.json").exists()
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "-o", str(SEAM_FILE), "--overwrite")
+    assert r.returncode != 0 and "is the input" in r.stderr
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "--point", "G", "-o", str(tmp_path / "g"))
+    assert r.returncode != 0 and "the seam is of tip" in r.stderr and not (tmp_path / "g").exists()
+
+
+if __name__ == "__main__":
+    if "--regenerate" in sys.argv:
+        regenerate()
+    else:
+        print(__doc__)
