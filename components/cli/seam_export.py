@@ -71,7 +71,8 @@ def path_export(args) -> int:
     speed = args.speed if args.speed is not None else (_feed_mm_s(raw) or 20.0)
     opts = ExportOptions(speed_mm_s=speed, zone_mm=args.zone, corner_zone_mm=args.corner_zone,
                          name=args.name or src.name.split(".")[0], point=point,
-                         tob_T_point_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, source=src.name)
+                         tob_T_point_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
+                         source=src.name)
     text = export(seam, args.format, opts, timed=_timed(raw) if args.format == "json" else None)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(text)

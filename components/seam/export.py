@@ -51,6 +51,9 @@ __all__ = ["FORMATS", "SUFFIXES", "ExportError", "ExportOptions", "Move", "moves
 FORMATS = ("val", "krl", "rapid", "urscript", "json")
 SUFFIXES = {"val": ".v2", "krl": ".src", "rapid": ".mod", "urscript": ".script", "json": ".json"}
 
+# A dwell is waited at the nearest move target within this (mm).
+DWELL_REACH_MM = 2.0
+
 # Two segments closer than this (mm) at a junction are continuous; farther, a linear move
 # bridges the gap (the fit ends each segment on its own fit at a tangent junction).
 _JOIN_MM = 1e-3
@@ -68,7 +71,8 @@ class ExportOptions:
     the VAL II SPEED
     (percent of the monitor speed: VAL II has no speed in mm/s) and the largest chord
     error (mm) of the points VAL II gets along an arc (it has no circular move), the
-    spacing (mm) of the JSON's poses along the seam."""
+    spacing (mm) of the JSON's poses along the seam; ``dwells``: wait where the welder
+    dwelt (:func:`moves`)."""
 
     speed_mm_s: float = 20.0
     zone_mm: float = 1.0
@@ -80,6 +84,7 @@ class ExportOptions:
     val_speed_percent: float = 20.0
     val_chord_mm: float = 0.05
     json_step_mm: float = 1.0
+    dwells: bool = False
     source: str = ""
 
     def __post_init__(self):
@@ -103,13 +108,15 @@ class Move:
     """One motion of the program: ``kind`` ``joint`` (to the first point), ``line`` or
     ``arc``; ``target`` and (arcs) ``via`` are (6,) x, y, z mm and psi, theta, phi deg
     (Z-Y-X) in the world frame; ``zone_mm`` the blend at the target (0: stop exactly);
-    ``segment`` the seam's segment (-1: the approach, or a bridge between two segments)."""
+    ``segment`` the seam's segment (-1: the approach, or a bridge between two segments);
+    ``dwell_s`` how long to wait at the target (s; 0: none)."""
 
     kind: str
     target: np.ndarray
     via: np.ndarray | None
     zone_mm: float
     segment: int
+    dwell_s: float = 0.0
 
 
 def program_name(name: str) -> str:
@@ -145,9 +152,12 @@ def _is_corner(seam: Seam, i: int) -> bool:
     return any(c.before == i and c.after == i + 1 for c in seam.corners)
 
 
-def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0) -> list[Move]:
+def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0, dwells: bool = False) -> list[Move]:
     """The seam as moves (see the module doc).  A blend never exceeds 0.4 of the shorter
-    of the two moves it joins (robots refuse or shrink overlapping blends)."""
+    of the two moves it joins (robots refuse or shrink overlapping blends).  With
+    ``dwells``, each of the seam's dwells is a wait of its duration, without a blend, at
+    the move's target nearest to it (the fit puts dwells at segment ends) if within
+    :data:`DWELL_REACH_MM`; a dwell farther from every target is left out."""
     segs = seam.segments
     if not segs:
         raise ExportError("the seam has no segments")
@@ -166,6 +176,13 @@ def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0) -> list
             out.append(Move("arc", pose_at(seg, 1.0), pose_at(seg, 0.5), z, i))
         else:
             out.append(Move("line", pose_at(seg, 1.0), None, z, i))
+    if dwells:
+        for d in seam.dwells:
+            dist = [float(np.linalg.norm(m.target[:3] - np.asarray(d.point_mm))) for m in out]
+            k = int(np.argmin(dist))
+            if dist[k] <= DWELL_REACH_MM:
+                m = out[k]
+                out[k] = Move(m.kind, m.target, m.via, 0.0, m.segment, m.dwell_s + d.duration_s)
     return out
 
 
@@ -187,6 +204,10 @@ def _zyz_deg(r: Rotation) -> np.ndarray:
 
 def _plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def _moves(seam: Seam, opts: ExportOptions) -> list[Move]:
+    return moves(seam, opts.zone_mm, opts.corner_zone_mm, opts.dwells)
 
 
 def _rot(x: np.ndarray) -> Rotation:
@@ -221,7 +242,8 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
     apart.  SPEED is a percent of the monitor speed; the feed is stated in a comment."""
     prog = program_name(opts.name).lower()
     pts: list[np.ndarray] = []
-    for m in moves(seam, opts.zone_mm, opts.corner_zone_mm):
+    waits: dict[int, float] = {}  # point index -> dwell s
+    for m in _moves(seam, opts):
         if m.kind == "arc":
             seg = seam.segments[m.segment]
             # chord error r (1 - cos(da / 2)) <= val_chord_mm
@@ -230,6 +252,8 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
             pts += [pose_at(seg, k / n) for k in range(1, n + 1)]
         else:
             pts.append(m.target)
+        if m.dwell_s > 0:
+            waits[len(pts) - 1] = m.dwell_s
     tool = _tool_x(opts)
     o, a, t = _zyz_deg(Rotation.from_euler("ZYX", tool[3:], degrees=True))
     lines = [f".PROGRAM {prog}()"] + [f"  ; {h}" for h in _header_lines(seam, opts, "val")]
@@ -240,8 +264,10 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
         o, a, t = _zyz_deg(_rot(p))
         lines.append(f"  SET p{i} = TRANS({_f(p[0], 3)}, {_f(p[1], 3)}, {_f(p[2], 3)}, {_f(o, 4)}, {_f(a, 4)}, "
                      f"{_f(t, 4)})")
-    lines.append("  MOVE p0")
-    lines += [f"  MOVES p{i}" for i in range(1, len(pts))]
+    for i in range(len(pts)):
+        lines.append(f"  MOVE{'S' if i else ''} p{i}")
+        if i in waits:
+            lines += ["  BREAK", f"  DELAY {_f(waits[i], 3)}"]  # BREAK: arrive, then wait
     lines.append(".END")
     return "\n".join(lines) + "\n"
 
@@ -264,7 +290,7 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
               f"$VEL.CP = {_f(opts.speed_mm_s / 1000.0, 6)}", "$VEL.ORI1 = 200", "$VEL.ORI2 = 200",
               "$ORI_TYPE = #VAR", "$CIRC_TYPE = #PATH", "$ADVANCE = 3"]
     apo = None
-    for m in moves(seam, opts.zone_mm, opts.corner_zone_mm):
+    for m in _moves(seam, opts):
         if m.zone_mm > 0 and m.zone_mm != apo:
             apo = m.zone_mm
             lines.append(f"$APO.CDIS = {_f(apo, 3)}")
@@ -275,6 +301,8 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
             lines.append(f"LIN {_krl_frame(m.target)}{cdis}")
         else:
             lines.append(f"CIRC {_krl_frame(m.via)}, {_krl_frame(m.target)}{cdis}")
+        if m.dwell_s > 0:
+            lines.append(f"WAIT SEC {_f(m.dwell_s, 3)}")
     lines.append("END")
     return "\n".join(lines) + "\n"
 
@@ -302,7 +330,7 @@ def to_rapid(seam: Seam, opts: ExportOptions) -> str:
     first point, MoveL, MoveC (via, target); ``ConfL \\Off`` (no configuration given)."""
     prog = program_name(opts.name)
     tool = _tool_x(opts)
-    mv = moves(seam, opts.zone_mm, opts.corner_zone_mm)
+    mv = _moves(seam, opts)
     lines = [f"MODULE {prog}"] + [f"  ! {h}" for h in _header_lines(seam, opts, "rapid")]
     lines += ["  ! robtargets in wobj0 = humanpt's world frame; quaternions [q1,q2,q3,q4] = [w,x,y,z]",
               f"  PERS tooldata tSeam := [TRUE,[{_rapid_pose(tool)}],[1,[0,0,1],[1,0,0,0],0,0,0]];  ! load: 1 kg placeholder",
@@ -331,6 +359,8 @@ def to_rapid(seam: Seam, opts: ExportOptions) -> str:
             lines.append(f"    MoveL {ns[0]}, vSeam, {z}, tSeam \\WObj:=wobj0;")
         else:
             lines.append(f"    MoveC {ns[0]}, {ns[1]}, vSeam, {z}, tSeam \\WObj:=wobj0;")
+        if m.dwell_s > 0:
+            lines.append(f"    WaitTime \\InPos, {_f(m.dwell_s, 3)};")
     lines += ["  ENDPROC", "ENDMODULE"]
     return "\n".join(lines) + "\n"
 
@@ -350,7 +380,7 @@ def to_urscript(seam: Seam, opts: ExportOptions) -> str:
     lines = [f"def {prog}():"] + [f"  # {h}" for h in _header_lines(seam, opts, "urscript")]
     lines += ["  # poses in the base frame = humanpt's world; the TCP = the point in the TOB frame",
               f"  set_tcp({_ur_pose(_tool_x(opts))})"]
-    for m in moves(seam, opts.zone_mm, opts.corner_zone_mm):
+    for m in _moves(seam, opts):
         r = _f(m.zone_mm / 1000.0, 6)
         if m.kind == "joint":
             lines.append(f"  movej({_ur_pose(m.target)}, a=0.5, v=0.25)")
@@ -358,6 +388,8 @@ def to_urscript(seam: Seam, opts: ExportOptions) -> str:
             lines.append(f"  movel({_ur_pose(m.target)}, a={a}, v={v}, r={r})")
         else:
             lines.append(f"  movec({_ur_pose(m.via)}, {_ur_pose(m.target)}, a={a}, v={v}, r={r}, mode=0)")
+        if m.dwell_s > 0:
+            lines.append(f"  sleep({_f(m.dwell_s, 3)})")
     lines.append("end")
     return "\n".join(lines) + "\n"
 
@@ -374,7 +406,7 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
     each ``json_step_mm`` (arc length ``s_mm``), or, when the seam was retimed, ``timed``: its
     samples (t s, (6,) pose) with ``t_s``."""
     step_mm = opts.json_step_mm
-    mv = moves(seam, opts.zone_mm, opts.corner_zone_mm)
+    mv = _moves(seam, opts)
     samples = []
     if timed is not None:
         samples = [{"t_s": round(float(t), 6), **_json_pose(np.asarray(x, dtype=float))} for t, x in timed]
@@ -394,6 +426,7 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
         "tool": {"tob_T_point": _json_pose(_tool_x(opts))},
         "speed_mm_s": opts.speed_mm_s, "zone_mm": opts.zone_mm, "corner_zone_mm": opts.corner_zone_mm,
         "moves": [{"kind": m.kind, "segment": m.segment, "zone_mm": round(m.zone_mm, 4),
+                   **({"dwell_s": round(m.dwell_s, 4)} if m.dwell_s > 0 else {}),
                    **({"via": _json_pose(m.via)} if m.via is not None else {}), "target": _json_pose(m.target)}
                   for m in mv],
     }

@@ -3,13 +3,15 @@ program's poses parsed back (a regex per format, the format's own angle conventi
 inverted with scipy) against the seam file's numbers within 0.01 mm / 0.01 deg.
 
 The seam is hand-made (``data/export-seam.json``): a line, a tangent arc (r 50 mm, 90
-deg), a line on from it, a 90 deg corner and a last line, the torch tilted and turning.
+deg), a line on from it, a 90 deg corner (with a 0.8 s dwell) and a last line, the torch
+tilted and turning.
 Regenerate the goldens (after a deliberate change of a format, and read the diff):
 ``python -m tests.seam.test_export --regenerate``.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -22,7 +24,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.seam import seamfile
 from humanpt.seam.export import FORMATS, SUFFIXES, ExportOptions, export
-from humanpt.seam.fit import Corner, FitConfig, Seam, Segment
+from humanpt.seam.fit import Corner, Dwell, FitConfig, Seam, Segment
 from tests.conftest import run_cli
 
 DATA = Path(__file__).parent / "data"
@@ -45,7 +47,8 @@ def hand_made_seam() -> Seam:
         seg("line", (150.0, 120.0, 10.0), (60.0, 120.0, 10.0), (-170.0, 20.0, -175.0), (-175.0, 35.0, 178.0)),
     )
     corner = Corner((150.0, 120.0, 10.0), 90.0, 2, 3)
-    return Seam(segs, (corner,), (), (), 0.0, FitConfig(), 40, {"path": "hand-made", "point": "tip",
+    dwell = Dwell((150.2, 120.1, 10.0), 0, 0, 0.8)  # the hand hesitating at the corner
+    return Seam(segs, (corner,), (dwell,), (), 0.0, FitConfig(), 40, {"path": "hand-made", "point": "tip",
                                                                   "frame": "world"})
 
 
@@ -232,6 +235,48 @@ def test_blends(seam):
     assert "$VEL.CP = 0.020000" in export(seam, "krl", options())  # 20 mm/s in m/s
 
 
+def test_dwells(seam):
+    """With ``dwells``: the 0.8 s at the corner, after the move that ends there, in each
+    format's own wait; none without."""
+    waits = {"krl": ("WAIT SEC 0.800", "X 150.000, Y 120.000, Z 10.000"),
+             "rapid": ("WaitTime \\InPos, 0.800;", "[[150.000,120.000,10.000]"),
+             "urscript": ("sleep(0.800)", "p[0.1500000, 0.1200000, 0.0100000"),
+             "val": ("DELAY 0.800", "TRANS(150.000, 120.000, 10.000")}
+    opts = dataclasses.replace(options(), dwells=True)
+    for fmt, (wait, corner) in waits.items():
+        text = export(seam, fmt, opts)
+        lines = text.splitlines()
+        at = [i for i, line in enumerate(lines) if wait in line]
+        assert len(at) == 1, fmt
+        move = [line for line in lines[:at[0]] if re.match(r"\s*(PTP|LIN|CIRC|Move|move|MOVE)", line)][-1]
+        name = re.match(r"\s*(?:MoveL|MOVES?) (\w+)", move)
+        if name:  # RAPID and VAL II name their targets
+            move = next(line for line in lines if re.search(rf"\b{name.group(1)} (:=|=) ", line))
+        assert corner in move, f"{fmt}: waits after {move}"
+        assert wait not in export(seam, fmt, options())
+    assert [m.get("dwell_s") for m in json.loads(export(seam, "json", opts))["moves"]] == [None, None, None,
+                                                                                          0.8, None]
+
+
+def test_json_samples_on_the_seam():
+    """The neutral JSON's poses along the seam: on the hand-made lines and arc (mm), arc
+    length from 0 to the seam's length (100 + 25 pi + sqrt(70^2 + 10^2) + 90 mm)."""
+    d = json.loads(golden("json").read_text())
+    s = np.array([x["s_mm"] for x in d["samples"]])
+    assert s[0] == 0 and np.all(np.diff(s) > 0) and np.all(np.diff(s) <= 5.0 + 1e-9)
+    assert abs(s[-1] - (100 + 25 * math.pi + math.hypot(70, 10) + 90)) < 1e-3
+    for x in d["samples"]:
+        p = np.array(x["x_mm"])
+        if x["segment"] == 1:
+            assert abs(np.linalg.norm(p - [100, 50, 0]) - 50) < TOL_MM and abs(p[2]) < TOL_MM
+        else:
+            a, b = {0: ([0, 0, 0], [100, 0, 0]), 2: ([150, 50, 0], [150, 120, 10]),
+                    3: ([150, 120, 10], [60, 120, 10])}[x["segment"]]
+            a, b = np.array(a, float), np.array(b, float)
+            t = (p - a) @ (b - a) / ((b - a) @ (b - a))
+            assert -1e-9 <= t <= 1 + 1e-9 and np.linalg.norm(a + t * (b - a) - p) < TOL_MM
+
+
 def test_tool_is_the_rigs_tip(seam):
     """The tool: the nominal rig's tip, 60 mm along the TOB's z."""
     assert "$TOOL = {X 0.000, Y 0.000, Z 60.000, A 0.0000, B 0.0000, C 0.0000}" in export(seam, "krl", options())
@@ -244,7 +289,7 @@ def test_cli_writes_refuses_and_errs(tmp_path):
     out = tmp_path / "seam.src"
     r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "-o", str(out), "--name", "seam")
     assert r.returncode == 0, r.stderr
-    assert out.read_text() == golden("krl").read_text().replace(": export-seam.json", ": export-seam.json")
+    assert out.read_text() == golden("krl").read_text()
     before = out.read_text()
     r = run_cli("path", "export", str(SEAM_FILE), "--format", "rapid", "-o", str(out))
     assert r.returncode != 0 and "exists" in r.stderr and out.read_text() == before
@@ -265,3 +310,29 @@ if __name__ == "__main__":
         regenerate()
     else:
         print(__doc__)
+
+
+def test_cli_retimed_g_seam_and_rig(tmp_path):
+    """A seam of G with a feed and timed samples (a retimed seam): the feed is the
+    default speed, the JSON carries the samples' times, G's tool is the identity; a rig
+    file's tip is the tip seam's tool."""
+    d = json.loads(SEAM_FILE.read_text())
+    d["source"]["point"] = "G"
+    d["retime"] = {"speed_mm_s": 35.0, "samples": [{"t_s": 0.0, "x": [0, 0, 0, 0, 30, 180]},
+                                                   {"t_s": 0.004, "x": [0.14, 0, 0, 0.01, 30, 179.99]}]}
+    g = tmp_path / "g.seam.json"
+    g.write_text(json.dumps(d))
+    r = run_cli("path", "export", str(g), "--format", "json")
+    assert r.returncode == 0, r.stderr
+    prog = json.loads((tmp_path / "g.json").read_text())
+    assert prog["speed_mm_s"] == 35.0 and prog["point"] == "G"
+    assert [x["t_s"] for x in prog["samples"]] == [0.0, 0.004]
+    assert prog["samples"][1]["x_mm"] == [0.14, 0.0, 0.0]
+    assert prog["tool"]["tob_T_point"]["x_mm"] == [0.0, 0.0, 0.0]
+    from humanpt.geometry.rig import Rig, Tip
+    from humanpt.runtime.rigfile import write_rig
+
+    rig = write_rig(tmp_path / "rig.toml", Rig(tip=Tip(tob_t_tip_mm=(1.0, -2.0, 75.0))))
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--rig", str(rig), "-o", str(tmp_path / "t.src"))
+    assert r.returncode == 0, r.stderr
+    assert "$TOOL = {X 1.000, Y -2.000, Z 75.000, A 0.0000, B 0.0000, C 0.0000}" in (tmp_path / "t.src").read_text()
