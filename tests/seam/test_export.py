@@ -299,6 +299,9 @@ def test_cli_writes_refuses_and_errs(tmp_path):
     empty.write_text(json.dumps({"format": "humanpt.seam", "version": 1, "segments": []}))
     r = run_cli("path", "export", str(empty), "--format", "json", "-o", str(tmp_path / "e.json"))
     assert r.returncode != 0 and "no segments" in r.stderr and not (tmp_path / "e.json").exists()
+    (tmp_path / "zero.json").write_text("")
+    r = run_cli("path", "export", str(tmp_path / "zero.json"), "--format", "krl", "-o", str(tmp_path / "z.src"))
+    assert r.returncode != 0 and "not JSON" in r.stderr and not (tmp_path / "z.src").exists()
     r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "-o", str(SEAM_FILE), "--overwrite")
     assert r.returncode != 0 and "is the input" in r.stderr
     r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "--point", "G", "-o", str(tmp_path / "g"))
