@@ -54,9 +54,14 @@ SUFFIXES = {"val": ".v2", "krl": ".src", "rapid": ".mod", "urscript": ".script",
 # A dwell is waited at the nearest move target within this (mm).
 DWELL_REACH_MM = 2.0
 
-# Two segments closer than this (mm) at a junction are continuous; farther, a linear move
-# bridges the gap (the fit ends each segment on its own fit at a tangent junction).
+# Two segments closer than this (mm) at a junction are continuous; farther (a seam file
+# not from humanpt's fit), a linear move bridges the gap.
 _JOIN_MM = 1e-3
+
+# An arc sweeping more than this (deg) is two circular moves: robots take a circle
+# through three points only up to some sweep (ABB about 240 deg), and the via point
+# defines the circle poorly as it nears the ends.
+MAX_CIRC_SWEEP_DEG = 180.0
 
 
 class ExportError(ValueError):
@@ -153,8 +158,10 @@ def _is_corner(seam: Seam, i: int) -> bool:
 
 
 def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0, dwells: bool = False) -> list[Move]:
-    """The seam as moves (see the module doc).  A blend never exceeds 0.4 of the shorter
-    of the two moves it joins (robots refuse or shrink overlapping blends).  With
+    """The seam as moves (see the module doc); an arc of more than
+    :data:`MAX_CIRC_SWEEP_DEG` is two circular moves (vias at 1/4 and 3/4 of it, the
+    first target half way).  A blend never exceeds 0.4 of the shorter of the two moves it
+    joins (robots refuse or shrink overlapping blends).  With
     ``dwells``, each of the seam's dwells is a wait of its duration, without a blend, at
     the move's target nearest to it (the fit puts dwells at segment ends) if within
     :data:`DWELL_REACH_MM`; a dwell farther from every target is left out."""
@@ -172,7 +179,11 @@ def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0, dwells:
             nxt = segs[i + 1]
             gap = float(np.linalg.norm(np.subtract(nxt.start_mm, seg.end_mm)))
             z = min(z, 0.4 * seg.length_mm, 0.4 * (gap if gap > _JOIN_MM else nxt.length_mm))
-        if seg.kind == "arc":
+        if seg.kind == "arc" and abs(seg.sweep_deg) > MAX_CIRC_SWEEP_DEG:
+            half = min(zone_mm, 0.4 * seg.length_mm / 2)  # the two halves run on tangentially
+            out.append(Move("arc", pose_at(seg, 0.5), pose_at(seg, 0.25), half, i))
+            out.append(Move("arc", pose_at(seg, 1.0), pose_at(seg, 0.75), z, i))
+        elif seg.kind == "arc":
             out.append(Move("arc", pose_at(seg, 1.0), pose_at(seg, 0.5), z, i))
         else:
             out.append(Move("line", pose_at(seg, 1.0), None, z, i))

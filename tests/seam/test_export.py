@@ -258,6 +258,23 @@ def test_dwells(seam):
                                                                                           0.8, None]
 
 
+def test_long_arc_is_two_circular_moves():
+    """An arc of 270 deg (r 40 mm about (0, 0, 5), normal -z): two CIRCs, each via and
+    target on the circle, the vias and the middle target at 1/4, 1/2, 3/4 of the sweep
+    (hand: from (40, 0, 5) clockwise seen from +z), the last target the arc's end."""
+    seg = Segment("arc", 0, 0, (40.0, 0.0, 5.0), (0.0, 40.0, 5.0), (0.0, 0.0, 180.0), (0.0, 0.0, 180.0),
+                  0.0, 0.0, 10, centre_mm=(0.0, 0.0, 5.0), normal=(0.0, 0.0, -1.0), radius_mm=40.0, sweep_deg=270.0)
+    seam = Seam((seg,), (), (), (), 0.0, FitConfig(), 10, {"point": "tip"})
+    moves = parse_krl(export(seam, "krl", options()))
+    assert [verb for verb, _ in moves] == ["PTP", "CIRC", "CIRC"]
+    # clockwise from +x by 67.5, 135, 202.5 and 270 deg
+    c67, s67, h = 40 * math.cos(math.radians(67.5)), 40 * math.sin(math.radians(67.5)), 40 * math.sqrt(0.5)
+    want = [(c67, -s67), (-h, -h), (-s67, c67), (0.0, 40.0)]  # via 1, target 1, via 2, target 2
+    got = [tuple(p[0][:2]) for _, poses in moves[1:] for p in poses]
+    assert np.allclose(got, want, atol=TOL_MM)
+    assert all(abs(p[0][2] - 5.0) < TOL_MM for _, poses in moves for p in poses)
+
+
 def test_json_samples_on_the_seam():
     """The neutral JSON's poses along the seam: on the hand-made lines and arc (mm), arc
     length from 0 to the seam's length (100 + 25 pi + sqrt(70^2 + 10^2) + 90 mm)."""
