@@ -297,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("input", help="a seam file (JSON, humanpt path fit)")
     q.add_argument("--format", "-f", required=True, choices=["val", "krl", "rapid", "urscript", "json"],
                    help="val (VAL II), krl (KUKA), rapid (ABB), urscript (Universal Robots), json (neutral)")
-    q.add_argument("--output", "-o", help="the program (default: the seam's name with .v2/.src/.mod/.script/.json)")
+    q.add_argument("--output", "-o", help="the program (default: beside the seam, its name with .v2/.mod/.script/.json; "
+                   "KRL: the program's name with .src, as KRL wants)")
     q.add_argument("--speed", type=float, metavar="MM_S",
                    help="feed along the seam, mm/s (default: the seam's feed if retimed, else 20)")
     q.add_argument("--zone", "--blend", type=float, default=1.0, metavar="MM",
@@ -306,7 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="blend radius at corners, mm (default 0: stop exactly, fine)")
     q.add_argument("--accel", type=float, default=500.0, metavar="MM_S2",
                    help="tool acceleration for URScript's a, mm/s^2 (default 500)")
-    q.add_argument("--name", help="program name (default: the seam file's name)")
+    q.add_argument("--name", help="program name (default: the seam file's name; KRL: OUTPUT's)")
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="the tool point: the seam's (default); must match what the seam was fitted on")
     q.add_argument("--rig", metavar="FILE", help="rig file whose tip (tob_T_tip) is the tool (default: nominal)")

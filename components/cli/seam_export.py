@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -41,11 +42,18 @@ def _timed(raw: dict) -> list[tuple[float, np.ndarray]] | None:
 
 def path_export(args) -> int:
     from humanpt.seam import seamfile
-    from humanpt.seam.export import SUFFIXES, ExportOptions, export
+    from humanpt.seam.export import SUFFIXES, ExportOptions, export, program_name
 
     src = Path(args.input)
-    out = Path(args.output) if args.output else src.with_name(
-        src.name.removesuffix(".json").removesuffix(".seam") + SUFFIXES[args.format])
+    stem = src.name.removesuffix(".json").removesuffix(".seam")
+    # KRL: the .src file is named as its DEF (KRL names have no '-'), so the default file
+    # is the program's name, and the default name the file's.
+    if args.output:
+        out = Path(args.output)
+    else:
+        out = src.with_name((program_name(args.name or stem) if args.format == "krl" else stem)
+                            + SUFFIXES[args.format])
+    name = args.name or (out.stem if args.format == "krl" else stem)
     if out.exists() and out.resolve() == src.resolve():
         raise ValueError(f"{out}: is the input; write the program to another file")
     if out.exists() and not args.overwrite:
@@ -70,13 +78,16 @@ def path_export(args) -> int:
         tool = np.eye(4)
     speed = args.speed if args.speed is not None else (_feed_mm_s(raw) or 20.0)
     opts = ExportOptions(speed_mm_s=speed, zone_mm=args.zone, corner_zone_mm=args.corner_zone,
-                         name=args.name or src.name.split(".")[0], point=point,
+                         name=name, point=point,
                          tob_T_point_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
                          source=src.name)
     text = export(seam, args.format, opts, timed=_timed(raw) if args.format == "json" else None)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, out)  # all or nothing: a crash leaves no half program
+    if args.format == "krl" and program_name(name) != out.stem:
+        print(f"humanpt path export: note: KRL wants the file named as its program: "
+              f"{program_name(name)}.src", file=sys.stderr)
     n = len(seam.segments)
     print(f"humanpt path export: {n} segments ({sum(s.kind == 'arc' for s in seam.segments)} arcs), "
           f"{len(seam.corners)} corners of the {point} -> {args.format} at {speed:g} mm/s: {out}")
