@@ -36,7 +36,8 @@ TOL_MM, TOL_DEG = 0.01, 0.01
 def hand_made_seam() -> Seam:
     """The seam of the module doc, its numbers chosen by hand (mm, deg)."""
     def seg(kind, a, b, ya, yb, **arc):
-        return Segment(kind, 0, 0, a, b, ya, yb, 0.0, 0.0, 10, **arc)
+        return Segment(kind=kind, first=0, last=0, start_mm=a, end_mm=b, start_ypr_deg=ya, end_ypr_deg=yb,
+                       residual_rms_mm=0.0, residual_max_mm=0.0, points=10, **arc)
 
     segs = (
         seg("line", (0.0, 0.0, 0.0), (100.0, 0.0, 0.0), (0.0, 30.0, 180.0), (10.0, 30.0, 175.0)),
@@ -48,8 +49,8 @@ def hand_made_seam() -> Seam:
     )
     corner = Corner((150.0, 120.0, 10.0), 90.0, 2, 3)
     dwell = Dwell((150.2, 120.1, 10.0), 0, 0, 0.8)  # the hand hesitating at the corner
-    return Seam(segs, (corner,), (dwell,), (), 0.0, FitConfig(), 40, {"path": "hand-made", "point": "tip",
-                                                                  "frame": "world"})
+    return Seam(segments=segs, corners=(corner,), dwells=(dwell,), outliers=(), noise_mm=0.0, config=FitConfig(),
+                points=40, meta={"path": "hand-made", "point": "tip", "frame": "world"})
 
 
 def options() -> ExportOptions:
@@ -262,9 +263,12 @@ def test_long_arc_is_two_circular_moves():
     """An arc of 270 deg (r 40 mm about (0, 0, 5), normal -z): two CIRCs, each via and
     target on the circle, the vias and the middle target at 1/4, 1/2, 3/4 of the sweep
     (hand: from (40, 0, 5) clockwise seen from +z), the last target the arc's end."""
-    seg = Segment("arc", 0, 0, (40.0, 0.0, 5.0), (0.0, 40.0, 5.0), (0.0, 0.0, 180.0), (0.0, 0.0, 180.0),
-                  0.0, 0.0, 10, centre_mm=(0.0, 0.0, 5.0), normal=(0.0, 0.0, -1.0), radius_mm=40.0, sweep_deg=270.0)
-    seam = Seam((seg,), (), (), (), 0.0, FitConfig(), 10, {"point": "tip"})
+    seg = Segment(kind="arc", first=0, last=0, start_mm=(40.0, 0.0, 5.0), end_mm=(0.0, 40.0, 5.0),
+                  start_ypr_deg=(0.0, 0.0, 180.0), end_ypr_deg=(0.0, 0.0, 180.0), residual_rms_mm=0.0,
+                  residual_max_mm=0.0, points=10, centre_mm=(0.0, 0.0, 5.0), normal=(0.0, 0.0, -1.0),
+                  radius_mm=40.0, sweep_deg=270.0)
+    seam = Seam(segments=(seg,), corners=(), dwells=(), outliers=(), noise_mm=0.0, config=FitConfig(), points=10,
+                meta={"point": "tip"})
     moves = parse_krl(export(seam, "krl", options()))
     assert [verb for verb, _ in moves] == ["PTP", "CIRC", "CIRC"]
     # clockwise from +x by 67.5, 135, 202.5 and 270 deg
