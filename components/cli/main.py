@@ -297,7 +297,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--timeout", type=float, default=180.0, metavar="S",
                    help="seconds a run may take beyond its twin time (default 180)")
 
-    p = sub.add_parser("path", help="recorded paths: smooth (RTS), fit lines and arcs, export as a VAL II program",
+    p = sub.add_parser("path", help="recorded paths: smooth, fit lines and arcs, retime, play, compare, export "
+                       "(VAL II, KRL, RAPID, URScript, JSON)",
                        description="Work offline on path files written while recording (CSV in mm and degrees: "
                        "<run dir>/paths/path-<n>.csv).")
     psub = p.add_subparsers(dest="path_verb", metavar="ACTION")
@@ -335,6 +336,32 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="which point's path (default: the tip when recorded)")
     q.add_argument("--overwrite", action="store_true", help="replace the outputs if they exist (never the input)")
+    q = psub.add_parser("export", help="a seam file as a robot program: VAL II, KUKA KRL, ABB RAPID, URScript, JSON",
+                        description="Write a program that moves the tool along a seam (humanpt path fit): a joint "
+                        "move to its start, then linear and circular moves (an arc through its midpoint), blended "
+                        "at tangent junctions, stopping exactly at corners. Poses in humanpt's world frame (the "
+                        "robot's base must be it); the tool is the seam's point in the TOB frame (the rig's tip). "
+                        "Frame conventions per format: components/seam/README.md, 'export'.")
+    q.add_argument("input", help="a seam file (JSON, humanpt path fit)")
+    q.add_argument("--format", "-f", required=True, choices=["val", "krl", "rapid", "urscript", "json"],
+                   help="val (VAL II), krl (KUKA), rapid (ABB), urscript (Universal Robots), json (neutral)")
+    q.add_argument("--output", "-o", help="the program (default: beside the seam, its name with .v2/.mod/.script/.json; "
+                   "KRL: the program's name with .src, as KRL wants)")
+    q.add_argument("--speed", type=float, metavar="MM_S",
+                   help="feed along the seam, mm/s (default: the seam's feed if retimed, else 20)")
+    q.add_argument("--zone", "--blend", type=float, default=1.0, metavar="MM",
+                   help="blend radius at tangent junctions, mm (default 1; 0 stops exactly)")
+    q.add_argument("--corner-zone", type=float, default=0.0, metavar="MM",
+                   help="blend radius at corners, mm (default 0: stop exactly, fine)")
+    q.add_argument("--accel", type=float, default=500.0, metavar="MM_S2",
+                   help="tool acceleration for URScript's a, mm/s^2 (default 500)")
+    q.add_argument("--name", help="program name (default: the seam file's name; KRL: OUTPUT's)")
+    q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
+                   help="the tool point: the seam's (default); must match what the seam was fitted on")
+    q.add_argument("--rig", metavar="FILE", help="rig file whose tip (tob_T_tip) is the tool (default: nominal)")
+    q.add_argument("--dwells", action="store_true",
+                   help="wait where the welder dwelt (the seam's dwells, at segment ends), as long as he did")
+    q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
 
     q = psub.add_parser("retime", help="a seam in time: constant feed, bounded acceleration and jerk",
                         description="Sample a seam file (from path fit) every controller cycle at a constant feed "
@@ -572,6 +599,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             from humanpt.cli import seam as seam_cli
 
             return getattr(seam_cli, f"path_{args.path_verb}")(args)
+        if args.path_verb == "export":
+            from humanpt.cli.seam_export import path_export
+            return path_export(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
         if args.bench_verb == "runtime":
