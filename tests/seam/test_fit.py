@@ -132,3 +132,19 @@ def test_path_fit_of_a_bad_path_writes_nothing(tmp_path):
     r = run_cli("path", "fit", str(src))
     assert r.returncode == 2 and "1 point" in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["one.csv"]
+
+
+@pytest.mark.parametrize("rows, says", [(0, "0 points"), ("nan", "not a finite number")])
+def test_path_fit_of_an_empty_or_nan_path_writes_nothing(tmp_path, rows, says):
+    lines = (ROOT / "recordings" / "arc" / "paths" / "path-1.csv").read_text().splitlines()
+    if rows == "nan":
+        cells = lines[2].split(",")
+        cells[2] = "nan"  # x_mm of the second point
+        lines = lines[:2] + [",".join(cells)] + lines[3:]
+    else:
+        lines = lines[:1]  # the header alone
+    src = tmp_path / "p.csv"
+    src.write_text("\n".join(lines) + "\n")
+    r = run_cli("path", "fit", str(src))
+    assert r.returncode == 2 and says in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]
