@@ -117,8 +117,9 @@ class ArcFit:
 
 
 def arc_fit(p_mm: np.ndarray) -> ArcFit | None:
-    """Least squares circle through (n, 3) points (n >= 3): the plane by SVD, the circle
-    in the plane algebraically (Kasa), then the 3-D geometric distance minimised (scipy).
+    """Least squares circle through (n, 3) points (n >= 3): the plane by SVD (total least
+    squares), the circle in the plane algebraically (Kasa), then its geometric distance
+    minimised (scipy, Levenberg-Marquardt); residuals are 3-D distances to the circle.
     None when the points are (nearly) collinear."""
     c0 = p_mm.mean(axis=0)
     _, s, vt = np.linalg.svd(p_mm - c0, full_matrices=False)
@@ -131,18 +132,20 @@ def arc_fit(p_mm: np.ndarray) -> ArcFit | None:
     sol, *_ = np.linalg.lstsq(A, b, rcond=None)
     cq = sol[:2]
     r0 = math.sqrt(max(sol[2] + cq @ cq, 1e-12))
-    centre0 = c0 + cq[0] * u + cq[1] * v
 
-    def resid(x):
-        centre, normal, r = x[:3], x[3:6], x[6]
-        normal = normal / np.linalg.norm(normal)
+    def resid2(x):  # in-plane geometric distance to the circle (cx, cy, r)
+        return np.hypot(q[:, 0] - x[0], q[:, 1] - x[1]) - x[2]
+
+    sol = least_squares(resid2, np.array([cq[0], cq[1], r0]), method="lm")
+    cq, r0 = sol.x[:2], abs(float(sol.x[2]))
+    centre, normal, r = c0 + cq[0] * u + cq[1] * v, n, r0
+
+    def resid(centre, normal, r):
         d = p_mm - centre
         h = d @ normal
         rho = np.linalg.norm(d - np.outer(h, normal), axis=1)
         return np.hypot(h, rho - r)
 
-    sol = least_squares(resid, np.concatenate([centre0, n, [r0]]), method="trf")
-    centre, normal, r = sol.x[:3], sol.x[3:6] / np.linalg.norm(sol.x[3:6]), abs(float(sol.x[6]))
     # In-plane basis from the first point; the sweep unwrapped point by point.
     d0 = p_mm[0] - centre
     u = d0 - (d0 @ normal) * normal
@@ -155,7 +158,7 @@ def arc_fit(p_mm: np.ndarray) -> ArcFit | None:
     sweep = float(ang[-1] - ang[0])
     if sweep < 0:  # orient the normal so the arc turns positively about it
         normal, v, ang, sweep = -normal, -v, -ang, -sweep
-    return ArcFit(centre, normal, r, float(ang[0]), sweep, u, v, resid(np.concatenate([centre, normal, [r]])))
+    return ArcFit(centre, normal, r, float(ang[0]), sweep, u, v, resid(centre, normal, r))
 
 
 def noise_mm(p_mm: np.ndarray, window: int = 5) -> float:
