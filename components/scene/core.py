@@ -222,7 +222,7 @@ class SceneCore(Core):
         if grown >= max(1, math.ceil(self._path_sent * self.config.path_resend_fraction)):
             out.append(self._path_message())
         n = self.config.seam_strip_points
-        k = (len(self.path) - 1) // (n - 1)  # strips share their end points: no gaps
+        k = max(0, len(self.path) - 2) // (n - 1)  # strip k: points k(n-1) .. k(n-1) + n-1 (ends shared)
         strip = self.path[k * (n - 1):]
         points = [self._seam_point(p) for p in strip]
         if len(points) >= 2:
@@ -255,7 +255,7 @@ class SceneCore(Core):
             return []
         self.truth_seam.append(p)
         n = self.config.seam_strip_points
-        k = (len(self.truth_seam) - 1) // (n - 1)
+        k = max(0, len(self.truth_seam) - 2) // (n - 1)
         strip = [Point3(x=x, y=y, z=z) for x, y, z in self.truth_seam[k * (n - 1):]]
         if len(strip) < 2:
             return []
