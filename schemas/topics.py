@@ -16,6 +16,7 @@ from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.Log_pb2 import Log
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
@@ -57,6 +58,7 @@ _ROWS = [
     Topic("scene/transforms", FrameTransforms, "scene", "frames world, base, flange, camera, camera_right/left, "
           "desired, flange_desired, tob, tip"),
     Topic("scene/path", PosesInFrame, "scene", "the recorded path (tip, else G) in world"),
+    Topic("scene/path_points", PointCloud, "scene", "the same path as points (rerun draws them)"),
     Topic("scene/annotations", ImageAnnotations, "scene", "centres, pairs, labels on the complex image"),
     Topic("scene/calibration", CameraCalibration, "scene", "the camera's K, D, P (rig), now and then"),
     Topic("scene/log", Log, "scene", "every component's events as log lines"),

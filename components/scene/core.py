@@ -40,8 +40,10 @@ from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
 from foxglove_schemas_protobuf.Log_pb2 import Log
+from foxglove_schemas_protobuf.PackedElementField_pb2 import PackedElementField
 from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.Point3_pb2 import Point3
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
 from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
@@ -66,6 +68,7 @@ __all__ = ["SceneCore", "EVENT_TOPICS", "FRAMES"]
 
 T_TRANSFORMS = "scene/transforms"
 T_PATH = "scene/path"
+T_PATH_POINTS = "scene/path_points"
 T_ANNOTATIONS = "scene/annotations"
 T_CALIBRATION = "scene/calibration"
 T_LOG = "scene/log"
@@ -91,6 +94,7 @@ _LEVEL = {
 }
 _DZ_CHANGED = re.compile(r"\bdz_mm = ([-+0-9.eE]+)")
 _LABELS = ("A", "B", "C")
+_XYZ_FLOAT32 = [PackedElementField(name=n, offset=4 * i, type=PackedElementField.FLOAT32) for i, n in enumerate("xyz")]
 
 
 def _rgba(r: float, g: float, b: float, a: float = 1.0) -> Color:
@@ -111,6 +115,11 @@ def timestamp(stamp_ns: int) -> Timestamp:
     """A google.protobuf.Timestamp of ``stamp_ns`` (ns of the shared time base)."""
     s, ns = divmod(int(stamp_ns), 1_000_000_000)
     return Timestamp(seconds=s, nanos=ns)
+
+
+def _identity() -> Pose:
+    """The identity pose, every field set (an unset position is no zero to every reader)."""
+    return Pose(position=Vector3(x=0.0, y=0.0, z=0.0), orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0))
 
 
 def _fox_pose(p: pb.Pose) -> Pose:
@@ -206,7 +215,7 @@ class SceneCore(Core):
             out.append((T_TRANSFORMS, FrameTransforms(transforms=[
                 _transform(msg.header.stamp_ns, WORLD, FLANGE_DESIRED, msg.world_T_desired)])))
         if self._recording and not msg.recording and self._path_sent < len(self.path):
-            out.append(self._path_message())
+            out += self._path_messages()
         self._recording = msg.recording
         return out
 
@@ -220,7 +229,7 @@ class SceneCore(Core):
         out: list[Output] = []
         grown = len(self.path) - self._path_sent
         if grown >= max(1, math.ceil(self._path_sent * self.config.path_resend_fraction)):
-            out.append(self._path_message())
+            out += self._path_messages()
         n = self.config.seam_strip_points
         k = max(0, len(self.path) - 2) // (n - 1)  # strip k: points k(n-1) .. k(n-1) + n-1 (ends shared)
         strip = self.path[k * (n - 1):]
@@ -239,11 +248,16 @@ class SceneCore(Core):
         t = self._path_pose(p).translation
         return Point3(x=t.x, y=t.y, z=t.z)
 
-    def _path_message(self) -> Output:
+    def _path_messages(self) -> list[Output]:
+        """The whole path as poses (scene/path) and as points (scene/path_points: rerun's
+        MCAP import draws a PointCloud as Points3D, a PosesInFrame only as poses)."""
         self._path_sent = len(self.path)
-        last = self.path[-1]
-        return (T_PATH, PosesInFrame(timestamp=timestamp(last.header.stamp_ns), frame_id=WORLD,
-                                     poses=[_fox_pose(self._path_pose(p)) for p in self.path]))
+        ts = timestamp(self.path[-1].header.stamp_ns)
+        poses = [self._path_pose(p) for p in self.path]
+        xyz = np.array([[p.translation.x, p.translation.y, p.translation.z] for p in poses], dtype="<f4")
+        return [(T_PATH, PosesInFrame(timestamp=ts, frame_id=WORLD, poses=[_fox_pose(p) for p in poses])),
+                (T_PATH_POINTS, PointCloud(timestamp=ts, frame_id=WORLD, pose=_identity(),
+                                           point_stride=12, fields=_XYZ_FLOAT32, data=xyz.tobytes()))]
 
     def _on_truth(self, t_ns: int, msg: pb.Truth) -> list[Output]:
         """The operator's true seam (the true tip, else G) as world line strips."""
@@ -319,7 +333,7 @@ class SceneCore(Core):
                                                      orientation=Quaternion(w=1.0)),
                                            billboard=True, font_size=14.0, scale_invariant=True, color=WHITE,
                                            text=label))
-        ent.lines.append(LinePrimitive(type=LinePrimitive.LINE_LOOP, pose=Pose(orientation=Quaternion(w=1.0)),
+        ent.lines.append(LinePrimitive(type=LinePrimitive.LINE_LOOP, pose=_identity(),
                                        thickness=0.002, points=corners, color=FILTERED))
         return (T_ENTITIES, SceneUpdate(entities=[ent]))
 
@@ -327,7 +341,7 @@ class SceneCore(Core):
     @staticmethod
     def _line(entity_id: str, stamp_ns: int, points: list[Point3], colour: Color, thickness_m: float) -> SceneEntity:
         ent = SceneEntity(timestamp=timestamp(stamp_ns), frame_id=WORLD, id=entity_id, frame_locked=False)
-        ent.lines.append(LinePrimitive(type=LinePrimitive.LINE_STRIP, pose=Pose(orientation=Quaternion(w=1.0)),
+        ent.lines.append(LinePrimitive(type=LinePrimitive.LINE_STRIP, pose=_identity(),
                                        thickness=thickness_m, points=points, color=colour))
         return ent
 

@@ -27,6 +27,7 @@ CELL = "humanpt/cell0/"
 FOXGLOVE = {
     "scene/transforms": "foxglove.FrameTransforms",
     "scene/path": "foxglove.PosesInFrame",
+    "scene/path_points": "foxglove.PointCloud",
     "scene/annotations": "foxglove.ImageAnnotations",
     "scene/calibration": "foxglove.CameraCalibration",
     "scene/log": "foxglove.Log",
@@ -222,10 +223,17 @@ def test_path_is_the_recorded_path(run):
     assert points and paths
     last = paths[-1]
     assert last.frame_id == "world" and len(last.poses) == len(points)
+    recorded = []
     for pose, pt in zip(last.poses, points, strict=True):
         src = pt.world_T_tip if pt.has_tip else pt.world_T_tob
-        assert (pose.position.x, pose.position.y, pose.position.z) == (
-            src.translation.x, src.translation.y, src.translation.z)
+        recorded.append((src.translation.x, src.translation.y, src.translation.z))
+        assert (pose.position.x, pose.position.y, pose.position.z) == recorded[-1]
+    # The same points as a PointCloud: x, y, z float32 (PackedElementField type 7) at 0, 4, 8.
+    cloud = run.of("scene/path_points")[-1]
+    assert cloud.frame_id == "world" and cloud.point_stride == 12
+    assert [(f.name, f.offset, f.type) for f in cloud.fields] == [("x", 0, 7), ("y", 4, 7), ("z", 8, 7)]
+    xyz = np.frombuffer(cloud.data, dtype="<f4").reshape(-1, 3)
+    np.testing.assert_allclose(xyz, np.array(recorded), rtol=0, atol=1e-6)  # float32 at ~1 m: < 0.1 um
 
 
 def test_entities_target_triangle_and_seams(run):
