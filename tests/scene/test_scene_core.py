@@ -88,3 +88,45 @@ def test_tilted_mirror_turns_its_virtual_camera():
     q = left.rotation
     assert Rotation.from_quat([q.x, q.y, q.z, q.w]).as_rotvec(degrees=True) == pytest.approx([0.0, 0.1, 0.0])
     assert (right.rotation.x, right.rotation.y, right.rotation.z, right.rotation.w) == (0, 0, 0, 1)
+
+
+def test_foxglove_layout_names_real_topics_of_the_right_types():
+    """docs/foxglove-layout.json: every topic it draws is in the topic table (cell0, the
+    lock-step and default cell) with the type the panel reads."""
+    import json
+    import re
+    from pathlib import Path
+
+    from humanpt.schemas import topics
+
+    layout = json.loads((Path(__file__).parents[2] / "docs" / "foxglove-layout.json").read_text())
+    panels = layout["configById"]
+
+    def short(key: str) -> str:
+        cell, name = topics.short_from_key(key)
+        assert cell == "cell0" and name in topics.TOPICS, key
+        return name
+
+    def type_of(key: str) -> str:
+        return topics.TOPICS[short(key)].type.DESCRIPTOR.full_name
+
+    image = panels["Image!humanptimage"]["imageMode"]
+    assert type_of(image["imageTopic"]) == "foxglove.RawImage"
+    assert type_of(image["calibrationTopic"]) == "foxglove.CameraCalibration"
+    assert {type_of(k) for k in image["annotations"]} == {"foxglove.ImageAnnotations"}
+    assert {type_of(k) for k in panels["3D!humanpt3d"]["topics"]} >= {
+        "foxglove.FrameTransforms", "foxglove.PosesInFrame", "foxglove.SceneUpdate"}
+    assert type_of(panels["RosOut!humanptlog"]["topicToRender"]) == "foxglove.Log"
+    # Plot paths: "<key>".field.field..., each field a field of the topic's message.
+    plotted = [p["value"] for k, v in panels.items() if k.startswith("Plot!") for p in v["paths"]]
+    assert plotted
+    for value in plotted:
+        m = re.fullmatch(r'"([^"]+)"((?:\.\w+)+)', value)
+        assert m, value
+        descriptor = topics.TOPICS[short(m.group(1))].type.DESCRIPTOR
+        for name in m.group(2).split(".")[1:]:
+            field = descriptor.fields_by_name[name]
+            descriptor = field.message_type or descriptor
+    # Every panel the mosaic shows is configured, and the other way round.
+    shown = re.findall(r"\w+!\w+", json.dumps(layout["layout"]))
+    assert sorted(shown) == sorted(panels)
