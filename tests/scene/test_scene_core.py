@@ -130,3 +130,21 @@ def test_foxglove_layout_names_real_topics_of_the_right_types():
     # Every panel the mosaic shows is configured, and the other way round.
     shown = re.findall(r"\w+!\w+", json.dumps(layout["layout"]))
     assert sorted(shown) == sorted(panels)
+
+
+def test_rerun_blueprint_is_written_once_and_verifies(tmp_path):
+    import subprocess
+    import sys
+
+    from humanpt.scene.rerun_blueprint import main
+
+    out = tmp_path / "run.rbl"
+    assert main([str(out), "--cell", "demo"]) == 0 and out.stat().st_size > 0
+    before = out.read_bytes()
+    assert main([str(out)]) == 1 and out.read_bytes() == before  # never overwritten
+    rerun = [sys.executable, "-m", "rerun"]
+    r = subprocess.run([*rerun, "rrd", "print", str(out)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    # The overrides name the converted channels' entities of the given cell.
+    assert "overrides/humanpt/demo/scene/transforms/visualizers" in r.stdout
+    assert "SpatialInformation:target_frame" in r.stdout
