@@ -9,9 +9,9 @@ both, so::
     humanpt runs merge RUN run.mcap
     rerun mcap convert run.mcap --application-id humanpt-run -o run.rrd
     python -m humanpt.scene.rerun_blueprint run.rbl
-    rerun run.rrd run.rbl
+    rerun run.rbl run.rrd
 
-shows the frames, the path, the image and the log.  (The live view is ``humanpt view`` /
+(the blueprint first: rerun 0.41 then applies it to the recording) shows the frames, the path, the image and the log.  (The live view is ``humanpt view`` /
 viz; this is for the MCAP as any rerun user opens it.)
 """
 
@@ -40,8 +40,12 @@ def blueprint(cell: str = "cell0"):
                                                    entity("scene/path_points"), entity("scene/calibration"),
                                                    entity("camera/image")],
         spatial_information=rrb.archetypes.SpatialInformation(target_frame="world", show_axes=True),
+        # The cell is metres from the world's origin: look at the recorded path.
+        eye_controls=rrb.archetypes.EyeControls3D(tracking_entity=entity("scene/path_points")),
         overrides={entity("scene/transforms"): [rr.TransformAxes3D(axis_length=0.05, show_frame=True).visualizer()],
-                   entity("scene/path"): [rr.TransformAxes3D(axis_length=0.01).visualizer()]})
+                   entity("scene/path"): [rr.TransformAxes3D(axis_length=0.01).visualizer()],
+                   entity("scene/path_points"): [rr.Points3D.from_fields(radii=0.003,
+                                                                         colors=[255, 230, 40]).visualizer()]})
     return rrb.Blueprint(rrb.Horizontal(
         view3d,
         rrb.Vertical(rrb.Spatial2DView(name="complex image", origin=entity("camera/image")),
@@ -65,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{out}: exists; not overwritten", file=sys.stderr)
         return 1
     blueprint(args.cell).save(args.application_id, str(out))
-    print(f"wrote {out}: rerun RUN.rrd {out}")
+    print(f"wrote {out}: rerun {out} RUN.rrd")
     return 0
 
 
