@@ -17,7 +17,7 @@ FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt
              "humanpt.testing", "humanpt.bench", "humanpt.cli")
 # What each product package may load besides itself.
 SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.alter", "humanpt.schemas")
-PRODUCT = ("camera", "perception", "pose_filter", "controller", "alter_gateway", "viz", "calibration")
+PRODUCT = ("camera", "perception", "pose_filter", "controller", "alter_gateway", "viz", "calibration", "scene")
 
 # Import the package and every submodule, then list the humanpt packages that got loaded.
 PROBE = """
