@@ -183,7 +183,7 @@ class SceneCore(Core):
         self.path_number = 0
         self._path_sent = 0  # points in the last scene/path
         self._recording = False
-        # The operator's true seam (operator/truth), world metres, and its strip count.
+        # The operator's true seam (operator/truth): world points (m), truth_step_mm apart.
         self.truth_seam: list[tuple[float, float, float]] = []
 
     def on_config_changed(self, old: SceneConfig, new: SceneConfig) -> None:
