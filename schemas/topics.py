@@ -20,7 +20,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.Log_pb2 import Log
+from foxglove_schemas_protobuf.PointCloud_pb2 import PointCloud
+from foxglove_schemas_protobuf.PosesInFrame_pb2 import PosesInFrame
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from google.protobuf.message import Message
 
 from humanpt.schemas import humanpt_pb2 as pb
@@ -55,6 +62,15 @@ _ROWS = [
     Topic("sim_robot/truth", pb.Truth, "sim_robot", "twin: true world_T_flange"),
     Topic("sim_camera/truth", pb.Truth, "sim_camera", "twin: world_T_tob, world_T_flange at each image's capture"),
     Topic("console/command", pb.Command, "console", "operator commands (record, save, hold, ...)"),
+    # Foxglove's own types for Foxglove and rerun's MCAP import (humanpt.scene).
+    Topic("scene/transforms", FrameTransforms, "scene", "frames world, base, flange, camera, camera_right/left, "
+          "desired, flange_desired, tob, tip"),
+    Topic("scene/path", PosesInFrame, "scene", "the recorded path (tip, else G) in world"),
+    Topic("scene/path_points", PointCloud, "scene", "the same path as points (rerun draws them)"),
+    Topic("scene/annotations", ImageAnnotations, "scene", "centres, pairs, labels on the complex image"),
+    Topic("scene/calibration", CameraCalibration, "scene", "the camera's K, D, P (rig), now and then"),
+    Topic("scene/log", Log, "scene", "every component's events as log lines"),
+    Topic("scene/entities", SceneUpdate, "scene", "target triangle, recorded seam, twin: true seam"),
     Topic("pinger/ping", pb.Tick, "pinger", "runtime self-test: a tick per period"),
     Topic("ponger/pong", pb.Event, "ponger", "runtime self-test: an event per ping"),
     Topic("player/clock", pb.Tick, "player",
@@ -72,6 +88,7 @@ EVENT_PUBLISHERS = (
     "operator",
     "standin_robot",
     "viz",
+    "scene",
     "pinger",
     "ponger",
 )

@@ -17,7 +17,8 @@ FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt
              "humanpt.testing", "humanpt.bench", "humanpt.cli")
 # What each product package may load besides itself.
 SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.alter", "humanpt.schemas")
-PRODUCT = ("camera", "perception", "pose_filter", "controller", "alter_gateway", "viz", "calibration", "seam")
+PRODUCT = ("camera", "perception", "pose_filter", "controller", "alter_gateway", "viz", "calibration", "seam",
+           "scene")
 
 # Import the package and every submodule, then list the humanpt packages that got loaded.
 PROBE = """

@@ -21,6 +21,7 @@ COMPONENTS: dict[str, str] = {
     "operator": "humanpt.operator.core:OperatorCore",
     "standin_robot": "humanpt.twin.standin:StandInRobotCore",
     "viz": "humanpt.viz.core:VizCore",
+    "scene": "humanpt.scene.core:SceneCore",
 }
 
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
@@ -38,12 +39,12 @@ ADAPTERS: dict[str, str] = {
 PROFILES: dict[str, dict] = {
     "server": {"router": True, "components": ("alter_gateway",),
                "doc": "router + ALTER gateway, beside the robot controller's serial port"},
-    "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz"),
+    "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz", "scene"),
                "doc": "vision and control, connecting to the server's router"},
     "twin": {"router": True, "components": ("operator", "standin_robot", "sim_camera"),
              "doc": "router + the digital twin: operator, stand-in robot, simulated PSVS camera"},
     "loop": {"router": True, "components": ("operator", "standin_robot", "sim_camera", "perception", "pose_filter",
-                                            "controller"),
+                                            "controller", "scene"),
              "doc": "router + the closed loop on the twin with a stand-in robot (the default of `up`; "
                     "`humanpt demo` runs the simulated Puma behind the ALTER link)"},
     "selftest": {"router": True, "components": ("pinger", "ponger"),

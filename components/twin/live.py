@@ -40,7 +40,7 @@ from .world import start_flange_for
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
            "run_live", "write_toml"]
 
-LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller")
+LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller", "scene")
 PKI_DIR = "pki"                    # under the run directory, with --secure
 OPERATOR_IDENTITY = "demo-operator"  # the certificate the run's own session (and its tools) present
 TOOL_IDENTITY = "tool"             # a read-only tool's certificate (humanpt topics --as tool)
@@ -96,6 +96,8 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
                     "rig": "rig.toml"},
         "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
+        # Foxglove's frames: the robot base where the gateway puts it.
+        "scene": {"world_T_base_mm_deg": list(gateway.world_T_base_mm_deg), "dz_mm": ctl.dz_mm},
     }
     if secure:
         # Peers would link to each other around the router's access control: clients only.

@@ -17,6 +17,8 @@ from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.core import PerceptionCore
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.core import PoseFilterCore
+from humanpt.scene.config import SceneConfig
+from humanpt.scene.core import SceneCore
 from humanpt.sim_camera import SimCameraConfig
 
 from . import evaluate
@@ -122,6 +124,9 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             raise ValueError(f"robot must be 'standin' or 'puma', got {robot!r}")
     cores = [PerceptionCore(perception or PerceptionConfig(), rig), PoseFilterCore(pose_filter or PoseFilterConfig(), rig),
              ControllerCore(ctl, rig)]
+    # Foxglove's own types beside ours (humanpt.scene); the base where the gateway puts it.
+    cores.append(SceneCore(SceneConfig(dz_mm=ctl.dz_mm, world_T_base_mm_deg=tuple(
+        robot_cores[1].config.world_T_base_mm_deg) if wire else (0.0,) * 6), rig))
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
     if wire:

@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from humanpt.bench.summary import latency_and_cycles
 from humanpt.controller import pathfile
@@ -49,6 +50,15 @@ def test_live_demo_runs_every_component_as_a_process(tmp_path):
     assert np.all(res["latency_ms"] > 0)
     r = run_cli("replay", str(run), timeout=300)
     assert r.returncode == 0, r.stdout[-3000:]
+    # Foxglove's own types beside ours in the live run too (issue 20 item 1; tests/scene: content).
+    r = run_cli("runs", "merge", str(run), str(tmp_path / "merged.mcap"))
+    assert r.returncode == 0, r.stderr
+    with open(tmp_path / "merged.mcap", "rb") as fh:
+        schemas = {c.topic: s.name for s, c, _ in make_reader(fh).iter_messages()}
+    for topic, name in (("transforms", "FrameTransforms"), ("path", "PosesInFrame"), ("log", "Log"),
+                        ("annotations", "ImageAnnotations"), ("calibration", "CameraCalibration"),
+                        ("entities", "SceneUpdate")):
+        assert schemas.get(f"humanpt/demo/scene/{topic}") == f"foxglove.{name}", topic
 
 
 def test_experiment_prints_the_papers_table_beside_the_twins(tmp_path):

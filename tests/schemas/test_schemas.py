@@ -38,6 +38,11 @@ def test_every_message_has_a_header():
         if cls.DESCRIPTOR.full_name == "foxglove.RawImage":
             assert "timestamp" in cls.DESCRIPTOR.fields_by_name and "frame_id" in cls.DESCRIPTOR.fields_by_name
             continue
+        if cls.DESCRIPTOR.full_name.startswith("foxglove."):  # humanpt.scene: stamped as Foxglove orders
+            stamped = [cls.DESCRIPTOR] + [f.message_type for f in cls.DESCRIPTOR.fields if f.message_type]
+            assert any(d.fields_by_name.get("timestamp") and d.fields_by_name["timestamp"].message_type.full_name
+                       == "google.protobuf.Timestamp" for d in stamped), cls
+            continue
         assert cls.DESCRIPTOR.fields_by_name["header"].message_type.full_name == "humanpt.Header", cls
 
 

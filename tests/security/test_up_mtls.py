@@ -8,7 +8,12 @@ from humanpt.runtime.recording import IN
 from humanpt.runtime.registry import PROFILES, core_class
 from humanpt.runtime.runinfo import file_info
 from humanpt.runtime.security import identities, init_ca, issue
+from humanpt.schemas import topics
 from tests.conftest import free_port, run_cli, write_config
+
+# Every other bus input must flow: nobody commands or records in this run (console/command,
+# controller/path), and events come only when something happens (scene logs them all).
+QUIET = {"console/command", "controller/path", *(t for t in topics.TOPICS if t.endswith("/events"))}
 
 
 def test_the_loop_runs_under_mtls(tmp_path):
@@ -25,8 +30,7 @@ def test_the_loop_runs_under_mtls(tmp_path):
     for name in comps:
         info = file_info(run_dir / f"{name}.mcap")
         got = {t for (d, t), ti in info.topics.items() if d == IN and ti.count > 0}
-        needs = {p.topic for p in core_class(name).ports if p.on_bus and p.topic != "console/command"}
-        # every bus input flowed (console/command: nobody commands in this run)
+        needs = {p.topic for p in core_class(name).ports if p.on_bus and p.topic not in QUIET}
         assert needs <= got, f"{name} never received {sorted(needs - got)} under mTLS"
     # the controller's commands reached the robot, through the access control
     robot = file_info(run_dir / "standin_robot.mcap")
