@@ -114,6 +114,14 @@ UNIT_RULES: list[tuple[str, str]] = [
     (r"^source_brightness$", "ratio"),  # TobMeasurement: brightness for its size, ~1
     (r"_m2$|_rad2$", "covariance"),  # PathPoint's 3x3 covariances (issue 18)
     (r"^rotation_scale$", "ratio"),  # ControllerStatus (issue 18)
+    # Foxglove's own types (the scene component, issue 20): poses and sizes in metres, image
+    # annotations in pixels, colours 0..1, the camera calibration's matrices.
+    (r"^orientation$", "quaternion"),
+    (r"^(position|points|size|scale|diameter|thickness|font_size|head_diameter|head_length|"
+     r"shaft_diameter|shaft_length|bottom_scale|top_scale)$", "m"),
+    (r"^(colors?|fill_color|outline_colors?|background_color|text_color)$", "ratio"),
+    (r"^(K|P)$", "px"),
+    (r"^(D|R)$", "ratio"),
 ]
 
 
