@@ -125,7 +125,7 @@ def run_component(args) -> int:
     except Exception as e:  # a serial port that does not open, say: name it and stop
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
-    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters)
+    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
     stop_on_signals(shell.stop)
     if args.duration:
         threading.Timer(args.duration, shell.stop.set).start()
