@@ -389,6 +389,13 @@ class RecordConfig:
     # being written when the first image arrives), else the pixels as for the producer;
     # "keep": always the pixels (each image twice in the run, as before).
     image_inputs: Literal["reference", "keep"] = "reference"
+    # MCAP chunk size of the recordings of the image producers (camera, sim_camera; the
+    # others keep [runtime] chunk_size, the larger of the two wins): zstd compresses each
+    # chunk alone, so it finds what successive frames share only within one (the twin's
+    # background noise is drawn from one bank: 4 MiB chunks hold ~13 frames and make its
+    # recording ~35 % smaller; a real sensor's noise is not shared). A crash loses at most
+    # the chunk in progress, and it is flushed every [runtime] flush_interval_s anyway.
+    image_chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 4 * 1024 * 1024
 
     def __post_init__(self):
         keep_every(self.images)

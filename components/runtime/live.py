@@ -45,7 +45,14 @@ from google.protobuf.message import DecodeError
 from humanpt.runtime.bus import liveliness_key, params_key, rig_key, zenoh_config
 from humanpt.runtime.config import RecordConfig, RuntimeConfig
 from humanpt.runtime.core import Core
-from humanpt.runtime.recording import IN, OUT, ImagePolicy, Recorder, live_producers
+from humanpt.runtime.recording import (
+    IMAGE_PRODUCER_NAMES,
+    IN,
+    OUT,
+    ImagePolicy,
+    Recorder,
+    live_producers,
+)
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import header
@@ -335,7 +342,9 @@ class LiveShell:
                 self.run_dir / f"{name}.mcap",
                 self.core.recording_metadata("live", start_time_ns=time.time_ns(), cell=self.cell,
                                              host=socket.gethostname(), pid=os.getpid()),
-                chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s,
+                chunk_size=self.rt.chunk_size if name not in IMAGE_PRODUCER_NAMES else max(
+                    self.rt.chunk_size, self.record.image_chunk_size),
+                flush_interval_s=self.rt.flush_interval_s,
                 background=self.rt.record_thread,
                 images=ImagePolicy.from_config(name, self.record, live_producers(
                     self.run_dir, fresh_s=max(10.0, 5 * self.rt.flush_interval_s))))

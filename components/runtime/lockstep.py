@@ -23,7 +23,14 @@ from pathlib import Path
 
 from humanpt.runtime.config import RecordConfig
 from humanpt.runtime.core import Core
-from humanpt.runtime.recording import IN, OUT, ImagePolicy, Recorder
+from humanpt.runtime.recording import (
+    IMAGE_PRODUCER_NAMES,
+    IMAGE_PRODUCERS,
+    IN,
+    OUT,
+    ImagePolicy,
+    Recorder,
+)
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -107,14 +114,14 @@ class Lockstep:
             recorded = set(names)  # every core records: an image's producer is recorded if it is here
 
             def producers(topic: str, me: str) -> tuple[str, ...]:
-                from humanpt.runtime.recording import IMAGE_PRODUCERS
                 return tuple(n for n in IMAGE_PRODUCERS.get(topic, ()) if n != me and n in recorded)
 
             for c in cores:
                 self.recorders[c.name] = Recorder(
                     Path(run_dir) / f"{c.name}.mcap",
                     c.recording_metadata("lockstep", start_time_ns=start_ns, wall_start_time_ns=time.time_ns()),
-                    chunk_size=chunk_size,
+                    chunk_size=chunk_size if c.name not in IMAGE_PRODUCER_NAMES else max(
+                        chunk_size, record.image_chunk_size),
                     background=True,
                     images=ImagePolicy.from_config(c.name, record, producers),
                 )

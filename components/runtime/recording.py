@@ -55,6 +55,7 @@ IN, OUT, DROPPED = "in", "out", "dropped"
 FULL, REFERENCE, SAME_AS_INPUT, OMITTED = "", "reference", "same_as_input", "omitted"
 # The components that may publish an image topic (the twin's camera stands in for the real one).
 IMAGE_PRODUCERS: dict[str, tuple[str, ...]] = {"camera/image": ("camera", "sim_camera")}
+IMAGE_PRODUCER_NAMES = frozenset(n for names in IMAGE_PRODUCERS.values() for n in names)
 
 log = logging.getLogger("humanpt.recording")
 
@@ -866,7 +867,7 @@ def resolve_images(rec: Recording) -> list[Entry]:
             src = last_in.get(e.channel.get("ref_topic", ""))
             if src is not None and src.payload == FULL:
                 msg = _parse_image(e)
-                msg.data = src.data
+                msg.data = _parse_image(src).data  # the input's pixels
                 e.data, e.payload = msg.SerializeToString(), FULL
             else:
                 e.channel["missing"] = (f"a copy of the {e.channel.get('ref_topic')} input before it, which is "
