@@ -174,3 +174,54 @@ def test_an_output_copying_its_input_image_is_recorded_once(run, tmp_path):
     assert got == {("in", "capture", FULL, True): 5, ("out", "camera/image", SAME_AS_INPUT, False): 5}
     res = replay(tmp_path / "cam" / "camera.mcap")
     assert res.match and res.compared == 5, res.report()
+
+
+def test_live_rule_counts_a_producer_recording_being_written(tmp_path):
+    """live_producers: a producer's recording in the run directory, written to lately (not a
+    stale file of an earlier run), and never the asking component itself."""
+    import os
+    import time
+
+    from humanpt.runtime.recording import live_producers
+
+    producers = live_producers(tmp_path, fresh_s=10.0)
+    assert producers("camera/image", "perception") == ()
+    (tmp_path / "camera.mcap").write_bytes(b"x")
+    old = time.time() - 60
+    os.utime(tmp_path / "camera.mcap", (old, old))
+    assert producers("camera/image", "perception") == ()  # stale: an earlier run's
+    (tmp_path / "camera.1.mcap").write_bytes(b"x")  # the camera restarted into this run
+    assert producers("camera/image", "perception") == ("camera",)
+    assert producers("camera/image", "camera") == ()
+    assert producers("perception/tob", "pose_filter") == ()  # not an image topic
+
+
+def test_live_perception_records_references_to_the_live_camera(tmp_path, router, procs):
+    """Two live components on a real router, one run directory: perception's image inputs
+    are references to camera.mcap, and its replay is exact."""
+    import cv2
+    import numpy as np
+
+    from tests.conftest import write_config
+
+    video = tmp_path / "dots.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30.0, (160, 120))
+    for i in range(10):
+        f = np.full((120, 160, 3), 12, np.uint8)
+        cv2.circle(f, (40 + 4 * i, 60), 3, (255, 255, 255), -1)
+        writer.write(f)
+    writer.release()
+    port, _ = router
+    cfg = write_config(tmp_path / "live.toml", port, extra=f'[camera]\nsource = "{video}"\nloop = true\n')
+    run_dir = tmp_path / "run"
+    common = ("--config", str(cfg), "--run-dir", str(run_dir), "--duration", "4")
+    perception = procs.start("perception", *common)
+    camera = procs.start("camera", *common)
+    for p in (camera, perception):
+        p.wait(timeout=30)  # --duration ends each
+        out = procs.stop(p)
+        assert p.returncode == 0, out
+    refs = [i for i in _images(run_dir / "perception.mcap") if i[0] == "in"]
+    assert refs and {i[2] for i in refs} == {REFERENCE} and all(i[4] == 0 for i in refs)
+    res = replay(run_dir / "perception.mcap")
+    assert res.match and res.compared >= len(refs), res.report()
