@@ -584,7 +584,7 @@ def config(args) -> int:
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
     print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
-    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig)}
+    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig), "record": (cfg.record, cfgmod.RecordConfig)}
     for name in sorted(COMPONENTS):
         cls = core_class(name).config_type
         sections[name] = (cfg.component(name, cls), cls)
