@@ -237,7 +237,7 @@ class Recorder:
         self._images = images
         self._image_refs: dict[str, tuple[str, ...]] = {}  # input topic -> producers referenced
         self._image_counts: dict[tuple[str, str], int] = {}  # (direction, topic) -> images seen
-        self._last_in_image: tuple[str, bytes] | None = None  # (topic, pixels) of the last input image
+        self._last_in_image: tuple[str, RawImage] | None = None  # (topic, message) of the last input image
         self._thread: threading.Thread | None = None
         self._base = Path(path)
         self._chunk_size = chunk_size
@@ -548,14 +548,14 @@ class Recorder:
         :class:`ImagePolicy`."""
         p = self._images
         if direction == IN:
-            self._last_in_image = (topic, msg.data)
+            self._last_in_image = (topic, msg)  # its pixels are read only if an output image follows
             if p.references and "/" in topic:
                 refs = self._image_refs.get(topic)
                 if refs is None:  # decided at the first image: the producer is recording by then
                     refs = self._image_refs[topic] = tuple(p.producers(topic, p.component))
                 if refs:
                     return (("payload", REFERENCE), ("producers", ",".join(refs)), ("ref_topic", topic))
-        elif self._last_in_image is not None and msg.data and msg.data == self._last_in_image[1]:
+        elif self._last_in_image is not None and msg.data and msg.data == self._last_in_image[1].data:
             return (("payload", SAME_AS_INPUT), ("ref_topic", self._last_in_image[0]))
         key = (direction, topic)
         n = self._image_counts.get(key, 0)
