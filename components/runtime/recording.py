@@ -656,7 +656,8 @@ class Entry:
     data: bytes
     schema: str  # full protobuf type name, or "raw"
     payload: str = FULL  # FULL, or where the pixels of an image are (channel metadata, see FULL)
-    channel: dict[str, str] = field(default_factory=dict)  # the channel's metadata
+    channel: dict[str, str] = field(default_factory=dict)  # the channel's metadata (shared: read only)
+    missing: str = ""  # an image still without its pixels after resolve_images: why
 
     def decode(self) -> Message:
         """The message, decoded with this build's schema for its topic."""
@@ -811,7 +812,7 @@ def resolve_images(rec: Recording) -> list[Entry]:
     directory (every segment), matched by topic, stamp and frame_id; a SAME_AS_INPUT from
     the last input on its ``ref_topic`` before it.  Returns the entries left without pixels
     (OMITTED by the policy, or not found: a truncated producer recording), and says why in
-    each entry's ``channel["missing"]``.  A producer recording that is not there at all is a
+    each entry's ``missing``.  A producer recording that is not there at all is a
     :class:`RecordingError` naming the file."""
     wanted: dict[tuple[str, tuple[str, ...]], dict[tuple[int, str], list[Entry]]] = {}
     for e in rec.entries:
@@ -830,37 +831,35 @@ def resolve_images(rec: Recording) -> list[Entry]:
                 f"{names} is missing (keep a run's recordings together; [record] image_inputs = \"keep\" "
                 f"records the pixels in each consumer)")
         notes: list[str] = []
-        found: dict[tuple[int, str], bytes] = {}
+        found: dict[tuple[int, str], tuple[bytes, bytes]] = {}  # identity -> (message, without pixels)
         omitted: set[tuple[int, str]] = set()
         policy = "?"
         for f in files:
-            try:
-                for pe in iter_entries(f, notes):
-                    if pe.direction != OUT or pe.topic != topic or pe.schema != RawImage.DESCRIPTOR.full_name:
-                        continue
-                    ident = image_identity(_parse_image(pe))
-                    if ident not in idents:
-                        continue
-                    if pe.payload != FULL:
-                        omitted.add(ident)
-                        policy = pe.channel.get("policy", "?")
-                    elif found.setdefault(ident, pe.data) != pe.data:
-                        raise RecordingError(f"{f}: two different {topic} images share stamp {ident[0]} ns and "
-                                             f"frame_id {ident[1]!r}: a reference to them is ambiguous")
-            except RecordingError as err:
-                if "ambiguous" in str(err):
-                    raise
-                notes.append(str(err))
+            for pe in _readable_entries(f, notes):
+                if pe.direction != OUT or pe.topic != topic or pe.schema != RawImage.DESCRIPTOR.full_name:
+                    continue
+                msg = _parse_image(pe)
+                ident = image_identity(msg)
+                if ident not in idents:
+                    continue
+                if pe.payload != FULL:
+                    omitted.add(ident)
+                    policy = pe.channel.get("policy", "?")
+                elif found.setdefault(ident, (pe.data, strip_image(msg).SerializeToString()))[0] != pe.data:
+                    raise RecordingError(f"{f}: two different {topic} images share stamp {ident[0]} ns and "
+                                         f"frame_id {ident[1]!r}: a reference to them is ambiguous")
         where = ", ".join(f.name for f in files)
         for ident, entries in idents.items():
-            data = found.get(ident)
+            data, header = found.get(ident, (None, None))
             for e in entries:
-                if data is not None:
+                if data is not None and header == e.data:  # the same image: size, encoding... too
                     e.data, e.payload = data, FULL
+                elif data is not None:
+                    e.missing = f"{where} holds an image of this stamp and frame_id of another size or encoding"
                 elif ident in omitted:
-                    e.channel["missing"] = f"{where} kept its pixels only for [record] images = {policy!r}"
+                    e.missing = f"{where} kept its pixels only for [record] images = {policy!r}"
                 else:
-                    e.channel["missing"] = (f"not in {where}" + (f" ({notes[0]})" if notes else ""))
+                    e.missing = f"not in {where}" + (f" ({notes[0]})" if notes else "")
     last_in: dict[str, Entry] = {}
     for e in rec.entries:
         if e.payload == SAME_AS_INPUT:
@@ -870,13 +869,21 @@ def resolve_images(rec: Recording) -> list[Entry]:
                 msg.data = _parse_image(src).data  # the input's pixels
                 e.data, e.payload = msg.SerializeToString(), FULL
             else:
-                e.channel["missing"] = (f"a copy of the {e.channel.get('ref_topic')} input before it, which is "
-                                        f"{'missing' if src is not None else 'not in the recording'}")
+                e.missing = (f"a copy of the {e.channel.get('ref_topic')} input before it, which is "
+                             f"{'missing' if src is not None else 'not in the recording'}")
         elif e.direction == IN and e.schema == RawImage.DESCRIPTOR.full_name:
             last_in[e.topic] = e
-        if e.payload == OMITTED and "missing" not in e.channel:
-            e.channel["missing"] = f"[record] images = {e.channel.get('policy', '?')!r} did not keep its pixels"
+        if e.payload == OMITTED and not e.missing:
+            e.missing = f"[record] images = {e.channel.get('policy', '?')!r} did not keep its pixels"
     return [e for e in rec.entries if e.payload != FULL]
+
+
+def _readable_entries(f: Path, notes: list[str]) -> Iterator[Entry]:
+    """``iter_entries(f)``, or nothing (with a note) when ``f`` cannot be read at all."""
+    try:
+        yield from iter_entries(f, notes)
+    except RecordingError as err:
+        notes.append(str(err))
 
 
 def _parse_image(e: Entry) -> RawImage:

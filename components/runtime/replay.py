@@ -253,7 +253,7 @@ def missing_inputs(rec: Recording) -> str | None:
     rec.missing = (
         f"{len(inputs)} of {n_in} inputs have no pixels in the run "
         f"({', '.join(f'{t} {n}' for t, n in sorted(by_topic.items()))}); the first, #{first.index} at "
-        f"t_ns={first.t_ns}: {first.channel.get('missing', '?')}; replayed and compared up to it")
+        f"t_ns={first.t_ns}: {first.missing or '?'}; replayed and compared up to it")
     return rec.missing
 
 

@@ -225,3 +225,30 @@ def test_live_perception_records_references_to_the_live_camera(tmp_path, router,
     assert refs and {i[2] for i in refs} == {REFERENCE} and all(i[4] == 0 for i in refs)
     res = replay(run_dir / "perception.mcap")
     assert res.match and res.compared >= len(refs), res.report()
+
+
+def test_a_reference_resolves_only_to_the_one_image_it_names(tmp_path):
+    """Two different producer images with one stamp and frame_id: refused as ambiguous; an
+    image of that identity but another size: not taken for it."""
+    import numpy as np
+
+    from humanpt.runtime.recording import ImagePolicy, Recorder, read, resolve_images
+    from humanpt.schemas.convert import image
+
+    a, b = np.zeros((4, 6), np.uint8), np.full((4, 6), 9, np.uint8)
+    policy = ImagePolicy("perception", producers=lambda topic, me: ("camera",))
+    for name, produced in (("twice", (a, b)), ("resized", (np.zeros((2, 3), np.uint8),))):
+        d = tmp_path / name
+        with Recorder(d / "camera.mcap", {"component": "camera"}) as cam:
+            for px in produced:
+                cam.write("out", 0, "camera/image", image(px, 5_000, "camera"))
+        with Recorder(d / "perception.mcap", {"component": "perception"}, images=policy) as per:
+            per.write("in", 1, "camera/image", image(a, 5_000, "camera"))
+        rec = read(d / "perception.mcap")
+        assert rec.entries[0].payload == REFERENCE
+        if name == "twice":
+            with pytest.raises(RecordingError, match="ambiguous"):
+                resolve_images(rec)
+        else:
+            left = resolve_images(rec)
+            assert len(left) == 1 and "another size" in left[0].missing
