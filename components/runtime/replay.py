@@ -296,6 +296,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                f"state at its start was not recorded, so it cannot be replayed from its config")
         return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
                             0, len(rec.entries), continuation=why)
+    n_read = len(rec.entries)  # before a missing input cuts them
     recorded, replayed = replay_recording(rec, core_factory)
     missing = rec.missing
     # The lost chunk of a truncated file held the tail of both streams (an input without its
@@ -321,7 +322,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
             compared = i
             break
     return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div,
-                        rec.truncated, compared, len(rec.entries), missing=missing)
+                        rec.truncated, compared, n_read, missing=missing)
 
 
 def message_text(topic: str, data: bytes) -> str:
