@@ -131,7 +131,7 @@ def run_component(args) -> int:
     except Exception as e:  # a serial port that does not open, say: name it and stop
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
-    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters)
+    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
     stop_on_signals(shell.stop)
     if args.duration:
         threading.Timer(args.duration, shell.stop.set).start()
@@ -962,7 +962,7 @@ def config(args) -> int:
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
     print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
-    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig)}
+    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig), "record": (cfg.record, cfgmod.RecordConfig)}
     for name in sorted(COMPONENTS):
         cls = core_class(name).config_type
         sections[name] = (cfg.component(name, cls), cls)

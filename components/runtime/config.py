@@ -355,6 +355,57 @@ class RuntimeConfig:
             raise ValueError("flush_interval_s must be positive")
 
 
+IMAGES_EVERY_MAX = 100_000  # "every N": at most one image in this many
+
+
+def keep_every(images: str) -> int:
+    """``[record] images`` -> keep one image in how many: ``"all"`` 1, ``"every N"`` N,
+    ``"none"`` 0.  ValueError (one line, naming the accepted forms) for anything else."""
+    text = " ".join(str(images).split())
+    if text == "all":
+        return 1
+    if text == "none":
+        return 0
+    word, _, n = text.partition(" ")
+    if word == "every" and n.isdigit() and 1 <= int(n) <= IMAGES_EVERY_MAX:
+        return int(n)
+    raise ValueError(f'images = {images!r}: must be "all", "every N" (N a whole number from 1 to '
+                     f'{IMAGES_EVERY_MAX}) or "none"')
+
+
+@dataclass(frozen=True)
+class RecordConfig:
+    """The ``[record]`` section: what a run's recordings keep of its images (foxglove.RawImage
+    messages: ``camera/image``, the camera's ``capture``).  runtime/README.md "Images"."""
+
+    # The run's copy of each image: the producer's (sim_camera/camera output, the camera's
+    # capture input), or a consumer's when no producer records in its run directory.
+    # "all", "every N" (the 1st, N+1th... of each topic; the others are kept without
+    # their pixels) or "none" (no pixels at all).  Lossless either way: zstd chunks.
+    images: str = "all"
+    # A consumer's image inputs (perception's, viz's camera/image): "reference" keeps the
+    # image's identity (stamp + frame_id, pixels left out) when the producer records into
+    # the same run directory (lock-step: it is recorded; live: its recording is there and
+    # being written when the first image arrives), else the pixels as for the producer;
+    # "keep": always the pixels (each image twice in the run, as before).
+    image_inputs: Literal["reference", "keep"] = "reference"
+    # MCAP chunk size of the recordings of the image producers (camera, sim_camera; the
+    # others keep [runtime] chunk_size, the larger of the two wins): zstd compresses each
+    # chunk alone, so it finds what successive frames share only within one (the twin's
+    # background noise is drawn from one bank: 4 MiB chunks hold ~13 frames and make its
+    # recording ~35 % smaller; a real sensor's noise is not shared). A crash loses at most
+    # the chunk in progress, and it is flushed every [runtime] flush_interval_s anyway.
+    image_chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 4 * 1024 * 1024
+
+    def __post_init__(self):
+        keep_every(self.images)
+
+    @property
+    def keep_every(self) -> int:
+        """Keep one image in this many (1: all, 0: none)."""
+        return keep_every(self.images)
+
+
 @dataclass(frozen=True)
 class ConfigFile:
     """A loaded configuration: the runtime section and every component's raw table."""
@@ -363,6 +414,7 @@ class ConfigFile:
     runtime: RuntimeConfig
     sections: dict[str, dict[str, Any]]
     profiles: dict[str, tuple[str, ...]]
+    record: RecordConfig = RecordConfig()
 
     def rig_path(self) -> Path | None:
         """The rig file ``[runtime] rig`` names (relative to the config file), or None."""
@@ -444,13 +496,14 @@ def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str,
         runtime = dataclasses.replace(runtime, pki=str(Path(source).resolve().parent / runtime.pki))
     profiles_raw = data.get("profiles", {})
     profiles = {k: coerce(tuple[str, ...], v, f"{source}: [profiles] {k}") for k, v in profiles_raw.items()}
-    sections = {k: dict(v) for k, v in data.items() if k not in ("runtime", "profiles")}
+    record = build(RecordConfig, data.get("record", {}), source=source, section="record")
+    sections = {k: dict(v) for k, v in data.items() if k not in ("runtime", "profiles", "record")}
     if known_sections is not None:
         for name in sections:
             if name not in known_sections:
-                raise ConfigError(f"{source}: unknown section [{name}]; known: runtime, profiles, "
+                raise ConfigError(f"{source}: unknown section [{name}]; known: runtime, profiles, record, "
                                   f"{', '.join(sorted(known_sections))}")
         built = {name: build(cls, sections.get(name, {}), source=source, section=name)
                  for name, cls in known_sections.items()}
         _check_shared(built, source)
-    return ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles)
+    return ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles, record=record)

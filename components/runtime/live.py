@@ -11,6 +11,8 @@
   input, so it is recorded and replays;
 * everything the core consumed and produced is recorded to ``<run dir>/<component>.mcap``
   (``<component>.1.mcap``... when the component restarts into the same run: never truncated);
+  images as ``[record]`` says (``record``): a consumer's image input is a reference when its
+  producer records into the same run directory (runtime/README.md "Images");
   a write error (full disk) never stops the component: it publishes a ``record_error``
   event at once, ``record_resumed`` when recording goes on in a new segment, and the
   losses go to ``<component>.losses.json`` (see :class:`~humanpt.runtime.recording.Recorder`);
@@ -41,9 +43,16 @@ import zenoh
 from google.protobuf.message import DecodeError
 
 from humanpt.runtime.bus import liveliness_key, params_key, rig_key, zenoh_config
-from humanpt.runtime.config import RuntimeConfig
+from humanpt.runtime.config import RecordConfig, RuntimeConfig
 from humanpt.runtime.core import Core
-from humanpt.runtime.recording import IN, OUT, Recorder
+from humanpt.runtime.recording import (
+    IMAGE_PRODUCER_NAMES,
+    IN,
+    OUT,
+    ImagePolicy,
+    Recorder,
+    live_producers,
+)
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import header
@@ -145,8 +154,10 @@ class LiveShell:
     """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
 
     def __init__(self, core: Core, rt: RuntimeConfig, *, run_dir: str | Path | None = None,
-                 zconf: zenoh.Config | None = None, adapters: list[Adapter] | None = None):
+                 zconf: zenoh.Config | None = None, adapters: list[Adapter] | None = None,
+                 record: RecordConfig | None = None):
         self.core = core
+        self.record = record or RecordConfig()  # [record]: what the recording keeps of images
         self.adapters = list(adapters or [])
         self._local_out = {t: a for a in self.adapters for t in a.topics_out}
         self.rt = rt
@@ -334,8 +345,12 @@ class LiveShell:
                 self.run_dir / f"{name}.mcap",
                 self.core.recording_metadata("live", start_time_ns=time.time_ns(), cell=self.cell,
                                              host=socket.gethostname(), pid=os.getpid()),
-                chunk_size=self.rt.chunk_size, flush_interval_s=self.rt.flush_interval_s,
-                background=self.rt.record_thread)
+                chunk_size=self.rt.chunk_size if name not in IMAGE_PRODUCER_NAMES else max(
+                    self.rt.chunk_size, self.record.image_chunk_size),
+                flush_interval_s=self.rt.flush_interval_s,
+                background=self.rt.record_thread,
+                images=ImagePolicy.from_config(name, self.record, live_producers(
+                    self.run_dir, fresh_s=max(10.0, 5 * self.rt.flush_interval_s))))
             log.info("%s: recording to %s", name, self.recorder.path)
         try:
             with zenoh.open(self.zconf) as session:

@@ -4,7 +4,8 @@ Inputs are delivered in time order; equal times keep the order in which they wer
 scheduled, so a run is fully deterministic.  Every message is serialised and parsed on
 the way, as on the network, so each subscriber gets its own copy.  With a run directory
 each core is recorded exactly as the live shell records it, so lock-step recordings
-replay with ``humanpt replay`` too.
+replay with ``humanpt replay`` too (``record``: the ``[record]`` section; by default a
+consumer's image inputs are references to the producer's recording, which is here).
 
 Serial lines (:meth:`Lockstep.connect_serial`) carry one core's ``serial_tx`` bytes to
 another core's ``serial_rx`` with the line's timing: a chunk of n bytes occupies the line
@@ -20,8 +21,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from humanpt.runtime.config import RecordConfig
 from humanpt.runtime.core import Core
-from humanpt.runtime.recording import IN, OUT, Recorder
+from humanpt.runtime.recording import (
+    IMAGE_PRODUCER_NAMES,
+    IMAGE_PRODUCERS,
+    IN,
+    OUT,
+    ImagePolicy,
+    Recorder,
+)
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -76,6 +85,7 @@ class Lockstep:
         keep_outputs: bool = True,
         chunk_size: int = 1024 * 1024,
         digest: bool = True,
+        record: RecordConfig | None = None,
     ):
         names = [c.name for c in cores]
         if len(set(names)) != len(names):
@@ -100,12 +110,20 @@ class Lockstep:
                 self._push(start_ns, i, "tick", b"")
         self.recorders: dict[str, Recorder] = {}
         if run_dir is not None:
+            record = record or RecordConfig()
+            recorded = set(names)  # every core records: an image's producer is recorded if it is here
+
+            def producers(topic: str, me: str) -> tuple[str, ...]:
+                return tuple(n for n in IMAGE_PRODUCERS.get(topic, ()) if n != me and n in recorded)
+
             for c in cores:
                 self.recorders[c.name] = Recorder(
                     Path(run_dir) / f"{c.name}.mcap",
                     c.recording_metadata("lockstep", start_time_ns=start_ns, wall_start_time_ns=time.time_ns()),
-                    chunk_size=chunk_size,
+                    chunk_size=chunk_size if c.name not in IMAGE_PRODUCER_NAMES else max(
+                        chunk_size, record.image_chunk_size),
                     background=True,
+                    images=ImagePolicy.from_config(c.name, record, producers),
                 )
 
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:

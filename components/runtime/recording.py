@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.message import DecodeError, Message
 from mcap.records import Channel, Chunk, Metadata, Schema
 from mcap.records import Message as McapMessage
@@ -45,6 +46,16 @@ from humanpt.schemas import topics
 
 RUN_METADATA = "humanpt.run"
 IN, OUT, DROPPED = "in", "out", "dropped"
+# What a channel's messages hold (channel metadata ``payload``; absent: the whole message).
+# Images only (foxglove.RawImage): the message with its ``data`` (the pixels) left out, and
+# where the pixels are: REFERENCE in the recording of the producer named by ``producers``
+# (the image of topic ``ref_topic`` with the same stamp and frame_id), SAME_AS_INPUT in this
+# recording (the last input on ``ref_topic`` before it: an output that copies its input),
+# OMITTED nowhere (``[record] images`` kept only ``policy``).
+FULL, REFERENCE, SAME_AS_INPUT, OMITTED = "", "reference", "same_as_input", "omitted"
+# The components that may publish an image topic (the twin's camera stands in for the real one).
+IMAGE_PRODUCERS: dict[str, tuple[str, ...]] = {"camera/image": ("camera", "sim_camera")}
+IMAGE_PRODUCER_NAMES = frozenset(n for names in IMAGE_PRODUCERS.values() for n in names)
 
 log = logging.getLogger("humanpt.recording")
 
@@ -110,6 +121,76 @@ def _by_topic_text(lost: dict[tuple[str, str], int], most: int = 4) -> str:
     return text + (f", {len(items) - most} more topics" if len(items) > most else "")
 
 
+def strip_image(msg: RawImage) -> RawImage:
+    """The image without its pixels (``data``): stamp, frame_id, size, encoding, step kept."""
+    out = RawImage(timestamp=msg.timestamp, frame_id=msg.frame_id, width=msg.width, height=msg.height,
+                   encoding=msg.encoding, step=msg.step)
+    return out
+
+
+def image_identity(msg: RawImage) -> tuple[int, str]:
+    """(capture stamp ns, frame_id): what names one image of a producer (RawImage has no
+    sequence number; a camera's stamps strictly increase - the camera core drops a frame not
+    after the previous one -, and the twin's are its capture times)."""
+    return msg.timestamp.seconds * 1_000_000_000 + msg.timestamp.nanos, msg.frame_id
+
+
+def segments_of(run_dir: Path, component: str) -> list[Path]:
+    """``<component>.mcap``, ``<component>.1.mcap``... in ``run_dir`` (segment order)."""
+    found = [(0, p) for p in [run_dir / f"{component}.mcap"] if p.is_file()]
+    for p in run_dir.glob(f"{component}.*.mcap"):
+        n = p.name[len(component) + 1:-len(".mcap")]
+        if n.isdigit():
+            found.append((int(n), p))
+    return [p for _, p in sorted(found)]
+
+
+def live_producers(run_dir: Path, fresh_s: float = 10.0) -> Callable[[str, str], tuple[str, ...]]:
+    """``producers(topic, me)`` of a live shell: the producers of ``topic`` (other than ``me``)
+    whose recording is in ``run_dir`` and was written to in the last ``fresh_s`` s (a producer
+    opens its recording before it publishes and writes to it at least every
+    ``flush_interval_s`` while images flow; a stale file of an earlier run does not count)."""
+
+    def producers(topic: str, me: str) -> tuple[str, ...]:
+        now = time.time()
+        out = []
+        for name in IMAGE_PRODUCERS.get(topic, ()):
+            if name == me:
+                continue
+            try:
+                if any(now - p.stat().st_mtime <= fresh_s for p in segments_of(run_dir, name)):
+                    out.append(name)
+            except OSError:
+                continue
+        return tuple(out)
+
+    return producers
+
+
+@dataclass
+class ImagePolicy:
+    """What a :class:`Recorder` keeps of images (foxglove.RawImage): ``[record]``
+    (``config.RecordConfig``) applied to one component's recording.
+
+    An input image on a bus topic is recorded as a REFERENCE when ``references`` and
+    ``producers(topic, component)`` names a producer recording into the same run; an output
+    image whose pixels equal those of the last input image is recorded SAME_AS_INPUT;
+    any other image (the producer's output, the camera's capture, a consumer's input with
+    no producer recorded) keeps its pixels for one in ``keep_every`` per topic (0: none),
+    the others are OMITTED."""
+
+    component: str
+    keep_every: int = 1
+    references: bool = True
+    producers: Callable[[str, str], tuple[str, ...]] = lambda topic, me: ()
+    policy_text: str = "all"
+
+    @classmethod
+    def from_config(cls, component: str, record, producers) -> ImagePolicy:
+        """From a ``config.RecordConfig``."""
+        return cls(component, record.keep_every, record.image_inputs == "reference", producers, record.images)
+
+
 class Recorder:
     """Writes one component's inputs and outputs to an MCAP file.
 
@@ -150,8 +231,13 @@ class Recorder:
         flush_interval_s: float = 1.0,
         compression: str = "zstd",
         background: bool = False,
+        images: ImagePolicy | None = None,
     ):
         self._queue: queue.Queue | None = None
+        self._images = images
+        self._image_refs: dict[str, tuple[str, ...]] = {}  # input topic -> producers referenced
+        self._image_counts: dict[tuple[str, str], int] = {}  # (direction, topic) -> images seen
+        self._last_in_image: tuple[str, RawImage] | None = None  # (topic, message) of the last input image
         self._thread: threading.Thread | None = None
         self._base = Path(path)
         self._chunk_size = chunk_size
@@ -219,7 +305,7 @@ class Recorder:
         self._writer, self._file, self.path = writer, f, path
         self.segments.append(path)
         self._schemas: dict[str, int] = {}
-        self._channels: dict[tuple[str, str], int] = {}
+        self._channels: dict[tuple, int] = {}  # (direction, topic, variant) -> channel id
         self._chan_keys: list[tuple[str, str]] = [("", "")]  # channel id -> (direction, topic)
         self._pend: list[int] = [0]  # channel id -> messages not yet in the file
         self._pend_t: list[int] = []  # [first, last] log time of those
@@ -244,7 +330,10 @@ class Recorder:
         if not isinstance(e, OSError):
             log.exception("recording to %s failed", self.path)
         lost_before = self._lost_n
-        pend = {self._chan_keys[cid]: n for cid, n in enumerate(self._pend) if n}
+        pend: dict[tuple[str, str], int] = {}
+        for cid, n in enumerate(self._pend):
+            if n:  # several channels may share a (direction, topic): images with and without pixels
+                pend[self._chan_keys[cid]] = pend.get(self._chan_keys[cid], 0) + n
         for key, n in pend.items():
             self._lose(key, n, self._pend_t)
         lost_now = sum(pend.values())
@@ -374,9 +463,9 @@ class Recorder:
             return
         # A full disk must not stop the component: no error leaves here.
         if kind == "msg":
-            direction, t_ns, topic, msg_type, payload = args
+            direction, t_ns, topic, msg_type, payload, variant = args
             try:
-                cid = self._channel(direction, topic, msg_type)
+                cid = self._channel(direction, topic, msg_type, variant)
             except Exception as e:  # noqa: BLE001 - registering the channel ended a chunk, which failed
                 self._lose((direction, topic), 1, [t_ns])
                 self._fail(e)
@@ -413,8 +502,9 @@ class Recorder:
             self._queue.put(self._batch)
             self._batch, self._batch_bytes = [], 0
 
-    def _channel(self, direction: str, topic: str, msg_type: type[Message] | None) -> int:
-        key = (direction, topic)
+    def _channel(self, direction: str, topic: str, msg_type: type[Message] | None,
+                 variant: tuple[tuple[str, str], ...] = ()) -> int:
+        key = (direction, topic, variant)
         cid = self._channels.get(key)
         if cid is None:
             if msg_type is None:
@@ -429,10 +519,10 @@ class Recorder:
                     self._schemas[full] = register_schema(self._writer, msg_type)
                 sid, enc = self._schemas[full], "protobuf"
             cid = self._writer.register_channel(
-                topic=topic, message_encoding=enc, schema_id=sid, metadata={"direction": direction}
+                topic=topic, message_encoding=enc, schema_id=sid, metadata={"direction": direction, **dict(variant)}
             )
             self._channels[key] = cid
-            self._chan_keys.append(key)
+            self._chan_keys.append((direction, topic))
             self._pend.append(0)
             if self._file.pos != self._committed_pos:  # registering ended a chunk
                 self._commit()
@@ -445,12 +535,38 @@ class Recorder:
 
         ``data`` may pass the already serialised bytes of ``msg`` to save work.
         """
+        variant: tuple[tuple[str, str], ...] = ()
+        if self._images is not None and type(msg) is RawImage:
+            variant = self._image_variant(direction, topic, msg)
+            if variant:  # the pixels are elsewhere, or not kept
+                data = strip_image(msg).SerializeToString()
         payload = msg.SerializeToString() if data is None else data
-        self._submit(("msg", direction, t_ns, topic, type(msg), payload), len(payload))
+        self._submit(("msg", direction, t_ns, topic, type(msg), payload, variant), len(payload))
+
+    def _image_variant(self, direction: str, topic: str, msg: RawImage) -> tuple[tuple[str, str], ...]:
+        """The channel metadata saying where this image's pixels are (empty: here); see
+        :class:`ImagePolicy`."""
+        p = self._images
+        if direction == IN:
+            self._last_in_image = (topic, msg)  # its pixels are read only if an output image follows
+            if p.references and "/" in topic:
+                refs = self._image_refs.get(topic)
+                if refs is None:  # decided at the first image: the producer is recording by then
+                    refs = self._image_refs[topic] = tuple(p.producers(topic, p.component))
+                if refs:
+                    return (("payload", REFERENCE), ("producers", ",".join(refs)), ("ref_topic", topic))
+        elif self._last_in_image is not None and msg.data and msg.data == self._last_in_image[1].data:
+            return (("payload", SAME_AS_INPUT), ("ref_topic", self._last_in_image[0]))
+        key = (direction, topic)
+        n = self._image_counts.get(key, 0)
+        self._image_counts[key] = n + 1
+        if p.keep_every == 1 or (p.keep_every and n % p.keep_every == 0):
+            return ()
+        return (("payload", OMITTED), ("policy", p.policy_text))
 
     def write_dropped(self, t_ns: int, topic: str, payload: bytes) -> None:
         """Record an input that failed to decode, raw."""
-        self._submit(("msg", DROPPED, t_ns, topic, None, payload), len(payload))
+        self._submit(("msg", DROPPED, t_ns, topic, None, payload, ()), len(payload))
 
     def _add(self, channel_id: int, t_ns: int, payload: bytes) -> None:
         # Pending first: if add_message fails (ending a chunk), this message is lost too.
@@ -539,6 +655,9 @@ class Entry:
     topic: str
     data: bytes
     schema: str  # full protobuf type name, or "raw"
+    payload: str = FULL  # FULL, or where the pixels of an image are (channel metadata, see FULL)
+    channel: dict[str, str] = field(default_factory=dict)  # the channel's metadata (shared: read only)
+    missing: str = ""  # an image still without its pixels after resolve_images: why
 
     def decode(self) -> Message:
         """The message, decoded with this build's schema for its topic."""
@@ -566,6 +685,9 @@ class Recording:
     metadata: dict[str, str]
     entries: list[Entry] = field(default_factory=list)
     truncated: str | None = None  # why reading stopped early, None when complete
+    # Inputs without their pixels that replay cannot get (replay.missing_inputs): what, else None.
+    missing: str | None = None
+    resolved: bool = False  # images recorded without their pixels were looked up (replay.missing_inputs)
 
     @property
     def component(self) -> str:
@@ -634,7 +756,7 @@ def iter_entries(
     p = Path(path)
     _check_file(p)
     schemas: dict[int, str] = {}
-    channels: dict[int, tuple[str, str, int]] = {}
+    channels: dict[int, tuple[str, str, int, dict[str, str]]] = {}
     n = 0
     skipped: list[str] = []
     try:
@@ -642,14 +764,15 @@ def iter_entries(
             if isinstance(r, Schema):
                 schemas[r.id] = r.name
             elif isinstance(r, Channel):
-                channels[r.id] = (r.topic, r.metadata.get("direction", OUT), r.schema_id)
+                channels[r.id] = (r.topic, r.metadata.get("direction", OUT), r.schema_id, dict(r.metadata))
             elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
                 metadata.update(r.metadata)
             elif isinstance(r, McapMessage):
                 if r.channel_id not in channels:  # its channel was in a skipped chunk
                     continue
-                topic, direction, sid = channels[r.channel_id]
-                yield Entry(n, direction, r.log_time, topic, r.data, schemas.get(sid, "raw"))
+                topic, direction, sid, meta = channels[r.channel_id]
+                yield Entry(n, direction, r.log_time, topic, r.data, schemas.get(sid, "raw"),
+                            meta.get("payload", FULL), meta)
                 n += 1
     except _DAMAGE as e:
         if notes is not None:
@@ -662,16 +785,18 @@ def iter_entries(
 
 
 def merge_entries(files: list[Path], notes: list[str], keep: Callable[[Entry], bool] = lambda e: True,
-                  ) -> Iterator[tuple[int, Path, Entry]]:
+                  *, stripped: bool = False) -> Iterator[tuple[int, Path, Entry]]:
     """(log time ns, file, entry) of several recordings, merged by log time (ties: the
     files' order, then each file's order), for the entries ``keep`` accepts.  A file that
     cannot be read at all is left out with a note; a damaged one is read to the damage and
-    past its bad chunks (notes say what was skipped): one bad file does not refuse a run."""
+    past its bad chunks (notes say what was skipped): one bad file does not refuse a run.
+    Images recorded without their pixels (a reference, an image ``[record] images`` did not
+    keep) are left out unless ``stripped``: each image of the run once, with its pixels."""
 
     def stream(i: int, f: Path) -> Iterator[tuple[int, int, int, Path, Entry]]:
         try:
             for e in iter_entries(f, notes):
-                if keep(e):
+                if (stripped or e.payload == FULL) and keep(e):
                     yield e.t_ns, i, e.index, f, e
         except RecordingError as err:
             notes.append(f"{err} - left out")
@@ -679,6 +804,95 @@ def merge_entries(files: list[Path], notes: list[str], keep: Callable[[Entry], b
     for t_ns, _, _, f, e in heapq.merge(*(stream(i, f) for i, f in enumerate(files)),
                                         key=lambda item: item[:3]):
         yield t_ns, f, e
+
+
+def resolve_images(rec: Recording) -> list[Entry]:
+    """Put back the pixels of the images ``rec`` recorded without them (in place; each entry
+    given its pixels becomes FULL): a REFERENCE from the producer's recording in the same
+    directory (every segment), matched by topic, stamp and frame_id; a SAME_AS_INPUT from
+    the last input on its ``ref_topic`` before it.  Returns the entries left without pixels
+    (OMITTED by the policy, or not found: a truncated producer recording), and says why in
+    each entry's ``missing``.  A producer recording that is not there at all is a
+    :class:`RecordingError` naming the file."""
+    wanted: dict[tuple[str, tuple[str, ...]], dict[tuple[int, str], list[Entry]]] = {}
+    for e in rec.entries:
+        if e.payload == REFERENCE:
+            key = (e.channel.get("ref_topic", e.topic), tuple(e.channel.get("producers", "").split(",")))
+            ident = image_identity(_parse_image(e))
+            wanted.setdefault(key, {}).setdefault(ident, []).append(e)
+    run_dir = rec.path.parent
+    for (topic, producers), idents in wanted.items():
+        files = [f for name in producers for f in segments_of(run_dir, name)]
+        if not files:
+            names = " or ".join(f"{run_dir / name}.mcap" for name in producers)
+            raise RecordingError(
+                f"{rec.path}: {sum(len(v) for v in idents.values())} {topic} images of this recording are "
+                f"references to the recording of {' or '.join(producers)} in the same run directory, and "
+                f"{names} is missing (keep a run's recordings together; [record] image_inputs = \"keep\" "
+                f"records the pixels in each consumer)")
+        notes: list[str] = []
+        found: dict[tuple[int, str], tuple[bytes, bytes]] = {}  # identity -> (message, without pixels)
+        omitted: set[tuple[int, str]] = set()
+        policy = "?"
+        for f in files:
+            for pe in _readable_entries(f, notes):
+                if pe.direction != OUT or pe.topic != topic or pe.schema != RawImage.DESCRIPTOR.full_name:
+                    continue
+                msg = _parse_image(pe)
+                ident = image_identity(msg)
+                if ident not in idents:
+                    continue
+                if pe.payload != FULL:
+                    omitted.add(ident)
+                    policy = pe.channel.get("policy", "?")
+                elif found.setdefault(ident, (pe.data, strip_image(msg).SerializeToString()))[0] != pe.data:
+                    raise RecordingError(f"{f}: two different {topic} images share stamp {ident[0]} ns and "
+                                         f"frame_id {ident[1]!r}: a reference to them is ambiguous")
+        where = ", ".join(f.name for f in files)
+        for ident, entries in idents.items():
+            data, header = found.get(ident, (None, None))
+            for e in entries:
+                if data is not None and header == e.data:  # the same image: size, encoding... too
+                    e.data, e.payload = data, FULL
+                elif data is not None:
+                    e.missing = f"{where} holds an image of this stamp and frame_id of another size or encoding"
+                elif ident in omitted:
+                    e.missing = f"{where} kept its pixels only for [record] images = {policy!r}"
+                else:
+                    e.missing = f"not in {where}" + (f" ({notes[0]})" if notes else "")
+    last_in: dict[str, Entry] = {}
+    for e in rec.entries:
+        if e.payload == SAME_AS_INPUT:
+            src = last_in.get(e.channel.get("ref_topic", ""))
+            if src is not None and src.payload == FULL:
+                msg = _parse_image(e)
+                msg.data = _parse_image(src).data  # the input's pixels
+                e.data, e.payload = msg.SerializeToString(), FULL
+            else:
+                e.missing = (f"a copy of the {e.channel.get('ref_topic')} input before it, which is "
+                             f"{'missing' if src is not None else 'not in the recording'}")
+        elif e.direction == IN and e.schema == RawImage.DESCRIPTOR.full_name:
+            last_in[e.topic] = e
+        if e.payload == OMITTED and not e.missing:
+            e.missing = f"[record] images = {e.channel.get('policy', '?')!r} did not keep its pixels"
+    return [e for e in rec.entries if e.payload != FULL]
+
+
+def _readable_entries(f: Path, notes: list[str]) -> Iterator[Entry]:
+    """``iter_entries(f)``, or nothing (with a note) when ``f`` cannot be read at all."""
+    try:
+        yield from iter_entries(f, notes)
+    except RecordingError as err:
+        notes.append(str(err))
+
+
+def _parse_image(e: Entry) -> RawImage:
+    msg = RawImage()
+    try:
+        msg.ParseFromString(e.data)
+    except DecodeError as err:
+        raise RecordingError(f"message {e.index} on {e.topic!r} does not decode: {err}") from err
+    return msg
 
 
 def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:

@@ -25,7 +25,15 @@ from google.protobuf.message import Message
 
 from humanpt.runtime.config import build
 from humanpt.runtime.core import Core
-from humanpt.runtime.recording import Recording, RecordingError, read
+from humanpt.runtime.recording import (
+    FULL,
+    IN,
+    Recording,
+    RecordingError,
+    read,
+    resolve_images,
+    strip_image,
+)
 from humanpt.runtime.registry import COMPONENTS, class_path, core_class
 from humanpt.schemas import topics
 
@@ -161,15 +169,19 @@ class ReplayResult:
     # A segment resumed after a write error (metadata ``continues``): the core's state at its
     # start was never recorded, so a fresh core cannot replay it. Why, else None.
     continuation: str | None = None
+    # Inputs the run did not keep (images without pixels: ``[record] images``, a producer's
+    # recording cut short): the replay stops at the first. What, else None.
+    missing: str | None = None
 
     @property
     def nothing_compared(self) -> bool:
-        """No input to replay, or a truncation that leaves no recorded output to compare
-        while the replay made some: no verdict either way."""
+        """No input to replay, or a truncation (or a missing input) that leaves no recorded
+        output to compare while the replay made some: no verdict either way."""
         if self.divergence is not None:
             return False
         return self.continuation is not None or self.inputs == 0 or (
-            self.truncated is not None and self.compared == 0 and self.replayed_outputs > 0
+            (self.truncated is not None or self.missing is not None)
+            and self.compared == 0 and self.replayed_outputs > 0
         )
 
     @property
@@ -189,14 +201,19 @@ class ReplayResult:
         trunc = (f"\n  the recording is truncated ({self.truncated}); only the "
                  f"{self.recorded_outputs} outputs recorded before the damage are compared"
                  if self.truncated else "")
+        if self.missing:
+            trunc += f"\n  inputs missing: {self.missing}"
         if self.nothing_compared:
             why = (self.continuation or ("the recording holds no inputs" if self.inputs == 0
+                                         else "no recorded output before the first missing input"
+                                         if self.missing and not self.truncated
                                          else "no recorded output survives the truncation"))
             return f"{head}{trunc}\n  NOTHING COMPARED: {why}; this is not a match"
         if self.match:
             if self.compared == 0:
                 return f"{head}{trunc}\n  MATCH: the core output nothing, recorded or replayed"
-            upto = " up to the truncation" if self.truncated else ""
+            upto = (" up to the truncation" if self.truncated else
+                    " up to the first missing input" if self.missing else "")
             return f"{head}{trunc}\n  MATCH: every output is identical{upto} ({self.compared} compared)"
         return f"{head}{trunc}\n  MISMATCH\n{self.divergence.describe()}"
 
@@ -213,16 +230,58 @@ def _decode(topic: str, data: bytes) -> Message | None:
 Stream = list[tuple[int, str, bytes]]  # (log time ns, short topic, serialised message)
 
 
+def missing_inputs(rec: Recording) -> str | None:
+    """Put back the pixels of the images ``rec`` recorded without them (``recording.
+    resolve_images``; raises RecordingError when the producer's recording is not there)
+    and cut the recording before its first input still without them: a core cannot be
+    replayed past an input it never gets.  Returns what is missing, for people (None:
+    nothing).  Idempotent."""
+    if rec.resolved:
+        return rec.missing
+    left = resolve_images(rec)
+    rec.resolved = True
+    inputs = [e for e in left if e.direction == IN]
+    if not inputs:
+        return None
+    first = inputs[0]
+    by_topic: dict[str, int] = {}
+    for e in inputs:
+        by_topic[e.topic] = by_topic.get(e.topic, 0) + 1
+    n_in = sum(1 for e in rec.entries if e.direction == IN)
+    cut = rec.entries.index(first)
+    rec.entries = rec.entries[:cut]
+    rec.missing = (
+        f"{len(inputs)} of {n_in} inputs have no pixels in the run "
+        f"({', '.join(f'{t} {n}' for t, n in sorted(by_topic.items()))}); the first, #{first.index} at "
+        f"t_ns={first.t_ns}: {first.missing or '?'}; replayed and compared up to it")
+    return rec.missing
+
+
 def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] = build_core,
                      ) -> tuple[Stream, Stream]:
     """(recorded outputs, replayed outputs) of a recording: a fresh core fed every recorded
-    input (of a truncated recording, the replayed stream runs past the recorded one's cut)."""
+    input (of a truncated recording, the replayed stream runs past the recorded one's cut).
+
+    Images recorded without their pixels are first resolved (:func:`missing_inputs`: the
+    recording is cut before an input that cannot be); a recorded output image still without
+    them (``[record] images`` did not keep it) is compared without its pixels."""
+    missing_inputs(rec)
     core = core_factory(rec)
     replayed: Stream = []
     for e in rec.inputs:
         for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
             replayed.append((e.t_ns, topic, msg.SerializeToString()))
-    recorded: Stream = [(e.t_ns, e.topic, e.data) for e in rec.outputs]
+    outputs = rec.outputs
+    recorded: Stream = [(e.t_ns, e.topic, e.data) for e in outputs]
+    for i, e in enumerate(outputs):
+        if e.payload != FULL and i < len(replayed) and replayed[i][1] == e.topic:
+            try:
+                t, topic, data = replayed[i]
+                msg = topics.message_type(topic)()
+                msg.ParseFromString(data)
+                replayed[i] = (t, topic, strip_image(msg).SerializeToString())
+            except Exception:  # noqa: BLE001 - not an image: the comparison shows it
+                pass
     return recorded, replayed
 
 
@@ -237,9 +296,12 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                f"state at its start was not recorded, so it cannot be replayed from its config")
         return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
                             0, len(rec.entries), continuation=why)
+    n_read = len(rec.entries)  # before a missing input cuts them
     recorded, replayed = replay_recording(rec, core_factory)
-    # The lost chunk of a truncated file held the tail of both streams: compare what both have.
-    replayed_cmp = replayed[:len(recorded)] if rec.truncated else replayed
+    missing = rec.missing
+    # The lost chunk of a truncated file held the tail of both streams (an input without its
+    # pixels cut both): compare what both have.
+    replayed_cmp = replayed[:len(recorded)] if rec.truncated or missing else replayed
     div = None
     compared = min(len(recorded), len(replayed_cmp))
     for i in range(max(len(recorded), len(replayed_cmp))):
@@ -260,7 +322,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
             compared = i
             break
     return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div,
-                        rec.truncated, compared, len(rec.entries))
+                        rec.truncated, compared, n_read, missing=missing)
 
 
 def message_text(topic: str, data: bytes) -> str:
