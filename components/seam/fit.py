@@ -53,6 +53,7 @@ class FitConfig:
     dwell_radius_mm: float = 0.5  # a dwell's points stay this close to their mean
     dwell_min_s: float = 0.5  # ... for at least this long
     outlier_sigma: float = 5.0  # robust standard deviations beyond which a point is an outlier
+    split_confidence: float = 0.999  # two lines stay apart only if the split is this significant (F-test)
     min_arc_sweep_deg: float = 10.0  # an arc sweeps at least this much (else it is a line)
     min_arc_points: int = 7  # ... over at least this many points (a rounded corner is a corner, not an arc)
     max_arc_radius_mm: float = 5000.0  # flatter arcs are lines
@@ -354,7 +355,30 @@ def _split(q: np.ndarray, idx: np.ndarray, cfg: FitConfig, noise: float) -> list
     return _split(q, idx[:k + 1], cfg, noise) + _split(q, idx[k:], cfg, noise)
 
 
+_PARAMS = {"line": 4, "arc": 6}  # free parameters of a 3-D line / circle arc
+
+
+def _split_needed(a: _Piece, b: _Piece, union: _Piece, cfg: FitConfig) -> bool:
+    """Does splitting into ``a`` and ``b`` explain the points significantly better than
+    ``union`` (an F-test on the residuals, each point giving 2 residuals across the path,
+    at ``1 - split_confidence``)?  Noise the local estimate missed (a hand's slow wander)
+    does not make a corner."""
+    from scipy.stats import f as f_dist
+
+    sse_u, sse_s = _sse(union), _sse(a) + _sse(b)
+    dof_s = 2 * (len(a.idx) + len(b.idx)) - _PARAMS[a.kind] - _PARAMS[b.kind]
+    ddof = _PARAMS[a.kind] + _PARAMS[b.kind] - _PARAMS[union.kind]
+    if dof_s <= 0 or ddof <= 0 or sse_s <= 0:
+        return True
+    F = ((sse_u - sse_s) / ddof) / (sse_s / dof_s)
+    return bool(f_dist.sf(F, ddof, dof_s) < 1.0 - cfg.split_confidence)
+
+
 def _merge(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float) -> list[_Piece]:
+    """Merge neighbours, best first, while their union fits one line or arc: within the
+    tolerance, or (a line; no point beyond the outlier limit) no significantly worse than
+    the two apart."""
+    limit_max = max(4 * cfg.tolerance_mm, 4 * noise)
     changed = True
     while changed and len(pieces) > 1:
         changed = False
@@ -362,6 +386,11 @@ def _merge(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float) ->
         for i in range(len(pieces) - 1):
             idx = np.union1d(pieces[i].idx, pieces[i + 1].idx)
             m = _fit_piece(q, idx, cfg, noise)
+            if m is None:
+                u = _refit(q, idx, "line")
+                if (u is not None and u.max <= limit_max and pieces[i].kind == pieces[i + 1].kind == "line"
+                        and not _split_needed(pieces[i], pieces[i + 1], u, cfg)):
+                    m = u
             if m is not None and (best is None or m.rms < best[1].rms):
                 best = (i, m)
         if best is not None:

@@ -148,3 +148,19 @@ def test_path_fit_of_an_empty_or_nan_path_writes_nothing(tmp_path, rows, says):
     r = run_cli("path", "fit", str(src))
     assert r.returncode == 2 and says in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]
+
+
+def test_a_hands_slow_wander_is_one_line_but_a_10_degree_kink_is_two():
+    rng = np.random.default_rng(5)
+    s = np.arange(0.0, 450.0, 5.6)  # the trapezium's long edge at 20 mm/s, 280 ms
+    wander = 0.25 * np.sin(2 * np.pi * s / 150.0)  # RMS 0.18 mm: within the tolerance, unseen by the noise windows
+    p = np.column_stack([s, wander + rng.normal(0, 0.35, len(s)), rng.normal(0, 0.35, len(s))])
+    x = np.column_stack([p, np.zeros((len(p), 3))])
+    seam = fit_path(x, (np.arange(len(p)) * 0.28e9).astype(np.int64))
+    assert [g.kind for g in seam.segments] == ["line"], [(g.first, g.last) for g in seam.segments]
+    k = np.radians(10.0)
+    kink = np.vstack([np.column_stack([s[:40], np.zeros(40), np.zeros(40)]),
+                      [s[39], 0, 0] + np.outer(s[1:40], [np.cos(k), np.sin(k), 0.0])])
+    kink = kink + rng.normal(0, 0.05, kink.shape)
+    seam = fit_path(np.column_stack([kink, np.zeros((len(kink), 3))]), (np.arange(len(kink)) * 0.28e9).astype(np.int64))
+    assert [g.kind for g in seam.segments] == ["line", "line"] and not seam.corners  # 10 deg: no corner (20)
