@@ -119,11 +119,15 @@ def params_key(cell: str, component: str) -> str:
     return f"{KEY_PREFIX}/{cell}/{component}/params"
 
 
-def open_tool_session(rt: RuntimeConfig) -> zenoh.Session:
+def open_tool_session(rt: RuntimeConfig, patient: bool = False) -> zenoh.Session:
     """A tool's session (topics, echo, param, console, the demo's own): always a client of
     the router. As a peer every component would link to it and re-route when it comes and
     goes (a ~35 ms stall of the servo loop seen as the demo's session left is gone since;
     the cause was not isolated further). Raises ConnectionError naming the router."""
+    import dataclasses
+
+    if not patient:  # a person waits: [runtime] tool_connect_timeout_s (patient: a router still starting)
+        rt = dataclasses.replace(rt, connect_timeout_s=min(rt.connect_timeout_s, rt.tool_connect_timeout_s))
     conf = zenoh_config(rt, mode="client")
     try:
         return zenoh.open(conf)

@@ -110,7 +110,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
 
 def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], timeout_s: float, procs) -> bool:
     deadline = time.monotonic() + timeout_s
-    with open_tool_session(cfg.runtime) as s:
+    with open_tool_session(cfg.runtime, patient=True) as s:
         while time.monotonic() < deadline:
             if any(p.poll() is not None for _, p in procs):
                 return False
@@ -254,7 +254,7 @@ def _drive(file_cfg: cfgmod.ConfigFile, duration: float, ctl: LiveControl, stop:
     """Start the path recording a second after everything is up; watch the processes until
     ``duration`` + 1 s, a stop, or one of them exiting."""
     t_start = time.monotonic()
-    with open_tool_session(file_cfg.runtime) as s:
+    with open_tool_session(file_cfg.runtime, patient=True) as s:
         pub = s.declare_publisher("humanpt/demo/console/command")
         recording = False
         while not stop.wait(0.2):
