@@ -161,6 +161,20 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
     assert r.returncode == 1 and "plain file name" in r.stdout, r.stdout + r.stderr
     assert victim.read_text() == "precious"
 
+    # A seam (issue 21.4): path play sends it re-timed; the console pauses, slows, resumes it.
+    from humanpt.seam import seamfile
+    from humanpt.seam.fit import Corner, FitConfig, Seam, Segment
+
+    seg = lambda a, b: Segment("line", 0, 5, a, b, (0.0, 15.0, 180.0), (0.0, 15.0, 180.0), 0.0, 0.0, 6)  # noqa: E731
+    seam = seamfile.write(tmp_path / "l.seam.json", Seam(
+        (seg((300.0, 1200.0, 0.0), (340.0, 1200.0, 0.0)), seg((340.0, 1200.0, 0.0), (340.0, 1230.0, 0.0))),
+        (Corner((340.0, 1200.0, 0.0), 90.0, 0, 1),), (), (), 0.0, FitConfig(), 12))
+    r = run_cli("path", "play", str(seam), "--speed", "25", "--config", str(cfg), "--timeout", "20")
+    assert r.returncode == 0 and "playback_started" in r.stdout and "timed" in r.stdout, r.stdout + r.stderr
+    for verb, code in (("pause", "playback_paused"), ("rate", "playback_rate"), ("resume", "playback_resumed")):
+        r = run_cli("console", verb, *(["0.5"] if verb == "rate" else []), "--config", str(cfg), "--timeout", "20")
+        assert r.returncode == 0 and code in r.stdout, (verb, r.stdout + r.stderr)
+
     procs.stop(ctl)
     procs.stop(per)
     prec, crec = read(run_dir / "perception.mcap"), read(run_dir / "controller.mcap")
@@ -171,7 +185,8 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
         30
     ]
     verbs = [e.decode().verb for e in crec.inputs if e.topic == "console/command"]
-    assert verbs == ["record_start", "playback", "record_stop", "hold", "save", "save", "save", "save"]
+    assert verbs == ["record_start", "playback", "record_stop", "hold", "save", "save", "save", "save", "playback",
+                     "playback_pause", "playback_rate", "playback_resume"]
     codes = [e.decode().code for e in crec.outputs if e.topic == "controller/events"]
     assert "record_started" in codes and "record_stopped" in codes
     assert sum(c == "param_changed" for c in codes) == 4
