@@ -4,7 +4,7 @@
 //   mkdir /tmp/fx && cd /tmp/fx && npm install @mcap/core protobufjs @foxglove/wasm-zstd @foxglove/wasm-lz4
 //   humanpt demo --lockstep --scenario arc --duration 4 --run-dir /tmp/run
 //   humanpt runs merge /tmp/run /tmp/run.mcap
-//   NODE_PATH=/tmp/fx/node_modules node docs/foxglove-check.mjs /tmp/run.mcap tests/scene/data
+//   NODE_PATH=/tmp/fx/node_modules node docs/foxglove-check.mjs /tmp/run.mcap schemas
 //
 // Prints one JSON line per channel (topic, schema, messages decoded) and exits 1 if a message
 // does not decode or a foxglove.* schema differs from the .proto files (field name, number,

@@ -1,5 +1,5 @@
 """The scene component in a lock-step run, merged with ``humanpt runs merge``: its channels
-carry Foxglove's own schemas (checked against Foxglove's .proto files, tests/scene/data) and
+carry Foxglove's own schemas (checked against Foxglove's .proto files, schemas/foxglove) and
 their content agrees with the humanpt messages they come from and with the rig."""
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from tests.conftest import run_cli
 
 pytestmark = pytest.mark.timeout(120)
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[2] / "schemas"  # schemas/foxglove: Foxglove's own .proto files (their README)
 CELL = "humanpt/cell0/"
 # scene topic -> Foxglove schema name (issue 20 item 1)
 FOXGLOVE = {
@@ -74,7 +74,7 @@ def _foxglove_descriptors(tmp_path: Path) -> dict[str, descriptor_pb2.Descriptor
     protos = sorted(str(p.relative_to(DATA)) for p in (DATA / "foxglove").glob("*.proto"))
     rc = protoc.main(["protoc", f"-I{DATA}", f"-I{include}", "--include_imports",
                       f"--descriptor_set_out={out}", *protos])
-    assert rc == 0, "protoc could not compile tests/scene/data/foxglove"
+    assert rc == 0, "protoc could not compile schemas/foxglove"
     return _messages(descriptor_pb2.FileDescriptorSet.FromString(out.read_bytes()))
 
 
