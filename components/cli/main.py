@@ -361,7 +361,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--name", help="program name (default: the seam file's name; KRL: OUTPUT's)")
     q.add_argument("--point", choices=["auto", "G", "tip"], default="auto",
                    help="the tool point: the seam's (default); must match what the seam was fitted on")
-    q.add_argument("--rig", metavar="FILE", help="rig file whose tip (tob_T_tip) is the tool (default: nominal)")
+    q.add_argument("--tool", metavar="X,Y,Z,PSI,THETA,PHI",
+                   help="the torch's tip on the flange, mm and Z-Y-X deg (default: the controller's "
+                   "flange_T_tool_x, 0,0,200,0,0,0)")
     q.add_argument("--dwells", action="store_true",
                    help="wait where the welder dwelt (the seam's dwells, at segment ends), as long as he did")
     q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")

@@ -65,21 +65,23 @@ def path_export(args) -> int:
     if seam_point and point != seam_point:
         raise ValueError(f"{src}: the seam is of {seam_point}, not {point}; fit the path of {point} "
                          f"(humanpt path fit --point {point})")
-    if point == "tip":
-        from humanpt.geometry.rig import Rig
+    from humanpt.controller.config import ControllerConfig
+    from humanpt.geometry.transforms import transform_from_x
 
-        rig = Rig()
-        if args.rig:
-            from humanpt.runtime.rigfile import load_rig
-
-            rig = load_rig(args.rig)
-        tool = rig.tip.tob_T_tip_mm()
+    if args.tool:
+        try:
+            tool_x = [float(v) for v in args.tool.split(",")]
+        except ValueError:
+            tool_x = []
+        if len(tool_x) != 6 or not all(np.isfinite(tool_x)):
+            raise ValueError(f"--tool {args.tool!r}: give X,Y,Z,PSI,THETA,PHI (mm, deg), six finite numbers")
     else:
-        tool = np.eye(4)
+        tool_x = ControllerConfig().flange_T_tool_x  # the torch humanpt's own playback uses
+    tool = transform_from_x(np.asarray(tool_x, dtype=float))
     speed = args.speed if args.speed is not None else (_feed_mm_s(raw) or 20.0)
     opts = ExportOptions(speed_mm_s=speed, zone_mm=args.zone, corner_zone_mm=args.corner_zone,
                          name=name, point=point,
-                         tob_T_point_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
+                         flange_T_tool_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
                          source=src.name)
     text = export(seam, args.format, opts, timed=_timed(raw) if args.format == "json" else None)
     tmp = out.with_name(out.name + ".tmp")

@@ -20,15 +20,14 @@ krl         mm      A, B, C: rotations about Z, Y, X (deg) =         ``$TOOL`` F
 rapid       mm      quaternion [q1, q2, q3, q4] = [w, x, y, z],      tooldata tframe
                     q1 >= 0
 urscript    m       rotation vector [rx, ry, rz] (rad)               ``set_tcp(p[...])``
-json        mm      Z-Y-X psi, theta, phi (deg) and [w, x, y, z]     tob_T_point
+json        mm      Z-Y-X psi, theta, phi (deg) and [w, x, y, z]     flange_T_tool
 ==========  ======  ==============================================  ====================
 
 Every pose is of the seam's point (the driver tip P or the target's G, as the seam says)
 in humanpt's world frame: the robot's base (KRL ``$BASE``, RAPID ``wobj0``, UR base)
-must be humanpt's world frame.  The tool is that point in the TOB frame
-(``tob_T_point``: the rig's ``tob_T_tip`` for the tip, the identity for G); the program
-states it as the tool, which is right when the torch is mounted on the flange as the
-driver's TOB (else compose the flange-to-TOB mount in front of it on the controller).
+must be humanpt's world frame.  The tool is the torch's tip on the robot's flange
+(``flange_T_tool``: the controller's ``flange_T_tool_x``, what humanpt's own playback
+moves along the seam), so the robot puts the torch where the seam is.
 """
 
 from __future__ import annotations
@@ -72,7 +71,7 @@ class ExportError(ValueError):
 class ExportOptions:
     """How to write the program: the feed (mm/s), the blend at tangent junctions and at
     corners (mm; 0 stops exactly), the program's name, the seam's point (``tip`` or ``G``)
-    and the tool ``tob_T_point_mm`` (4, 4) mm, the acceleration for URScript (mm/s^2),
+    and the tool ``flange_T_tool_mm`` (4, 4) mm, the acceleration for URScript (mm/s^2),
     the VAL II SPEED
     (percent of the monitor speed: VAL II has no speed in mm/s) and the largest chord
     error (mm) of the points VAL II gets along an arc (it has no circular move), the
@@ -84,7 +83,7 @@ class ExportOptions:
     corner_zone_mm: float = 0.0
     name: str = "seam"
     point: str = "tip"
-    tob_T_point_mm: tuple[tuple[float, ...], ...] = tuple(map(tuple, np.eye(4)))
+    flange_T_tool_mm: tuple[tuple[float, ...], ...] = tuple(map(tuple, np.eye(4)))
     accel_mm_s2: float = 500.0
     val_speed_percent: float = 20.0
     val_chord_mm: float = 0.05
@@ -104,8 +103,8 @@ class ExportOptions:
                 raise ExportError(f"{k} must be >= 0, got {v!r}")
         if self.point not in ("tip", "G"):
             raise ExportError(f"point must be tip or G, got {self.point!r}")
-        if np.asarray(self.tob_T_point_mm).shape != (4, 4):
-            raise ExportError("tob_T_point_mm must be a 4x4 transform")
+        if np.asarray(self.flange_T_tool_mm).shape != (4, 4):
+            raise ExportError("flange_T_tool_mm must be a 4x4 transform")
 
 
 @dataclass(frozen=True)
@@ -226,8 +225,8 @@ def _rot(x: np.ndarray) -> Rotation:
 
 
 def _tool_x(opts: ExportOptions) -> np.ndarray:
-    """(6,) the tool (tob_T_point) as x, y, z mm and Z-Y-X deg."""
-    T = np.asarray(opts.tob_T_point_mm, dtype=float)
+    """(6,) the tool (flange_T_tool) as x, y, z mm and Z-Y-X deg."""
+    T = np.asarray(opts.flange_T_tool_mm, dtype=float)
     return np.concatenate([T[:3, 3], Rotation.from_matrix(T[:3, :3]).as_euler("ZYX", degrees=True)])
 
 
@@ -296,7 +295,7 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
     move is blended."""
     prog = program_name(opts.name)
     lines = [f"DEF {prog}( )"] + [f"; {h}" for h in _header_lines(seam, opts, "krl")]
-    lines += ["; $BASE = humanpt's world frame; $TOOL = the point in the TOB frame (tob_T_point)",
+    lines += ["; $BASE = humanpt's world frame; $TOOL = the torch on the flange (flange_T_tool)",
               "$BASE = {X 0.0, Y 0.0, Z 0.0, A 0.0, B 0.0, C 0.0}", f"$TOOL = {_krl_frame(_tool_x(opts))}",
               f"$VEL.CP = {_f(opts.speed_mm_s / 1000.0, 6)}", "$VEL.ORI1 = 200", "$VEL.ORI2 = 200",
               "$ORI_TYPE = #VAR", "$CIRC_TYPE = #PATH", "$ADVANCE = 3"]
@@ -336,7 +335,7 @@ def _rapid_zone(z: float) -> str:
 
 def to_rapid(seam: Seam, opts: ExportOptions) -> str:
     """ABB RAPID (.mod): robtargets [[x, y, z] mm, [q1, q2, q3, q4] = [w, x, y, z]] in
-    ``wobj0`` (the robot's base = humanpt's world), a tooldata of the point, a speeddata
+    ``wobj0`` (the robot's base = humanpt's world), a tooldata of the torch on the flange, a speeddata
     of the feed, zonedata of the blends (``fine`` at corners and the end); MoveJ to the
     first point, MoveL, MoveC (via, target); ``ConfL \\Off`` (no configuration given)."""
     prog = program_name(opts.name)
@@ -389,7 +388,7 @@ def to_urscript(seam: Seam, opts: ExportOptions) -> str:
     prog = program_name(opts.name)
     a, v = _f(opts.accel_mm_s2 / 1000.0, 4), _f(opts.speed_mm_s / 1000.0, 6)
     lines = [f"def {prog}():"] + [f"  # {h}" for h in _header_lines(seam, opts, "urscript")]
-    lines += ["  # poses in the base frame = humanpt's world; the TCP = the point in the TOB frame",
+    lines += ["  # poses in the base frame = humanpt's world; the TCP = the torch on the flange",
               f"  set_tcp({_ur_pose(_tool_x(opts))})"]
     for m in _moves(seam, opts):
         r = _f(m.zone_mm / 1000.0, 6)
@@ -434,7 +433,7 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
         "frame": "world", "point": opts.point,
         "units": {"position": "mm", "ypr_deg": "Z-Y-X psi, theta, phi: R = Rz(psi) Ry(theta) Rx(phi)",
                   "quat_wxyz": "[w, x, y, z]", "speed": "mm/s", "zone": "mm"},
-        "tool": {"tob_T_point": _json_pose(_tool_x(opts))},
+        "tool": {"flange_T_tool": _json_pose(_tool_x(opts))},
         "speed_mm_s": opts.speed_mm_s, "zone_mm": opts.zone_mm, "corner_zone_mm": opts.corner_zone_mm,
         "moves": [{"kind": m.kind, "segment": m.segment, "zone_mm": round(m.zone_mm, 4),
                    **({"dwell_s": round(m.dwell_s, 4)} if m.dwell_s > 0 else {}),

@@ -29,7 +29,7 @@ from tests.conftest import run_cli
 
 DATA = Path(__file__).parent / "data"
 SEAM_FILE = DATA / "export-seam.json"
-TIP_MM = (0.0, 0.0, 60.0)  # the nominal rig's tob_t_tip (humanpt.geometry.rig.Tip)
+TORCH_MM = (0.0, 0.0, 200.0)  # the controller's default flange_T_tool_x: the torch 200 mm along the flange's z
 TOL_MM, TOL_DEG = 0.01, 0.01
 
 
@@ -55,9 +55,9 @@ def hand_made_seam() -> Seam:
 
 def options() -> ExportOptions:
     T = np.eye(4)
-    T[:3, 3] = TIP_MM
+    T[:3, 3] = TORCH_MM
     return ExportOptions(speed_mm_s=20.0, zone_mm=1.0, name="seam", point="tip", json_step_mm=5.0,
-                         tob_T_point_mm=tuple(map(tuple, T)), source="export-seam.json")
+                         flange_T_tool_mm=tuple(map(tuple, T)), source="export-seam.json")
 
 
 def golden(fmt: str) -> Path:
@@ -298,12 +298,12 @@ def test_json_samples_on_the_seam():
             assert -1e-9 <= t <= 1 + 1e-9 and np.linalg.norm(a + t * (b - a) - p) < TOL_MM
 
 
-def test_tool_is_the_rigs_tip(seam):
-    """The tool: the nominal rig's tip, 60 mm along the TOB's z."""
-    assert "$TOOL = {X 0.000, Y 0.000, Z 60.000, A 0.0000, B 0.0000, C 0.0000}" in export(seam, "krl", options())
-    assert "[TRUE,[[0.000,0.000,60.000],[1.0000000,0.0000000,0.0000000,0.0000000]]" in export(seam, "rapid",
-                                                                                                  options())
-    assert "set_tcp(p[0.0000000, 0.0000000, 0.0600000, " in export(seam, "urscript", options())
+def test_tool_is_the_torch_on_the_flange(seam):
+    """The tool: the torch 200 mm along the flange's z (the controller's flange_T_tool_x)."""
+    assert "$TOOL = {X 0.000, Y 0.000, Z 200.000, A 0.0000, B 0.0000, C 0.0000}" in export(seam, "krl", options())
+    assert "[TRUE,[[0.000,0.000,200.000],[1.0000000,0.0000000,0.0000000,0.0000000]]" in export(seam, "rapid",
+                                                                                                   options())
+    assert "set_tcp(p[0.0000000, 0.0000000, 0.2000000, " in export(seam, "urscript", options())
 
 
 def test_cli_writes_refuses_and_errs(tmp_path):
@@ -336,10 +336,10 @@ if __name__ == "__main__":
         print(__doc__)
 
 
-def test_cli_retimed_g_seam_and_rig(tmp_path):
+def test_cli_retimed_g_seam_and_tool(tmp_path):
     """A seam of G with a feed and timed samples (a retimed seam): the feed is the
-    default speed, the JSON carries the samples' times, G's tool is the identity; a rig
-    file's tip is the tip seam's tool."""
+    default speed, the JSON carries the samples' times; the tool is the controller's
+    torch by default, --tool's when given, refused when not six numbers."""
     d = json.loads(SEAM_FILE.read_text())
     d["source"]["point"] = "G"
     d["retime"] = {"speed_mm_s": 35.0, "samples": [{"t_s": 0.0, "x": [0, 0, 0, 0, 30, 180]},
@@ -352,11 +352,10 @@ def test_cli_retimed_g_seam_and_rig(tmp_path):
     assert prog["speed_mm_s"] == 35.0 and prog["point"] == "G"
     assert [x["t_s"] for x in prog["samples"]] == [0.0, 0.004]
     assert prog["samples"][1]["x_mm"] == [0.14, 0.0, 0.0]
-    assert prog["tool"]["tob_T_point"]["x_mm"] == [0.0, 0.0, 0.0]
-    from humanpt.geometry.rig import Rig, Tip
-    from humanpt.runtime.rigfile import write_rig
-
-    rig = write_rig(tmp_path / "rig.toml", Rig(tip=Tip(tob_t_tip_mm=(1.0, -2.0, 75.0))))
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--rig", str(rig), "-o", str(tmp_path / "t.src"))
+    assert prog["tool"]["flange_T_tool"]["x_mm"] == [0.0, 0.0, 200.0]
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,-2,75,0,0,0", "-o",
+                str(tmp_path / "t.src"))
     assert r.returncode == 0, r.stderr
     assert "$TOOL = {X 1.000, Y -2.000, Z 75.000, A 0.0000, B 0.0000, C 0.0000}" in (tmp_path / "t.src").read_text()
+    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,2,3", "-o", str(tmp_path / "u.src"))
+    assert r.returncode == 2 and "six finite numbers" in r.stderr and not (tmp_path / "u.src").exists()
