@@ -525,6 +525,35 @@ def _orientation_ends(ypr_deg: np.ndarray, s_mm: np.ndarray) -> tuple[np.ndarray
     return out[0], out[1]
 
 
+def _join(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float, spacing: float
+          ) -> tuple[list[np.ndarray], list[np.ndarray], list[Corner]]:
+    """Each piece's start and end, and the corners: where the direction changes by more
+    than corner_deg, the two pieces meet where their lines (tangents) do; else halfway
+    between their own ends."""
+    starts, ends = zip(*(_end_points(q, pc) for pc in pieces), strict=True)
+    starts, ends = [s.copy() for s in starts], [e.copy() for e in ends]
+    corners: list[Corner] = []
+    for i in range(len(pieces) - 1):
+        _, d_out = _end_directions(pieces[i])
+        d_in, _ = _end_directions(pieces[i + 1])
+        angle = math.degrees(math.acos(float(np.clip(d_out @ d_in, -1.0, 1.0))))
+        joint = None
+        if angle > cfg.corner_deg:
+            joint = _closest_points(ends[i], d_out, starts[i + 1], d_in)
+            # the shared point may lie up to about a point's spacing on either side of the corner
+            slack = max(3 * max(cfg.tolerance_mm, noise), 1.5 * spacing)
+            if joint is not None and not (
+                    -slack <= (joint - ends[i]) @ d_out <= cfg.corner_reach_mm
+                    and -cfg.corner_reach_mm <= (joint - starts[i + 1]) @ d_in <= slack):
+                joint = None  # the lines meet far from where the hand turned: no clean corner
+            if joint is not None:
+                corners.append(Corner(tuple(map(float, joint)), angle, i, i + 1))
+        if joint is None:
+            joint = 0.5 * (ends[i] + starts[i + 1])
+        ends[i], starts[i + 1] = joint, joint
+    return starts, ends, corners
+
+
 def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndarray | None = None,
              config: FitConfig | None = None, meta: dict | None = None) -> Seam:
     """Fit a seam to a path: ``x`` (N, 6) positions mm and Z-Y-X angles deg (one frame),
@@ -568,27 +597,24 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
         outliers += [int(q_src[i]) for i in bad]
     pieces = cleaned
 
-    # Ends: corners where the direction changes, else the fits' own ends (meeting halfway).
-    starts, ends = zip(*(_end_points(q, pc) for pc in pieces), strict=True)
-    starts, ends = [s.copy() for s in starts], [e.copy() for e in ends]
-    corners: list[Corner] = []
-    for i in range(len(pieces) - 1):
-        _, d_out = _end_directions(pieces[i])
-        d_in, _ = _end_directions(pieces[i + 1])
-        angle = math.degrees(math.acos(float(np.clip(d_out @ d_in, -1.0, 1.0))))
-        joint = None
-        if angle > cfg.corner_deg:
-            joint = _closest_points(ends[i], d_out, starts[i + 1], d_in)
-            slack = 3 * max(cfg.tolerance_mm, noise)
-            if joint is not None and not (
-                    -slack <= (joint - ends[i]) @ d_out <= cfg.corner_reach_mm
-                    and -cfg.corner_reach_mm <= (joint - starts[i + 1]) @ d_in <= slack):
-                joint = None  # the lines meet far from where the hand turned: no clean corner
-            if joint is not None:
-                corners.append(Corner(tuple(map(float, joint)), angle, i, i + 1))
-        if joint is None:
-            joint = 0.5 * (ends[i] + starts[i + 1])
-        ends[i], starts[i + 1] = joint, joint
+    spacing = float(np.median(np.linalg.norm(np.diff(q, axis=0), axis=1))) if len(q) > 1 else 0.0
+    starts, ends, corners = _join(q, pieces, cfg, noise, spacing)
+    if corners:
+        # The hand rounds a corner: the points within a spacing of it lie off both lines.
+        # Fit each line without them, then join again.
+        near: dict[int, list[np.ndarray]] = {}
+        for c in corners:
+            near.setdefault(c.before, []).append(np.array(c.point_mm))
+            near.setdefault(c.after, []).append(np.array(c.point_mm))
+        for i, joints in near.items():
+            pc = pieces[i]
+            if pc.kind != "line":
+                continue
+            far = np.all([np.linalg.norm(q[pc.idx] - j, axis=1) > spacing for j in joints], axis=0)
+            if far.sum() >= cfg.min_points and not far.all():
+                corner_cut += [int(q_src[k]) for k in pc.idx[~far]]
+                pieces[i] = _refit(q, pc.idx[far], "line")
+        starts, ends, corners = _join(q, pieces, cfg, noise, spacing)
 
     segments = []
     for i, pc in enumerate(pieces):
