@@ -642,7 +642,7 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
     dwells = tuple(Dwell(tuple(map(float, p[a:b + 1].mean(axis=0))), int(a), int(b), float(t[b] - t[a]))
                    for a, b in dwell_runs)
     return Seam(tuple(segments), tuple(corners), dwells, tuple(sorted(outliers)), noise, cfg, len(x), dict(meta or {}),
-                tuple(corner_cut))
+                tuple(sorted(set(corner_cut))))
 
 
 def sample_segment(seg: Segment, step_mm: float = 1.0) -> np.ndarray:
