@@ -199,6 +199,13 @@ def run_calibrate(args, run_dir: Path) -> int:
     write_rig(run_dir / "rig.toml", res.rig, "the rig humanpt demo --calibrate ended with", overwrite=True)
     print(calibrate_report(res))
     print(f"calibrated rig: {run_dir / 'rig.toml'}")
+    if res.fitted is not None:
+        from humanpt.seam import seamfile
+
+        (run_dir / "paths").mkdir(exist_ok=True)
+        seam = seamfile.write(run_dir / "paths" / "taught.seam.json", res.fitted, overwrite=True)
+        print(f"taught seam: {seam}  (humanpt path export {seam} --format krl|rapid|urscript|val|json; "
+              f"humanpt view {run_dir} draws it)")
     return 0
 
 
