@@ -903,7 +903,7 @@ def runs_play(args) -> int:
                     break
                 pub = pubs.get(e.topic)
                 if pub is None:
-                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic)
+                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic, block=True)
                 pub.put(e.data)
                 n += 1
                 played += 1

@@ -82,9 +82,12 @@ def type_name_of(encoding: zenoh.Encoding) -> str | None:
     return schema if mime == PROTOBUF_MIME and sep and schema else None
 
 
-def declare_topic_publisher(session: zenoh.Session, cell: str, short: str) -> zenoh.Publisher:
+def declare_topic_publisher(session: zenoh.Session, cell: str, short: str, block: bool = False) -> zenoh.Publisher:
     """A publisher on bus topic ``short`` of ``cell`` whose samples carry :func:`topic_encoding`
-    (a topic this version's table lacks: plain ``application/protobuf``, no schema)."""
+    (a topic this version's table lacks: plain ``application/protobuf``, no schema).
+    ``block``: wait for a congested link instead of dropping the sample (zenoh's default
+    drops: right for a live cell, where a late sample is worthless; a player of recordings
+    must deliver every one)."""
     from humanpt.schemas.topics import KEY_PREFIX as prefix
     from humanpt.schemas.topics import UnknownTopicError
 
@@ -92,6 +95,9 @@ def declare_topic_publisher(session: zenoh.Session, cell: str, short: str) -> ze
         encoding = topic_encoding(short)
     except UnknownTopicError:
         encoding = zenoh.Encoding.APPLICATION_PROTOBUF
+    if block:
+        return session.declare_publisher(f"{prefix}/{cell}/{short}", encoding=encoding,
+                                         congestion_control=zenoh.CongestionControl.BLOCK)
     return session.declare_publisher(f"{prefix}/{cell}/{short}", encoding=encoding)
 
 
