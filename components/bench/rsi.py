@@ -79,6 +79,7 @@ class RsiRun:
     gateway_events: list = field(default_factory=list)
     overruns: int = 0  # robot cycles that started > 1 ms after their deadline
     stopped: str | None = None
+    moved_mm: np.ndarray | None = None  # (3,) where the flange went, base frame
 
     @property
     def on_time_pct(self) -> float:
@@ -90,8 +91,11 @@ class RsiRun:
 
 def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig | None = None,
             gateway: RsiGatewayConfig | None = None,
-            step: Callable[[int, float], np.ndarray] | None = None) -> RsiRun:
-    """One round trip run of ``cycles`` robot cycles (blocks ~cycles x cycle_ms)."""
+            step: Callable[[int, float], np.ndarray] | None = None,
+            lose: Callable[[int], bool] | None = None) -> RsiRun:
+    """One round trip run of ``cycles`` robot cycles (blocks ~cycles x cycle_ms); ``step``
+    the scripted controller's per-cycle step (default: a 20 mm/s circle), ``lose(n)`` True
+    drops the robot's n-th <Rob> (a lost datagram)."""
     gw_cfg = gateway or RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms)
     core = RsiGatewayCore(gw_cfg)
     adapter = UdpAdapter(gw_cfg.udp_bind)
@@ -100,7 +104,8 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     host, port = adapter.address
     robot_cfg = robot or SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms)
     sim = RsiRobot(robot_cfg)
-    server = RsiRobotServer(sim, gateway=f"{host}:{port}", cycles=cycles)
+    server = RsiRobotServer(sim, gateway=f"{host}:{port}", cycles=cycles, lose=lose)
+    start_mm = sim.base_T_flange_mm[:3, 3].copy()
     controller = CommandAhead(cycle_ms, step)
     run = RsiRun(cycle_ms)
     tick_ns = gw_cfg.tick_period_ns
@@ -144,4 +149,5 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     run.robot_events = list(sim.events)
     run.overruns = server.overruns
     run.stopped = sim.stopped
+    run.moved_mm = sim.base_T_flange_mm[:3, 3] - start_mm
     return run
