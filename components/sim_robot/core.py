@@ -112,6 +112,9 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     )
 
     def __init__(self, config: SimRobotConfig):
+        if config.protocol != "alter":
+            raise ValueError(f"sim_robot: protocol {config.protocol!r} does not run as this core yet; the RSI "
+                             "controller is humanpt.sim_robot.rsi (RsiRobot, RsiRobotServer)")
         super().__init__(config)
         self.kin = config.kinematics()
         self.q_rad = config.start_joints_rad()  # the joints (encoders)
