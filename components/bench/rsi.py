@@ -89,26 +89,80 @@ class RsiRun:
         return float(np.percentile(self.work_us, q)) if self.work_us else float("nan")
 
 
+@dataclass
+class _RobotSide:
+    """What the simulated controller reports after a run (picklable: it may run in a child
+    process)."""
+
+    counters: dict
+    histogram: dict
+    events: list
+    overruns: int
+    stopped: str | None
+    moved_mm: np.ndarray
+
+
+def _run_robot(robot_cfg: SimRobotConfig, gateway: str, cycles: int,
+               lose: Callable[[int], bool] | None = None, stop=None) -> _RobotSide:
+    sim = RsiRobot(robot_cfg)
+    start_mm = sim.base_T_flange_mm[:3, 3].copy()
+    server = RsiRobotServer(sim, gateway=gateway, cycles=cycles, lose=lose).start()
+    try:
+        while server._thread.is_alive():
+            server.join(0.1)
+            if stop is not None and stop.is_set():
+                break
+    finally:
+        server.stop()
+        server.join(2.0)
+    return _RobotSide(dict(sim.counters), sim.latency_histogram(), list(sim.events), server.overruns,
+                      sim.stopped, sim.base_T_flange_mm[:3, 3] - start_mm)
+
+
+def _robot_process(conn, robot_cfg: SimRobotConfig, gateway: str, cycles: int) -> None:
+    """Child process: the simulated controller alone (its own GIL, as a real one is a
+    machine of its own); the result goes back through ``conn``."""
+    from humanpt.runtime.tuning import tune_process
+
+    tune_process()
+    conn.send(_run_robot(robot_cfg, gateway, cycles))
+    conn.close()
+
+
 def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig | None = None,
             gateway: RsiGatewayConfig | None = None,
             step: Callable[[int, float], np.ndarray] | None = None,
-            lose: Callable[[int], bool] | None = None) -> RsiRun:
+            lose: Callable[[int], bool] | None = None, robot_process: bool = False) -> RsiRun:
     """One round trip run of ``cycles`` robot cycles (blocks ~cycles x cycle_ms); ``step``
     the scripted controller's per-cycle step (default: a 20 mm/s circle), ``lose(n)`` True
-    drops the robot's n-th <Rob> (a lost datagram)."""
+    drops the robot's n-th <Rob> (a lost datagram; in-process only). ``robot_process``:
+    the simulated controller in a child process (its own interpreter and GIL, as the real
+    one is a machine of its own), else a thread of this process."""
+    import multiprocessing
+    import threading
+
     gw_cfg = gateway or RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms)
     core = RsiGatewayCore(gw_cfg)
     adapter = UdpAdapter(gw_cfg.udp_bind)
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     adapter.start(lambda topic, msg: inbox.put((topic, msg)))
     host, port = adapter.address
+    address = f"{host}:{port}"
     robot_cfg = robot or SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms)
-    sim = RsiRobot(robot_cfg)
-    server = RsiRobotServer(sim, gateway=f"{host}:{port}", cycles=cycles, lose=lose)
-    start_mm = sim.base_T_flange_mm[:3, 3].copy()
     controller = CommandAhead(cycle_ms, step)
     run = RsiRun(cycle_ms)
     tick_ns = gw_cfg.tick_period_ns
+    result: list[_RobotSide] = []
+    stop = threading.Event()
+    if robot_process:
+        if lose is not None:
+            raise ValueError("lose works with the robot in this process only")
+        parent, child = multiprocessing.get_context("spawn").Pipe(duplex=False)
+        worker = multiprocessing.get_context("spawn").Process(
+            target=_robot_process, args=(child, robot_cfg, address, cycles), daemon=True)
+    else:
+        worker = threading.Thread(
+            target=lambda: result.append(_run_robot(robot_cfg, address, cycles, lose, stop)), daemon=True)
 
     def handle(t_ns: int, topic: str, msg) -> None:
         for out_topic, out in core.step(t_ns, topic, msg):
@@ -120,9 +174,9 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
                 run.gateway_events.append(out)
 
     try:
-        server.start()
+        worker.start()
         next_tick = time.time_ns()
-        while server._thread.is_alive() or not inbox.empty():
+        while worker.is_alive() or not inbox.empty():
             try:
                 topic, msg = inbox.get(timeout=max(0.0, (next_tick - time.time_ns()) / 1e9))
             except queue.Empty:
@@ -136,18 +190,27 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
             if now >= next_tick:
                 handle(now, "tick", pb.Tick(header=header(now), period_ns=tick_ns))
                 next_tick += tick_ns * max(1, (now - next_tick) // tick_ns + 1)
-        server.join(5.0)
+            if robot_process and parent.poll():
+                result.append(parent.recv())
     finally:
-        server.stop()
-        server.join(2.0)
+        stop.set()
+        worker.join(5.0)
+        if robot_process:
+            if not result and parent.poll(5.0):
+                result.append(parent.recv())
+            if worker.is_alive():
+                worker.terminate()
         adapter.close()
-    run.cycles = sim.counters["cycles"]
-    run.on_time = sim.counters["on_time"]
-    run.late = sim.counters["late"]
-    run.histogram = sim.latency_histogram()
+    if not result:
+        raise RuntimeError("the simulated RSI controller reported nothing (it failed; see its log)")
+    side = result[0]
+    run.cycles = side.counters["cycles"]
+    run.on_time = side.counters["on_time"]
+    run.late = side.counters["late"]
+    run.histogram = side.histogram
     run.gateway = dict(core.counters)
-    run.robot_events = list(sim.events)
-    run.overruns = server.overruns
-    run.stopped = sim.stopped
-    run.moved_mm = sim.base_T_flange_mm[:3, 3] - start_mm
+    run.robot_events = side.events
+    run.overruns = side.overruns
+    run.stopped = side.stopped
+    run.moved_mm = side.moved_mm
     return run

@@ -114,12 +114,13 @@ def bench_rsi(args) -> int:
         print(f"humanpt bench rsi: --cycles takes 4 and/or 12 (RSI's cycle times), --duration > 0; got "
               f"{args.cycles!r}, {args.duration:g}", file=sys.stderr)
         return 2
-    print("humanpt bench rsi (gateway <-> simulated RSI controller over UDP on loopback; scripted "
+    where = "a thread of this process" if args.same_process else "a process of its own"
+    print(f"humanpt bench rsi (gateway <-> simulated RSI controller ({where}) over UDP on loopback; scripted "
           "command-ahead controller; no Zenoh)", flush=True)
     rows = []
     for c in cycle_times:
         n = max(1, round(args.duration * 1000.0 / c))
-        r = run_rsi(c, n)
+        r = run_rsi(c, n, robot_process=not args.same_process)
         print(f"  {c:g} ms: {r.on_time}/{r.cycles} cycles on time", flush=True)
         h = r.histogram
         rows.append([f"{c:g} ms", r.cycles, r.on_time, f"{r.on_time_pct:.2f} %", r.late,

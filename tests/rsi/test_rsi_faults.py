@@ -190,3 +190,14 @@ def test_an_ipoc_going_back_is_a_new_rsi_session():
     rig.status(cycle=1)  # RSI restarted at the robot: IPOC from the start
     assert rig.gw.link.counters["sessions"] == 2
     assert rig.states()[-1].cycle == 1 and rig.gw.counters["status_lost"] == 0
+
+
+def test_a_silent_robot_is_link_down_then_its_next_datagram_link_up():
+    rig = RsiRig(cycle_period_ms=4.0, status_timeout_cycles=5)
+    rig.status()
+    rig.command(dp_mm=(0.1, 0, 0))
+    outs = rig.advance(30 * 1_000_000)  # > 5 cycles of 4 ms without a <Rob>
+    assert rig.codes(outs) == ["link_down"] and "restarting the RSI link" in rig.events(outs)[0].text
+    outs = rig.status(cycle=200)
+    assert rig.codes(outs) == ["link_up"] and rig.events(outs)[0].text.startswith("RSI link up")
+    assert rig.states()[-1].cycle == 200
