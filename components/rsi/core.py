@@ -1,11 +1,11 @@
 """The gateway core (pure) over a KUKA RSI-style link: ``udp_rx`` datagrams in (a
 ``<Rob>`` per robot cycle), ``udp_tx`` datagrams out (the ``<Sen>`` answer echoing the
-IPOC), the same safety rules as over ALTER (humanpt.alter_gateway.gateway.GatewayCore),
+IPOC), the same safety rules as over ALTER (humanpt.alter_gateway.core.GatewayCore),
 the same topics (``alter_gateway/robot_state``, ``alter_gateway/events``)."""
 
 from __future__ import annotations
 
-from humanpt.alter_gateway.gateway import WATCH, GatewayCore, gateway_ports
+from humanpt.alter_gateway.core import WATCH, GatewayCore, gateway_ports
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.rsi.link import RsiLink
 
