@@ -14,12 +14,23 @@ the robot sends into a :class:`CycleState` per robot cycle and encodes the gatew
    correction frame (base or tool: ``CycleState.tool_mode``) and handed to the link, which
    quantises it to its wire within the limits.
 
-Zero (hold) instead: stale commands, the controller's liveliness token gone, HOLD/IDLE
-commands, the robot reporting FAULT, a latched gateway fault (``fault_after_missed``
-consecutive missed cycles while commands come), two command streams. See README.md for
-every rule and event; ``humanpt.alter_gateway.core`` (ALTER) and ``humanpt.rsi.core``
-(KUKA RSI-style UDP/XML) are the links. The component keeps the name ``alter_gateway``
-(its topics and events are unchanged) whatever the link.
+Zero (hold) instead: no usable command (stale), the controller's liveliness token is gone,
+the command says HOLD/IDLE or asks ALTER off, the robot reports FAULT, the gateway is
+faulted, two command streams. ``fault_after_missed`` consecutive missed cycles (no fresh
+command at the deadline, the robot reporting a late correction, cycles lost on the line)
+while commands come raise a latched fault: hold, plus ALTER_OFF (if ``alter_off_on_fault``)
+until the robot shows correction mode off; it clears when the robot re-activates it (a new
+ALTER session, started by the operator at the controller) or on ``console/command``
+{component: alter_gateway, verb: reset_fault}. The miss watchdog arms with the first fresh
+command, and disarms while the controller is gone (then the gateway just holds and waits).
+Every such action is an event on ``alter_gateway/events``, rate-limited per code to one per
+``event_interval_ms``. See README.md for every rule and event.
+
+Links: :class:`AlterGatewayCore` (below) over ALTER (``alter_link.AlterLink``: STATUS k on
+``serial_rx``, a CORRECTION echoing k quantised to 0.01 mm / 0.01 deg on ``serial_tx``,
+the TOOL_MODE bit choosing the frame) and ``humanpt.rsi.core.RsiGatewayCore`` over KUKA
+RSI-style UDP/XML. The component keeps the name ``alter_gateway`` (its topics and events
+are unchanged) whatever the link.
 
 Frames: ``world`` (the cell), ``base`` (the robot base, placed by ``world_T_base_mm_deg``),
 ``tool`` (the flange). A FlangeCommand's header.frame_id says whether its step is in
