@@ -40,6 +40,9 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # The robot's RSI correction frame (its ST_PATHCORR / POSCORR reference): RKorr is in
     # the robot base ("base") or the flange ("tool"). Must match the robot's configuration.
     correction_frame: Literal["base", "tool"] = "base"
+    # Only datagrams from this host (or host:port) are the robot's; others are dropped (and
+    # logged) by the adapter. Empty: any sender (a test bench; not for a cell on a shared net).
+    udp_robot: str = ""
     sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
 
     def __post_init__(self) -> None:
@@ -47,6 +50,8 @@ class RsiGatewayConfig(AlterGatewayConfig):
         if self.cycle_period_ms not in RSI_CYCLES_MS:
             raise ValueError(f"cycle_period_ms must be one of {RSI_CYCLES_MS} (RSI), got {self.cycle_period_ms}")
         parse_address(self.udp_bind)
+        if self.udp_robot and ":" in self.udp_robot:
+            parse_address(self.udp_robot)
         if self.correction_frame not in ("base", "tool"):
             raise ValueError(f"correction_frame must be base or tool, got {self.correction_frame!r}")
         if not self.sen_type.isidentifier():

@@ -4,7 +4,8 @@ Cycle numbers: a ``<Rob>``'s IPOC (ms) divided by the cycle time (4 or 12 ms), m
 2^32, so that a lost datagram is a gap of one cycle and the gateway's rules (missed
 cycles, lost statuses, command-ahead by cycle number) apply unchanged. An IPOC that goes
 back or jumps more than ``MAX_IPOC_JUMP_CYCLES`` ahead is a new RSI session (RSI_ON again
-at the robot): ``LinkUp``, the gateway starts over. ``<Delay>`` growing between two
+at the robot): ``LinkUp``, the gateway starts over; the same IPOC twice (a duplicated
+datagram) is dropped. ``<Delay>`` growing between two
 datagrams means the robot judged the previous answer late: ``correction_missed``.
 """
 
@@ -42,7 +43,7 @@ class RsiLink:
         self._last_ipoc: int | None = None
         self._last_delay: int | None = None
         self._ipocs: OrderedDict[int, int] = OrderedDict()  # cycle -> IPOC, the last few
-        self.counters = {"datagrams": 0, "malformed": 0, "sessions": 0}
+        self.counters = {"datagrams": 0, "malformed": 0, "sessions": 0, "duplicates": 0}
 
     @property
     def is_running(self) -> bool:
@@ -67,6 +68,9 @@ class RsiLink:
             return [LinkError(f"RSI link: {e}; datagram dropped (no answer for it)")]
         events: list = []
         last = self._last_ipoc
+        if self._running and rob.ipoc == last:
+            self.counters["duplicates"] += 1  # UDP may deliver a datagram twice: answered once
+            return events
         jump = None if last is None else (rob.ipoc - last) // self.cycle_ms
         if not self._running or jump is None or jump <= 0 or jump > MAX_IPOC_JUMP_CYCLES:
             # First datagram, or a new RSI session (IPOC back or far ahead).

@@ -1,6 +1,6 @@
 """The RSI gateway's live-shell adapter: a UDP socket on a thread of its own.
 
-Datagrams read become ``udp_rx`` inputs (humanpt.SerialChunk, stamped when read, frame_id
+Datagrams read (from the robot's address, ``udp_robot``, if set) become ``udp_rx`` inputs (humanpt.SerialChunk, stamped when read, frame_id
 = the sender's host:port); the core's ``udp_tx`` outputs go back to the sender of the
 latest datagram (the robot). The socket never waits behind bus traffic: the read loop is
 its own thread and puts straight into the shell's input queue (local inputs go first).
@@ -24,8 +24,12 @@ log = logging.getLogger("humanpt.rsi")
 class UdpAdapter:
     topics_out = ("udp_tx",)
 
-    def __init__(self, bind: str, *, rx_topic: str = "udp_rx", poll_s: float = 0.2):
+    def __init__(self, bind: str, *, robot: str = "", rx_topic: str = "udp_rx", poll_s: float = 0.2):
+        """``robot``: "host" or "host:port" the datagrams must come from ("": any)."""
         self.bind = bind
+        host, _, port = robot.rpartition(":") if ":" in robot else (robot, "", "")
+        self._robot_host, self._robot_port = host or None, int(port) if port else None
+        self.rejected = 0
         self.rx_topic = rx_topic
         self.poll_s = poll_s
         self._sock: socket.socket | None = None
@@ -75,6 +79,13 @@ class UdpAdapter:
                 time.sleep(self.poll_s)  # a socket error (not a wait for data): do not spin
                 continue
             stamp = time.time_ns()
+            if ((self._robot_host is not None and peer[0] != self._robot_host)
+                    or (self._robot_port is not None and peer[1] != self._robot_port)):
+                self.rejected += 1
+                if self.rejected == 1 or self.rejected % 1000 == 0:
+                    log.warning("UDP %s: datagram from %s:%d dropped: not the robot (%d so far)",
+                                self.bind, peer[0], peer[1], self.rejected)
+                continue
             self._peer = peer
             self.datagrams_in += 1
             put(self.rx_topic, pb.SerialChunk(header=header(stamp, frame_id=f"{peer[0]}:{peer[1]}"), data=data))
@@ -101,4 +112,4 @@ class UdpAdapter:
 
 def adapters(config: RsiGatewayConfig) -> list[UdpAdapter]:
     """The live shell's adapters: one UDP socket at ``udp_bind``."""
-    return [UdpAdapter(config.udp_bind)]
+    return [UdpAdapter(config.udp_bind, robot=config.udp_robot)]

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import socket
+import time
+
 import pytest
 
 from humanpt.rsi.config import RsiGatewayConfig
@@ -44,3 +47,18 @@ def test_bench_rsi_refuses_a_cycle_rsi_does_not_have():
     r = run_cli("bench", "rsi", "--cycles", "5", timeout=30)
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.strip().count("\n") == 0 and "4 and/or 12" in r.stderr
+
+
+def test_datagrams_from_another_sender_than_the_robot_are_dropped():
+    received = []
+    gw = UdpAdapter("127.0.0.1:0", robot="127.0.0.1:9")  # the robot: port 9 (nobody here)
+    gw.start(lambda topic, msg: received.append(msg))
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rogue:
+            rogue.sendto(b"<Rob/>", gw.address)
+            deadline = time.monotonic() + 2.0
+            while gw.rejected == 0 and time.monotonic() < deadline:
+                time.sleep(0.01)  # poll the adapter's counter (no event to wait on)
+    finally:
+        gw.close()
+    assert gw.rejected == 1 and received == []

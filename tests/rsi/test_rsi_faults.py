@@ -201,3 +201,13 @@ def test_a_silent_robot_is_link_down_then_its_next_datagram_link_up():
     outs = rig.status(cycle=200)
     assert rig.codes(outs) == ["link_up"] and rig.events(outs)[0].text.startswith("RSI link up")
     assert rig.states()[-1].cycle == 200
+
+
+def test_a_duplicated_rob_is_answered_once():
+    rig = RsiRig(cycle_period_ms=4.0)
+    rig.status()
+    rig.command(dp_mm=(0.1, 0, 0))
+    n = len(rig.corrections)
+    rig.status(cycle=1)  # the same datagram again
+    assert len(rig.corrections) == n and rig.gw.link.counters["duplicates"] == 1
+    assert rig.gw.link.counters["sessions"] == 1 and rig.codes() == []
