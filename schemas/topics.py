@@ -103,6 +103,7 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
     "param": pb.ParamSet,
     "serial_rx": pb.SerialChunk,  # bytes read from the component's serial port
     "serial_tx": pb.SerialChunk,  # output: bytes the shell writes to the serial port
+    "udp_rx": pb.SerialChunk, "udp_tx": pb.SerialChunk,  # datagrams from / to a UDP link (RSI)
     "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
     "capture": RawImage,  # a frame grabbed by the camera's capture adapter (stamp = capture)
     "path_file": pb.Event,  # what the controller's path writer did on save (path_saved, save_failed)

@@ -1,34 +1,40 @@
-"""alter_gateway core (pure): the host end of the ALTER link and the last line of safety.
+"""The gateway (pure): the last line of safety between the controller and a robot link.
 
-Per controller cycle k (the controller sends STATUS k every ``cycle_period_ms``):
+One implementation of the safety rules for every link protocol. A :class:`Link` turns what
+the robot sends into a :class:`CycleState` per robot cycle and encodes the gateway's answer
+(a correction or a hold) into bytes; :class:`GatewayCore` decides that answer:
 
-1. STATUS k arrives (``serial_rx``): publish ``alter_gateway/robot_state`` (world_T_flange
-   from the status' fixed-point pose, stamp = receive time - ``status_delay_ms``) and
-   account for the previous cycle (missed or not).
-2. Answer with a CORRECTION echoing k, built from the controller's command for cycle k
-   (``controller/command``, FlangeCommand.cycle == k). If it is not there yet, wait for
-   it until ``reply_deadline_ms`` after the STATUS; then answer with the freshest command
-   no older than ``stale_cycles`` (velocity hold: per-cycle steps repeat), else zero.
-3. Every correction is clamped (translation by norm to ``max_speed_mm_s`` x cycle,
-   rotation by angle to ``max_angular_speed_deg_s`` x cycle), cut to keep the flange in
-   the workspace box, converted to the controller's ALTER frame (world/base or tool, from
-   the TOOL_MODE status bit) and quantised (0.01 mm, 0.01 deg) within the limits.
+1. robot cycle k arrives: publish ``alter_gateway/robot_state`` (world_T_flange, stamp =
+   receive time - ``status_delay_ms``) and account for the previous cycle (missed or not);
+2. answer cycle k from the controller's command for k (``FlangeCommand.cycle == k``),
+   waiting for it until ``reply_deadline_ms``; then the freshest command no older than
+   ``stale_cycles``, else zero (``stale_command``);
+3. every step is clamped (norm to ``max_speed_mm_s`` x cycle, angle to
+   ``max_angular_speed_deg_s`` x cycle), cut to the workspace box, changed to the robot's
+   correction frame (base or tool: ``CycleState.tool_mode``) and handed to the link, which
+   quantises it to its wire within the limits.
 
-Zero (HOLD) instead: no usable command (stale), the controller's liveliness token is gone,
-the command says HOLD/IDLE or asks ALTER off, the robot reports FAULT, or the gateway is
-faulted. ``fault_after_missed`` consecutive missed cycles (no fresh command at the
-deadline, the robot reporting CORRECTION_MISSED, statuses lost on the line) raise a
-latched fault: HOLD, plus ALTER_OFF (if ``alter_off_on_fault``) until the controller shows
-ALTER off. The fault clears when the controller then re-activates ALTER (a new ALTER
-session, started by the operator at the controller) or
-on ``console/command`` {component: alter_gateway, verb: reset_fault}. The miss watchdog
-arms with the first fresh command, and disarms while the controller is gone (then the
-gateway just holds and waits). Every such action is an event on ``alter_gateway/events``,
-rate-limited per code to one per ``event_interval_ms``.
+Zero (hold) instead: no usable command (stale), the controller's liveliness token is gone,
+the command says HOLD/IDLE or asks ALTER off, the robot reports FAULT, the gateway is
+faulted, two command streams. ``fault_after_missed`` consecutive missed cycles (no fresh
+command at the deadline, the robot reporting a late correction, cycles lost on the line)
+while commands come raise a latched fault: hold, plus ALTER_OFF (if ``alter_off_on_fault``)
+until the robot shows correction mode off; it clears when the robot re-activates it (a new
+ALTER session, started by the operator at the controller) or on ``console/command``
+{component: alter_gateway, verb: reset_fault}. The miss watchdog arms with the first fresh
+command, and disarms while the controller is gone (then the gateway just holds and waits).
+Every such action is an event on ``alter_gateway/events``, rate-limited per code to one per
+``event_interval_ms``. See README.md for every rule and event.
 
-Frames: ``world`` (the cell), ``base`` (the robot base = the controller's ALTER world,
-placed by ``world_T_base_mm_deg``), ``tool`` (the flange). A FlangeCommand's
-header.frame_id says whether its step is in ``world`` (default) or ``tool``.
+Links: :class:`AlterGatewayCore` (below) over ALTER (``alter_link.AlterLink``: STATUS k on
+``serial_rx``, a CORRECTION echoing k quantised to 0.01 mm / 0.01 deg on ``serial_tx``,
+the TOOL_MODE bit choosing the frame) and ``humanpt.rsi.core.RsiGatewayCore`` over KUKA
+RSI-style UDP/XML. The component keeps the name ``alter_gateway`` (its topics and events
+are unchanged) whatever the link.
+
+Frames: ``world`` (the cell), ``base`` (the robot base, placed by ``world_T_base_mm_deg``),
+``tool`` (the flange). A FlangeCommand's header.frame_id says whether its step is in
+``world`` (default) or ``tool``.
 """
 
 from __future__ import annotations
@@ -36,32 +42,25 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from humanpt.alter import (
-    ControllerStatus,
-    Correction,
-    CorrectionFlags,
-    FrameError,
-    HostConfig,
     HostEndpoint,
-    LinkConfig,
     LinkDown,
     LinkUp,
-    MessageRejected,
     RepSent,
     SendRejected,
-    StatusBits,
-    StatusReceived,
     Transmit,
 )
 from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
+from humanpt.alter_gateway.alter_link import AlterLink
 from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.alter_gateway.link import CycleReceived, CycleState, Link, LinkError
 from humanpt.alter_gateway.safety import (
     clamp_norm,
     clip_to_envelope,
-    quantize,
     rotation_angle_deg,
     safe_norm,
 )
@@ -79,15 +78,6 @@ MAX_LEAD_CYCLES = 64
 MAX_SEQ_GAP = 100_000
 # Command modes that mean "do not move".
 _ZERO_MODES = (pb.CONTROL_MODE_HOLD, pb.CONTROL_MODE_IDLE)
-
-# Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
-_ALTER_ACTIVE, _TOOL_MODE, _CUMULATIVE, _ARM_POWER, _FAULT = (
-    int(StatusBits.ALTER_ACTIVE),
-    int(StatusBits.TOOL_MODE),
-    int(StatusBits.CUMULATIVE),
-    int(StatusBits.ARM_POWER),
-    int(StatusBits.FAULT),
-)
 
 ROBOT_STATE = "alter_gateway/robot_state"
 EVENTS = "alter_gateway/events"
@@ -113,39 +103,56 @@ class Command:
 
 @dataclass(frozen=True)
 class Sent:
-    """One correction the gateway sent (for benches and tests; not an output)."""
+    """One correction the gateway sent (for benches and tests; not an output).
+
+    ``correction`` is the link's wire object (humanpt.alter.Correction for ALTER,
+    humanpt.rsi.protocol.RsiCorrection for RSI); ``step`` the decided step before the
+    link quantised it: (dp_mm (3,), rv_rad (3,)) in the robot's correction frame (base or
+    tool), None for a hold."""
 
     t_ns: int
     cycle: int
-    correction: Correction
-    source: str  # "fresh", "reused", "stale", "gone", "fault", "robot_fault", "hold"
+    correction: Any
+    source: str  # "fresh", "reused", "stale", "gone", "fault", "robot_fault", "hold", "conflict"
     command_cycle: int | None
+    step: tuple[np.ndarray, np.ndarray] | None = None
 
 
-class AlterGatewayCore(SerialLinkCoreMixin, Core):
-    name = "alter_gateway"
-    config_type = AlterGatewayConfig
-    ports = (
+WATCH = ("controller",)  # the liveliness the gateway watches
+
+
+def gateway_ports(rx_topic: str) -> tuple[Port, ...]:
+    """The gateway's inputs with its link's receive topic (``serial_rx``, ``udp_rx``)."""
+    return (
         Port("tick", pb.Tick, "_on_tick"),
-        Port("serial_rx", pb.SerialChunk, "_on_serial"),
+        Port(rx_topic, pb.SerialChunk, "_on_rx"),
         Port("controller/command", pb.FlangeCommand, "_on_command", queue=8),
         Port("liveliness", pb.Liveliness, "_on_liveliness"),
         Port("console/command", pb.Command, "_on_console", queue=8),
     )
-    watch = ("controller",)
+
+
+class GatewayCore(SerialLinkCoreMixin, Core):
+    """The gateway's safety rules over a :class:`Link`. Subclasses give ``config_type``,
+    ``ports`` (:func:`gateway_ports` with the link's receive topic), ``watch = WATCH``,
+    ``tick_period_ns`` (``config.tick_period_ns``) and :meth:`make_link`."""
+
+    name = "alter_gateway"
+
+    def make_link(self, config: Any) -> Link:
+        raise NotImplementedError
 
     def __init__(self, config: AlterGatewayConfig):
         super().__init__(config)
-        cycle_ns = config.cycle_period_ns
-        self._host = HostEndpoint(HostConfig(LinkConfig(rep_timeout_ns=3 * cycle_ns)))
+        self.link: Link = self.make_link(config)
         self._limiter = EventLimiter(round(config.event_interval_ms * 1e6))
         self._world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         self._started = False
         self._commands: dict[int, Command] = {}
-        self._status: ControllerStatus | None = None
+        self._status: CycleState | None = None
         self._status_t_ns: int | None = None  # when the last STATUS arrived
         # (status, its base_T_flange, world_T_flange): both read once per STATUS, mm.
-        self._status_pose: tuple[ControllerStatus, np.ndarray, np.ndarray] | None = None
+        self._status_pose: tuple[CycleState, np.ndarray, np.ndarray] | None = None
         self._pending: tuple[int, int] | None = None  # (cycle, deadline_ns) awaiting an answer
         self._prev_cycle: int | None = None  # last STATUS cycle of this link session
         self._prev_fresh: bool | None = (
@@ -199,10 +206,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             0,
         )
 
-    # -- contract ---------------------------------------------------------------------------
-    def tick_period_ns(self) -> int | None:
-        return self.config.tick_period_ns
-
+    # -- contract (a concrete gateway also gives tick_period_ns: config.tick_period_ns) -----
     @property
     def fault(self) -> str | None:
         return self._fault
@@ -213,19 +217,26 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
 
     @property
     def link_running(self) -> bool:
-        return self._host.link.is_running
+        return self.link.is_running
 
     # -- inputs (SerialLinkCoreMixin._bind): the first input of any kind starts the link -----
     def _begin(self, t_ns: int) -> list[Output]:
         outs: list[Output] = []
         if not self._started:
             self._started = True
-            self._link(self._host.start(t_ns), t_ns, outs)
+            self._link(self.link.start(t_ns), t_ns, outs)
         return outs
 
-    def _on_serial(self, t_ns: int, msg: pb.SerialChunk, outs: list[Output]) -> None:
+    def _on_rx(self, t_ns: int, msg: pb.SerialChunk, outs: list[Output]) -> None:
         rx_ns = msg.header.stamp_ns or t_ns
-        self._link(self._host.receive(bytes(msg.data), t_ns), rx_ns, outs)
+        self._link(self.link.receive(bytes(msg.data), t_ns), rx_ns, outs)
+
+    def _flush_tx(self, t_ns: int, outs: list) -> None:
+        if self._tx:
+            topic = self.link.tx_topic
+            outs.append((topic, pb.SerialChunk(header=self.next_header(topic, t_ns, self.link.name.lower()),
+                                               data=bytes(self._tx), outgoing=True)))
+            self._tx.clear()
 
     # -- link -------------------------------------------------------------------------------
     def _link(self, events, t_ns: int, outs: list[Output]) -> None:
@@ -233,8 +244,8 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         for e in events:
             if isinstance(e, Transmit):
                 self._tx += e.data
-            elif isinstance(e, StatusReceived):
-                self._on_status(e.status, t_ns, outs)
+            elif isinstance(e, CycleReceived):
+                self._on_status(e.state, t_ns, outs)
             elif isinstance(e, LinkUp):
                 self._new_session()
                 if self._link_down:
@@ -244,7 +255,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                         t_ns,
                         pb.SEVERITY_INFO,
                         "link_up",
-                        "ALTER link up (DDCMP start-up done)",
+                        self.link.up_text,
                         limited=False,
                     )
             elif isinstance(e, LinkDown):
@@ -256,13 +267,13 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                     t_ns,
                     pb.SEVERITY_ERROR,
                     "link_down",
-                    f"ALTER link down: {e.reason} ({e.unacked} corrections unacknowledged); "
+                    f"{self.link.name} link down: {e.reason} ({e.unacked} corrections unacknowledged); "
                     "the robot gets no corrections (holds) until it is back",
                     limited=False,
                 )
-            elif isinstance(e, FrameError | MessageRejected):
+            elif isinstance(e, LinkError):
                 self.counters["link_errors"] += 1
-                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "link_error", f"ALTER link: {e}")
+                self._ev(outs, t_ns, pb.SEVERITY_WARNING, "link_error", e.text)
             elif isinstance(e, SendRejected):
                 self._ev(
                     outs,
@@ -292,7 +303,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._armed_from = None
 
     def _on_tick(self, t_ns: int, msg: pb.Tick, outs: list[Output]) -> None:
-        events = self._host.poll(t_ns)
+        events = self.link.poll(t_ns)
         if events:
             self._link(events, t_ns, outs)
         if self._pending is not None and t_ns >= self._pending[1]:
@@ -312,7 +323,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             and not self._silent
             and t_ns - self._status_t_ns
             > self.config.status_timeout_cycles * self.config.cycle_period_ns
-            and self._host.link.is_running
+            and self.link.is_running
         ):
             self._silent = True
             self._pending = None
@@ -323,13 +334,13 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 pb.SEVERITY_ERROR,
                 "link_down",
                 f"no STATUS from the controller for {(t_ns - self._status_t_ns) / 1e6:.0f} ms; "
-                "the robot gets no corrections (holds); restarting the ALTER link",
+                f"the robot gets no corrections (holds); restarting the {self.link.name} link",
                 limited=False,
             )
             # Whatever silenced it (a cut line, a peer stuck in start-up), a restart is the
             # way back: the link_up event says when it is.
             self._link_down = True
-            self._link(self._host.start(t_ns), t_ns, outs)
+            self._link(self.link.start(t_ns), t_ns, outs)
 
     # -- controller side ----------------------------------------------------------------------
     def _on_command(self, t_ns: int, msg: pb.FlangeCommand, outs: list[Output]) -> None:
@@ -511,7 +522,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             )
 
     # -- robot side ---------------------------------------------------------------------------
-    def _on_status(self, status: ControllerStatus, rx_ns: int, outs: list[Output]) -> None:
+    def _on_status(self, status: CycleState, rx_ns: int, outs: list[Output]) -> None:
         cfg = self.config
         k = status.cycle
         self.counters["statuses"] += 1
@@ -532,9 +543,7 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
             and not self._controller_gone
         ):
             lost = cycles_after(k, self._prev_cycle) - 1
-            robot_missed = (
-                StatusBits.CORRECTION_MISSED in status.bits and self._prev_fresh is not None
-            )
+            robot_missed = status.correction_missed and self._prev_fresh is not None
             missed = lost + (1 if (self._prev_fresh is False or robot_missed) else 0)
             if lost > 0:
                 self.counters["status_lost"] += lost
@@ -567,13 +576,11 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         # Robot-side transitions. ALTER_OFF is requested until the controller shows ALTER
         # off; ALTER on again after that is a new session started at the controller.
         if self._fault is not None:
-            if StatusBits.ALTER_ACTIVE not in status.bits:
+            if not status.corrections_on:
                 self._fault_alter_off_seen = True
             elif self._fault_alter_off_seen:
-                self._clear_fault(rx_ns, f"ALTER re-activated at the controller (cycle {k})", outs)
-        if StatusBits.FAULT in status.bits and (
-            prev_status is None or StatusBits.FAULT not in prev_status.bits
-        ):
+                self._clear_fault(rx_ns, f"{self.link.name} re-activated at the controller (cycle {k})", outs)
+        if status.fault and (prev_status is None or not prev_status.fault):
             self._ev(
                 outs,
                 rx_ns,
@@ -598,39 +605,38 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         else:
             self._pending = (k, rx_ns + round(cfg.reply_deadline_ms * 1e6))
 
-    def _pose(self, status: ControllerStatus) -> tuple[np.ndarray, np.ndarray]:
-        """(base_T_flange, world_T_flange) of a STATUS, mm; computed once. Do not modify."""
+    def _pose(self, status: CycleState) -> tuple[np.ndarray, np.ndarray]:
+        """(base_T_flange, world_T_flange) of a cycle's state, mm; computed once. Do not modify."""
         if self._status_pose is None or self._status_pose[0] is not status:
-            base_T_flange = status.base_T_flange_mm()
+            base_T_flange = status.base_T_flange_mm
             self._status_pose = (status, base_T_flange, self._world_T_base @ base_T_flange)
         return self._status_pose[1:]
 
-    def _robot_state(self, status: ControllerStatus, rx_ns: int) -> Output:
+    def _robot_state(self, status: CycleState, rx_ns: int) -> Output:
         world_T_flange = self._pose(status)[1].copy()
         world_T_flange[:3, 3] /= 1000.0
-        b = int(status.bits)
         stamp = max(0, rx_ns - round(self.config.status_delay_ms * 1e6))
         return ROBOT_STATE, pb.RobotState(
             header=self.next_header(ROBOT_STATE, stamp, "world"),
             world_T_flange=pose(world_T_flange),
             status=pb.AlterStatus(
-                alter_active=bool(b & _ALTER_ACTIVE),
-                tool_mode=bool(b & _TOOL_MODE),
-                cumulative=bool(b & _CUMULATIVE),
-                arm_power=bool(b & _ARM_POWER),
-                fault=bool(b & _FAULT),
+                alter_active=status.corrections_on,
+                tool_mode=status.tool_mode,
+                cumulative=status.cumulative,
+                arm_power=status.arm_power,
+                fault=status.fault,
             ),
             cycle=status.cycle,
             missed_cycles=self._missed,
         )
 
-    def _must_hold(self, status: ControllerStatus) -> str | None:
+    def _must_hold(self, status: CycleState) -> str | None:
         """Why cycle ``status`` must get a zero correction regardless of commands, or None."""
         if self._fault is not None:
             return "fault"
         if self._controller_gone:
             return "gone"
-        if StatusBits.FAULT in status.bits:
+        if status.fault:
             return "robot_fault"
         return None
 
@@ -697,26 +703,30 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 text,
                 limited=False,
             )
-        flags = CorrectionFlags(0)
-        if hold == "fault" and cfg.alter_off_on_fault and not self._fault_alter_off_seen:
-            flags |= CorrectionFlags.ALTER_OFF
+        off = hold == "fault" and cfg.alter_off_on_fault and not self._fault_alter_off_seen
+        step = None
         if hold is not None or cmd is None or cmd.zero:
             if cmd is not None and cmd.alter_off and hold is None:
-                flags |= CorrectionFlags.ALTER_OFF
-            correction = Correction.hold(k, flags)
+                off = True
+            correction = self.link.hold(k, off)
             source = hold or ("hold" if cmd is not None else "stale")
         else:
-            correction = self._safe_correction(k, status, cmd, t_ns, outs)
+            step = self._safe_step(k, status, cmd, t_ns, outs)
+            if step is None:
+                correction = self.link.hold(k, False)
+            else:
+                correction = self.link.correction(k, step[0], step[1], cfg.max_step_mm, cfg.max_step_deg)
         self.counters[
             "fresh" if source == "fresh" else "reused" if source == "reused" else "zero"
         ] += 1
-        self.sent.append(Sent(t_ns, k, correction, source, cmd.cycle if cmd is not None else None))
-        self._link(self._host.send_correction(correction, t_ns), t_ns, outs)
+        self.sent.append(Sent(t_ns, k, correction, source, cmd.cycle if cmd is not None else None, step))
+        self._link(self.link.send(correction, t_ns), t_ns, outs)
 
-    def _safe_correction(
-        self, k: int, status: ControllerStatus, cmd: Command, t_ns: int, outs: list[Output]
-    ) -> Correction:
-        """Clamp, keep inside the envelope, change to the ALTER frame, quantise."""
+    def _safe_step(
+        self, k: int, status: CycleState, cmd: Command, t_ns: int, outs: list[Output]
+    ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Clamp, keep inside the envelope, change to the robot's correction frame:
+        (dp_mm (3,), rv_rad (3,)), or None (hold) if that is not finite."""
         cfg = self.config
         base_T_flange, world_T_flange = self._pose(status)
         world_R_base = self._world_T_base[:3, :3]
@@ -754,17 +764,17 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
                 f"cycle {k}: step to {np.round(p_world + dp_c, 2).tolist()} mm cut at the workspace "
                 f"envelope {list(cfg.envelope_min_mm)}..{list(cfg.envelope_max_mm)} mm",
             )
-        # World -> the controller's ALTER frame.
+        # World -> the robot's correction frame (base or tool).
         dp_b, rv_b = world_R_base.T @ dp_e, world_R_base.T @ rv_c
-        if StatusBits.TOOL_MODE in status.bits:
+        if status.tool_mode:
             R = base_T_flange[:3, :3]
             dp_b, rv_b = R.T @ dp_b, R.T @ rv_b
         if not (np.all(np.isfinite(dp_b)) and np.all(np.isfinite(rv_b))):
             # Cannot happen after the clamp; if it ever does, the robot holds, nothing raises.
             self._bad_command(outs, t_ns, f"cycle {k}: the correction is not finite after the frame "
                                           f"changes ({dp_b} mm, {rv_b} rad): zero correction")
-            return Correction.hold(k, CorrectionFlags(0))
-        return quantize(k, dp_b, rv_b, max_mm, max_deg)
+            return None
+        return dp_b, rv_b
 
     # -- starvation and fault -------------------------------------------------------------------
     def _starve(self, t_ns: int, k: int, quiet_ns: int | None, outs: list[Output]) -> None:
@@ -817,3 +827,20 @@ class AlterGatewayCore(SerialLinkCoreMixin, Core):
         self._fault = None
         self._missed = 0
         self._commands.clear()
+
+
+class AlterGatewayCore(GatewayCore):
+    name = "alter_gateway"
+    config_type = AlterGatewayConfig
+    ports = gateway_ports(AlterLink.rx_topic)
+    watch = WATCH
+
+    def tick_period_ns(self) -> int | None:
+        return self.config.tick_period_ns
+
+    def make_link(self, config: AlterGatewayConfig) -> AlterLink:
+        return AlterLink(config.cycle_period_ns)
+
+    @property
+    def _host(self) -> HostEndpoint:  # (tests and benches reach the endpoint by this name)
+        return self.link.host

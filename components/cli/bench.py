@@ -99,6 +99,43 @@ def bench_alter(args) -> int:
     return 0
 
 
+def bench_rsi(args) -> int:
+    """The gateway <-> the simulated RSI controller over UDP (see ``humanpt.bench.rsi``)."""
+    from humanpt.bench.rsi import run_rsi
+    from humanpt.sim_robot.rsi import LATENCY_EDGES_MS
+
+    try:
+        cycle_times = [float(c) for c in args.cycles.split(",") if c.strip()]
+    except ValueError:
+        print(f"humanpt bench rsi: --cycles must be numbers (4, 12), got {args.cycles!r}", file=sys.stderr)
+        return 2
+    bad = [c for c in cycle_times if c not in (4.0, 12.0)]
+    if bad or not cycle_times or not args.duration > 0:
+        print(f"humanpt bench rsi: --cycles takes 4 and/or 12 (RSI's cycle times), --duration > 0; got "
+              f"{args.cycles!r}, {args.duration:g}", file=sys.stderr)
+        return 2
+    where = "a thread of this process" if args.same_process else "a process of its own"
+    print(f"humanpt bench rsi (gateway <-> simulated RSI controller ({where}) over UDP on loopback; scripted "
+          "command-ahead controller; no Zenoh)", flush=True)
+    rows = []
+    for c in cycle_times:
+        n = max(1, round(args.duration * 1000.0 / c))
+        r = run_rsi(c, n, robot_process=not args.same_process)
+        print(f"  {c:g} ms: {r.on_time}/{r.cycles} cycles on time", flush=True)
+        h = r.histogram
+        rows.append([f"{c:g} ms", r.cycles, r.on_time, f"{r.on_time_pct:.2f} %", r.late,
+                     *(h[f"<={e:g} ms"] for e in LATENCY_EDGES_MS),
+                     f"{r.work_pct(50):.0f}", f"{r.work_pct(99):.0f}", r.overruns, r.stopped or ""])
+    print("")
+    print(tables.render(["cycle", "cycles", "on time", "%", "late",
+                         *(f"<={e:g} ms" for e in LATENCY_EDGES_MS), "work p50 us", "work p99 us",
+                         "robot overruns", "stopped"], rows, align="r" * 14 + "l"))
+    print("\nlatency = robot sends <Rob> -> a valid <Sen> arrives; late = none before the next cycle boundary. "
+          "work = the gateway's udp_rx step (decode, safety rules, encode) and the command step, wall time. "
+          "robot overruns = robot cycles started > 1 ms after their deadline (the simulator itself late).")
+    return 0
+
+
 def bench_all(args) -> int:
     """One table of the figures that matter (:func:`humanpt.bench.summary.measure_all`)."""
     from humanpt.bench.summary import measure_all

@@ -26,6 +26,7 @@ examples:
   humanpt console status --follow                 the operator console: status, options, record, save
   humanpt bench runtime                           latency and recording throughput
   humanpt bench alter                             ALTER link cycles on time, shortest cycle
+  humanpt bench rsi                               RSI link (UDP): cycles on time, late replies, gateway us
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
   humanpt bench faults                            the attacks of issue 14 against a live twin
@@ -462,6 +463,16 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--search-seconds", type=float, default=3.0, help="seconds per period tried (default 3)")
     q.add_argument("--zenoh", action="store_true", help="sim_robot and alter_gateway as child processes through "
                    "a router, this process the controller over Zenoh (default: threads of this process)")
+    q = bsub.add_parser("rsi", help="RSI link (UDP/XML): cycles on time, late-reply histogram, gateway work",
+                        description="The gateway (its UDP adapter on a thread) <-> the simulated KUKA RSI-style "
+                        "controller (its own clock, its own process) over UDP on loopback, with a scripted command-ahead "
+                        "controller, at each of --cycles: cycles answered in time, the reply-latency histogram "
+                        "as the robot sees it (late = after its next cycle boundary), and the gateway's "
+                        "per-cycle work p50/p99 in microseconds.")
+    q.add_argument("--duration", type=float, default=10.0, help="seconds per cycle time (default 10)")
+    q.add_argument("--cycles", default="12,4", help="RSI cycle times to run, ms: 4 and/or 12 (default 12,4)")
+    q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
+                   "process (sharing its GIL) instead of a process of its own")
     q = bsub.add_parser("render", help="frames per second of the simulated PSVS camera",
                         description="Render complex images of the static target (Table 1 pose, 600 mm "
                         "ahead) at the default sim_camera settings and print frames per second, with the "
@@ -615,6 +626,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "alter":
             from humanpt.cli.bench import bench_alter
             return bench_alter(args)
+        if args.bench_verb == "rsi":
+            from humanpt.cli.bench import bench_rsi
+            return bench_rsi(args)
         if args.bench_verb == "render":
             from humanpt.cli.bench import bench_render
             return bench_render(args)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -55,6 +56,19 @@ class SimRobotConfig:
     joint_offsets_deg: tuple[Annotated[float, Range(-5, 5, "deg")], ...] = (0.0,) * 6
     link_length_errors_mm: tuple[Annotated[float, Range(-50, 50, "mm")], ...] = (0.0,) * 5
     lag_time_constant_ms: Annotated[float, Range(0, 10000, "ms")] = 0.0
+    # The link to the gateway: "alter" (the Puma's serial line, this core) or "rsi" (a KUKA
+    # RSI-style controller over UDP: humanpt.sim_robot.rsi; cycle_period_ms 4 or 12;
+    # alter_mode world = RKorr in the base frame, tool = in the flange frame).
+    protocol: Literal["alter", "rsi"] = "alter"
+    # RSI: where the gateway listens (the robot's IP_NUMBER:PORT for its <Rob> datagrams).
+    rsi_gateway: str = "127.0.0.1:49152"
+    # RSI: this many late (or missing, wrong-IPOC, malformed) answers in a row stop RSI.
+    rsi_late_limit: Annotated[int, Range(1, 100000, "replies")] = 100
+    # RSI HOLDON: a missed answer repeats the last correction (True) or applies zero (False).
+    rsi_holdon: bool = True
+    # RSI correction limits per cycle (the robot's RSI POSCORR limits): beyond -> RSI stops.
+    rsi_max_correction_mm: Annotated[float, Range(0.001, 100, "mm")] = 5.0
+    rsi_max_correction_deg: Annotated[float, Range(0.001, 45, "deg")] = 2.0
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.cycle_period_ms <= 1000.0:
@@ -83,6 +97,13 @@ class SimRobotConfig:
                 raise ValueError(f"{name} needs {n} finite values within +-{bound:g}, got {value!r}")
         if not (np.isfinite(self.lag_time_constant_ms) and 0.0 <= self.lag_time_constant_ms <= 10000.0):
             raise ValueError(f"lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}")
+        if self.protocol == "rsi" and self.cycle_period_ms not in (4.0, 12.0):
+            raise ValueError(f"cycle_period_ms must be 4 or 12 over RSI, got {self.cycle_period_ms}")
+        if not self.rsi_late_limit >= 1:
+            raise ValueError(f"rsi_late_limit must be >= 1, got {self.rsi_late_limit}")
+        for name in ("rsi_max_correction_mm", "rsi_max_correction_deg"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         self.start_joints_rad()  # raises ValueError when the start is not reachable
 
     @property

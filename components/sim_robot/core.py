@@ -70,6 +70,38 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
 )
 
 
+class JointStepError(ValueError):
+    """A correction that needs a joint step beyond the joint speed limit."""
+
+
+def corrected_joints(kin, base_T_flange_mm: np.ndarray, delta_T_mm: np.ndarray, mode: str,
+                     q_ref_rad: np.ndarray, max_step_deg: float) -> np.ndarray:
+    """The joints (rad, (6,)) that put the flange at ``base_T_flange_mm`` (4, 4) moved by one
+    relative correction ``delta_T_mm`` (4, 4): ``mode`` "tool" = in the flange frame
+    (T @ delta), else in the base frame about the flange origin ([dR R, p + dp]); inverse
+    kinematics on the branch closest to ``q_ref_rad``. Shared by every simulated link
+    (ALTER, RSI): one robot model. Raises UnreachableError ("is unreachable: ...") or
+    JointStepError ("needs a joint step of ...") if the step is beyond
+    ``max_step_deg`` per cycle on any joint."""
+    T = base_T_flange_mm
+    if mode == "tool":
+        target = T @ delta_T_mm
+    else:
+        target = np.eye(4)
+        target[:3, :3] = delta_T_mm[:3, :3] @ T[:3, :3]
+        target[:3, 3] = T[:3, 3] + delta_T_mm[:3, 3]
+    try:
+        q = kin.inverse(target, q_ref_rad)
+    except UnreachableError as e:
+        raise UnreachableError(f"is unreachable: {e}") from None
+    steps = [abs(a - b) for a, b in zip(q.tolist(), q_ref_rad.tolist(), strict=True)]
+    step_deg = math.degrees(max(steps))
+    if step_deg > max_step_deg:
+        raise JointStepError(f"needs a joint step of {step_deg:.2f} deg "
+                             f"(> {max_step_deg:.2f} deg per cycle; near a singularity?)")
+    return q
+
+
 class SimRobotCore(SerialLinkCoreMixin, Core):
     name = "sim_robot"
     config_type = SimRobotConfig
@@ -80,6 +112,9 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     )
 
     def __init__(self, config: SimRobotConfig):
+        if config.protocol != "alter":
+            raise ValueError(f"sim_robot: protocol {config.protocol!r} does not run as this core yet; the RSI "
+                             "controller is humanpt.sim_robot.rsi (RsiRobot, RsiRobotServer)")
         super().__init__(config)
         self.kin = config.kinematics()
         self.q_rad = config.start_joints_rad()  # the joints (encoders)
@@ -312,28 +347,12 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         # The correction moves the setpoint (ALTER accumulates onto the commanded path),
         # in the controller's nominal kinematics.
         T = self._base_T_flange() if self.lag_gain == 1.0 else self.kin.forward(self.q_setpoint_rad)
-        delta = c.delta_T_mm()
-        if self.config.alter_mode == "tool":
-            target = T @ delta
-        else:
-            target = np.eye(4)
-            target[:3, :3] = delta[:3, :3] @ T[:3, :3]
-            target[:3, 3] = T[:3, 3] + delta[:3, 3]
-        try:
-            q = self.kin.inverse(target, self.q_setpoint_rad)
-        except UnreachableError as e:
-            self._fault(t_ns, f"correction for cycle {c.echo_cycle} is unreachable: {e}", outs)
-            return
-        steps = [abs(a - b) for a, b in zip(q.tolist(), self.q_setpoint_rad.tolist(), strict=True)]
-        step_deg = math.degrees(max(steps))
         max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_period_ms / 1000.0
-        if step_deg > max_step_deg:
-            self._fault(
-                t_ns,
-                f"correction for cycle {c.echo_cycle} needs a joint step of {step_deg:.2f} deg "
-                f"(> {max_step_deg:.2f} deg per cycle; near a singularity?)",
-                outs,
-            )
+        try:
+            q = corrected_joints(self.kin, T, c.delta_T_mm(), self.config.alter_mode,
+                                 self.q_setpoint_rad, max_step_deg)
+        except (UnreachableError, JointStepError) as e:
+            self._fault(t_ns, f"correction for cycle {c.echo_cycle} {e}", outs)
             return
         self.q_setpoint_rad = q
         self.applied.append((self.cycle, c))

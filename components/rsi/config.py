@@ -1,0 +1,58 @@
+"""The RSI gateway's configuration: the gateway's (``AlterGatewayConfig``: limits,
+envelope, watchdogs) with the RSI link's fields and RSI's cycle times."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.runtime.config import Range, live
+
+RSI_CYCLES_MS = (4.0, 12.0)  # the RSI cycle times (IPO_FAST and IPO modes)
+
+
+def parse_address(text: str) -> tuple[str, int]:
+    """``"host:port"`` -> (host, port); ValueError with the bad text."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ValueError(f"an address must be host:port (port 0..65535), got {text!r}")
+    return host, int(port)
+
+
+@dataclass(frozen=True)
+class RsiGatewayConfig(AlterGatewayConfig):
+    """The gateway over a KUKA RSI-style link (UDP/XML). Same safety fields as over ALTER;
+    the per-cycle limits follow the RSI cycle (100 mm/s at 4 ms: 0.4 mm per cycle)."""
+
+    # Where the gateway listens: the robot's RSI configuration sends to this address
+    # (its IP_NUMBER and PORT); the answers go back to where each <Rob> came from.
+    udp_bind: str = "127.0.0.1:49152"
+    cycle_period_ms: Annotated[float, Range(4, 12, "ms")] = 4.0
+    tick_ms: Annotated[float, Range(0.1, 12, "ms")] = 0.5
+    # The answer must reach the robot within its cycle: wait at most this long for the
+    # controller's command of the cycle before answering with the freshest one.
+    reply_deadline_ms: Annotated[float, Range(0.01, 12, "ms")] = 2.0
+    status_timeout_cycles: Annotated[int, Range(1, 1000, "cycles")] = 25
+    # ~0.3 s at 4 ms, as ALTER's 10 cycles are at 28 ms.
+    fault_after_missed: Annotated[int, Range(1, 10000, "cycles")] = live(
+        70, "consecutive missed cycles that raise a fault", stricter="lower")
+    # The robot's RSI correction frame (its ST_PATHCORR / POSCORR reference): RKorr is in
+    # the robot base ("base") or the flange ("tool"). Must match the robot's configuration.
+    correction_frame: Literal["base", "tool"] = "base"
+    # Only datagrams from this host (or host:port) are the robot's; others are dropped (and
+    # logged) by the adapter. Empty: any sender (a test bench; not for a cell on a shared net).
+    udp_robot: str = ""
+    sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.cycle_period_ms not in RSI_CYCLES_MS:
+            raise ValueError(f"cycle_period_ms must be one of {RSI_CYCLES_MS} (RSI), got {self.cycle_period_ms}")
+        parse_address(self.udp_bind)
+        if self.udp_robot and ":" in self.udp_robot:
+            parse_address(self.udp_robot)
+        if self.correction_frame not in ("base", "tool"):
+            raise ValueError(f"correction_frame must be base or tool, got {self.correction_frame!r}")
+        if not self.sen_type.isidentifier():
+            raise ValueError(f"sen_type must be a plain name, got {self.sen_type!r}")

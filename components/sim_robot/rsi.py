@@ -1,0 +1,268 @@
+"""A simulated KUKA RSI-style controller: sim_robot's arm behind an RSI link (UDP/XML).
+
+:class:`RsiRobot` is the controller (pure: times are given). Every RSI cycle (4 or 12 ms,
+``cycle_period_ms``) :meth:`RsiRobot.cycle`:
+
+1. judges the answer to the previous ``<Rob>``: an in-time ``<Sen>`` echoing its IPOC is
+   applied (a relative correction, RKorr, through the same kinematics as the ALTER sim:
+   :func:`humanpt.sim_robot.core.corrected_joints`; ``alter_mode`` world = base frame,
+   tool = flange frame). None in time (late, lost, a wrong IPOC, malformed XML) is a
+   *late reply*: the ``<Delay>`` counter grows, HOLDON (``rsi_holdon``) repeats the last
+   correction or applies zero, and ``rsi_late_limit`` late replies in a row stop RSI
+   (``rsi_stopped``: no more datagrams, the arm stays);
+2. sends the next ``<Rob>``: IPOC + cycle time, RIst (the flange in the base frame from
+   the nominal forward kinematics), AIPos (joints), Delay.
+
+An RKorr beyond ``rsi_max_correction_mm`` / ``rsi_max_correction_deg`` (the robot's own
+RSI limits) or one the arm cannot follow (unreachable, joint speed) stops RSI as well.
+Every such thing is an event (:attr:`RsiRobot.events`). :class:`RsiRobotServer` runs it
+over a real UDP socket on a thread of its own with a monotonic deadline per cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from humanpt.geometry.transforms import x_from_transform
+from humanpt.rsi.config import parse_address
+from humanpt.rsi.protocol import (
+    RobState,
+    RsiCorrection,
+    RsiProtocolError,
+    decode_sen,
+    encode_rob,
+)
+from humanpt.sim_robot.config import SimRobotConfig
+from humanpt.sim_robot.core import JointStepError, corrected_joints
+from humanpt.sim_robot.kinematics import UnreachableError
+
+FIRST_IPOC = 1_000_000  # the IPOC of the first <Rob> (ms)
+# Reply latency histogram (send of <Rob> -> valid <Sen>) bucket upper edges, ms; the last
+# bucket is "late" (after the cycle boundary, or never).
+LATENCY_EDGES_MS = (0.25, 0.5, 1.0, 2.0, 4.0, 12.0)
+
+
+@dataclass(frozen=True, slots=True)
+class SimEvent:
+    t_ns: int
+    severity: str  # "info", "warning", "error"
+    code: str
+    text: str
+
+
+class RsiRobot:
+    """The simulated RSI controller (pure). ``events``, ``counters``, ``applied``
+    (IPOC, RsiCorrection) and ``latency_ns`` (per answered cycle) are for tests and benches."""
+
+    def __init__(self, config: SimRobotConfig):
+        self.config = config
+        self.cycle_ms = int(config.cycle_period_ms)
+        self.kin = config.kinematics()
+        self.q_rad = config.start_joints_rad()
+        self.ipoc: int | None = None  # IPOC of the last <Rob> sent
+        self._sent_ns = 0
+        self._answer: RsiCorrection | None = None  # the in-time answer to self.ipoc
+        self._last: RsiCorrection | None = None  # the last applied (HOLDON)
+        self.delay = 0  # late replies so far (<Delay D>)
+        self.late_run = 0  # late replies in a row
+        self.stopped: str | None = None
+        self.events: list[SimEvent] = []
+        self.counters = dict.fromkeys(
+            ("cycles", "on_time", "late", "late_arrivals", "wrong_ipoc", "malformed", "overwritten",
+             "after_stop", "applied"), 0)
+        self.applied: deque[tuple[int, RsiCorrection]] = deque(maxlen=100_000)
+        self.latency_ns: deque[int] = deque(maxlen=1_000_000)
+        self.max_joint_step_deg = config.max_joint_speed_deg_s * config.cycle_period_ms / 1000.0
+
+    # -- state ------------------------------------------------------------------------------
+    @property
+    def base_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) the flange in the base frame (nominal forward kinematics), mm."""
+        return self.kin.forward(self.q_rad)
+
+    def _event(self, t_ns: int, severity: str, code: str, text: str) -> None:
+        self.events.append(SimEvent(t_ns, severity, code, text))
+
+    # -- the cycle ----------------------------------------------------------------------------
+    def cycle(self, t_ns: int) -> bytes | None:
+        """A cycle boundary at ``t_ns``: judge and apply the answer to the last <Rob>, then
+        the next <Rob> (None once RSI stopped)."""
+        if self.stopped is not None:
+            return None
+        if self.ipoc is not None:
+            self._judge(t_ns)
+            if self.stopped is not None:
+                return None
+        self.ipoc = FIRST_IPOC if self.ipoc is None else self.ipoc + self.cycle_ms
+        self._sent_ns = t_ns
+        self.counters["cycles"] += 1
+        rist = tuple(float(v) for v in x_from_transform(self.base_T_flange_mm))
+        aipos = tuple(math.degrees(v) for v in self.q_rad.tolist())
+        return encode_rob(RobState(self.ipoc, rist, aipos, self.delay))
+
+    def finish(self, t_ns: int) -> None:
+        """The end of the run at ``t_ns``: judge the answer to the last <Rob>."""
+        if self.ipoc is not None and self.stopped is None:
+            self._judge(t_ns)
+
+    def _judge(self, t_ns: int) -> None:
+        answer, self._answer = self._answer, None
+        if answer is not None:
+            self.counters["on_time"] += 1
+            if self.late_run:
+                self._event(t_ns, "info", "reply_in_time",
+                            f"answers in time again from IPOC {self.ipoc} after {self.late_run} late")
+            self.late_run = 0
+            self._apply(answer, t_ns)
+            return
+        self.counters["late"] += 1
+        self.delay += 1
+        self.late_run += 1
+        limit = self.config.rsi_late_limit
+        hold = "repeating the last correction (HOLDON=1)" if self.config.rsi_holdon else "zero correction (HOLDON=0)"
+        if self.late_run == 1:
+            self._event(t_ns, "warning", "late_reply",
+                        f"no answer to IPOC {self.ipoc} within the {self.cycle_ms} ms cycle: {hold}; "
+                        f"late {self.late_run} in a row (RSI stops at {limit})")
+        if self.late_run >= limit:
+            self._stop(t_ns, "rsi_stopped", f"RSI stopped: {self.late_run} late answers in a row "
+                       f"(limit {limit}, at IPOC {self.ipoc}); the robot holds, restart RSI at the robot")
+            return
+        if self.config.rsi_holdon and self._last is not None and any(self._last.rkorr):
+            self._apply(self._last, t_ns, repeat=True)
+
+    def _apply(self, c: RsiCorrection, t_ns: int, repeat: bool = False) -> None:
+        if not repeat:
+            self._last = c
+        if not any(c.rkorr):
+            return
+        try:
+            q = corrected_joints(self.kin, self.base_T_flange_mm, c.delta_T_mm(), self.config.alter_mode,
+                                 self.q_rad, self.max_joint_step_deg)
+        except (UnreachableError, JointStepError) as e:
+            self._stop(t_ns, "fault", f"RSI stopped: correction for IPOC {c.ipoc} {e}")
+            return
+        self.q_rad = q
+        self.counters["applied"] += 1
+        self.applied.append((self.ipoc, c))
+
+    def _stop(self, t_ns: int, code: str, text: str) -> None:
+        self.stopped = text
+        self._event(t_ns, "error", code, text)
+
+    # -- answers --------------------------------------------------------------------------------
+    def receive(self, data: bytes, t_ns: int) -> None:
+        """A datagram from the client at ``t_ns``."""
+        if self.stopped is not None:
+            self.counters["after_stop"] += 1
+            return
+        try:
+            c = decode_sen(data)
+        except RsiProtocolError as e:
+            self.counters["malformed"] += 1
+            self._event(t_ns, "warning", "bad_reply", f"answer dropped: {e}")
+            return
+        if c.ipoc != self.ipoc:
+            if self.ipoc is not None and c.ipoc < self.ipoc and (self.ipoc - c.ipoc) % self.cycle_ms == 0:
+                self.counters["late_arrivals"] += 1  # an answer to an earlier cycle: late
+                return
+            self.counters["wrong_ipoc"] += 1
+            self._event(t_ns, "warning", "wrong_ipoc",
+                        f"answer with IPOC {c.ipoc} while the cycle is IPOC {self.ipoc}: ignored")
+            return
+        mm = float(np.linalg.norm(c.translation_mm))
+        deg = c.angle_deg()
+        cfg = self.config
+        if mm > cfg.rsi_max_correction_mm or deg > cfg.rsi_max_correction_deg:
+            self._stop(t_ns, "correction_limit",
+                       f"RSI stopped: RKorr of {mm:.3f} mm / {deg:.3f} deg for IPOC {c.ipoc} exceeds the "
+                       f"robot's limits ({cfg.rsi_max_correction_mm:g} mm, {cfg.rsi_max_correction_deg:g} deg "
+                       "per cycle)")
+            return
+        if self._answer is not None:
+            self.counters["overwritten"] += 1
+        else:
+            self.latency_ns.append(t_ns - self._sent_ns)
+        self._answer = c
+
+    def latency_histogram(self) -> dict[str, int]:
+        """Answers per latency bucket (ms upper edges) and the late ones."""
+        edges_ns = [e * 1e6 for e in LATENCY_EDGES_MS]
+        hist = {f"<={e:g} ms": 0 for e in LATENCY_EDGES_MS}
+        for lat in self.latency_ns:
+            for e, key in zip(edges_ns, hist, strict=True):
+                if lat <= e:
+                    hist[key] += 1
+                    break
+        hist["late"] = self.counters["late"]
+        return hist
+
+
+class RsiRobotServer:
+    """:class:`RsiRobot` over a real UDP socket, its cycle on a thread of its own (a
+    monotonic deadline per cycle; answers are read until the next deadline).
+
+    ``lose(n)``: a hook for tests, True to drop the n-th <Rob> (1-based) on the floor, as
+    a lost datagram. Stops after ``cycles`` cycles (None: until :meth:`stop`) or when
+    RSI stops."""
+
+    def __init__(self, robot: RsiRobot, *, gateway: str | None = None, bind: str = "127.0.0.1:0",
+                 cycles: int | None = None, lose: Callable[[int], bool] | None = None):
+        self.robot = robot
+        self.gateway = parse_address(gateway or robot.config.rsi_gateway)
+        self.cycles = cycles
+        self.lose = lose
+        host, port = parse_address(bind)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((host, port))
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.overruns = 0  # cycles that started later than their deadline + 1 ms
+
+    def start(self) -> RsiRobotServer:
+        self._thread = threading.Thread(target=self._run, name="sim-rsi", daemon=True)
+        self._thread.start()
+        return self
+
+    def _run(self) -> None:
+        robot, sock = self.robot, self.sock
+        period = robot.cycle_ms * 1_000_000
+        deadline = time.monotonic_ns()
+        n = 0
+        try:
+            while not self._stop.is_set() and (self.cycles is None or n < self.cycles):
+                now = time.monotonic_ns()
+                if now - deadline > 1_000_000:
+                    self.overruns += 1
+                data = robot.cycle(now)
+                if data is None:
+                    return  # RSI stopped
+                n += 1
+                if self.lose is None or not self.lose(n):
+                    sock.sendto(data, self.gateway)
+                deadline += period
+                while (remaining := deadline - time.monotonic_ns()) > 0:
+                    sock.settimeout(remaining / 1e9)
+                    try:
+                        reply, _ = sock.recvfrom(65536)
+                    except TimeoutError:
+                        break
+                    robot.receive(reply, time.monotonic_ns())
+            robot.finish(time.monotonic_ns())
+        finally:
+            self.sock.close()
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def join(self, timeout: float | None = None) -> None:
+        if self._thread is not None:
+            self._thread.join(timeout)

@@ -1,0 +1,98 @@
+"""One implementation of the safety rules: the same fault sequence through the gateway over
+ALTER and over RSI gives the same decisions (what is sent, why, from which command), the
+same events, and the same steps; the expected steps are worked out by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.rsi.config import RsiGatewayConfig
+from humanpt.schemas import humanpt_pb2 as pb
+from tests.alter_gateway.rig import MS, START_X, Rig
+from tests.rsi.rig import RsiRig
+
+CYCLE_MS = 12.0  # both links at RSI's 12 ms cycle: the same per-cycle limits
+# 100 mm/s x 12 ms = 1.2 mm per cycle; the box's +x face 0.8 mm beyond the start.
+COMMON = dict(cycle_period_ms=CYCLE_MS, reply_deadline_ms=2.0, tick_ms=2.0, stale_cycles=3,
+              fault_after_missed=10, status_timeout_cycles=3, max_speed_mm_s=100.0,
+              envelope_max_mm=(float(START_X[0]) + 0.8, 1600.0, 1600.0))
+
+
+def _sequence(rig) -> None:
+    cycle_ns = round(CYCLE_MS * MS)
+
+    def cycle(**cmd):
+        rig.status()
+        if cmd:
+            rig.command(**cmd)
+        rig.advance(cycle_ns)
+
+    for _ in range(3):
+        cycle(dp_mm=(0.5, 0.0, 0.0))  # 1-3: within the limits
+    cycle(dp_mm=(3.0, 4.0, 0.0))  # 4: 5 mm, beyond 1.2 mm: clamped
+    for _ in range(4):
+        cycle()  # 5-7: the last command reused; 8: stale -> zero
+    for _ in range(2):
+        cycle(dp_mm=(0.0, 0.5, 0.0), rv_deg=(0.0, 0.0, 0.2))  # 9-10: commands again
+    rig.liveliness(False)
+    for _ in range(2):
+        cycle(dp_mm=(0.5, 0.0, 0.0))  # 11-12: the controller's token gone: hold
+    rig.liveliness(True)
+    cycle(dp_mm=(1.0, 0.0, 0.0))  # 13: would leave the box: cut at its face
+    cycle(dp_mm=(0.5, 0.0, 0.0), mode=pb.CONTROL_MODE_HOLD)  # 14: HOLD mode
+
+
+@pytest.fixture(scope="module")
+def rigs():
+    alter = Rig(AlterGatewayConfig(**COMMON))
+    rsi = RsiRig(RsiGatewayConfig(udp_bind="127.0.0.1:0", **COMMON))
+    for rig in (alter, rsi):
+        _sequence(rig)
+    return alter, rsi
+
+
+EXPECTED_SOURCES = (["fresh"] * 4 + ["reused"] * 3 + ["stale"] + ["fresh"] * 2 + ["gone"] * 2
+                    + ["fresh", "hold"])
+
+
+def test_the_same_decisions_over_both_links(rigs):
+    alter, rsi = rigs
+    decisions = [[(s.cycle, s.source, s.command_cycle) for s in rig.gw.sent] for rig in rigs]
+    assert decisions[0] == decisions[1]
+    assert [d[1] for d in decisions[0]] == EXPECTED_SOURCES
+    assert [d[0] for d in decisions[0]] == list(range(1, 15))
+    # The same events, in the same order (the links' own start-up aside).
+    codes = [[c for c in rig.codes() if c != "link_up"] for rig in rigs]
+    assert codes[0] == codes[1]
+    assert {"clamped", "stale_command", "command_resumed", "controller_gone", "controller_back",
+            "envelope"} <= set(codes[0])
+
+
+def test_the_same_steps_over_both_links_as_worked_out_by_hand(rigs):
+    alter, rsi = rigs
+    for a, r in zip(alter.gw.sent, rsi.gw.sent, strict=True):
+        assert (a.step is None) == (r.step is None)
+        if a.step is not None:
+            np.testing.assert_array_equal(a.step[0], r.step[0])
+            np.testing.assert_array_equal(a.step[1], r.step[1])
+    steps = {s.cycle: s.step for s in rsi.gw.sent}
+    # 5 mm along (0.6, 0.8) clamped by norm to 1.2 mm; reused as such for cycles 5-7.
+    for k in (4, 5, 6, 7):
+        np.testing.assert_allclose(steps[k][0], [0.72, 0.96, 0.0], atol=1e-12)
+    # The flange (reported at the start) may go 0.8 mm further in +x.
+    np.testing.assert_allclose(steps[13][0], [0.8, 0.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(steps[9][1], [0.0, 0.0, np.radians(0.2)], atol=1e-15)
+
+
+def test_both_wires_carry_those_steps_to_their_resolution(rigs):
+    alter, rsi = rigs
+    by_cycle = dict(rsi.corrections)
+    for cycle, c in alter.corrections:
+        r = by_cycle[cycle]
+        np.testing.assert_allclose(r.translation_mm, c.translation_mm, atol=0.005 + 1e-4)
+    assert by_cycle[4].rkorr[:3] == (0.72, 0.96, 0.0)
+    assert by_cycle[8].rkorr == (0.0,) * 6 and by_cycle[11].rkorr == (0.0,) * 6  # holds
+    # RSI's A (about Z) carries the 0.2 deg rotation about the base's z.
+    assert by_cycle[9].rkorr[3:] == (0.2, 0.0, 0.0)

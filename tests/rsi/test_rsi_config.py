@@ -1,0 +1,64 @@
+"""Bad RSI settings: a clear one-line error, nothing started."""
+
+from __future__ import annotations
+
+import socket
+import time
+
+import pytest
+
+from humanpt.rsi.config import RsiGatewayConfig
+from humanpt.rsi.shell import UdpAdapter
+from humanpt.sim_robot.config import SimRobotConfig
+from humanpt.sim_robot.core import SimRobotCore
+from tests.conftest import run_cli
+
+
+@pytest.mark.parametrize("kw, says", [
+    ({"cycle_period_ms": 8.0}, "must be one of (4.0, 12.0)"),
+    ({"udp_bind": "localhost"}, "host:port"),
+    ({"reply_deadline_ms": 4.0}, "shorter than the cycle"),
+    ({"correction_frame": "flange"}, "base or tool"),
+])
+def test_bad_gateway_settings_are_refused(kw, says):
+    with pytest.raises(ValueError, match=says.replace("(", r"\(").replace(")", r"\)")):
+        RsiGatewayConfig(**kw)
+
+
+def test_an_rsi_sim_robot_is_not_silently_run_as_an_alter_one():
+    with pytest.raises(ValueError, match="humanpt.sim_robot.rsi"):
+        SimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ms=4.0))
+    with pytest.raises(ValueError, match="4 or 12"):
+        SimRobotConfig(protocol="rsi")  # 28 ms is no RSI cycle
+
+
+def test_a_port_in_use_names_the_address():
+    a = UdpAdapter("127.0.0.1:0")
+    a.open()
+    host, port = a.address
+    try:
+        with pytest.raises(OSError, match=f"cannot bind UDP 127.0.0.1:{port}"):
+            UdpAdapter(f"127.0.0.1:{port}").open()
+    finally:
+        a.close()
+
+
+def test_bench_rsi_refuses_a_cycle_rsi_does_not_have():
+    r = run_cli("bench", "rsi", "--cycles", "5", timeout=30)
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().count("\n") == 0 and "4 and/or 12" in r.stderr
+
+
+def test_datagrams_from_another_sender_than_the_robot_are_dropped():
+    received = []
+    gw = UdpAdapter("127.0.0.1:0", robot="127.0.0.1:9")  # the robot: port 9 (nobody here)
+    gw.start(lambda topic, msg: received.append(msg))
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as rogue:
+            rogue.sendto(b"<Rob/>", gw.address)
+            deadline = time.monotonic() + 2.0
+            while gw.rejected == 0 and time.monotonic() < deadline:
+                time.sleep(0.01)  # poll the adapter's counter (no event to wait on)
+    finally:
+        gw.close()
+    assert gw.rejected == 1 and received == []
