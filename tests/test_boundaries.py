@@ -59,3 +59,10 @@ def test_the_probe_sees_a_forbidden_import():
     # would pass on a probe that never records anything).
     _, loaded = loaded_by("humanpt.twin")
     assert {"humanpt.sim_camera", "humanpt.operator"} <= loaded
+
+
+def test_the_rsi_link_loads_only_the_gateway_and_the_shared_packages():
+    # issue 22: RSI is a link of the one gateway (its safety core), not a simulator's
+    modules, loaded = loaded_by("humanpt.rsi")
+    assert len(modules) > 1 and not loaded & set(FORBIDDEN), sorted(loaded & set(FORBIDDEN))
+    assert loaded <= {"humanpt.rsi", "humanpt.alter_gateway", *SHARED}, sorted(loaded)
