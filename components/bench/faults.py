@@ -821,7 +821,7 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         cycle_s = gw.cycle_period_ms * 1e-3
         limit_mm = gw.max_step_mm
         as_identity, opened = _identity_sessions(file_cfg.runtime) if secure else (None, {})
-        with open_tool_session(file_cfg.runtime) as session:
+        with open_tool_session(file_cfg.runtime, patient=True) as session:
             mon = Monitor(session, file_cfg.runtime.cell)
             ctx = Ctx(session, mon, file_cfg.runtime.cell, gw.port, cycle_s, rt=file_cfg.runtime,
                       as_identity=as_identity, control=control)

@@ -313,7 +313,7 @@ class RuntimeConfig:
     connect_timeout_s: Annotated[float, Range(0.1, 3600, "s")] = 10.0
     # A tool (topics, echo, param, console) gives up on the router sooner: a person is
     # waiting (zenoh adds ~2 s to it; with the interpreter's start, ~4 s to the message).
-    tool_connect_timeout_s: Annotated[float, Range(0.1, 3600, "s")] = 1.5
+    tool_connect_timeout_s: Annotated[float, Range(0.1, 3600, "s")] = 2.0
     # Record on a writer thread of its own: off the core's path (lower latency), but a
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False

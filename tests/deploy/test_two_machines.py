@@ -113,6 +113,7 @@ def write_config(d: Path) -> Path:
     _, sections = live_sections(cfg, d, PORT)
     ep = [f"tcp/{SERVER_IP}:{PORT}"]
     sections["runtime"] = {"cell": "two", "connect": ep, "listen": ep, "connect_timeout_s": 20.0,
+                           "tool_connect_timeout_s": 20.0,  # echo over mTLS across a loaded veth
                            "security": "mtls", "pki": str(d / "pki"), "rig": str(d / "rig.toml")}
     # Room for a loaded machine (2 shared cores, 8 processes): a 0.3 s stall of the client
     # with commands still trickling in late would latch a miss fault (not a partition's
