@@ -89,7 +89,7 @@ def played_tool_path(run_dir: str | Path) -> Played:
     return Played(t[keep], tool.reshape(-1, 3), window)
 
 
-def compare(seam: Seam, played: Played, cover_mm: float = 1.0, approach_mm: float = 1.0) -> Comparison:
+def compare(seam: Seam, played: Played, cover_mm: float = 1.0, approach_mm: float = 0.25) -> Comparison:
     """The played path against the seam.  Played points before the tool first comes within
     ``approach_mm`` of the seam's start (the approach from where the robot was) do not count."""
     p = played.tool_mm

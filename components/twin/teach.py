@@ -217,7 +217,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
         # from the first time the tool reaches the path's start (after the approach)
         first = np.array([fitted.segments[0].start_mm if play == "seam" else transform_from_x(taught[0])[:3, 3]])
-        near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 1.0)[0]
+        # the approach ends within 0.2 mm of the start (the controller's criterion): count from there
+        near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 0.25)[0]
         tips = tips[near[0]:] if len(near) else tips[:0]
         played_mm = seam_distances_mm(tips, seam) if len(tips) else np.zeros(0)
         warnings = [f"{e.source}: {e.code}" for e in (pb.Event.FromString(o.data) for o in w.outputs()
