@@ -303,8 +303,15 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("path", help="recorded paths: smooth, fit lines and arcs, retime, play, compare, export "
                        "(VAL II, KRL, RAPID, URScript, JSON)",
-                       description="Work offline on path files written while recording (CSV in mm and degrees: "
-                       "<run dir>/paths/path-<n>.csv).")
+                       description="Work on path files written while recording (CSV in mm and degrees: "
+                       "<run dir>/paths/path-<n>.csv) and on the seams fitted to them (JSON): fit -> retime | "
+                       "export | play -> compare.",
+                       epilog="a welder's sequence:\n"
+                       "  humanpt path fit RUN/paths/path-1.csv                    # -> path-1.seam.json, .png\n"
+                       "  humanpt path export RUN/paths/path-1.seam.json --format krl\n"
+                       "  humanpt path play RUN/paths/path-1.seam.json --speed 20  # on the running cell\n"
+                       "  humanpt path compare RUN/paths/path-1.seam.json RUN2\n",
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
     psub = p.add_subparsers(dest="path_verb", metavar="ACTION")
     q = psub.add_parser("smooth", help="Rauch-Tung-Striebel smoothing of a path file",
                         description="Smooth every coordinate of G (and of the tip) with a constant-velocity "
