@@ -35,7 +35,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
 from .run import SystemConfig
-from .system import puma_cores
+from .system import puma_cores, rsi_link
 from .world import start_flange_for
 
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
@@ -94,22 +94,16 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     cycle_ms = link_cycle_ms(link, cycle_ms)
     if link == "alter":
         return
-    from humanpt.rsi.config import RsiGatewayConfig
+    from humanpt.alter_gateway.config import AlterGatewayConfig
+    from humanpt.sim_robot.config import SimRobotConfig
 
-    alter = sections["alter_gateway"]
-    robot = sections["sim_robot"]
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
-    kept = ("max_speed_mm_s", "max_angular_speed_deg_s", "envelope_min_mm", "envelope_max_mm", "stale_cycles",
-            "alter_off_on_fault", "world_T_base_mm_deg", "event_interval_ms", "stamp_tolerance_ms",
-            "conflict_hold_ms")
-    gateway = RsiGatewayConfig(
-        **{k: tuple(alter[k]) if isinstance(alter[k], list) else alter[k] for k in kept},
-        cycle_period_ms=cycle_ms, udp_bind=udp, udp_robot="127.0.0.1",
-        correction_frame="tool" if robot["alter_mode"] == "tool" else "base")
-    sections["alter_gateway"] = to_table(gateway)
-    robot.update(protocol="rsi", cycle_period_ms=cycle_ms, rsi_gateway=udp)
+    robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
+                              cfgmod.build(AlterGatewayConfig, sections["alter_gateway"], source="demo",
+                                           section="alter_gateway"), cycle_ms, udp)
+    sections["sim_robot"], sections["alter_gateway"] = to_table(robot), to_table(gateway)
     sections["controller"]["cycle_period_ms"] = cycle_ms
     sections.setdefault("pose_filter", {})["predict_ahead_ms"] = cycle_ms
     sections.setdefault("viz", {})["cycle_period_ms"] = cycle_ms
