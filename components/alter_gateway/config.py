@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated
+from typing import Annotated, Literal
 
 import numpy as np
 
@@ -71,8 +71,25 @@ class AlterGatewayConfig:
     # a second controller session, a replay, a forger) holds the robot for this long after
     # its last command (controller_conflict).
     conflict_hold_ms: Annotated[float, Range(0, 60000, "ms")] = 500.0
+    # The link to the robot controller: "alter" (the Puma's serial ALTER line, the fields
+    # above) or "rsi" (a KUKA RSI-style UDP link: humanpt.rsi, its own fields and defaults,
+    # see components/rsi/README.md). Component name, topics and rules are the same.
+    link: Literal["alter", "rsi"] = "alter"
+
+    @classmethod
+    def config_class_for(cls, table) -> type:
+        """The config class of an ``[alter_gateway]`` table: the RSI gateway's for
+        ``link = "rsi"`` (its keys: udp_bind, ...), else this one (runtime.config.build)."""
+        if cls is AlterGatewayConfig and table.get("link") == "rsi":
+            from humanpt.rsi.config import RsiGatewayConfig  # (rsi imports this module)
+
+            return RsiGatewayConfig
+        return cls
 
     def __post_init__(self) -> None:
+        if type(self) is AlterGatewayConfig and self.link != "alter":
+            raise ValueError(f"link {self.link!r}: this is the ALTER link's config; "
+                             "link = \"rsi\" takes humanpt.rsi.config.RsiGatewayConfig")
         if not self.port:
             raise ValueError("port must name a serial device or a pyserial URL")
         if self.baud not in SUPPORTED_BAUDS:

@@ -841,6 +841,16 @@ class AlterGatewayCore(GatewayCore):
     def make_link(self, config: AlterGatewayConfig) -> AlterLink:
         return AlterLink(config.cycle_period_ns)
 
+    @classmethod
+    def create(cls, config: AlterGatewayConfig, rig: Any = None) -> Core:
+        """The gateway of ``config.link``: this core over ALTER, ``RsiGatewayCore`` over RSI
+        (the registry names this class for the component; ``link`` chooses)."""
+        if cls is AlterGatewayCore and config.link == "rsi":
+            from humanpt.rsi.core import RsiGatewayCore  # (rsi imports this module)
+
+            return RsiGatewayCore.create(config, rig)
+        return super().create(config, rig)
+
     @property
     def _host(self) -> HostEndpoint:  # (tests and benches reach the endpoint by this name)
         return self.link.host

@@ -41,6 +41,11 @@ class PatientSerialAdapter(SerialAdapter):
         self._thread.start()
 
 
-def adapters(config: AlterGatewayConfig) -> list[SerialAdapter]:
-    """The live shell's adapters (registry ADAPTERS): one serial port, 8N1 at ``baud``."""
+def adapters(config: AlterGatewayConfig) -> list:
+    """The live shell's adapters (registry ADAPTERS): one serial port, 8N1 at ``baud``; over
+    RSI (``link = "rsi"``) the UDP socket of humanpt.rsi.shell."""
+    if config.link == "rsi":
+        from humanpt.rsi.shell import adapters as rsi_adapters
+
+        return rsi_adapters(config)
     return [PatientSerialAdapter(config.port, config.baud)]

@@ -121,13 +121,18 @@ def run_live(args, cfg, run_dir: Path) -> int:
     with Bars("s") as bars:
         res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
                   overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
-                  progress=bars.stage("live"), secure=getattr(args, "secure", False))
+                  progress=bars.stage("live"), secure=getattr(args, "secure", False),
+                  link=getattr(args, "link", "alter"), cycle_ms=getattr(args, "cycle_ms", None))
     if res.failed:
         print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
               file=sys.stderr)
         return 1
     print(report(RunOutputs(run_dir), res.config, run_dir, res.wall_s, res.duration_s, "live",
                  stop_ns=res.stop_ns))
+    if getattr(args, "link", "alter") == "rsi":
+        from humanpt.rsi.runstats import rsi_cycles
+
+        print(rsi_cycles(run_dir) or "RSI: no <Rob> recorded by sim_robot")
     return 0
 
 
@@ -249,6 +254,16 @@ def demo(args) -> int:
     (run_dir / "world.toml").write_text(
         "# the twin's world in this run (humanpt demo --world " + str(args.world) + ")\n"
         + cfgmod.dumps_toml({"name": cfg.world.name, "sources": list(cfg.world.sources), **cfg.world.extra}))
+    if args.lockstep and (getattr(args, "link", "alter") != "alter" or getattr(args, "cycle_ms", None)):
+        raise SystemExit("humanpt demo: --link rsi / --cycle-ms are for the live demo (the lock-step shell "
+                         "does not simulate RSI's UDP timing yet)")
+    if not args.lockstep:
+        from humanpt.twin.live import link_cycle_ms
+
+        try:  # a cycle the link does not have fails here, before anything starts
+            link_cycle_ms(args.link, args.cycle_ms)
+        except ValueError as e:
+            raise SystemExit(f"humanpt demo: {e}") from None
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

@@ -44,9 +44,12 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # logged) by the adapter. Empty: any sender (a test bench; not for a cell on a shared net).
     udp_robot: str = ""
     sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
+    link: Literal["alter", "rsi"] = "rsi"  # ([alter_gateway] link = "rsi" selects this config)
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.link != "rsi":
+            raise ValueError(f"link must be rsi in the RSI gateway's config, got {self.link!r}")
         if self.cycle_period_ms not in RSI_CYCLES_MS:
             raise ValueError(f"cycle_period_ms must be one of {RSI_CYCLES_MS} (RSI), got {self.cycle_period_ms}")
         parse_address(self.udp_bind)

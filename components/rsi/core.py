@@ -5,7 +5,9 @@ the same topics (``alter_gateway/robot_state``, ``alter_gateway/events``)."""
 
 from __future__ import annotations
 
-from humanpt.alter_gateway.core import WATCH, GatewayCore, gateway_ports
+from typing import Any
+
+from humanpt.alter_gateway.core import WATCH, AlterGatewayCore, GatewayCore, gateway_ports
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.rsi.link import RsiLink
 
@@ -21,3 +23,10 @@ class RsiGatewayCore(GatewayCore):
 
     def make_link(self, config: RsiGatewayConfig) -> RsiLink:
         return RsiLink(config.cycle_period_ms, config.correction_frame, config.sen_type)
+
+    def recording_metadata(self, shell: str, **extra: Any) -> dict[str, Any]:
+        # The registry's entry for the component (AlterGatewayCore) rebuilds this core from
+        # the recorded config (link = "rsi"): a replay finds the class it knows.
+        from humanpt.runtime.registry import class_path
+
+        return super().recording_metadata(shell, **extra) | {"core": class_path(AlterGatewayCore)}

@@ -24,8 +24,11 @@ log = logging.getLogger("humanpt.rsi")
 class UdpAdapter:
     topics_out = ("udp_tx",)
 
-    def __init__(self, bind: str, *, robot: str = "", rx_topic: str = "udp_rx", poll_s: float = 0.2):
-        """``robot``: "host" or "host:port" the datagrams must come from ("": any)."""
+    def __init__(self, bind: str, *, robot: str = "", rx_topic: str = "udp_rx", poll_s: float = 0.2,
+                 peer: str = ""):
+        """``robot``: "host" or "host:port" the datagrams must come from ("": any);
+        ``peer``: "host:port" to send to before anything arrived (the simulated robot's
+        gateway; "": answer only, the gateway's way)."""
         self.bind = bind
         host, _, port = robot.rpartition(":") if ":" in robot else (robot, "", "")
         self._robot_host, self._robot_port = host or None, int(port) if port else None
@@ -33,7 +36,7 @@ class UdpAdapter:
         self.rx_topic = rx_topic
         self.poll_s = poll_s
         self._sock: socket.socket | None = None
-        self._peer: tuple[str, int] | None = None
+        self._peer: tuple[str, int] | None = parse_address(peer) if peer else None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.datagrams_in = 0

@@ -196,6 +196,9 @@ def build(cls: type, table: Mapping[str, Any], *, source: str, section: str) -> 
     where = f"{source}: [{section}]" if section else source
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where}: must be a [section] (a table), got {type(table).__name__} {table!r}")
+    select = getattr(cls, "config_class_for", None)
+    if select is not None:  # a config whose class one key chooses ([alter_gateway] link)
+        cls = select(table)
     types_ = hints(cls)
     names = [f.name for f in dataclasses.fields(cls) if f.init]
     unknown = [k for k in table if k not in names]

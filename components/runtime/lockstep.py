@@ -10,7 +10,9 @@ consumer's image inputs are references to the producer's recording, which is her
 Serial lines (:meth:`Lockstep.connect_serial`) carry one core's ``serial_tx`` bytes to
 another core's ``serial_rx`` with the line's timing: a chunk of n bytes occupies the line
 for n x bits-per-byte / baud seconds (8N1: 10 bits), chunks queue one after another, and
-each arrives whole when its last byte has.
+each arrives whole when its last byte has.  UDP paths (:meth:`Lockstep.connect_udp`, the
+RSI link) carry ``udp_tx`` datagrams to ``udp_rx``, each arriving whole a fixed delay
+after it was sent (the robot's own clock is its core's tick).
 """
 
 from __future__ import annotations
@@ -67,6 +69,19 @@ class SerialLine:
         return -(-n_bytes * self.bits_per_byte * 1_000_000_000 // self.baud)
 
 
+@dataclass
+class UdpPath:
+    """One direction of a UDP path between two cores (:meth:`Lockstep.connect_udp`): every
+    datagram arrives ``delay_ns`` after it was sent; ``enabled = False`` loses them."""
+
+    src: str
+    dst: str
+    delay_ns: int
+    enabled: bool = True
+    datagrams: int = 0
+    lost: int = 0
+
+
 class Lockstep:
     """Run cores on virtual time.
 
@@ -102,6 +117,7 @@ class Lockstep:
         self._subs: dict[str, list[int]] = {}  # bus topic -> indices of the cores with a port on it
         # per core index: topic -> message class of its port (decodes what is delivered)
         self._lines: dict[int, list[tuple[SerialLine, int]]] = {}  # src index -> (line, dst index)
+        self._udp: dict[int, list[tuple[UdpPath, int]]] = {}  # src index -> (path, dst index)
         for i, c in enumerate(cores):
             for p in c.ports:
                 if p.on_bus:
@@ -148,6 +164,30 @@ class Lockstep:
             self._lines.setdefault(isrc, []).append((line, idst))
             lines.append(line)
         return lines
+
+    def connect_udp(self, a: str, b: str, delay_ns: int = 100_000) -> list[UdpPath]:
+        """Wire core ``a``'s ``udp_tx`` to core ``b``'s ``udp_rx`` and back, each datagram
+        arriving ``delay_ns`` after it was sent (default 0.1 ms: loopback or a switch)."""
+        if delay_ns < 0:
+            raise ValueError("delay_ns must be >= 0")
+        names = [c.name for c in self.cores]
+        ia, ib = names.index(a), names.index(b)
+        paths = []
+        for src, isrc, dst, idst in ((a, ia, b, ib), (b, ib, a, ia)):
+            self.cores[idst].port("udp_rx")  # a core without a udp_rx port cannot take the path
+            path = UdpPath(src, dst, delay_ns)
+            self._udp.setdefault(isrc, []).append((path, idst))
+            paths.append(path)
+        return paths
+
+    def _send_udp(self, t_ns: int, src: int, msg) -> None:
+        for path, dst in self._udp[src]:
+            if not path.enabled:
+                path.lost += 1
+                continue
+            path.datagrams += 1
+            chunk = pb.SerialChunk(header=header(t_ns + path.delay_ns, frame_id=path.src), data=msg.data)
+            self._push(t_ns + path.delay_ns, dst, "udp_rx", chunk.SerializeToString())
 
     def _transmit(self, t_ns: int, src: int, msg) -> None:
         for line, dst in self._lines.get(src, ()):
@@ -210,6 +250,8 @@ class Lockstep:
                     self._push(t_ns + self.latency_ns, j, out_topic, payload)
                 if out_topic == "serial_tx" and idx in self._lines:
                     self._transmit(t_ns, idx, out)
+                elif out_topic == "udp_tx" and idx in self._udp:
+                    self._send_udp(t_ns, idx, out)
         self.now_ns = max(self.now_ns, end_ns)
 
     def digest(self) -> str:

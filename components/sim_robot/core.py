@@ -111,10 +111,20 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         Port("console/command", pb.Command, "_on_console"),
     )
 
+    @classmethod
+    def create(cls, config: SimRobotConfig, rig=None) -> Core:
+        """The simulated controller of ``config.protocol``: this core over ALTER,
+        ``humanpt.sim_robot.rsi.RsiSimRobotCore`` over RSI."""
+        if cls is SimRobotCore and config.protocol == "rsi":
+            from humanpt.sim_robot.rsi import RsiSimRobotCore  # (rsi imports this module)
+
+            return RsiSimRobotCore.create(config, rig)
+        return super().create(config, rig)
+
     def __init__(self, config: SimRobotConfig):
         if config.protocol != "alter":
-            raise ValueError(f"sim_robot: protocol {config.protocol!r} does not run as this core yet; the RSI "
-                             "controller is humanpt.sim_robot.rsi (RsiRobot, RsiRobotServer)")
+            raise ValueError(f"sim_robot: protocol {config.protocol!r} is not this core's (ALTER); "
+                             "SimRobotCore.create builds the RSI one (humanpt.sim_robot.rsi.RsiSimRobotCore)")
         super().__init__(config)
         self.kin = config.kinematics()
         self.q_rad = config.start_joints_rad()  # the joints (encoders)

@@ -28,10 +28,11 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from humanpt.geometry.transforms import x_from_transform
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.rsi.config import parse_address
 from humanpt.rsi.protocol import (
     RobState,
@@ -40,8 +41,11 @@ from humanpt.rsi.protocol import (
     decode_sen,
     encode_rob,
 )
+from humanpt.runtime.core import Core, Output, Port
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig
-from humanpt.sim_robot.core import JointStepError, corrected_joints
+from humanpt.sim_robot.core import TRUTH, JointStepError, corrected_joints
 from humanpt.sim_robot.kinematics import UnreachableError
 
 FIRST_IPOC = 1_000_000  # the IPOC of the first <Rob> (ms)
@@ -266,3 +270,68 @@ class RsiRobotServer:
     def join(self, timeout: float | None = None) -> None:
         if self._thread is not None:
             self._thread.join(timeout)
+
+
+# -- as the sim_robot component (``[sim_robot] protocol = "rsi"``) ----------------------------
+_SEVERITY = {"info": pb.SEVERITY_INFO, "warning": pb.SEVERITY_WARNING, "error": pb.SEVERITY_ERROR}
+
+
+class RsiSimRobotCore(Core):
+    """sim_robot over RSI (pure): :class:`RsiRobot` on the component's ``tick`` (every
+    ``cycle_period_ms``, 4 or 12). Inputs ``tick``, ``udp_rx`` (the gateway's ``<Sen>``,
+    humanpt.SerialChunk); outputs ``udp_tx`` (the ``<Rob>`` of each cycle; the live shell's
+    UDP adapter sends it to ``rsi_gateway``), ``sim_robot/truth`` (world_T_flange, m, after
+    each cycle, as over ALTER) and ``sim_robot/events`` (RsiRobot's events). Built by
+    ``SimRobotCore.create`` for ``protocol = "rsi"``."""
+
+    name = "sim_robot"
+    config_type = SimRobotConfig
+    ports = (
+        Port("tick", pb.Tick, "_on_cycle"),
+        Port("udp_rx", pb.SerialChunk, "_on_udp"),
+    )
+
+    def __init__(self, config: SimRobotConfig):
+        super().__init__(config)
+        self.robot = RsiRobot(config)
+        self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
+        self.true_arm = None if config.ideal_arm else config.true_arm()
+        self._events_sent = 0
+
+    @property
+    def counters(self) -> dict[str, int]:
+        return self.robot.counters
+
+    def tick_period_ns(self) -> int | None:
+        return self.config.cycle_period_ns
+
+    def recording_metadata(self, shell: str, **extra: Any) -> dict[str, Any]:
+        # The registry's entry (SimRobotCore) rebuilds this core from the recorded config.
+        from humanpt.runtime.registry import class_path
+        from humanpt.sim_robot.core import SimRobotCore
+
+        return super().recording_metadata(shell, **extra) | {"core": class_path(SimRobotCore)}
+
+    def _flush_events(self, outs: list[Output]) -> None:
+        for e in self.robot.events[self._events_sent:]:
+            outs.append(self.event(e.t_ns, _SEVERITY[e.severity], e.code, e.text))
+        self._events_sent = len(self.robot.events)
+
+    def _on_udp(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
+        self.robot.receive(msg.data, t_ns)
+        outs: list[Output] = []
+        self._flush_events(outs)
+        return outs
+
+    def _on_cycle(self, t_ns: int, msg: pb.Tick) -> list[Output]:
+        outs: list[Output] = []
+        data = self.robot.cycle(t_ns)
+        self._flush_events(outs)
+        if data is not None:
+            outs.append(("udp_tx", pb.SerialChunk(header=self.next_header("udp_tx", t_ns), data=data)))
+        arm = self.robot.kin if self.true_arm is None else self.true_arm
+        world_T_flange = self.world_T_base @ arm.forward(self.robot.q_rad)
+        world_T_flange[:3, 3] /= 1000.0
+        outs.append((TRUTH, pb.Truth(header=self.next_header(TRUTH, t_ns, "world"),
+                                     world_T_flange=pose(world_T_flange))))
+        return outs

@@ -125,6 +125,12 @@ class PtyAdapter:
                 pass
 
 
-def adapters(config: SimRobotConfig) -> list[PtyAdapter]:
-    """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``."""
+def adapters(config: SimRobotConfig) -> list:
+    """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``; over
+    RSI (``protocol = "rsi"``) a UDP socket on an ephemeral loopback port that sends each
+    ``<Rob>`` to ``rsi_gateway`` and takes answers only from there."""
+    if config.protocol == "rsi":
+        from humanpt.rsi.shell import UdpAdapter
+
+        return [UdpAdapter("127.0.0.1:0", robot=config.rsi_gateway, peer=config.rsi_gateway)]
     return [PtyAdapter(config.pty_link)]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -34,7 +35,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
 from .run import SystemConfig
-from .system import puma_cores
+from .system import puma_cores, rsi_link
 from .world import start_flange_for
 
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
@@ -66,9 +67,52 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
     path.write_text("# written by humanpt demo: the configuration of this run\n\n" + cfgmod.dumps_toml(sections))
 
 
+def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
+    """The cycle period (ms) of ``link`` ("alter": 28; "rsi": ``cycle_ms``, 4 or 12, default
+    12); ValueError, one line, for a cycle the link does not have."""
+    from humanpt.rsi.config import RSI_CYCLES_MS
+
+    if link == "alter":
+        if cycle_ms not in (None, 28.0):
+            raise ValueError(f"--cycle-ms {cycle_ms:g}: the ALTER link runs the Puma's 28 ms cycle (RSI: 4 or 12)")
+        return 28.0
+    if link != "rsi":
+        raise ValueError(f"no link {link!r} (alter, rsi)")
+    cycle_ms = 12.0 if cycle_ms is None else float(cycle_ms)
+    if cycle_ms not in RSI_CYCLES_MS:
+        raise ValueError(f"--cycle-ms {cycle_ms:g}: RSI runs at {' or '.join(f'{c:g}' for c in RSI_CYCLES_MS)} ms")
+    return cycle_ms
+
+
+def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) -> None:
+    """Put the robot link in the run's ``sections`` (in place), from this one place: ALTER
+    (as written, 28 ms) or RSI (``cycle_ms`` 4 or 12, default 12) over UDP on loopback.
+    One cycle period goes to the gateway, the simulated controller, the controller, the
+    pose filter's prediction and viz; the gateway's safety fields (speeds, envelope,
+    stale commands, world_T_base) carry over from the ALTER gateway's, the rest are RSI's
+    defaults (humanpt.rsi.config)."""
+    cycle_ms = link_cycle_ms(link, cycle_ms)
+    if link == "alter":
+        return
+    from humanpt.alter_gateway.config import AlterGatewayConfig
+    from humanpt.sim_robot.config import SimRobotConfig
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
+    robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
+                              cfgmod.build(AlterGatewayConfig, sections["alter_gateway"], source="demo",
+                                           section="alter_gateway"), cycle_ms, udp)
+    sections["sim_robot"], sections["alter_gateway"] = to_table(robot), to_table(gateway)
+    sections["controller"]["cycle_period_ms"] = cycle_ms
+    sections.setdefault("pose_filter", {})["predict_ahead_ms"] = cycle_ms
+    sections.setdefault("viz", {})["cycle_period_ms"] = cycle_ms
+
+
 def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
                   overrides: dict[str, dict] | None = None,
-                  secure: bool = False) -> tuple[SystemConfig, dict[str, dict]]:
+                  secure: bool = False, link: str = "alter",
+                  cycle_ms: float | None = None) -> tuple[SystemConfig, dict[str, dict]]:
     """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
     simulated Puma is mounted so that it starts where the camera sees the target, behind a
     pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
@@ -104,7 +148,8 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
         sections["runtime"].update(mode="client", security="mtls", pki=PKI_DIR, identity=OPERATOR_IDENTITY)
     for name in ("perception", "pose_filter"):
         if over.get(name):
-            sections[name] = over[name]
+            sections[name] = dict(over[name])
+    link_sections(sections, link, cycle_ms)
     return dataclasses.replace(cfg, operator=op), sections
 
 
@@ -190,17 +235,19 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
              duration_s: float | None = None, overrides: dict[str, dict] | None = None,
              stop: threading.Event | None = None, on_started: Callable[[list[str]], None] | None = None,
              progress: Callable[[float, float], None] | None = None, secure: bool = False,
-             control: LiveControl | None = None) -> LiveResult:
+             control: LiveControl | None = None, link: str = "alter",
+             cycle_ms: float | None = None) -> LiveResult:
     """Run ``cfg`` live (:func:`live_sections`; ``port``: the router's, a free one by
     default; ``viewer``: viz too) for ``duration_s`` of scenario (default: start delay +
     scenario + 1.5 s) after everything is up, recording the path from a second after
     that. ``stop`` ends the run early; ``on_started(components)`` once the processes are
     spawned; ``progress(elapsed_s, total_s)`` about five times a second.  ``secure``: under
     mTLS with a throwaway PKI in ``run_dir/pki`` (:func:`make_pki`).  ``control``: filled
-    with the processes, to stop and start one on purpose (:class:`LiveControl`)."""
+    with the processes, to stop and start one on purpose (:class:`LiveControl`).  ``link``,
+    ``cycle_ms``: the robot link and its cycle (:func:`link_sections`)."""
     run_dir = Path(run_dir)
     port = port or free_tcp_port()
-    cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure)
+    cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure, link=link, cycle_ms=cycle_ms)
     comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
     if secure:
         make_pki(run_dir, sections["runtime"]["cell"], comps + ["operator"])

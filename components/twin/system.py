@@ -61,6 +61,24 @@ def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.
     return robot, gateway
 
 
+# The gateway's safety values that stay when the link changes (the rest are the link's).
+SAFETY_KEYS = ("max_speed_mm_s", "max_angular_speed_deg_s", "envelope_min_mm", "envelope_max_mm", "stale_cycles",
+               "alter_off_on_fault", "world_T_base_mm_deg", "event_interval_ms", "stamp_tolerance_ms",
+               "conflict_hold_ms")
+
+
+def rsi_link(robot, gateway, cycle_ms: float, udp_bind: str = "127.0.0.1:49152"):
+    """(sim_robot config, RsiGatewayConfig) over RSI at ``cycle_ms`` (4 or 12) from the ALTER
+    pair of :func:`puma_cores`: the gateway keeps ``SAFETY_KEYS``, the rest RSI's defaults;
+    RKorr in the frame the robot applies corrections in (``alter_mode``)."""
+    from humanpt.rsi.config import RsiGatewayConfig
+
+    rsi_gateway = RsiGatewayConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
+                                   udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
+                                   correction_frame="tool" if robot.alter_mode == "tool" else "base")
+    return dataclasses.replace(robot, protocol="rsi", cycle_period_ms=cycle_ms, rsi_gateway=udp_bind), rsi_gateway
+
+
 def operator_config(scenario: str | OperatorConfig, seed: int = 0) -> OperatorConfig:
     """A built-in name, a scenario file path or an OperatorConfig -> OperatorConfig."""
     if isinstance(scenario, OperatorConfig):
@@ -77,7 +95,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  robot: str = "standin", run_dir: str | Path | None = None, keep_outputs: bool = True,
                  digest: bool = True, rig: Rig | None = None,
                  robot_overrides: dict[str, dict] | None = None,
-                 mount_world_T_flange_mm: np.ndarray | None = None) -> TwinWorld:
+                 mount_world_T_flange_mm: np.ndarray | None = None,
+                 rsi_cycle_ms: float | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
@@ -87,7 +106,9 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     ``mount_world_T_flange_mm``: the Puma's comfortable flange pose (4, 4) mm, where it is
     mounted around (default: the start pose).  ``robot``: ``standin`` (integrates commands) or
     ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
-    ``digest=False``: no output hash (faster; for runs nobody compares)."""
+    ``digest=False``: no output hash (faster; for runs nobody compares).  ``rsi_cycle_ms``
+    (4 or 12; ``puma`` only): the Puma behind the RSI link instead (UDP paths with 0.1 ms
+    delivery), the controller and the pose filter's prediction at that cycle."""
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -115,7 +136,11 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
             rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")
-            robot_cores = [SimRobotCore(rcfg), AlterGatewayCore(gcfg)]
+            if rsi_cycle_ms is not None:
+                rcfg, gcfg = rsi_link(rcfg, gcfg, float(rsi_cycle_ms))
+                ctl = dataclasses.replace(ctl, cycle_period_ms=float(rsi_cycle_ms))
+                pose_filter = dataclasses.replace(pose_filter or PoseFilterConfig(), predict_ahead_ms=float(rsi_cycle_ms))
+            robot_cores = [SimRobotCore.create(rcfg), AlterGatewayCore.create(gcfg)]
             wire = True
         elif robot == "standin":
             standin = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))
@@ -129,7 +154,9 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
         robot_cores[1].config.world_T_base_mm_deg) if wire else (0.0,) * 6), rig))
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
-    if wire:
+    if wire and rsi_cycle_ms is not None:
+        world.lockstep.connect_udp("sim_robot", "alter_gateway")
+    elif wire:
         world.lockstep.connect_serial("alter_gateway", "sim_robot", baud=robot_cores[1].config.baud)
     return world
 

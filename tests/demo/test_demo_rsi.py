@@ -1,0 +1,48 @@
+"""humanpt demo --link rsi: the whole live system over the KUKA RSI-style link at 12 ms
+(the simulated RSI controller as sim_robot, the gateway over UDP), end to end."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+
+import numpy as np
+import pytest
+
+from humanpt.controller import pathfile
+from humanpt.runtime.replay import replay
+from tests.conftest import run_cli
+
+
+@pytest.mark.timeout(300)
+def test_live_demo_over_rsi_at_12_ms_records_the_arc(tmp_path):
+    run = tmp_path / "rsi"
+    r = run_cli("demo", "--link", "rsi", "--cycle-ms", "12", "--scenario", "arc", "--duration", "6",
+                "--run-dir", str(run), timeout=240)
+    assert r.returncode == 0, r.stdout + r.stderr + (run / "processes.log").read_text()[-3000:]
+    # One cycle period, written from one place, in every section that has one.
+    cfg = tomllib.loads((run / "humanpt.toml").read_text())
+    assert cfg["alter_gateway"]["link"] == "rsi" and cfg["sim_robot"]["protocol"] == "rsi"
+    assert {cfg[s]["cycle_period_ms"] for s in ("alter_gateway", "sim_robot", "controller", "viz")} == {12.0}
+    assert cfg["pose_filter"]["predict_ahead_ms"] == 12.0
+    # The robot's own count (<Delay> in its datagrams): most cycles answered in time on a
+    # loaded 2-core machine (issue 22's 100 % at 12 ms is a quiet machine's figure).
+    m = re.search(r"RSI at 12 ms: (\d+) cycles, (\d+) answered in time", r.stdout)
+    assert m, r.stdout
+    cycles, in_time = int(m[1]), int(m[2])
+    assert cycles > 400 and in_time >= 0.9 * cycles
+    # The servo kept the target: the recorded path follows the paper's arc (radius 246 mm).
+    path = pathfile.read(run / "paths" / "path-1.csv")
+    assert len(path) > 5
+    radius = np.linalg.norm(path.x_g[:, :2] - [147.5, 1378.5], axis=1)
+    assert np.all(np.abs(radius - 246.0) < 1.0)
+    for comp in ("alter_gateway", "sim_robot"):  # the RSI cores replay from their recordings
+        res = replay(run / f"{comp}.mcap")
+        assert res.match and res.compared > 400, res.report()
+
+
+def test_cycle_ms_is_for_rsi(tmp_path):
+    r = run_cli("demo", "--cycle-ms", "4", "--run-dir", str(tmp_path / "r"))
+    assert r.returncode != 0 and "ALTER link runs the Puma's 28 ms cycle" in r.stderr
+    r = run_cli("demo", "--link", "rsi", "--lockstep", "--run-dir", str(tmp_path / "r2"))
+    assert r.returncode != 0 and "live demo" in r.stderr
