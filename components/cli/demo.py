@@ -94,8 +94,11 @@ def run_lockstep(args, cfg, run_dir: Path) -> int:
     write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believed in this run", overwrite=True)
     # Record once the target starts to move (the servo has acquired it by then).
     with Bars("s") as bars:
+        from humanpt.twin.live import link_cycle_ms
+
+        rsi_ms = link_cycle_ms("rsi", args.cycle_ms) if getattr(args, "link", "alter") == "rsi" else None
         res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
-                  run_dir=run_dir, progress=bars.stage("twin"))
+                  run_dir=run_dir, progress=bars.stage("twin"), rsi_cycle_ms=rsi_ms)
     res.write_path(run_dir / "paths" / "path-1.csv")
     print(report(res.world, cfg, run_dir, res.wall_s, res.twin_s, "lock-step"))
     return 0
@@ -254,16 +257,14 @@ def demo(args) -> int:
     (run_dir / "world.toml").write_text(
         "# the twin's world in this run (humanpt demo --world " + str(args.world) + ")\n"
         + cfgmod.dumps_toml({"name": cfg.world.name, "sources": list(cfg.world.sources), **cfg.world.extra}))
-    if args.lockstep and (getattr(args, "link", "alter") != "alter" or getattr(args, "cycle_ms", None)):
-        raise SystemExit("humanpt demo: --link rsi / --cycle-ms are for the live demo (the lock-step shell "
-                         "does not simulate RSI's UDP timing yet)")
-    if not args.lockstep:
-        from humanpt.twin.live import link_cycle_ms
+    from humanpt.twin.live import link_cycle_ms
 
-        try:  # a cycle the link does not have fails here, before anything starts
-            link_cycle_ms(args.link, args.cycle_ms)
-        except ValueError as e:
-            raise SystemExit(f"humanpt demo: {e}") from None
+    try:  # a cycle the link does not have fails here, before anything starts
+        link_cycle_ms(args.link, args.cycle_ms)
+    except ValueError as e:
+        raise SystemExit(f"humanpt demo: {e}") from None
+    if args.lockstep and args.link == "rsi" and args.robot != "puma":
+        raise SystemExit("humanpt demo: --link rsi drives the simulated Puma (--robot puma)")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

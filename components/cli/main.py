@@ -79,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--robot", choices=["puma", "standin"], default="puma",
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
     p.add_argument("--link", choices=["alter", "rsi"], default="alter",
-                   help="live only: the robot link: the Puma's serial ALTER line at 28 ms (default) or a KUKA "
+                   help="the robot link: the Puma's serial ALTER line at 28 ms (default) or a KUKA "
                    "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md)")
     p.add_argument("--cycle-ms", type=float, choices=[4.0, 12.0], metavar="4|12",
                    help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); the gateway, the simulated "

@@ -44,5 +44,16 @@ def test_live_demo_over_rsi_at_12_ms_records_the_arc(tmp_path):
 def test_cycle_ms_is_for_rsi(tmp_path):
     r = run_cli("demo", "--cycle-ms", "4", "--run-dir", str(tmp_path / "r"))
     assert r.returncode != 0 and "ALTER link runs the Puma's 28 ms cycle" in r.stderr
-    r = run_cli("demo", "--link", "rsi", "--lockstep", "--run-dir", str(tmp_path / "r2"))
-    assert r.returncode != 0 and "live demo" in r.stderr
+    r = run_cli("demo", "--link", "rsi", "--lockstep", "--robot", "standin", "--run-dir", str(tmp_path / "r2"))
+    assert r.returncode != 0 and "simulated Puma" in r.stderr
+
+
+def test_lockstep_demo_over_rsi_at_4_ms_is_deterministic(tmp_path):
+    """`humanpt demo --lockstep --link rsi --cycle-ms 4`: two runs give the same path."""
+    paths = []
+    for k in (1, 2):
+        r = run_cli("demo", "--lockstep", "--link", "rsi", "--cycle-ms", "4", "--scenario", "arc", "--duration", "4",
+                    "--run-dir", str(tmp_path / f"r{k}"))
+        assert r.returncode == 0, r.stdout + r.stderr
+        paths.append((tmp_path / f"r{k}" / "paths" / "path-1.csv").read_text())
+    assert paths[0] == paths[1] and len(paths[0].splitlines()) > 3
