@@ -380,6 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "flange_T_tool_x, 0,0,200,0,0,0)")
     q.add_argument("--dwells", action="store_true",
                    help="wait where the welder dwelt (the seam's dwells, at segment ends), as long as he did")
+    q.add_argument("--timed", metavar="CSV",
+                   help="the seam's timing from humanpt path retime: its feed is the default --speed, and the "
+                   "JSON format carries its samples (t_s and pose every cycle)")
     q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
 
     q = psub.add_parser("retime", help="a seam in time: constant feed, bounded acceleration and jerk",

@@ -78,12 +78,19 @@ def path_export(args) -> int:
     else:
         tool_x = ControllerConfig().flange_T_tool_x  # the torch humanpt's own playback uses
     tool = transform_from_x(np.asarray(tool_x, dtype=float))
-    speed = args.speed if args.speed is not None else (_feed_mm_s(raw) or 20.0)
+    timed_csv = None
+    if getattr(args, "timed", None):  # humanpt path retime's samples (the feed, and the JSON's times)
+        from humanpt.seam.retime import read_csv
+
+        timed_csv = read_csv(args.timed)
+    feed = timed_csv.feeds_mm_s[0] if timed_csv is not None else _feed_mm_s(raw)
+    speed = args.speed if args.speed is not None else (feed or 20.0)
     opts = ExportOptions(speed_mm_s=speed, zone_mm=args.zone, corner_zone_mm=args.corner_zone,
                          name=name, point=point,
                          flange_T_tool_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
                          source=src.name)
-    text = export(seam, args.format, opts, timed=_timed(raw) if args.format == "json" else None)
+    timed = list(zip(timed_csv.t_s, timed_csv.x, strict=True)) if timed_csv is not None else _timed(raw)
+    text = export(seam, args.format, opts, timed=timed if args.format == "json" else None)
     tmp = out.with_name(out.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, out)  # all or nothing: a crash leaves no half program

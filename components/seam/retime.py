@@ -23,7 +23,8 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.seam.fit import Seam, Segment
 
-__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "segment_point", "write_csv", "peaks", "playback_args"]
+__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "segment_point", "write_csv", "read_csv", "peaks",
+           "playback_args"]
 
 CSV_HEADER = ("index", "t_s", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg", "speed_mm_s")
 
@@ -266,3 +267,28 @@ def playback_args(timed: Timed, max_points: int = 5000) -> dict:
     k = max(1, int(math.ceil(n / max_points)))
     idx = np.unique(np.r_[np.arange(0, n, k), n - 1])
     return {"points": np.round(timed.x[idx], 4).tolist(), "times_s": np.round(timed.t_s[idx], 6).tolist()}
+
+
+def read_csv(path) -> Timed:
+    """A timed CSV written by :func:`write_csv` (``humanpt path retime``); RetimeError
+    naming the file and line for anything else.  ``feeds_mm_s`` holds the largest speed."""
+    import csv
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        with path.open(newline="") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError) as e:
+        raise RetimeError(f"{path}: cannot read ({e})") from None
+    if not rows or tuple(rows[0]) != CSV_HEADER:
+        raise RetimeError(f"{path}: not a timed path (header {', '.join(CSV_HEADER)}; humanpt path retime)")
+    try:
+        data = np.array([[float(v) for v in r[1:]] for r in rows[1:] if r], dtype=float)
+    except ValueError as e:
+        raise RetimeError(f"{path}: a value that is not a number ({e})") from None
+    if data.ndim != 2 or len(data) == 0 or data.shape[1] != len(CSV_HEADER) - 1 or not np.all(np.isfinite(data)):
+        raise RetimeError(f"{path}: no samples, or a row without {len(CSV_HEADER)} finite numbers")
+    if np.any(np.diff(data[:, 0]) < 0):
+        raise RetimeError(f"{path}: the times go backwards")
+    return Timed(data[:, 0], data[:, 1:7], data[:, 7], (float(data[:, 7].max()),))

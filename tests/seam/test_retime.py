@@ -107,3 +107,26 @@ def test_cli_refuses_a_speed_above_the_limit_and_writes_nothing(tmp_path):
     assert ok.returncode == 0, ok.stderr
     rows = (tmp_path / "s.timed.csv").read_text().splitlines()
     assert rows[0].startswith("index,t_s,x_mm") and len(rows) > 100
+
+
+def test_export_takes_the_retimed_samples_and_feed(tmp_path):
+    # humanpt path retime -> path export --timed: the JSON program carries every cycle's
+    # time and pose, the feed is the retime's; a CSV that is not retime's is refused.
+    from humanpt.seam import seamfile
+
+    f = seamfile.write(tmp_path / "s.json", L_CORNER)
+    assert run_cli("path", "retime", str(f), "--speed", "35", "-o", str(tmp_path / "t.csv")).returncode == 0
+    r = run_cli("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "t.csv"), "-o",
+                str(tmp_path / "p.json"))
+    assert r.returncode == 0, r.stderr
+    import json
+
+    prog = json.loads((tmp_path / "p.json").read_text())
+    rows = (tmp_path / "t.csv").read_text().splitlines()[1:]
+    assert prog["speed_mm_s"] == 35.0 and len(prog["samples"]) == len(rows)
+    last = [float(v) for v in rows[-1].split(",")]
+    assert prog["samples"][-1]["t_s"] == round(last[1], 6) and prog["samples"][-1]["x_mm"] == [100.0, 80.0, 0.0]
+    (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
+    r = run_cli("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "bad.csv"), "-o",
+                str(tmp_path / "q.json"))
+    assert r.returncode == 2 and "not a timed path" in r.stderr and not (tmp_path / "q.json").exists()
