@@ -975,14 +975,20 @@ def config(args) -> int:
     return 0
 
 
+def check_output(out: str | Path, src: str | Path, overwrite: bool) -> None:
+    """A command's output file: never its input, never an existing file unless
+    ``overwrite`` (ValueError saying which)."""
+    out = Path(out)
+    if out.exists() and out.resolve() == Path(src).resolve():
+        raise ValueError(f"{out}: is the input; write the result to another file")
+    if out.exists() and not overwrite:
+        raise ValueError(f"{out}: exists; give --overwrite to replace it")
+
+
 def path_cmd(args) -> int:
     from humanpt.controller import pathfile
 
-    out_path = Path(args.output)
-    if out_path.exists() and out_path.resolve() == Path(args.input).resolve():
-        raise ValueError(f"{args.output}: is the input; write the result to another file")
-    if out_path.exists() and not args.overwrite:
-        raise ValueError(f"{args.output}: exists; give --overwrite to replace it")
+    check_output(args.output, args.input, args.overwrite)
     p = pathfile.read(args.input)
     if args.path_verb == "smooth":
         # Held orientations filled in first (Path6.points); the flags and the filter's

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from humanpt.cli.commands import check_output
 from humanpt.runtime import tables
 
 
@@ -17,10 +18,7 @@ def path_fit(args) -> int:
     out = Path(args.output) if args.output else src.with_suffix(".seam.json")
     png = Path(args.plot) if args.plot else out.with_name(out.name.removesuffix(".json") + ".png")
     for f in (out, png):
-        if f.exists() and f.resolve() == src.resolve():
-            raise ValueError(f"{f}: is the input; write the result to another file")
-        if f.exists() and not args.overwrite:
-            raise ValueError(f"{f}: exists; give --overwrite to replace it")
+        check_output(f, src, args.overwrite)
     p = pathfile.read(src)
     which = args.point
     if which == "auto":
@@ -59,10 +57,7 @@ def path_retime(args) -> int:
 
     src = Path(args.seam)
     out = Path(args.output) if args.output else src.with_name(src.name.removesuffix(".json") + ".timed.csv")
-    if out.exists() and out.resolve() == src.resolve():
-        raise ValueError(f"{out}: is the input; write the result to another file")
-    if out.exists() and not args.overwrite:
-        raise ValueError(f"{out}: exists; give --overwrite to replace it")
+    check_output(out, src, args.overwrite)
     seam = seamfile.read(src)
     cfg = RetimeConfig(speed_mm_s=args.speed, accel_mm_s2=args.accel, jerk_mm_s3=args.jerk,
                        max_speed_mm_s=args.max_speed, max_angular_deg_s=args.max_angular, cycle_ms=args.cycle_ms,

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.cli.commands import check_output
+
 
 def _feed_mm_s(raw: dict) -> float | None:
     """The seam's own feed (mm/s) if it has one: ``retime.speed_mm_s`` or ``feed_mm_s``."""
@@ -54,10 +56,7 @@ def path_export(args) -> int:
         out = src.with_name((program_name(args.name or stem) if args.format == "krl" else stem)
                             + SUFFIXES[args.format])
     name = args.name or (out.stem if args.format == "krl" else stem)
-    if out.exists() and out.resolve() == src.resolve():
-        raise ValueError(f"{out}: is the input; write the program to another file")
-    if out.exists() and not args.overwrite:
-        raise ValueError(f"{out}: exists; give --overwrite to replace it")
+    check_output(out, src, args.overwrite)
     seam = seamfile.read(src)
     raw = json.loads(src.read_text())
     seam_point = seam.meta.get("point")

@@ -135,17 +135,7 @@ def pose_at(seg: Segment, s: float) -> np.ndarray:
     """(6,) the seam's pose a fraction ``s`` (0..1) along a segment: mm on the line or the
     arc (by arc length; at 0 and 1 the segment's own ends), the torch on the geodesic
     between the end orientations, Z-Y-X deg."""
-    a, b = np.array(seg.start_mm, dtype=float), np.array(seg.end_mm, dtype=float)
-    if seg.kind == "line" or s <= 0.0 or s >= 1.0:
-        p = a + min(max(s, 0.0), 1.0) * (b - a) if seg.kind == "line" else (a if s <= 0.0 else b)
-    else:
-        # On the circle (centre, normal, radius), from the start's direction: the fit's
-        # ends may lie a few micrometres off its circle; the ends are the seam's own.
-        c, nrm = np.array(seg.centre_mm, dtype=float), np.array(seg.normal, dtype=float)
-        nrm = nrm / np.linalg.norm(nrm)
-        u = (a - c) - ((a - c) @ nrm) * nrm
-        u = seg.radius_mm * u / np.linalg.norm(u)
-        p = c + Rotation.from_rotvec(nrm * s * math.radians(seg.sweep_deg)).apply(u)
+    p = seg.points_at(s)[0]  # the ends are the seam's own
     r0, r1 = rotation_from_ypr_deg(seg.start_ypr_deg), rotation_from_ypr_deg(seg.end_ypr_deg)
     ypr = Rotation.from_matrix(slerp(r0, r1, s)).as_euler("ZYX", degrees=True)
     return np.concatenate([p, ypr])

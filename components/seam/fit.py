@@ -216,6 +216,30 @@ class Segment:
             return abs(math.radians(self.sweep_deg)) * self.radius_mm
         return float(np.linalg.norm(np.subtract(self.end_mm, self.start_mm)))
 
+    def arc_basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """An arc's (centre, unit normal, u, v): u the unit direction from the centre to the
+        start in the arc's plane, v = normal x u, so the arc is centre + r (cos a u + sin a
+        v) for a from 0 to the sweep (mm)."""
+        c, n = np.array(self.centre_mm, dtype=float), np.array(self.normal, dtype=float)
+        n = n / np.linalg.norm(n)
+        u = np.array(self.start_mm, dtype=float) - c
+        u = u - (u @ n) * n
+        u = u / np.linalg.norm(u)
+        return c, n, u, np.cross(n, u)
+
+    def points_at(self, fractions) -> np.ndarray:
+        """(k, 3) points a fraction (0..1, of the length) along the segment, mm; at 0 and 1
+        exactly its own ends (an arc's fitted ends may lie micrometres off its circle)."""
+        f = np.clip(np.atleast_1d(np.asarray(fractions, dtype=float)), 0.0, 1.0)
+        a, b = np.array(self.start_mm, dtype=float), np.array(self.end_mm, dtype=float)
+        if self.kind == "line":
+            return a + f[:, None] * (b - a)
+        c, _, u, v = self.arc_basis()
+        ang = f * math.radians(self.sweep_deg)
+        p = c + self.radius_mm * (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v)
+        p[f <= 0.0], p[f >= 1.0] = a, b
+        return p
+
 
 @dataclass(frozen=True)
 class Corner:
@@ -400,7 +424,7 @@ def _merge(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float) ->
     return pieces
 
 
-def _drop_rounded_corners(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig) -> tuple[list[_Piece], list[int]]:
+def _drop_rounded_corners(pieces: list[_Piece], cfg: FitConfig) -> tuple[list[_Piece], list[int]]:
     """A short piece between two lines that turn by more than ``corner_deg`` is the hand
     (and the servo) rounding a corner: it is dropped, its inner points are kept out of every
     fit (returned), and the corner becomes where the two lines meet."""
@@ -566,14 +590,12 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
     dwell_runs = _dwells(p, t, cfg) if stamp_ns is not None else []
     # Working points: a dwell counts once (its mean), so it does not weigh on the fits.
     keep = np.ones(len(p), dtype=bool)
-    work_of = np.arange(len(p))
     for a, b in dwell_runs:
         keep[a + 1:b + 1] = False
     q_src = np.flatnonzero(keep)  # working index -> path index
     q = p[q_src].copy()
     for a, b in dwell_runs:
         q[np.searchsorted(q_src, a)] = p[a:b + 1].mean(axis=0)
-    del work_of
     noise = noise_mm(q)
     spikes = _spikes(q, noise, cfg)
     if spikes:
@@ -587,7 +609,7 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
         pieces = _split(q, idx, cfg, noise)
     pieces = _merge(q, pieces, cfg, noise)
     pieces = _refine_boundaries(q, pieces, cfg, noise)
-    pieces, cut = _drop_rounded_corners(q, pieces, cfg)
+    pieces, cut = _drop_rounded_corners(pieces, cfg)
     corner_cut = [int(q_src[i]) for i in cut]
     outliers: list[int] = [int(i) for i in np.flatnonzero(keep)[spikes]] if spikes else []
     cleaned = []
@@ -648,18 +670,7 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
 def sample_segment(seg: Segment, step_mm: float = 1.0) -> np.ndarray:
     """(k, 3) points along a segment, at most ``step_mm`` apart, ends included."""
     n = max(2, int(math.ceil(seg.length_mm / step_mm)) + 1)
-    s = np.linspace(0.0, 1.0, n)
-    a, b = np.array(seg.start_mm), np.array(seg.end_mm)
-    if seg.kind == "line":
-        return a + s[:, None] * (b - a)
-    c, nrm = np.array(seg.centre_mm), np.array(seg.normal)
-    u = a - c
-    u = u - (u @ nrm) * nrm
-    r0 = np.linalg.norm(u)
-    u = u / r0
-    v = np.cross(nrm, u)
-    ang = s * math.radians(seg.sweep_deg)
-    return c + seg.radius_mm * (np.cos(ang)[:, None] * u + np.sin(ang)[:, None] * v)
+    return seg.points_at(np.linspace(0.0, 1.0, n))
 
 
 def distance_to_seam(seam: Seam, p_mm: np.ndarray) -> np.ndarray:
@@ -675,10 +686,7 @@ def distance_to_seam(seam: Seam, p_mm: np.ndarray) -> np.ndarray:
             s = np.clip(((p - a) @ d) / L2, 0.0, 1.0) if L2 > 0 else np.zeros(len(p))
             dist = np.linalg.norm(p - (a + s[:, None] * d), axis=1)
         else:
-            c, nrm = np.array(seg.centre_mm), np.array(seg.normal)
-            u = a - c
-            u = (u - (u @ nrm) * nrm) / np.linalg.norm(u - (u @ nrm) * nrm)
-            v = np.cross(nrm, u)
+            c, nrm, u, v = seg.arc_basis()
             r = p - c
             h = r @ nrm
             ang = np.mod(np.arctan2(r @ v, r @ u), 2 * math.pi)

@@ -15,15 +15,18 @@ segment's end orientations).  Samples every ``cycle_ms`` (the controller's cycle
 
 from __future__ import annotations
 
+import csv
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.seam.fit import Seam, Segment
 
-__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "segment_point", "write_csv", "read_csv", "peaks",
+__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "write_csv", "read_csv", "peaks",
            "playback_args"]
 
 CSV_HEADER = ("index", "t_s", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg", "speed_mm_s")
@@ -68,20 +71,6 @@ class Timed:
     @property
     def duration_s(self) -> float:
         return float(self.t_s[-1]) if len(self.t_s) else 0.0
-
-
-def segment_point(seg: Segment, fraction: float) -> np.ndarray:
-    """(3,) the point a ``fraction`` (0..1) of the way along a segment (by length)."""
-    a, b = np.array(seg.start_mm), np.array(seg.end_mm)
-    if seg.kind == "line":
-        return a + fraction * (b - a)
-    c, n = np.array(seg.centre_mm), np.array(seg.normal)
-    u = a - c
-    u = u - (u @ n) * n
-    u = u / np.linalg.norm(u)
-    v = np.cross(n, u)
-    ang = fraction * math.radians(seg.sweep_deg)
-    return c + seg.radius_mm * (math.cos(ang) * u + math.sin(ang) * v)
 
 
 def _turn_deg(seg: Segment) -> float:
@@ -200,7 +189,7 @@ def retime(seam: Seam, config: RetimeConfig | None = None) -> Timed:
             if not m.any():
                 continue
             f = (s[m] - bounds[j]) / lengths[j] if lengths[j] > 0 else np.zeros(m.sum())
-            pos[m] = np.array([segment_point(seg, float(k)) for k in f])
+            pos[m] = seg.points_at(f)
             rots = Rotation.from_euler("ZYX", [seg.start_ypr_deg, seg.end_ypr_deg], degrees=True)
             ypr[m] = Slerp([0.0, 1.0], rots)(np.clip(f, 0, 1)).as_euler("ZYX", degrees=True)
         if t_all:  # a corner: turn the torch on the spot from the last run's end orientation
@@ -242,10 +231,6 @@ def peaks(timed: Timed) -> dict[str, float]:
 def write_csv(path, timed: Timed, overwrite: bool = False):
     """The samples as CSV (:data:`CSV_HEADER`; mm, deg, s); never replaces a file unless
     ``overwrite``."""
-    import csv
-    import os
-    from pathlib import Path
-
     path = Path(path)
     if path.exists() and not overwrite:
         raise RetimeError(f"{path}: exists; give --overwrite to replace it")
@@ -272,9 +257,6 @@ def playback_args(timed: Timed, max_points: int = 5000) -> dict:
 def read_csv(path) -> Timed:
     """A timed CSV written by :func:`write_csv` (``humanpt path retime``); RetimeError
     naming the file and line for anything else.  ``feeds_mm_s`` holds the largest speed."""
-    import csv
-    from pathlib import Path
-
     path = Path(path)
     try:
         with path.open(newline="") as f:
