@@ -119,7 +119,7 @@ def router(args) -> int:
 
 
 def run_component(args) -> int:
-    from humanpt.runtime.live import LiveShell
+    from humanpt.runtime.live import LiveShell, make_realtime
 
     cfg = load_cfg(args)
     name = args.component
@@ -132,6 +132,9 @@ def run_component(args) -> int:
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
     shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
+    realtime = make_realtime(core, cfg.runtime)
+    if realtime:
+        print(f"humanpt {name}: on a robot link's cycle: {realtime}", file=sys.stderr, flush=True)
     stop_on_signals(shell.stop)
     if args.duration:
         threading.Timer(args.duration, shell.stop.set).start()

@@ -320,6 +320,13 @@ class RuntimeConfig:
     # Record on a writer thread of its own: off the core's path (lower latency), but a
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False
+    # A realtime core's process (Core.realtime: the robot gateway, the simulated robot):
+    # Python hands the GIL over every 5 ms by default, longer than RSI's 4 ms cycle, so a
+    # thread woken by a datagram could wait a whole cycle behind a busy one.  Such a process
+    # switches every this many ms and asks the kernel for this nice value (negative: more
+    # CPU under load; needs CAP_SYS_NICE, else it runs at the normal priority with a note).
+    realtime_switch_interval_ms: Annotated[float, Range(0.05, 5, "ms")] = 0.2
+    realtime_nice: Annotated[int, Range(-20, 0, "")] = -10
     # The rig file: what the pipeline believes about the hardware (intrinsics, mirrors,
     # hand-eye, target, tip), written by `humanpt calibrate` or `humanpt rig init`.  A
     # relative path is relative to this config file.  Empty: the nominal design rig.

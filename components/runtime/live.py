@@ -150,6 +150,27 @@ class Inbox:
             return "bus", short, payload
 
 
+def make_realtime(core: Core, rt: RuntimeConfig) -> str | None:
+    """For a process that runs ``core`` alone (``humanpt run``): if the core is on a robot
+    link's hard cycle (``Core.realtime``), shorten the GIL's switch interval to
+    ``rt.realtime_switch_interval_ms`` and ask for nice ``rt.realtime_nice``. Returns a line
+    saying what was done (None: not a realtime core). Process-wide: not for a shell that
+    shares its process (tests, lock-step)."""
+    import sys
+
+    if not core.realtime:
+        return None
+    sys.setswitchinterval(rt.realtime_switch_interval_ms / 1000.0)
+    said = f"GIL switch interval {rt.realtime_switch_interval_ms:g} ms"
+    if rt.realtime_nice < 0:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, rt.realtime_nice)
+            said += f", nice {rt.realtime_nice}"
+        except OSError as e:  # no CAP_SYS_NICE: the normal priority, and say so
+            said += f", normal priority (nice {rt.realtime_nice} refused: {e.strerror})"
+    return said
+
+
 class LiveShell:
     """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
 
@@ -171,6 +192,8 @@ class LiveShell:
         self._q = Inbox({p.topic: p.queue for p in core.ports if p.on_bus})
         self._pubs: dict[str, zenoh.Publisher] = {}
         self.recorder: Recorder | None = None
+        self._tick_handled = threading.Event()  # a realtime core's tick was taken (_tick_loop)
+        self._tick_handled_at = 0.0  # time.monotonic() then
 
     # -- Zenoh callbacks (Zenoh threads): only enqueue -----------------------------------
     def _on_sample(self, short: str):
@@ -225,6 +248,7 @@ class LiveShell:
 
     def _tick_loop(self) -> None:
         next_t = time.monotonic()
+        realtime = self.core.realtime
         while not self.stop.is_set():
             period = self.core.tick_period_ns()
             if not period:
@@ -236,7 +260,19 @@ class LiveShell:
                 delay = 0.0
             if self.stop.wait(max(delay, 0.0)):
                 return
+            if not realtime:
+                self._q.put_local(("tick", "tick", None))
+                continue
+            # A realtime core (a robot link's cycle) never gets a cycle shorter than its
+            # period: the next tick is due a period after the worker got to this one. A busy
+            # process stretches its cycle (a real controller's would not) but never cuts the
+            # next one short, which would leave a peer less than a cycle to answer.
+            self._tick_handled.clear()
             self._q.put_local(("tick", "tick", None))
+            while not self._tick_handled.wait(0.1):
+                if self.stop.is_set():
+                    return
+            next_t = self._tick_handled_at
 
     # -- the one worker thread -----------------------------------------------------------
     def _feed(self, t_ns: int, topic: str, msg, data: bytes | None = None) -> list:
@@ -327,6 +363,8 @@ class LiveShell:
         elif kind == "liveliness":
             self._feed(t_ns, "liveliness", pb.Liveliness(header=header(t_ns), component=short, alive=item))
         elif kind == "tick":
+            self._tick_handled_at = time.monotonic()
+            self._tick_handled.set()
             self._feed(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=self.core.tick_period_ns() or 0))
         elif kind == "param":
             req: _ParamRequest = item
@@ -348,7 +386,8 @@ class LiveShell:
                 chunk_size=self.rt.chunk_size if name not in IMAGE_PRODUCER_NAMES else max(
                     self.rt.chunk_size, self.record.image_chunk_size),
                 flush_interval_s=self.rt.flush_interval_s,
-                background=self.rt.record_thread,
+                # A robot link's cycle must not wait for a chunk's compression.
+                background=self.rt.record_thread or self.core.realtime,
                 images=ImagePolicy.from_config(name, self.record, live_producers(
                     self.run_dir, fresh_s=max(10.0, 5 * self.rt.flush_interval_s))))
             log.info("%s: recording to %s", name, self.recorder.path)

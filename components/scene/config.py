@@ -45,6 +45,11 @@ class SceneConfig:
     # The operator's true seam (operator/truth, twin only) gets a point when the true tip
     # (else G) moved this far since the last one.
     truth_step_mm: Annotated[float, Range(0.01, 1000, "mm")] = 2.0
+    # Moving frames (robot state, the filter's target, the desired flange) are sent at most
+    # this often each, by their stamps: a viewer draws 60 Hz, and a 4 ms robot link would
+    # otherwise cost ~800 messages a second on a machine that also runs the link's cycle.
+    transforms_max_hz: Annotated[float, Range(1, 10000, "Hz")] = live(
+        60.0, "moving frames sent at most this often each")
 
     def __post_init__(self) -> None:
         if len(self.world_T_base_mm_deg) != 6:

@@ -185,6 +185,15 @@ class SceneCore(Core):
         self._recording = False
         # The operator's true seam (operator/truth): world points (m), truth_step_mm apart.
         self.truth_seam: list[tuple[float, float, float]] = []
+        self._sent_tf_ns: dict[str, int] = {}  # moving frame source -> stamp last sent
+
+    def _tf_due(self, source: str, stamp_ns: int) -> bool:
+        """Whether ``source``'s frames at ``stamp_ns`` go out (transforms_max_hz, by stamp)."""
+        last = self._sent_tf_ns.get(source)
+        if last is not None and 0 <= stamp_ns - last < 1e9 / self.config.transforms_max_hz:
+            return False
+        self._sent_tf_ns[source] = stamp_ns
+        return True
 
     def on_config_changed(self, old: SceneConfig, new: SceneConfig) -> None:
         if new.dz_mm != old.dz_mm:
@@ -194,6 +203,8 @@ class SceneCore(Core):
     def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
         """world -> base -> flange at the cycle's stamp, with the rig's fixed frames and D."""
         stamp = msg.header.stamp_ns
+        if not self._tf_due("robot", stamp):
+            return []
         base_T_flange = self._base_T_world @ from_pose(msg.world_T_flange)
         out = [_transform(stamp, parent, child, p) for parent, child, p in self._rig_poses]
         out.append(_transform(stamp, BASE, FLANGE, pose(base_T_flange)))
@@ -205,13 +216,15 @@ class SceneCore(Core):
         if not msg.HasField("world_T_tob"):
             return []
         stamp = msg.header.stamp_ns
+        if not self._tf_due("tob", stamp):
+            return []
         return [(T_TRANSFORMS, FrameTransforms(transforms=[
             _transform(stamp, WORLD, TOB, msg.world_T_tob), _transform(stamp, TOB, TIP, self._tob_T_tip)]))]
 
     def _on_status(self, t_ns: int, msg: pb.ControllerStatus) -> list[Output]:
         """world -> flange_desired; the last path once recording stops."""
         out: list[Output] = []
-        if msg.HasField("world_T_desired"):
+        if msg.HasField("world_T_desired") and self._tf_due("desired", msg.header.stamp_ns):
             out.append((T_TRANSFORMS, FrameTransforms(transforms=[
                 _transform(msg.header.stamp_ns, WORLD, FLANGE_DESIRED, msg.world_T_desired)])))
         if self._recording and not msg.recording and self._path_sent < len(self.path):

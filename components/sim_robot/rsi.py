@@ -163,8 +163,12 @@ class RsiRobot:
         self._event(t_ns, "error", code, text)
 
     # -- answers --------------------------------------------------------------------------------
-    def receive(self, data: bytes, t_ns: int) -> None:
-        """A datagram from the client at ``t_ns``."""
+    def receive(self, data: bytes, t_ns: int, arrived_ns: int | None = None) -> None:
+        """A datagram from the client, handled at ``t_ns``; ``arrived_ns`` is when it reached
+        the robot's socket (default ``t_ns``). An answer is in time if it arrived within one
+        cycle of its <Rob>'s sending, as a controller on a hard real-time clock judges it: a
+        simulated controller that handles it later (a busy process) does not make it late."""
+        arrived_ns = t_ns if arrived_ns is None else arrived_ns
         if self.stopped is not None:
             self.counters["after_stop"] += 1
             return
@@ -191,10 +195,13 @@ class RsiRobot:
                        f"robot's limits ({cfg.rsi_max_correction_mm:g} mm, {cfg.rsi_max_correction_deg:g} deg "
                        "per cycle)")
             return
+        if arrived_ns - self._sent_ns > self.cycle_ms * 1_000_000:
+            self.counters["late_arrivals"] += 1  # after its cycle's end: late, whenever handled
+            return
         if self._answer is not None:
             self.counters["overwritten"] += 1
         else:
-            self.latency_ns.append(t_ns - self._sent_ns)
+            self.latency_ns.append(arrived_ns - self._sent_ns)
         self._answer = c
 
     def latency_histogram(self) -> dict[str, int]:
@@ -285,6 +292,7 @@ class RsiSimRobotCore(Core):
     ``SimRobotCore.create`` for ``protocol = "rsi"``."""
 
     name = "sim_robot"
+    realtime = True  # a robot link's cycle: see runtime.live.make_realtime
     config_type = SimRobotConfig
     ports = (
         Port("tick", pb.Tick, "_on_cycle"),
@@ -318,7 +326,8 @@ class RsiSimRobotCore(Core):
         self._events_sent = len(self.robot.events)
 
     def _on_udp(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
-        self.robot.receive(msg.data, t_ns)
+        # The adapter stamps a datagram when it reads it (lock-step: when it arrives).
+        self.robot.receive(msg.data, t_ns, msg.header.stamp_ns or t_ns)
         outs: list[Output] = []
         self._flush_events(outs)
         return outs

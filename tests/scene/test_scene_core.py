@@ -40,8 +40,17 @@ def test_desired_follows_the_controllers_dz():
                   text="controller: dz_mm = 650.0")
     (log,) = core.step(2, "controller/events", ev)
     assert log[0] == "scene/log" and log[1].name == "controller"
-    (d,) = _frame(core.step(3, "alter_gateway/robot_state", _robot_state(3)), "desired")
+    (d,) = _frame(core.step(3, "alter_gateway/robot_state", _robot_state(int(1e8))), "desired")
     assert d.translation.z == pytest.approx(0.65)
+
+
+def test_moving_frames_are_sent_at_most_transforms_max_hz():
+    """A 4 ms robot link's 250 states a second become at most 60 transform messages."""
+    core = SceneCore(SceneConfig(transforms_max_hz=60.0))
+    sent = [k for k in range(250) if _frame(core.step(k, "alter_gateway/robot_state",
+                                                         _robot_state(k * 4_000_000)), "flange")]
+    # Every 5th state (20 ms >= 1/60 s = 16.7 ms; 16 ms < it): 50 in the second.
+    assert len(sent) == 50 and sent[:3] == [0, 5, 10]
 
 
 def test_long_path_is_resent_geometrically_and_ends_whole():
