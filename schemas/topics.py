@@ -57,7 +57,7 @@ _ROWS = [
     Topic("controller/command", pb.FlangeCommand, "controller", "per-cycle flange correction"),
     Topic("controller/status", pb.ControllerStatus, "controller", "mode, visible sources, error"),
     Topic("controller/path", pb.PathPoint, "controller", "recorded path points"),
-    Topic("alter_gateway/robot_state", pb.RobotState, "alter_gateway", "world_T_flange per ALTER cycle"),
+    Topic("robot_gateway/robot_state", pb.RobotState, "robot_gateway", "world_T_flange per ALTER cycle"),
     Topic("operator/truth", pb.Truth, "operator", "twin: true world_T_tob (and tip)"),
     Topic("sim_robot/truth", pb.Truth, "sim_robot", "twin: true world_T_flange"),
     Topic("sim_camera/truth", pb.Truth, "sim_camera", "twin: world_T_tob, world_T_flange at each image's capture"),
@@ -82,7 +82,7 @@ EVENT_PUBLISHERS = (
     "perception",
     "pose_filter",
     "controller",
-    "alter_gateway",
+    "robot_gateway",
     "sim_robot",
     "sim_camera",
     "operator",
@@ -125,6 +125,20 @@ def show_topic(short: str) -> str:
 def shown_short(local: str) -> str:
     """The bus topic a ``show:`` local topic copies (inverse of :func:`show_topic`)."""
     return local[len(SHOW_PREFIX):].replace(".", "/")
+
+
+# Topics of renamed components (runtime.config.RENAMED_COMPONENTS): a recording made under
+# the old name reads as if made under the new one.
+RENAMED_TOPIC_PREFIXES = {"alter_gateway/": "robot_gateway/"}
+
+
+def current_topic(short: str) -> str:
+    """A short topic's name in this version (``alter_gateway/robot_state`` ->
+    ``robot_gateway/robot_state``); others unchanged."""
+    for old, new in RENAMED_TOPIC_PREFIXES.items():
+        if short.startswith(old):
+            return new + short[len(old):]
+    return short
 
 
 class UnknownTopicError(KeyError):

@@ -17,7 +17,7 @@ FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt
              "humanpt.testing", "humanpt.bench", "humanpt.cli")
 # What each product package may load besides itself.
 SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.alter", "humanpt.schemas")
-PRODUCT = ("camera", "perception", "pose_filter", "controller", "alter_gateway", "viz", "calibration", "seam",
+PRODUCT = ("camera", "perception", "pose_filter", "controller", "robot_gateway", "viz", "calibration", "seam",
            "scene")
 
 # Import the package and every submodule, then list the humanpt packages that got loaded.
@@ -65,4 +65,4 @@ def test_the_rsi_link_loads_only_the_gateway_and_the_shared_packages():
     # issue 22: RSI is a link of the one gateway (its safety core), not a simulator's
     modules, loaded = loaded_by("humanpt.rsi")
     assert len(modules) > 1 and not loaded & set(FORBIDDEN), sorted(loaded & set(FORBIDDEN))
-    assert loaded <= {"humanpt.rsi", "humanpt.alter_gateway", *SHARED}, sorted(loaded)
+    assert loaded <= {"humanpt.rsi", "humanpt.robot_gateway", *SHARED}, sorted(loaded)

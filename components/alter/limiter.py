@@ -1,4 +1,4 @@
-"""Shared by both ends of the ALTER link (alter_gateway and sim_robot cores).
+"""Shared by both ends of the ALTER link (robot_gateway and sim_robot cores).
 
 Rate-limited events: the first occurrence goes out at once, repeats at most once per
 interval with a count of what was held back. Pure (times are given, never read)."""
@@ -36,7 +36,7 @@ def suffix(held: int) -> str:
 
 
 class SerialLinkCoreMixin:
-    """What both ends of the ALTER link share (alter_gateway and sim_robot cores): bytes to
+    """What both ends of the ALTER link share (robot_gateway and sim_robot cores): bytes to
     send gathered in ``self._tx`` go out as one ``serial_tx`` chunk per step, and events are
     rate-limited by ``self._limiter``.
 

@@ -2,7 +2,7 @@
 
 - ``measure``: round trips through the router and MCAP write throughput (``bench runtime``),
   the simulated camera (``bench render``), each perception method (``bench perception``);
-- ``alter``: alter_gateway <-> sim_robot over a real pty in real time (``bench alter``);
+- ``alter``: robot_gateway <-> sim_robot over a real pty in real time (``bench alter``);
 - ``summary``: the figures that matter in one table (``humanpt bench``).
 - ``faults``: the attack set of issue 14 against a live twin, one row per attack (reaction
   time, robot held, recovered, data lost) (``bench faults``).

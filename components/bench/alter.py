@@ -5,7 +5,7 @@ own command for k (fresh, not a reused or zero one) and the robot applied it at 
 of cycle k (not a cycle late). The controller is scripted and answers each robot state
 at once: in ``threads`` mode directly (both cores on threads of this process, as
 ThreadShells), in ``zenoh`` mode over a router to ``humanpt sim_robot`` and
-``humanpt alter_gateway`` child processes (then only the gateway's view is available:
+``humanpt robot_gateway`` child processes (then only the gateway's view is available:
 a cycle counts as on time when its robot state reports ``missed_cycles == 0``).
 
 A pty has no baud rate: bytes cross at once, so these figures are what the software
@@ -29,9 +29,9 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.alter.budget import cycle_budget
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
-from humanpt.alter_gateway.shell import PatientSerialAdapter
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.shell import PatientSerialAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
@@ -81,7 +81,7 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
         gw_shell: ThreadShell
 
         def on_gateway(topic, msg):
-            if topic == "alter_gateway/robot_state":
+            if topic == "robot_gateway/robot_state":
                 rx_ns[msg.cycle] = msg.header.stamp_ns
                 seq[0] += 1
                 gw_shell.put("controller/command", scripted_command(msg, script, seq[0]))
@@ -140,7 +140,7 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
 
 
 def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> AlterRun:
-    """Router, ``humanpt sim_robot`` and ``humanpt alter_gateway`` as child processes; this
+    """Router, ``humanpt sim_robot`` and ``humanpt robot_gateway`` as child processes; this
     process is the controller (liveliness token, commands) over Zenoh."""
     import socket
 
@@ -163,13 +163,13 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
             f'[runtime]\ncell = "bench"\nconnect = ["tcp/127.0.0.1:{port}"]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
             f'run_dir = "{d}/runs"\nrecord = false\n'
             f'[sim_robot]\npty_link = "{link}"\ncycle_period_ms = {period_ms}\n'
-            f'[alter_gateway]\nport = "{link}"\ncycle_period_ms = {period_ms}\ntick_ms = {g.tick_ms}\n'
+            f'[robot_gateway]\nport = "{link}"\ncycle_period_ms = {period_ms}\ntick_ms = {g.tick_ms}\n'
             f"reply_deadline_ms = {g.reply_deadline_ms}\n"
         )
         base = [sys.executable, "-m", "humanpt.cli.main"]
         children = []
         try:
-            for verb in ("router", "sim_robot", "alter_gateway"):
+            for verb in ("router", "sim_robot", "robot_gateway"):
                 children.append(
                     subprocess.Popen(
                         [*base, verb, "--config", str(cfg)],
@@ -200,7 +200,7 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
                     if e.code == "fault" and measuring.is_set():
                         faults.append(f"{e.source} fault: {e.text}")
 
-                sub = s.declare_subscriber("humanpt/bench/alter_gateway/robot_state", on_state)
+                sub = s.declare_subscriber("humanpt/bench/robot_gateway/robot_state", on_state)
                 ev_sub = s.declare_subscriber("humanpt/bench/*/events", on_event)
                 deadline = time.monotonic() + 15.0
                 while seq[0] < 5 and time.monotonic() < deadline:

@@ -1,7 +1,7 @@
 """``humanpt bench faults``: the attack set of issue 14 against a live twin, one row each.
 
 :func:`run_faults` starts the whole system live (:func:`humanpt.twin.live.run_live`: router,
-sim_robot behind a pty, alter_gateway, sim_camera, perception, pose_filter, controller,
+sim_robot behind a pty, robot_gateway, sim_camera, perception, pose_filter, controller,
 operator, as processes), waits until the servo loop runs, then injects each attack of
 :data:`ATTACKS` in turn from a Zenoh client session (or, for the forged STRT, on the serial
 line itself), each followed by a recovery check, and stops the twin (always: on an error and
@@ -14,7 +14,7 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
   and) how long after the injection ended the loop was back; and how long robot states
   stopped in between (gaps over two cycles, less one cycle each) (robot states every
   cycle without a fault, ``tob_state`` finite and FULL, the servo error small) for 1 s;
-- data lost: messages missing (sequence gaps) in ``alter_gateway/robot_state`` and
+- data lost: messages missing (sequence gaps) in ``robot_gateway/robot_state`` and
   ``pose_filter/tob_state`` over the same window.
 
 Every wait has a timeout; what does not come is reported as "not observed".
@@ -89,7 +89,7 @@ class FaultRow:
 class Monitor:
     """What the bench's session sees: arrival time (monotonic s) and message, per topic."""
 
-    SHORTS = ("alter_gateway/robot_state", "pose_filter/tob_state", "sim_robot/truth", "controller/status")
+    SHORTS = ("robot_gateway/robot_state", "pose_filter/tob_state", "sim_robot/truth", "controller/status")
 
     def __init__(self, session, cell: str):
         self.lock = threading.Lock()
@@ -208,12 +208,12 @@ def attack_param(ctx: Ctx, row: FaultRow) -> None:
     sets = {"max_speed_mm_s": 1000.0, "envelope_min_mm": [-1e6, -1e6, -1e6],
             "envelope_max_mm": [1e6, 1e6, 1e6], "stale_cycles": 100, "fault_after_missed": 10000}
     t0 = time.monotonic()
-    replies = list(ctx.session.get(params_key(ctx.cell, "alter_gateway"), payload=json.dumps({"set": sets}),
+    replies = list(ctx.session.get(params_key(ctx.cell, "robot_gateway"), payload=json.dumps({"set": sets}),
                                    timeout=REACTION_TIMEOUT_S))
     t1 = time.monotonic()
     bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
     if not bodies:
-        row.note = "no reply from alter_gateway"
+        row.note = "no reply from robot_gateway"
         return
     results = bodies[0].get("results", [])
     accepted = [r.get("key") or r.get("text") for r in results if r.get("ok")]
@@ -225,7 +225,7 @@ def attack_param(ctx: Ctx, row: FaultRow) -> None:
 
 def attack_forged_state(ctx: Ctx, row: FaultRow) -> None:
     """A copy of the latest robot state stamped an hour ahead, on the gateway's key."""
-    last = ctx.mon.latest("alter_gateway/robot_state")
+    last = ctx.mon.latest("robot_gateway/robot_state")
     if last is None:
         row.note = "no robot state to copy"
         return
@@ -233,7 +233,7 @@ def attack_forged_state(ctx: Ctx, row: FaultRow) -> None:
     forged.CopyFrom(last[1])
     forged.header.stamp_ns = time.time_ns() + 3600 * 10**9
     t0 = time.monotonic()
-    ctx.put("alter_gateway/robot_state", forged)
+    ctx.put("robot_gateway/robot_state", forged)
     hit = ctx.mon.wait_event(t0, ("robot_state_rejected",), "pose_filter")
     _answered(row, hit, t0, "pose_filter: robot_state_rejected", "no robot_state_rejected")
 
@@ -253,14 +253,14 @@ def attack_nan(ctx: Ctx, row: FaultRow) -> None:
 
 def attack_absurd(ctx: Ctx, row: FaultRow) -> None:
     """A tool-frame step of 1.7e305 m for the next cycle on controller/command."""
-    last = ctx.mon.latest("alter_gateway/robot_state")
+    last = ctx.mon.latest("robot_gateway/robot_state")
     cycle = (last[1].cycle + 1) if last else 0
     cmd = pb.FlangeCommand(header=header(time.time_ns(), 0, "tool"), cycle=cycle, mode=pb.CONTROL_MODE_TRACK)
     cmd.d_translation_m.x = 1.7e305
     t0 = time.monotonic()
     ctx.put("controller/command", cmd)
-    hit = ctx.mon.wait_event(t0, ("bad_input",), "alter_gateway")
-    _answered(row, hit, t0, "alter_gateway: bad_input", "no bad_input from alter_gateway")
+    hit = ctx.mon.wait_event(t0, ("bad_input",), "robot_gateway")
+    _answered(row, hit, t0, "robot_gateway: bad_input", "no bad_input from robot_gateway")
 
 
 def attack_strt(ctx: Ctx, row: FaultRow) -> None:
@@ -295,13 +295,13 @@ def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
     t1 = time.monotonic()
     # Robot states must keep coming: the largest gap between their cycle stamps (producer
     # clock, so the bench's own busy loop does not count) during the flood.
-    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("alter_gateway/robot_state", t0, t1 + 0.2)]
+    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("robot_gateway/robot_state", t0, t1 + 0.2)]
     gap_ms = 1e-6 * max(np.diff(stamps), default=0) if len(stamps) > 1 else math.inf
     evs = ctx.mon.events_since(t0)
     faults = [ev.code for ev in evs if ev.code in ("fault", "link_down", "watchdog_fault")]
     late = sum(ev.code in ("deadline_missed", "stale_command") for ev in evs)
-    faulted = any(m.status.fault for _, m in ctx.mon.since("alter_gateway/robot_state", t0))
-    hit = ctx.mon.wait_event(t0, ("bad_command",), "alter_gateway", timeout_s=0.5)
+    faulted = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
+    hit = ctx.mon.wait_event(t0, ("bad_command",), "robot_gateway", timeout_s=0.5)
     row.expected = len(stamps) > 1 and gap_ms < 10 * 1e3 * ctx.cycle_s and not faults and not faulted
     row.reaction_ms = _ms(hit and hit[0], t0)
     row.note = (f"{n / (t1 - t0):.0f} puts/s; robot_state max gap {gap_ms:.0f} ms; {late} late-command events"
@@ -341,12 +341,12 @@ def attack_console(ctx: Ctx, row: FaultRow) -> None:
 def attack_reset_fault(ctx: Ctx, row: FaultRow) -> None:
     """reset_fault with no operator's name."""
     t0 = time.monotonic()
-    hit = _console(ctx, "alter_gateway", "reset_fault", {}, ("bad_console_command", "fault_cleared", "no_fault"))
-    ev = [e for e in ctx.mon.events_since(t0) if e.source == "alter_gateway"
+    hit = _console(ctx, "robot_gateway", "reset_fault", {}, ("bad_console_command", "fault_cleared", "no_fault"))
+    ev = [e for e in ctx.mon.events_since(t0) if e.source == "robot_gateway"
           and e.code in ("bad_console_command", "fault_cleared", "no_fault")]
     row.expected = bool(ev) and ev[0].code == "bad_console_command"
     row.reaction_ms = _ms(hit, t0)
-    row.note = f"alter_gateway: {ev[0].code}" if ev else "no answer"
+    row.note = f"robot_gateway: {ev[0].code}" if ev else "no answer"
 
 
 PARTITION_S = 5.0  # the router frozen this long: shorter than zenoh's 10 s lease
@@ -372,16 +372,16 @@ def attack_partition(ctx: Ctx, row: FaultRow, seconds: float = PARTITION_S) -> N
         time.sleep(seconds)  # the partition's length is the attack itself, not a wait for an event
     finally:
         os.kill(pid, sig.SIGCONT)
-    silent = ctx.mon.wait_event(t0, ("controller_silent",), "alter_gateway")
-    resumed = ctx.mon.wait_event(t0, ("command_resumed",), "alter_gateway", timeout_s=30.0)
-    faulted = ctx.mon.wait_event(t0, ("fault",), "alter_gateway", timeout_s=0.0)
+    silent = ctx.mon.wait_event(t0, ("controller_silent",), "robot_gateway")
+    resumed = ctx.mon.wait_event(t0, ("command_resumed",), "robot_gateway", timeout_s=30.0)
+    faulted = ctx.mon.wait_event(t0, ("fault",), "robot_gateway", timeout_s=0.0)
     row.expected = silent is not None and resumed is not None and faulted is None
     # The hold is the gateway's: stamped by its clock when it happened, not when the
     # monitor heard of it (after the partition).
     row.reaction_ms = None if silent is None else (silent[1].header.stamp_ns - wall0) / 1e6
     held_s = (None if silent is None or resumed is None
               else (resumed[1].header.stamp_ns - silent[1].header.stamp_ns) / 1e9)
-    row.note = (f"router frozen {seconds:g} s; alter_gateway: "
+    row.note = (f"router frozen {seconds:g} s; robot_gateway: "
                 + ("controller_silent" if silent else "NO controller_silent")
                 + (f", command_resumed (held {held_s:.2f} s)" if resumed else ", NO command_resumed")
                 + ("; FAULT latched" if faulted else ""))
@@ -494,7 +494,7 @@ def attack_unauthorised(ctx: Ctx, row: FaultRow, n: int = 20) -> None:
     seen = _Seen(ctx, lambda c: c.header.frame_id == ROGUE_FRAME)
     pub = rogue.declare_publisher(topics.TOPICS["controller/command"].key(ctx.cell))
     try:
-        last = ctx.mon.latest("alter_gateway/robot_state")
+        last = ctx.mon.latest("robot_gateway/robot_state")
         cycle = (last[1].cycle + 1) if last else 0
         t0 = time.monotonic()
         for i in range(n):
@@ -581,14 +581,14 @@ def attack_rogue_token(ctx: Ctx, row: FaultRow) -> None:
         denied = _router_denied(ctx, t0, liveliness_key(ctx.cell, "controller"), timeout_s=2.0)
         t_kill = time.monotonic()
         ctx.control.kill("controller")
-        gone = ctx.mon.wait_event(t_kill, ("controller_gone",), "alter_gateway")
+        gone = ctx.mon.wait_event(t_kill, ("controller_gone",), "robot_gateway")
     finally:
         token.undeclare()
         ctx.control.start("controller")
-    back = ctx.mon.wait_event(t_kill, ("controller_back",), "alter_gateway", timeout_s=60.0)
+    back = ctx.mon.wait_event(t_kill, ("controller_back",), "robot_gateway", timeout_s=60.0)
     row.expected = gone is not None
     row.reaction_ms = _ms(gone and gone[0], t_kill)
-    row.note = (("controller killed: alter_gateway controller_gone" if gone else
+    row.note = (("controller killed: robot_gateway controller_gone" if gone else
                  "controller killed: NO controller_gone (masked)")
                 + ("; controller_back" if back else "; no controller_back")
                 + ("; router: access_denied on its key" if denied else "; no access_denied event"))
@@ -648,7 +648,7 @@ def loop_ok(mon: Monitor, cycle_s: float, now: float | None = None) -> tuple[boo
     """Whether the servo loop runs now: a robot state in the last 4 cycles without a fault, a
     finite FULL tob_state in the last 8, a controller status with a small servo error."""
     now = time.monotonic() if now is None else now
-    rs, tob, st = (mon.latest(s) for s in ("alter_gateway/robot_state", "pose_filter/tob_state",
+    rs, tob, st = (mon.latest(s) for s in ("robot_gateway/robot_state", "pose_filter/tob_state",
                                           "controller/status"))
     if rs is None or now - rs[0] > 4 * cycle_s:
         return False, "no robot state"
@@ -694,7 +694,7 @@ def wait_loop(mon: Monitor, cycle_s: float, timeout_s: float, stop: threading.Ev
 
 def operator_reset(ctx: Ctx) -> bool:
     """What the operator does after a fault: reset_fault on the gateway, then ALTER on."""
-    ok = _console(ctx, "alter_gateway", "reset_fault", {"operator": OPERATOR},
+    ok = _console(ctx, "robot_gateway", "reset_fault", {"operator": OPERATOR},
                   ("fault_cleared", "no_fault", "bad_console_command")) is not None
     return _console(ctx, "sim_robot", "alter_on", {"operator": OPERATOR}, ("alter_on", "bad_console_command")) \
         is not None and ok
@@ -748,10 +748,10 @@ def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
     if attack.keeps_loop and (not worst <= MAX_SERVO_ERROR_MM or not_full):
         row.recovered = False
         row.note += f"; the loop broke during it ({not_full} tob_states not FULL and finite)"
-    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("alter_gateway/robot_state", t0, t1)]
+    stamps = [m.header.stamp_ns for _, m in ctx.mon.since("robot_gateway/robot_state", t0, t1)]
     row.down_ms = float(sum(1e-6 * g - 1e3 * ctx.cycle_s for g in np.diff(stamps) if g > 2e9 * ctx.cycle_s)) \
         if len(stamps) > 1 else 0.0
-    row.lost = {s: seq_gaps(ctx.mon, s, t0, t1) for s in ("alter_gateway/robot_state", "pose_filter/tob_state")}
+    row.lost = {s: seq_gaps(ctx.mon, s, t0, t1) for s in ("robot_gateway/robot_state", "pose_filter/tob_state")}
     return row
 
 
@@ -815,9 +815,9 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         if "error" in result or not cfg_path.exists():
             raise RuntimeError(f"the live twin did not start: {result.get('error', 'no config written')}")
         file_cfg = cfgmod.load(cfg_path)
-        from humanpt.alter_gateway.config import AlterGatewayConfig
+        from humanpt.robot_gateway.config import AlterGatewayConfig
 
-        gw = file_cfg.component("alter_gateway", AlterGatewayConfig)
+        gw = file_cfg.component("robot_gateway", AlterGatewayConfig)
         cycle_s = gw.cycle_period_ms * 1e-3
         limit_mm = gw.max_step_mm
         as_identity, opened = _identity_sessions(file_cfg.runtime) if secure else (None, {})

@@ -1,12 +1,12 @@
 """A network partition between the cell's two machines, judged from the recordings (issue 19).
 
-The server (router, alter_gateway, sim_robot) and the client (camera side and control) each
+The server (router, robot_gateway, sim_robot) and the client (camera side and control) each
 record what they consumed and produced; a partition is judged afterwards from those files
 alone, against the times the link was cut and restored (wall-clock ns, the recordings' time
 base):
 
 - :func:`robot_track` - the flange position per ALTER cycle, from the gateway's own
-  ``alter_gateway/robot_state`` outputs (what the robot reported);
+  ``robot_gateway/robot_state`` outputs (what the robot reported);
 - :func:`holds` - per partition: how far the robot moved after the cut, when it stood still
   (and stayed still up to the restore), how long the hold lasted and when it moved again;
 - :func:`late_commands` - commands that reached the gateway after their cycle's reuse window
@@ -27,7 +27,7 @@ import numpy as np
 from humanpt.runtime.recording import IN, OUT, iter_entries
 from humanpt.schemas.convert import from_pose
 
-ROBOT_STATE = "alter_gateway/robot_state"
+ROBOT_STATE = "robot_gateway/robot_state"
 COMMAND = "controller/command"
 
 

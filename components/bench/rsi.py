@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from humanpt.alter_gateway.core import ROBOT_STATE
+from humanpt.robot_gateway.core import ROBOT_STATE
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.rsi.core import RsiGatewayCore
 from humanpt.rsi.shell import UdpAdapter

@@ -73,11 +73,11 @@ def latency_and_cycles(run_dir: Path, deadline_ms: float = 6.0) -> dict:
                 lat.append((e.t_ns - m) / 1e6)
     commands: dict[int, int] = {}
     states: list[tuple[int, int, int]] = []
-    for e in iter_entries(run_dir / "alter_gateway.mcap"):
+    for e in iter_entries(run_dir / "robot_gateway.mcap"):
         if e.direction == "in" and e.topic == "controller/command":
             c = pb.FlangeCommand.FromString(e.data).cycle
             commands.setdefault(c, e.t_ns)
-        elif e.direction == "out" and e.topic == "alter_gateway/robot_state":
+        elif e.direction == "out" and e.topic == "robot_gateway/robot_state":
             st = pb.RobotState.FromString(e.data)
             states.append((st.cycle, e.t_ns, st.missed_cycles))
     # Judge the cycles after the servo started commanding (the first command).

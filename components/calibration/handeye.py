@@ -509,7 +509,7 @@ class PoseCollector:
 
     It moves the robot with the controller's ``playback`` verb (one point: the tool pose
     that puts the flange on the planned pose), so every motion goes through the normal
-    command path (controller -> alter_gateway -> robot, with their limits) and the
+    command path (controller -> robot_gateway -> robot, with their limits) and the
     console's ``stop`` ends it."""
 
     def __init__(self, world_T_flange_mm: np.ndarray, flange_T_tool_mm: np.ndarray,

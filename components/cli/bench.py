@@ -65,7 +65,7 @@ def bench_perception(args) -> int:
 
 
 def bench_alter(args) -> int:
-    """alter_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
+    """robot_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
     from humanpt.bench.alter import line_capacity, measure_alter, shortest_sustained
 
     periods = tuple(float(p) for p in args.periods.split(",") if p.strip())

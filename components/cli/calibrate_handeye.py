@@ -137,26 +137,26 @@ def _save_pairs(path: str | None, A: np.ndarray, B: np.ndarray) -> None:
 def collect_live(cfg, rig, n_poses: int, timeout_s: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Drive a running cell through the planned poses (console commands to the controller
     over Zenoh, as ``humanpt console`` sends them) and collect the pairs from
-    ``alter_gateway/robot_state`` and ``perception/tob``. Ctrl-C or the console's ``stop``
+    ``robot_gateway/robot_state`` and ``perception/tob``. Ctrl-C or the console's ``stop``
     ends it (the robot is told to hold). Returns (A (n, 4, 4), B (n, 4, 4), notes)."""
     import queue
     import time
 
-    from humanpt.alter_gateway.config import AlterGatewayConfig
     from humanpt.calibration.handeye import HandEyeError, PoseCollector, plan_poses
     from humanpt.controller.config import ControllerConfig
     from humanpt.geometry.transforms import transform_from_x
+    from humanpt.robot_gateway.config import AlterGatewayConfig
     from humanpt.runtime.bus import open_tool_session
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas import topics
     from humanpt.schemas.convert import from_pose
 
     ctl = cfg.component("controller", ControllerConfig)
-    gw = cfg.component("alter_gateway", AlterGatewayConfig)
+    gw = cfg.component("robot_gateway", AlterGatewayConfig)
     cell = cfg.runtime.cell
     inbox: queue.Queue = queue.Queue()
     session = open_tool_session(cfg.runtime)
-    names = ("alter_gateway/robot_state", "perception/tob", "controller/events", "alter_gateway/events")
+    names = ("robot_gateway/robot_state", "perception/tob", "controller/events", "robot_gateway/events")
 
     def into_inbox(name: str):
         return lambda smp: inbox.put((time.monotonic_ns(), name, smp.payload.to_bytes()))
@@ -188,11 +188,11 @@ def collect_live(cfg, rig, n_poses: int, timeout_s: float) -> tuple[np.ndarray, 
             except queue.Empty:
                 raise HandEyeError(f"no robot state from the gateway in cell {cell} within 5 s (is the cell "
                                    "running, the robot in ALTER?)") from None
-            if n == "alter_gateway/robot_state":
+            if n == "robot_gateway/robot_state":
                 state = pb.RobotState.FromString(data)
                 start = mm(from_pose(state.world_T_flange))
                 first = time.monotonic() if first is None else first
-            elif n == "alter_gateway/events" and pb.Event.FromString(data).code == "robot_fault":
+            elif n == "robot_gateway/events" and pb.Event.FromString(data).code == "robot_fault":
                 raise HandEyeError(f"the robot is in FAULT ({pb.Event.FromString(data).text}); clear it first")
         from humanpt.sim_robot.config import SimRobotConfig
         from humanpt.twin.cal_handeye import puma_move_check
@@ -211,7 +211,7 @@ def collect_live(cfg, rig, n_poses: int, timeout_s: float) -> tuple[np.ndarray, 
                 break
             try:
                 t, n, data = inbox.get(timeout=0.05)
-                if n == "alter_gateway/robot_state":
+                if n == "robot_gateway/robot_state":
                     collector.on_robot_state(t, mm(from_pose(pb.RobotState.FromString(data).world_T_flange)))
                 elif n == "perception/tob":
                     m = pb.TobMeasurement.FromString(data)

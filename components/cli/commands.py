@@ -186,7 +186,7 @@ def _passthrough(args) -> list[str]:
 def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str, ...]]:
     """(label, start a router?, components) of ``up``'s arguments."""
     if args.components:
-        comps = tuple(c.strip() for c in args.components.split(",") if c.strip())
+        comps = tuple(cfgmod.current_name(c.strip()) for c in args.components.split(",") if c.strip())
         label, with_router = "custom", True
     elif args.profile:
         if args.profile in cfg.profiles:
@@ -541,7 +541,7 @@ def _param_action(args) -> tuple[str, str, list[str]]:
     """(action, component, rest) of ``param``'s positionals: ``COMPONENT [KEY=VALUE...]``,
     ``dump COMPONENT [FILE]`` or ``load COMPONENT FILE``."""
     if args.component not in ("dump", "load"):
-        return "set", args.component, list(args.assignments)
+        return "set", cfgmod.current_name(args.component), list(args.assignments)
     rest = list(args.assignments)
     if not rest:
         raise ValueError(f"param {args.component}: name the component (humanpt param {args.component} COMPONENT"
@@ -550,7 +550,7 @@ def _param_action(args) -> tuple[str, str, list[str]]:
     if len(rest) > most or (args.component == "load" and len(rest) != 2):
         raise ValueError(f"param {args.component}: expected COMPONENT {'[FILE]' if args.component == 'dump' else 'FILE'}"
                          f", got {' '.join(rest)}")
-    return args.component, rest[0], rest[1:]
+    return args.component, cfgmod.current_name(rest[0]), rest[1:]
 
 
 def param(args) -> int:

@@ -5,7 +5,7 @@ queryables (``humanpt/<cell>/<component>/params``), so every change reaches the 
 ``param`` input and is in its recording.  Commands (record, save, calibrate, playback,
 hold/track/return) are published on ``console/command`` and confirmed by the controller's
 answering event.  The status is read from ``controller/status``,
-``alter_gateway/robot_state`` and ``perception/tob``.  Like every component it is a client
+``robot_gateway/robot_state`` and ``perception/tob``.  Like every component it is a client
 of the router (``--connect`` for the other machine).  Without a verb it reads verbs from
 stdin, one per line (an interactive prompt on a terminal).
 """
@@ -156,7 +156,7 @@ def operator_name() -> str:
 
 STATUS_TOPICS = (
     "controller/status",
-    "alter_gateway/robot_state",
+    "robot_gateway/robot_state",
     "perception/tob",
     "pose_filter/tob_state",
 )
@@ -269,7 +269,7 @@ class StatusBoard:
         """One line: mode, visible sources, error, cycle misses, recording."""
         st, rs, tob = (
             self.get("controller/status"),
-            self.get("alter_gateway/robot_state"),
+            self.get("robot_gateway/robot_state"),
             self.get("perception/tob"),
         )
         parts = []
@@ -294,7 +294,7 @@ class StatusBoard:
 
     def block(self, alive: list[str]) -> str:
         """Several lines: everything the console knows."""
-        st, rs = self.get("controller/status"), self.get("alter_gateway/robot_state")
+        st, rs = self.get("controller/status"), self.get("robot_gateway/robot_state")
         tob, state = self.get("perception/tob"), self.get("pose_filter/tob_state")
         lines = [f"components up: {', '.join(alive) or 'none'}"]
         if st is not None:
@@ -570,7 +570,7 @@ def _add_actions(asub) -> dict[str, str]:
         help="mode, visible sources, error, cycle misses, recording",
         description="Print the live status once (or a line every --interval with --follow): "
         "controller mode, visible sources, |G-D| error (mm, deg), missed ALTER cycles, recording "
-        "and path points, from controller/status, alter_gateway/robot_state and perception/tob; with "
+        "and path points, from controller/status, robot_gateway/robot_state and perception/tob; with "
         "--follow also each warning or error event of a component or the router as it comes.",
     )
     q.add_argument(
@@ -627,7 +627,7 @@ def _add_actions(asub) -> dict[str, str]:
     q.add_argument("--overwrite", action="store_true", help="replace an existing file of that name")
     action(
         "reset-fault",
-        help="clear the ALTER gateway's latched fault (the operator's decision, logged by name)",
+        help="clear the robot gateway's latched fault (the operator's decision, logged by name)",
         description="Clear the gateway's latched fault (missed cycles, a lost controller...): "
         "corrections flow again once the controller commands. The gateway logs who asked "
         "(user@host of this console).",
@@ -762,7 +762,7 @@ def _do(con: Console, a) -> int:
     if v == "capture":
         return con.tell("finish" if a.finish else "capture", component="calibrate")
     if v == "reset-fault":
-        return con.command("reset_fault", {"operator": operator_name()}, component="alter_gateway")
+        return con.command("reset_fault", {"operator": operator_name()}, component="robot_gateway")
     if v == "alter":
         return con.command(f"alter_{a.state}", {"operator": operator_name()}, component="sim_robot")
     if v in ("hold", "track", "return"):

@@ -1,7 +1,7 @@
 """``humanpt demo``: the whole system on the digital twin, and its accuracy against ground truth.
 
 Live (default, :func:`humanpt.twin.live.run_live`): the router, sim_robot behind a pty,
-alter_gateway, operator, sim_camera, perception, pose_filter and controller (and viz with
+robot_gateway, operator, sim_camera, perception, pose_filter and controller (and viz with
 ``--viewer``) as separate processes over Zenoh.  ``--lockstep`` (:func:`humanpt.twin.run.run`):
 the same cores in one process on virtual time.  Either way every component records its
 MCAP in the run directory, the path is written as CSV, and an accuracy table against
@@ -223,6 +223,10 @@ def demo(args) -> int:
     from humanpt.twin.run import SECTIONS, OverrideError, SystemConfig
     from humanpt.twin.worlds import World
 
+    if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
+        if args.link != "alter" and args.link != args.robot:
+            raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")
+        args.link, args.robot = args.robot, "puma"
     calibrate = getattr(args, "calibrate", False)
     # The job's defaults: the paper's Table 3 seam (the tip) in a realistic world; a plain
     # demo: the arc in the ideal world.

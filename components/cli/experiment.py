@@ -40,6 +40,17 @@ STATS = ("ME", "MAE", "MaxE", "SD")
 KINDS = ("paper", "truth")
 
 
+def rsi_cycle_ms(args) -> float | None:
+    """``--link rsi [--cycle-ms]`` -> the RSI cycle (4 or 12); None over ALTER. ValueError
+    for a cycle the link does not have (``--link alter --cycle-ms 4``)."""
+    from humanpt.twin.live import link_cycle_ms
+
+    cycle = link_cycle_ms(args.link, args.cycle_ms)
+    if args.link == "rsi" and args.robot != "puma":
+        raise ValueError("--link rsi drives the simulated Puma (--robot puma)")
+    return None if args.link == "alter" else cycle
+
+
 def _row(label: str, v) -> list[str]:
     return [label, *(tables.number(float(x)) for x in v)]
 
@@ -113,7 +124,8 @@ def budget(args) -> int:
             + (f", warned: {', '.join(row.warnings)}" if row.warnings else ""))
         print(f"  [{i}/{n}] {row.source}: {what} ({row.wall_s:.1f} s)", file=sys.stderr, flush=True)
 
-    rows = bud.run_budget(args.scenario, args.seed, args.robot, only, args.duration, progress)
+    rows = bud.run_budget(args.scenario, args.seed, args.robot, only, args.duration, progress,
+                          rsi_cycle_ms=rsi_cycle_ms(args))
     text = bud.format_table(rows, args.scenario, args.seed, args.robot)
     print(text)
     (out / "budget.txt").write_text(text + "\n")
@@ -158,7 +170,8 @@ def hard(args) -> int:
     def progress(i: int, n: int, label: str) -> None:
         print(f"  [{i}/{n}] {label} done", file=sys.stderr, flush=True)
 
-    cases = hc.run_cases(scenarios, speeds, args.seed, world, args.robot, over, progress)
+    cases = hc.run_cases(scenarios, speeds, args.seed, world, args.robot, over, progress,
+                         rsi_cycle_ms=rsi_cycle_ms(args))
     text = (f"humanpt experiment hard: world {world.name}, seed {args.seed}, robot {args.robot}\n"
             + hc.format_cases(cases))
     print(text)
@@ -188,6 +201,7 @@ def experiment(args) -> int:
 
     if args.seeds < 1:
         raise ValueError(f"--seeds must be >= 1, got {args.seeds}")
+    rsi = rsi_cycle_ms(args)  # a bad link or cycle fails before anything is made
     out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-{args.name}"
     made = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
@@ -199,7 +213,8 @@ def experiment(args) -> int:
         for seed in seeds:
             run_dir = (out / f"run-{m}" if len(seeds) == 1 else out / f"run-{m}-seed{seed}") if args.record else None
             try:
-                r = run_experiment(args.name, m, seed, args.robot, run_dir, args.vectors, args.speed_scale, over)
+                r = run_experiment(args.name, m, seed, args.robot, run_dir, args.vectors, args.speed_scale, over,
+                                   rsi_cycle_ms=rsi)
             except OverrideError as e:
                 if made and not any(out.iterdir()):
                     out.rmdir()  # nothing was run: leave no empty run directory behind
@@ -219,6 +234,8 @@ def experiment(args) -> int:
                                         for stat, a in per[kind].items()} for kind in KINDS}}
     how = "against the mean" if args.name == "static" else "against the known path"
     over_seeds = (f"; median over seeds {seeds[0]}..{seeds[-1]}" if len(seeds) > 1 else f"; seed {seeds[0]}")
+    if rsi:
+        over_seeds += f"; the robot over RSI at {rsi:g} ms"
     title = (f"humanpt experiment {args.name}: the paper's Table {TABLE[args.name]} on the twin "
              f"(mm, deg; errors {how} as the paper computed them, and against ground truth{over_seeds})")
     names = {"paper": "paper's perception", "weighted": "default perception"}

@@ -9,7 +9,7 @@ import sys
 
 from humanpt import __version__
 from humanpt.operator.scenario import BUILTIN_SCENARIOS
-from humanpt.runtime.config import ConfigError
+from humanpt.runtime.config import RENAMED_COMPONENTS, ConfigError
 from humanpt.runtime.recording import RecordingError
 from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
 
@@ -76,8 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
     p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
-    p.add_argument("--robot", choices=["puma", "standin"], default="puma",
-                   help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in")
+    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi"], default="puma",
+                   help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in; "
+                   "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi)")
     p.add_argument("--link", choices=["alter", "rsi"], default="alter",
                    help="the robot link: the Puma's serial ALTER line at 28 ms (default) or a KUKA "
                    "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md)")
@@ -131,6 +132,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(one seed's figures move with any arithmetic change: the rendered noise "
                         "is drawn per pixel)")
     p.add_argument("--robot", choices=["puma", "standin"], default="puma")
+    p.add_argument("--link", choices=["alter", "rsi"], default="alter",
+                   help="the simulated Puma's link: ALTER at 28 ms (default, the paper's) or RSI (UDP/XML; "
+                   "--cycle-ms 4|12, default 12); the controller and the filter take the link's cycle")
+    p.add_argument("--cycle-ms", type=float, choices=[4.0, 12.0], metavar="4|12", help="with --link rsi: 4 or 12")
     p.add_argument("--out", help="output directory (default runs/<time>-experiment-<name>)")
     p.add_argument("--record", action="store_true", help="also record every component's MCAP")
     p.add_argument("--no-plots", action="store_true")
@@ -173,8 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<profile>)")
     p.add_argument("--duration", type=float, help="stop everything after this many seconds")
 
+    old_names = {new: old for old, new in RENAMED_COMPONENTS.items()}
     for name in sorted(COMPONENTS):
         p = sub.add_parser(name, help=f"run the {name} component alone",
+                           aliases=[old_names[name]] if name in old_names else [],
                            description=f"Run the {name} component alone, as a client of the router.")
         _add_common(p)
         p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<name>)")
@@ -470,14 +477,14 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--n", type=int, default=300, help="round trips per payload (default 300)")
     q.add_argument("--seconds", type=float, default=3.0, help="seconds of MCAP writing per case (default 3)")
     q = bsub.add_parser("alter", help="ALTER link: cycles on time at 28 ms; shortest cycle without a miss",
-                        description="alter_gateway <-> sim_robot over a real pty in real time, with a scripted "
+                        description="robot_gateway <-> sim_robot over a real pty in real time, with a scripted "
                         "controller: cycles served on time (the controller's own command, applied within its "
                         "cycle) over --duration at 28 ms, then short runs at each of --periods; prints a table "
                         "and the shortest period sustained without a miss.")
     q.add_argument("--duration", type=float, default=60.0, help="seconds at 28 ms (default 60)")
     q.add_argument("--periods", default="28,16,8,4,2", help="cycle periods to try, ms (default 28,16,8,4,2)")
     q.add_argument("--search-seconds", type=float, default=3.0, help="seconds per period tried (default 3)")
-    q.add_argument("--zenoh", action="store_true", help="sim_robot and alter_gateway as child processes through "
+    q.add_argument("--zenoh", action="store_true", help="sim_robot and robot_gateway as child processes through "
                    "a router, this process the controller over Zenoh (default: threads of this process)")
     q = bsub.add_parser("rsi", help="RSI link (UDP/XML): cycles on time, late-reply histogram, gateway work",
                         description="The gateway (its UDP adapter on a thread) <-> the simulated KUKA RSI-style "

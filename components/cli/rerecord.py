@@ -2,7 +2,7 @@
 
 The reference runs are listed in ``recordings/runs.toml`` (scenario, twin seconds, seed,
 ``--set`` overrides).  Each is recorded LIVE with ``humanpt demo`` (router, sim_robot behind a
-pty, alter_gateway, sim_camera, perception, pose_filter, controller and operator as
+pty, robot_gateway, sim_camera, perception, pose_filter, controller and operator as
 processes over Zenoh) into a temporary directory.  Then, per run:
 
 1. every new component recording must replay exactly, byte for byte (else nothing is
@@ -67,6 +67,8 @@ class ReferenceRun:
     duration_s: float
     seed: int = 0
     overrides: tuple[str, ...] = ()  # --set SECTION.KEY=VALUE items
+    link: str = "alter"  # the robot link (demo --link): alter or rsi
+    cycle_ms: float | None = None  # with link rsi: 4 or 12 (demo --cycle-ms)
 
     def __post_init__(self) -> None:
         if not _NAME.match(self.name):
@@ -84,6 +86,11 @@ class ReferenceRun:
             raise ValueError(
                 f"reference run {self.name}: seed must be an integer >= 0, got {self.seed!r}"
             )
+        if self.link not in ("alter", "rsi"):
+            raise ValueError(f"reference run {self.name}: link must be alter or rsi, got {self.link!r}")
+        if self.cycle_ms is not None and (self.link != "rsi" or self.cycle_ms not in (4, 12)):
+            raise ValueError(f"reference run {self.name}: cycle_ms is RSI's 4 or 12 (with link = \"rsi\"), "
+                             f"got {self.cycle_ms!r}")
         for o in self.overrides:
             if not isinstance(o, str) or "=" not in o or "." not in o.partition("=")[0]:
                 raise ValueError(
@@ -101,6 +108,10 @@ class ReferenceRun:
             "--seed",
             str(self.seed),
         ]
+        if self.link != "alter":
+            args += ["--link", self.link]
+        if self.cycle_ms is not None:
+            args += ["--cycle-ms", f"{self.cycle_ms:g}"]
         for o in self.overrides:
             args += ["--set", o]
         return args + ["--run-dir", str(run_dir)]
@@ -130,11 +141,11 @@ def load_specs(path: str | Path) -> list[ReferenceRun]:
     common = tuple(data.get("set", ()))
     specs = []
     for name, t in data.get("runs", {}).items():
-        bad = set(t) - {"scenario", "duration_s", "seed", "set"}
+        bad = set(t) - {"scenario", "duration_s", "seed", "set", "link", "cycle_ms"}
         if bad:
             raise golden.GoldenError(
                 f"{p}: [runs.{name}] unknown key {sorted(bad)[0]!r} "
-                "(scenario, duration_s, seed, set)"
+                "(scenario, duration_s, seed, set, link, cycle_ms)"
             )
         try:
             specs.append(
@@ -144,6 +155,8 @@ def load_specs(path: str | Path) -> list[ReferenceRun]:
                     t.get("duration_s", 0),
                     t.get("seed", 0),
                     common + tuple(t.get("set", ())),
+                    t.get("link", "alter"),
+                    t.get("cycle_ms"),
                 )
             )
         except (ValueError, TypeError) as e:

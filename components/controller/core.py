@@ -126,7 +126,7 @@ class ControllerCore(Core):
     config_type = ControllerConfig
     ports = (
         Port("pose_filter/tob_state", pb.TobState, "_cycle"),
-        Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+        Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),
         Port("console/command", pb.Command, "_on_console"),
         # The shell's path writer reports what a save did (a local input).
         Port("path_file", pb.Event, "_on_path_file"),

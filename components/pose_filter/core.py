@@ -40,7 +40,7 @@ class PoseFilterCore(Core):
     config_type = PoseFilterConfig
     ports = (
         Port("perception/tob", pb.TobMeasurement, "_on_tob"),
-        Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+        Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),
     )
 
     uses_rig = True  # the hand-eye transform and the target's triangle

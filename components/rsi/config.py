@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.config import AlterGatewayConfig
 from humanpt.runtime.config import Range, live
 
 RSI_CYCLES_MS = (4.0, 12.0)  # the RSI cycle times (IPO_FAST and IPO modes)
@@ -47,7 +47,7 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # logged) by the adapter. Empty: any sender (a test bench; not for a cell on a shared net).
     udp_robot: str = ""
     sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
-    link: Literal["alter", "rsi"] = "rsi"  # ([alter_gateway] link = "rsi" selects this config)
+    link: Literal["alter", "rsi"] = "rsi"  # ([robot_gateway] link = "rsi" selects this config)
 
     def __post_init__(self) -> None:
         super().__post_init__()

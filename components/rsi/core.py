@@ -1,19 +1,19 @@
 """The gateway core (pure) over a KUKA RSI-style link: ``udp_rx`` datagrams in (a
 ``<Rob>`` per robot cycle), ``udp_tx`` datagrams out (the ``<Sen>`` answer echoing the
-IPOC), the same safety rules as over ALTER (humanpt.alter_gateway.core.GatewayCore),
-the same topics (``alter_gateway/robot_state``, ``alter_gateway/events``)."""
+IPOC), the same safety rules as over ALTER (humanpt.robot_gateway.core.GatewayCore),
+the same topics (``robot_gateway/robot_state``, ``robot_gateway/events``)."""
 
 from __future__ import annotations
 
 from typing import Any
 
-from humanpt.alter_gateway.core import WATCH, AlterGatewayCore, GatewayCore, gateway_ports
+from humanpt.robot_gateway.core import WATCH, AlterGatewayCore, GatewayCore, gateway_ports
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.rsi.link import RsiLink
 
 
 class RsiGatewayCore(GatewayCore):
-    name = "alter_gateway"  # one gateway component whatever its link (topics unchanged)
+    name = "robot_gateway"  # one gateway component whatever its link (topics unchanged)
     config_type = RsiGatewayConfig
     ports = gateway_ports(RsiLink.rx_topic)
     watch = WATCH

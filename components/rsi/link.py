@@ -16,7 +16,7 @@ from collections import OrderedDict
 import numpy as np
 
 from humanpt.alter import LinkUp, Transmit
-from humanpt.alter_gateway.link import CycleReceived, CycleState, LinkError
+from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError
 from humanpt.rsi.protocol import (
     RsiCorrection,
     RsiProtocolError,

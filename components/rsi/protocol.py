@@ -27,8 +27,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from humanpt.alter_gateway.safety import clamp_norm, wire_rotation_deg
 from humanpt.geometry.transforms import rotation_angle_rad, rotation_from_ypr_deg, transform_from_x
+from humanpt.robot_gateway.safety import clamp_norm, wire_rotation_deg
 
 # A datagram longer than this is not an RSI message (the real ones are < 1.5 kB).
 MAX_DATAGRAM = 4096

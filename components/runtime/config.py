@@ -197,7 +197,7 @@ def build(cls: type, table: Mapping[str, Any], *, source: str, section: str) -> 
     if not isinstance(table, Mapping):
         raise ConfigError(f"{where}: must be a [section] (a table), got {type(table).__name__} {table!r}")
     select = getattr(cls, "config_class_for", None)
-    if select is not None:  # a config whose class one key chooses ([alter_gateway] link)
+    if select is not None:  # a config whose class one key chooses ([robot_gateway] link)
         cls = select(table)
     types_ = hints(cls)
     names = [f.name for f in dataclasses.fields(cls) if f.init]
@@ -295,6 +295,17 @@ def replace_live(obj: Any, key: str, value_json: str, hard: Any = None) -> Any:
         return dataclasses.replace(obj, **{key: typed})
     except (ValueError, TypeError) as e:
         raise ConfigError(f"{key}: {e}") from e
+
+
+# Components that changed their name: old name -> new. A config section, profile entry,
+# `humanpt OLD` or `humanpt param OLD` under the old name still works (issue 22 made the
+# ALTER gateway one gateway for every robot link: robot_gateway).
+RENAMED_COMPONENTS: dict[str, str] = {"alter_gateway": "robot_gateway"}
+
+
+def current_name(name: str) -> str:
+    """A component's name now (``alter_gateway`` -> ``robot_gateway``)."""
+    return RENAMED_COMPONENTS.get(name, name)
 
 
 @dataclass(frozen=True)
@@ -511,6 +522,13 @@ def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str,
     profiles = {k: coerce(tuple[str, ...], v, f"{source}: [profiles] {k}") for k, v in profiles_raw.items()}
     record = build(RecordConfig, data.get("record", {}), source=source, section="record")
     sections = {k: dict(v) for k, v in data.items() if k not in ("runtime", "profiles", "record")}
+    for old, new in RENAMED_COMPONENTS.items():
+        if old in sections:
+            if new in sections:
+                raise ConfigError(f"{source}: both [{old}] and [{new}]: [{old}] is the old name of [{new}]; "
+                                  f"keep one")
+            sections[new] = sections.pop(old)
+    profiles = {k: tuple(current_name(c) for c in v) for k, v in profiles.items()}
     if known_sections is not None:
         for name in sections:
             if name not in known_sections:

@@ -764,7 +764,8 @@ def iter_entries(
             if isinstance(r, Schema):
                 schemas[r.id] = r.name
             elif isinstance(r, Channel):
-                channels[r.id] = (r.topic, r.metadata.get("direction", OUT), r.schema_id, dict(r.metadata))
+                channels[r.id] = (topics.current_topic(r.topic), r.metadata.get("direction", OUT), r.schema_id,
+                                  dict(r.metadata))
             elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
                 metadata.update(r.metadata)
             elif isinstance(r, McapMessage):
@@ -915,6 +916,18 @@ def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
     return meta, complete
 
 
+def _current_names(meta: dict[str, str]) -> None:
+    """A recording of a renamed component (RENAMED_COMPONENTS) reads under its name now:
+    its ``component`` and its core's class path (``humanpt.<old>.`` -> ``humanpt.<new>.``)."""
+    from humanpt.runtime.config import RENAMED_COMPONENTS
+
+    for old, new in RENAMED_COMPONENTS.items():
+        if meta.get("component") == old:
+            meta["component"] = new
+        if meta.get("core", "").startswith(f"humanpt.{old}."):
+            meta["core"] = f"humanpt.{new}." + meta["core"][len(f"humanpt.{old}."):]
+
+
 def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
     """Read a whole recording in file order.
 
@@ -926,6 +939,7 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
     notes: list[str] = []
     meta: dict[str, str] = {}
     entries = list(iter_entries(p, notes, meta))
+    _current_names(meta)
     rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None)
     if require_humanpt:
         if not rec.metadata:

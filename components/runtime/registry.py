@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import inspect
 
+from humanpt.runtime.config import current_name
 from humanpt.runtime.core import Core
 
 # name -> "module:Class".  A component appears here once its core exists.
@@ -14,7 +15,7 @@ COMPONENTS: dict[str, str] = {
     "perception": "humanpt.perception.core:PerceptionCore",
     "pose_filter": "humanpt.pose_filter.core:PoseFilterCore",
     "controller": "humanpt.controller.core:ControllerCore",
-    "alter_gateway": "humanpt.alter_gateway.core:AlterGatewayCore",
+    "robot_gateway": "humanpt.robot_gateway.core:AlterGatewayCore",
     "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
     "camera": "humanpt.camera.core:CameraCore",
     "sim_camera": "humanpt.sim_camera.core:SimCameraCore",
@@ -29,7 +30,7 @@ COMPONENTS: dict[str, str] = {
 # are not listed.
 ADAPTERS: dict[str, str] = {
     "controller": "humanpt.controller.shell:adapters",
-    "alter_gateway": "humanpt.alter_gateway.shell:adapters",
+    "robot_gateway": "humanpt.robot_gateway.shell:adapters",
     "sim_robot": "humanpt.sim_robot.shell:adapters",
     "camera": "humanpt.camera.capture:capture_adapters",
     "viz": "humanpt.viz.sink:adapters",
@@ -37,8 +38,8 @@ ADAPTERS: dict[str, str] = {
 
 # The paper's two machines.  Single-machine use needs no profile ("all").
 PROFILES: dict[str, dict] = {
-    "server": {"router": True, "components": ("alter_gateway",),
-               "doc": "router + ALTER gateway, beside the robot controller's serial port"},
+    "server": {"router": True, "components": ("robot_gateway",),
+               "doc": "router + the robot gateway (ALTER serial or RSI UDP), beside the robot controller"},
     "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz", "scene"),
                "doc": "vision and control, connecting to the server's router"},
     "twin": {"router": True, "components": ("operator", "standin_robot", "sim_camera"),
@@ -64,7 +65,8 @@ def import_path(path: str) -> type:
 
 
 def core_class(name: str) -> type[Core]:
-    """The core class of component ``name``."""
+    """The core class of component ``name`` (or its old name, ``RENAMED_COMPONENTS``)."""
+    name = current_name(name)
     if name not in COMPONENTS:
         raise UnknownComponentError(
             f"no component {name!r} in this version; available: {', '.join(sorted(COMPONENTS))}")
@@ -76,7 +78,7 @@ def adapters_for(name: str, config, run_dir=None, rig=None) -> list:
 
     A factory that takes a ``run_dir`` keyword gets the run directory (to write files
     beside the recordings), one that takes ``rig`` the cell's rig."""
-    path = ADAPTERS.get(name)
+    path = ADAPTERS.get(current_name(name))
     if not path:
         return []
     factory = import_path(path)

@@ -55,7 +55,7 @@ log = logging.getLogger("humanpt.security")
 # (a real cell issues none: then only the gateway publishes robot state).
 STANDS_IN: dict[str, tuple[str, ...]] = {
     "sim_camera": ("camera/image",),
-    "standin_robot": ("alter_gateway/robot_state", "sim_robot/truth"),
+    "standin_robot": ("robot_gateway/robot_state", "sim_robot/truth"),
 }
 
 

@@ -22,7 +22,7 @@ class SceneConfig:
     """``[scene]`` (README.md of the component has the table)."""
 
     # The robot base in the world, X = (x, y, z mm, yaw, pitch, roll deg): the same value as
-    # [alter_gateway] world_T_base_mm_deg (the twin sets both); only splits world -> flange
+    # [robot_gateway] world_T_base_mm_deg (the twin sets both); only splits world -> flange
     # into world -> base -> flange for the 3D view.
     world_T_base_mm_deg: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0,) * 6
     # Distance of the desired point D from the camera at start; follows the controller's

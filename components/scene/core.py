@@ -11,7 +11,7 @@ Frames (foxglove.FrameTransform parent -> child; a_T_b is the pose of b in a):
 parent              child               source
 ==================  ==================  =================================================
 ``world``           ``base``            config ``world_T_base_mm_deg`` (the gateway's)
-``base``            ``flange``          alter_gateway/robot_state (world_T_flange)
+``base``            ``flange``          robot_gateway/robot_state (world_T_flange)
 ``flange``          ``camera``          rig: hand-eye flange_T_camera
 ``camera``          ``camera_right``    rig: PSVS virtual camera 1 (O1, mirror rotation)
 ``camera``          ``camera_left``     rig: PSVS virtual camera 2 (O2, mirror rotation)
@@ -149,7 +149,7 @@ class SceneCore(Core):
     config_type = SceneConfig
     uses_rig = True
     ports = (
-        Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+        Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),
         Port("pose_filter/tob_state", pb.TobState, "_on_tob_state"),
         Port("controller/status", pb.ControllerStatus, "_on_status"),
         Port("controller/path", pb.PathPoint, "_on_path"),

@@ -1,6 +1,6 @@
 """What the robot played against the seam (issue 21.4): ``humanpt path compare SEAM RUN``.
 
-The tool's actual path is read from a run's recordings: every ``alter_gateway/robot_state``
+The tool's actual path is read from a run's recordings: every ``robot_gateway/robot_state``
 the robot reported (``world_T_flange``) times the controller's ``flange_T_tool`` (from the
 controller's recorded configuration), between the controller's last ``playback_started``
 and the ``playback_done`` after it (the whole run if there was none).  The report: each
@@ -70,11 +70,11 @@ def played_tool_path(run_dir: str | Path) -> Played:
     states: list[tuple[int, np.ndarray]] = []
     for f in sorted(run.glob("*.mcap")):
         for e in iter_entries(f):
-            if e.direction == "out" and e.topic == "alter_gateway/robot_state":
+            if e.direction == "out" and e.topic == "robot_gateway/robot_state":
                 msg: pb.RobotState = e.decode()
                 states.append((msg.header.stamp_ns, from_pose(msg.world_T_flange)))
     if not states:
-        raise RecordingError(f"{run}: no robot state was recorded (alter_gateway/robot_state)")
+        raise RecordingError(f"{run}: no robot state was recorded (robot_gateway/robot_state)")
     states.sort(key=lambda s: s[0])
     t = np.array([s for s, _ in states], dtype=np.int64)
     lo, hi, window = t[0], t[-1], "whole run (no playback_started event)"

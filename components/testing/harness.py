@@ -83,7 +83,7 @@ def scripted_command(
 class ScriptedControllerCore(Core):
     name = "controller"
     config_type = ScriptedControllerConfig
-    ports = (Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
+    ports = (Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
 
     def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
         if any(lo <= msg.cycle <= hi for lo, hi in self.config.mute):

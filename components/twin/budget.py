@@ -5,7 +5,7 @@ the rig (what the pipeline believes) at its nominal values every time.
 Each run's recorded path is judged against ground truth (:func:`humanpt.twin.run.accuracy`):
 ME, RMS and MaxE per coordinate of X (x, y, z mm; psi, theta, phi deg), whether the
 pipeline warned (warning and error events of perception, pose_filter, controller and
-alter_gateway, while the path was recorded: the twin's own events are not warnings to a user,
+robot_gateway, while the path was recorded: the twin's own events are not warnings to a user,
 and start-up ones are listed apart), and how often perception
 saw the whole target.  A run that fails or records nothing is a row that says so, never
 the end of the budget.  ``humanpt experiment budget`` prints :func:`format_table`, writes
@@ -35,7 +35,7 @@ __all__ = ["PIPELINE", "ISSUE_FIGURES", "IssueFigure", "BudgetRow", "plan", "run
 
 # The components whose warnings a user sees (the twin's sim_camera, sim_robot, operator
 # and stand-in robot are the world, not the system).
-PIPELINE = ("perception", "pose_filter", "controller", "alter_gateway")
+PIPELINE = ("perception", "pose_filter", "controller", "robot_gateway")
 
 
 def _norm3(v: np.ndarray) -> float:
@@ -168,17 +168,19 @@ def _speed_and_shifted(src, source: str) -> tuple[float, np.ndarray]:
 
 def run_world(world: World, scenario: str = "arc", seed: int = 0, robot: str = "puma", *,
               source: str | None = None, what: str = "", size: str = "",
-              duration_s: float | None = None) -> BudgetRow:
+              duration_s: float | None = None, rsi_cycle_ms: float | None = None) -> BudgetRow:
     """Run ``scenario`` on ``world`` with the nominal rig, the path recorded from the
     operator's start, and judge it.  Never raises for what the run does: a failure is the
-    row's ``status``.  ``duration_s``: twin time (default the scenario's, as the demo)."""
+    row's ``status``.  ``duration_s``: twin time (default the scenario's, as the demo).
+    ``rsi_cycle_ms`` (4 or 12): the simulated Puma over the RSI link instead of ALTER."""
     from .run import SystemConfig, accuracy, run
 
     row = BudgetRow(source or world.name, what, size)
     t0 = time.perf_counter()
     try:
         cfg = SystemConfig.for_scenario(scenario, seed, world=world)
-        res = run(cfg, robot=robot, duration_s=duration_s, record_from_s=cfg.operator.start_delay_s)
+        res = run(cfg, robot=robot, duration_s=duration_s, record_from_s=cfg.operator.start_delay_s,
+                  rsi_cycle_ms=rsi_cycle_ms)
         acc = accuracy(res.world, cfg.controller, cfg.sim_camera.flange_T_camera)
     except Exception as e:  # noqa: BLE001 - a world that breaks the run is itself a result
         row.status = f"failed: {type(e).__name__}: {e}"
@@ -209,7 +211,8 @@ def run_world(world: World, scenario: str = "arc", seed: int = 0, robot: str = "
 
 def run_budget(scenario: str = "arc", seed: int = 0, robot: str = "puma", only: Sequence[str] | None = None,
                duration_s: float | None = None,
-               progress: Callable[[int, int, BudgetRow], None] | None = None) -> list[BudgetRow]:
+               progress: Callable[[int, int, BudgetRow], None] | None = None,
+               rsi_cycle_ms: float | None = None) -> list[BudgetRow]:
     """The whole budget: the ideal world, each planned source alone (:func:`plan`; skipped
     ones as rows that say so), then all the run sources together ("all": with no ``only``
     that is :meth:`World.realistic`, minus sources for another robot).  ``progress(i, n,
@@ -225,19 +228,21 @@ def run_budget(scenario: str = "arc", seed: int = 0, robot: str = "puma", only: 
         if progress is not None:
             progress(len(rows), total, row)
 
-    done(run_world(World.ideal(), scenario, seed, robot, what="every error off", size="-", duration_s=duration_s))
+    done(run_world(World.ideal(), scenario, seed, robot, what="every error off", size="-", duration_s=duration_s,
+                   rsi_cycle_ms=rsi_cycle_ms))
     for s, skip in todo:
         if skip:
             done(BudgetRow(s.name, s.what, s.size, status=skip))
         else:
             done(run_world(World.only(s.name), scenario, seed, robot, source=s.name, what=s.what, size=s.size,
-                           duration_s=duration_s))
+                           duration_s=duration_s, rsi_cycle_ms=rsi_cycle_ms))
     if together:
         everything = len(runnable) == len(ERROR_SOURCES)
         world = World.realistic() if everything else World("all", tuple(runnable))
         size = "all sources above" + ("" if everything else f" that ran ({len(runnable)})")
         done(run_world(world, scenario, seed, robot, source="all", what="all together (realistic world)"
-                       if everything else "all of them together", size=size, duration_s=duration_s))
+                       if everything else "all of them together", size=size, duration_s=duration_s,
+                       rsi_cycle_ms=rsi_cycle_ms))
     return rows
 
 

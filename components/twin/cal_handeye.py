@@ -1,7 +1,7 @@
 """Hand-eye calibration (AX = YB) observed on the lock-step twin.
 
 The twin's world (:class:`humanpt.twin.worlds.World`) with the simulated Puma behind the
-ALTER link (sim_robot + alter_gateway), the TOB on a fixture (the static scenario, without
+ALTER link (sim_robot + robot_gateway), the TOB on a fixture (the static scenario, without
 the operator's tremor: nobody holds it) and the pipeline (perception, pose filter,
 controller) on the given rig. The robot moves itself through poses planned around the
 target (:func:`humanpt.calibration.handeye.plan_poses`) with the controller's ``playback``
@@ -82,16 +82,16 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         sys_.run_for(1.0)
         start = None
         for o in ls.outputs:
-            if o.topic == "alter_gateway/robot_state":
+            if o.topic == "robot_gateway/robot_state":
                 start = _mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
-            elif o.topic == "alter_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
+            elif o.topic == "robot_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
                 raise HandEyeError(f"the robot faulted before the calibration could start "
                                    f"({pb.Event.FromString(o.data).text}); nothing written")
         ls.outputs.clear()
         if start is None:
             raise HandEyeError("no robot state from the gateway in the first second: is the robot up?")
         if robot == "puma":
-            gateway = next(c for c in ls.cores if c.name == "alter_gateway").config
+            gateway = next(c for c in ls.cores if c.name == "robot_gateway").config
             box = (gateway.envelope_min_mm, gateway.envelope_max_mm)
             check = puma_move_check(gateway.world_T_base_mm_deg)
         else:  # the stand-in: no joints; the demo's envelope around the start
@@ -196,14 +196,14 @@ def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig:
 
 def _feed(collector: PoseCollector, outputs) -> None:
     for o in outputs:
-        if o.topic == "alter_gateway/robot_state":
+        if o.topic == "robot_gateway/robot_state":
             msg = pb.RobotState.FromString(o.data)
             collector.on_robot_state(o.t_ns, _mm(from_pose(msg.world_T_flange)))
         elif o.topic == "perception/tob":
             msg = pb.TobMeasurement.FromString(o.data)
             full = msg.status == pb.TOB_STATUS_FULL
             collector.on_measurement(o.t_ns, _mm(from_pose(msg.camera_T_tob)) if full else None)
-        elif o.topic == "alter_gateway/events":
+        elif o.topic == "robot_gateway/events":
             msg = pb.Event.FromString(o.data)
             if msg.code == "robot_fault":
                 collector.end(f"the robot faulted ({msg.text})")

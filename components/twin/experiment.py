@@ -68,24 +68,25 @@ class ExperimentResult:
 
 def run_experiment(name: str, method: str, seed: int = 0, robot: str = "puma", run_dir: str | Path | None = None,
                    vectors: int = STATIC_VECTORS, speed_scale: float = 1.0,
-                   overrides: dict[str, dict] | None = None) -> ExperimentResult:
+                   overrides: dict[str, dict] | None = None, rsi_cycle_ms: float | None = None) -> ExperimentResult:
     """Experiment ``name`` (one of :data:`EXPERIMENTS`) with perception ``method``.
     ``overrides``: {section: {key: value}} for sim_camera, perception, pose_filter,
     controller (OverrideError on a bad key or value). Static: ``vectors`` recorded once
     the servo has settled on the still target; arc, trapezium: the scenario at
-    ``speed_scale`` times its speed, recorded from its start."""
+    ``speed_scale`` times its speed, recorded from its start. ``rsi_cycle_ms`` (4 or 12):
+    the simulated Puma over the RSI link instead of ALTER (:func:`humanpt.twin.run.run`)."""
     cfg = SystemConfig.for_scenario(name, seed, overrides, controller=ControllerConfig(recording_delay_cycles=10),
                                     perception=PerceptionConfig(method=method))
     op = cfg.operator
     if name == "static":
         op = dataclasses.replace(op, start_delay_s=3.0)
         record_from_s = 3.0
-        duration = 3.0 + vectors * 10 * cfg.controller.cycle_period_ms * 1e-3 + 0.2
+        duration = 3.0 + vectors * 10 * (rsi_cycle_ms or cfg.controller.cycle_period_ms) * 1e-3 + 0.2
     else:
         op = dataclasses.replace(op, speed_scale=speed_scale)
         record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale
     res = run(dataclasses.replace(cfg, operator=op), robot=robot, duration_s=duration, record_from_s=record_from_s,
-              run_dir=run_dir)
+              run_dir=run_dir, rsi_cycle_ms=rsi_cycle_ms)
     which, err_truth, _ = res.path_truth_errors()
     _, xg, xt = res.path_points()
     x = xt if xt is not None else xg

@@ -77,21 +77,22 @@ def _event_counts(world) -> Counter:
 
 
 def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | None = None, robot: str = "puma",
-             overrides: dict[str, dict] | None = None, run_dir=None) -> HardCase:
-    """Run ``scenario`` at ``speed_mm_s`` on the lock-step twin and judge it."""
+             overrides: dict[str, dict] | None = None, run_dir=None, rsi_cycle_ms: float | None = None) -> HardCase:
+    """Run ``scenario`` at ``speed_mm_s`` on the lock-step twin and judge it (``rsi_cycle_ms``,
+    4 or 12: the simulated Puma over the RSI link instead of ALTER)."""
     over = {**(overrides or {})}
     over["operator"] = {**over.get("operator", {}), "speed_mm_s": float(speed_mm_s)}
     cfg = SystemConfig.for_scenario(scenario, seed, over, world=world, controller=ControllerConfig())
     op = cfg.operator
     moving_s = scenario_duration_s(op) / op.speed_scale
     res = run(cfg, robot=robot, duration_s=op.start_delay_s + moving_s + 0.5, record_from_s=op.start_delay_s,
-              run_dir=run_dir)
+              run_dir=run_dir, rsi_cycle_ms=rsi_cycle_ms)
     w = res.world
     start_ns = evaluate.scenario_start_ns(w)
     end_ns = start_ns + round(moving_s * 1e9)
     points = [pb.PathPoint.FromString(o.data) for o in w.outputs("controller/path")]
     stamps = np.array([p.header.stamp_ns for p in points], dtype=np.int64)
-    interval_s = cfg.controller.recording_delay_cycles * cfg.controller.cycle_period_ms * 1e-3
+    interval_s = cfg.controller.recording_delay_cycles * (rsi_cycle_ms or cfg.controller.cycle_period_ms) * 1e-3
     inside = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
     edges = np.concatenate([[start_ns], inside, [end_ns]]) if len(inside) else np.array([start_ns, end_ns])
     gap_frames = max(0.0, (float(np.diff(edges).max()) * 1e-9 - interval_s) / FRAME_S)
@@ -120,12 +121,13 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
 
 def run_cases(scenarios=HARD_SCENARIOS, speeds=HARD_SPEEDS_MM_S, seed: int = 0, world: World | None = None,
               robot: str = "puma", overrides: dict[str, dict] | None = None,
-              progress: Callable[[int, int, str], None] | None = None) -> list[HardCase]:
+              progress: Callable[[int, int, str], None] | None = None,
+              rsi_cycle_ms: float | None = None) -> list[HardCase]:
     """Every scenario at every speed (progress(done, total, label) after each)."""
     cases = [(s, v) for s in scenarios for v in speeds]
     out = []
     for i, (s, v) in enumerate(cases):
-        out.append(run_case(s, v, seed, world, robot, overrides))
+        out.append(run_case(s, v, seed, world, robot, overrides, rsi_cycle_ms=rsi_cycle_ms))
         if progress is not None:
             progress(i + 1, len(cases), f"{s} at {v:g} mm/s")
     return out

@@ -1,4 +1,4 @@
-"""The whole system on the twin, live: the router, sim_robot behind a pty, alter_gateway,
+"""The whole system on the twin, live: the router, sim_robot behind a pty, robot_gateway,
 operator, sim_camera, perception, pose_filter and controller (and viz) as separate
 processes over Zenoh, each recording its MCAP in the run directory (``humanpt demo``).
 
@@ -41,7 +41,7 @@ from .world import start_flange_for
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
            "run_live", "write_toml"]
 
-LIVE_COMPONENTS = ("sim_robot", "alter_gateway", "sim_camera", "perception", "pose_filter", "controller", "scene")
+LIVE_COMPONENTS = ("sim_robot", "robot_gateway", "sim_camera", "perception", "pose_filter", "controller", "scene")
 PKI_DIR = "pki"                    # under the run directory, with --secure
 OPERATOR_IDENTITY = "demo-operator"  # the certificate the run's own session (and its tools) present
 TOOL_IDENTITY = "tool"             # a read-only tool's certificate (humanpt topics --as tool)
@@ -94,16 +94,16 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     cycle_ms = link_cycle_ms(link, cycle_ms)
     if link == "alter":
         return
-    from humanpt.alter_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.config import AlterGatewayConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
     robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
-                              cfgmod.build(AlterGatewayConfig, sections["alter_gateway"], source="demo",
-                                           section="alter_gateway"), cycle_ms, udp)
-    sections["sim_robot"], sections["alter_gateway"] = to_table(robot), to_table(gateway)
+                              cfgmod.build(AlterGatewayConfig, sections["robot_gateway"], source="demo",
+                                           section="robot_gateway"), cycle_ms, udp)
+    sections["sim_robot"], sections["robot_gateway"] = to_table(robot), to_table(gateway)
     sections["controller"]["cycle_period_ms"] = cycle_ms
     sections.setdefault("pose_filter", {})["predict_ahead_ms"] = cycle_ms
     sections.setdefault("viz", {})["cycle_period_ms"] = cycle_ms
@@ -138,7 +138,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
         "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
                     "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer",
                     "rig": "rig.toml"},
-        "operator": to_table(op), "sim_robot": to_table(robot), "alter_gateway": to_table(gateway),
+        "operator": to_table(op), "sim_robot": to_table(robot), "robot_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
         # Foxglove's frames: the robot base where the gateway puts it.
         "scene": {"world_T_base_mm_deg": list(gateway.world_T_base_mm_deg), "dz_mm": ctl.dz_mm},

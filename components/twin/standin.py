@@ -5,7 +5,7 @@ exists, this core plays robot and gateway at once: it consumes ``controller/comm
 (humanpt.FlangeCommand: per-cycle translation in m and rotation vector in rad, world frame)
 and on every cycle (28 ms) applies the latest command - clipped to the paper's step-
 controller limits, 100 mm/s and 60 deg/s - to the true flange pose, then publishes
-``alter_gateway/robot_state`` (what the gateway would report) and ``sim_robot/truth``
+``robot_gateway/robot_state`` (what the gateway would report) and ``sim_robot/truth``
 (what the camera simulator needs): the pose at the cycle's stamp, reached by moving over
 the cycle that ends there. No kinematics, no joint limits, no latency - unless
 ``lag_time_constant_ms`` > 0: then the commands move a setpoint and the flange follows it
@@ -195,7 +195,7 @@ class StandInRobotCore(Core):
         world_T_flange_m = self.world_T_flange.copy()
         world_T_flange_m[:3, 3] /= 1000.0
         state = pb.RobotState(
-            header=self.next_header("alter_gateway/robot_state", t_ns, "world"),
+            header=self.next_header("robot_gateway/robot_state", t_ns, "world"),
             cycle=self.cycle,
             missed_cycles=self.missed,
             status=pb.AlterStatus(alter_active=True, arm_power=True),
@@ -204,4 +204,4 @@ class StandInRobotCore(Core):
         truth = pb.Truth(header=self.next_header("sim_robot/truth", t_ns, "world"))
         truth.world_T_flange.CopyFrom(pose(world_T_flange_m))
         self.cycle += 1
-        return [*out, ("alter_gateway/robot_state", state), ("sim_robot/truth", truth)]
+        return [*out, ("robot_gateway/robot_state", state), ("sim_robot/truth", truth)]

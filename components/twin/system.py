@@ -44,9 +44,9 @@ def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") 
 
 
 def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400):
-    """(sim_robot config, alter_gateway config) for a Puma 762 twin starting at the given
+    """(sim_robot config, robot_gateway config) for a Puma 762 twin starting at the given
     flange pose, with a workspace envelope of +-``envelope_mm`` around it."""
-    from humanpt.alter_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.config import AlterGatewayConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
     base = puma_placement(world_T_flange_start_mm)
@@ -105,7 +105,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     {``sim_robot`` | ``standin_robot``: {key: value}} of the world's robot.
     ``mount_world_T_flange_mm``: the Puma's comfortable flange pose (4, 4) mm, where it is
     mounted around (default: the start pose).  ``robot``: ``standin`` (integrates commands) or
-    ``puma`` (sim_robot + alter_gateway over a simulated 38 400 baud ALTER line).
+    ``puma`` (sim_robot + robot_gateway over a simulated 38 400 baud ALTER line).
     ``digest=False``: no output hash (faster; for runs nobody compares).  ``rsi_cycle_ms``
     (4 or 12; ``puma`` only): the Puma behind the RSI link instead (UDP paths with 0.1 ms
     delivery), the controller and the pose filter's prediction at that cycle."""
@@ -125,7 +125,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
         start[:3, :3] = D[:3, :3] @ start[:3, :3]
         start[:3, 3] += off[:3]
         if robot == "puma":
-            from humanpt.alter_gateway.core import AlterGatewayCore
+            from humanpt.robot_gateway.core import AlterGatewayCore
             from humanpt.sim_robot.core import SimRobotCore
 
             # The robot is mounted so that it starts where the camera sees the target (or
@@ -155,9 +155,9 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
     if wire and rsi_cycle_ms is not None:
-        world.lockstep.connect_udp("sim_robot", "alter_gateway")
+        world.lockstep.connect_udp("sim_robot", "robot_gateway")
     elif wire:
-        world.lockstep.connect_serial("alter_gateway", "sim_robot", baud=robot_cores[1].config.baud)
+        world.lockstep.connect_serial("robot_gateway", "sim_robot", baud=robot_cores[1].config.baud)
     return world
 
 

@@ -118,7 +118,7 @@ def build_world(
     Without ``robot``, the flange starts where the camera sees the scenario's first pose
     on its optical axis at ``dz_mm`` (:func:`start_flange_for`). With ``run_dir`` every core
     is recorded there (``humanpt replay`` replays each). ``robot_cores`` replaces the
-    stand-in robot by other cores (e.g. ``sim_robot`` and ``alter_gateway``, wired with
+    stand-in robot by other cores (e.g. ``sim_robot`` and ``robot_gateway``, wired with
     ``world.lockstep.connect_serial``); one of them must publish ``sim_robot/truth``.
     """
     if isinstance(scenario, OperatorConfig):

@@ -32,7 +32,7 @@ SHOWN_TOPICS: tuple[str, ...] = (
     "controller/command",
     "controller/status",
     "controller/path",
-    "alter_gateway/robot_state",
+    "robot_gateway/robot_state",
     "operator/truth",
     "sim_robot/truth",
     "sim_camera/truth",

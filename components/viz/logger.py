@@ -17,7 +17,7 @@ Entity paths (the blueprint's views are rooted at ``world``, ``image``, ``plots`
 
 =====================================  ================================================
 ``world``                              robot base frame, z up (ViewCoordinates)
-``world/flange``                       world_T_flange (alter_gateway/robot_state), axes
+``world/flange``                       world_T_flange (robot_gateway/robot_state), axes
 ``world/flange/camera``                flange_T_camera (hand-eye), axes
 ``world/flange/camera/psvs``           the PSVS camera frustum (Pinhole, to d_z)
 ``world/flange/camera/desired``        the virtual point D (camera_T_desired(d_z)), axes
@@ -653,7 +653,7 @@ _HANDLERS = {
     "camera/image": RerunLogger._image,
     "perception/tob": RerunLogger._tob,
     "pose_filter/tob_state": RerunLogger._tob_state,
-    "alter_gateway/robot_state": RerunLogger._robot_state,
+    "robot_gateway/robot_state": RerunLogger._robot_state,
     "controller/command": RerunLogger._command,
     "controller/status": RerunLogger._status,
     "controller/path": RerunLogger._path,

@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.alter import ControllerStatus, Correction, StatusBits
 from humanpt.alter.messages import NO_FLAGS
-from humanpt.alter_gateway.safety import correction_angle_deg, wire_rotation_deg
+from humanpt.robot_gateway.safety import correction_angle_deg, wire_rotation_deg
 
 
 def _rz_ry_rx(z_deg: float, y_deg: float, x_deg: float) -> np.ndarray:

@@ -82,7 +82,7 @@ def test_quick_attacks_are_seen_held_and_recovered(tmp_path):
     assert leftovers(run_dir) == []
     # What the twin recorded says the same: the gateway refused the five keys, the controller
     # the three commands.
-    assert codes(run_dir, "alter_gateway").count("param_rejected") == 5
+    assert codes(run_dir, "robot_gateway").count("param_rejected") == 5
     assert codes(run_dir, "controller").count("bad_command") == 3
 
 

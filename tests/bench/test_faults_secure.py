@@ -51,7 +51,7 @@ def test_secure_rows_held_recovered_nothing_lost(tmp_path):
     assert (run_dir / "pki" / "perception.pem").exists()
     # A client with a valid non-controller certificate cannot move the robot: none of its
     # commands (frame "bench-rogue") is among what the gateway received, in any segment...
-    gw = read(run_dir / "alter_gateway.mcap")
+    gw = read(run_dir / "robot_gateway.mcap")
     cmds = [e.decode() for e in gw.inputs if e.topic == "controller/command"]
     assert len(cmds) > 100, "the gateway received (almost) no commands at all: nothing was judged"
     assert [c.cycle for c in cmds if c.header.frame_id == "bench-rogue"] == []
@@ -99,7 +99,7 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
 
     pki = tmp_path / "pki"
     security.init_ca(pki, "test")
-    for name in ("router", "perception", "alter_gateway", "tool"):
+    for name in ("router", "perception", "robot_gateway", "tool"):
         security.issue(pki, name)
     port = free_port()
     cfg = write_config(tmp_path / "cell.toml", port, extra=f'security = "mtls"\npki = "pki"\n'
@@ -109,7 +109,7 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
     rt = load(cfg).runtime
     tob = topics.TOPICS["perception/tob"].key("test")
     events, after = Inbox(), Inbox()
-    sessions = [zenoh.open(zenoh_config(rt, identity=n)) for n in ("alter_gateway", "tool", "perception")]
+    sessions = [zenoh.open(zenoh_config(rt, identity=n)) for n in ("robot_gateway", "tool", "perception")]
     gw, tool, rogue = sessions
     try:
         gw.declare_subscriber(topics.TOPICS["controller/command"].key("test"), lambda s: None)

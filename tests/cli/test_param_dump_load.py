@@ -58,32 +58,32 @@ def test_dump_then_load_all_or_nothing(router, procs, tmp_path, cli_main, capsys
 
 
 def test_load_rolls_back_when_the_component_refuses_one(router, procs, tmp_path, cli_main, capsys):
-    """alter_gateway's safety limits may only become stricter at run time (the component
+    """robot_gateway's safety limits may only become stricter at run time (the component
     checks against the values it started with): a file tightening one and loosening another
     leaves both as they were."""
     _, cfg = router
     with open(cfg, "a") as f:
-        f.write('\n[alter_gateway]\nport = "loop://"\n')  # pyserial's loopback: no robot needed
+        f.write('\n[robot_gateway]\nport = "loop://"\n')  # pyserial's loopback: no robot needed
     c = ["--config", str(cfg)]
 
     def params() -> dict:
-        assert cli_main(["param", "alter_gateway", *c, "--timeout", "1"]) == 0
+        assert cli_main(["param", "robot_gateway", *c, "--timeout", "1"]) == 0
         out = capsys.readouterr().out
         return json.loads(out[out.index("{"):])["params"]
 
-    procs.start("alter_gateway", *c, "--run-dir", str(tmp_path / "run"))
+    procs.start("robot_gateway", *c, "--run-dir", str(tmp_path / "run"))
 
     def answering() -> bool:
-        ok = cli_main(["param", "alter_gateway", *c, "--timeout", "1"]) == 0
+        ok = cli_main(["param", "robot_gateway", *c, "--timeout", "1"]) == 0
         capsys.readouterr()
         return ok
 
     wait_for(answering, 30, "the gateway's parameters")
     before = params()
     f = tmp_path / "limits.toml"
-    f.write_text(f"[alter_gateway]\nstale_cycles = {before['stale_cycles'] - 1}\n"
+    f.write_text(f"[robot_gateway]\nstale_cycles = {before['stale_cycles'] - 1}\n"
                  f"max_speed_mm_s = {before['max_speed_mm_s'] * 2}\n")
-    assert cli_main(["param", "load", "alter_gateway", str(f), *c]) == 1
+    assert cli_main(["param", "load", "robot_gateway", str(f), *c]) == 1
     err = capsys.readouterr().err
     rejected = [ln for ln in err.splitlines() if ln.startswith("REJECTED")]
     assert len(rejected) == 1 and "max_speed_mm_s" in rejected[0], err  # stale_cycles was set ...

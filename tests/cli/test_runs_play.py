@@ -189,7 +189,7 @@ def test_runs_merge_keeps_local_topics_apart(run_dir, tmp_path, cli_main):
     counts = {c.topic: s.statistics.channel_message_counts.get(cid, 0) for cid, c in s.channels.items()}
     rec = recorded_outputs(run_dir)
     # both ends of the ALTER link write serial_tx: two channels, never one
-    assert counts["humanpt/cell0/alter_gateway/local/serial_tx"] > 0
+    assert counts["humanpt/cell0/robot_gateway/local/serial_tx"] > 0
     assert counts["humanpt/cell0/sim_robot/local/serial_tx"] > 0
     assert "humanpt/cell0/serial_tx" not in counts
     assert sum(counts.values()) == sum(rec.values())

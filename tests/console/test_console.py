@@ -84,7 +84,7 @@ def test_status_board_line_and_block():
     )
     b.update("controller/status", st.SerializeToString())
     b.update(
-        "alter_gateway/robot_state", pb.RobotState(cycle=42, missed_cycles=1).SerializeToString()
+        "robot_gateway/robot_state", pb.RobotState(cycle=42, missed_cycles=1).SerializeToString()
     )
     line = b.line()
     assert (
@@ -199,7 +199,7 @@ def test_console_status_shows_what_is_published(router, tmp_path):
     def publish():
         with zenoh_client(port) as s:
             st = s.declare_publisher("humanpt/test/controller/status")
-            rs = s.declare_publisher("humanpt/test/alter_gateway/robot_state")
+            rs = s.declare_publisher("humanpt/test/robot_gateway/robot_state")
             i = 0
             while not stop.is_set():
                 st.put(
@@ -260,9 +260,9 @@ def test_console_says_when_nobody_answers(router):
 def test_reset_fault_goes_to_the_gateway_with_the_operators_name(router, procs, tmp_path):
     port, cfg = router
     conf = tmp_path / "gw.toml"
-    conf.write_text(cfg.read_text() + f'\n[alter_gateway]\nport = "{tmp_path / "no-robot"}"\n')
-    procs.start("alter_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
-    _wait_alive(port, ("alter_gateway",))
+    conf.write_text(cfg.read_text() + f'\n[robot_gateway]\nport = "{tmp_path / "no-robot"}"\n')
+    procs.start("robot_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
+    _wait_alive(port, ("robot_gateway",))
     r = run_cli("console", "--config", str(conf), "--timeout", "20", "reset-fault")
     assert r.returncode == 0 and "no_fault" in r.stdout, r.stdout + r.stderr
     assert "reset_fault by " in r.stdout and "@" in r.stdout  # who asked, as user@host

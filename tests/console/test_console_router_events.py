@@ -28,7 +28,7 @@ pytestmark = pytest.mark.timeout(90)
 def secure_cell(tmp_path, procs):
     pki = tmp_path / "pki"
     security.init_ca(pki, "test")
-    for name in ("router", "perception", "alter_gateway", "tool"):
+    for name in ("router", "perception", "robot_gateway", "tool"):
         security.issue(pki, name)
     port = free_port()
     cfg = write_config(tmp_path / "cell.toml", port, extra='security = "mtls"\npki = "pki"\n')
@@ -43,10 +43,10 @@ def test_console_events_shows_the_routers_refusals(secure_cell, procs):
     con = procs.start("console", "--config", str(cfg), "--as", "tool", "events", "--duration", "30")
     command = topics.TOPICS["controller/command"].key("test")
     with zenoh.open(zenoh_config(rt, identity="perception")) as rogue, \
-            zenoh.open(zenoh_config(rt, identity="alter_gateway")) as gw:
+            zenoh.open(zenoh_config(rt, identity="robot_gateway")) as gw:
         # a component's own warning too: the console shows both kinds alike
-        gw_events = topics.TOPICS["alter_gateway/events"].key("test")
-        marker = pb.Event(severity=pb.SEVERITY_WARNING, source="alter_gateway", code="bench_marker", text="x")
+        gw_events = topics.TOPICS["robot_gateway/events"].key("test")
+        marker = pb.Event(severity=pb.SEVERITY_WARNING, source="robot_gateway", code="bench_marker", text="x")
         # Keep trying until the console shows the refusal (the router reports the 1st, 10th,
         # 100th... per identity/message/key; the console's subscription may come after the 1st).
         buf = ""  # the console's output so far (a read may end mid-line)
@@ -74,7 +74,7 @@ def shown(lines: list[str], command: str) -> bool:
     gateway's warning, each as an event line."""
     return (any(line.startswith("event router WARNING access_denied:") and f"refused Put (ingress) on {command} from "
                 in line for line in lines)
-            and any(line.startswith("event alter_gateway WARNING bench_marker: x") for line in lines))
+            and any(line.startswith("event robot_gateway WARNING bench_marker: x") for line in lines))
 
 
 def test_a_command_the_router_refuses_is_said_so(secure_cell):
@@ -84,7 +84,7 @@ def test_a_command_the_router_refuses_is_said_so(secure_cell):
     naming the certificate), not a plain "is it running?"."""
     cfg, _ = secure_cell
     rt = load(cfg).runtime
-    with zenoh.open(zenoh_config(rt, identity="alter_gateway")) as gw:  # a listener on console/command
+    with zenoh.open(zenoh_config(rt, identity="robot_gateway")) as gw:  # a listener on console/command
         got: list[bytes] = []
         sub = gw.declare_subscriber(topics.TOPICS["console/command"].key("test"),
                                     lambda s: got.append(s.payload.to_bytes()))

@@ -75,7 +75,7 @@ class Rig:
         for _ in range(n):
             t = self.k * DT_NS
             self.at_cycle[self.k] = self.flange.copy()
-            self.core.step(t, "alter_gateway/robot_state", pb.RobotState(
+            self.core.step(t, "robot_gateway/robot_state", pb.RobotState(
                 header=header(t, self.k, "world"), world_T_flange=pose(self.flange), cycle=self.k))
             T, v, w = self.tob_fn(t)
             st = pb.TobState(header=header(t, self.k, "world"), world_T_tob=pose(T), status=self.status_fn(self.k),
@@ -322,8 +322,8 @@ def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_c
             st = pb.TobState(header=header(t, k, "world"), world_T_tob=pose(tob), status=pb.TOB_STATUS_FULL,
                              linear_velocity_m_s=vector3(np.zeros(3)), angular_velocity_rad_s=vector3(np.zeros(3)),
                              cycle=k)
-            order = [("pose_filter/tob_state", st), ("alter_gateway/robot_state", rs)] if k == swap_at else \
-                [("alter_gateway/robot_state", rs), ("pose_filter/tob_state", st)]
+            order = [("pose_filter/tob_state", st), ("robot_gateway/robot_state", rs)] if k == swap_at else \
+                [("robot_gateway/robot_state", rs), ("pose_filter/tob_state", st)]
             for topic, m in order:
                 for tp, out in core.step(t + 1, topic, m):
                     if tp == "controller/command":
@@ -347,7 +347,7 @@ def test_the_cycle_counter_wraps_without_losing_a_command():
     cycles = []
     for k in (0xFFFFFFFE, 0xFFFFFFFF, 0, 1):
         t = 1_000_000_000 + len(cycles) * DT_NS
-        core.step(t, "alter_gateway/robot_state", pb.RobotState(header=header(t, 0, "world"),
+        core.step(t, "robot_gateway/robot_state", pb.RobotState(header=header(t, 0, "world"),
                                                                 world_T_flange=pose(flange), cycle=k))
         st = pb.TobState(header=header(t, 0, "world"), world_T_tob=pose(tob), status=pb.TOB_STATUS_FULL,
                          linear_velocity_m_s=vector3(np.zeros(3)), angular_velocity_rad_s=vector3(np.zeros(3)),

@@ -21,14 +21,14 @@ def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path):
     r = run_cli("demo", "--lockstep", "--scenario", "arc", "--duration", "6", "--run-dir", str(run), timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "recorded path of G against ground truth" in r.stdout
-    assert {p.stem for p in run.glob("*.mcap")} >= {"operator", "sim_robot", "alter_gateway", "sim_camera",
+    assert {p.stem for p in run.glob("*.mcap")} >= {"operator", "sim_robot", "robot_gateway", "sim_camera",
                                                       "perception", "pose_filter", "controller"}
     path = pathfile.read(run / "paths" / "path-1.csv")
     assert len(path) > 5
     # The servo kept the target: the path follows the paper's arc (radius 246 mm).
     radius = np.linalg.norm(path.x_g[:, :2] - [147.5, 1378.5], axis=1)
     assert np.all(np.abs(radius - 246.0) < 1.0)
-    for comp in ("controller", "alter_gateway", "sim_robot"):
+    for comp in ("controller", "robot_gateway", "sim_robot"):
         res = replay(run / f"{comp}.mcap")
         # An output per 28 ms ALTER cycle of the 6 s run (recorded from 1 s after start-up).
         assert res.match and res.compared >= 150, res.report()

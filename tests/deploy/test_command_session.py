@@ -1,6 +1,6 @@
 """The gateway accepts commands only from the controller session it follows (issue 19 item 3).
 
-Real parts: a real router, ``humanpt alter_gateway`` and ``humanpt sim_robot`` as processes
+Real parts: a real router, ``humanpt robot_gateway`` and ``humanpt sim_robot`` as processes
 over a real pty; two controller sessions of this test, each a Zenoh client with its own
 ``controller`` liveliness token. The first commands +0.5 mm along x every cycle; then a
 second session (a second controller, or a forger that read the robot states and stamps its
@@ -43,7 +43,7 @@ class Controller:
         self.pub = self.session.declare_publisher(COMMAND)
         self.dp_m, self.seq = dp_m, seq0
         self.speaking = threading.Event()
-        self.sub = self.session.declare_subscriber("humanpt/test/alter_gateway/robot_state", self._on_state)
+        self.sub = self.session.declare_subscriber("humanpt/test/robot_gateway/robot_state", self._on_state)
 
     def _on_state(self, sample) -> None:
         if not self.speaking.is_set():
@@ -68,15 +68,15 @@ def test_a_second_controller_session_holds_the_robot_and_never_moves_it(procs, t
     sec = f'security = "{security}"\npki = "{pki}"\n'
     if security == "mtls":
         init_ca(pki, "test")
-        for name in ("router", "alter_gateway", "sim_robot", "controller", "tool"):
+        for name in ("router", "robot_gateway", "sim_robot", "controller", "tool"):
             issue(pki, name)
     cfg = write_config(tmp_path / "alter.toml", port,
-                       extra=sec + f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n')
+                       extra=sec + f'[sim_robot]\npty_link = "{link}"\n[robot_gateway]\nport = "{link}"\n')
     rt = RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",), security=security, pki=str(pki))
     procs.start("router", "--config", str(cfg))
     wait_port(port)
     run = tmp_path / "run"
-    gw = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    gw = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
     truths: list[np.ndarray] = []
     events: queue.Queue = queue.Queue()
@@ -90,7 +90,7 @@ def test_a_second_controller_session_holds_the_robot_and_never_moves_it(procs, t
     with zenoh.open(zenoh_config(rt, identity="tool")) as watcher:
         subs = [watcher.declare_subscriber("humanpt/test/sim_robot/truth", lambda s: truths.append(
                     from_pose(pb.Truth.FromString(s.payload.to_bytes()).world_T_flange)[:3, 3] * 1000.0)),
-                watcher.declare_subscriber("humanpt/test/alter_gateway/events", lambda s: events.put(
+                watcher.declare_subscriber("humanpt/test/robot_gateway/events", lambda s: events.put(
                     pb.Event.FromString(s.payload.to_bytes())))]
         real = Controller(rt, (0.0005, 0.0, 0.0), seq0=1000)  # it has been running a while
         second = Controller(rt, (0.0, -0.001, 0.0), seq0=0)  # a fresh second session
@@ -122,5 +122,5 @@ def test_a_second_controller_session_holds_the_robot_and_never_moves_it(procs, t
     out = procs.stop(gw)
     assert gw.returncode == 0, out
     assert codes.count("controller_conflict") >= 1 and "fault" not in codes, codes
-    res = run_cli("replay", str(run), "--component", "alter_gateway")
+    res = run_cli("replay", str(run), "--component", "robot_gateway")
     assert res.returncode == 0 and "MATCH" in res.stdout, res.stdout + res.stderr

@@ -2,7 +2,7 @@
 mTLS, with the link cut for 5 s and for 15 s (longer than zenoh's 10 s lease) (issue 19
 item 4).
 
-Server namespace: ``humanpt up`` with the router, alter_gateway and sim_robot (behind its
+Server namespace: ``humanpt up`` with the router, robot_gateway and sim_robot (behind its
 pty). Client namespace: ``humanpt up --no-router`` with operator, sim_camera, perception,
 pose_filter and controller, connecting to the router's veth address (the router's
 certificate is issued for it: clients verify the name). The link is cut with ``ip link set
@@ -29,8 +29,8 @@ from pathlib import Path
 
 import pytest
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
 from humanpt.bench.partition import holds, late_commands, output_gaps, robot_track
+from humanpt.robot_gateway.config import AlterGatewayConfig
 from humanpt.runtime.recording import OUT, iter_entries
 from humanpt.runtime.security import init_ca, issue
 
@@ -42,7 +42,7 @@ NS_S, NS_C = f"h19s-{TAG}", f"h19c-{TAG}"
 VETH_S, VETH_C = f"h19s{TAG}", f"h19c{TAG}"  # <= 15 characters
 PORT = 7447
 CLIENT_COMPONENTS = ("operator", "sim_camera", "perception", "pose_filter", "controller")
-SERVER_COMPONENTS = ("alter_gateway", "sim_robot")
+SERVER_COMPONENTS = ("robot_gateway", "sim_robot")
 GW = AlterGatewayConfig()
 CYCLE_NS = GW.cycle_period_ns
 
@@ -118,7 +118,7 @@ def write_config(d: Path) -> Path:
     # Room for a loaded machine (2 shared cores, 8 processes): a 0.3 s stall of the client
     # with commands still trickling in late would latch a miss fault (not a partition's
     # doing: a partition starves the gateway, which holds without a fault).
-    sections["alter_gateway"]["fault_after_missed"] = 30
+    sections["robot_gateway"]["fault_after_missed"] = 30
     write_rig(d / "rig.toml", cfg.rig)
     write_toml(d / "cell.toml", sections)
     return d / "cell.toml"
@@ -180,10 +180,10 @@ def test_the_robot_holds_through_partitions_and_the_loop_resumes_by_itself(tmp_p
     logs = f"server: {(tmp_path / 'server.log').read_text()[-3000:]}\nclient: {(tmp_path / 'client.log').read_text()[-3000:]}"
     assert rc_s == 0 and rc_c == 0, f"a side failed (server {rc_s}, client {rc_c})\n{logs}"
 
-    gw_mcap = run_s / "alter_gateway.mcap"
+    gw_mcap = run_s / "robot_gateway.mcap"
     report = [h for h in holds(robot_track(gw_mcap), cuts)]
     late, acted = late_commands(gw_mcap, GW.stale_cycles)
-    gw_events = events(gw_mcap, "alter_gateway/events")
+    gw_events = events(gw_mcap, "robot_gateway/events")
     codes = [m.code for _, m in gw_events]
     infos = [subprocess.run([HUMANPT, "runs", "info", str(r)], capture_output=True, text=True) for r in (run_s, run_c)]
     print("\n".join(h.line() for h in report))

@@ -37,7 +37,7 @@ RECORDINGS = ROOT / "recordings"
 LIVE_COMPONENTS = {
     "operator",
     "sim_robot",
-    "alter_gateway",
+    "robot_gateway",
     "sim_camera",
     "perception",
     "pose_filter",

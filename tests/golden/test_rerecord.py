@@ -205,7 +205,7 @@ def test_dry_run_summarises_and_leaves_recordings_alone(scratch, fresh, tmp_path
     out = capsys.readouterr().out
     assert "this build on the old run's inputs (identical, within tolerance or CHANGED" in out
     for c in (
-        "alter_gateway",
+        "robot_gateway",
         "controller",
         "operator",
         "perception",
@@ -306,7 +306,7 @@ def test_rerecord_static_live_dry_run(scratch, fresh, tmp_path):
         "perception",
         "pose_filter",
         "controller",
-        "alter_gateway",
+        "robot_gateway",
         "sim_robot",
         "operator",
     }

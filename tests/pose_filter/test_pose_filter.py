@@ -49,7 +49,7 @@ class World:
         msg = pb.RobotState(header=header(t_ns, self.cycle, "world"), world_T_flange=pose(self.flange(t_ns)),
                             cycle=self.cycle)
         self.cycle += 1
-        self._take(self.core.step(t_ns, "alter_gateway/robot_state", msg))
+        self._take(self.core.step(t_ns, "robot_gateway/robot_state", msg))
 
     def measurement(self, t_ns, world_T_tob=None, status=pb.TOB_STATUS_FULL, points_tob_m=None):
         world_T_tob = self.tob(t_ns) if world_T_tob is None else world_T_tob
@@ -215,10 +215,10 @@ def test_lost_after_silence_and_bad_input_never_raises():
     far = pb.TobMeasurement(header=header(50_000_000_000), status=pb.TOB_STATUS_FULL)
     outs = core.step(800_000_002, "perception/tob", far)
     assert [m.code for _, m in outs] == ["no_robot_pose"]
-    outs = core.step(800_000_003, "alter_gateway/robot_state", pb.RobotState(
+    outs = core.step(800_000_003, "robot_gateway/robot_state", pb.RobotState(
         world_T_flange=pb.Pose(translation=pb.Vector3(x=float("inf")))))
     assert [m.code for _, m in outs] == ["bad_input"]
-    outs = core.step(800_000_003, "alter_gateway/robot_state", pb.RobotState(
+    outs = core.step(800_000_003, "robot_gateway/robot_state", pb.RobotState(
         header=header(2**63 - 1), world_T_flange=pb.Pose(rotation=pb.Quaternion(w=1.0))))
     assert [m.code for _, m in outs] == ["robot_state_rejected"]
 
@@ -250,11 +250,11 @@ def test_a_forged_future_robot_state_does_not_lock_out_the_real_ones():
     reported = []
     for stamp in (500_000_000 + 10**12, 2**63 - 1):  # 1000 s ahead; the largest int64
         forged = pb.RobotState(header=header(stamp), cycle=99, world_T_flange=pose(np.eye(4)))
-        outs = core.step(500_000_001, "alter_gateway/robot_state", forged)
+        outs = core.step(500_000_001, "robot_gateway/robot_state", forged)
         assert all(t == "pose_filter/events" for t, _ in outs)  # no state from a forged one
         reported += [m.code for _, m in outs]
     assert reported == ["robot_state_rejected"]  # the first reported, the second counted
-    assert [m.code for t, m in core.step(500_000_001, "alter_gateway/robot_state", forged)] == []  # rate-limited
+    assert [m.code for t, m in core.step(500_000_001, "robot_gateway/robot_state", forged)] == []  # rate-limited
     n = len(w.states)
     w.run(500_000_000, 1_000_000_000)
     assert len(w.states) > n + 10  # the real states still come in and are answered
@@ -267,12 +267,12 @@ def test_a_robot_clock_that_steps_back_restarts_the_buffer():
     flange = pose(np.eye(4))
     t = 10_000_000_000
     for k in range(5):
-        core.step(t + k * 28_000_000, "alter_gateway/robot_state",
+        core.step(t + k * 28_000_000, "robot_gateway/robot_state",
                   pb.RobotState(header=header(t + k * 28_000_000), cycle=k, world_T_flange=flange))
     back = t - 500_000_000  # the robot's clock stepped back half a second (within the skew)
     codes = []
     for k in range(3):
-        outs = core.step(t + (5 + k) * 28_000_000, "alter_gateway/robot_state",
+        outs = core.step(t + (5 + k) * 28_000_000, "robot_gateway/robot_state",
                          pb.RobotState(header=header(back + k * 28_000_000), cycle=5 + k, world_T_flange=flange))
         codes += [m.code for tp, m in outs if tp == "pose_filter/events"]
     assert codes == ["robot_state_rejected", "robot_clock_reset"]
@@ -300,7 +300,7 @@ class LateStates(World):
                 msg = pb.RobotState(header=header(stamp, self.cycle, "world"),
                                     world_T_flange=pose(self.flange(stamp)), cycle=self.cycle)
                 self.cycle += 1
-                self._take(self.core.step(stamp + 11_000_000, "alter_gateway/robot_state", msg))
+                self._take(self.core.step(stamp + 11_000_000, "robot_gateway/robot_state", msg))
             elif measure:
                 self.measurement(stamp)
 

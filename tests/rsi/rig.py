@@ -1,5 +1,5 @@
 """An RSI gateway core wired in memory, instantly, to a scripted RSI robot (encoded <Rob>
-datagrams in, decoded <Sen> answers out): the RSI twin of tests/alter_gateway/rig.Rig."""
+datagrams in, decoded <Sen> answers out): the RSI twin of tests/robot_gateway/rig.Rig."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from humanpt.rsi.core import RsiGatewayCore
 from humanpt.rsi.protocol import RobState, RsiCorrection, decode_sen, encode_rob
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
-from tests.alter_gateway.rig import MS, START_X
+from tests.robot_gateway.rig import MS, START_X
 
 
 class RsiRig:
@@ -72,10 +72,10 @@ class RsiRig:
         return self.step("liveliness", pb.Liveliness(header=header(self.t_ns), component="controller", alive=alive))
 
     def events(self, outs=None) -> list[pb.Event]:
-        return [m for t, m in (self.outs if outs is None else outs) if t == "alter_gateway/events"]
+        return [m for t, m in (self.outs if outs is None else outs) if t == "robot_gateway/events"]
 
     def codes(self, outs=None) -> list[str]:
         return [e.code for e in self.events(outs)]
 
     def states(self) -> list[pb.RobotState]:
-        return [m for t, m in self.outs if t == "alter_gateway/robot_state"]
+        return [m for t, m in self.outs if t == "robot_gateway/robot_state"]

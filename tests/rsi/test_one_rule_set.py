@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.config import AlterGatewayConfig
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.alter_gateway.rig import MS, START_X, Rig
+from tests.robot_gateway.rig import MS, START_X, Rig
 from tests.rsi.rig import RsiRig
 
 CYCLE_MS = 12.0  # both links at RSI's 12 ms cycle: the same per-cycle limits

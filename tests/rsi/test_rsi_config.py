@@ -65,30 +65,30 @@ def test_datagrams_from_another_sender_than_the_robot_are_dropped():
 
 
 def test_the_link_key_chooses_the_gateway_and_the_protocol_the_simulated_robot():
-    from humanpt.alter_gateway.config import AlterGatewayConfig
-    from humanpt.alter_gateway.core import AlterGatewayCore
+    from humanpt.robot_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.core import AlterGatewayCore
     from humanpt.rsi.core import RsiGatewayCore
     from humanpt.runtime.config import ConfigError, from_dict
     from humanpt.runtime.registry import config_types, core_class
     from humanpt.sim_robot.rsi import RsiSimRobotCore
 
-    sections = {"alter_gateway": {"link": "rsi", "cycle_period_ms": 12.0, "udp_bind": "127.0.0.1:0"},
+    sections = {"robot_gateway": {"link": "rsi", "cycle_period_ms": 12.0, "udp_bind": "127.0.0.1:0"},
                 "sim_robot": {"protocol": "rsi", "cycle_period_ms": 12.0},
                 "controller": {"cycle_period_ms": 12.0}, "viz": {"cycle_period_ms": 12.0}}
     cfg = from_dict(sections, "cell.toml", config_types())
     made = {}
-    for name in ("alter_gateway", "sim_robot"):
+    for name in ("robot_gateway", "sim_robot"):
         cls = core_class(name)  # the registry's entry, as `humanpt <component>` does
         made[name] = cls.create(cfg.component(name, cls.config_type), cfg.rig())
         # a recording names the registry's class: replay rebuilds the RSI core from it
         assert made[name].recording_metadata("live")["core"] == f"{cls.__module__}:{cls.__qualname__}"
-    assert type(made["alter_gateway"]) is RsiGatewayCore and made["alter_gateway"].config.udp_bind == "127.0.0.1:0"
+    assert type(made["robot_gateway"]) is RsiGatewayCore and made["robot_gateway"].config.udp_bind == "127.0.0.1:0"
     assert type(made["sim_robot"]) is RsiSimRobotCore
     assert type(AlterGatewayCore.create(AlterGatewayConfig())) is AlterGatewayCore  # the default: ALTER
     # RSI keys without link = "rsi", and a link that does not exist: one line naming the key
-    with pytest.raises(ConfigError, match=r"\[alter_gateway\] unknown key 'udp_bind'"):
-        from_dict({"alter_gateway": {"udp_bind": "127.0.0.1:1"}}, "cell.toml", config_types())
-    with pytest.raises(ConfigError, match=r"\[alter_gateway\] link: 'can' is not one of"):
-        from_dict({"alter_gateway": {"link": "can"}}, "cell.toml", config_types())
+    with pytest.raises(ConfigError, match=r"\[robot_gateway\] unknown key 'udp_bind'"):
+        from_dict({"robot_gateway": {"udp_bind": "127.0.0.1:1"}}, "cell.toml", config_types())
+    with pytest.raises(ConfigError, match=r"\[robot_gateway\] link: 'can' is not one of"):
+        from_dict({"robot_gateway": {"link": "can"}}, "cell.toml", config_types())
     with pytest.raises(ValueError, match="RsiGatewayConfig"):
         AlterGatewayConfig(link="rsi")

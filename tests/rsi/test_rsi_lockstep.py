@@ -24,7 +24,7 @@ def _run(run_dir):
     # Steps within the 0.4 mm / 0.24 deg per cycle limits at 4 ms.
     ctl = ScriptedControllerCore(ScriptedControllerConfig(amplitude_mm=0.2, amplitude_deg=0.1))
     with Lockstep([sim, gw, ctl], run_dir=run_dir) as ls:
-        ls.connect_udp("sim_robot", "alter_gateway")
+        ls.connect_udp("sim_robot", "robot_gateway")
         ls.run_until(SECONDS * 1_000_000_000)
         return ls.digest(), sim.robot
 
@@ -46,6 +46,6 @@ def test_two_runs_are_identical_and_every_cycle_is_answered_in_time(runs):
 
 def test_the_recordings_replay_exactly(runs):
     d, _, _ = runs
-    for comp in ("sim_robot", "alter_gateway"):
+    for comp in ("sim_robot", "robot_gateway"):
         res = replay(d / "a" / f"{comp}.mcap")
         assert res.match and res.compared > 400, res.report()

@@ -1,5 +1,5 @@
 """The running cell over RSI: `humanpt sim_robot` (``protocol = "rsi"``) and `humanpt
-alter_gateway` (``link = "rsi"``) as processes at 12 ms over real UDP on loopback, a real
+robot_gateway` (``link = "rsi"``) as processes at 12 ms over real UDP on loopback, a real
 Zenoh router; this test is the controller (liveliness token + one constant command per
 robot state over Zenoh).
 
@@ -33,11 +33,11 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
     port, _ = router
     gw_addr = f"127.0.0.1:{free_udp_port()}"
     cfg = write_config(tmp_path / "rsi.toml", port, extra=(
-        f'[alter_gateway]\nlink = "rsi"\ncycle_period_ms = 12.0\nudp_bind = "{gw_addr}"\n'
+        f'[robot_gateway]\nlink = "rsi"\ncycle_period_ms = 12.0\nudp_bind = "{gw_addr}"\n'
         f'[sim_robot]\nprotocol = "rsi"\ncycle_period_ms = 12.0\nrsi_gateway = "{gw_addr}"\n'
         '[controller]\ncycle_period_ms = 12.0\n[viz]\ncycle_period_ms = 12.0\n'))
     run = tmp_path / "run"
-    gw = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    gw = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     states: list[pb.RobotState] = []
     truths: list[np.ndarray] = []
     with zenoh_client(port) as s:
@@ -56,7 +56,7 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
             T = from_pose(pb.Truth.FromString(sample.payload.to_bytes()).world_T_flange)
             truths.append(T[:3, 3] * 1000.0)
 
-        subs = [s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state),
+        subs = [s.declare_subscriber("humanpt/test/robot_gateway/robot_state", on_state),
                 s.declare_subscriber("humanpt/test/sim_robot/truth", on_truth)]
         sim = procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
         wait_for(lambda: len(states) >= 250, 40.0, "250 robot states over RSI")
@@ -78,6 +78,6 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
     out_gw = procs.stop(gw)
     assert gw.returncode == 0 and "core errors 0" in out_gw, out_gw
     assert sim.returncode == 0 and "core errors 0" in out_sim, out_sim
-    for component in ("alter_gateway", "sim_robot"):
+    for component in ("robot_gateway", "sim_robot"):
         res = run_cli("replay", str(run), "--component", component)
         assert res.returncode == 0 and "MATCH" in res.stdout, res.stdout + res.stderr

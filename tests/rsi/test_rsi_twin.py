@@ -22,7 +22,7 @@ def test_the_arc_over_rsi_at_12_ms_is_tracked_and_replays(tmp_path):
     _, xg, _ = path_points(w)
     radius = np.linalg.norm(xg[:, :2] - [147.5, 1378.5], axis=1)
     assert len(xg) > 10 and np.all(np.abs(radius - 246.0) < 1.0), radius
-    for comp in ("sim_robot", "alter_gateway", "controller"):
+    for comp in ("sim_robot", "robot_gateway", "controller"):
         res = replay(tmp_path / f"{comp}.mcap")
         # a robot cycle every 12 ms for 5 s
         assert res.match and res.compared >= 400, res.report()

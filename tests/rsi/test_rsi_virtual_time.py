@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanpt.alter_gateway.core import ROBOT_STATE
 from humanpt.bench.rsi import CommandAhead, circle_step
+from humanpt.robot_gateway.core import ROBOT_STATE
 from humanpt.rsi.config import RsiGatewayConfig
 from humanpt.rsi.core import RsiGatewayCore
 from humanpt.schemas import humanpt_pb2 as pb

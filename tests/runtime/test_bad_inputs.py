@@ -88,7 +88,7 @@ def test_a_poisoned_measurement_does_not_poison_the_pose_filter(field, value):
 
     states = []
     for k in range(1, 40):
-        outs = core.step(k * 28_000_000, "alter_gateway/robot_state", robot(k))
+        outs = core.step(k * 28_000_000, "robot_gateway/robot_state", robot(k))
         states += [s for t, s in outs if t == "pose_filter/tob_state"]
         m = measurement(k, 0.6)
         if k == 20:

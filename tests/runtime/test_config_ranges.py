@@ -14,8 +14,8 @@ import typing
 
 import pytest
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
 from humanpt.schemas import humanpt_pb2 as pb
@@ -75,11 +75,11 @@ def test_every_default_is_inside_its_range():
 
 # Each hole of the attack: the TOML text, and what the error must name.
 HOLES = [
-    ("alter_gateway = 5\n", "'alter_gateway' must be a [section]"),
-    ("[alter_gateway]\nevent_interval_ms = inf\n", "[alter_gateway] event_interval_ms"),
+    ("robot_gateway = 5\n", "'robot_gateway' must be a [section]"),
+    ("[robot_gateway]\nevent_interval_ms = inf\n", "[robot_gateway] event_interval_ms"),
     ("[runtime]\nconnect_timeout_s = -5.0\n", "[runtime] connect_timeout_s"),
-    ("[alter_gateway]\nmax_speed_mm_s = 11000.0\n", "[alter_gateway] max_speed_mm_s"),
-    ("[alter_gateway]\nenvelope_max_mm = [1e300, 1600.0, 1600.0]\n", "[alter_gateway] envelope_max_mm[0]"),
+    ("[robot_gateway]\nmax_speed_mm_s = 11000.0\n", "[robot_gateway] max_speed_mm_s"),
+    ("[robot_gateway]\nenvelope_max_mm = [1e300, 1600.0, 1600.0]\n", "[robot_gateway] envelope_max_mm[0]"),
     ("[controller]\nmax_speed_mm_s = 1e9\n", "[controller] max_speed_mm_s"),
     ("[controller]\nmax_speed_mm_s = inf\n", "[controller] max_speed_mm_s"),
     ("[controller]\nlead_ms = nan\n", "[controller] lead_ms"),
@@ -98,7 +98,7 @@ def test_config_holes_are_named_errors_before_start(tmp_path, text, needle):
 
 
 def test_cycle_periods_that_agree_are_accepted():
-    text = {"controller": {"cycle_period_ms": 12.0}, "alter_gateway": {"cycle_period_ms": 12.0},
+    text = {"controller": {"cycle_period_ms": 12.0}, "robot_gateway": {"cycle_period_ms": 12.0},
             "sim_robot": {"cycle_period_ms": 12.0}, "viz": {"cycle_period_ms": 12.0}}
     cfg.from_dict(text, "f.toml", config_types())
 
@@ -106,7 +106,7 @@ def test_cycle_periods_that_agree_are_accepted():
 # -- hard limits at run time --------------------------------------------------------------
 def _param(core, key, value) -> pb.Event:
     (topic, ev), = core.step(0, "param", pb.ParamSet(key=key, value_json=json.dumps(value)))
-    assert topic == "alter_gateway/events"
+    assert topic == "robot_gateway/events"
     return ev
 
 
@@ -141,17 +141,17 @@ def test_gateway_limits_may_become_stricter_and_back_to_the_start_value():
 
 @pytest.mark.timeout(60)
 def test_param_over_the_bus_cannot_loosen_a_running_gateway(tmp_path, procs):
-    """The attack itself: `humanpt param alter_gateway ...` against a gateway process."""
+    """The attack itself: `humanpt param robot_gateway ...` against a gateway process."""
     from tests.conftest import free_port
 
     port = free_port()
     conf = write_config(tmp_path / "humanpt.toml", port,
-                        extra=f'[alter_gateway]\nport = "{tmp_path / "no-robot-yet"}"\n')
+                        extra=f'[robot_gateway]\nport = "{tmp_path / "no-robot-yet"}"\n')
     procs.start("router", "--config", str(conf))
     wait_port(port)
-    procs.start("alter_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
+    procs.start("robot_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
     def param(*assignments):
-        return run_cli("param", "alter_gateway", *assignments, "--config", str(conf), "--timeout", "2")
+        return run_cli("param", "robot_gateway", *assignments, "--config", str(conf), "--timeout", "2")
 
     # The gateway's queryable comes up after its session: ask until it answers.
     for _ in range(30):

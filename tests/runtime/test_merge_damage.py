@@ -35,8 +35,8 @@ def test_a_lockstep_run_merges_with_local_outputs_apart(lockstep_run, tmp_path):
     ch = _channels(out)
     # Each end of the ALTER line keeps its own serial bytes; the bus topics are there once.
     serial = sorted(k for k in ch if k.endswith("/local/serial_tx"))
-    assert serial == ["humanpt/cell0/alter_gateway/local/serial_tx", "humanpt/cell0/sim_robot/local/serial_tx"]
-    assert ch["humanpt/cell0/alter_gateway/robot_state"] > 20  # 1 s of 28 ms cycles
+    assert serial == ["humanpt/cell0/robot_gateway/local/serial_tx", "humanpt/cell0/sim_robot/local/serial_tx"]
+    assert ch["humanpt/cell0/robot_gateway/robot_state"] > 20  # 1 s of 28 ms cycles
     assert ch["humanpt/cell0/camera/image"] > 20  # 30 images/s
 
 
@@ -51,7 +51,7 @@ def test_an_empty_and_a_foreign_file_do_not_refuse_the_run(lockstep_run, tmp_pat
     r = run_cli("runs", "merge", str(run_dir), str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     assert "empty.mcap" in r.stderr and "notes.mcap" in r.stderr and "left out" in r.stderr
-    assert _channels(out)["humanpt/cell0/alter_gateway/robot_state"] > 20
+    assert _channels(out)["humanpt/cell0/robot_gateway/robot_state"] > 20
     r = run_cli("view", str(run_dir), "--save", str(tmp_path / "run.rrd"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "run.rrd").stat().st_size > 10_000

@@ -187,16 +187,16 @@ def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, pro
     link = tmp_path / "pty"
     cfg = write_config(tmp_path / "alter.toml", port, extra=(
         f"record_thread = {str(thread).lower()}\nchunk_size = 4096\nflush_interval_s = 0.2\n"
-        f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n'))
+        f'[sim_robot]\npty_link = "{link}"\n[robot_gateway]\nport = "{link}"\n'))
     run = small_disk / "run"
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(tmp_path / "robot-run"))
-    gateway = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    gateway = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     with zenoh_client(port) as s:
         states: queue.Queue = queue.Queue()
         events: queue.Queue = queue.Queue()
-        subs = [s.declare_subscriber("humanpt/test/alter_gateway/robot_state",
+        subs = [s.declare_subscriber("humanpt/test/robot_gateway/robot_state",
                                      lambda smp: states.put(time.monotonic())),
-                s.declare_subscriber("humanpt/test/alter_gateway/events", lambda smp: events.put(
+                s.declare_subscriber("humanpt/test/robot_gateway/events", lambda smp: events.put(
                     (time.monotonic(), pb.Event.FromString(smp.payload.to_bytes()))))]
         states.get(timeout=30)  # the link is up
         _fill(small_disk / "filler")
@@ -223,6 +223,6 @@ def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, pro
             sub.undeclare()
     out = procs.stop(gateway)
     assert gateway.returncode == 0 and "LOST" in out, out
-    losses = json.loads((run / "alter_gateway.losses.json").read_text())
+    losses = json.loads((run / "robot_gateway.losses.json").read_text())
     assert losses["lost"] > 0 and losses["lost_by_topic"]["in"]["serial_rx"] > 0, losses
-    assert losses["segments"] == ["alter_gateway.mcap", "alter_gateway.1.mcap"], losses
+    assert losses["segments"] == ["robot_gateway.mcap", "robot_gateway.1.mcap"], losses

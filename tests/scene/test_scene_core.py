@@ -33,21 +33,21 @@ def _point(i: int, stamp_ns: int) -> pb.PathPoint:
 
 def test_desired_follows_the_controllers_dz():
     core = SceneCore(SceneConfig(dz_mm=600.0))
-    (d,) = _frame(core.step(1, "alter_gateway/robot_state", _robot_state(1)), "desired")
+    (d,) = _frame(core.step(1, "robot_gateway/robot_state", _robot_state(1)), "desired")
     assert d.translation.z == pytest.approx(0.6)
     # What the controller says when its dz_mm changes (runtime.core.Core._on_param).
     ev = pb.Event(header=header(2), severity=pb.SEVERITY_INFO, source="controller", code="param_changed",
                   text="controller: dz_mm = 650.0")
     (log,) = core.step(2, "controller/events", ev)
     assert log[0] == "scene/log" and log[1].name == "controller"
-    (d,) = _frame(core.step(3, "alter_gateway/robot_state", _robot_state(int(1e8))), "desired")
+    (d,) = _frame(core.step(3, "robot_gateway/robot_state", _robot_state(int(1e8))), "desired")
     assert d.translation.z == pytest.approx(0.65)
 
 
 def test_moving_frames_are_sent_at_most_transforms_max_hz():
     """A 4 ms robot link's 250 states a second become at most 60 transform messages."""
     core = SceneCore(SceneConfig(transforms_max_hz=60.0))
-    sent = [k for k in range(250) if _frame(core.step(k, "alter_gateway/robot_state",
+    sent = [k for k in range(250) if _frame(core.step(k, "robot_gateway/robot_state",
                                                          _robot_state(k * 4_000_000)), "flange")]
     # Every 5th state (20 ms >= 1/60 s = 16.7 ms; 16 ms < it): 50 in the second.
     assert len(sent) == 50 and sent[:3] == [0, 5, 10]
@@ -91,7 +91,7 @@ def test_tilted_mirror_turns_its_virtual_camera():
     rig = Rig()
     rig = dataclasses.replace(rig, psvs=dataclasses.replace(rig.psvs, rotvec_left_deg=(0.0, 0.1, 0.0)))
     core = SceneCore(SceneConfig(), rig)
-    out = core.step(1, "alter_gateway/robot_state", _robot_state(1))
+    out = core.step(1, "robot_gateway/robot_state", _robot_state(1))
     (left,) = _frame(out, "camera_left")
     (right,) = _frame(out, "camera_right")
     q = left.rotation

@@ -158,7 +158,7 @@ def _matrix(t) -> np.ndarray:
 
 
 def test_robot_chain_and_rig_frames(run):
-    states = run.of("alter_gateway/robot_state")
+    states = run.of("robot_gateway/robot_state")
     world_base, base_flange = _transforms(run, "world", "base"), _transforms(run, "base", "flange")
     assert len(base_flange) == len(world_base) == len(states) > 50
     for s, wb, bf in zip(states, world_base, base_flange, strict=True):

@@ -17,7 +17,7 @@ def test_every_published_key_is_allowed_to_its_publisher(robot):
     w = build_system("arc", seed=0, robot=robot, digest=False)
     w.run_for(1.5)
     produced = {(d.component, d.topic) for d in w.lockstep.outputs if d.topic in topics.TOPICS}
-    robot_side = {"sim_robot", "alter_gateway"} if robot == "puma" else {"standin_robot"}
+    robot_side = {"sim_robot", "robot_gateway"} if robot == "puma" else {"standin_robot"}
     assert {c for c, _ in produced} >= {"sim_camera", "perception", "pose_filter", "controller", "operator",
                                         *robot_side}
     refused = sorted((c, t) for c, t in produced

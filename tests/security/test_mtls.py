@@ -34,7 +34,7 @@ def cell(tmp_path_factory):
     """(RuntimeConfig of the cell's clients, the router's session, a foreign PKI dir)."""
     d = tmp_path_factory.mktemp("pki")
     security.init_ca(d, CELL)
-    for name in ("router", "controller", "alter_gateway", "perception", "tool"):
+    for name in ("router", "controller", "robot_gateway", "perception", "tool"):
         security.issue(d, name)
     security.issue(d, "welder", role="operator")
     # valid for a day, three days ago: expired two days ago
@@ -117,7 +117,7 @@ def test_only_the_controller_identity_commands_the_gateway(cell):
     reaches it. A tool and an operator cannot put there either."""
     rt, _, _ = cell
     gw_inbox, observer = Inbox(), Inbox()
-    with session(rt, "alter_gateway") as gw, session(rt, "tool") as watcher, session(rt, "tool") as tool, \
+    with session(rt, "robot_gateway") as gw, session(rt, "tool") as watcher, session(rt, "tool") as tool, \
             session(rt, "controller") as ctl, session(rt, "perception") as rogue, \
             session(rt, "welder") as welder:
         gw_sub = gw.declare_subscriber(COMMAND, gw_inbox)
@@ -157,7 +157,7 @@ def test_a_liveliness_token_only_under_its_own_name(cell):
     rt, _, _ = cell
     gw_inbox, tool_inbox = Inbox(), Inbox()
     ctl_key, own_key = liveliness_key(CELL, "controller"), liveliness_key(CELL, "perception")
-    with session(rt, "alter_gateway") as gw, session(rt, "tool") as tool, \
+    with session(rt, "robot_gateway") as gw, session(rt, "tool") as tool, \
             session(rt, "perception") as rogue, session(rt, "controller") as ctl:
         gw_sub = gw.liveliness().declare_subscriber(ctl_key, gw_inbox, history=True)
         tool_sub = tool.liveliness().declare_subscriber(liveliness_key(CELL, "*"), tool_inbox, history=True)

@@ -134,7 +134,7 @@ def test_the_access_control_says_what_issue_19_asks(tmp_path):
         return {n for n in names if key in rights_of(acl, n, message)}
 
     assert who("put", "humanpt/c/controller/command") == {"controller"}
-    assert who("put", "humanpt/c/alter_gateway/robot_state") == {"alter_gateway"}
+    assert who("put", "humanpt/c/robot_gateway/robot_state") == {"robot_gateway"}
     assert who("put", "humanpt/c/console/command") == {"welder"}
     for n in names:
         assert rights_of(acl, n, "liveliness_token") <= {f"humanpt/c/{n}"}, n
@@ -143,12 +143,12 @@ def test_the_access_control_says_what_issue_19_asks(tmp_path):
     assert rights_of(acl, "tool", "query") == {"humanpt/c/*/rig"}
     assert "humanpt/c/*/params" in rights_of(acl, "welder", "query")
     # the gateway reads the controller's commands and the console, and watches the controller
-    assert rights_of(acl, "alter_gateway", "declare_subscriber") >= {"humanpt/c/controller/command"}
-    assert rights_of(acl, "alter_gateway", "declare_liveliness_subscriber") == {"humanpt/c/controller"}
+    assert rights_of(acl, "robot_gateway", "declare_subscriber") >= {"humanpt/c/controller/command"}
+    assert rights_of(acl, "robot_gateway", "declare_liveliness_subscriber") == {"humanpt/c/controller"}
     assert rights_of(acl, "router", "put") == set()  # a router's certificate grants nothing
     # the twin's stand-in gets the gateway's robot state only when the PKI certified it
     with_standin = security.access_control("c", certs)
-    assert "humanpt/c/alter_gateway/robot_state" in rights_of(with_standin, "standin_robot", "put")
+    assert "humanpt/c/robot_gateway/robot_state" in rights_of(with_standin, "standin_robot", "put")
 
 
 def test_runtime_config_for_mtls(tmp_path):

@@ -187,7 +187,7 @@ class _Commander(Core):
 
 
 def _flange_track(world) -> np.ndarray:
-    states = [pb.RobotState.FromString(o.data) for o in world.outputs("alter_gateway/robot_state")]
+    states = [pb.RobotState.FromString(o.data) for o in world.outputs("robot_gateway/robot_state")]
     out = []
     for s in states:
         t = from_pose(s.world_T_flange)
@@ -209,7 +209,7 @@ def test_stand_in_robot_integrates_commands_in_the_world_frame():
     np.testing.assert_allclose(np.diff(yaw)[1:], 0.5, atol=1e-9)
     truth = world.truths("sim_robot/truth")
     np.testing.assert_allclose(truth[-1][1]["world_T_flange"], track[-1], atol=1e-9)
-    states = [pb.RobotState.FromString(o.data) for o in world.outputs("alter_gateway/robot_state")]
+    states = [pb.RobotState.FromString(o.data) for o in world.outputs("robot_gateway/robot_state")]
     assert [s.cycle for s in states] == list(range(11)) and states[0].missed_cycles == 1
     assert states[-1].missed_cycles == 0 and states[-1].header.frame_id == "world"
 

@@ -57,7 +57,7 @@ def _publish_some(session, n: int = 20) -> int:
         t: session.declare_publisher(f"humanpt/test/{t}", congestion_control=zenoh.CongestionControl.BLOCK)
         for t in (
             "camera/image",
-            "alter_gateway/robot_state",
+            "robot_gateway/robot_state",
             "controller/status",
             "controller/path",
             "controller/events",
@@ -70,7 +70,7 @@ def _publish_some(session, n: int = 20) -> int:
         t = t0 + i * 28_000_000
         T = np.eye(4)
         T[:3, 3] = [0.2 + i * 1e-3, 1.2, 0.5]
-        pubs["alter_gateway/robot_state"].put(
+        pubs["robot_gateway/robot_state"].put(
             pb.RobotState(
                 header=header(t, i, "world"), world_T_flange=pose(T), cycle=i
             ).SerializeToString()

@@ -217,7 +217,7 @@ def test_logger_never_raises_on_bad_messages():
     lg.log("camera/image", bad_image, 1)
     bad_pose = pb.RobotState(header=header(2))
     bad_pose.world_T_flange.translation.x = float("nan")
-    lg.log("alter_gateway/robot_state", bad_pose, 2)
+    lg.log("robot_gateway/robot_state", bad_pose, 2)
     tob = pb.TobMeasurement(header=header(3), status=pb.TOB_STATUS_FULL)
     tob.pairs.add(right=7, left=9)  # indices beyond the centres
     lg.log("perception/tob", tob, 3)
@@ -247,7 +247,7 @@ def test_logger_overlays_wait_for_their_image():
     lg.log("camera/image", image(np.zeros((480, 640), np.uint8), 1000), 1000)
     assert 1000 not in lg._pending
     lg.log(
-        "alter_gateway/robot_state",
+        "robot_gateway/robot_state",
         pb.RobotState(header=header(1001), world_T_flange=pose(np.eye(4))),
         1001,
     )

@@ -1,4 +1,4 @@
-"""`humanpt sim_robot` and `humanpt alter_gateway` as separate processes over a real pty, with a
+"""`humanpt sim_robot` and `humanpt robot_gateway` as separate processes over a real pty, with a
 real Zenoh router; this test is the controller (liveliness token + commands over Zenoh).
 
 Scripted commands move the robot; the controller's liveliness token vanishing holds it
@@ -28,11 +28,11 @@ def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
     cfg = write_config(
         tmp_path / "alter.toml",
         port,
-        extra=f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n',
+        extra=f'[sim_robot]\npty_link = "{link}"\n[robot_gateway]\nport = "{link}"\n',
     )
     run = tmp_path / "run"
     # The gateway first: it waits for the port (sim_robot makes it).
-    gw = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    gw = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     sim = procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
     script = ScriptedControllerConfig()
     states: list[pb.RobotState] = []
@@ -53,7 +53,7 @@ def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
             truths.append(T[:3, 3] * 1000.0)
 
         subs = [
-            s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state),
+            s.declare_subscriber("humanpt/test/robot_gateway/robot_state", on_state),
             s.declare_subscriber("humanpt/test/sim_robot/truth", on_truth),
             s.declare_subscriber(
                 "humanpt/test/*/events",
@@ -75,19 +75,19 @@ def test_processes_over_a_pty_and_zenoh(router, procs, tmp_path):
         assert states[-1].status.alter_active and not states[-1].status.fault
         # 2. The controller's liveliness token goes: zero corrections, an event.
         token.undeclare()
-        wait_for(lambda: seen("alter_gateway:controller_gone"), 3.0, "controller_gone")
+        wait_for(lambda: seen("robot_gateway:controller_gone"), 3.0, "controller_gone")
         n = len(truths) + 3  # (a correction already on its way may still be applied)
         wait_for(lambda: len(truths) >= n + 6, 3.0, "six more cycles of the robot")
         assert np.ptp(truths[n:], axis=0).max() < 1e-9  # held although commands keep coming
         # 3. The robot end dies: a lost link.
         sim.send_signal(signal.SIGKILL)
         sim.wait(10)
-        wait_for(lambda: seen("alter_gateway:link_down"), 3.0, "link_down")
+        wait_for(lambda: seen("robot_gateway:link_down"), 3.0, "link_down")
         for sub in subs:
             sub.undeclare()
     out = procs.stop(gw)
     assert gw.returncode == 0, out
     assert "core errors 0" in out
-    res = run_cli("replay", str(run), "--component", "alter_gateway")
+    res = run_cli("replay", str(run), "--component", "robot_gateway")
     assert res.returncode == 0, res.stdout + res.stderr
     assert "MATCH" in res.stdout

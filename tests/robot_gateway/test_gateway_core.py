@@ -11,13 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from humanpt.alter import ControllerEndpoint, CorrectionFlags, StatusBits
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
 from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.runtime.config import ConfigError, build
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
-from tests.alter_gateway.oracle import (
+from tests.robot_gateway.oracle import (
     LIMIT_DEG,
     LIMIT_MM,
     assert_wire_correction,
@@ -26,7 +26,7 @@ from tests.alter_gateway.oracle import (
     wire_euler_deg,
     wire_translation_mm,
 )
-from tests.alter_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, Rig
+from tests.robot_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, Rig
 
 HOLD = CorrectionFlags.HOLD
 
@@ -106,7 +106,7 @@ def test_clamping_follows_live_limit_changes():
     outs = rig.step(
         "param",
         pb.ParamSet(
-            header=header(0), component="alter_gateway", key="max_speed_mm_s", value_json="50"
+            header=header(0), component="robot_gateway", key="max_speed_mm_s", value_json="50"
         ),
     )
     assert rig.codes(outs) == ["param_changed"]
@@ -311,15 +311,15 @@ def test_a_console_reset_clears_a_fault_and_without_alter_off_only_hold_is_sent(
         rig.advance(CYCLE_NS - 10 * MS)
     assert rig.gw.fault is not None and rig.last_correction().flags == HOLD
     # Only the operator clears a fault, by name (issue 14, item 1): a bare command is refused.
-    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault"))
+    outs = rig.step("console/command", pb.Command(component="robot_gateway", verb="reset_fault"))
     assert rig.codes(outs) == ["bad_console_command"] and rig.gw.fault is not None
-    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault",
+    outs = rig.step("console/command", pb.Command(component="robot_gateway", verb="reset_fault",
                                                   args_json='{"operator": "ann@cell1"}'))
     assert rig.codes(outs) == ["fault_cleared"] and "ann@cell1" in rig.events(outs)[0].text
-    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="reset_fault",
+    outs = rig.step("console/command", pb.Command(component="robot_gateway", verb="reset_fault",
                                                   args_json='{"operator": "ann@cell1"}'))
     assert rig.codes(outs) == ["no_fault"]
-    outs = rig.step("console/command", pb.Command(component="alter_gateway", verb="explode"))
+    outs = rig.step("console/command", pb.Command(component="robot_gateway", verb="explode"))
     assert rig.codes(outs) == ["bad_console_command"]
 
 
@@ -448,7 +448,7 @@ def test_bad_commands_are_dropped_with_an_event():
 )
 def test_config_rejects_bad_values_naming_the_key(key, value, needle):
     with pytest.raises(ConfigError) as e:
-        build(AlterGatewayConfig, {key: value}, source="x.toml", section="alter_gateway")
+        build(AlterGatewayConfig, {key: value}, source="x.toml", section="robot_gateway")
     assert needle in str(e.value)
 
 
@@ -537,7 +537,7 @@ def test_an_absurd_finite_step_is_clamped_never_raises(frame, step_m):
 @pytest.mark.parametrize("v", [(1.7e308, 1.7e308, 0.0), (-1e300, 5.0, 1e299), (3.0, 4.0, 0.0)])
 def test_clamp_norm_keeps_the_direction_of_any_finite_step(v):
     """The gateway's clamp, even where the squares overflow: direction kept, norm = limit."""
-    from humanpt.alter_gateway.safety import clamp_norm
+    from humanpt.robot_gateway.safety import clamp_norm
 
     out, clamped = clamp_norm(np.array(v), 2.8)
     assert clamped and np.all(np.isfinite(out))

@@ -4,7 +4,7 @@ One implementation of the safety rules for every link protocol. A :class:`Link` 
 the robot sends into a :class:`CycleState` per robot cycle and encodes the gateway's answer
 (a correction or a hold) into bytes; :class:`GatewayCore` decides that answer:
 
-1. robot cycle k arrives: publish ``alter_gateway/robot_state`` (world_T_flange, stamp =
+1. robot cycle k arrives: publish ``robot_gateway/robot_state`` (world_T_flange, stamp =
    receive time - ``status_delay_ms``) and account for the previous cycle (missed or not);
 2. answer cycle k from the controller's command for k (``FlangeCommand.cycle == k``),
    waiting for it until ``reply_deadline_ms``; then the freshest command no older than
@@ -21,15 +21,15 @@ command at the deadline, the robot reporting a late correction, cycles lost on t
 while commands come raise a latched fault: hold, plus ALTER_OFF (if ``alter_off_on_fault``)
 until the robot shows correction mode off; it clears when the robot re-activates it (a new
 ALTER session, started by the operator at the controller) or on ``console/command``
-{component: alter_gateway, verb: reset_fault}. The miss watchdog arms with the first fresh
+{component: robot_gateway, verb: reset_fault}. The miss watchdog arms with the first fresh
 command, and disarms while the controller is gone (then the gateway just holds and waits).
-Every such action is an event on ``alter_gateway/events``, rate-limited per code to one per
+Every such action is an event on ``robot_gateway/events``, rate-limited per code to one per
 ``event_interval_ms``. See README.md for every rule and event.
 
 Links: :class:`AlterGatewayCore` (below) over ALTER (``alter_link.AlterLink``: STATUS k on
 ``serial_rx``, a CORRECTION echoing k quantised to 0.01 mm / 0.01 deg on ``serial_tx``,
 the TOOL_MODE bit choosing the frame) and ``humanpt.rsi.core.RsiGatewayCore`` over KUKA
-RSI-style UDP/XML. The component keeps the name ``alter_gateway`` (its topics and events
+RSI-style UDP/XML. The component is ``robot_gateway`` whatever the link (its topics and events
 are unchanged) whatever the link.
 
 Frames: ``world`` (the cell), ``base`` (the robot base, placed by ``world_T_base_mm_deg``),
@@ -55,16 +55,17 @@ from humanpt.alter import (
     Transmit,
 )
 from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
-from humanpt.alter_gateway.alter_link import AlterLink
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.link import CycleReceived, CycleState, Link, LinkError
-from humanpt.alter_gateway.safety import (
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.alter_link import AlterLink
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.link import CycleReceived, CycleState, Link, LinkError
+from humanpt.robot_gateway.safety import (
     clamp_norm,
     clip_to_envelope,
     rotation_angle_deg,
     safe_norm,
 )
-from humanpt.geometry.transforms import transform_from_x
+from humanpt.runtime.config import current_name
 from humanpt.runtime.core import Core, Output, Port, command_operator
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
@@ -79,8 +80,8 @@ MAX_SEQ_GAP = 100_000
 # Command modes that mean "do not move".
 _ZERO_MODES = (pb.CONTROL_MODE_HOLD, pb.CONTROL_MODE_IDLE)
 
-ROBOT_STATE = "alter_gateway/robot_state"
-EVENTS = "alter_gateway/events"
+ROBOT_STATE = "robot_gateway/robot_state"
+EVENTS = "robot_gateway/events"
 
 
 def cycles_after(a: int, b: int) -> int:
@@ -137,7 +138,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
     ``ports`` (:func:`gateway_ports` with the link's receive topic), ``watch = WATCH``,
     ``tick_period_ns`` (``config.tick_period_ns``) and :meth:`make_link`."""
 
-    name = "alter_gateway"
+    name = "robot_gateway"
     realtime = True  # a robot link's cycle: see runtime.live.make_realtime
 
     def make_link(self, config: Any) -> Link:
@@ -500,7 +501,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             )
 
     def _on_console(self, t_ns: int, msg: pb.Command, outs: list[Output]) -> None:
-        if msg.component != self.name:
+        if current_name(msg.component) != self.name:  # a script's old name (alter_gateway) too
             return
         if msg.verb == "reset_fault":
             who = command_operator(msg)
@@ -831,7 +832,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
 
 
 class AlterGatewayCore(GatewayCore):
-    name = "alter_gateway"
+    name = "robot_gateway"
     config_type = AlterGatewayConfig
     ports = gateway_ports(AlterLink.rx_topic)
     watch = WATCH

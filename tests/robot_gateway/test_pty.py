@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.runtime.replay import replay
 from humanpt.runtime.serial_io import SerialAdapter
 from humanpt.schemas import humanpt_pb2 as pb
@@ -30,14 +30,14 @@ from humanpt.testing.harness import (
     scripted_command,
     scripted_step,
 )
-from tests.alter_gateway.oracle import (
+from tests.conftest import wait_for
+from tests.robot_gateway.oracle import (
     LIMIT_DEG,
     LIMIT_MM,
     assert_wire_correction,
     wire_rotation,
     wire_translation_mm,
 )
-from tests.conftest import wait_for
 
 SCRIPT = ScriptedControllerConfig()
 
@@ -54,9 +54,9 @@ class Controller:
         self.seq = 0
 
     def on_gateway_output(self, topic, msg) -> None:
-        if topic == "alter_gateway/events":
+        if topic == "robot_gateway/events":
             self.events.append(msg)
-        if topic != "alter_gateway/robot_state":
+        if topic != "robot_gateway/robot_state":
             return
         self.states.append(msg)
         cmd = scripted_command(msg, SCRIPT, self.seq)
@@ -198,6 +198,6 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
         gw_shell.stop()
         sim_shell.stop()
     assert gw_shell.errors == 0 and sim_shell.errors == 0
-    for comp in ("alter_gateway", "sim_robot"):
+    for comp in ("robot_gateway", "sim_robot"):
         res = replay(tmp_path / f"{comp}.mcap")
         assert res.match and res.compared >= 20, res.report()  # seconds of 28 ms cycles

@@ -1,7 +1,7 @@
-"""alter_gateway: the host end of the ALTER serial link and the last line of safety.
+"""robot_gateway: the host end of the ALTER serial link and the last line of safety.
 
 ``core.AlterGatewayCore`` (pure) turns the controller's per-cycle STATUS into
-``alter_gateway/robot_state`` and answers each with a clamped, enveloped, fresh-or-zero
+``robot_gateway/robot_state`` and answers each with a clamped, enveloped, fresh-or-zero
 CORRECTION; ``shell.adapters`` binds it to a serial port. The safety rules are
 ``core.GatewayCore``, one implementation behind a small ``link.Link`` interface (ALTER
 in ``alter_link``, KUKA RSI-style UDP/XML in ``humanpt.rsi``). Cores on threads without

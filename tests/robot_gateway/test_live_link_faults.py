@@ -1,6 +1,6 @@
 """Faults on the serial line between real processes (issue 14, item 5).
 
-`humanpt sim_robot` and `humanpt alter_gateway` run as processes on a real router; the test
+`humanpt sim_robot` and `humanpt robot_gateway` run as processes on a real router; the test
 sits on the line between them as a tap (its own pty for the gateway, relaying to and from
 sim_robot's pty) and injects one forged STRT frame toward either end, as the attack did. The attack saw the link
 stay dead; here the previous codec happened to recover through its REP timeout (0.45 s:
@@ -71,7 +71,7 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
     robot_link, gateway_link = tmp_path / "robot-pty", tmp_path / "gateway-pty"
     cfg = write_config(tmp_path / "alter.toml", port,
                        extra=f'[sim_robot]\npty_link = "{robot_link}"\n'
-                             f'[alter_gateway]\nport = "{gateway_link}"\n')
+                             f'[robot_gateway]\nport = "{gateway_link}"\n')
     run = tmp_path / "run"
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
     deadline = time.monotonic() + 20
@@ -89,10 +89,10 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
                 states.append(time.monotonic())
                 got_state.set()
 
-            subs = [s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state),
+            subs = [s.declare_subscriber("humanpt/test/robot_gateway/robot_state", on_state),
                     s.declare_subscriber("humanpt/test/*/events", lambda smp: codes.append(
                         pb.Event.FromString(smp.payload.to_bytes()).code))]
-            procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+            procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
             assert got_state.wait(30), "no robot state: the link never came up"
             # Let it run a second, then forge one STRT toward the robot.
             t_run = time.monotonic()
@@ -136,9 +136,9 @@ def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
     port, _ = router
     link = tmp_path / "pty"
     cfg = write_config(tmp_path / "alter.toml", port,
-                       extra=f'[sim_robot]\npty_link = "{link}"\n[alter_gateway]\nport = "{link}"\n')
+                       extra=f'[sim_robot]\npty_link = "{link}"\n[robot_gateway]\nport = "{link}"\n')
     run = tmp_path / "run"
-    gateway = procs.start("alter_gateway", "--config", str(cfg), "--run-dir", str(run))
+    gateway = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
     stamps: list[float] = []
     got = threading.Event()
@@ -147,7 +147,7 @@ def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
             stamps.append(time.monotonic())
             got.set()
 
-        sub = s.declare_subscriber("humanpt/test/alter_gateway/robot_state", on_state)
+        sub = s.declare_subscriber("humanpt/test/robot_gateway/robot_state", on_state)
         assert got.wait(30), "no robot state: the link never came up"
         # Commands for a cycle far ahead: the gateway drops each (bad_command, rate-limited).
         pub = s.declare_publisher("humanpt/test/controller/command")
@@ -165,7 +165,7 @@ def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
         pub.undeclare()
         sub.undeclare()
     procs.stop(gateway)
-    rec = read(run / "alter_gateway.mcap")
+    rec = read(run / "robot_gateway.mcap")
     waits_ms = [(e.t_ns - pb.SerialChunk.FromString(e.data).header.stamp_ns) / 1e6
                 for e in rec.entries if e.direction == "in" and e.topic == "serial_rx"]
     assert len(waits_ms) > 100 and max(waits_ms) < 500, (

@@ -5,7 +5,7 @@ The rules come from the stated limits and the wire format, not from the gateway'
 
 * per cycle, a translation step is at most ``max_speed_mm_s`` x the cycle time and a
   rotation at most ``max_angular_speed_deg_s`` x the cycle time, clamped by norm / by
-  angle with the direction kept (components/alter_gateway/README.md, config docs);
+  angle with the direction kept (components/robot_gateway/README.md, config docs);
 * the CORRECTION message carries dx, dy, dz in 0.01 mm and drx, dry, drz in 0.01 deg
   with dR = Rz(drz) Ry(dry) Rx(drx) (components/alter/PROTOCOL.md);
 * the limits hold after rounding: a step at the limit may be shrunk by a few wire units.

@@ -1,6 +1,6 @@
 """The gateway's link interface: what a robot link protocol gives the safety rules
 (:class:`CycleState` per robot cycle) and what it must do (:class:`Link`). Implementations:
-``humanpt.alter_gateway.alter_link.AlterLink`` (ALTER, serial) and
+``humanpt.robot_gateway.alter_link.AlterLink`` (ALTER, serial) and
 ``humanpt.rsi.link.RsiLink`` (KUKA RSI-style, UDP/XML)."""
 
 from __future__ import annotations

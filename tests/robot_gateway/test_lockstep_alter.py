@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.runtime.core import Core, Port
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import factory_with, replay
@@ -21,7 +21,7 @@ from humanpt.testing.harness import (
     ScriptedControllerCore,
     scripted_step,
 )
-from tests.alter_gateway.oracle import (
+from tests.robot_gateway.oracle import (
     LIMIT_DEG,
     LIMIT_MM,
     assert_wire_correction,
@@ -50,7 +50,7 @@ def _run(
         ctl if isinstance(ctl, Core) else ScriptedControllerCore(ctl or ScriptedControllerConfig())
     )
     ls = Lockstep([robot, gateway, controller], latency_ns=latency_ns, run_dir=run_dir)
-    lines = ls.connect_serial("alter_gateway", "sim_robot", baud)
+    lines = ls.connect_serial("robot_gateway", "sim_robot", baud)
     end = n_cycles * CYCLE_NS
     for t_ns, action in sorted(actions, key=lambda a: a[0]):
         ls.run_until(t_ns)
@@ -121,7 +121,7 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
     states = [
         pb.RobotState.FromString(o.data)
         for o in ls.outputs
-        if o.topic == "alter_gateway/robot_state"
+        if o.topic == "robot_gateway/robot_state"
     ]
     assert len(states) >= 395
     for st in states[-50:]:
@@ -130,13 +130,13 @@ def test_the_flange_path_is_the_integral_of_the_clamped_commands():
             T[:3, 3] * 1000.0, truths[st.cycle - 1][:3, 3], atol=0.0051 * np.sqrt(3)
         )
     # The events: clamping, rate-limited (about one a second).
-    codes = [e.code for e in _events(ls, "alter_gateway")]
+    codes = [e.code for e in _events(ls, "robot_gateway")]
     assert set(codes) == {"clamped"} and len(codes) <= 13
 
 
 def test_byte_timing_makes_the_reply_arrive_within_the_cycle_at_38400_and_late_at_19200():
     ls, gw, sim = _run(n_cycles=100, baud=38_400)
-    rx = [o.t_ns for o in ls.outputs if o.topic == "alter_gateway/robot_state"]
+    rx = [o.t_ns for o in ls.outputs if o.topic == "robot_gateway/robot_state"]
     # STATUS takes 41 bytes x 10 bits / 38400 = 10.68 ms on the wire.
     assert {t % CYCLE_NS for t in rx} == {10_677_084}
     ls, gw, sim = _run(n_cycles=200, baud=19_200)
@@ -166,7 +166,7 @@ def test_same_run_twice_is_identical_and_the_recordings_replay(tmp_path):
     a, _, _ = _run(n_cycles=120, run_dir=tmp_path)
     b, _, _ = _run(n_cycles=120)
     assert a.digest() == b.digest()
-    for comp in ("alter_gateway", "sim_robot", "controller"):
+    for comp in ("robot_gateway", "sim_robot", "controller"):
         res = replay(tmp_path / f"{comp}.mcap", core_factory=factory_with(ScriptedControllerCore))
         # Each answers (nearly) every one of the 120 ALTER cycles.
         assert res.match and res.compared >= 100, res.report()
@@ -185,7 +185,7 @@ def test_a_silent_controller_is_reused_then_zero_and_a_long_silence_holds_and_re
         "stale",
         "fresh",
     ]
-    codes = [e.code for e in _events(ls, "alter_gateway")]
+    codes = [e.code for e in _events(ls, "robot_gateway")]
     assert "stale_command" in codes and "command_resumed" in codes and "fault" not in codes
     truths = _truths(ls)
     # truths[k] follows the correction for cycle k: cycles 103 and 104 got zero, no motion.
@@ -196,11 +196,11 @@ def test_a_silent_controller_is_reused_then_zero_and_a_long_silence_holds_and_re
     # fault, ALTER stays on; the controller's commands from cycle 130 on move it again by
     # themselves (issue 19's policy: a silent controller is held, not faulted).
     ls, gw, sim = _run(n_cycles=220, ctl=ScriptedControllerConfig(mute=((100, 129),)))
-    gw_codes = [e.code for e in _events(ls, "alter_gateway")]
+    gw_codes = [e.code for e in _events(ls, "robot_gateway")]
     sim_codes = [e.code for e in _events(ls, "sim_robot")]
     assert "fault" not in gw_codes and gw_codes.count("controller_silent") == 1
     assert "alter_off" not in sim_codes
-    resumed = [e for e in _events(ls, "alter_gateway") if e.code == "command_resumed"]
+    resumed = [e for e in _events(ls, "robot_gateway") if e.code == "command_resumed"]
     assert resumed and "resumed by itself" in resumed[-1].text
     truths = _truths(ls)
     still = [T[:3, 3] for T in truths[103:130]]
@@ -212,7 +212,7 @@ def test_liveliness_loss_holds_at_once_and_return_resumes():
     def gone(ls, lines):
         ls.inject(
             ls.now_ns,
-            "alter_gateway",
+            "robot_gateway",
             "liveliness",
             pb.Liveliness(header=header(ls.now_ns), component="controller", alive=False),
         )
@@ -220,7 +220,7 @@ def test_liveliness_loss_holds_at_once_and_return_resumes():
     def back(ls, lines):
         ls.inject(
             ls.now_ns,
-            "alter_gateway",
+            "robot_gateway",
             "liveliness",
             pb.Liveliness(header=header(ls.now_ns), component="controller", alive=True),
         )
@@ -235,7 +235,7 @@ def test_liveliness_loss_holds_at_once_and_return_resumes():
     assert {sources[c] for c in range(152, 195)} == {"fresh"}
     truths = _truths(ls)
     assert np.ptp([T[:3, 3] for T in truths[102:152]], axis=0).max() < 1e-9
-    codes = [e.code for e in _events(ls, "alter_gateway")]
+    codes = [e.code for e in _events(ls, "robot_gateway")]
     assert (
         codes.count("controller_gone") == 1
         and codes.count("controller_back") == 1
@@ -253,7 +253,7 @@ def test_a_cut_line_is_link_down_on_both_ends_the_robot_holds_and_the_link_recov
             line.enabled = True
 
     ls, gw, sim = _run(n_cycles=300, actions=[(100 * CYCLE_NS, cut), (150 * CYCLE_NS, mend)])
-    gw_codes = [e.code for e in _events(ls, "alter_gateway")]
+    gw_codes = [e.code for e in _events(ls, "robot_gateway")]
     sim_codes = [e.code for e in _events(ls, "sim_robot")]
     assert "link_down" in gw_codes and "link_up" in gw_codes
     assert "link_down" in sim_codes and "correction_missed" in sim_codes
@@ -271,7 +271,7 @@ class _PushOut(Core):
 
     name = "controller"
     config_type = ScriptedControllerConfig
-    ports = (Port("alter_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
+    ports = (Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),)
 
     def _on_robot_state(self, t_ns, msg):
         cmd = pb.FlangeCommand(
@@ -287,7 +287,7 @@ def test_pushing_out_of_reach_faults_the_robot_which_stops_and_the_gateway_holds
     ls, gw, sim = _run(n_cycles=320, ctl=_PushOut(ScriptedControllerConfig()))
     assert sim.fault is not None
     sim_codes = [e.code for e in _events(ls, "sim_robot")]
-    gw_codes = [e.code for e in _events(ls, "alter_gateway")]
+    gw_codes = [e.code for e in _events(ls, "robot_gateway")]
     assert "fault" in sim_codes and "robot_fault" in gw_codes
     truths = _truths(ls)
     x = [T[0, 3] for T in truths]
@@ -306,14 +306,14 @@ def test_the_envelope_stops_the_flange_at_its_wall():
     )
     truths = _truths(ls)
     assert truths[-1][0, 3] == pytest.approx(x0 + 100.0, abs=0.02)
-    assert "envelope" in [e.code for e in _events(ls, "alter_gateway")]
+    assert "envelope" in [e.code for e in _events(ls, "robot_gateway")]
     assert sim.fault is None
 
 
 def test_lockstep_serial_line_timing_is_sequential():
     ls, gw, sim = _run(n_cycles=3)
     g2s, s2g = ls._lines[1][0][0], ls._lines[0][0][0]
-    assert g2s.src == "alter_gateway" and s2g.src == "sim_robot"
+    assert g2s.src == "robot_gateway" and s2g.src == "sim_robot"
     assert g2s.wire_time_ns(29) == 7_552_084 and g2s.bytes_carried > 0 and s2g.bytes_carried > 0
 
 

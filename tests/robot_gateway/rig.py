@@ -12,9 +12,9 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter_gateway.config import AlterGatewayConfig
-from humanpt.alter_gateway.core import AlterGatewayCore
 from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 
@@ -137,13 +137,13 @@ class Rig:
 
     # -- reading -------------------------------------------------------------------------
     def events(self, outs=None) -> list[pb.Event]:
-        return [m for t, m in (self.outs if outs is None else outs) if t == "alter_gateway/events"]
+        return [m for t, m in (self.outs if outs is None else outs) if t == "robot_gateway/events"]
 
     def codes(self, outs=None) -> list[str]:
         return [e.code for e in self.events(outs)]
 
     def states(self) -> list[pb.RobotState]:
-        return [m for t, m in self.outs if t == "alter_gateway/robot_state"]
+        return [m for t, m in self.outs if t == "robot_gateway/robot_state"]
 
     def last_correction(self) -> Correction:
         return self.corrections[-1][1]

@@ -1,4 +1,4 @@
-"""alter_gateway's live-shell adapter: the serial port to the robot controller (pyserial).
+"""robot_gateway's live-shell adapter: the serial port to the robot controller (pyserial).
 
 ``port`` is a device (/dev/ttyS0, /dev/ttyUSB0) or a pyserial URL (``rfc2217://host:port``,
 ``socket://host:port``, ``loop://``); the default is the link sim_robot makes to its pty.
@@ -15,10 +15,10 @@ from collections.abc import Callable
 
 import serial
 
-from humanpt.alter_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.config import AlterGatewayConfig
 from humanpt.runtime.serial_io import SerialAdapter
 
-log = logging.getLogger("humanpt.alter_gateway")
+log = logging.getLogger("humanpt.robot_gateway")
 
 
 class PatientSerialAdapter(SerialAdapter):

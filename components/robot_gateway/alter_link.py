@@ -1,5 +1,5 @@
 """The gateway's ALTER link: humanpt.alter's HostEndpoint (DDCMP frames over a serial line,
-STATUS in, CORRECTION out) behind the gateway's :class:`~humanpt.alter_gateway.link.Link`."""
+STATUS in, CORRECTION out) behind the gateway's :class:`~humanpt.robot_gateway.link.Link`."""
 
 from __future__ import annotations
 
@@ -17,8 +17,8 @@ from humanpt.alter import (
     StatusBits,
     StatusReceived,
 )
-from humanpt.alter_gateway.link import CycleReceived, CycleState, LinkError
-from humanpt.alter_gateway.safety import quantize
+from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError
+from humanpt.robot_gateway.safety import quantize
 
 # Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
 _ALTER_ACTIVE, _TOOL_MODE, _CUMULATIVE, _ARM_POWER, _FAULT, _MISSED = (

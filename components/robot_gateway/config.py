@@ -1,4 +1,4 @@
-"""alter_gateway configuration (the ``[alter_gateway]`` section)."""
+"""robot_gateway configuration (the ``[robot_gateway]`` section)."""
 
 from __future__ import annotations
 
@@ -78,7 +78,7 @@ class AlterGatewayConfig:
 
     @classmethod
     def config_class_for(cls, table) -> type:
-        """The config class of an ``[alter_gateway]`` table: the RSI gateway's for
+        """The config class of an ``[robot_gateway]`` table: the RSI gateway's for
         ``link = "rsi"`` (its keys: udp_bind, ...), else this one (runtime.config.build)."""
         if cls is AlterGatewayConfig and table.get("link") == "rsi":
             from humanpt.rsi.config import RsiGatewayConfig  # (rsi imports this module)
