@@ -119,7 +119,8 @@ def router(args) -> int:
 
 
 def run_component(args) -> int:
-    from humanpt.runtime.live import LiveShell, make_realtime
+    from humanpt.runtime.live import LiveShell
+    from humanpt.runtime.tuning import tune_realtime
 
     cfg = load_cfg(args)
     name = args.component
@@ -132,7 +133,7 @@ def run_component(args) -> int:
         print(f"humanpt {name}: {e}", file=sys.stderr)
         return 1
     shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
-    realtime = make_realtime(core, cfg.runtime)
+    realtime = tune_realtime(core, cfg.runtime)
     if realtime:
         print(f"humanpt {name}: on a robot link's cycle: {realtime}", file=sys.stderr, flush=True)
     stop_on_signals(shell.stop)

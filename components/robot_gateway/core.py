@@ -139,7 +139,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
     ``tick_period_ns`` (``config.tick_period_ns``) and :meth:`make_link`."""
 
     name = "robot_gateway"
-    realtime = True  # a robot link's cycle: see runtime.live.make_realtime
+    realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
 
     def make_link(self, config: Any) -> Link:
         raise NotImplementedError

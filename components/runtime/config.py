@@ -332,9 +332,9 @@ class RuntimeConfig:
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False
     # A realtime core's process (Core.realtime: the robot gateway, the simulated robot):
-    # Python hands the GIL over every 5 ms by default, longer than RSI's 4 ms cycle, so a
-    # thread woken by a datagram could wait a whole cycle behind a busy one.  Such a process
-    # switches every this many ms and asks the kernel for this nice value (negative: more
+    # a thread woken by a datagram waits up to the GIL's switch interval behind a busy one
+    # (every humanpt process: 0.5 ms, runtime.tuning), an eighth of RSI's 4 ms cycle, and
+    # such waits add up along the way.  Such a process switches every this many ms and asks the kernel for this nice value (negative: more
     # CPU under load; needs CAP_SYS_NICE, else it runs at the normal priority with a note).
     realtime_switch_interval_ms: Annotated[float, Range(0.05, 5, "ms")] = 0.2
     realtime_nice: Annotated[int, Range(-20, 0, "")] = -10

@@ -149,9 +149,10 @@ class Core:
     # :class:`humanpt.geometry.rig.Rig`): it is then built as ``cls(config, rig=...)``
     # (:meth:`create`) and defaults to the nominal rig when given none.
     uses_rig: ClassVar[bool] = False
-    # A core on a robot link's hard cycle (the gateway, the simulated controller): the live
-    # shell gives its process the GIL more often and, where allowed, a higher priority
-    # ([runtime] realtime_switch_interval_ms, realtime_nice).
+    # A core on a robot link's hard cycle (the gateway, the simulated controller): its process
+    # gets the GIL more often and, where allowed, a higher priority (runtime.tuning
+    # .tune_realtime); the live shell records off its worker thread and never gives it a
+    # tick sooner than a period after the last was taken.
     realtime: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs: Any) -> None:

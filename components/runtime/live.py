@@ -150,27 +150,6 @@ class Inbox:
             return "bus", short, payload
 
 
-def make_realtime(core: Core, rt: RuntimeConfig) -> str | None:
-    """For a process that runs ``core`` alone (``humanpt run``): if the core is on a robot
-    link's hard cycle (``Core.realtime``), shorten the GIL's switch interval to
-    ``rt.realtime_switch_interval_ms`` and ask for nice ``rt.realtime_nice``. Returns a line
-    saying what was done (None: not a realtime core). Process-wide: not for a shell that
-    shares its process (tests, lock-step)."""
-    import sys
-
-    if not core.realtime:
-        return None
-    sys.setswitchinterval(rt.realtime_switch_interval_ms / 1000.0)
-    said = f"GIL switch interval {rt.realtime_switch_interval_ms:g} ms"
-    if rt.realtime_nice < 0:
-        try:
-            os.setpriority(os.PRIO_PROCESS, 0, rt.realtime_nice)
-            said += f", nice {rt.realtime_nice}"
-        except OSError as e:  # no CAP_SYS_NICE: the normal priority, and say so
-            said += f", normal priority (nice {rt.realtime_nice} refused: {e.strerror})"
-    return said
-
-
 class LiveShell:
     """Bind ``core`` to Zenoh; :meth:`run` blocks until ``stop`` is set."""
 

@@ -12,13 +12,15 @@ Two things measurably matter on a small machine:
   waits up to the switch interval (5 ms by default) before it may run: 0.5 ms bounds the
   hand-off that the image-to-command latency pays.
 
-Neither changes results, only timing.
+Neither changes results, only timing.  A core on a robot link's hard cycle (``Core.realtime``:
+the gateway, the simulated robot) gets more (:func:`tune_realtime`).
 """
 
 from __future__ import annotations
 
 import ctypes
 import logging
+import os
 import sys
 
 log = logging.getLogger("humanpt.tuning")
@@ -53,3 +55,22 @@ def tune_process() -> None:
     """Both tunings, for a humanpt process (CLI start)."""
     tune_allocator()
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+
+
+def tune_realtime(core, rt) -> str | None:
+    """For a process that runs ``core`` alone (``humanpt run``): if the core is on a robot
+    link's hard cycle (``Core.realtime``), shorten the GIL's switch interval to
+    ``rt.realtime_switch_interval_ms`` and ask for nice ``rt.realtime_nice``. Returns a line
+    saying what was done (None: not a realtime core). Process-wide: not for a shell that
+    shares its process (tests, lock-step)."""
+    if not core.realtime:
+        return None
+    sys.setswitchinterval(rt.realtime_switch_interval_ms / 1000.0)
+    said = f"GIL switch interval {rt.realtime_switch_interval_ms:g} ms"
+    if rt.realtime_nice < 0:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, rt.realtime_nice)
+            said += f", nice {rt.realtime_nice}"
+        except OSError as e:  # no CAP_SYS_NICE: the normal priority, and say so
+            said += f", normal priority (nice {rt.realtime_nice} refused: {e.strerror})"
+    return said

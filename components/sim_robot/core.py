@@ -104,7 +104,7 @@ def corrected_joints(kin, base_T_flange_mm: np.ndarray, delta_T_mm: np.ndarray, 
 
 class SimRobotCore(SerialLinkCoreMixin, Core):
     name = "sim_robot"
-    realtime = True  # a robot link's cycle: see runtime.live.make_realtime
+    realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
     config_type = SimRobotConfig
     ports = (
         Port("tick", pb.Tick, "_on_cycle"),

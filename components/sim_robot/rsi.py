@@ -292,7 +292,7 @@ class RsiSimRobotCore(Core):
     ``SimRobotCore.create`` for ``protocol = "rsi"``."""
 
     name = "sim_robot"
-    realtime = True  # a robot link's cycle: see runtime.live.make_realtime
+    realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
     config_type = SimRobotConfig
     ports = (
         Port("tick", pb.Tick, "_on_cycle"),
