@@ -577,7 +577,7 @@ def main(argv: list[str] | None = None) -> int:
 def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     from humanpt.cli import commands
 
-    if getattr(args, "component", None) and args.verb == args.component:
+    if getattr(args, "component", None) and RENAMED_COMPONENTS.get(args.verb, args.verb) == args.component:
         return commands.run_component(args)
     if args.verb == "experiment":
         from humanpt.cli.experiment import experiment

@@ -46,13 +46,16 @@ def test_cycle_ms_is_for_rsi(tmp_path):
     assert r.returncode != 0 and "ALTER link runs the Puma's 28 ms cycle" in r.stderr
     r = run_cli("demo", "--link", "rsi", "--lockstep", "--robot", "standin", "--run-dir", str(tmp_path / "r2"))
     assert r.returncode != 0 and "simulated Puma" in r.stderr
+    r = run_cli("demo", "--robot", "alter", "--link", "rsi", "--run-dir", str(tmp_path / "r3"))
+    assert r.returncode != 0 and "--robot alter and --link rsi disagree" in r.stderr
 
 
 def test_lockstep_demo_over_rsi_at_4_ms_is_deterministic(tmp_path):
-    """`humanpt demo --lockstep --link rsi --cycle-ms 4`: two runs give the same path."""
+    """`humanpt demo --lockstep --link rsi --cycle-ms 4`: two runs give the same path (the
+    second spelt as issue 22 does, `--robot rsi`: the same run)."""
     paths = []
-    for k in (1, 2):
-        r = run_cli("demo", "--lockstep", "--link", "rsi", "--cycle-ms", "4", "--scenario", "arc", "--duration", "4",
+    for k, link in ((1, ["--link", "rsi"]), (2, ["--robot", "rsi"])):
+        r = run_cli("demo", "--lockstep", *link, "--cycle-ms", "4", "--scenario", "arc", "--duration", "4",
                     "--run-dir", str(tmp_path / f"r{k}"))
         assert r.returncode == 0, r.stdout + r.stderr
         paths.append((tmp_path / f"r{k}" / "paths" / "path-1.csv").read_text())

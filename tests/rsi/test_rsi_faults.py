@@ -211,3 +211,21 @@ def test_a_duplicated_rob_is_answered_once():
     rig.status(cycle=1)  # the same datagram again
     assert len(rig.corrections) == n and rig.gw.link.counters["duplicates"] == 1
     assert rig.gw.link.counters["sessions"] == 1 and rig.codes() == []
+
+
+def test_an_answer_is_judged_by_when_it_reached_the_robot_not_when_the_robot_got_to_it():
+    """A controller on a hard real-time clock judges an answer by its arrival: one that
+    arrived within the 4 ms cycle is in time even if the (simulated, busy) robot handles it
+    later; one that arrived after the cycle is late even if handled before the next one."""
+    ms = 1_000_000
+    robot = _robot()
+    rob = robot.cycle(0)
+    sen = encode_sen(RsiCorrection(decode_rob(rob).ipoc, (0.0,) * 6))
+    robot.receive(sen, t_ns=round(4.6 * ms), arrived_ns=round(3.5 * ms))  # arrived in time, handled late
+    rob = robot.cycle(round(4.8 * ms))
+    assert robot.counters["on_time"] == 1 and robot.counters["late"] == 0
+    sen = encode_sen(RsiCorrection(decode_rob(rob).ipoc, (0.0,) * 6))
+    robot.receive(sen, t_ns=round(9.0 * ms), arrived_ns=round(8.9 * ms))  # 4.1 ms after its <Rob>
+    robot.cycle(round(9.6 * ms))
+    assert robot.counters["on_time"] == 1 and robot.counters["late"] == 1
+    assert robot.counters["late_arrivals"] == 1 and robot.delay == 1
