@@ -338,6 +338,10 @@ class RuntimeConfig:
     # CPU under load; needs CAP_SYS_NICE, else it runs at the normal priority with a note).
     realtime_switch_interval_ms: Annotated[float, Range(0.05, 5, "ms")] = 0.2
     realtime_nice: Annotated[int, Range(-20, 0, "")] = -10
+    # ... or the kernel's SCHED_FIFO real-time class at this priority (0: not asked; then
+    # realtime_nice), as RSI clients on a real cell run. The kernel keeps 5 % of each second
+    # for ordinary tasks (sched_rt_runtime_us), so a runaway cannot hang the machine.
+    realtime_fifo_priority: Annotated[int, Range(0, 99, "")] = 10
     # The rig file: what the pipeline believes about the hardware (intrinsics, mirrors,
     # hand-eye, target, tip), written by `humanpt calibrate` or `humanpt rig init`.  A
     # relative path is relative to this config file.  Empty: the nominal design rig.

@@ -67,6 +67,13 @@ def tune_realtime(core, rt) -> str | None:
         return None
     sys.setswitchinterval(rt.realtime_switch_interval_ms / 1000.0)
     said = f"GIL switch interval {rt.realtime_switch_interval_ms:g} ms"
+    if rt.realtime_fifo_priority > 0:
+        # Before any thread starts (zenoh's, the adapters', the recorder's): they inherit it.
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt.realtime_fifo_priority))
+            return said + f", SCHED_FIFO priority {rt.realtime_fifo_priority}"
+        except (OSError, AttributeError) as e:  # no CAP_SYS_NICE, or not Linux
+            said += f", no SCHED_FIFO ({getattr(e, 'strerror', None) or e})"
     if rt.realtime_nice < 0:
         try:
             os.setpriority(os.PRIO_PROCESS, 0, rt.realtime_nice)

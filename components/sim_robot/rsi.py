@@ -3,6 +3,10 @@
 :class:`RsiRobot` is the controller (pure: times are given). Every RSI cycle (4 or 12 ms,
 ``cycle_period_ms``) :meth:`RsiRobot.cycle`:
 
+0. until the client's first datagram arrives, sends ``<Rob>`` without judging (``waiting``
+   cycles: RSI_ON comes once the sensor side is up, so a gateway that takes a while to
+   start is not ``rsi_late_limit`` late replies before the run begins); then
+   ``client_answered`` and every cycle is judged;
 1. judges the answer to the previous ``<Rob>``: an in-time ``<Sen>`` echoing its IPOC is
    applied (a relative correction, RKorr, through the same kinematics as the ALTER sim:
    :func:`humanpt.sim_robot.core.corrected_joints`; ``alter_mode`` world = base frame,
@@ -77,10 +81,12 @@ class RsiRobot:
         self._last: RsiCorrection | None = None  # the last applied (HOLDON)
         self.delay = 0  # late replies so far (<Delay D>)
         self.late_run = 0  # late replies in a row
+        self.client_seen = False  # a datagram came from the client: cycles are judged from then on
+        self.judging = False
         self.stopped: str | None = None
         self.events: list[SimEvent] = []
         self.counters = dict.fromkeys(
-            ("cycles", "on_time", "late", "late_arrivals", "wrong_ipoc", "malformed", "overwritten",
+            ("cycles", "waiting", "on_time", "late", "late_arrivals", "wrong_ipoc", "malformed", "overwritten",
              "after_stop", "applied"), 0)
         self.applied: deque[tuple[int, RsiCorrection]] = deque(maxlen=100_000)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
@@ -118,6 +124,14 @@ class RsiRobot:
             self._judge(t_ns)
 
     def _judge(self, t_ns: int) -> None:
+        if not self.judging:
+            if not self.client_seen:
+                self.counters["waiting"] += 1  # before the client's first word: not judged
+                return
+            self.judging = True
+            self._event(t_ns, "info", "client_answered",
+                        f"the client answers (IPOC {self.ipoc}, after {self.counters['waiting']} cycles waiting); "
+                        "every cycle is judged from now on")
         answer, self._answer = self._answer, None
         if answer is not None:
             self.counters["on_time"] += 1
@@ -169,6 +183,7 @@ class RsiRobot:
         cycle of its <Rob>'s sending, as a controller on a hard real-time clock judges it: a
         simulated controller that handles it later (a busy process) does not make it late."""
         arrived_ns = t_ns if arrived_ns is None else arrived_ns
+        self.client_seen = True  # whatever it says: the client is up
         if self.stopped is not None:
             self.counters["after_stop"] += 1
             return

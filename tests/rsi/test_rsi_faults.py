@@ -91,9 +91,10 @@ def test_late_answers_count_up_to_the_limit_then_rsi_stops_with_a_clear_event():
     robot = _run(_echo((0.1, 0, 0, 0, 0, 0)), delay_s=0.006)  # 6 ms: after the 4 ms cycle
     assert robot.stopped is not None and robot.counters["on_time"] == 0
     assert robot.counters["late"] == LIMIT and robot.delay == LIMIT
-    assert robot.counters["cycles"] == LIMIT  # no <Rob> after the stop
+    # Judged from the client's first (late) datagram on; none after the stop.
+    assert robot.counters["waiting"] == 1 and robot.counters["cycles"] == 1 + LIMIT
     codes = _codes(robot)
-    assert codes[0] == "late_reply" and codes[-1] == "rsi_stopped"
+    assert codes[:2] == ["client_answered", "late_reply"] and codes[-1] == "rsi_stopped"
     assert f"{LIMIT} late answers in a row" in robot.events[-1].text
     np.testing.assert_array_equal(robot.q_rad, q0)  # nothing late was ever applied
 
@@ -144,7 +145,7 @@ def test_holdon_repeats_the_last_correction_or_holds_for_a_missed_answer(holdon)
     moved_x = robot.base_T_flange_mm[0, 3] - p0[0]
     assert robot.counters["on_time"] == 3 and robot.counters["late"] == 3
     assert moved_x == pytest.approx(0.2 * (6 if holdon else 3), abs=1e-6)
-    assert _codes(robot) == ["late_reply"]
+    assert _codes(robot) == ["client_answered", "late_reply"]
 
 
 # -- the gateway's side ------------------------------------------------------------------------
@@ -229,3 +230,20 @@ def test_an_answer_is_judged_by_when_it_reached_the_robot_not_when_the_robot_got
     robot.cycle(round(9.6 * ms))
     assert robot.counters["on_time"] == 1 and robot.counters["late"] == 1
     assert robot.counters["late_arrivals"] == 1 and robot.delay == 1
+
+
+def test_cycles_before_the_clients_first_datagram_are_not_judged():
+    """RSI_ON waits for the sensor side: a gateway that takes longer to start than the late
+    limit allows does not stop RSI before the run begins; judging starts with its first word."""
+    robot = _robot()  # rsi_late_limit = LIMIT
+    t = 0
+    for _ in range(3 * LIMIT):  # silence, far longer than the limit
+        rob = robot.cycle(t)
+        t += 4_000_000
+    assert robot.stopped is None and robot.counters["waiting"] == 3 * LIMIT - 1 and robot.delay == 0
+    robot.receive(encode_sen(RsiCorrection(decode_rob(rob).ipoc, (0.0,) * 6)), t - 3_000_000)
+    robot.cycle(t)
+    assert robot.counters["on_time"] == 1 and _codes(robot) == ["client_answered"]
+    for _ in range(LIMIT):  # silent again: now it counts, and stops at the limit
+        robot.cycle(t := t + 4_000_000)
+    assert robot.stopped is not None and robot.delay == LIMIT and _codes(robot)[-1] == "rsi_stopped"
