@@ -123,6 +123,7 @@ def _held_filled(path: list[pb.PathPoint]) -> np.ndarray:
 
 class ControllerCore(Core):
     name = "controller"
+    realtime = True  # on the robot link's cycle (a command per cycle): see runtime.tuning.tune_realtime
     config_type = ControllerConfig
     ports = (
         Port("pose_filter/tob_state", pb.TobState, "_cycle"),

@@ -37,6 +37,7 @@ MANOEUVRE_EVENT_NS = 1_000_000_000  # at most one "manoeuvre" event per second
 
 class PoseFilterCore(Core):
     name = "pose_filter"
+    realtime = True  # on the robot link's cycle (a state per cycle): see runtime.tuning.tune_realtime
     config_type = PoseFilterConfig
     ports = (
         Port("perception/tob", pb.TobMeasurement, "_on_tob"),
