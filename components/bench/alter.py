@@ -48,7 +48,16 @@ class AlterRun:
     on_time: int = 0
     latency_ms: list[float] = field(default_factory=list)  # STATUS received -> correction sent
     jitter_ms: list[float] = field(default_factory=list)  # |robot cycle interval - period|
+    work_us: list[float] = field(default_factory=list)  # the gateway's serial_rx and command steps (threads mode)
     note: str = ""
+
+    @property
+    def histogram(self) -> dict[str, int]:
+        """Replies per latency bucket (STATUS received -> correction sent, the gateway's
+        side), as ``bench rsi``'s, and the missed cycles as ``late``."""
+        from humanpt.sim_robot.rsi import latency_histogram
+
+        return latency_histogram([ms * 1e6 for ms in self.latency_ms], self.missed)
 
     @property
     def missed(self) -> int:
@@ -92,6 +101,18 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
             if topic == "sim_robot/truth" and measuring.is_set():
                 truth_ns.append(msg.header.stamp_ns)
 
+        work_us: list[float] = []
+        gateway_step = gw.step
+
+        def timed_step(t_ns, topic, msg):  # the gateway's work per cycle, as bench rsi measures it
+            t0 = time.perf_counter_ns()
+            try:
+                return gateway_step(t_ns, topic, msg)
+            finally:
+                if measuring.is_set() and topic in ("serial_rx", "controller/command"):
+                    work_us.append((time.perf_counter_ns() - t0) / 1e3)
+
+        gw.step = timed_step
         sim_shell = ThreadShell(sim, [PtyAdapter(link)], on_output=on_sim)
         gw_shell = ThreadShell(gw, [PatientSerialAdapter(str(link), 38_400)], on_output=on_gateway)
         sim_shell.start()
@@ -118,7 +139,7 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
         finally:
             gw_shell.stop()
             sim_shell.stop()
-    res = AlterRun(period_ms, duration_s)
+    res = AlterRun(period_ms, duration_s, work_us=work_us)
     res.note = "; ".join(
         f"{who} fault: {why}"
         for who, why in (("robot", robot_fault), ("gateway", gateway_fault))

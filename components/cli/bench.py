@@ -67,6 +67,7 @@ def bench_perception(args) -> int:
 def bench_alter(args) -> int:
     """robot_gateway <-> sim_robot over a real pty (see ``humanpt.bench.alter``)."""
     from humanpt.bench.alter import line_capacity, measure_alter, shortest_sustained
+    from humanpt.sim_robot.rsi import LATENCY_EDGES_MS
 
     periods = tuple(float(p) for p in args.periods.split(",") if p.strip())
     mode = "zenoh" if args.zenoh else "threads"
@@ -88,10 +89,16 @@ def bench_alter(args) -> int:
         lat50 = f"{r.pct(50, r.latency_ms):.2f} ms" if r.latency_ms else "-"
         lat99 = f"{r.pct(99, r.latency_ms):.2f} ms" if r.latency_ms else "-"
         jit = f"{r.pct(99, r.jitter_ms):.2f} ms" if r.jitter_ms else "-"
-        cells.append([f"{r.period_ms:g} ms", f"{r.duration_s:g} s", r.cycles, r.on_time, r.missed, lat50, lat99, jit,
-                      line_capacity(r.period_ms), r.note])
-    print(tables.render(["period", "run", "cycles", "on time", "missed", "reply p50", "reply p99", "jitter p99",
-                         "38400 line", "note"], cells, align="r" * 9 + "l"))
+        work = [f"{r.pct(q, r.work_us):.0f}" if r.work_us else "-" for q in (50, 99)]
+        h = r.histogram
+        cells.append([f"{r.period_ms:g} ms", f"{r.duration_s:g} s", r.cycles, r.on_time, r.missed, lat50, lat99,
+                      *(h[f"<={e:g} ms"] for e in LATENCY_EDGES_MS), jit, *work, line_capacity(r.period_ms), r.note])
+    print(tables.render(["period", "run", "cycles", "on time", "missed", "reply p50", "reply p99",
+                         *(f"<={e:g} ms" for e in LATENCY_EDGES_MS), "jitter p99", "work p50 us", "work p99 us",
+                         "38400 line", "note"], cells, align="r" * 17 + "l"))
+    print("\nreply = STATUS received -> correction sent (the gateway's side; a pty carries it at once); "
+          "missed = not answered with the controller's own command, applied in its cycle. work = the "
+          "gateway's serial_rx and command steps, wall time (threads mode; - over Zenoh).")
     best = shortest_sustained(rows)
     print("")
     print(f"shortest cycle period sustained without a miss: {f'{best:g} ms' if best else 'none of those tried'}"

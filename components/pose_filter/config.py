@@ -74,7 +74,11 @@ class PoseFilterConfig:
     # from the states before is off by up to 0.6 mm whenever the robot accelerates (a
     # STATUS frame takes 11 ms on a 38 400 baud line).  0: never wait.
     wait_for_robot_ms: Annotated[float, Range(0, 1000, "ms")] = live(60.0, "hold a measurement this long for the robot state after its stamp")
-    robot_history: Annotated[int, Range(2, 100000, "states")] = 64
+    # Robot states kept for those lookups: 512 is 2 s at RSI's 4 ms (14 s at ALTER's 28 ms).
+    # A measurement older than the oldest state is extrapolated backwards from the two
+    # oldest, 4 ms apart: with 64 states (256 ms at 4 ms) a 257 ms-old image came out 0.4-0.5
+    # mm off (issue 22).
+    robot_history: Annotated[int, Range(2, 100000, "states")] = 512
     # A robot state stamped this far from the time it reaches the filter (the receiver's
     # clock) is not believed: a forged future stamp would otherwise lock the buffer.
     max_stamp_skew_ms: Annotated[float, Range(1, 60000, "ms")] = 1000.0

@@ -58,6 +58,20 @@ FIRST_IPOC = 1_000_000  # the IPOC of the first <Rob> (ms)
 LATENCY_EDGES_MS = (0.25, 0.5, 1.0, 2.0, 4.0, 12.0)
 
 
+def latency_histogram(latencies_ns, late: int) -> dict[str, int]:
+    """Replies per latency bucket (``<=E ms`` for each of LATENCY_EDGES_MS; a reply beyond
+    the last edge is counted in none) and ``late``: the benches of both links share it."""
+    edges_ns = [e * 1e6 for e in LATENCY_EDGES_MS]
+    hist = {f"<={e:g} ms": 0 for e in LATENCY_EDGES_MS}
+    for lat in latencies_ns:
+        for e, key in zip(edges_ns, hist, strict=True):
+            if lat <= e:
+                hist[key] += 1
+                break
+    hist["late"] = late
+    return hist
+
+
 @dataclass(frozen=True, slots=True)
 class SimEvent:
     t_ns: int
@@ -221,15 +235,7 @@ class RsiRobot:
 
     def latency_histogram(self) -> dict[str, int]:
         """Answers per latency bucket (ms upper edges) and the late ones."""
-        edges_ns = [e * 1e6 for e in LATENCY_EDGES_MS]
-        hist = {f"<={e:g} ms": 0 for e in LATENCY_EDGES_MS}
-        for lat in self.latency_ns:
-            for e, key in zip(edges_ns, hist, strict=True):
-                if lat <= e:
-                    hist[key] += 1
-                    break
-        hist["late"] = self.counters["late"]
-        return hist
+        return latency_histogram(self.latency_ns, self.counters["late"])
 
 
 class RsiRobotServer:

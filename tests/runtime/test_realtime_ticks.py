@@ -5,6 +5,8 @@ over a real router. And a realtime core's process is tuned (switch interval, nic
 
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
 import threading
@@ -77,25 +79,33 @@ def test_a_realtime_cycle_is_never_cut_short_and_an_ordinary_one_catches_up(rout
 
 def test_a_realtime_core_process_gets_a_short_switch_interval_and_a_higher_priority():
     """In a process of its own, as ``humanpt robot_gateway`` runs: the runtime config's
-    values, and a nice value we (root here) may set; an ordinary core's process is left alone."""
+    values (SCHED_FIFO, else the nice value), which we (root here) may set; an ordinary
+    core's process is left alone."""
     code = """
-import os, sys
+import json, os, sys
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.tuning import tune_realtime
 from humanpt.robot_gateway.core import AlterGatewayCore
 from humanpt.controller.core import ControllerCore
-print(tune_realtime(ControllerCore, RuntimeConfig()), sys.getswitchinterval(), os.getpriority(os.PRIO_PROCESS, 0))
-print(tune_realtime(AlterGatewayCore, RuntimeConfig(realtime_switch_interval_ms=0.25, realtime_nice=-5)))
-print(sys.getswitchinterval(), os.getpriority(os.PRIO_PROCESS, 0))
+from humanpt.perception.core import PerceptionCore
+state = lambda: [sys.getswitchinterval(), os.sched_getscheduler(0), os.getpriority(os.PRIO_PROCESS, 0)]
+out = {"before": state(), "ordinary": tune_realtime(PerceptionCore, RuntimeConfig())}
+out["nice_said"] = tune_realtime(AlterGatewayCore, RuntimeConfig(realtime_switch_interval_ms=0.25,
+                                                                 realtime_fifo_priority=0, realtime_nice=-5))
+out["nice"] = state()
+out["fifo_said"] = tune_realtime(ControllerCore, RuntimeConfig())
+out["fifo"] = state()
+print(json.dumps(out))
 """
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
-    before, said, after = p.stdout.splitlines()
-    none, interval0, nice0 = before.split()
-    assert none == "None" and float(interval0) == 0.005 and int(nice0) == 0
-    interval, nice = after.split()
-    assert float(interval) == pytest.approx(0.00025)
-    if said.endswith("nice -5"):  # allowed (CAP_SYS_NICE): applied
-        assert int(nice) == -5
+    out = json.loads(p.stdout)
+    assert out["ordinary"] is None and out["before"] == [0.005, os.SCHED_OTHER, 0]
+    if out["nice_said"].endswith("nice -5"):  # allowed (CAP_SYS_NICE): applied
+        assert out["nice"] == [pytest.approx(0.00025), os.SCHED_OTHER, -5]
     else:  # refused: said so, priority unchanged
-        assert "refused" in said and int(nice) == 0
+        assert "refused" in out["nice_said"] and out["nice"][2] == 0
+    if out["fifo_said"].endswith("SCHED_FIFO priority 10"):
+        assert out["fifo"][:2] == [pytest.approx(0.0002), os.SCHED_FIFO]
+    else:
+        assert "no SCHED_FIFO" in out["fifo_said"] and out["fifo"][1] == os.SCHED_OTHER
