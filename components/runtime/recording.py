@@ -444,6 +444,14 @@ class Recorder:
 
     # -- writing ---------------------------------------------------------------------------
     def _drain(self) -> None:
+        # In a realtime process (SCHED_FIFO, runtime.tuning) this thread would inherit the
+        # class, and a chunk's compression would hold a CPU against the link's threads of the
+        # same priority (FIFO does not share a CPU among them): it writes as an ordinary task.
+        if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
+            try:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            except OSError:
+                pass
         while True:
             batch = self._queue.get()
             if batch is None:
