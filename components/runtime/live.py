@@ -366,7 +366,7 @@ class LiveShell:
                     self.rt.chunk_size, self.record.image_chunk_size),
                 flush_interval_s=self.rt.flush_interval_s,
                 # A robot link's cycle must not wait for a chunk's compression.
-                background=self.rt.record_thread or self.core.realtime,
+                background=self.rt.record_thread or bool(self.core.realtime),
                 images=ImagePolicy.from_config(name, self.record, live_producers(
                     self.run_dir, fresh_s=max(10.0, 5 * self.rt.flush_interval_s))))
             log.info("%s: recording to %s", name, self.recorder.path)
