@@ -127,18 +127,22 @@ def shown_short(local: str) -> str:
     return local[len(SHOW_PREFIX):].replace(".", "/")
 
 
-# Topics of renamed components (runtime.config.RENAMED_COMPONENTS): a recording made under
-# the old name reads as if made under the new one.
-RENAMED_TOPIC_PREFIXES = {"alter_gateway/": "robot_gateway/"}
+# Components that changed their name: old name -> new. A config section, profile entry,
+# `humanpt OLD`, `humanpt param OLD`, a console command or a recording under the old name
+# still works (issue 22 made the ALTER gateway one gateway for every robot link).
+RENAMED_COMPONENTS: dict[str, str] = {"alter_gateway": "robot_gateway"}
+
+
+def current_name(component: str) -> str:
+    """A component's name now (``alter_gateway`` -> ``robot_gateway``)."""
+    return RENAMED_COMPONENTS.get(component, component)
 
 
 def current_topic(short: str) -> str:
-    """A short topic's name in this version (``alter_gateway/robot_state`` ->
-    ``robot_gateway/robot_state``); others unchanged."""
-    for old, new in RENAMED_TOPIC_PREFIXES.items():
-        if short.startswith(old):
-            return new + short[len(old):]
-    return short
+    """A short topic's name now (``alter_gateway/robot_state`` -> ``robot_gateway/robot_state``):
+    a renamed component's topics moved with it; others unchanged."""
+    component, sep, rest = short.partition("/")
+    return current_name(component) + sep + rest if sep else short
 
 
 class UnknownTopicError(KeyError):

@@ -9,7 +9,7 @@ import sys
 
 from humanpt import __version__
 from humanpt.operator.scenario import BUILTIN_SCENARIOS
-from humanpt.runtime.config import RENAMED_COMPONENTS, ConfigError
+from humanpt.runtime.config import RENAMED_COMPONENTS, ConfigError, current_name
 from humanpt.runtime.recording import RecordingError
 from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
 
@@ -577,7 +577,7 @@ def main(argv: list[str] | None = None) -> int:
 def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     from humanpt.cli import commands
 
-    if getattr(args, "component", None) and RENAMED_COMPONENTS.get(args.verb, args.verb) == args.component:
+    if getattr(args, "component", None) and current_name(args.verb) == args.component:
         return commands.run_component(args)
     if args.verb == "experiment":
         from humanpt.cli.experiment import experiment

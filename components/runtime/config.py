@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+from humanpt.schemas.topics import RENAMED_COMPONENTS, current_name  # noqa: F401 (re-exported)
+
 
 class ConfigError(ValueError):
     """A configuration problem; the message names the file, section and key."""
@@ -297,17 +299,6 @@ def replace_live(obj: Any, key: str, value_json: str, hard: Any = None) -> Any:
         raise ConfigError(f"{key}: {e}") from e
 
 
-# Components that changed their name: old name -> new. A config section, profile entry,
-# `humanpt OLD` or `humanpt param OLD` under the old name still works (issue 22 made the
-# ALTER gateway one gateway for every robot link: robot_gateway).
-RENAMED_COMPONENTS: dict[str, str] = {"alter_gateway": "robot_gateway"}
-
-
-def current_name(name: str) -> str:
-    """A component's name now (``alter_gateway`` -> ``robot_gateway``)."""
-    return RENAMED_COMPONENTS.get(name, name)
-
-
 @dataclass(frozen=True)
 class RuntimeConfig:
     """The ``[runtime]`` section: where components meet and where runs are recorded."""
@@ -331,11 +322,12 @@ class RuntimeConfig:
     # Record on a writer thread of its own: off the core's path (lower latency), but a
     # crash may then also lose the few messages still queued for it.
     record_thread: bool = False
-    # A realtime core's process (Core.realtime: the robot gateway, the simulated robot):
-    # a thread woken by a datagram waits up to the GIL's switch interval behind a busy one
-    # (every humanpt process: 0.5 ms, runtime.tuning), an eighth of RSI's 4 ms cycle, and
-    # such waits add up along the way.  Such a process switches every this many ms and asks the kernel for this nice value (negative: more
-    # CPU under load; needs CAP_SYS_NICE, else it runs at the normal priority with a note).
+    # A realtime core's process (Core.realtime: the robot gateway, the simulated robot, the
+    # controller, the pose filter; runtime.tuning.tune_realtime). A thread woken by a
+    # datagram waits up to the GIL's switch interval behind a busy one (every humanpt
+    # process: 0.5 ms), an eighth of RSI's 4 ms cycle, and such waits add up along the way:
+    # such a process switches every this many ms. Without SCHED_FIFO (below) it asks for this
+    # nice value (needs CAP_SYS_NICE, else it runs at the normal priority with a note).
     realtime_switch_interval_ms: Annotated[float, Range(0.05, 5, "ms")] = 0.2
     realtime_nice: Annotated[int, Range(-20, 0, "")] = -10
     # ... or the kernel's SCHED_FIFO real-time class at this priority (0: not asked; then

@@ -342,8 +342,9 @@ class LiveShell:
         elif kind == "liveliness":
             self._feed(t_ns, "liveliness", pb.Liveliness(header=header(t_ns), component=short, alive=item))
         elif kind == "tick":
-            self._tick_handled_at = time.monotonic()
-            self._tick_handled.set()
+            if self.core.realtime:  # _tick_loop waits for it
+                self._tick_handled_at = time.monotonic()
+                self._tick_handled.set()
             self._feed(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=self.core.tick_period_ns() or 0))
         elif kind == "param":
             req: _ParamRequest = item

@@ -925,11 +925,9 @@ def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
 
 
 def _current_names(meta: dict[str, str]) -> None:
-    """A recording of a renamed component (RENAMED_COMPONENTS) reads under its name now:
+    """A recording of a renamed component (topics.RENAMED_COMPONENTS) reads under its name now:
     its ``component`` and its core's class path (``humanpt.<old>.`` -> ``humanpt.<new>.``)."""
-    from humanpt.runtime.config import RENAMED_COMPONENTS
-
-    for old, new in RENAMED_COMPONENTS.items():
+    for old, new in topics.RENAMED_COMPONENTS.items():
         if meta.get("component") == old:
             meta["component"] = new
         if meta.get("core", "").startswith(f"humanpt.{old}."):

@@ -60,11 +60,13 @@ def tune_process() -> None:
 
 
 def tune_realtime(core, rt) -> str | None:
-    """For a process that runs ``core`` alone (``humanpt run``): if the core is on a robot
-    link's hard cycle (``Core.realtime``), shorten the GIL's switch interval to
-    ``rt.realtime_switch_interval_ms`` and ask for nice ``rt.realtime_nice``. Returns a line
-    saying what was done (None: not a realtime core). Process-wide: not for a shell that
-    shares its process (tests, lock-step)."""
+    """For a process that runs ``core`` alone (``humanpt <component>``): if the core is on a
+    robot link's hard cycle (``Core.realtime``), freeze the objects made so far out of the
+    garbage collector's sight (and log collections over SLOW_GC_S), shorten the GIL's switch
+    interval to ``rt.realtime_switch_interval_ms``, and ask for SCHED_FIFO at
+    ``rt.realtime_fifo_priority``, else nice ``rt.realtime_nice``. Call it before any thread
+    starts (they inherit the class). Returns a line saying what was done (None: not a
+    realtime core). Process-wide: not for a shell that shares its process (tests, lock-step)."""
     if not core.realtime:
         return None
     # Everything made so far (modules, classes, the core) lives as long as the process: out
