@@ -662,6 +662,7 @@ def param_load(args, component: str, path: str) -> int:
 def replay(args) -> int:
     from humanpt.runtime.recording import RecordingError
     from humanpt.runtime.replay import (
+        EXIT_INCOMPLETE,
         EXIT_MATCH,
         EXIT_MISMATCH,
         EXIT_NOTHING_COMPARED,
@@ -695,8 +696,8 @@ def replay(args) -> int:
             continue
         print(res.report(), flush=True)
         codes.append(res.exit_code)
-    # The worst verdict: unreadable, then a mismatch, then nothing compared.
-    for code in (EXIT_UNREADABLE, EXIT_MISMATCH, EXIT_NOTHING_COMPARED):
+    # The worst verdict: unreadable, then a mismatch, then not read in full, then nothing compared.
+    for code in (EXIT_UNREADABLE, EXIT_MISMATCH, EXIT_INCOMPLETE, EXIT_NOTHING_COMPARED):
         if code in codes:
             return code
     return EXIT_MATCH

@@ -242,14 +242,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="re-run a component on its recorded inputs and compare outputs",
                        description="Rebuild the component from its recording (core class and config), feed it "
                        "every recorded input and say whether its outputs match the recorded ones exactly, "
-                       "showing the first divergence when they do not. A truncated recording is compared "
-                       "up to the damage (the report says how many outputs). An image recorded as a reference "
+                       "showing the first divergence when they do not. A recording that cannot be read in full "
+                       "(cut, never closed, a damaged or implausible chunk) is compared up to the damage and "
+                       "is never a match (the report says how much was read). An image recorded as a reference "
                        "takes its pixels from the producer's recording in the same directory; an input whose "
                        "pixels the run did not keep ([record] images) ends the comparison there, as damage "
                        "does. Exit status: 0 match, "
                        "1 mismatch, 2 a recording cannot be read (missing, not MCAP, not humanpt, no "
                        "message readable, the producer recording its images refer to is missing), 3 nothing compared (no inputs recorded, or none left before "
-                       "the damage); with several recordings, the worst in that order (2, 1, 3).")
+                       "the damage), 4 incomplete (identical as far as read, but not read in full); with several "
+                       "recordings, the worst in that order (2, 1, 4, 3).")
     p.add_argument("run", help="a run directory (with --component) or one component's .mcap file")
     p.add_argument("--component", help="component name (default: every recording in the run)")
 

@@ -22,29 +22,39 @@ from __future__ import annotations
 
 import errno
 import heapq
+import io
 import json
 import logging
 import os
 import queue
+import struct
 import threading
 import time
+import zlib
 from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import lz4.frame
+import zstandard
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 from google.protobuf.message import DecodeError, Message
-from mcap.records import Channel, Chunk, Metadata, Schema
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, ChunkIndex, Metadata, Schema, Statistics
 from mcap.records import Message as McapMessage
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
 
 from humanpt.schemas import topics
 
 RUN_METADATA = "humanpt.run"
+# Each channel as it is registered (id -> JSON: topic, schema name, metadata), outside the chunks:
+# a file never closed (no summary) whose chunk declaring a channel is damaged still reads its messages.
+CHANNELS_METADATA = "humanpt.channels"
 IN, OUT, DROPPED = "in", "out", "dropped"
 # What a channel's messages hold (channel metadata ``payload``; absent: the whole message).
 # Images only (foxglove.RawImage): the message with its ``data`` (the pixels) left out, and
@@ -534,6 +544,12 @@ class Recorder:
             self._pend.append(0)
             if self._file.pos != self._committed_pos:  # registering ended a chunk
                 self._commit()
+            # The channel once more outside the chunks (the chunk holding it may be damaged, and
+            # a file never closed has no summary to repeat it): a record of its own, at once.
+            self._writer.add_metadata(CHANNELS_METADATA, {str(cid): json.dumps(
+                {"topic": topic, "schema": "raw" if msg_type is None else msg_type.DESCRIPTOR.full_name,
+                 "encoding": enc, "metadata": {"direction": direction, **dict(variant)}}, sort_keys=True)})
+            self._committed_pos = self._file.pos  # the file ends at a record boundary; nothing committed
         return cid
 
     def write(
@@ -648,7 +664,7 @@ def losses_lines(run_dir: str | Path) -> list[str]:
             d = json.loads(f.read_text())
             out.append(f"RECORDING LOST {d['lost']} messages of {d['component']} in {len(d['outages'])} "
                        f"write outage(s) ({d['outages'][0]['error'] if d['outages'] else '?'}): {f}")
-        except (OSError, ValueError, KeyError, TypeError) as e:
+        except (OSError, ValueError, KeyError, TypeError, IndexError, RecursionError) as e:
             out.append(f"RECORDING LOSSES: {f} cannot be read ({type(e).__name__}: {e})")
     return out
 
@@ -692,7 +708,8 @@ class Recording:
     path: Path
     metadata: dict[str, str]
     entries: list[Entry] = field(default_factory=list)
-    truncated: str | None = None  # why reading stopped early, None when complete
+    truncated: str | None = None  # why it could not be read in full (the first note), None when it was
+    notes: list[str] = field(default_factory=list)  # every reason (damage, skipped chunks, messages not read)
     # Inputs without their pixels that replay cannot get (replay.missing_inputs): what, else None.
     missing: str | None = None
     resolved: bool = False  # images recorded without their pixels were looked up (replay.missing_inputs)
@@ -710,31 +727,229 @@ class Recording:
         return [e for e in self.entries if e.direction == OUT]
 
     def config(self) -> dict[str, Any]:
-        return json.loads(self.metadata.get("config", "{}"))
+        """The recorded config (raises RecordingError, one line, when it is not a JSON table)."""
+        return recorded_json(self.metadata.get("config", "{}"), f"{self.path}: its recorded config")
+
+
+def recorded_json(text: str, what: str) -> dict[str, Any]:
+    """A JSON table a recording holds (its config), or a RecordingError naming ``what``:
+    not JSON, not a table, or nested too deeply for the parser (a crafted file)."""
+    try:
+        value = json.loads(text)
+    except RecursionError:
+        raise RecordingError(f"{what} is nested too deeply to be read (a damaged or crafted file)") from None
+    except ValueError as e:
+        raise RecordingError(f"{what} is not valid JSON ({e})") from None
+    if not isinstance(value, dict):
+        raise RecordingError(f"{what} is a JSON {type(value).__name__}, not a table")
+    return value
 
 
 def iter_records(path: Path, skipped: list[str] | None = None) -> Iterator[Any]:
-    """MCAP records of ``path`` in file order, chunks opened; stops (raising McapError,
-    EOFError...) where the file itself is cut or its record framing is broken.
+    """MCAP records of ``path``, chunks opened: first the schemas, channels and statistics of
+    its summary section (when the file was closed and its summary is sound), then the data
+    section in file order.  Raises :class:`RecordingDamage` (a clear line: the file, the
+    offset, what is wrong) where the file stops being readable: cut inside a record, ended
+    without its summary (a writer killed), a record whose framing is broken (with a sound
+    summary, reading resumes at the next chunk it indexes, and ``skipped`` says what was
+    jumped over).
 
-    A chunk whose content is damaged (CRC, compression) is skipped, its description appended
-    to ``skipped``, and reading goes on with the next record: one bad chunk does not hide
-    the rest of the file.  Without ``skipped`` it raises at the bad chunk instead."""
+    A chunk is decompressed only when what it declares is plausible (:data:`MAX_CHUNK_BYTES`,
+    :data:`MAX_RATIO`), and never into more than it declares.  A chunk refused, or whose
+    content is damaged (CRC, compression), is skipped, its description appended to
+    ``skipped``, and reading goes on with the next record: one bad chunk does not hide the
+    rest of the file.  Without ``skipped`` it raises at the bad chunk instead."""
     with open(path, "rb") as f:
-        for record in StreamReader(f, skip_magic=False, emit_chunks=True, validate_crcs=True).records:
-            if not isinstance(record, Chunk):
-                yield record
-                continue
+        size = os.fstat(f.fileno()).st_size
+        if f.read(8) != MAGIC:
+            raise RecordingDamage(f"{path}: does not start with the MCAP magic")
+        footer = _footer(f, size)
+        summary = None if footer is None else _read_summary(f, size, footer, path, skipped)
+        resume: list[int] = []
+        if summary is not None:
+            yield from summary.records
+            resume = sorted(summary.chunk_starts)
+        yield from _scan(f, size, path, resume, skipped)
+        if footer is None:  # the data section ended (DataEnd) but the file does not close
+            raise RecordingDamage(f"{path}: its footer or closing magic is missing or damaged (the last bytes "
+                                  f"are cut or overwritten)")
+
+
+class RecordingDamage(Exception):
+    """Where and why a recording stops being readable (one line, naming the file and offset)."""
+
+
+class _ChunkRefused(Exception):
+    """A chunk not decompressed: what it declares is not plausible, or its content is damaged."""
+
+
+@dataclass
+class _Summary:
+    records: list[Any]  # Schema, Channel, Statistics of the summary section
+    chunk_starts: list[int]  # where its chunk indexes say chunks start
+
+
+_FOOTER_TAIL = 1 + 8 + 20 + 8  # the footer record (opcode, length, 20 bytes) and the closing magic
+# Records the reader needs the body of; the others (indexes, attachments, the header) are stepped over.
+_READ_OPS = {Opcode.CHUNK: Chunk, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.METADATA: Metadata,
+             Opcode.MESSAGE: McapMessage, Opcode.STATISTICS: Statistics, Opcode.CHUNK_INDEX: ChunkIndex}
+
+
+def _parse(op: int, body: bytes) -> Any:
+    stream = ReadDataStream(io.BytesIO(body))
+    cls = _READ_OPS[op]
+    return cls.read(stream, len(body)) if cls is McapMessage else cls.read(stream)
+
+
+def _footer(f, size: int) -> bytes | None:
+    """The footer record and closing magic of a closed file, else None."""
+    if size < 8 + _FOOTER_TAIL:
+        return None
+    f.seek(size - _FOOTER_TAIL)
+    tail = f.read(_FOOTER_TAIL)
+    if tail[-8:] != MAGIC or tail[0] != Opcode.FOOTER or struct.unpack_from("<Q", tail, 1)[0] != 20:
+        return None
+    return tail
+
+
+def _read_summary(f, size: int, tail: bytes, path: Path, skipped: list[str] | None) -> _Summary | None:
+    """The summary section the footer ``tail`` names (its CRC checked when it has one), else None."""
+    footer_at = size - _FOOTER_TAIL
+    start, _, crc = struct.unpack_from("<QQI", tail, 9)
+    if start == 0:
+        return _Summary([], [])
+    if not 8 <= start <= footer_at:
+        if skipped is not None:
+            skipped.append(f"{path}: its footer puts the summary at offset {start}, outside the file: summary not used")
+        return None
+    f.seek(start)
+    region = f.read(footer_at - start)
+    if crc and zlib.crc32(tail[:1 + 8 + 16], zlib.crc32(region)) != crc:
+        if skipped is not None:
+            skipped.append(f"{path}: its summary section (offset {start}) fails its CRC: not used")
+        return None
+    out = _Summary([], [])
+    pos = 0
+    while pos + 9 <= len(region):
+        op, length = struct.unpack_from("<BQ", region, pos)
+        if length > len(region) - pos - 9:
+            break
+        if op in (Opcode.SCHEMA, Opcode.CHANNEL, Opcode.STATISTICS, Opcode.CHUNK_INDEX):
             try:
-                inner = breakup_chunk(record, validate_crc=True)
-            except _DAMAGE as e:
+                rec = _parse(op, region[pos + 9:pos + 9 + length])
+            except _DAMAGE:
+                break
+            if isinstance(rec, ChunkIndex):
+                out.chunk_starts.append(rec.chunk_start_offset)
+            else:
+                out.records.append(rec)
+        pos += 9 + length
+    return out
+
+
+def _chunk_data(chunk: Chunk) -> bytes:
+    """The records of ``chunk``, decompressed only if what it declares is plausible and never
+    beyond it; raises :class:`_ChunkRefused` saying why not."""
+    n, clen, comp = chunk.uncompressed_size, len(chunk.data), chunk.compression
+    name = comp or "uncompressed"
+    if comp not in MAX_RATIO:
+        raise _ChunkRefused(f"compression {comp!r} is not one a recording uses (zstd, lz4 or none)")
+    if n > MAX_CHUNK_BYTES:
+        raise _ChunkRefused(f"it declares {n} bytes uncompressed from {clen} bytes of {name}, more than the "
+                            f"reader's limit of {MAX_CHUNK_BYTES // 2**20} MiB per chunk: refused, not decompressed")
+    if n > MAX_RATIO[comp] * clen + _RATIO_SLACK:
+        raise _ChunkRefused(f"it declares {n} bytes uncompressed from {clen} bytes of {name}, more than "
+                            f"{name} can expand them to ({MAX_RATIO[comp]}:1): refused, not decompressed")
+    if comp == "zstd":
+        parts, want = [], n + 1  # one byte more than declared tells a chunk that lies
+        with zstandard.ZstdDecompressor().stream_reader(io.BytesIO(chunk.data)) as r:
+            while want > 0:
+                part = r.read(min(want, 1 << 20))
+                if not part:
+                    break
+                parts.append(part)
+                want -= len(part)
+        data = b"".join(parts)
+    elif comp == "lz4":
+        data = lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=n + 1)
+    else:
+        data = chunk.data
+    if len(data) != n:
+        raise _ChunkRefused(f"its {name} data holds {'more than' if len(data) > n else len(data)} bytes, "
+                            f"not the {n} it declares")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise _ChunkRefused(f"CRC of its records is {zlib.crc32(data):#010x}, the chunk says "
+                            f"{chunk.uncompressed_crc:#010x}")
+    return data
+
+
+def _scan(f, size: int, path: Path, resume: list[int], skipped: list[str] | None) -> Iterator[Any]:
+    """The data section's records from offset 8 (see :func:`iter_records`)."""
+    pos = 8
+    while True:
+        if pos == size:
+            raise RecordingDamage(f"{path}: ends at offset {size} without its summary: its writer did not "
+                                  f"close it (killed or crashed)")
+        f.seek(pos)
+        head = f.read(9)
+        problem = None
+        if len(head) < 9:
+            problem = f"cut inside the record header at offset {pos} (the file ends at {size})"
+        else:
+            op, length = struct.unpack("<BQ", head)
+            if length > size - pos - 9:
+                problem = (f"the record at offset {pos} (opcode {op:#04x}) declares {length} bytes, the file "
+                           f"has {size - pos - 9} after it: cut there, or its framing is damaged")
+            elif op == Opcode.CHUNK and length > MAX_CHUNK_BYTES + 4096:
                 if skipped is None:
-                    raise
-                skipped.append(f"{path}: skipped a damaged chunk of messages logged "
-                               f"{record.message_start_time}..{record.message_end_time} ns "
-                               f"({type(e).__name__}: {e})")
+                    raise RecordingDamage(f"{path}: the chunk at offset {pos} is {length} bytes, more than the "
+                                          f"reader's limit of {MAX_CHUNK_BYTES // 2**20} MiB")
+                skipped.append(f"{path}: skipped a damaged chunk at offset {pos}: it is {length} bytes, more than the "
+                               f"reader's limit of {MAX_CHUNK_BYTES // 2**20} MiB per chunk")
+                pos += 9 + length
                 continue
+        if problem is not None:
+            nxt = next((s for s in resume if s > pos and s < size), None)
+            if nxt is None or skipped is None:
+                raise RecordingDamage(f"{path}: {problem}")
+            skipped.append(f"{path}: {problem}; resumed at the next chunk the summary indexes, offset {nxt}")
+            pos = nxt
+            continue
+        if op in (Opcode.DATA_END, Opcode.FOOTER):
+            return
+        if op not in _READ_OPS or op in (Opcode.STATISTICS, Opcode.CHUNK_INDEX):
+            pos += 9 + length
+            continue
+        body = f.read(length)
+        try:
+            rec = _parse(op, body)
+        except _DAMAGE as e:
+            rec, why = None, f"{type(e).__name__}{': ' + str(e) if str(e) else ''}"
+        if rec is None or not isinstance(rec, Chunk):
+            if rec is None:
+                if skipped is None:
+                    raise RecordingDamage(f"{path}: the record at offset {pos} (opcode {op:#04x}) does not parse "
+                                          f"({why})")
+                skipped.append(f"{path}: skipped the record at offset {pos} (opcode {op:#04x}): it does not "
+                               f"parse ({why})")
+            else:
+                yield rec
+            pos += 9 + length
+            continue
+        try:
+            data = _chunk_data(rec)
+            inner = breakup_chunk(Chunk(compression="", data=data, message_start_time=rec.message_start_time,
+                                        message_end_time=rec.message_end_time, uncompressed_crc=0,
+                                        uncompressed_size=len(data)))
+        except _DAMAGE as e:
+            if skipped is None:
+                raise
+            why = str(e) if isinstance(e, _ChunkRefused) else f"{type(e).__name__}: {e}"
+            skipped.append(f"{path}: skipped a damaged chunk at offset {pos} (messages logged "
+                           f"{rec.message_start_time}..{rec.message_end_time} ns): {why}")
+        else:
             yield from inner
+        pos += 9 + length
 
 
 def _check_file(p: Path) -> None:
@@ -749,8 +964,32 @@ def _check_file(p: Path) -> None:
 
 
 MAGIC = b"\x89MCAP0\r\n"
+# What a chunk may declare before it is decompressed (issue 29: a 65 kB zstd chunk declaring
+# 2 GiB took 2.19 GB and over a minute).  A humanpt chunk is [runtime] chunk_size (or [record]
+# image_chunk_size) plus one message: the largest in the reference runs is 4.3 MB (camera images).
+MAX_CHUNK_BYTES = 256 * 2**20
+# ... and no more than its compression can make of its compressed bytes: zstd codes a 128 KiB
+# block of one byte value in 4 bytes (32 768:1; 2 GiB of zeros is 65 kB, a black image ~16 000:1),
+# an LZ4 frame at most ~255:1; stored (no compression): itself.
+MAX_RATIO = {"zstd": 32768, "lz4": 256, "": 1}
+_RATIO_SLACK = 64 * 1024  # a tiny chunk's frame headers
 # Whatever a damaged file makes the MCAP reader raise (struct.error, zstd errors, ...): stop there.
 _DAMAGE = Exception
+
+
+def _channel_table(meta: dict[str, str]) -> dict[int, tuple[str, str, str, dict[str, str]]]:
+    """Channels named by a ``humanpt.channels`` metadata record: id -> (topic, direction,
+    schema name, channel metadata); malformed items are left out."""
+    out = {}
+    for key, text in meta.items():
+        try:
+            d = json.loads(text)
+            md = {str(k): str(v) for k, v in dict(d.get("metadata", {})).items()}
+            out[int(key)] = (topics.current_topic(str(d["topic"])), md.get("direction", OUT),
+                             str(d.get("schema", "raw")), md)
+        except (ValueError, TypeError, KeyError, AttributeError, RecursionError):
+            continue
+    return out
 
 
 def iter_entries(
@@ -758,14 +997,21 @@ def iter_entries(
 ) -> Iterator[Entry]:
     """Messages of a recording in file order, one at a time (constant memory).
 
-    Stops quietly at damage (a truncated file) and appends why to ``notes``; fills
-    ``metadata`` with the ``humanpt.run`` record when given.
+    Stops quietly at damage (a truncated file, one not closed) and appends why to ``notes``,
+    with every chunk skipped, the messages whose channel is unknown and, when the summary
+    counts more messages than were read, how many were; fills ``metadata`` with the
+    ``humanpt.run`` record when given.  Channels are known from the summary section (a closed
+    file), the chunks, and the ``humanpt.channels`` records the :class:`Recorder` writes
+    outside the chunks (a file whose chunk declaring them is damaged and which was never
+    closed).
     """
     p = Path(path)
     _check_file(p)
     schemas: dict[int, str] = {}
-    channels: dict[int, tuple[str, str, int, dict[str, str]]] = {}
+    channels: dict[int, tuple[str, str, int | str, dict[str, str]]] = {}
     n = 0
+    unknown = 0
+    expected: int | None = None
     skipped: list[str] = []
     try:
         for r in iter_records(p, skipped):
@@ -774,23 +1020,34 @@ def iter_entries(
             elif isinstance(r, Channel):
                 channels[r.id] = (topics.current_topic(r.topic), r.metadata.get("direction", OUT), r.schema_id,
                                   dict(r.metadata))
+            elif isinstance(r, Statistics):
+                expected = r.message_count
+            elif isinstance(r, Metadata) and r.name == CHANNELS_METADATA:
+                for cid, ch in _channel_table(r.metadata).items():
+                    channels.setdefault(cid, ch)
             elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
                 metadata.update(r.metadata)
             elif isinstance(r, McapMessage):
-                if r.channel_id not in channels:  # its channel was in a skipped chunk
+                ch = channels.get(r.channel_id)
+                if ch is None:  # its channel was in a skipped chunk, and nowhere else
+                    unknown += 1
                     continue
-                topic, direction, sid, meta = channels[r.channel_id]
-                yield Entry(n, direction, r.log_time, topic, r.data, schemas.get(sid, "raw"),
-                            meta.get("payload", FULL), meta)
+                topic, direction, sid, meta = ch
+                yield Entry(n, direction, r.log_time, topic, r.data,
+                            sid if isinstance(sid, str) else schemas.get(sid, "raw"), meta.get("payload", FULL), meta)
                 n += 1
     except _DAMAGE as e:
         if notes is not None:
-            notes.append(
-                f"{p}: truncated or damaged after {n} messages ({type(e).__name__}{': ' + str(e) if str(e) else ''})"
-            )
+            why = str(e) if isinstance(e, RecordingDamage) else f"{type(e).__name__}{': ' + str(e) if str(e) else ''}"
+            notes.append(f"{p}: truncated or damaged after {n} messages ({why})")
     finally:
         if notes is not None:
             notes.extend(skipped)
+            if unknown:
+                notes.append(f"{p}: {unknown} messages left out: their channel was declared only in a "
+                             f"skipped chunk")
+            if expected is not None and n < expected:
+                notes.append(f"{p}: {n} of the {expected} messages its summary counts were read")
 
 
 def merge_entries(files: list[Path], notes: list[str], keep: Callable[[Entry], bool] = lambda e: True,
@@ -946,7 +1203,7 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
     meta: dict[str, str] = {}
     entries = list(iter_entries(p, notes, meta))
     _current_names(meta)
-    rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None)
+    rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None, notes=notes)
     if require_humanpt:
         if not rec.metadata:
             why = f" ({rec.truncated})" if rec.truncated else ""

@@ -7,10 +7,12 @@ divergence is reported with the fields that differ.
 
 A verdict is never reached on nothing: a recording of which no message can be read
 raises :class:`RecordingError`; one that holds no inputs, or whose truncation leaves no
-output to compare, is "nothing compared", not a match.  A truncated recording is
-compared up to the damage and the report says how much that was.  Exit statuses of
-``humanpt replay``: :data:`EXIT_MATCH`, :data:`EXIT_MISMATCH`, :data:`EXIT_UNREADABLE`,
-:data:`EXIT_NOTHING_COMPARED`.
+output to compare, is "nothing compared", not a match.  A recording that cannot be read in
+full (cut, never closed, a chunk damaged or refused, messages whose channel is lost) is
+compared up to the damage and the report says how much was read, but it is never a match:
+at best INCOMPLETE.  Exit statuses of ``humanpt replay``: :data:`EXIT_MATCH`,
+:data:`EXIT_MISMATCH`, :data:`EXIT_UNREADABLE`, :data:`EXIT_NOTHING_COMPARED`,
+:data:`EXIT_INCOMPLETE`.
 """
 
 from __future__ import annotations
@@ -149,10 +151,11 @@ class Divergence:
         return "\n".join(lines)
 
 
-EXIT_MATCH = 0  # every output compared identical (up to a truncation, said so)
+EXIT_MATCH = 0  # the recording was read in full and every output compared identical
 EXIT_MISMATCH = 1  # an output differs, is missing or is extra
 EXIT_UNREADABLE = 2  # the recording cannot be read (missing, not MCAP, no message, ...)
 EXIT_NOTHING_COMPARED = 3  # readable, but no input to replay or no output left to compare
+EXIT_INCOMPLETE = 4  # not read in full: the outputs read are identical, but that is not a match
 
 
 @dataclass
@@ -163,7 +166,7 @@ class ReplayResult:
     recorded_outputs: int  # read from the recording (up to a truncation)
     replayed_outputs: int  # made by the replay from the inputs read
     divergence: Divergence | None
-    truncated: str | None  # why reading stopped early, None when the file is complete
+    truncated: str | None  # why the file could not be read in full, None when it was
     compared: int = 0  # output pairs found identical (before the divergence, if any)
     messages_read: int = 0  # every message read: inputs, outputs, dropped inputs
     # A segment resumed after a write error (metadata ``continues``): the core's state at its
@@ -172,6 +175,7 @@ class ReplayResult:
     # Inputs the run did not keep (images without pixels: ``[record] images``, a producer's
     # recording cut short): the replay stops at the first. What, else None.
     missing: str | None = None
+    notes: list[str] = field(default_factory=list)  # every reason it was not read in full
 
     @property
     def nothing_compared(self) -> bool:
@@ -185,22 +189,34 @@ class ReplayResult:
         )
 
     @property
+    def incomplete(self) -> bool:
+        """Identical as far as it goes, but the recording could not be read in full."""
+        return self.divergence is None and not self.nothing_compared and self.truncated is not None
+
+    @property
     def match(self) -> bool:
-        return self.divergence is None and not self.nothing_compared
+        return self.divergence is None and not self.nothing_compared and self.truncated is None
 
     @property
     def exit_code(self) -> int:
         if self.match:
             return EXIT_MATCH
-        return EXIT_NOTHING_COMPARED if self.nothing_compared else EXIT_MISMATCH
+        if self.nothing_compared:
+            return EXIT_NOTHING_COMPARED
+        return EXIT_INCOMPLETE if self.incomplete else EXIT_MISMATCH
 
     def report(self) -> str:
         head = (f"{self.path}: component {self.component}: {self.messages_read} messages read, "
                 f"{self.inputs} inputs replayed, {self.recorded_outputs} outputs recorded, "
                 f"{self.replayed_outputs} replayed, {self.compared} compared")
-        trunc = (f"\n  the recording is truncated ({self.truncated}); only the "
-                 f"{self.recorded_outputs} outputs recorded before the damage are compared"
-                 if self.truncated else "")
+        trunc = ""
+        if self.truncated:
+            trunc = (f"\n  the recording could not be read in full: {self.messages_read} messages read; only the "
+                     f"{self.recorded_outputs} outputs read are compared")
+            notes = self.notes or [self.truncated]
+            trunc += "".join(f"\n  - {n}" for n in notes[:6])
+            if len(notes) > 6:
+                trunc += f"\n  - ... and {len(notes) - 6} more"
         if self.missing:
             trunc += f"\n  inputs missing: {self.missing}"
         if self.nothing_compared:
@@ -209,11 +225,13 @@ class ReplayResult:
                                          if self.missing and not self.truncated
                                          else "no recorded output survives the truncation"))
             return f"{head}{trunc}\n  NOTHING COMPARED: {why}; this is not a match"
+        if self.incomplete:
+            return (f"{head}{trunc}\n  INCOMPLETE: the {self.compared} outputs read are identical to the replay's, "
+                    f"but the recording could not be read in full; this is not a match")
         if self.match:
             if self.compared == 0:
                 return f"{head}{trunc}\n  MATCH: the core output nothing, recorded or replayed"
-            upto = (" up to the truncation" if self.truncated else
-                    " up to the first missing input" if self.missing else "")
+            upto = " up to the first missing input" if self.missing else ""
             return f"{head}{trunc}\n  MATCH: every output is identical{upto} ({self.compared} compared)"
         return f"{head}{trunc}\n  MISMATCH\n{self.divergence.describe()}"
 
@@ -295,7 +313,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                f"{rec.metadata.get('lost_before', '?')} messages were lost to a write error: the core's "
                f"state at its start was not recorded, so it cannot be replayed from its config")
         return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
-                            0, len(rec.entries), continuation=why)
+                            0, len(rec.entries), continuation=why, notes=rec.notes)
     n_read = len(rec.entries)  # before a missing input cuts them
     recorded, replayed = replay_recording(rec, core_factory)
     missing = rec.missing
@@ -322,7 +340,7 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
             compared = i
             break
     return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div,
-                        rec.truncated, compared, n_read, missing=missing)
+                        rec.truncated, compared, n_read, missing=missing, notes=rec.notes)
 
 
 def message_text(topic: str, data: bytes) -> str:

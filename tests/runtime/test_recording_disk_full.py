@@ -170,11 +170,12 @@ def test_a_full_disk_is_reported_at_once_the_component_lives_and_recording_resum
     # The first segment ends cleanly after its last whole chunk (cut back at the error).
     first = entries["ponger.mcap"]
     assert first and first[-1].t_ns <= losses["first_lost_ns"]
-    # Replay: the first segment matches up to its end; the continuation is no verdict (its
-    # core's state at the start was not recorded), never a false MISMATCH.
+    # Replay: the first segment (cut back, never closed) is identical up to its end but not a
+    # match; the continuation is no verdict (its core's state at the start was not recorded),
+    # never a false MISMATCH.
     r = run_cli("replay", str(run))
     assert r.returncode == 3, r.stdout + r.stderr
-    assert "MATCH: every output is identical up to the truncation" in r.stdout
+    assert "INCOMPLETE: the " in r.stdout and "outputs read are identical" in r.stdout
     assert "NOTHING COMPARED: this segment continues ponger.mcap after" in r.stdout
 
 
