@@ -710,6 +710,7 @@ class Recording:
     entries: list[Entry] = field(default_factory=list)
     truncated: str | None = None  # why it could not be read in full (the first note), None when it was
     notes: list[str] = field(default_factory=list)  # every reason (damage, skipped chunks, messages not read)
+    first_gap: int | None = None  # entries read before the first skipped chunk (messages missing there)
     # Inputs without their pixels that replay cannot get (replay.missing_inputs): what, else None.
     missing: str | None = None
     resolved: bool = False  # images recorded without their pixels were looked up (replay.missing_inputs)
@@ -764,12 +765,19 @@ def iter_records(path: Path, skipped: list[str] | None = None) -> Iterator[Any]:
         if f.read(8) != MAGIC:
             raise RecordingDamage(f"{path}: does not start with the MCAP magic")
         footer = _footer(f, size)
-        summary = None if footer is None else _read_summary(f, size, footer, path, skipped)
+        summary_notes: list[str] = []  # a summary not used loses no message: said at the end
+        summary = None if footer is None else _read_summary(f, size, footer, path, summary_notes)
         resume: list[int] = []
-        if summary is not None:
-            yield from summary.records
-            resume = sorted(summary.chunk_starts)
-        yield from _scan(f, size, path, resume, skipped)
+        try:
+            if summary is not None:
+                yield from summary.records
+                resume = sorted(summary.chunk_starts)
+            yield from _scan(f, size, path, resume, skipped)
+        finally:
+            if skipped is not None:
+                skipped.extend(summary_notes)
+        if summary_notes and skipped is None:
+            raise RecordingDamage(summary_notes[0])
         if footer is None:  # the data section ended (DataEnd) but the file does not close
             raise RecordingDamage(f"{path}: its footer or closing magic is missing or damaged (the last bytes "
                                   f"are cut or overwritten)")
@@ -812,21 +820,19 @@ def _footer(f, size: int) -> bytes | None:
     return tail
 
 
-def _read_summary(f, size: int, tail: bytes, path: Path, skipped: list[str] | None) -> _Summary | None:
+def _read_summary(f, size: int, tail: bytes, path: Path, skipped: list[str]) -> _Summary | None:
     """The summary section the footer ``tail`` names (its CRC checked when it has one), else None."""
     footer_at = size - _FOOTER_TAIL
     start, _, crc = struct.unpack_from("<QQI", tail, 9)
     if start == 0:
         return _Summary([], [])
     if not 8 <= start <= footer_at:
-        if skipped is not None:
-            skipped.append(f"{path}: its footer puts the summary at offset {start}, outside the file: summary not used")
+        skipped.append(f"{path}: its footer puts the summary at offset {start}, outside the file: summary not used")
         return None
     f.seek(start)
     region = f.read(footer_at - start)
     if crc and zlib.crc32(tail[:1 + 8 + 16], zlib.crc32(region)) != crc:
-        if skipped is not None:
-            skipped.append(f"{path}: its summary section (offset {start}) fails its CRC: not used")
+        skipped.append(f"{path}: its summary section (offset {start}) fails its CRC: not used")
         return None
     out = _Summary([], [])
     pos = 0
@@ -993,7 +999,8 @@ def _channel_table(meta: dict[str, str]) -> dict[int, tuple[str, str, str, dict[
 
 
 def iter_entries(
-    path: str | Path, notes: list[str] | None = None, metadata: dict[str, str] | None = None
+    path: str | Path, notes: list[str] | None = None, metadata: dict[str, str] | None = None,
+    gaps: list[int] | None = None,
 ) -> Iterator[Entry]:
     """Messages of a recording in file order, one at a time (constant memory).
 
@@ -1003,7 +1010,8 @@ def iter_entries(
     ``humanpt.run`` record when given.  Channels are known from the summary section (a closed
     file), the chunks, and the ``humanpt.channels`` records the :class:`Recorder` writes
     outside the chunks (a file whose chunk declaring them is damaged and which was never
-    closed).
+    closed).  ``gaps`` gets, for each chunk or record skipped, the number of entries yielded
+    before it (messages are missing there).
     """
     p = Path(path)
     _check_file(p)
@@ -1013,8 +1021,12 @@ def iter_entries(
     unknown = 0
     expected: int | None = None
     skipped: list[str] = []
+    n_skipped = 0
     try:
         for r in iter_records(p, skipped):
+            if gaps is not None and len(skipped) > n_skipped:  # a chunk skipped just before this record
+                gaps.append(n)
+            n_skipped = len(skipped)
             if isinstance(r, Schema):
                 schemas[r.id] = r.name
             elif isinstance(r, Channel):
@@ -1031,6 +1043,8 @@ def iter_entries(
                 ch = channels.get(r.channel_id)
                 if ch is None:  # its channel was in a skipped chunk, and nowhere else
                     unknown += 1
+                    if gaps is not None and n not in gaps:
+                        gaps.append(n)
                     continue
                 topic, direction, sid, meta = ch
                 yield Entry(n, direction, r.log_time, topic, r.data,
@@ -1201,9 +1215,11 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
     p = Path(path)
     notes: list[str] = []
     meta: dict[str, str] = {}
-    entries = list(iter_entries(p, notes, meta))
+    gaps: list[int] = []
+    entries = list(iter_entries(p, notes, meta, gaps))
     _current_names(meta)
-    rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None, notes=notes)
+    rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None, notes=notes,
+                    first_gap=min(gaps) if gaps else None)
     if require_humanpt:
         if not rec.metadata:
             why = f" ({rec.truncated})" if rec.truncated else ""

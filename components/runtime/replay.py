@@ -212,7 +212,7 @@ class ReplayResult:
         trunc = ""
         if self.truncated:
             trunc = (f"\n  the recording could not be read in full: {self.messages_read} messages read; only the "
-                     f"{self.recorded_outputs} outputs read are compared")
+                     f"{self.recorded_outputs} outputs read before the first damage are compared")
             notes = self.notes or [self.truncated]
             trunc += "".join(f"\n  - {n}" for n in notes[:6])
             if len(notes) > 6:
@@ -220,7 +220,9 @@ class ReplayResult:
         if self.missing:
             trunc += f"\n  inputs missing: {self.missing}"
         if self.nothing_compared:
-            why = (self.continuation or ("the recording holds no inputs" if self.inputs == 0
+            why = (self.continuation or ("no input was read before the first damage"
+                                         if self.inputs == 0 and self.truncated
+                                         else "the recording holds no inputs" if self.inputs == 0
                                          else "no recorded output before the first missing input"
                                          if self.missing and not self.truncated
                                          else "no recorded output survives the truncation"))
@@ -314,7 +316,11 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
                f"state at its start was not recorded, so it cannot be replayed from its config")
         return ReplayResult(rec.path, rec.component, len(rec.inputs), len(rec.outputs), 0, None, rec.truncated,
                             0, len(rec.entries), continuation=why, notes=rec.notes)
-    n_read = len(rec.entries)  # before a missing input cuts them
+    n_read = len(rec.entries)  # before a gap or a missing input cuts them
+    if rec.first_gap is not None:
+        # Messages are missing there (a chunk skipped): the core's state after it is unknown, so
+        # the inputs after it cannot be replayed and the outputs after it cannot be compared.
+        rec.entries = rec.entries[:rec.first_gap]
     recorded, replayed = replay_recording(rec, core_factory)
     missing = rec.missing
     # The lost chunk of a truncated file held the tail of both streams (an input without its

@@ -148,7 +148,9 @@ def rig_to_json(rig: Rig) -> str:
 def rig_from_json(text: str, source: str = "<rig json>") -> Rig:
     try:
         data = json.loads(text)
-    except (ValueError, RecursionError) as e:
+    except RecursionError:
+        raise ConfigError(f"{source}: the rig is nested too deeply to be read (a damaged or crafted file)") from None
+    except ValueError as e:
         raise ConfigError(f"{source}: the rig is not JSON: {e}") from None
     return rig_from_table(data, source)
 
