@@ -22,6 +22,7 @@ from humanpt.runtime.bus import (
     type_name_of,
     zenoh_config,
 )
+from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
     COMPONENTS,
     PROFILES,
@@ -588,7 +589,7 @@ def param_dump(args, component: str, out: str | None) -> int:
     if out is None:
         print(text, end="")
     else:
-        Path(out).write_text(text)
+        write_atomic(out, text)  # never through a link planted at its name
         print(f"humanpt param: {len(body.get('params') or {})} live parameters of {component} -> {out}",
               file=sys.stderr)
     return 0
@@ -1006,7 +1007,7 @@ def path_cmd(args) -> int:
         print(f"humanpt path smooth: {len(p)} points -> {args.output}")
         return 0
     which = {"auto": "auto", "G": "G", "tip": "tip"}[args.point]
-    Path(args.output).write_text(pathfile.to_val2(p.points(which), args.name, args.speed))
+    write_atomic(args.output, pathfile.to_val2(p.points(which), args.name, args.speed))  # never through a link
     print(f"humanpt path val: {len(p)} points -> {args.output}")
     return 0
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
 from humanpt.cli.commands import check_output
+from humanpt.runtime.files import write_atomic
 
 
 def _feed_mm_s(raw: dict) -> float | None:
@@ -90,9 +90,7 @@ def path_export(args) -> int:
                          source=src.name)
     timed = list(zip(timed_csv.t_s, timed_csv.x, strict=True)) if timed_csv is not None else _timed(raw)
     text = export(seam, args.format, opts, timed=timed if args.format == "json" else None)
-    tmp = out.with_name(out.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, out)  # all or nothing: a crash leaves no half program
+    write_atomic(out, text)  # all or nothing, never through a planted link: a crash leaves no half program
     if args.format == "krl" and program_name(name) != out.stem:
         print(f"humanpt path export: note: KRL wants the file named as its program: "
               f"{program_name(name)}.src", file=sys.stderr)

@@ -27,6 +27,8 @@ import numpy as np
 from filterpy.common import Q_discrete_white_noise
 from filterpy.kalman import KalmanFilter, rts_smoother
 
+from humanpt.runtime.files import atomic_open
+
 HEADER = ["index", "stamp_ns", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg"]
 TIP_HEADER = ["tip_x_mm", "tip_y_mm", "tip_z_mm", "tip_psi_deg", "tip_theta_deg", "tip_phi_deg"]
 _UPPER = ("xx", "xy", "xz", "yy", "yz", "zz")
@@ -163,7 +165,7 @@ def header(with_tip: bool, with_covariance: bool = False) -> list[str]:
 
 def write(path: str | Path, p: Path6) -> None:
     cov = p.orientation_held is not None
-    with open(path, "w", newline="") as f:
+    with atomic_open(path, "w", newline="") as f:  # never through a link planted at its name
         w = csv.writer(f)
         w.writerow(header(p.x_tip is not None, cov))
         for i in range(len(p)):

@@ -49,6 +49,7 @@ from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
 from mcap_protobuf.schema import register_schema
 
+from humanpt.runtime.files import write_atomic
 from humanpt.schemas import topics
 
 RUN_METADATA = "humanpt.run"
@@ -432,12 +433,9 @@ class Recorder:
     def _save_losses(self) -> None:
         """Write :meth:`losses` beside the recording (atomically; on a full disk it may
         fail: logged, tried again at the next resumption and at close)."""
-        tmp = self.losses_path.with_name(self.losses_path.name + ".tmp")
         try:
-            tmp.write_text(json.dumps(self.losses(), indent=1) + "\n")
-            os.replace(tmp, self.losses_path)
+            write_atomic(self.losses_path, json.dumps(self.losses(), indent=1) + "\n")
         except OSError as e:
-            tmp.unlink(missing_ok=True)
             log.warning("recording: could not write %s: %s", self.losses_path, e)
 
     def summary(self) -> str:

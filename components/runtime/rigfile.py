@@ -28,6 +28,7 @@ queryable and in every MCAP's metadata (``rig``).
 from __future__ import annotations
 
 import json
+import os
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -39,6 +40,7 @@ from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.rig import RIG_VERSION, Calibration, HandEye, Rig, TargetGeometry, Tip
 from humanpt.geometry.transforms import x_from_transform
 from humanpt.runtime.config import ConfigError, build, dumps_toml, read_toml, to_table
+from humanpt.runtime.files import write_atomic
 
 __all__ = ["load_rig", "rig_from_table", "rig_to_table", "rig_to_toml", "write_rig", "rig_to_json",
            "rig_from_json", "RIG_METADATA"]
@@ -163,17 +165,15 @@ def load_rig(path: str | Path) -> Rig:
 
 def write_rig(path: str | Path, rig: Rig, comment: str = "", *, overwrite: bool = False) -> Path:
     """Write ``rig`` as TOML, atomically (a crash leaves the old file or the new one, never
-    half of one).  An existing file is kept unless ``overwrite``: its previous content is
-    then saved beside it as ``<name>.bak``."""
+    half of one; :func:`humanpt.runtime.files.write_atomic`).  An existing file is kept unless
+    ``overwrite``: its previous content is then saved beside it as ``<name>.bak``."""
     p = Path(path)
     text = rig_to_toml(rig, comment)
     rig_from_table(tomllib.loads(text), f"{p} (as written)")  # what we write reads back
-    if p.exists():
-        if not overwrite:
-            raise FileExistsError(f"{p} exists (overwrite it with --overwrite; the old one is kept as "
-                                  f"{p.name}.bak)")
-        p.with_name(p.name + ".bak").write_bytes(p.read_bytes())
-    tmp = p.with_name(f".{p.name}.tmp")
-    tmp.write_text(text)
-    tmp.replace(p)
-    return p
+    there = os.path.lexists(p)
+    if there and not overwrite:
+        raise FileExistsError(f"{p} exists (overwrite it with --overwrite; the old one is kept as "
+                              f"{p.name}.bak)")
+    # A temporary file of a random name, created exclusively; the backup written the same way:
+    # a link planted at .bak or at the temporary name is replaced, never written through.
+    return write_atomic(p, text, backup=there)

@@ -17,13 +17,13 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from humanpt.runtime.files import atomic_open
 from humanpt.seam.fit import Seam, Segment
 
 __all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "write_csv", "read_csv", "peaks",
@@ -234,13 +234,11 @@ def write_csv(path, timed: Timed, overwrite: bool = False):
     path = Path(path)
     if path.exists() and not overwrite:
         raise RetimeError(f"{path}: exists; give --overwrite to replace it")
-    tmp = path.with_name(path.name + ".tmp")
-    with tmp.open("w", newline="") as f:
+    with atomic_open(path, "w", newline="") as f:  # a new temporary file, never through a planted link
         w = csv.writer(f)
         w.writerow(CSV_HEADER)
         for k, (t, x, v) in enumerate(zip(timed.t_s, timed.x, timed.speed_mm_s, strict=True)):
             w.writerow([k, f"{t:.6f}", *(f"{c:.6f}" for c in x), f"{v:.4f}"])
-    os.replace(tmp, path)
     return path
 
 

@@ -24,9 +24,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 from pathlib import Path
 
+from humanpt.runtime.files import write_atomic
 from humanpt.seam.fit import Corner, Dwell, FitConfig, FitError, Seam, Segment
 
 FORMAT, VERSION = "humanpt.seam", 1
@@ -122,9 +122,7 @@ def write(path: str | Path, seam: Seam, overwrite: bool = False) -> Path:
     path = Path(path)
     if path.exists() and not overwrite:
         raise SeamFileError(f"{path}: exists; give --overwrite to replace it")
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(to_dict(seam), indent=1) + "\n")
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(to_dict(seam), indent=1) + "\n")  # never through a planted link
     return path
 
 
