@@ -271,6 +271,9 @@ class Recorder:
         self._count = 0
         self._flush_interval_s = flush_interval_s
         self._last_flush = time.monotonic()
+        self._lock = threading.Lock()  # between the caller and the flush timer
+        self._unflushed = 0  # messages given since the last flush
+        self._stop_timer = threading.Event()
         self.bytes_written = 0
         self._closed = False
         self._batch: list[tuple] = []
@@ -296,6 +299,11 @@ class Recorder:
                 target=self._drain, name=f"recorder-{self.path.stem}", daemon=True
             )
             self._thread.start()
+        # Flushes on wall time, whether messages come or not (a component that stops producing
+        # still has its last messages in the file within flush_interval_s).
+        self._timer = threading.Thread(target=self._flush_timer, name=f"recorder-flush-{self.path.stem}",
+                                       daemon=True)
+        self._timer.start()
 
     # -- segments --------------------------------------------------------------------------
     def _open_segment(self) -> None:
@@ -451,15 +459,51 @@ class Recorder:
         return text
 
     # -- writing ---------------------------------------------------------------------------
-    def _drain(self) -> None:
-        # In a realtime process (SCHED_FIFO, runtime.tuning) this thread would inherit the
-        # class, and a chunk's compression would hold a CPU against the link's threads of the
-        # same priority (FIFO does not share a CPU among them): it writes as an ordinary task.
+    @staticmethod
+    def _ordinary_task() -> None:
+        # In a realtime process (SCHED_FIFO, runtime.tuning) a thread would inherit the class,
+        # and a chunk's compression would hold a CPU against the link's threads of the same
+        # priority (FIFO does not share a CPU among them): the recorder's threads are ordinary.
         if hasattr(os, "sched_getscheduler") and os.sched_getscheduler(0) != os.SCHED_OTHER:
             try:
                 os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
             except OSError:
                 pass
+
+    def _flush_timer(self) -> None:
+        """Flush ``flush_interval_s`` after the last flush, messages or not: what was given is
+        in the file (written to the OS: a killed process loses none of it) at most
+        ``flush_interval_s`` after it was given, plus the time to compress and write it."""
+        self._ordinary_task()
+        while True:
+            due_in = min(self._last_flush + self._flush_interval_s - time.monotonic(), threading.TIMEOUT_MAX)
+            if due_in > 0:
+                if self._stop_timer.wait(due_in):
+                    return
+                continue
+            with self._lock:
+                if self._closed:
+                    return
+                now = time.monotonic()
+                if now - self._last_flush < self._flush_interval_s:
+                    continue  # the caller flushed meanwhile
+                self._last_flush = now
+                if not self._unflushed and (self._writer is not None or self._queue is not None):
+                    continue  # nothing new (a write outage's retry goes on: the flush item retries)
+                self._unflushed = 0
+                if self._queue is None:
+                    self._do("flush")
+                    continue
+                self._batch.append(("flush",))
+                try:
+                    self._queue.put_nowait(self._batch)  # never wait here holding the caller's lock
+                    self._batch, self._batch_bytes = [], 0
+                except queue.Full:  # the writer thread is busy: again shortly
+                    self._batch.pop()
+                    self._last_flush = now - self._flush_interval_s + min(0.05, self._flush_interval_s)
+
+    def _drain(self) -> None:
+        self._ordinary_task()
         while True:
             batch = self._queue.get()
             if batch is None:
@@ -498,9 +542,15 @@ class Recorder:
 
     def _submit(self, item: tuple, size: int = 0) -> None:
         """Write ``item`` now, or batch it for the writer thread."""
+        with self._lock:
+            self._submit_locked(item, size)
+
+    def _submit_locked(self, item: tuple, size: int) -> None:
+        self._unflushed += 1
         due = time.monotonic() - self._last_flush >= self._flush_interval_s
         if due:
             self._last_flush = time.monotonic()
+            self._unflushed = 0
         if self._queue is None:
             self._do(*item)
             if due:
@@ -614,11 +664,14 @@ class Recorder:
     def flush(self) -> None:
         """End the chunk in progress and put it in the file (with ``background=True``:
         once the writer thread gets there)."""
-        if self._queue is None:
-            self._do("flush")
-        else:
-            self._batch.append(("flush",))
-            self._hand_over()
+        with self._lock:
+            self._last_flush = time.monotonic()
+            self._unflushed = 0
+            if self._queue is None:
+                self._do("flush")
+            else:
+                self._batch.append(("flush",))
+                self._hand_over()
 
     def _flush_now(self) -> None:
         self._writer.flush()
@@ -630,7 +683,10 @@ class Recorder:
         error: what was lost is in :meth:`losses`, :meth:`summary` and the losses file."""
         if self._closed:
             return
-        self._closed = True
+        self._stop_timer.set()
+        with self._lock:  # a timed flush in progress ends first
+            self._closed = True
+        self._timer.join()
         if self._thread is not None:
             self._hand_over()
             self._queue.put(None)
