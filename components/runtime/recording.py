@@ -10,12 +10,25 @@ FileDescriptorSets so Foxglove and rerun open the files.  A metadata record
 start time; replay builds the core from it.
 
 Writing uses mcap's public :class:`mcap.writer.Writer` only (zstd chunks of
-``chunk_size`` bytes).  Each finished chunk is put in the file at once, and the chunk in
-progress is ended and put in the file every ``flush_interval_s`` of wall time, so a crash
-loses at most the chunk in progress (plus, with ``background=True``, the messages still
-queued for the writer thread: at most about one more chunk's worth, see :class:`Recorder`).
-A write error (a full disk) never raises to the component: the recording stops at its last
-whole chunk, counts what it loses, and resumes in the next segment when there is room.
+``chunk_size`` bytes).  Each finished chunk is put in the file at once, and a timer ends the
+chunk in progress and puts it in the file ``flush_interval_s`` after the last flush, whether
+messages keep coming or not: a process killed (SIGKILL, a crash) loses at most the messages
+it gave its recorder in the last ``flush_interval_s``, plus those being compressed and
+written at that moment (with ``background=True``, what waits for the writer thread: see
+:class:`Recorder`).  Every channel is also written, when registered, in a ``humanpt.channels``
+metadata record outside the chunks, so a file never closed (no summary) whose chunk declaring
+a channel is damaged still reads the channel's messages in later chunks.  A write error (a
+full disk) never raises to the component: the recording stops at its last whole chunk,
+counts what it loses, and resumes in the next segment when there is room.
+
+Reading (:func:`iter_records`, :func:`iter_entries`, :func:`read`) never trusts what a file
+declares: a chunk is decompressed only when its declared size is within
+:data:`MAX_CHUNK_BYTES` and what its compression can make of its bytes (:data:`MAX_RATIO`),
+and never into more than it declares; a chunk refused or damaged is skipped with one line
+naming the file and its offset, and reading goes on; channels come from the summary section
+too, so damage in the first chunk hides only that chunk.  A recording read with any note
+(cut, never closed, a chunk skipped, fewer messages than its summary counts) is not read in
+full, and replay never calls it a match.
 """
 
 from __future__ import annotations
@@ -210,10 +223,12 @@ class Recorder:
     (zstd releases the GIL, so compression overlaps the caller's work); the caller only
     appends each message to a batch, handed to the thread when it holds a quarter of
     ``chunk_size`` bytes or :data:`BATCH_MESSAGES` messages, on :meth:`flush` and every
-    ``flush_interval_s``.  At most :data:`QUEUED_BATCHES` batches wait for the thread (the
-    caller then waits: back-pressure, not unbounded memory), so a crash loses at most the
-    chunk in progress and about one chunk's worth of messages not yet written (the batch
-    being filled, the queued ones and the one being written).  One thread writes, in the
+    ``flush_interval_s`` (by a timer, even when no message comes).  At most
+    :data:`QUEUED_BATCHES` batches wait for the thread (the caller then waits: back-pressure,
+    not unbounded memory).  Either way a crash loses at most the messages given in the last
+    ``flush_interval_s`` (the timer flushes that long after the last flush) plus those the
+    writer is compressing and writing at that moment (and, with the thread, the batches
+    queued for it when it lags).  One thread writes, in the
     order the messages were given: the file holds the same messages in the same order
     as without the thread.  :meth:`close` drains the queue.
 
