@@ -191,11 +191,12 @@ def test_csv_round_trip_with_the_held_flag_and_covariance(tmp_path, tip):
     pathfile.write(old, _path(5, tip=tip))
     o = pathfile.read(old)
     assert o.orientation_held is None and o.cov_g_mm2 is None and len(o) == 5
-    # Not a number: refused, naming the row.
+    # Not a number: refused, naming the line (the third data row) and the column.
     lines = f.read_text().splitlines()
     lines[3] = lines[3].rsplit(",", 1)[0] + ",nan"
     f.write_text("\n".join(lines) + "\n")
-    with pytest.raises(pathfile.PathFileError, match="not a finite number on data row 3"):
+    last = pathfile.header(tip, with_covariance=True)[-1]
+    with pytest.raises(pathfile.PathFileError, match=rf"c\.csv:4: {last} is nan, not a finite number"):
         pathfile.read(f)
 
 
