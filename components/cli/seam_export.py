@@ -19,7 +19,7 @@ def _floats(text: str, n: int, option: str, what: str) -> tuple[float, ...]:
     except ValueError:
         v = ()
     if len(v) != n or not all(np.isfinite(v)):
-        raise ValueError(f"{option} {shown(text)}: give {what}, {n} finite numbers")
+        raise ValueError(f"{option} {shown(text)}: give {what}, {({6: 'six'}).get(n, n)} finite numbers")
     return v
 
 

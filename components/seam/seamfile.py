@@ -37,8 +37,15 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.seam.fit import Corner, Dwell, FitConfig, FitError, Seam, Segment
-from humanpt.seam.limits import (MAX_ABS_DEG, MAX_ABS_MM, MAX_DWELL_S, MAX_INDEX, MAX_TIME_S, MIN_ARC_RADIUS_MM,
-                                 SPEED_CEILING_MM_S)
+from humanpt.seam.limits import (
+    MAX_ABS_DEG,
+    MAX_ABS_MM,
+    MAX_DWELL_S,
+    MAX_INDEX,
+    MAX_TIME_S,
+    MIN_ARC_RADIUS_MM,
+    SPEED_CEILING_MM_S,
+)
 from humanpt.seam.sanitise import shown
 
 FORMAT, VERSION = "humanpt.seam", 1
