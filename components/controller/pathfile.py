@@ -224,6 +224,7 @@ def read(path: str | Path) -> Path6:
     cov = COV_HEADER[0] in head
     n = len(head)
     bounds = _bounds(n, tip)
+    k_held = head.index(COV_HEADER[0]) if cov else 0
     data, stamps = [], []
     int64 = np.iinfo(np.int64)
     for lineno, r in enumerate(rows[1:], start=2):
@@ -241,7 +242,9 @@ def read(path: str | Path) -> Path6:
                 raise PathFileError(f"{name}:{lineno}: {head[k]} is {r[k]}, not a finite number")
             if not lo <= v <= hi:
                 raise PathFileError(f"{name}:{lineno}: {head[k]} {v:g}{' ' + unit if unit else ''} is outside "
-                                    f"[{lo:g}, {hi:g}]")
+                                    f"[{lo:.10g}, {hi:.10g}]")
+            if k in (0, k_held) and v != int(v):
+                raise PathFileError(f"{name}:{lineno}: {head[k]} {v:g} is not a whole number")
         if not int64.min <= stamp <= int64.max:
             raise PathFileError(f"{name}:{lineno}: stamp_ns {stamp} is outside int64 nanoseconds")
         data.append(vals)
@@ -261,7 +264,13 @@ def smooth(x: np.ndarray, stamp_ns: np.ndarray, *, accel_sigma: float = 200.0, m
     """RTS-smoothed (N, 6) path: per coordinate a constant-velocity Kalman filter forward and
     filterpy's Rauch-Tung-Striebel smoother backward.  Angles are unwrapped first and
     wrapped back.  ``accel_sigma`` in units/s^2, ``meas_sigma`` in units."""
+    from humanpt.seam.limits import MAX_ABS_DEG, MAX_ABS_MM
+
     x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 6 or not np.all(np.isfinite(x)):
+        raise PathFileError("smoothing needs (N, 6) finite points")
+    if np.abs(x[:, :3]).max(initial=0.0) > MAX_ABS_MM or np.abs(x[:, 3:]).max(initial=0.0) > MAX_ABS_DEG:
+        raise PathFileError(f"a point beyond +-{MAX_ABS_MM:g} mm or +-{MAX_ABS_DEG:g} deg: not smoothed")
     if len(x) < 3:
         return x.copy()
     t = (np.asarray(stamp_ns, dtype=np.int64) - int(stamp_ns[0])) * 1e-9
