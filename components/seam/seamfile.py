@@ -18,7 +18,7 @@ Layout (``"format": "humanpt.seam"``, ``"version": 1``)::
 Angles are Z-Y-X (psi, theta, phi) as everywhere in humanpt; ``first``/``last`` index the
 source path's points.  :func:`read` checks every field and names the one that is wrong:
 numbers finite and within :mod:`humanpt.seam.limits` (positions within +-10 m, angles
-+-720 deg, dwells 0..600 s, a feed in (0, 1000] mm/s), arcs with a non-zero normal, a
++-720 deg, dwells 0..3600 s, a feed in (0, 1000] mm/s), arcs with a non-zero normal, a
 radius of at least 1 mm and the centre off the start, corners between neighbouring
 segments; a retimed seam's ``retime`` (``speed_mm_s``, ``samples`` of ``t_s`` and ``x``) and
 a ``feed_mm_s`` are checked the same way (:func:`read_file`).  :func:`write` checks the

@@ -51,7 +51,7 @@ CASES = [
     ("feed 1e308", "feed_mm_s", 1e308, "feed_mm_s must be a finite number in (0, 1000] mm/s"),
     ("retime feed", "retime", {"speed_mm_s": 1e308}, "retime: speed_mm_s"),
     ("negative feed", "feed_mm_s", -5, "feed_mm_s"),
-    ("dwell Infinity", "dwells.0.duration_s", math.inf, "dwells[0]: duration_s must be a finite number in [0, 600] s"),
+    ("dwell Infinity", "dwells.0.duration_s", math.inf, "dwells[0]: duration_s must be a finite number in [0, 3600] s"),
     ("dwell NaN", "dwells.0.duration_s", math.nan, "dwells[0]: duration_s"),
     ("zero normal", "segments.1.normal", [0, 0, 0], "segments[1]: normal must not be zero"),
     ("centre at start", "segments.1.centre_mm", [100.0, 0.0, 0.0], "segments[1]: centre_mm is at start_mm"),
