@@ -308,17 +308,23 @@ def to_val2(x: np.ndarray, name: str = "path", speed_percent: float = 20.0) -> s
     """A VAL II program that moves the tool through the points (mm, deg).
 
     VAL II's TRANS(x, y, z, o, a, t) takes Euler O-A-T angles (Z-Y-Z); the points are
-    converted from yaw-pitch-roll Z-Y-X via scipy.
+    converted from yaw-pitch-roll Z-Y-X via scipy.  Every point must lie in the robot
+    gateway's workspace box (:mod:`humanpt.seam.limits`), SPEED in (0, 100]; ``name``
+    becomes a VAL II name (:func:`re_name`).
     """
     from scipy.spatial.transform import Rotation
 
     x = np.asarray(x, dtype=float)
     if x.ndim != 2 or x.shape[1] != 6 or not np.all(np.isfinite(x)):
         raise PathFileError("a VAL II program needs (N, 6) finite points")
-    from humanpt.seam.limits import MAX_ABS_MM
+    from humanpt.seam.limits import ENVELOPE_MAX_MM, ENVELOPE_MIN_MM
 
-    if np.abs(x[:, :3]).max(initial=0.0) > MAX_ABS_MM:
-        raise PathFileError(f"a point beyond +-{MAX_ABS_MM:g} mm: not a VAL II program")
+    lo, hi = np.asarray(ENVELOPE_MIN_MM), np.asarray(ENVELOPE_MAX_MM)
+    out = np.flatnonzero(np.any((x[:, :3] < lo) | (x[:, :3] > hi), axis=1))
+    if len(out):
+        raise PathFileError(f"point {int(out[0])} ({', '.join(f'{v:.6g}' for v in x[out[0], :3])}) mm is beyond "
+                            f"the workspace {tuple(lo)}..{tuple(hi)} mm (the robot gateway's box, "
+                            "humanpt.seam.limits): not a VAL II program")
     if not (np.isfinite(speed_percent) and 0 < speed_percent <= 100):
         raise PathFileError(f"SPEED must be a percent in (0, 100], got {speed_percent!r}")
     prog = re_name(name)

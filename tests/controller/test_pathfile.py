@@ -284,7 +284,10 @@ def test_smooth_and_val_refuse_what_they_cannot_write():
     x[:, 0] = [0.0, 1.0, 1e308, 3.0, 4.0]
     with pytest.raises(pathfile.PathFileError, match="beyond"):
         pathfile.smooth(x, np.arange(5, dtype=np.int64) * 280_000_000)
-    with pytest.raises(pathfile.PathFileError, match="beyond"):
+    with pytest.raises(pathfile.PathFileError, match=r"point 2 \(1e\+308, 0, 0\) mm is beyond the workspace"):
+        pathfile.to_val2(x)
+    x[2, 0] = 1601.0  # the gateway's box ends at x = 1600 mm
+    with pytest.raises(pathfile.PathFileError, match=r"point 2 \(1601, 0, 0\) mm is beyond the workspace"):
         pathfile.to_val2(x)
     with pytest.raises(pathfile.PathFileError, match="percent"):
         pathfile.to_val2(np.zeros((2, 6)), speed_percent=1e308)
