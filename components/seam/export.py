@@ -266,7 +266,7 @@ def check(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray]]
         if seg.kind == "arc":
             n = max(2, math.ceil(abs(seg.sweep_deg)) + 1)
             inside(seg.points_at(np.linspace(0.0, 1.0, n)), f"segments[{i}]: a point on the arc")
-    mv = _moves(seam, opts)
+    mv = moves(seam, opts.zone_mm, opts.corner_zone_mm, opts.dwells)
     prev = mv[0].target
     for m in mv:
         where = f"segments[{m.segment}]" if m.segment >= 0 else "a move between segments"
@@ -325,8 +325,9 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _moves(seam: Seam, opts: ExportOptions) -> list[Move]:
-    return moves(seam, opts.zone_mm, opts.corner_zone_mm, opts.dwells)
+def _moves(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray]] | None = None) -> list[Move]:
+    """The moves every writer writes, once :func:`check` passed them."""
+    return check(seam, opts, timed)
 
 
 def _rot(x: np.ndarray) -> Rotation:
@@ -528,7 +529,7 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
     each ``json_step_mm`` (arc length ``s_mm``), or, when the seam was retimed, ``timed``: its
     samples (t s, (6,) pose) with ``t_s``."""
     step_mm = opts.json_step_mm
-    mv = _moves(seam, opts)
+    mv = _moves(seam, opts, timed)
     samples = []
     if timed is not None:
         samples = [{"t_s": round(float(t), 6), **_json_pose(np.asarray(x, dtype=float))} for t, x in timed]
@@ -565,10 +566,9 @@ _WRITERS = {"val": to_val, "krl": to_krl, "rapid": to_rapid, "urscript": to_ursc
 
 def export(seam: Seam, fmt: str, opts: ExportOptions, timed: list[tuple[float, np.ndarray]] | None = None) -> str:
     """The program's text in format ``fmt`` (one of :data:`FORMATS`), once :func:`check`
-    found every pose in the workspace (else :class:`ExportError`)."""
+    found every pose in the workspace (else :class:`ExportError`; every writer checks)."""
     if fmt not in _WRITERS:
         raise ExportError(f"unknown format {fmt!r}; one of {', '.join(FORMATS)}")
-    check(seam, opts, timed if fmt == "json" else None)
     if fmt == "json":
         return to_json(seam, opts, timed=timed)
     return _WRITERS[fmt](seam, opts)

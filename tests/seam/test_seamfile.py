@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from humanpt.seam import limits, seamfile
-from humanpt.seam.export import ExportError, ExportOptions, export
+from humanpt.seam.export import ExportError, ExportOptions, export, to_json, to_krl, to_rapid, to_urscript, to_val
 from humanpt.seam.fit import FitConfig, Seam, Segment
 from humanpt.seam.retime import RetimeConfig, retime
 from tests.conftest import run_cli
@@ -211,6 +211,9 @@ def test_an_arc_bulging_out_of_the_workspace_is_refused():
                                envelope_max_mm=(100.0, 40.0, 100.0))
     with pytest.raises(ExportError, match=r"segments\[0\]: a point on the arc: \(.*\) mm is outside"):
         export(_arc_seam(), "krl", opts)
+    for writer in (to_val, to_krl, to_rapid, to_urscript, to_json):  # each writer checks, not only export()
+        with pytest.raises(ExportError, match="outside the workspace"):
+            writer(_arc_seam(), opts)
     export(_arc_seam(), "krl", dataclasses.replace(opts, envelope_max_mm=(100.0, 51.0, 100.0)))
 
 
