@@ -21,7 +21,16 @@ import numpy as np
 import pytest
 
 from humanpt.seam import limits, seamfile
-from humanpt.seam.export import ExportError, ExportOptions, export, to_json, to_krl, to_rapid, to_urscript, to_val
+from humanpt.seam.export import (
+    ExportError,
+    ExportOptions,
+    export,
+    to_json,
+    to_krl,
+    to_rapid,
+    to_urscript,
+    to_val,
+)
 from humanpt.seam.fit import FitConfig, Seam, Segment
 from humanpt.seam.retime import RetimeConfig, retime
 from tests.conftest import run_cli
