@@ -392,6 +392,12 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--timed", metavar="CSV",
                    help="the seam's timing from humanpt path retime: its feed is the default --speed, and the "
                    "JSON format carries its samples (t_s and pose every cycle)")
+    q.add_argument("--max-speed", type=float, metavar="MM_S",
+                   help="the feed's limit, mm/s (default 100: retime's, the robot gateway's max_speed_mm_s); a "
+                   "higher --speed or seam feed is refused")
+    q.add_argument("--envelope", metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
+                   help="the workspace every pose of the program must lie in, mm in the world frame (default "
+                   "the robot gateway's box, -1600,-1600,-1400,1600,1600,1600); a seam outside is refused")
     q.add_argument("--overwrite", action="store_true", help="replace OUTPUT if it exists (never the input)")
 
     q = psub.add_parser("retime", help="a seam in time: constant feed, bounded acceleration and jerk",
@@ -404,9 +410,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--speed", type=float, default=20.0, metavar="MM_S", help="feed along the seam (default 20)")
     q.add_argument("--accel", type=float, default=200.0, metavar="MM_S2", help="acceleration limit (default 200)")
     q.add_argument("--jerk", type=float, default=2000.0, metavar="MM_S3", help="jerk limit (default 2000)")
-    q.add_argument("--max-speed", type=float, default=100.0, metavar="MM_S", help="speed limit (default 100)")
-    q.add_argument("--max-angular", type=float, default=60.0, metavar="DEG_S",
-                   help="the torch's angular speed limit (default 60)")
+    q.add_argument("--max-speed", type=float, metavar="MM_S",
+                   help="speed limit (default 100: the robot gateway's max_speed_mm_s, humanpt.seam.limits)")
+    q.add_argument("--max-angular", type=float, metavar="DEG_S",
+                   help="the torch's angular speed limit (default 60: the gateway's max_angular_speed_deg_s)")
     q.add_argument("--cycle-ms", type=float, default=28.0, help="sample period, the controller's cycle (default 28)")
     q.add_argument("--no-dwells", action="store_true", help="do not hold at the seam's dwells")
     q.add_argument("--overwrite", action="store_true", help="replace the output if it exists (never the input)")

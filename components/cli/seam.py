@@ -59,9 +59,10 @@ def path_retime(args) -> int:
     out = Path(args.output) if args.output else src.with_name(src.name.removesuffix(".json") + ".timed.csv")
     check_output(out, src, args.overwrite)
     seam = seamfile.read(src)
-    cfg = RetimeConfig(speed_mm_s=args.speed, accel_mm_s2=args.accel, jerk_mm_s3=args.jerk,
-                       max_speed_mm_s=args.max_speed, max_angular_deg_s=args.max_angular, cycle_ms=args.cycle_ms,
-                       dwells=not args.no_dwells)
+    limits = {k: v for k, v in (("max_speed_mm_s", args.max_speed), ("max_angular_deg_s", args.max_angular))
+              if v is not None}  # else RetimeConfig's: humanpt.seam.limits
+    cfg = RetimeConfig(speed_mm_s=args.speed, accel_mm_s2=args.accel, jerk_mm_s3=args.jerk, cycle_ms=args.cycle_ms,
+                       dwells=not args.no_dwells, **limits)
     timed = retime(seam, cfg)
     write_csv(out, timed, overwrite=args.overwrite)
     pk = peaks(timed)

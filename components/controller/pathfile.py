@@ -178,35 +178,80 @@ def write(path: str | Path, p: Path6) -> None:
             w.writerow(row(p.index[i], p.stamp_ns[i], p.x_g[i], None if p.x_tip is None else p.x_tip[i], **extra))
 
 
+# How large a row may be (bytes): a path row is about 400 (csv's own field limit is 128 kB).
+_MAX_ROW = 4096
+
+
+def _bounds(n_cols: int, tip: bool) -> list[tuple[float, float, str]]:
+    """Per column (lo, hi, what) (:mod:`humanpt.seam.limits`): positions within +-10 m,
+    angles within +-720 deg, covariances within +-1e8 (mm^2, deg^2), index whole >= 0."""
+    from humanpt.seam.limits import MAX_ABS_DEG, MAX_ABS_MM, MAX_COV, MAX_INDEX
+
+    pos, ang, cov = (-MAX_ABS_MM, MAX_ABS_MM, "mm"), (-MAX_ABS_DEG, MAX_ABS_DEG, "deg"), (-MAX_COV, MAX_COV, "")
+    out = [(0, MAX_INDEX, ""), (-np.inf, np.inf, "")] + [pos] * 3 + [ang] * 3
+    if tip:
+        out += [pos] * 3 + [ang] * 3
+    if n_cols > len(out):
+        out += [(0.0, 1.0, "")] + [cov] * (n_cols - len(out) - 1)
+    return out
+
+
 def read(path: str | Path) -> Path6:
+    """A path file, every value checked: finite, within :mod:`humanpt.seam.limits`,
+    stamps whole nanoseconds within int64; :class:`PathFileError` naming the file, the
+    line and the column."""
+    from humanpt.seam.sanitise import shown
+
     p = Path(path)
+    name = shown(p)
     if not p.is_file():
-        raise PathFileError(f"{p}: no such path file")
-    with open(p, newline="") as f:
-        rows = list(csv.reader(f))
+        raise PathFileError(f"{name}: no such path file")
+    try:
+        with open(p, newline="") as f:
+            rows = []
+            for r in csv.reader(f):
+                if sum(len(c) for c in r) > _MAX_ROW:
+                    raise PathFileError(f"{name}:{len(rows) + 1}: a row of more than {_MAX_ROW} characters")
+                rows.append(r)
+    except (UnicodeDecodeError, csv.Error) as e:
+        raise PathFileError(f"{name}: not a path file ({shown(e)})") from None
+    except OSError as e:
+        raise PathFileError(f"{name}: cannot read ({shown(e.strerror or e)})") from None
     if not rows:
-        raise PathFileError(f"{p}: empty file (no header line)")
+        raise PathFileError(f"{name}: empty file (no header line)")
     head = rows[0]
     if head not in [header(tip, cov) for tip in (False, True) for cov in (False, True)]:
-        raise PathFileError(f"{p}:1: not a humanpt path header: {','.join(head)}")
+        raise PathFileError(f"{name}:1: not a humanpt path header: {shown(','.join(head))[:200]}")
     tip = TIP_HEADER[0] in head
     cov = COV_HEADER[0] in head
     n = len(head)
+    bounds = _bounds(n, tip)
+    k_held = head.index(COV_HEADER[0]) if cov else 0
     data, stamps = [], []
+    int64 = np.iinfo(np.int64)
     for lineno, r in enumerate(rows[1:], start=2):
         if not r:
             continue
         if len(r) != n:
-            raise PathFileError(f"{p}:{lineno}: {len(r)} columns, expected {n}")
+            raise PathFileError(f"{name}:{lineno}: {len(r)} columns, expected {n}")
         try:
-            data.append([float(v) for v in r])
-            stamps.append(int(r[1]))  # exact: wall-clock stamps (~1.8e18 ns) exceed a float's 53 bits
+            vals = [float(v) for v in r]
+            stamp = int(r[1])  # exact: wall-clock stamps (~1.8e18 ns) exceed a float's 53 bits
         except ValueError as e:
-            raise PathFileError(f"{p}:{lineno}: {e}") from e
+            raise PathFileError(f"{name}:{lineno}: {shown(e)}") from None
+        for k, (v, (lo, hi, unit)) in enumerate(zip(vals, bounds, strict=True)):
+            if not np.isfinite(v):
+                raise PathFileError(f"{name}:{lineno}: {head[k]} is {r[k]}, not a finite number")
+            if not lo <= v <= hi:
+                raise PathFileError(f"{name}:{lineno}: {head[k]} {v:g}{' ' + unit if unit else ''} is outside "
+                                    f"[{lo:.10g}, {hi:.10g}]")
+            if k in (0, k_held) and v != int(v):
+                raise PathFileError(f"{name}:{lineno}: {head[k]} {v:g} is not a whole number")
+        if not int64.min <= stamp <= int64.max:
+            raise PathFileError(f"{name}:{lineno}: stamp_ns {stamp} is outside int64 nanoseconds")
+        data.append(vals)
+        stamps.append(stamp)
     a = np.array(data, dtype=float).reshape(-1, n)
-    bad = np.flatnonzero(~np.all(np.isfinite(a), axis=1))
-    if len(bad):
-        raise PathFileError(f"{p}: a value that is not a finite number on data row {int(bad[0]) + 1}")
     out = Path6(a[:, 0].astype(int), np.array(stamps, dtype=np.int64), a[:, 2:8], a[:, 8:14] if tip else None)
     if cov:
         k = 14 if tip else 8
@@ -221,7 +266,13 @@ def smooth(x: np.ndarray, stamp_ns: np.ndarray, *, accel_sigma: float = 200.0, m
     """RTS-smoothed (N, 6) path: per coordinate a constant-velocity Kalman filter forward and
     filterpy's Rauch-Tung-Striebel smoother backward.  Angles are unwrapped first and
     wrapped back.  ``accel_sigma`` in units/s^2, ``meas_sigma`` in units."""
+    from humanpt.seam.limits import MAX_ABS_DEG, MAX_ABS_MM
+
     x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 6 or not np.all(np.isfinite(x)):
+        raise PathFileError("smoothing needs (N, 6) finite points")
+    if np.abs(x[:, :3]).max(initial=0.0) > MAX_ABS_MM or np.abs(x[:, 3:]).max(initial=0.0) > MAX_ABS_DEG:
+        raise PathFileError(f"a point beyond +-{MAX_ABS_MM:g} mm or +-{MAX_ABS_DEG:g} deg: not smoothed")
     if len(x) < 3:
         return x.copy()
     t = (np.asarray(stamp_ns, dtype=np.int64) - int(stamp_ns[0])) * 1e-9
@@ -250,6 +301,8 @@ def smooth(x: np.ndarray, stamp_ns: np.ndarray, *, accel_sigma: float = 200.0, m
         xs, _, _, _ = rts_smoother(np.array(means), np.array(covs), np.array(Fs), np.array(Qs))
         out[:, j] = xs[:, 0]
     out[:, 3:] = (out[:, 3:] + 180.0) % 360.0 - 180.0
+    if not np.all(np.isfinite(out)):
+        raise PathFileError("smoothing gave values that are not finite numbers (a path beyond the limits?)")
     return out
 
 
@@ -257,11 +310,25 @@ def to_val2(x: np.ndarray, name: str = "path", speed_percent: float = 20.0) -> s
     """A VAL II program that moves the tool through the points (mm, deg).
 
     VAL II's TRANS(x, y, z, o, a, t) takes Euler O-A-T angles (Z-Y-Z); the points are
-    converted from yaw-pitch-roll Z-Y-X via scipy.
+    converted from yaw-pitch-roll Z-Y-X via scipy.  Every point must lie in the robot
+    gateway's workspace box (:mod:`humanpt.seam.limits`), SPEED in (0, 100]; ``name``
+    becomes a VAL II name (:func:`re_name`).
     """
     from scipy.spatial.transform import Rotation
 
     x = np.asarray(x, dtype=float)
+    if x.ndim != 2 or x.shape[1] != 6 or not np.all(np.isfinite(x)):
+        raise PathFileError("a VAL II program needs (N, 6) finite points")
+    from humanpt.seam.limits import ENVELOPE_MAX_MM, ENVELOPE_MIN_MM
+
+    lo, hi = np.asarray(ENVELOPE_MIN_MM), np.asarray(ENVELOPE_MAX_MM)
+    out = np.flatnonzero(np.any((x[:, :3] < lo) | (x[:, :3] > hi), axis=1))
+    if len(out):
+        raise PathFileError(f"point {int(out[0])} ({', '.join(f'{v:.6g}' for v in x[out[0], :3])}) mm is beyond "
+                            f"the workspace {tuple(lo)}..{tuple(hi)} mm (the robot gateway's box, "
+                            "humanpt.seam.limits): not a VAL II program")
+    if not (np.isfinite(speed_percent) and 0 < speed_percent <= 100):
+        raise PathFileError(f"SPEED must be a percent in (0, 100], got {speed_percent!r}")
     prog = re_name(name)
     lines = [f".PROGRAM {prog}()", f"  ; {len(x)} points recorded by humanpt (teaching by showing)",
              f"  SPEED {speed_percent:g} ALWAYS"]
@@ -274,5 +341,7 @@ def to_val2(x: np.ndarray, name: str = "path", speed_percent: float = 20.0) -> s
 
 
 def re_name(name: str) -> str:
-    clean = "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_") or "path"
-    return clean if clean[0].isalpha() else f"p_{clean}"
+    """A VAL II program name of ``name`` (:func:`humanpt.seam.sanitise.identifier`)."""
+    from humanpt.seam.sanitise import identifier
+
+    return identifier(name, "val", default="path")

@@ -42,10 +42,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from humanpt.geometry.transforms import rotation_from_ypr_deg, slerp
+from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
+from humanpt.seam.sanitise import comment, comment_line, identifier
 
 __all__ = ["FORMATS", "SUFFIXES", "ExportError", "ExportOptions", "Move", "moves", "pose_at", "export",
-           "to_val", "to_krl", "to_rapid", "to_urscript", "to_json", "program_name"]
+           "to_val", "to_krl", "to_rapid", "to_urscript", "to_json", "program_name", "check"]
 
 FORMATS = ("val", "krl", "rapid", "urscript", "json")
 SUFFIXES = {"val": ".v2", "krl": ".src", "rapid": ".mod", "urscript": ".script", "json": ".json"}
@@ -76,7 +78,13 @@ class ExportOptions:
     (percent of the monitor speed: VAL II has no speed in mm/s) and the largest chord
     error (mm) of the points VAL II gets along an arc (it has no circular move), the
     spacing (mm) of the JSON's poses along the seam; ``dwells``: wait where the welder
-    dwelt (:func:`moves`)."""
+    dwelt (:func:`moves`).  Every number is checked here: the feed within
+    ``max_speed_mm_s`` (default :data:`humanpt.seam.limits.MAX_SPEED_MM_S`, retime's),
+    the acceleration, blends, tool within their bounds; every pose the program moves
+    through must lie in the workspace box ``envelope_min_mm``..``envelope_max_mm``
+    (world, mm; default the gateway's, :mod:`humanpt.seam.limits`), or :func:`export`
+    refuses (:func:`check`).  ``name`` and ``source`` reach the program only through
+    :mod:`humanpt.seam.sanitise`."""
 
     speed_mm_s: float = 20.0
     zone_mm: float = 1.0
@@ -90,21 +98,44 @@ class ExportOptions:
     json_step_mm: float = 1.0
     dwells: bool = False
     source: str = ""
+    max_speed_mm_s: float = limits.MAX_SPEED_MM_S
+    envelope_min_mm: tuple[float, float, float] = limits.ENVELOPE_MIN_MM
+    envelope_max_mm: tuple[float, float, float] = limits.ENVELOPE_MAX_MM
 
     def __post_init__(self):
-        for k in ("speed_mm_s", "accel_mm_s2", "val_speed_percent", "val_chord_mm",
-                  "json_step_mm"):
+        def within(k, lo, hi, lo_open=True):
             v = getattr(self, k)
-            if not (math.isfinite(v) and v > 0):
-                raise ExportError(f"{k} must be a positive number, got {v!r}")
+            ok = isinstance(v, (int, float)) and math.isfinite(v) and (lo < v if lo_open else lo <= v) and v <= hi
+            if not ok:
+                raise ExportError(f"{k} must be a number in {'(' if lo_open else '['}{lo:g}, {hi:g}], got {v!r}")
+
+        within("max_speed_mm_s", 0.0, limits.SPEED_CEILING_MM_S)
+        within("speed_mm_s", 0.0, limits.SPEED_CEILING_MM_S)
+        if self.speed_mm_s > self.max_speed_mm_s:
+            raise ExportError(f"speed_mm_s {self.speed_mm_s:g} mm/s is above the limit max_speed_mm_s "
+                              f"{self.max_speed_mm_s:g} mm/s")
+        within("accel_mm_s2", 0.0, limits.ACCEL_CEILING_MM_S2)
+        within("val_speed_percent", 0.0, 100.0)
+        within("val_chord_mm", 1e-3, 10.0, lo_open=False)
+        within("json_step_mm", 0.01, 1000.0, lo_open=False)
         for k in ("zone_mm", "corner_zone_mm"):
-            v = getattr(self, k)
-            if not (math.isfinite(v) and v >= 0):
-                raise ExportError(f"{k} must be >= 0, got {v!r}")
+            within(k, 0.0, 1000.0, lo_open=False)
         if self.point not in ("tip", "G"):
             raise ExportError(f"point must be tip or G, got {self.point!r}")
-        if np.asarray(self.flange_T_tool_mm).shape != (4, 4):
-            raise ExportError("flange_T_tool_mm must be a 4x4 transform")
+        T = np.asarray(self.flange_T_tool_mm, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ExportError("flange_T_tool_mm must be a 4x4 transform of finite numbers")
+        if float(np.abs(T[:3, 3]).max()) > limits.MAX_TOOL_MM or float(np.linalg.norm(T[:3, 3])) > limits.MAX_TOOL_MM:
+            raise ExportError(f"the tool's offset {_fmt_xyz(T[:3, 3])} mm from the flange is beyond "
+                              f"{limits.MAX_TOOL_MM:g} mm")
+        if not (np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(T[:3, :3]) > 0
+                and np.allclose(T[3], [0, 0, 0, 1])):
+            raise ExportError("flange_T_tool_mm's rotation is not a rotation")
+        lo, hi = np.asarray(self.envelope_min_mm, dtype=float), np.asarray(self.envelope_max_mm, dtype=float)
+        if (lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)))
+                or np.any(np.abs(np.r_[lo, hi]) > limits.MAX_ABS_MM) or np.any(lo >= hi)):
+            raise ExportError(f"the envelope {list(self.envelope_min_mm)}..{list(self.envelope_max_mm)} mm: three "
+                              f"finite lower bounds below three upper ones, within +-{limits.MAX_ABS_MM:g} mm")
 
 
 @dataclass(frozen=True)
@@ -123,12 +154,11 @@ class Move:
     dwell_s: float = 0.0
 
 
-def program_name(name: str) -> str:
-    """A name every format accepts: letters, digits and ``_``, starting with a letter, at
-    most 24 characters (KRL's limit)."""
-    clean = "".join(c if c.isascii() and c.isalnum() else "_" for c in name).strip("_") or "seam"
-    clean = clean if clean[0].isalpha() else f"p_{clean}"
-    return clean[:24]
+def program_name(name: str, fmt: str = "krl") -> str:
+    """``name`` as a program name ``fmt`` accepts (:func:`humanpt.seam.sanitise.identifier`:
+    letters, digits and ``_``, starting with a letter, no keyword, at most 24 characters
+    for KRL, 32 for RAPID and URScript, 15 for VAL II)."""
+    return identifier(name, fmt)
 
 
 def pose_at(seg: Segment, s: float) -> np.ndarray:
@@ -186,6 +216,95 @@ def moves(seam: Seam, zone_mm: float = 1.0, corner_zone_mm: float = 0.0, dwells:
     return out
 
 
+# ---------------------------------------------------------------------------- checks
+
+# A circular move's robot arc (through its start, via and target) may sweep this much
+# (deg) more or less than the seam's arc before the export is refused: the via would
+# not lie between the ends (the robot would go the long way round).
+ARC_SWEEP_TOL_DEG = 30.0
+
+
+def _robot_arc(a: np.ndarray, b: np.ndarray, c: np.ndarray, n: int = 90) -> tuple[np.ndarray, float] | None:
+    """The circle a robot takes through ``a``, via ``b``, to ``c`` (mm): (n, 3) points
+    along it from ``a`` to ``c`` and its sweep (deg); None when the three are in a line."""
+    u, v = b - a, c - a
+    w = np.cross(u, v)
+    ww = float(w @ w)
+    if ww < 1e-12 * max(float(u @ u) * float(v @ v), 1e-30):
+        return None
+    centre = a + (float(u @ u) * np.cross(v, w) + float(v @ v) * np.cross(w, u)) / (2.0 * ww)
+    r = float(np.linalg.norm(a - centre))
+    nrm = w / math.sqrt(ww)
+    e1 = (a - centre) / r
+    e2 = np.cross(nrm, e1)
+    dc = c - centre
+    sweep = math.atan2(float(dc @ e2), float(dc @ e1)) % (2 * math.pi)  # a -> b -> c turns positively about w
+    ang = np.linspace(0.0, sweep, n)
+    return centre + r * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2), math.degrees(sweep)
+
+
+def check(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray]] | None = None) -> list[Move]:
+    """The moves of the program, once every pose it goes through is known to lie in the
+    workspace box (``opts.envelope_min_mm``..``envelope_max_mm``): each move's target and
+    via, every point along each arc of the seam, the arc each circular move makes the
+    robot take (through its start, via and target: refused when the three are in a line
+    or it sweeps more than :data:`ARC_SWEEP_TOL_DEG` beyond the seam's arc), and the
+    timed samples (whose speed between samples must keep within ``max_speed_mm_s``);
+    :class:`ExportError` naming the segment or sample otherwise."""
+    lo, hi = np.asarray(opts.envelope_min_mm, dtype=float), np.asarray(opts.envelope_max_mm, dtype=float)
+    box = f"the workspace {_fmt_xyz(lo)}..{_fmt_xyz(hi)} mm"
+
+    def inside(p: np.ndarray, what: str) -> None:
+        p = np.atleast_2d(p)
+        bad = ~np.all(np.isfinite(p) & (p >= lo - 1e-9) & (p <= hi + 1e-9), axis=1)
+        if bad.any():
+            raise ExportError(f"{what}: {_fmt_xyz(p[int(np.argmax(bad))])} mm is outside {box} (--envelope)")
+
+    for i, seg in enumerate(seam.segments):
+        inside(np.asarray(seg.start_mm), f"segments[{i}]: start_mm")
+        inside(np.asarray(seg.end_mm), f"segments[{i}]: end_mm")
+        if seg.kind == "arc":
+            n = max(2, math.ceil(abs(seg.sweep_deg)) + 1)
+            inside(seg.points_at(np.linspace(0.0, 1.0, n)), f"segments[{i}]: a point on the arc")
+    mv = moves(seam, opts.zone_mm, opts.corner_zone_mm, opts.dwells)
+    prev = mv[0].target
+    for m in mv:
+        where = f"segments[{m.segment}]" if m.segment >= 0 else "a move between segments"
+        inside(m.target[:3], f"{where}: the move's target")
+        if m.via is not None:
+            inside(m.via[:3], f"{where}: the circular move's via point")
+            arc = _robot_arc(prev[:3], m.via[:3], m.target[:3])
+            if arc is None:
+                raise ExportError(f"{where}: the circular move's start, via and target are in a line")
+            pts, sweep = arc
+            seg = seam.segments[m.segment]
+            part = abs(seg.sweep_deg) / (2 if abs(seg.sweep_deg) > MAX_CIRC_SWEEP_DEG else 1)
+            if abs(sweep - part) > ARC_SWEEP_TOL_DEG:
+                raise ExportError(f"{where}: the circular move through its start, via and target sweeps "
+                                  f"{sweep:.1f} deg, the seam's arc {part:.1f} deg: the arc's ends are off its circle")
+            inside(pts, f"{where}: the robot's arc")
+        prev = m.target
+    if timed is not None:
+        last = None
+        for k, (t, x) in enumerate(timed):
+            x = np.asarray(x, dtype=float)
+            if x.shape != (6,) or not np.all(np.isfinite(x)) or not math.isfinite(t):
+                raise ExportError(f"retime.samples[{k}]: t_s and x must be finite (6 numbers)")
+            inside(x[:3], f"retime.samples[{k}]: x")
+            if last is not None:
+                dt, dp = t - last[0], float(np.linalg.norm(x[:3] - last[1][:3]))
+                if dt < 0 or (dp > 1e-3 and dp > opts.max_speed_mm_s * 1.01 * dt + 1e-3):
+                    v = dp / dt if dt > 0 else math.inf
+                    raise ExportError(f"retime.samples[{k}]: {v:.6g} mm/s from the sample before, above the limit "
+                                      f"max_speed_mm_s {opts.max_speed_mm_s:g} mm/s")
+            last = (t, x)
+    return mv
+
+
+def _fmt_xyz(p) -> str:
+    return "(" + ", ".join(f"{float(v):.6g}" for v in p) + ")"
+
+
 # ---------------------------------------------------------------------------- formatting
 
 
@@ -206,8 +325,9 @@ def _plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
-def _moves(seam: Seam, opts: ExportOptions) -> list[Move]:
-    return moves(seam, opts.zone_mm, opts.corner_zone_mm, opts.dwells)
+def _moves(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray]] | None = None) -> list[Move]:
+    """The moves every writer writes, once :func:`check` passed them."""
+    return check(seam, opts, timed)
 
 
 def _rot(x: np.ndarray) -> Rotation:
@@ -225,13 +345,16 @@ def _quat_wxyz(r: Rotation) -> np.ndarray:
     return np.array([q[3], q[0], q[1], q[2]])
 
 
-def _header_lines(seam: Seam, opts: ExportOptions, fmt: str) -> list[str]:
+def _header_lines(seam: Seam, opts: ExportOptions, fmt: str, indent: str = "") -> list[str]:
+    """The program's header comment lines, each through the comment whitelist of ``fmt``
+    (the seam file's name is a user's: it may hold a newline and a statement)."""
     n_arc = sum(s.kind == "arc" for s in seam.segments)
-    return [f"humanpt path export --format {fmt}" + (f": {opts.source}" if opts.source else ""),
-            f"{_plural(len(seam.segments), 'segment')} ({_plural(len(seam.segments) - n_arc, 'line')}, "
-            f"{_plural(n_arc, 'arc')}), {_plural(len(seam.corners), 'corner')}; the {opts.point} in humanpt's world frame",
-            f"feed {opts.speed_mm_s:g} mm/s; blend {opts.zone_mm:g} mm at tangent junctions, "
-            f"{opts.corner_zone_mm:g} mm at corners"]
+    return [comment_line(line, fmt, indent) for line in (
+        f"humanpt path export --format {fmt}" + (f": {opts.source}" if opts.source else ""),
+        f"{_plural(len(seam.segments), 'segment')} ({_plural(len(seam.segments) - n_arc, 'line')}, "
+        f"{_plural(n_arc, 'arc')}), {_plural(len(seam.corners), 'corner')}, the {opts.point} in humanpt's world frame",
+        f"feed {opts.speed_mm_s:g} mm/s, blend {opts.zone_mm:g} mm at tangent junctions, "
+        f"{opts.corner_zone_mm:g} mm at corners")]
 
 
 def to_val(seam: Seam, opts: ExportOptions) -> str:
@@ -240,7 +363,7 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
     Z-Y-Z deg; MOVE to the first point, MOVES (straight) through the rest.  VAL II has no
     circular move: an arc is given as points on it, at most ``val_chord_mm`` chord error
     apart.  SPEED is a percent of the monitor speed; the feed is stated in a comment."""
-    prog = program_name(opts.name).lower()
+    prog = program_name(opts.name, "val")
     pts: list[np.ndarray] = []
     waits: dict[int, float] = {}  # point index -> dwell s
     for m in _moves(seam, opts):
@@ -256,7 +379,7 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
             waits[len(pts) - 1] = m.dwell_s
     tool = _tool_x(opts)
     o, a, t = _zyz_deg(Rotation.from_euler("ZYX", tool[3:], degrees=True))
-    lines = [f".PROGRAM {prog}()"] + [f"  ; {h}" for h in _header_lines(seam, opts, "val")]
+    lines = [f".PROGRAM {prog}()"] + _header_lines(seam, opts, "val", "  ")
     lines += [f"  ; SPEED {opts.val_speed_percent:g} (percent of the monitor speed): set it for "
               f"{opts.speed_mm_s:g} mm/s", f"  TOOL TRANS({_f(tool[0], 3)}, {_f(tool[1], 3)}, {_f(tool[2], 3)}, "
               f"{_f(o, 4)}, {_f(a, 4)}, {_f(t, 4)})", f"  SPEED {opts.val_speed_percent:g} ALWAYS"]
@@ -283,8 +406,8 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
     deg); ``$BASE`` the world frame, ``$TOOL`` the tool; PTP to the first point, LIN, CIRC
     (via, target); ``$VEL.CP`` (m/s) the feed; ``C_DIS`` with ``$APO.CDIS`` (mm) where a
     move is blended."""
-    prog = program_name(opts.name)
-    lines = [f"DEF {prog}( )"] + [f"; {h}" for h in _header_lines(seam, opts, "krl")]
+    prog = program_name(opts.name, "krl")
+    lines = [f"DEF {prog}( )"] + _header_lines(seam, opts, "krl")
     lines += ["; $BASE = humanpt's world frame; $TOOL = the torch on the flange (flange_T_tool)",
               "$BASE = {X 0.0, Y 0.0, Z 0.0, A 0.0, B 0.0, C 0.0}", f"$TOOL = {_krl_frame(_tool_x(opts))}",
               f"$VEL.CP = {_f(opts.speed_mm_s / 1000.0, 6)}", "$VEL.ORI1 = 200", "$VEL.ORI2 = 200",
@@ -328,10 +451,10 @@ def to_rapid(seam: Seam, opts: ExportOptions) -> str:
     ``wobj0`` (the robot's base = humanpt's world), a tooldata of the torch on the flange, a speeddata
     of the feed, zonedata of the blends (``fine`` at corners and the end); MoveJ to the
     first point, MoveL, MoveC (via, target); ``ConfL \\Off`` (no configuration given)."""
-    prog = program_name(opts.name)
+    prog = program_name(opts.name, "rapid")
     tool = _tool_x(opts)
     mv = _moves(seam, opts)
-    lines = [f"MODULE {prog}"] + [f"  ! {h}" for h in _header_lines(seam, opts, "rapid")]
+    lines = [f"MODULE {prog}"] + _header_lines(seam, opts, "rapid", "  ")
     lines += ["  ! robtargets in wobj0 = humanpt's world frame; quaternions [q1,q2,q3,q4] = [w,x,y,z]",
               f"  PERS tooldata tSeam := [TRUE,[{_rapid_pose(tool)}],[1,[0,0,1],[1,0,0,0],0,0,0]];  ! load: 1 kg placeholder",
               f"  CONST speeddata vSeam := [{opts.speed_mm_s:g},500,5000,1000];"]
@@ -375,9 +498,9 @@ def to_urscript(seam: Seam, opts: ExportOptions) -> str:
     in the robot's base frame (= humanpt's world), ``set_tcp`` the tool; movej to the
     first point, movel, movec (via, target; mode 0: the orientation interpolated from the
     start to the target) with a (m/s^2), v (m/s) and the blend radius r (m)."""
-    prog = program_name(opts.name)
+    prog = program_name(opts.name, "urscript")
     a, v = _f(opts.accel_mm_s2 / 1000.0, 4), _f(opts.speed_mm_s / 1000.0, 6)
-    lines = [f"def {prog}():"] + [f"  # {h}" for h in _header_lines(seam, opts, "urscript")]
+    lines = [f"def {prog}():"] + _header_lines(seam, opts, "urscript", "  ")
     lines += ["  # poses in the base frame = humanpt's world; the TCP = the torch on the flange",
               f"  set_tcp({_ur_pose(_tool_x(opts))})"]
     for m in _moves(seam, opts):
@@ -406,7 +529,7 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
     each ``json_step_mm`` (arc length ``s_mm``), or, when the seam was retimed, ``timed``: its
     samples (t s, (6,) pose) with ``t_s``."""
     step_mm = opts.json_step_mm
-    mv = _moves(seam, opts)
+    mv = _moves(seam, opts, timed)
     samples = []
     if timed is not None:
         samples = [{"t_s": round(float(t), 6), **_json_pose(np.asarray(x, dtype=float))} for t, x in timed]
@@ -419,7 +542,8 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
                                 **_json_pose(pose_at(seg, k / n))})
             s0 += seg.length_mm
     doc = {
-        "format": "humanpt.program", "version": 1, "name": program_name(opts.name), "source": opts.source,
+        "format": "humanpt.program", "version": 1, "name": program_name(opts.name, "json"),
+        "source": comment(opts.source),
         "frame": "world", "point": opts.point,
         "units": {"position": "mm", "ypr_deg": "Z-Y-X psi, theta, phi: R = Rz(psi) Ry(theta) Rx(phi)",
                   "quat_wxyz": "[w, x, y, z]", "speed": "mm/s", "zone": "mm"},
@@ -441,7 +565,8 @@ _WRITERS = {"val": to_val, "krl": to_krl, "rapid": to_rapid, "urscript": to_ursc
 
 
 def export(seam: Seam, fmt: str, opts: ExportOptions, timed: list[tuple[float, np.ndarray]] | None = None) -> str:
-    """The program's text in format ``fmt`` (one of :data:`FORMATS`)."""
+    """The program's text in format ``fmt`` (one of :data:`FORMATS`), once :func:`check`
+    found every pose in the workspace (else :class:`ExportError`; every writer checks)."""
     if fmt not in _WRITERS:
         raise ExportError(f"unknown format {fmt!r}; one of {', '.join(FORMATS)}")
     if fmt == "json":

@@ -24,10 +24,15 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 from humanpt.runtime.files import atomic_open
+from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
+from humanpt.seam.sanitise import shown
 
 __all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "write_csv", "read_csv", "peaks",
            "playback_args"]
+
+# The most samples a re-timed seam may have (about 39 h at the 28 ms cycle).
+MAX_SAMPLES = 5_000_000
 
 CSV_HEADER = ("index", "t_s", "x_mm", "y_mm", "z_mm", "psi_deg", "theta_deg", "phi_deg", "speed_mm_s")
 
@@ -41,8 +46,8 @@ class RetimeConfig:
     speed_mm_s: float = 20.0  # the feed along the seam
     accel_mm_s2: float = 200.0
     jerk_mm_s3: float = 2000.0
-    max_speed_mm_s: float = 100.0  # the paper's limits (the gateway's defaults)
-    max_angular_deg_s: float = 60.0
+    max_speed_mm_s: float = limits.MAX_SPEED_MM_S  # the paper's limits (the gateway's defaults, 100 mm/s)
+    max_angular_deg_s: float = limits.MAX_ANGULAR_DEG_S  # (60 deg/s)
     angular_accel_deg_s2: float = 120.0  # for a turn on the spot at a corner
     angular_jerk_deg_s3: float = 1200.0
     cycle_ms: float = 28.0  # the controller's cycle (the Puma's ALTER period)
@@ -54,6 +59,14 @@ class RetimeConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise RetimeError(f"{name} must be a positive number, got {v!r}")
+        for name, hi in (("max_speed_mm_s", limits.SPEED_CEILING_MM_S), ("accel_mm_s2", limits.ACCEL_CEILING_MM_S2),
+                         ("jerk_mm_s3", 100 * limits.ACCEL_CEILING_MM_S2), ("max_angular_deg_s", 3600.0),
+                         ("angular_accel_deg_s2", 36_000.0), ("angular_jerk_deg_s3", 3_600_000.0),
+                         ("cycle_ms", 1000.0)):
+            if getattr(self, name) > hi:
+                raise RetimeError(f"{name} must be at most {hi:g}, got {getattr(self, name):g}")
+        if self.cycle_ms < 0.1:
+            raise RetimeError(f"cycle_ms must be at least 0.1, got {self.cycle_ms:g}")
         if self.speed_mm_s > self.max_speed_mm_s:
             raise RetimeError(f"speed_mm_s {self.speed_mm_s:g} is above max_speed_mm_s {self.max_speed_mm_s:g}")
 
@@ -105,7 +118,11 @@ def _on_cycles(length: float, v_max: float, accel: float, jerk: float, dt: float
     """(V, T, t): the profile over ``length`` sampled at every cycle, t = 0, dt, ... up to
     the first cycle at or after its end (where it stands still at the end)."""
     v, T = _run_profile(length, v_max, accel, jerk)
-    n = max(int(math.ceil(_duration(length, v, accel, jerk) / dt - 1e-9)), 1)
+    cycles = _duration(length, v, accel, jerk) / dt
+    if not cycles <= MAX_SAMPLES:
+        raise RetimeError(f"a run of {length:.6g} at {v:.6g}/s takes {cycles:.3g} cycles of {dt * 1e3:g} ms; "
+                          f"at most {MAX_SAMPLES} samples")
+    n = max(int(math.ceil(cycles - 1e-9)), 1)
     return v, T, np.arange(n + 1) * dt
 
 
@@ -256,19 +273,30 @@ def read_csv(path) -> Timed:
     """A timed CSV written by :func:`write_csv` (``humanpt path retime``); RetimeError
     naming the file and line for anything else.  ``feeds_mm_s`` holds the largest speed."""
     path = Path(path)
+    name = shown(path)
     try:
         with path.open(newline="") as f:
             rows = list(csv.reader(f))
-    except (OSError, UnicodeDecodeError) as e:
-        raise RetimeError(f"{path}: cannot read ({e})") from None
+    except (OSError, UnicodeDecodeError, csv.Error) as e:
+        raise RetimeError(f"{name}: cannot read ({shown(e)})") from None
     if not rows or tuple(rows[0]) != CSV_HEADER:
-        raise RetimeError(f"{path}: not a timed path (header {', '.join(CSV_HEADER)}; humanpt path retime)")
+        raise RetimeError(f"{name}: not a timed path (header {', '.join(CSV_HEADER)}; humanpt path retime)")
     try:
         data = np.array([[float(v) for v in r[1:]] for r in rows[1:] if r], dtype=float)
     except ValueError as e:
-        raise RetimeError(f"{path}: a value that is not a number ({e})") from None
+        raise RetimeError(f"{name}: a value that is not a number ({shown(e)})") from None
     if data.ndim != 2 or len(data) == 0 or data.shape[1] != len(CSV_HEADER) - 1 or not np.all(np.isfinite(data)):
-        raise RetimeError(f"{path}: no samples, or a row without {len(CSV_HEADER)} finite numbers")
+        raise RetimeError(f"{name}: no samples, or a row without {len(CSV_HEADER)} finite numbers")
+    for col, (lo, hi, what) in {0: (0.0, limits.MAX_TIME_S, "t_s"), 1: (-limits.MAX_ABS_MM, limits.MAX_ABS_MM, "x_mm"),
+                                2: (-limits.MAX_ABS_MM, limits.MAX_ABS_MM, "y_mm"),
+                                3: (-limits.MAX_ABS_MM, limits.MAX_ABS_MM, "z_mm"),
+                                4: (-limits.MAX_ABS_DEG, limits.MAX_ABS_DEG, "psi_deg"),
+                                5: (-limits.MAX_ABS_DEG, limits.MAX_ABS_DEG, "theta_deg"),
+                                6: (-limits.MAX_ABS_DEG, limits.MAX_ABS_DEG, "phi_deg"),
+                                7: (0.0, limits.SPEED_CEILING_MM_S, "speed_mm_s")}.items():
+        bad = np.flatnonzero((data[:, col] < lo) | (data[:, col] > hi))
+        if len(bad):
+            raise RetimeError(f"{name}:{int(bad[0]) + 2}: {what} {data[bad[0], col]:g} is outside [{lo:g}, {hi:g}]")
     if np.any(np.diff(data[:, 0]) < 0):
-        raise RetimeError(f"{path}: the times go backwards")
+        raise RetimeError(f"{name}: the times go backwards")
     return Timed(data[:, 0], data[:, 1:7], data[:, 7], (float(data[:, 7].max()),))

@@ -4,6 +4,7 @@ and the shell's PathWriter that appends points as they come."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from humanpt.controller import pathfile
 from humanpt.controller.shell import PathWriter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
+from tests.conftest import run_cli
 
 
 def _path(n=50, tip=True, seed=0):
@@ -191,11 +193,12 @@ def test_csv_round_trip_with_the_held_flag_and_covariance(tmp_path, tip):
     pathfile.write(old, _path(5, tip=tip))
     o = pathfile.read(old)
     assert o.orientation_held is None and o.cov_g_mm2 is None and len(o) == 5
-    # Not a number: refused, naming the row.
+    # Not a number: refused, naming the line (the third data row) and the column.
     lines = f.read_text().splitlines()
     lines[3] = lines[3].rsplit(",", 1)[0] + ",nan"
     f.write_text("\n".join(lines) + "\n")
-    with pytest.raises(pathfile.PathFileError, match="not a finite number on data row 3"):
+    last = pathfile.header(tip, with_covariance=True)[-1]
+    with pytest.raises(pathfile.PathFileError, match=rf"c\.csv:4: {last} is nan, not a finite number"):
         pathfile.read(f)
 
 
@@ -220,3 +223,87 @@ def test_cli_smooth_and_val_fill_held_orientations(tmp_path, cli_main):
     np.testing.assert_array_equal(s.orientation_held, p.orientation_held)
     np.testing.assert_allclose(s.cov_g_mm2, p.cov_g_mm2, rtol=1e-5)
     assert np.abs(s.x_g[:, 3] - 10.0).max() < 0.5  # smoothed through the filled orientations, not 60
+
+
+# ---------------------------------------------------------------------------- issue 29.3 / 29.14
+
+ARC_PATH = Path(__file__).resolve().parents[2] / "recordings" / "arc" / "paths" / "path-1.csv"
+
+
+def _crafted(tmp_path, line: int, col: int, value: str) -> Path:
+    """The recorded arc path with one cell (data line ``line``, column ``col``) replaced."""
+    lines = ARC_PATH.read_text().splitlines()
+    cells = lines[line].split(",")
+    cells[col] = value
+    lines[line] = ",".join(cells)
+    f = tmp_path / "bad.csv"
+    f.write_text("\n".join(lines) + "\n")
+    return f
+
+
+@pytest.mark.parametrize("col, value, says", [
+    (2, "1e308", "bad.csv:3: x_mm 1e+308 mm is outside [-10000, 10000]"),
+    (6, "-1e300", "bad.csv:3: theta_deg -1e+300 deg is outside [-720, 720]"),
+    (2, "inf", "bad.csv:3: x_mm is inf, not a finite number"),
+    (1, "9" * 30, "bad.csv:3: stamp_ns 999999999999999999999999999999 is outside int64"),
+    (0, "1e300", "bad.csv:3: index 1e+300 is outside [0, 2147483647]"),
+    (9, "1e300", "bad.csv:3: cov_xx_mm2 1e+300 is outside [-100000000, 100000000]"),
+    (8, "0.5", "bad.csv:3: orientation_held 0.5 is not a whole number"),
+], ids=["x 1e308", "theta", "inf", "stamp 30 digits", "index", "covariance", "held"])
+@pytest.mark.parametrize("verb", ["smooth", "val", "fit"])
+def test_absurd_values_are_refused_naming_line_and_column(tmp_path, verb, col, value, says):
+    """`path smooth` of x = 1e308 wrote nan in every row, `path val` wrote 1e308, a
+    30-digit stamp raised OverflowError: now one line naming the file, line and column,
+    exit 2, no output."""
+    f = _crafted(tmp_path, 2, col, value)
+    if verb == "fit":
+        args = ["--no-plot", "-o", str(tmp_path / "o.json")]
+    else:
+        args = [str(tmp_path / "o")]
+    r = run_cli("path", verb, str(f), *args)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert says in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]
+
+
+@pytest.mark.parametrize("content, says", [
+    (b"1" * 200_000 + b"\n", "not a path file (field larger than field limit"),  # was _csv.Error
+    (b"\xff\xfe\x00\x01\n", "not a path file ('utf-8' codec can't decode"),
+    (b"0,1\x00,2\n", "3 columns, expected"),
+], ids=["long field", "binary", "NUL"])
+def test_broken_files_are_refused_in_one_line(tmp_path, content, says):
+    f = tmp_path / "bad.csv"
+    f.write_bytes(ARC_PATH.read_bytes().splitlines(keepends=True)[0] + content)
+    with pytest.raises(pathfile.PathFileError) as e:
+        pathfile.read(f)
+    assert says in str(e.value) and "bad.csv" in str(e.value) and "\n" not in str(e.value)
+
+
+def test_smooth_and_val_refuse_what_they_cannot_write():
+    x = np.zeros((5, 6))
+    x[:, 0] = [0.0, 1.0, 1e308, 3.0, 4.0]
+    with pytest.raises(pathfile.PathFileError, match="beyond"):
+        pathfile.smooth(x, np.arange(5, dtype=np.int64) * 280_000_000)
+    with pytest.raises(pathfile.PathFileError, match=r"point 2 \(1e\+308, 0, 0\) mm is beyond the workspace"):
+        pathfile.to_val2(x)
+    x[2, 0] = 1601.0  # the gateway's box ends at x = 1600 mm
+    with pytest.raises(pathfile.PathFileError, match=r"point 2 \(1601, 0, 0\) mm is beyond the workspace"):
+        pathfile.to_val2(x)
+    with pytest.raises(pathfile.PathFileError, match="percent"):
+        pathfile.to_val2(np.zeros((2, 6)), speed_percent=1e308)
+
+
+def test_val_program_name_is_an_identifier():
+    """--name reaches the program only through the whitelist (humanpt.seam.sanitise):
+    a name with a newline and a statement is one VAL II name."""
+    text = pathfile.to_val2(np.tile([0.0, 0.0, 0.0, 10.0, 20.0, 30.0], (2, 1)), "x\nSIGNAL 1\nEND")
+    assert text.splitlines()[0] == ".PROGRAM x_signal_1_end()"
+    assert len(text.splitlines()) == 2 + 1 + 2 + 2 + 1
+    assert pathfile.re_name("MOVE") == "prog_move" and pathfile.re_name("") == "path"
+
+
+def test_a_long_row_of_short_fields_is_refused(tmp_path):
+    f = tmp_path / "bad.csv"
+    f.write_text(ARC_PATH.read_text().splitlines()[0] + "\n" + "1," * 5000 + "1\n")
+    with pytest.raises(pathfile.PathFileError, match=r"bad.csv:2: a row of more than 4096 characters"):
+        pathfile.read(f)

@@ -1,7 +1,7 @@
 MODULE seam
   ! humanpt path export --format rapid: export-seam.json
-  ! 4 segments (3 lines, 1 arc), 1 corner; the tip in humanpt's world frame
-  ! feed 20 mm/s; blend 1 mm at tangent junctions, 0 mm at corners
+  ! 4 segments (3 lines, 1 arc), 1 corner, the tip in humanpt's world frame
+  ! feed 20 mm/s, blend 1 mm at tangent junctions, 0 mm at corners
   ! robtargets in wobj0 = humanpt's world frame; quaternions [q1,q2,q3,q4] = [w,x,y,z]
   PERS tooldata tSeam := [TRUE,[[0.000,0.000,200.000],[1.0000000,0.0000000,0.0000000,0.0000000]],[1,[0,0,1],[1,0,0,0],0,0,0]];  ! load: 1 kg placeholder
   CONST speeddata vSeam := [20,500,5000,1000];
