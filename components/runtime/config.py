@@ -456,8 +456,15 @@ class ConfigFile:
         return Rig() if p is None else load_rig(p)
 
     def component(self, name: str, cls: type) -> Any:
-        """The validated config of component ``name`` (defaults when its section is absent)."""
-        return build(cls, self.sections.get(name, {}), source=self.source, section=name)
+        """The validated config of component ``name`` (defaults when its section is absent).
+        A config class with a ``cell_defaults(sections)`` class method takes values its own
+        section does not set from the cell's other sections (the controller's workspace
+        envelope is the robot gateway's)."""
+        table = dict(self.sections.get(name, {}))
+        cell_defaults = getattr(cls, "cell_defaults", None)
+        if cell_defaults is not None:
+            table = {**cell_defaults(self.sections, self.source), **table}
+        return build(cls, table, source=self.source, section=name)
 
 
 def read_toml(path: str | Path, kind: str = "config", hint: str = "") -> dict[str, Any]:
