@@ -611,13 +611,13 @@ def check_command(verb: str, args_json: str) -> dict[str, Any]:
         raise ConfigError(f"unknown argument {unknown[0]!r}; {verb} takes "
                           f"{', '.join(spec) if spec else 'no arguments'}")
     checked = {k: coerce(spec[k], v, k) for k, v in args.items() if spec[k] not in (_POINTS, _TIMES)}
+    booleans = "true" in args_json or "false" in args_json  # (else no per-element look for them)
     if "points" in args:
-        checked["points"] = playback.check_points(args["points"], "points",
-                                                  booleans="true" in args_json or "false" in args_json)
+        checked["points"] = playback.check_points(args["points"], "points", booleans)
     if "times_s" in args:
         if "points" not in checked:
             raise ConfigError("times_s: no points given; times_s needs points, one time per point")
-        checked["times_s"] = playback.check_times(args["times_s"], len(checked["points"]), "times_s")
+        checked["times_s"] = playback.check_times(args["times_s"], len(checked["points"]), "times_s", booleans)
     if verb == "save":
         name = checked.get("file", "")
         if not _FILE_NAME.fullmatch(name):

@@ -60,12 +60,8 @@ def check_points(points, where: str = "points", booleans: bool = True) -> np.nda
         raise ConfigError(f"{where}: expected a list of [x, y, z, psi, theta, phi], got {type(points).__name__}")
     if len(points) > MAX_PLAYBACK_POINTS:
         raise ConfigError(f"{where}: {len(points)} points; the controller takes at most {MAX_PLAYBACK_POINTS}")
-    try:
-        x = np.array(points, dtype=float)
-        ok = x.ndim == 2 and x.shape[1] == 6 or x.size == 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
+    x = _numbers(points)
+    if x is None or not (x.ndim == 2 and x.shape[1] == 6 or x.size == 0):
         _first_malformed(points, where)  # raises, naming the element
     x = x.reshape(-1, 6)
     if booleans:
@@ -80,6 +76,16 @@ def check_points(points, where: str = "points", booleans: bool = True) -> np.nda
         raise ConfigError(f"{where}[{i}][{j}]: {v!r} is outside its range [{-POSE_LIMITS[j]:g}, "
                           f"{POSE_LIMITS[j]:g}] {POSE_UNITS[j]}")
     return x
+
+
+def _numbers(values) -> np.ndarray | None:
+    """A float array of nested lists of numbers, None when they are not (numpy would take
+    "1" for 1.0 if asked for floats: its own inference says what the elements are)."""
+    try:
+        a = np.array(values)
+    except (TypeError, ValueError):  # ragged
+        return None
+    return a.astype(float) if a.dtype.kind in "fiu" or a.size == 0 else None
 
 
 def _first_malformed(points: Sequence, where: str) -> None:
@@ -102,18 +108,16 @@ def _no_booleans(rows: Sequence, where: str) -> None:
             raise ConfigError(f"{where}[{i}]: expected numbers, got {p!r}")
 
 
-def check_times(times, n: int, where: str = "times_s") -> np.ndarray:
+def check_times(times, n: int, where: str = "times_s", booleans: bool = True) -> np.ndarray:
     """(N,) float array of a playback's times (s from any start): one per point, finite,
-    within [0, 1e6] s, never decreasing; :class:`ConfigError` naming the first bad one."""
+    within [0, 1e6] s, never decreasing; :class:`ConfigError` naming the first bad one
+    (``booleans`` as in :func:`check_points`)."""
     if not isinstance(times, (list, tuple)):
         raise ConfigError(f"{where}: expected a list of times, got {type(times).__name__}")
     if len(times) != n:
         raise ConfigError(f"{where}: {len(times)} times for {n} points: one time per point")
-    try:
-        t = np.array(times, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        t = None
-    if t is None or len(t) != n or any(isinstance(v, bool) for v in times):
+    t = _numbers(times)
+    if t is None or t.ndim != 1 or (booleans and any(isinstance(v, bool) for v in times)):
         bad = next((i for i, v in enumerate(times) if isinstance(v, bool) or not isinstance(v, (int, float))), 0)
         raise ConfigError(f"{where}[{bad}]: expected a number, got {times[bad]!r}")
     with np.errstate(invalid="ignore"):
