@@ -169,3 +169,16 @@ def test_console_names_that_would_be_key_expressions_are_refused_in_one_line(rou
     text = (r.stdout + r.stderr).strip()
     assert "Traceback" not in text and "ZError" not in text and len(text.splitlines()) == 1, text
     assert assignment in text, text
+
+
+@pytest.mark.parametrize("cell", ["$x", "..", "a?b", "a#b", "a b", "@x"])
+def test_console_cells_that_would_break_key_expressions_are_refused_in_one_line(router, cell):
+    # Each gave a zenoh.ZError traceback ("`$` is only allowed in `$*`", "`#` and `?` are
+    # forbidden") or, for '..', a cell of that name.
+    _, cfg = router
+    # (the name is checked with the config, before any verb: every verb for one of them)
+    for verb in (["status"], ["set", "dz=600"], ["record", "start"]) if cell == "$x" else (["status"],):
+        r = run_cli("console", "--config", str(cfg), "--cell", cell, *verb, "--timeout", "5")
+        text = (r.stdout + r.stderr).strip()
+        assert r.returncode != 0 and "Traceback" not in text and len(text.splitlines()) == 1, text
+        assert f"cell {cell!r} must be a name of letters, digits" in text, text
