@@ -930,19 +930,20 @@ def run(args) -> int:
     from humanpt.cli.commands import load_cfg
 
     cfg = load_cfg(args)
+    prog = "path play" if getattr(args, "verb", None) == "path" else "console"
     try:
         if args.console_verb == "playback":  # the heavy part and its refusals before connecting
             args.playback_args = playback_args(args)
         con = Console(cfg, timeout_s=args.timeout)
     except ConsoleError as e:
-        print(f"humanpt console: {e}", file=sys.stderr)
+        print(f"humanpt {prog}: {e}", file=sys.stderr)
         return 1
     try:
         if not args.console_verb:
             return _interactive(con)
         return _do(con, args)
     except ConsoleError as e:
-        print(f"humanpt console: {e}", file=sys.stderr)
+        print(f"humanpt {prog}: {e}", file=sys.stderr)
         return 1
     finally:
         con.close()
