@@ -7,12 +7,14 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
 from humanpt.geometry.rig import DEFAULT_DZ_MM
-from humanpt.robot_gateway.config import AlterGatewayConfig
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
 # The robot gateway's workspace envelope is the authority (it clips every step at it); a
-# playback is checked against the same box before anything moves.
+# playback is checked against the same box before anything moves.  The controller does not
+# load the gateway's package (tests/test_boundaries.py): it reads the keys from the cell's
+# [robot_gateway] table, and its defaults are the gateway's (a test keeps them equal).
 ENVELOPE_KEYS = ("envelope_min_mm", "envelope_max_mm")
+GATEWAY_ENVELOPE_MM = ((-1600.0, -1600.0, -1400.0), (1600.0, 1600.0, 1600.0))
 
 X6 = tuple[float, float, float, float, float, float]
 
@@ -70,21 +72,19 @@ class ControllerConfig:
     # moves.  From a config file these are the [robot_gateway] section's (cell_defaults)
     # unless [controller] sets its own (a smaller box); at run time they may only shrink.
     envelope_min_mm: tuple[Mm, Mm, Mm] = live(
-        AlterGatewayConfig.envelope_min_mm, "playback workspace box, world frame, lower corner of the flange (mm)",
+        GATEWAY_ENVELOPE_MM[0], "playback workspace box, world frame, lower corner of the flange (mm)",
         stricter="higher")
     envelope_max_mm: tuple[Mm, Mm, Mm] = live(
-        AlterGatewayConfig.envelope_max_mm, "playback workspace box, world frame, upper corner of the flange (mm)",
+        GATEWAY_ENVELOPE_MM[1], "playback workspace box, world frame, upper corner of the flange (mm)",
         stricter="lower")
 
     @classmethod
     def cell_defaults(cls, sections: Mapping[str, Mapping[str, Any]], source: str = "config") -> dict[str, Any]:
         """What the cell's other sections set for the controller: the robot gateway's
-        workspace envelope (its config's, defaults included: the gateway is the authority)."""
-        from humanpt.runtime.config import build
-
+        workspace envelope, as far as [robot_gateway] sets it (else both take the same
+        defaults); checked as the controller's own keys."""
         table = sections.get("robot_gateway", {})
-        gateway = build(AlterGatewayConfig.config_class_for(table), table, source=source, section="robot_gateway")
-        return {k: list(getattr(gateway, k)) for k in ENVELOPE_KEYS}
+        return {k: table[k] for k in ENVELOPE_KEYS if k in table}
 
     def __post_init__(self):
         for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "cycle_period_ms", "playback_speed_mm_s",
