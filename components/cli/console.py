@@ -14,12 +14,16 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import queue
+import re
 import shlex
 import sys
 import threading
 import time
+
+import numpy as np
 
 from humanpt.runtime.bus import (
     declare_topic_publisher,
@@ -29,6 +33,7 @@ from humanpt.runtime.bus import (
 )
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
+from humanpt.schemas.topics import current_name
 
 DESCRIPTION = """\
 The operator console: the options of the paper's GUI (Fig. 5) and its buttons, from either
@@ -204,6 +209,9 @@ def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
                 raise ConsoleError(f"{name}: {e}") from None
         elif "." in name:  # component.key=JSON, any live parameter
             comp, _, param = name.partition(".")
+            comp = _component(comp, a)
+            if not _KEY.fullmatch(param):
+                raise ConsoleError(f"{a!r}: {param!r} is not a parameter name (letters, digits, '_')")
             try:
                 typed = json.loads(value)
             except json.JSONDecodeError:
@@ -215,6 +223,23 @@ def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
             )
         out.setdefault(comp, {})[param] = typed
     return out
+
+
+# A live parameter's name (a config field): what a COMPONENT.KEY assignment may name.
+_KEY = re.compile(r"[A-Za-z_][A-Za-z0-9_]{0,99}")
+
+
+def _component(name: str, where: str) -> str:
+    """The component a console request names (its current name), or ConsoleError: the name
+    goes into a Zenoh key, so only the components of this version ('/', '*', '$', '..' and
+    empty names never reach the bus)."""
+    from humanpt.runtime.registry import UnknownComponentError, core_class
+
+    try:
+        core_class(name)
+    except UnknownComponentError as e:
+        raise ConsoleError(f"{where!r}: {e}") from None
+    return current_name(name)
 
 
 def gui_values(params: dict[str, dict]) -> dict[str, object]:
@@ -359,13 +384,13 @@ class Console:
         replies = self.session.liveliness().get(liveliness_key(self.cell, "*"), timeout=2.0)
         return sorted(str(r.ok.key_expr).rsplit("/", 1)[-1] for r in replies if r.ok is not None)
 
-    def params(self, component: str, sets: dict | None = None) -> dict:
+    def params(self, component: str, sets: dict | None = None, timeout_s: float | None = None) -> dict:
         """Ask (and with ``sets``, set) a component's live parameters; its reply."""
         replies = list(
             self.session.get(
                 params_key(self.cell, component),
                 payload=json.dumps({"set": sets or {}}),
-                timeout=self.timeout_s + 5.0 * len(sets or {}),
+                timeout=(self.timeout_s if timeout_s is None else timeout_s) + 5.0 * len(sets or {}),
             )
         )
         bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
@@ -709,13 +734,111 @@ def add_parser(sub, add_common) -> argparse.ArgumentParser:
     return p
 
 
-def seam_playback(seam_file: str, speed_mm_s: float | None) -> dict:
-    """The playback arguments of a seam file: re-timed at ``speed_mm_s`` (default 20)."""
-    from humanpt.seam import seamfile
-    from humanpt.seam.retime import RetimeConfig, playback_args, retime
+# A seam is re-timed here (every 28 ms) before it is thinned to the controller's points:
+# one that would give more samples than this is refused before re-timing (at 20 mm/s,
+# 200 000 samples are 112 m of seam, 93 minutes).
+MAX_SEAM_SAMPLES = 200_000
 
-    timed = retime(seamfile.read(seam_file), RetimeConfig(speed_mm_s=speed_mm_s or 20.0))
-    return playback_args(timed)
+
+def seam_playback(seam_file: str, speed_mm_s: float | None) -> dict:
+    """The playback arguments of a seam file: re-timed at ``speed_mm_s`` (default 20) and
+    thinned to the controller's MAX_PLAYBACK_POINTS (humanpt.controller.playback.thin);
+    ConsoleError naming the file for a seam too long or too detailed for one playback,
+    refused before the work that would grow with it."""
+    from humanpt.controller.playback import MAX_PLAYBACK_POINTS, thin
+    from humanpt.seam import seamfile
+    from humanpt.seam.retime import RetimeConfig, retime
+
+    seam = seamfile.read(seam_file)
+    cfg = RetimeConfig(speed_mm_s=speed_mm_s or 20.0)
+    if len(seam.segments) > MAX_PLAYBACK_POINTS:
+        raise ConsoleError(f"{seam_file}: {len(seam.segments)} segments; a playback holds at most "
+                           f"{MAX_PLAYBACK_POINTS} points: play the seam in parts")
+    # At least the length at the feed, plus the dwells: samples every cycle.
+    length_mm = math.fsum(s.length_mm for s in seam.segments)
+    dwell_s = math.fsum(d.duration_s for d in seam.dwells) if cfg.dwells else 0.0
+    least_s = length_mm / min(cfg.speed_mm_s, cfg.max_speed_mm_s) + dwell_s
+    if not math.isfinite(least_s) or least_s / (cfg.cycle_ms * 1e-3) > MAX_SEAM_SAMPLES:
+        raise ConsoleError(f"{seam_file}: {length_mm:.6g} mm at {cfg.speed_mm_s:g} mm/s is at least {least_s:.6g} s, "
+                           f"more than {MAX_SEAM_SAMPLES} samples of {cfg.cycle_ms:g} ms: too long for one "
+                           "playback; play the seam in parts")
+    try:
+        timed = retime(seam, cfg)
+        x, t = thin(timed.x, timed.t_s)
+    except (OverflowError, FloatingPointError) as e:
+        raise ConsoleError(f"{seam_file}: cannot be re-timed ({e})") from None
+    except ValueError as e:  # RetimeError, PlaybackError: what does not fit, and why
+        raise ConsoleError(f"{seam_file}: {e}") from None
+    return {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}
+
+
+def path_playback(path_file: str, point: str) -> dict:
+    """The playback arguments of a recorded path file (CSV): its points, at most the
+    controller's MAX_PLAYBACK_POINTS (counted before the file is parsed)."""
+    from humanpt.controller import pathfile
+    from humanpt.controller.playback import MAX_PLAYBACK_POINTS
+
+    rows = 0
+    with open(path_file, "rb") as f:
+        while chunk := f.read(1 << 20):
+            rows += chunk.count(b"\n")
+            if rows > MAX_PLAYBACK_POINTS + 1:
+                raise ConsoleError(f"{path_file}: more than {MAX_PLAYBACK_POINTS} points; a playback holds at most "
+                                   f"{MAX_PLAYBACK_POINTS}: fit a seam (humanpt path fit) and play that")
+    return {"points": pathfile.read(path_file).points(point).tolist()}
+
+
+def playback_args(a) -> dict:
+    """The ``playback`` command's arguments for ``console playback [FILE]`` and ``path
+    play``: a seam re-timed and thinned, a path file's points, or none (the controller's
+    recorded path); checked as the controller checks them (a ConsoleError naming the
+    first bad point) before anything is sent."""
+    from humanpt.controller.playback import check_points, check_times
+    from humanpt.runtime.config import ConfigError
+
+    if a.file and a.file.endswith(".json"):
+        args = seam_playback(a.file, a.speed)
+    elif a.file:
+        args = path_playback(a.file, a.point)
+    else:
+        args = {}
+    if a.speed is not None and "times_s" not in args:
+        args["speed_mm_s"] = a.speed
+    if "points" in args:
+        try:
+            pts = check_points(args["points"], "points", booleans=False)
+            if "times_s" in args:
+                check_times(args["times_s"], len(pts), "times_s")
+        except ConfigError as e:
+            raise ConsoleError(f"{a.file}: {e}") from None
+    return args
+
+
+def check_envelope(con: Console, args: dict, source: str) -> None:
+    """ConsoleError naming the first point of a playback that would put the flange outside
+    the workspace envelope: the robot gateway's as it runs now (its live parameters; the
+    authority), else the controller's, else this config file's (ControllerConfig takes
+    [robot_gateway]'s); the tool offset is this config file's controller's."""
+    from humanpt.controller.config import ControllerConfig
+    from humanpt.controller.playback import envelope_refusal
+    from humanpt.geometry.transforms import transform_from_x
+
+    if not args.get("points"):
+        return
+    ctl = con.cfg.component("controller", ControllerConfig)
+    box, owner = (ctl.envelope_min_mm, ctl.envelope_max_mm), "the controller config's envelope"
+    for comp, whose in (("robot_gateway", "the robot gateway's envelope"), ("controller", "the controller's envelope")):
+        try:
+            live = con.params(comp, timeout_s=min(con.timeout_s, 2.0)).get("params") or {}
+        except ConsoleError:
+            continue
+        if "envelope_min_mm" in live and "envelope_max_mm" in live:
+            box, owner = (live["envelope_min_mm"], live["envelope_max_mm"]), whose
+            break
+    why = envelope_refusal(np.asarray(args["points"], dtype=float), transform_from_x(np.asarray(ctl.flange_T_tool_x)),
+                           *box, owner=owner)
+    if why is not None:
+        raise ConsoleError(f"{source}: refused, nothing sent: {why}")
 
 
 def _do(con: Console, a) -> int:
@@ -745,15 +868,10 @@ def _do(con: Console, a) -> int:
                 raise ConsoleError(f"--pivot {a.pivot!r}: give X,Y,Z in mm")
         return con.command("calibrate", args)
     if v == "playback":
-        args = {}
-        if a.speed is not None:
-            args["speed_mm_s"] = a.speed
-        if a.file and a.file.endswith(".json"):
-            args = seam_playback(a.file, a.speed)
-        elif a.file:
-            from humanpt.controller import pathfile
-
-            args["points"] = pathfile.read(a.file).points(a.point).tolist()
+        args = getattr(a, "playback_args", None)
+        if args is None:
+            args = playback_args(a)
+        check_envelope(con, args, a.file or "playback")
         return con.command("playback", args)
     if v in ("pause", "resume"):
         return con.command(f"playback_{v}")
@@ -812,17 +930,20 @@ def run(args) -> int:
     from humanpt.cli.commands import load_cfg
 
     cfg = load_cfg(args)
+    prog = "path play" if getattr(args, "verb", None) == "path" else "console"
     try:
+        if args.console_verb == "playback":  # the heavy part and its refusals before connecting
+            args.playback_args = playback_args(args)
         con = Console(cfg, timeout_s=args.timeout)
     except ConsoleError as e:
-        print(f"humanpt console: {e}", file=sys.stderr)
+        print(f"humanpt {prog}: {e}", file=sys.stderr)
         return 1
     try:
         if not args.console_verb:
             return _interactive(con)
         return _do(con, args)
     except ConsoleError as e:
-        print(f"humanpt console: {e}", file=sys.stderr)
+        print(f"humanpt {prog}: {e}", file=sys.stderr)
         return 1
     finally:
         con.close()

@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from humanpt.geometry.rig import DEFAULT_DZ_MM
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
+
+# The robot gateway's workspace envelope is the authority (it clips every step at it); a
+# playback is checked against the same box before anything moves.  The controller does not
+# load the gateway's package (tests/test_boundaries.py): it reads the keys from the cell's
+# [robot_gateway] table, and its defaults are the gateway's (a test keeps them equal).
+ENVELOPE_KEYS = ("envelope_min_mm", "envelope_max_mm")
+GATEWAY_ENVELOPE_MM = ((-1600.0, -1600.0, -1400.0), (1600.0, 1600.0, 1600.0))
 
 X6 = tuple[float, float, float, float, float, float]
 
@@ -59,6 +67,24 @@ class ControllerConfig:
     flange_T_tool_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)
     playback_speed_mm_s: SpeedMmS = live(20.0, "tool speed along a played-back path")
     playback_max_lag_mm: Annotated[float, Range(1e-3, 1000, "mm")] = 2.0
+    # Every point of a playback (the flange, tool point and flange_T_tool) must lie inside
+    # the robot gateway's workspace envelope, or the playback is refused before anything
+    # moves.  From a config file these are the [robot_gateway] section's (cell_defaults)
+    # unless [controller] sets its own (a smaller box); at run time they may only shrink.
+    envelope_min_mm: tuple[Mm, Mm, Mm] = live(
+        GATEWAY_ENVELOPE_MM[0], "playback workspace box, world frame, lower corner of the flange (mm)",
+        stricter="higher")
+    envelope_max_mm: tuple[Mm, Mm, Mm] = live(
+        GATEWAY_ENVELOPE_MM[1], "playback workspace box, world frame, upper corner of the flange (mm)",
+        stricter="lower")
+
+    @classmethod
+    def cell_defaults(cls, sections: Mapping[str, Mapping[str, Any]], source: str = "config") -> dict[str, Any]:
+        """What the cell's other sections set for the controller: the robot gateway's
+        workspace envelope, as far as [robot_gateway] sets it (else both take the same
+        defaults); checked as the controller's own keys."""
+        table = sections.get("robot_gateway", {})
+        return {k: table[k] for k in ENVELOPE_KEYS if k in table}
 
     def __post_init__(self):
         for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "cycle_period_ms", "playback_speed_mm_s",
@@ -73,5 +99,8 @@ class ControllerConfig:
                                  f"at a {self.cycle_period_ms} ms cycle")
         if self.recording_delay_cycles < 1:
             raise ValueError("recording_delay_cycles must be >= 1")
+        if not all(lo < hi for lo, hi in zip(self.envelope_min_mm, self.envelope_max_mm, strict=True)):
+            raise ValueError(f"envelope_min_mm {self.envelope_min_mm} must be below envelope_max_mm "
+                             f"{self.envelope_max_mm} on every axis")
         if self.calibration_samples < 6:
             raise ValueError("calibration_samples must be >= 6 (the pivot fit has 6 unknowns)")

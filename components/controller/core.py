@@ -37,8 +37,9 @@ from typing import Annotated, Any
 
 import numpy as np
 
-from humanpt.controller import law
+from humanpt.controller import law, playback
 from humanpt.controller.config import ControllerConfig
+from humanpt.controller.playback import MAX_ARGS_CHARS, MAX_PLAYBACK_POINTS
 from humanpt.geometry.calibration import calibrate_tip_paper, calibrate_tip_pivot
 from humanpt.geometry.errors import GeometryError
 from humanpt.geometry.rig import Calibration, Rig, Tip, flange_T_desired
@@ -49,7 +50,7 @@ from humanpt.geometry.transforms import (
     transform_from_x,
     x_from_transform,
 )
-from humanpt.runtime.config import ConfigError, Deg, Mm, Range, SpeedMmS, coerce
+from humanpt.runtime.config import ConfigError, Mm, Range, SpeedMmS, coerce
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose, vector3
@@ -109,18 +110,6 @@ def tip_position_covariance(cov_pr: np.ndarray, world_p_tip_from_g: np.ndarray) 
     return J @ cov_pr @ J.T
 
 
-def _held_filled(path: list[pb.PathPoint]) -> np.ndarray:
-    """(N, 6) mm/deg of a recorded path (the tip's when recorded), held orientations
-    interpolated from the measured ones around them (pathfile.fill_held_orientation)."""
-    from humanpt.controller.pathfile import fill_held_orientation
-
-    x = np.array([x_from_transform(_mm(from_pose(p.world_T_tip if p.has_tip else p.world_T_tob)))
-                  for p in path]).reshape(-1, 6)
-    held = np.array([p.orientation_held for p in path], dtype=bool)
-    stamps = np.array([p.header.stamp_ns for p in path], dtype=np.int64)
-    return fill_held_orientation(x, held, stamps)
-
-
 class ControllerCore(Core):
     name = "controller"
     realtime = True  # on the robot link's cycle (a command per cycle): see runtime.tuning.tune_realtime
@@ -142,6 +131,11 @@ class ControllerCore(Core):
         self.start_world_T_flange: np.ndarray | None = None
         self.recording = config.record_on_start
         self.path: list[pb.PathPoint] = []
+        # The recorded path as a playback needs it, kept as each point is recorded: (6,)
+        # mm/deg of the tip (G without a driver), held-orientation flag, stamp.
+        self._path_x: list[np.ndarray] = []
+        self._path_held: list[bool] = []
+        self._path_stamps: list[int] = []
         self.path_index = 0
         self.path_last_stamp_ns: int | None = None
         self.cycles_since_point = 0
@@ -350,6 +344,10 @@ class ControllerCore(Core):
         self.path_index += 1
         self.path_last_stamp_ns = stamp_ns
         self.path.append(pt)
+        world_T_point = world_T_tob @ self.tob_T_tip if self.config.has_driver else world_T_tob
+        self._path_x.append(x_from_transform(_mm(world_T_point)))
+        self._path_held.append(orientation_held)
+        self._path_stamps.append(stamp_ns)
         return T_PATH, pt
 
     # -- calibration ----------------------------------------------------------------------------
@@ -403,13 +401,16 @@ class ControllerCore(Core):
         return outs
 
     # -- playback -------------------------------------------------------------------------------
-    def _start_playback(self, points_mm_deg: np.ndarray, speed_mm_s: float, times_s: np.ndarray | None = None
-                        ) -> None:
+    def _start_playback(self, points_mm_deg: np.ndarray, speed_mm_s: float, times_s: np.ndarray | None = None,
+                        world_T_tool_mm: np.ndarray | None = None) -> None:
         """Play ``points_mm_deg`` (N, 6) tool poses at ``speed_mm_s`` along them, or, with
         ``times_s`` (N,) (a re-timed seam: humanpt path retime), reaching each point at its
-        time from the start (the feed, its ramps and stops are the timing's)."""
-        tips = np.array([_m(transform_from_x(p)) for p in points_mm_deg])
-        flanges = np.array([t @ invert_transform(self.flange_T_tool) for t in tips])
+        time from the start (the feed, its ramps and stops are the timing's).
+        ``world_T_tool_mm`` (N, 4, 4): the poses as transforms, when the caller has them."""
+        tips = (transform_from_x(np.asarray(points_mm_deg, dtype=float).reshape(-1, 6))
+                if world_T_tool_mm is None else np.array(world_T_tool_mm, dtype=float))
+        tips[:, :3, 3] *= 1e-3
+        flanges = tips @ invert_transform(self.flange_T_tool)
         seg = np.linalg.norm(np.diff(tips[:, :3, 3], axis=0), axis=1)
         self.playback = {"flanges": flanges, "tips": tips, "s": np.r_[0.0, np.cumsum(seg)], "pos": 0.0,
                          "speed": speed_mm_s * 1e-3, "approach": True, "paused": False, "rate": 1.0,
@@ -472,6 +473,52 @@ class ControllerCore(Core):
         done = pb_["pos"] >= pb_["s"][-1] and step.error_translation_m < 0.1e-3
         return step, desired, done
 
+    def _recorded_points(self) -> np.ndarray:
+        """(N, 6) mm/deg of the recorded path (the tip's when recorded), held orientations
+        interpolated from the measured ones around them (pathfile.fill_held_orientation)."""
+        from humanpt.controller.pathfile import fill_held_orientation
+
+        if not self._path_x:
+            return np.zeros((0, 6))
+        return fill_held_orientation(np.array(self._path_x), np.array(self._path_held, dtype=bool),
+                                     np.array(self._path_stamps, dtype=np.int64))
+
+    def _playback_command(self, t_ns: int, args: dict[str, Any]) -> list[Output]:
+        """Start a playback of the checked arguments (at most MAX_PLAYBACK_POINTS points,
+        check_command), or refuse it with one ``bad_command`` event: a speed above the
+        limit, no points, a timing faster than max_speed_mm_s, or a point that would put the
+        flange outside the workspace envelope.  Array operations only: bounded work on the
+        realtime thread."""
+        c = self.config
+
+        def refuse(text: str) -> list[Output]:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"playback: {text}")]
+
+        speed = args.get("speed_mm_s", c.playback_speed_mm_s)
+        if speed > c.max_speed_mm_s:
+            return refuse(f"speed_mm_s {speed:g} is above the controller's max_speed_mm_s {c.max_speed_mm_s:g}")
+        times = args.get("times_s")
+        if "points" in args:
+            pts = args["points"]
+        elif len(self.path) > MAX_PLAYBACK_POINTS:
+            return refuse(f"the recorded path has {len(self.path)} points; the controller plays at most "
+                          f"{MAX_PLAYBACK_POINTS}: save it, fit a seam (humanpt path fit) and play that")
+        else:
+            pts = self._recorded_points()
+        if len(pts) < 1:
+            return refuse("no points given and no path recorded")
+        world_T_tool_mm = transform_from_x(pts)
+        flange_p_mm = (world_T_tool_mm @ invert_transform(_mm(self.flange_T_tool)))[:, :3, 3]
+        why = playback.envelope_refusal(pts, None, c.envelope_min_mm, c.envelope_max_mm, flange_p_mm=flange_p_mm)
+        if why is not None:
+            return refuse(why)
+        if times is not None and self._too_fast(pts, times):
+            return refuse(f"the timing asks for more than max_speed_mm_s {c.max_speed_mm_s:g}")
+        self._start_playback(pts, speed, times, world_T_tool_mm)
+        self.mode = pb.CONTROL_MODE_PLAYBACK
+        how = f"timed, {times[-1] - times[0]:.1f} s" if times is not None else f"at {speed:g} mm/s"
+        return [self.event(t_ns, pb.SEVERITY_INFO, "playback_started", f"{len(pts)} points {how}")]
+
     # -- commands ---------------------------------------------------------------------------------
     def _command(self, t_ns: int, verb: str, args_json: str) -> list[Output]:
         try:
@@ -491,6 +538,7 @@ class ControllerCore(Core):
             return info("command", "return to the start pose")
         if verb == "record_start":
             self.recording, self.path, self.path_index, self.cycles_since_point = True, [], 0, 0
+            self._path_x, self._path_held, self._path_stamps = [], [], []
             self.path_last_stamp_ns = None
             return info("record_started", json.dumps({"has_tip": self.config.has_driver}))
         if verb == "record_stop":
@@ -507,31 +555,7 @@ class ControllerCore(Core):
             self.mode = pb.CONTROL_MODE_CALIBRATE
             return info("calibration_started", f"pivot the target on its driver tip: {n} samples")
         if verb == "playback":
-            speed = args.get("speed_mm_s", self.config.playback_speed_mm_s)
-            if speed > self.config.max_speed_mm_s:
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
-                                   f"playback: speed_mm_s {speed:g} is above the controller's "
-                                   f"max_speed_mm_s {self.config.max_speed_mm_s:g}")]
-            if "points" in args:
-                pts = np.asarray(args["points"], dtype=float)
-            else:
-                pts = _held_filled(self.path)
-            if len(pts) < 1:
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
-                                   "playback: no points given and no path recorded")]
-            times = args.get("times_s")
-            if times is not None and ("points" not in args or len(times) != len(pts)
-                                      or np.any(np.diff(np.asarray(times, dtype=float)) < 0)):
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
-                                   "playback: times_s needs points, one time per point, never decreasing")]
-            if times is not None and self._too_fast(pts, np.asarray(times, dtype=float)):
-                return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command",
-                                   f"playback: the timing asks for more than max_speed_mm_s "
-                                   f"{self.config.max_speed_mm_s:g}")]
-            self._start_playback(pts, speed, None if times is None else np.asarray(times, dtype=float))
-            self.mode = pb.CONTROL_MODE_PLAYBACK
-            how = f"timed, {times[-1] - times[0]:.1f} s" if times is not None else f"at {speed:g} mm/s"
-            return info("playback_started", f"{len(pts)} points {how}")
+            return self._playback_command(t_ns, args)
         if verb in ("playback_pause", "playback_resume", "playback_rate"):
             if self.playback is None or self.mode != pb.CONTROL_MODE_PLAYBACK:
                 return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_command", f"{verb}: no playback running")]
@@ -547,28 +571,34 @@ class ControllerCore(Core):
 
 # -- console command arguments ---------------------------------------------------------------------
 _NO_ARGS: dict[str, Any] = {}
+# A playback's points and times are checked with array operations (playback.check_points,
+# check_times): a per-element check of 2000 points took most of a 28 ms cycle.
+_POINTS, _TIMES = object(), object()
 # verb -> {argument: type (with its range)}; every argument is optional.
 COMMAND_ARGS: dict[str, dict[str, Any]] = {
     "track": _NO_ARGS, "hold": _NO_ARGS, "stop": _NO_ARGS, "return": _NO_ARGS,
     "record_start": _NO_ARGS, "record_stop": _NO_ARGS,
     "save": {"file": str, "overwrite": bool},
     "calibrate": {"samples": Annotated[int, Range(6, 100_000, "samples")], "pivot_mm": tuple[Mm, Mm, Mm]},
-    "playback": {"points": tuple[tuple[Mm, Mm, Mm, Deg, Deg, Deg], ...], "speed_mm_s": SpeedMmS,
-                 "times_s": tuple[Annotated[float, Range(0.0, 1e6, "s")], ...]},
+    "playback": {"points": _POINTS, "speed_mm_s": SpeedMmS, "times_s": _TIMES},
     "playback_pause": _NO_ARGS, "playback_resume": _NO_ARGS,
     "playback_rate": {"rate": Annotated[float, Range(0.05, 2.0, "x")]},
 }
 # A saved path's name: a plain file name in the run's paths/ directory (no directories, no
 # dot files), so that a console command can never write elsewhere.
 _FILE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,99}")
-MAX_PLAYBACK_POINTS = 1_000_000
 
 
 def check_command(verb: str, args_json: str) -> dict[str, Any]:
     """The checked arguments of console command ``verb`` (JSON object text), typed and in
-    range; :class:`ConfigError` naming the argument otherwise."""
+    range (a playback's points an (N, 6) array, its times (N,)); :class:`ConfigError`
+    naming the argument otherwise.  The text is bounded (MAX_ARGS_CHARS) before it is
+    parsed, a playback's points (MAX_PLAYBACK_POINTS) before they are converted."""
     if verb not in COMMAND_ARGS:
         raise ConfigError(f"unknown verb {verb!r}; known: {', '.join(COMMAND_ARGS)}")
+    if len(args_json) > MAX_ARGS_CHARS:
+        raise ConfigError(f"arguments of {len(args_json)} characters; the controller takes at most "
+                          f"{MAX_ARGS_CHARS} (a playback of at most {MAX_PLAYBACK_POINTS} points)")
     try:
         args = json.loads(args_json) if args_json else {}
     except (ValueError, RecursionError) as e:
@@ -580,9 +610,14 @@ def check_command(verb: str, args_json: str) -> dict[str, Any]:
     if unknown:
         raise ConfigError(f"unknown argument {unknown[0]!r}; {verb} takes "
                           f"{', '.join(spec) if spec else 'no arguments'}")
-    if len(args.get("points", ())) > MAX_PLAYBACK_POINTS or len(args.get("times_s", ())) > MAX_PLAYBACK_POINTS:
-        raise ConfigError(f"points: at most {MAX_PLAYBACK_POINTS} points")
-    checked = {k: coerce(spec[k], v, k) for k, v in args.items()}
+    checked = {k: coerce(spec[k], v, k) for k, v in args.items() if spec[k] not in (_POINTS, _TIMES)}
+    booleans = "true" in args_json or "false" in args_json  # (else no per-element look for them)
+    if "points" in args:
+        checked["points"] = playback.check_points(args["points"], "points", booleans)
+    if "times_s" in args:
+        if "points" not in checked:
+            raise ConfigError("times_s: no points given; times_s needs points, one time per point")
+        checked["times_s"] = playback.check_times(args["times_s"], len(checked["points"]), "times_s", booleans)
     if verb == "save":
         name = checked.get("file", "")
         if not _FILE_NAME.fullmatch(name):

@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import tomllib
 import types
 import typing
@@ -299,6 +300,9 @@ def replace_live(obj: Any, key: str, value_json: str, hard: Any = None) -> Any:
         raise ConfigError(f"{key}: {e}") from e
 
 
+_CELL = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,99}")
+
+
 @dataclass(frozen=True)
 class RuntimeConfig:
     """The ``[runtime]`` section: where components meet and where runs are recorded."""
@@ -357,8 +361,11 @@ class RuntimeConfig:
     report_denied: bool = True
 
     def __post_init__(self):
-        if not self.cell or "/" in self.cell or "*" in self.cell:
-            raise ValueError(f"cell {self.cell!r} must be a non-empty name without '/' or '*'")
+        if not _CELL.fullmatch(self.cell):
+            # It is a chunk of every Zenoh key (humanpt/<cell>/...): '/', '*', '$', '?', '#'
+            # would be key-expression syntax or errors, '..' a confusing name.
+            raise ValueError(f"cell {self.cell!r} must be a name of letters, digits, '_', '-' and '.' "
+                             "(not first), at most 100 characters")
         if self.security == "mtls":
             if self.mode == "peer":
                 raise ValueError('security = "mtls" needs mode = "client": the router enforces access control, '
@@ -456,8 +463,15 @@ class ConfigFile:
         return Rig() if p is None else load_rig(p)
 
     def component(self, name: str, cls: type) -> Any:
-        """The validated config of component ``name`` (defaults when its section is absent)."""
-        return build(cls, self.sections.get(name, {}), source=self.source, section=name)
+        """The validated config of component ``name`` (defaults when its section is absent).
+        A config class with a ``cell_defaults(sections)`` class method takes values its own
+        section does not set from the cell's other sections (the controller's workspace
+        envelope is the robot gateway's)."""
+        table = dict(self.sections.get(name, {}))
+        cell_defaults = getattr(cls, "cell_defaults", None)
+        if cell_defaults is not None:
+            table = {**cell_defaults(self.sections, self.source), **table}
+        return build(cls, table, source=self.source, section=name)
 
 
 def read_toml(path: str | Path, kind: str = "config", hint: str = "") -> dict[str, Any]:
