@@ -28,8 +28,7 @@ from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
 from humanpt.seam.sanitise import shown
 
-__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "write_csv", "read_csv", "peaks",
-           "playback_args"]
+__all__ = ["RetimeConfig", "RetimeError", "Timed", "retime", "write_csv", "read_csv", "peaks"]
 
 # The most samples a re-timed seam may have (about 39 h at the 28 ms cycle).
 MAX_SAMPLES = 5_000_000
@@ -257,16 +256,6 @@ def write_csv(path, timed: Timed, overwrite: bool = False):
         for k, (t, x, v) in enumerate(zip(timed.t_s, timed.x, timed.speed_mm_s, strict=True)):
             w.writerow([k, f"{t:.6f}", *(f"{c:.6f}" for c in x), f"{v:.4f}"])
     return path
-
-
-def playback_args(timed: Timed, max_points: int = 5000) -> dict:
-    """The controller's ``playback`` command arguments for a re-timed seam: the tool poses
-    (mm, deg) and their times (s), every sample, or every k-th (ends kept) when there are
-    more than ``max_points`` (linear in between: the carrot interpolates)."""
-    n = len(timed.t_s)
-    k = max(1, int(math.ceil(n / max_points)))
-    idx = np.unique(np.r_[np.arange(0, n, k), n - 1])
-    return {"points": np.round(timed.x[idx], 4).tolist(), "times_s": np.round(timed.t_s[idx], 6).tolist()}
 
 
 def read_csv(path) -> Timed:
