@@ -7,14 +7,14 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
 from humanpt.geometry.rig import DEFAULT_DZ_MM
+from humanpt.runtime import cell_limits
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
 # The robot gateway's workspace envelope is the authority (it clips every step at it); a
 # playback is checked against the same box before anything moves.  The controller does not
 # load the gateway's package (tests/test_boundaries.py): it reads the keys from the cell's
-# [robot_gateway] table, and its defaults are the gateway's (a test keeps them equal).
+# [robot_gateway] table, and its defaults are the gateway's (humanpt.runtime.cell_limits).
 ENVELOPE_KEYS = ("envelope_min_mm", "envelope_max_mm")
-GATEWAY_ENVELOPE_MM = ((-1600.0, -1600.0, -1400.0), (1600.0, 1600.0, 1600.0))
 
 X6 = tuple[float, float, float, float, float, float]
 
@@ -72,10 +72,10 @@ class ControllerConfig:
     # moves.  From a config file these are the [robot_gateway] section's (cell_defaults)
     # unless [controller] sets its own (a smaller box); at run time they may only shrink.
     envelope_min_mm: tuple[Mm, Mm, Mm] = live(
-        GATEWAY_ENVELOPE_MM[0], "playback workspace box, world frame, lower corner of the flange (mm)",
+        cell_limits.ENVELOPE_MIN_MM, "playback workspace box, world frame, lower corner of the flange (mm)",
         stricter="higher")
     envelope_max_mm: tuple[Mm, Mm, Mm] = live(
-        GATEWAY_ENVELOPE_MM[1], "playback workspace box, world frame, upper corner of the flange (mm)",
+        cell_limits.ENVELOPE_MAX_MM, "playback workspace box, world frame, upper corner of the flange (mm)",
         stricter="lower")
 
     @classmethod

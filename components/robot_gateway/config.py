@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 
 import numpy as np
 
+from humanpt.runtime import cell_limits
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
 SUPPORTED_BAUDS = (19_200, 38_400)
@@ -35,14 +36,14 @@ class AlterGatewayConfig:
     # The limits, envelope and watchdogs are hard limits: the values in the config file at
     # start; at run time (`humanpt param`) they may only become stricter.
     max_speed_mm_s: SpeedMmS = live(
-        100.0, "translation limit, mm/s (clamped by norm)", stricter="lower")
+        cell_limits.MAX_SPEED_MM_S, "translation limit, mm/s (clamped by norm)", stricter="lower")
     max_angular_speed_deg_s: RateDegS = live(
-        60.0, "rotation limit, deg/s (clamped by angle)", stricter="lower")
+        cell_limits.MAX_ANGULAR_SPEED_DEG_S, "rotation limit, deg/s (clamped by angle)", stricter="lower")
     envelope_min_mm: tuple[Mm, Mm, Mm] = live(
-        (-1600.0, -1600.0, -1400.0), "workspace box, world frame, lower corner (mm)",
+        cell_limits.ENVELOPE_MIN_MM, "workspace box, world frame, lower corner (mm)",
         stricter="higher")
     envelope_max_mm: tuple[Mm, Mm, Mm] = live(
-        (1600.0, 1600.0, 1600.0), "workspace box, world frame, upper corner (mm)",
+        cell_limits.ENVELOPE_MAX_MM, "workspace box, world frame, upper corner (mm)",
         stricter="lower")
     # A command older than this many cycles is stale: the gateway sends zero (HOLD).
     stale_cycles: Annotated[int, Range(0, 100, "cycles")] = live(

@@ -1,7 +1,7 @@
 """The limits a seam, a path file and an exported program are held to: one place.
 
-The feed and angular limits and the workspace box are the robot gateway's defaults
-(:class:`humanpt.robot_gateway.config.AlterGatewayConfig`: the paper's step controller,
+The feed and angular limits and the workspace box are the cell's defaults, which are the
+robot gateway's (:mod:`humanpt.runtime.cell_limits`: the paper's step controller,
 100 mm/s and 60 deg/s, and the workspace box humanpt drives the robot in), so
 ``humanpt path retime`` (its ``--max-speed``/``--max-angular`` defaults),
 ``humanpt path export`` (``--max-speed``, ``--envelope``) and the gateway agree unless a
@@ -13,13 +13,11 @@ a 309-digit number.
 
 from __future__ import annotations
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-
-_GATEWAY = AlterGatewayConfig()
+from humanpt.runtime import cell_limits
 
 # Feed along the seam and the torch's turn rate (mm/s, deg/s): the default limits.
-MAX_SPEED_MM_S: float = float(_GATEWAY.max_speed_mm_s)
-MAX_ANGULAR_DEG_S: float = float(_GATEWAY.max_angular_speed_deg_s)
+MAX_SPEED_MM_S: float = cell_limits.MAX_SPEED_MM_S
+MAX_ANGULAR_DEG_S: float = cell_limits.MAX_ANGULAR_SPEED_DEG_S
 # No speed limit may be set above this (mm/s), whatever a user asks: a welding feed is
 # well under it, a robot's TCP limit about it.
 SPEED_CEILING_MM_S = 1000.0
@@ -27,8 +25,8 @@ SPEED_CEILING_MM_S = 1000.0
 ACCEL_CEILING_MM_S2 = 10_000.0
 
 # The workspace every exported pose must lie in (world frame, mm): the gateway's box.
-ENVELOPE_MIN_MM: tuple[float, float, float] = tuple(float(v) for v in _GATEWAY.envelope_min_mm)
-ENVELOPE_MAX_MM: tuple[float, float, float] = tuple(float(v) for v in _GATEWAY.envelope_max_mm)
+ENVELOPE_MIN_MM: tuple[float, float, float] = cell_limits.ENVELOPE_MIN_MM
+ENVELOPE_MAX_MM: tuple[float, float, float] = cell_limits.ENVELOPE_MAX_MM
 
 # What a seam or path file may hold at all.
 MAX_ABS_MM = 10_000.0  # any position or length (10 m: no robot cell is larger)
