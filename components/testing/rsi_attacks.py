@@ -116,25 +116,30 @@ def start_flood(target: tuple[str, int], seconds: float, rate_hz: float) -> subp
 
 
 class NextIpocSpoofer:
-    """After each of the robot's <Rob> (``RsiRobotServer(after_send=...)``), send the
-    gateway a ``<Rob>`` with the robot's *next* IPOC from another local port: the gateway
-    must neither answer it nor let it displace the robot's own datagram. ``answers``: the
-    datagrams the gateway sent to the attacker; ``sent``: the spoofs sent."""
+    """After each of the robot's <Rob> (``RsiRobotServer(after_send=...)``), once
+    :meth:`arm` was called (the loop runs), send the gateway a ``<Rob>`` with the robot's
+    *next* IPOC from another local port, ``count`` times: the gateway must neither answer
+    it nor let it displace the robot's own datagram. ``answers``: datagrams the gateway sent
+    to the attacker; ``sent``: spoofs sent; ``done`` is set after the last."""
 
-    def __init__(self, gateway: tuple[str, int], cycle_ms: int, *, count: int = 80, after: int = 20):
+    def __init__(self, gateway: tuple[str, int], cycle_ms: int, *, count: int = 80):
         self.gateway = gateway
         self.cycle_ms = cycle_ms
-        self.count, self.after = count, after
+        self.count = count
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
         self.sent = 0
         self.answers = 0
+        self.armed = threading.Event()
         self.done = threading.Event()
+
+    def arm(self) -> None:
+        self.armed.set()
 
     def __call__(self, n: int, data: bytes) -> list[bytes]:
         self._drain()
-        if n > self.after and self.sent < self.count:
+        if self.armed.is_set() and self.sent < self.count:
             ipoc = int(data.split(b"<IPOC>")[1].split(b"</IPOC>")[0])
             self.sock.sendto(rob(ipoc + self.cycle_ms), self.gateway)
             self.sent += 1
@@ -148,6 +153,8 @@ class NextIpocSpoofer:
                 self.sock.recvfrom(65536)
             except (BlockingIOError, InterruptedError):
                 return
+            except OSError:
+                return  # (closed)
             self.answers += 1
 
     def close(self) -> None:
