@@ -10,7 +10,9 @@ the robot sends into a :class:`CycleState` per robot cycle and encodes the gatew
    waiting for it until ``reply_deadline_ms``; then the freshest command no older than
    ``stale_cycles``, else zero (``stale_command``);
 3. every step is clamped (norm to ``max_speed_mm_s`` x cycle, angle to
-   ``max_angular_speed_deg_s`` x cycle), cut to the workspace box, changed to the robot's
+   ``max_angular_speed_deg_s`` x cycle), cut to the workspace box (so that the step and
+   the repeats the robot may add on its own when answers are late, RSI's HOLDON up to
+   ``robot_late_limit``, stay inside: :meth:`GatewayCore.late_repeat_cycles`), changed to the robot's
    correction frame (base or tool: ``CycleState.tool_mode``) and handed to the link, which
    quantises it to its wire within the limits.
 
