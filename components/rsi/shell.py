@@ -8,12 +8,14 @@ puts straight into the shell's input queue (local inputs go first).
 Which sender is the robot (issue 29, :class:`PeerLock`): the first datagram from an allowed
 host (``udp_robot``: "host" or "host:port"; "" any) that is a valid ``<Rob>`` locks the
 adapter onto its host *and port*; from then on only that sender's datagrams reach the core
-and answers go only there. Any other datagram is dropped on arrival, before it is parsed
-(a comparison of addresses: a flood from elsewhere costs a ``recvfrom`` each). Another
-sender can take over only once the locked one has been silent for ``relock_after_ms`` (the
-gateway's silence watchdog, ``status_timeout_cycles`` cycles: the gateway has declared
-``link_down`` by then), which is how a robot that restarts RSI from another port is found
-again.
+and answers go only there. Once locked the socket is *connected* to the robot's address,
+so the kernel itself drops every other sender's datagram before it is queued: a flood from
+elsewhere neither costs the reader anything nor fills the socket's buffer ahead of the
+robot's datagrams (until the lock, others are dropped by the reader, by address, before they
+are parsed). Another sender can take over only once the locked one has been silent for
+``relock_after_ms`` (the gateway's silence watchdog, ``status_timeout_cycles`` cycles: the
+gateway has declared ``link_down`` by then): the socket is then bound afresh, unconnected,
+which is how a robot that restarts RSI from another port is found again.
 """
 
 from __future__ import annotations
@@ -84,6 +86,12 @@ class PeerLock:
     def rejected(self) -> int:
         return self.counters["not_robot"] + self.counters["not_peer"] + self.counters["invalid"]
 
+    def silent(self, t_ns: int) -> bool:
+        """Whether another sender may take over at ``t_ns``: the locked one has said nothing
+        for ``relock_after_ns`` (never for a fixed peer)."""
+        return (not self.fixed and self.peer is not None and self._last_ns is not None
+                and t_ns - self._last_ns >= self.relock_after_ns)
+
 
 class UdpAdapter:
     topics_out = ("udp_tx",)
@@ -108,6 +116,7 @@ class UdpAdapter:
         self.errors = 0
         self._logged_ns = -LOG_INTERVAL_NS
         self._logged_rejected = 0
+        self._connected: tuple[str, int] | None = None  # the socket's connected peer
 
     @property
     def rejected(self) -> int:
@@ -121,16 +130,47 @@ class UdpAdapter:
         return self.lock.peer
 
     def open(self) -> None:
-        """Bind now (OSError names the address on failure)."""
+        """Bind now (OSError names the address on failure); connected to a fixed peer."""
+        self._sock = self._bind()
+        if self.lock.fixed:
+            self._connect(self._sock, self.lock.peer)
+
+    def _bind(self) -> socket.socket:
         host, port = parse_address(self.bind)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
-            sock.bind((host, port))
+            sock.bind((host, port))  # (no SO_REUSEADDR: for UDP it would let another socket share the port)
         except OSError as e:
             sock.close()
             raise OSError(f"cannot bind UDP {self.bind}: {e.strerror or e}") from None
         sock.settimeout(self.poll_s)
-        self._sock = sock
+        if port == 0:
+            self.bind = "{}:{}".format(*sock.getsockname())  # the same port if bound afresh
+        return sock
+
+    def _connect(self, sock: socket.socket, peer: tuple[str, int]) -> None:
+        """From now on the kernel delivers only ``peer``'s datagrams to ``sock``."""
+        sock.connect(peer)
+        self._connected = peer
+
+    def _unlock(self) -> None:
+        """The locked sender is silent: take datagrams from any sender again (a socket bound
+        afresh: a connected UDP socket cannot be disconnected portably)."""
+        old = self._sock
+        self._connected = None
+        old.close()
+        while True:  # a closed UDP port is free at once: bound again in one go, unless taken meanwhile
+            try:
+                self._sock = self._bind()
+                break
+            except OSError as e:
+                self.errors += 1
+                log.error("UDP %s: %s; trying again", self.bind, e)
+                if self._stop.wait(self.poll_s):
+                    self._sock = None
+                    return
+        log.warning("UDP %s: the robot at %s:%d silent for %.0f ms: the next valid <Rob> from an allowed "
+                    "sender locks", self.bind, *self.lock.peer, self.lock.relock_after_ns / 1e6)
 
     @property
     def address(self) -> tuple[str, int]:
@@ -145,13 +185,20 @@ class UdpAdapter:
         self._thread.start()
 
     def _read_loop(self, put) -> None:
-        sock, lock, topic = self._sock, self.lock, self.rx_topic
-        recvfrom, clock, stamp_now = sock.recvfrom, time.monotonic_ns, time.time_ns
+        lock, topic = self.lock, self.rx_topic
+        clock, stamp_now = time.monotonic_ns, time.time_ns
         while not self._stop.is_set():
+            sock = self._sock
+            if sock is None:
+                return
             try:
-                data, peer = recvfrom(65536)
+                data, peer = sock.recvfrom(65536)
             except TimeoutError:
+                if self._connected is not None and lock.silent(clock()):
+                    self._unlock()
                 continue
+            except ConnectionRefusedError:
+                continue  # (an ICMP "port unreachable" for an answer: the robot's socket is gone)
             except OSError as e:
                 if self._stop.is_set():
                     return
@@ -160,9 +207,14 @@ class UdpAdapter:
                 time.sleep(self.poll_s)  # a socket error (not a wait for data): do not spin
                 continue
             stamp = stamp_now()
-            if not lock.accept(peer, data, clock()):
+            now = clock()
+            if not lock.accept(peer, data, now):
                 self._log_rejected(peer)
+                if self._connected is not None and lock.silent(now):
+                    self._unlock()
                 continue
+            if self._connected != peer:
+                self._connect(sock, peer)
             self.datagrams_in += 1
             put(topic, pb.SerialChunk(header=header(stamp, frame_id=f"{peer[0]}:{peer[1]}"), data=data))
 
@@ -182,7 +234,10 @@ class UdpAdapter:
         if peer is None or sock is None:
             return  # nobody to answer yet: lost, as a datagram to nowhere
         try:
-            sock.sendto(msg.data, peer)
+            if self._connected == peer:
+                sock.send(msg.data)
+            else:
+                sock.sendto(msg.data, peer)
             self.datagrams_out += 1
         except OSError as e:
             self.errors += 1

@@ -75,7 +75,32 @@ def test_with_real_sockets_an_attacker_on_another_port_gets_nothing():
         robot.close()
         attacker.close()
     assert [m.header.frame_id for m in received] == [f"127.0.0.1:{robot_port}"] * 2
-    assert gw.rejected == 1 and gw.peer == ("127.0.0.1", robot_port)
+    # Locked, the socket is connected to the robot: the kernel dropped the attacker's datagram,
+    # the reader never saw it.
+    assert gw.rejected == 0 and gw.peer == ("127.0.0.1", robot_port)
+
+
+def test_a_robot_silent_for_the_relock_time_is_replaced_by_a_sender_of_a_valid_rob():
+    received: list[pb.SerialChunk] = []
+    gw = UdpAdapter("127.0.0.1:0", robot="127.0.0.1", relock_after_ms=50.0, poll_s=0.02)
+    gw.start(lambda topic, msg: received.append(msg))
+    old, new = (socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2))
+    try:
+        for s in (old, new):
+            s.bind(("127.0.0.1", 0))
+            s.settimeout(10.0)
+        old.sendto(rob(1_000_008), gw.address)
+        wait_for(lambda: len(received) == 1, 10.0, "the first robot's <Rob> taken")
+        # RSI restarted at the robot from another port: its <Rob> until the old one's lock lapses
+        wait_for(lambda: (new.sendto(rob(1_000_008), gw.address), len(received) == 2)[1], 10.0,
+                 "the new sender taken after the old one's silence", poll_s=0.02)
+        gw.write("udp_tx", pb.SerialChunk(data=b"answer"))
+        assert new.recvfrom(100)[0] == b"answer"
+    finally:
+        gw.close()
+        old.close()
+        new.close()
+    assert gw.peer[1] == int(received[1].header.frame_id.split(":")[1]) != int(received[0].header.frame_id.split(":")[1])
 
 
 def _cell(router, procs, tmp_path) -> LiveCell:
@@ -90,8 +115,9 @@ def test_live_80_robs_with_the_next_ipoc_from_another_port_get_no_answer(router,
     cell = _cell(router, procs, tmp_path)
     spoofer = NextIpocSpoofer(cell.udp, CYCLE_MS, count=80)
     try:
-        # HOLDON off; a late limit of 50: the attack gave 79 late replies in a row
-        robot = cell.start_robot(after_send=spoofer, rsi_late_limit=50)
+        # HOLDON off; a late limit of 100 (a loaded machine's stalls are no stop; the attack
+        # is caught by its answers: 73 of 80 went to the attacker)
+        robot = cell.start_robot(after_send=spoofer, rsi_late_limit=100)
         cell.wait_moving(applied=30)
         spoofer.arm()
         wait_for(lambda: spoofer.done.is_set() or robot.stopped is not None, 60.0, "80 spoofed <Rob> sent")
@@ -104,14 +130,16 @@ def test_live_80_robs_with_the_next_ipoc_from_another_port_get_no_answer(router,
     assert robot.counters["wrong_ipoc"] == 0  # no answer to a spoofed IPOC reached the robot either
     assert "link_error" not in cell.codes()  # the spoofs never reached the gateway's core
     out = procs.stop(cell.gw)
-    assert "not the robot" in out and "Traceback" not in out, out[-2000:]
+    assert "Traceback" not in out and "core errors 0" in out, out[-2000:]
 
 
 @pytest.mark.timeout(150)
 def test_live_a_3_s_junk_flood_from_another_port_neither_stops_rsi_nor_downs_the_link(router, procs, tmp_path):
     cell = _cell(router, procs, tmp_path)
     try:
-        robot = cell.start_robot(rsi_late_limit=50)  # HOLDON off
+        # HOLDON off; a late limit of 100 (1.2 s: a loaded machine's stalls are no stop; the
+        # flood sent the answers elsewhere for its 3 s)
+        robot = cell.start_robot(rsi_late_limit=100)
         cell.wait_moving(applied=30)
         applied = robot.counters["applied"]
         flood = start_flood(cell.udp, seconds=3.0, rate_hz=20_000)
@@ -126,4 +154,4 @@ def test_live_a_3_s_junk_flood_from_another_port_neither_stops_rsi_nor_downs_the
     codes = cell.codes()
     assert "link_down" not in codes and "link_error" not in codes, codes
     gw_out = procs.stop(cell.gw)
-    assert "dropped on arrival" in gw_out and "Traceback" not in gw_out, gw_out[-2000:]
+    assert "Traceback" not in gw_out and "core errors 0" in gw_out, gw_out[-2000:]

@@ -143,8 +143,8 @@ def test_live_replays_and_spoofs_from_the_robots_address_neither_fault_nor_resta
     try:
         cell.start_gateway()
         cell.start_controller()
-        # HOLDON off; a late limit of 50: what a restart costs (the issue: 25-47 late each) shows
-        robot = cell.start_robot(after_send=after_send, rsi_late_limit=50)
+        # HOLDON off; a late limit of 100 (a loaded machine's stalls are no stop)
+        robot = cell.start_robot(after_send=after_send, rsi_late_limit=100)
         cell.wait_moving(applied=30)
         armed.append(robot.counters["cycles"] + 1)
         applied = robot.counters["applied"]
