@@ -117,6 +117,8 @@ class UdpAdapter:
         self._logged_ns = -LOG_INTERVAL_NS
         self._logged_rejected = 0
         self._connected: tuple[str, int] | None = None  # the socket's connected peer
+        self.refused = 0  # sends refused by the peer's host (nobody listening there)
+        self._refused_logged_ns = -LOG_INTERVAL_NS
 
     @property
     def rejected(self) -> int:
@@ -239,6 +241,15 @@ class UdpAdapter:
             else:
                 sock.sendto(msg.data, peer)
             self.datagrams_out += 1
+        except ConnectionRefusedError:
+            # (a connected socket reports an earlier datagram's ICMP "port unreachable": nobody
+            # listens there now, e.g. the gateway restarting; at most one report a second)
+            self.refused += 1
+            now = time.monotonic_ns()
+            if now - self._refused_logged_ns >= LOG_INTERVAL_NS:
+                self._refused_logged_ns = now
+                log.warning("UDP %s: nobody listens at %s:%d (%d refused so far)", self.bind, peer[0], peer[1],
+                            self.refused)
         except OSError as e:
             self.errors += 1
             log.warning("UDP %s: answer to %s:%d lost: %s", self.bind, peer[0], peer[1], e)
