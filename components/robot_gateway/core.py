@@ -10,7 +10,9 @@ the robot sends into a :class:`CycleState` per robot cycle and encodes the gatew
    waiting for it until ``reply_deadline_ms``; then the freshest command no older than
    ``stale_cycles``, else zero (``stale_command``);
 3. every step is clamped (norm to ``max_speed_mm_s`` x cycle, angle to
-   ``max_angular_speed_deg_s`` x cycle), cut to the workspace box, changed to the robot's
+   ``max_angular_speed_deg_s`` x cycle), cut to the workspace box (so that the step and
+   the repeats the robot may add on its own when answers are late, RSI's HOLDON up to
+   ``robot_late_limit``, stay inside: :meth:`GatewayCore.late_repeat_cycles`), changed to the robot's
    correction frame (base or tool: ``CycleState.tool_mode``) and handed to the link, which
    quantises it to its wire within the limits.
 
@@ -144,9 +146,15 @@ class GatewayCore(SerialLinkCoreMixin, Core):
     def make_link(self, config: Any) -> Link:
         raise NotImplementedError
 
+    def late_repeat_cycles(self, config: Any) -> int:
+        """How many times the robot may repeat a correction on its own when answers are late
+        (RSI with HOLDON on: up to its late limit); the envelope keeps them all inside. ALTER: 0."""
+        return 0
+
     def __init__(self, config: AlterGatewayConfig):
         super().__init__(config)
         self.link: Link = self.make_link(config)
+        self.late_repeats = self.late_repeat_cycles(config)
         self._limiter = EventLimiter(round(config.event_interval_ms * 1e6))
         self._world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         self._started = False
@@ -753,17 +761,20 @@ class GatewayCore(SerialLinkCoreMixin, Core):
                 f"({cfg.max_speed_mm_s:g} mm/s, {cfg.max_angular_speed_deg_s:g} deg/s)",
             )
         p_world = world_T_flange[:3, 3]
+        repeats = self.late_repeats
         dp_e, clipped = clip_to_envelope(
-            p_world, dp_c, np.asarray(cfg.envelope_min_mm), np.asarray(cfg.envelope_max_mm)
+            p_world, dp_c, np.asarray(cfg.envelope_min_mm), np.asarray(cfg.envelope_max_mm), repeats
         )
         if clipped:
             self.counters["envelope"] += 1
+            held = (f" (with the {repeats} repeats the robot may add if answers are late: "
+                    f"{np.round(p_world + (1 + repeats) * dp_c, 2).tolist()} mm)") if repeats else ""
             self._ev(
                 outs,
                 t_ns,
                 pb.SEVERITY_WARNING,
                 "envelope",
-                f"cycle {k}: step to {np.round(p_world + dp_c, 2).tolist()} mm cut at the workspace "
+                f"cycle {k}: step to {np.round(p_world + dp_c, 2).tolist()} mm{held} cut at the workspace "
                 f"envelope {list(cfg.envelope_min_mm)}..{list(cfg.envelope_max_mm)} mm",
             )
         # World -> the robot's correction frame (base or tool).

@@ -57,19 +57,23 @@ def clamp_norm(v: np.ndarray, limit: float) -> tuple[np.ndarray, bool]:
 
 
 def clip_to_envelope(
-    p_mm: np.ndarray, dp_mm: np.ndarray, lo_mm: np.ndarray, hi_mm: np.ndarray
+    p_mm: np.ndarray, dp_mm: np.ndarray, lo_mm: np.ndarray, hi_mm: np.ndarray, repeats: int = 0
 ) -> tuple[np.ndarray, bool]:
     """The step ``dp_mm`` (3,) from ``p_mm`` (3,), cut so that p + dp stays in the box
     [lo, hi] (world mm). A flange already outside may move back in, never further out
-    (per axis the box is widened to include p). Returns (dp, clipped?)."""
+    (per axis the box is widened to include p). ``repeats``: the robot may apply the step
+    that many more times on its own (RSI with HOLDON on repeats the last relative
+    correction for each late answer): then p + (1 + repeats) dp stays in the box, per axis
+    the step being at most the room left / (1 + repeats). Returns (dp, clipped?)."""
+    n = 1 + repeats
     p = np.asarray(p_mm, dtype=float)
-    target = p + np.asarray(dp_mm, dtype=float)
+    target = p + n * np.asarray(dp_mm, dtype=float)
     if all(a < t < b for a, t, b in zip(lo_mm, target.tolist(), hi_mm, strict=True)):
-        return target - p, False  # well inside: what the clip below gives, quicker
+        return (target - p) / n, False  # well inside: what the clip below gives, quicker (n = 1: exact)
     lo = np.minimum(np.asarray(lo_mm, dtype=float), p)
     hi = np.maximum(np.asarray(hi_mm, dtype=float), p)
     clipped = np.clip(target, lo, hi)
-    return clipped - p, bool(np.any(clipped != target))
+    return (clipped - p) / n, bool(np.any(clipped != target))
 
 
 def rotation_angle_deg(rv_rad: np.ndarray) -> float:

@@ -46,8 +46,17 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # the robot base ("base") or the flange ("tool"). Must match the robot's configuration.
     correction_frame: Literal["base", "tool"] = "base"
     # Only datagrams from this host (or host:port) are the robot's; others are dropped (and
-    # logged) by the adapter. Empty: any sender (a test bench; not for a cell on a shared net).
+    # logged) by the adapter. Empty: any host. Either way the adapter locks onto the host and
+    # port of the first valid <Rob> and takes datagrams only from there until that sender has
+    # been silent for status_timeout_cycles (humanpt.rsi.shell.PeerLock).
     udp_robot: str = ""
+    # The robot's late limit (the RSI ETHERNET object's limit of late answers in a row before
+    # RSI stops; required on the robot: as low as the application allows, 10 here). If HOLDON
+    # is on for RKorr the robot repeats the last correction for every late answer until then:
+    # the gateway keeps each step and this many repeats inside the envelope
+    # (pose + (1 + robot_late_limit) x step), so set it >= the robot's limit. 0 only if the
+    # robot applies zero when an answer is late (HOLDON="0" on every RKorr element).
+    robot_late_limit: Annotated[int, Range(0, 1000, "cycles")] = 10
     sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
     link: Literal["alter", "rsi"] = "rsi"  # ([robot_gateway] link = "rsi" selects this config)
 
@@ -64,5 +73,7 @@ class RsiGatewayConfig(AlterGatewayConfig):
             parse_address(self.udp_robot)
         if self.correction_frame not in ("base", "tool"):
             raise ValueError(f"correction_frame must be base or tool, got {self.correction_frame!r}")
+        if not 0 <= self.robot_late_limit <= 1000:
+            raise ValueError(f"robot_late_limit must be within 0 and 1000 (late answers), got {self.robot_late_limit}")
         if not self.sen_type.isidentifier():
             raise ValueError(f"sen_type must be a plain name, got {self.sen_type!r}")

@@ -24,6 +24,11 @@ class RsiGatewayCore(GatewayCore):
     def make_link(self, config: RsiGatewayConfig) -> RsiLink:
         return RsiLink(config.cycle_period_ms, config.correction_frame, config.sen_type)
 
+    def late_repeat_cycles(self, config: RsiGatewayConfig) -> int:
+        # HOLDON on RKorr repeats the last correction for each late answer until the robot's
+        # late limit stops RSI: the envelope keeps the step and as many repeats inside.
+        return config.robot_late_limit
+
     def recording_metadata(self, shell: str, **extra: Any) -> dict[str, Any]:
         # The registry's entry for the component (AlterGatewayCore) rebuilds this core from
         # the recorded config (link = "rsi"): a replay finds the class it knows.

@@ -2,11 +2,20 @@
 
 Cycle numbers: a ``<Rob>``'s IPOC (ms) divided by the cycle time (4 or 12 ms), modulo
 2^32, so that a lost datagram is a gap of one cycle and the gateway's rules (missed
-cycles, lost statuses, command-ahead by cycle number) apply unchanged. An IPOC that goes
-back or jumps more than ``MAX_IPOC_JUMP_CYCLES`` ahead is a new RSI session (RSI_ON again
-at the robot): ``LinkUp``, the gateway starts over; the same IPOC twice (a duplicated
-datagram) is dropped. ``<Delay>`` growing between two
-datagrams means the robot judged the previous answer late: ``correction_missed``.
+cycles, lost statuses, command-ahead by cycle number) apply unchanged.
+
+Sequence (issue 29): a datagram whose IPOC is the last one + one cycle continues the session
+and is answered; the same IPOC again (UDP may duplicate) is dropped. Anything else is *out of
+sequence* (back: a replay, a reordering, a late duplicate, a restart at the robot; ahead by
+more than a cycle: datagrams lost, a spoof; off the cycle's grid): dropped without an answer
+and without counting cycles, and kept as a candidate. The next datagram decides: if it
+continues the session, the candidate is forgotten (nothing else happened); if it continues
+the candidate (candidate + one cycle), the candidate was real: a gap of at most
+``MAX_GAP_CYCLES`` ahead on the session's grid is lost cycles of the same session (the
+gateway counts them), anything else (back, further ahead, off the grid) a new RSI session
+(``LinkUp``, the gateway starts over). So one datagram, whatever its IPOC, is never lost
+cycles nor a restart by itself. ``<Delay>`` growing between two datagrams of a session
+means the robot judged the previous answer late: ``correction_missed``.
 """
 
 from __future__ import annotations
@@ -25,7 +34,10 @@ from humanpt.rsi.protocol import (
     rsi_correction,
 )
 
-MAX_IPOC_JUMP_CYCLES = 1000
+# A confirmed jump ahead by at most this many cycles (on the session's grid) is lost cycles
+# of the session; further (or back, or off the grid) it is a new session. More than the
+# gateway's silence watchdog (status_timeout_cycles, 25) is a link_down and a restart anyway.
+MAX_GAP_CYCLES = 25
 _CYCLE_MOD = 1 << 32
 
 
@@ -42,8 +54,10 @@ class RsiLink:
         self._running = False
         self._last_ipoc: int | None = None
         self._last_delay: int | None = None
+        self._candidate: int | None = None  # an out-of-sequence IPOC awaiting the next datagram
         self._ipocs: OrderedDict[int, int] = OrderedDict()  # cycle -> IPOC, the last few
-        self.counters = {"datagrams": 0, "malformed": 0, "sessions": 0, "duplicates": 0}
+        self.counters = dict.fromkeys(("datagrams", "malformed", "sessions", "duplicates", "out_of_sequence",
+                                       "out_of_sequence_dropped", "confirmed"), 0)
 
     @property
     def is_running(self) -> bool:
@@ -52,7 +66,7 @@ class RsiLink:
     def start(self, t_ns: int) -> list:
         """(Re)start: wait for the robot's next datagram (RSI has no handshake)."""
         self._running = False
-        self._last_ipoc = self._last_delay = None
+        self._last_ipoc = self._last_delay = self._candidate = None
         self._ipocs.clear()
         return []
 
@@ -65,17 +79,44 @@ class RsiLink:
             rob = decode_rob(data)
         except RsiProtocolError as e:
             self.counters["malformed"] += 1
-            return [LinkError(f"RSI link: {e}; datagram dropped (no answer for it)")]
-        events: list = []
+            return [LinkError(f"RSI link: {e}; datagram dropped, no answer for it "
+                              f"({self.counters['malformed']} malformed so far)")]
+        if not self._running:
+            return self._accept(rob, new_session=True)  # the first datagram of a session
         last = self._last_ipoc
-        if self._running and rob.ipoc == last:
+        assert last is not None
+        if rob.ipoc == last:
             self.counters["duplicates"] += 1  # UDP may deliver a datagram twice: answered once
-            return events
-        jump = None if last is None else (rob.ipoc - last) // self.cycle_ms
-        if not self._running or jump is None or jump <= 0 or jump > MAX_IPOC_JUMP_CYCLES:
-            # First datagram, or a new RSI session (IPOC back or far ahead).
+            return []
+        candidate, self._candidate = self._candidate, None
+        if rob.ipoc - last == self.cycle_ms:
+            if candidate is not None:
+                self.counters["out_of_sequence_dropped"] += 1  # the session went on: it was nothing
+            return self._accept(rob)
+        if candidate is not None and rob.ipoc - candidate == self.cycle_ms:
+            # The candidate is confirmed: a gap of the same session, or a new one.
+            self.counters["confirmed"] += 1
+            cycles, off_grid = divmod(candidate - last, self.cycle_ms)
+            return self._accept(rob, new_session=bool(off_grid) or not 1 < cycles <= MAX_GAP_CYCLES)
+        if candidate is not None and rob.ipoc == candidate:
+            self._candidate = candidate
+            self.counters["duplicates"] += 1
+            return []
+        self._candidate = rob.ipoc
+        self.counters["out_of_sequence"] += 1
+        where = "back" if rob.ipoc < last else "ahead"
+        return [LinkError(
+            f"RSI link: IPOC {rob.ipoc} out of sequence ({abs(rob.ipoc - last)} ms {where} of the last, {last}; "
+            f"the cycle is {self.cycle_ms} ms): dropped, no answer; it counts only if the next datagram "
+            f"continues it ({self.counters['out_of_sequence']} so far)")]
+
+    def _accept(self, rob, new_session: bool = False) -> list:
+        """``rob`` is the session's next datagram (the first of a new one if ``new_session``)."""
+        events: list = []
+        if new_session:
             self._running = True
             self._last_delay = None
+            self._candidate = None
             self._ipocs.clear()
             self.counters["sessions"] += 1
             events.append(LinkUp())

@@ -14,13 +14,16 @@ A, B, C deg: rotations about Z, Y, X, R = Rz(A) Ry(B) Rx(C)); ``AIPos``: the joi
 
 echoing the IPOC; ``RKorr`` is a *relative* correction for one cycle (mm, deg; same angle
 convention) in the frame the robot's RSI configuration names (base or tool). Values go
-on the wire with 4 decimals (0.0001 mm / deg). Anything that is not such a message
-raises :class:`RsiProtocolError` (one line, what was wrong).
+on the wire with 4 decimals (0.0001 mm / deg). A datagram is printable ASCII of at most
+``MAX_DATAGRAM`` bytes with no DOCTYPE, entity or character reference (:func:`check_bytes`,
+before any XML parsing: no entity is ever expanded, the parse cost is bounded). Anything
+that is not such a message raises :class:`RsiProtocolError` (one line, what was wrong).
 """
 
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from functools import lru_cache
@@ -118,17 +121,66 @@ def encode_sen(c: RsiCorrection, sen_type: str = "ImFree") -> bytes:
             f"<IPOC>{c.ipoc}</IPOC></Sen>").encode("ascii")
 
 
-def _root(data: bytes, tag: str) -> ET.Element:
+# An RSI message is printable ASCII (and tab, CR, LF): any other byte (NUL, >= 0x80: UTF-16,
+# UTF-8 beyond ASCII, a BOM) is refused before the XML parser sees it, so that no other
+# encoding can carry what the byte checks below look for.
+_NOT_ASCII = re.compile(rb"[^\t\n\r\x20-\x7e]")
+# The only processing instruction allowed: a leading XML declaration, ASCII or UTF-8.
+_DECLARATION = re.compile(
+    rb"""\s*<\?xml\s+version\s*=\s*["']1\.\d{1,2}["']"""
+    rb"""(?:\s+encoding\s*=\s*["']([A-Za-z0-9._-]{1,40})["'])?"""
+    rb"""(?:\s+standalone\s*=\s*["'](?:yes|no)["'])?\s*\?>""")
+_ENCODINGS = (b"ascii", b"us-ascii", b"utf-8", b"utf8")
+# Numbers as RSI writes them: decimal, optional exponent (no "1_0", "inf", "nan", "0x1").
+_FLOAT = re.compile(r"[+-]?(?:\d{1,30}(?:\.\d{0,30})?|\.\d{1,30})(?:[eE][+-]?\d{1,3})?")
+_UINT = re.compile(r"\d{1,19}")
+
+
+def _show(text: str | None, n: int = 24) -> str:
+    """``text`` for an error message: repr'd (one line) and cut to ``n`` characters."""
+    text = "" if text is None else text
+    return repr(text[:n] + "...") if len(text) > n else repr(text)
+
+
+def check_bytes(data: bytes) -> None:
+    """Refuse, before any XML parsing, what cannot be an RSI message: too long, a byte that
+    is not printable ASCII, a DOCTYPE / ENTITY / comment / CDATA (``<!``), a character or
+    entity reference (``&``), a processing instruction, an encoding other than ASCII or
+    UTF-8. What passes is parsed in time linear in its (bounded) length: no entity is ever
+    expanded."""
     if len(data) > MAX_DATAGRAM:
         raise RsiProtocolError(f"datagram of {len(data)} bytes (an RSI message has < {MAX_DATAGRAM})")
-    if b"<!DOCTYPE" in data or b"<!ENTITY" in data:
-        raise RsiProtocolError("a DOCTYPE or ENTITY declaration: not an RSI message")
+    bad = _NOT_ASCII.search(data)
+    if bad is not None:
+        raise RsiProtocolError(f"byte 0x{data[bad.start()]:02x} at offset {bad.start()}: an RSI message is "
+                               "printable ASCII only (no other encoding, no NUL)")
+    if b"<!" in data:
+        raise RsiProtocolError("a DOCTYPE, ENTITY, comment or CDATA ('<!'): not an RSI message")
+    if b"&" in data:
+        raise RsiProtocolError(f"a character or entity reference ('&' at offset {data.index(b'&')}): "
+                               "not an RSI message")
+    if b"<?" in data:
+        decl = _DECLARATION.match(data)
+        if decl is None or b"<?" in data[decl.end():]:
+            raise RsiProtocolError("a processing instruction other than a leading XML declaration: "
+                                   "not an RSI message")
+        encoding = decl.group(1)
+        if encoding is not None and encoding.lower() not in _ENCODINGS:
+            raise RsiProtocolError(f"encoding {encoding.decode()!r} declared: an RSI message is ASCII")
+
+
+def _root(data: bytes, tag: str) -> ET.Element:
+    if not isinstance(data, bytes | bytearray):
+        raise RsiProtocolError(f"a datagram is bytes, got {type(data).__name__}")
+    check_bytes(data)
     try:
         root = ET.fromstring(data)
     except ET.ParseError as e:
         raise RsiProtocolError(f"malformed XML: {e}") from None
+    except (ValueError, RecursionError) as e:  # (not expected after check_bytes: still one line)
+        raise RsiProtocolError(f"unreadable XML: {type(e).__name__}: {_show(str(e), 80)}") from None
     if root.tag != tag:
-        raise RsiProtocolError(f"<{root.tag}> where <{tag}> was expected")
+        raise RsiProtocolError(f"<{_show(root.tag)[1:-1]}> where <{tag}> was expected")
     return root
 
 
@@ -136,32 +188,37 @@ def _floats(root: ET.Element, child: str, names) -> tuple[float, ...]:
     el = root.find(child)
     if el is None:
         raise RsiProtocolError(f"<{root.tag}> has no <{child}>")
-    try:
-        values = tuple(float(el.attrib[n]) for n in names)
-    except KeyError as e:
-        raise RsiProtocolError(f"<{child}> lacks attribute {e.args[0]}") from None
-    except ValueError as e:
-        raise RsiProtocolError(f"<{child}>: {e}") from None
+    values = []
+    for n in names:
+        text = el.attrib.get(n)
+        if text is None:
+            raise RsiProtocolError(f"<{child}> lacks attribute {n}")
+        text = text.strip()
+        if _FLOAT.fullmatch(text) is None:
+            raise RsiProtocolError(f"<{child} {n}={_show(text)}> is not a decimal number")
+        values.append(float(text))
     if not all(map(math.isfinite, values)):
-        raise RsiProtocolError(f"<{child}> has a non-finite value: {values}")
-    return values
+        raise RsiProtocolError(f"<{child}> has a non-finite value: {tuple(values)}")
+    return tuple(values)
 
 
 def _ipoc(root: ET.Element) -> int:
     el = root.find("IPOC")
     text = (el.text or "").strip() if el is not None else ""
-    if not text.isdigit():
-        raise RsiProtocolError(f"<{root.tag}> has no valid <IPOC> (got {text!r})")
+    if _UINT.fullmatch(text) is None:
+        raise RsiProtocolError(f"<{root.tag}> has no valid <IPOC> (got {_show(text)})")
     return int(text)
 
 
 def decode_rob(data: bytes) -> RobState:
     root = _root(data, "Rob")
     delay_el = root.find("Delay")
-    try:
-        delay = int(delay_el.attrib.get("D", "0")) if delay_el is not None else 0
-    except ValueError:
-        raise RsiProtocolError(f"<Delay D={delay_el.attrib.get('D')!r}> is not an integer") from None
+    delay = 0
+    if delay_el is not None:
+        text = delay_el.attrib.get("D", "0").strip()
+        if _UINT.fullmatch(text) is None:
+            raise RsiProtocolError(f"<Delay D={_show(text)}> is not a count")
+        delay = int(text)
     return RobState(_ipoc(root), _floats(root, "RIst", _XYZABC), _floats(root, "AIPos", _AXES), delay)
 
 

@@ -62,10 +62,12 @@ class SimRobotConfig:
     protocol: Literal["alter", "rsi"] = "alter"
     # RSI: where the gateway listens (the robot's IP_NUMBER:PORT for its <Rob> datagrams).
     rsi_gateway: str = "127.0.0.1:49152"
-    # RSI: this many late (or missing, wrong-IPOC, malformed) answers in a row stop RSI.
-    rsi_late_limit: Annotated[int, Range(1, 100000, "replies")] = 100
-    # RSI HOLDON: a missed answer repeats the last correction (True) or applies zero (False).
-    rsi_holdon: bool = True
+    # RSI: this many late (or missing, wrong-IPOC, malformed) answers in a row stop RSI (the
+    # ETHERNET object's late limit). Low, as required of a real robot (components/rsi/README.md).
+    rsi_late_limit: Annotated[int, Range(1, 100000, "replies")] = 10
+    # RSI HOLDON on RKorr: a missed answer repeats the last correction (True) or applies zero
+    # (False, the required setting: a relative correction repeated moves the robot on its own).
+    rsi_holdon: bool = False
     # RSI correction limits per cycle (the robot's RSI POSCORR limits): beyond -> RSI stops.
     rsi_max_correction_mm: Annotated[float, Range(0.001, 100, "mm")] = 5.0
     rsi_max_correction_deg: Annotated[float, Range(0.001, 45, "deg")] = 2.0

@@ -243,15 +243,21 @@ class RsiRobotServer:
     monotonic deadline per cycle; answers are read until the next deadline).
 
     ``lose(n)``: a hook for tests, True to drop the n-th <Rob> (1-based) on the floor, as
-    a lost datagram. Stops after ``cycles`` cycles (None: until :meth:`stop`) or when
-    RSI stops."""
+    a lost datagram. ``after_send(n, rob)``: a hook for tests and benches, called on the
+    robot's thread right after the n-th <Rob> (``rob``, its bytes) went out: the datagrams
+    it returns are sent to the gateway from the robot's own socket (a network that
+    duplicates, replays or reorders, or a spoofer with the robot's address); it may also act
+    on its own (an attacker on another port that knows the next IPOC). Stops after
+    ``cycles`` cycles (None: until :meth:`stop`) or when RSI stops."""
 
     def __init__(self, robot: RsiRobot, *, gateway: str | None = None, bind: str = "127.0.0.1:0",
-                 cycles: int | None = None, lose: Callable[[int], bool] | None = None):
+                 cycles: int | None = None, lose: Callable[[int], bool] | None = None,
+                 after_send: Callable[[int, bytes], list[bytes]] | None = None):
         self.robot = robot
         self.gateway = parse_address(gateway or robot.config.rsi_gateway)
         self.cycles = cycles
         self.lose = lose
+        self.after_send = after_send
         host, port = parse_address(bind)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.bind((host, port))
@@ -280,6 +286,9 @@ class RsiRobotServer:
                 n += 1
                 if self.lose is None or not self.lose(n):
                     sock.sendto(data, self.gateway)
+                if self.after_send is not None:
+                    for extra in self.after_send(n, data):
+                        sock.sendto(extra, self.gateway)
                 deadline += period
                 while (remaining := deadline - time.monotonic_ns()) > 0:
                     sock.settimeout(remaining / 1e9)

@@ -47,7 +47,9 @@ def _sequence(rig) -> None:
 @pytest.fixture(scope="module")
 def rigs():
     alter = Rig(AlterGatewayConfig(**COMMON))
-    rsi = RsiRig(RsiGatewayConfig(udp_bind="127.0.0.1:0", **COMMON))
+    # robot_late_limit 0: a robot that applies zero when late (HOLDON off), as ALTER's does;
+    # with HOLDON's repeats the envelope cuts earlier (tests/rsi/test_rsi_holdon.py).
+    rsi = RsiRig(RsiGatewayConfig(udp_bind="127.0.0.1:0", robot_late_limit=0, **COMMON))
     for rig in (alter, rsi):
         _sequence(rig)
     return alter, rsi

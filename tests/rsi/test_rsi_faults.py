@@ -91,8 +91,11 @@ def test_late_answers_count_up_to_the_limit_then_rsi_stops_with_a_clear_event():
     robot = _run(_echo((0.1, 0, 0, 0, 0, 0)), delay_s=0.006)  # 6 ms: after the 4 ms cycle
     assert robot.stopped is not None and robot.counters["on_time"] == 0
     assert robot.counters["late"] == LIMIT and robot.delay == LIMIT
-    # Judged from the client's first (late) datagram on; none after the stop.
-    assert robot.counters["waiting"] == 1 and robot.counters["cycles"] == 1 + LIMIT
+    # Judged from the client's first (late) datagram on; none after the stop. (The first <Rob>
+    # is judged too if the simulator's thread came to its next boundary after the late answer
+    # arrived: a loaded machine.)
+    waiting = robot.counters["waiting"]
+    assert waiting in (0, 1) and robot.counters["cycles"] == waiting + LIMIT
     codes = _codes(robot)
     assert codes[:2] == ["client_answered", "late_reply"] and codes[-1] == "rsi_stopped"
     assert f"{LIMIT} late answers in a row" in robot.events[-1].text
@@ -165,13 +168,20 @@ def test_malformed_xml_from_the_robot_is_a_link_error_without_answer_and_the_nex
     assert len(rig.states()) == n_states + 1
 
 
-def test_a_lost_rob_is_a_lost_status_and_a_missed_cycle():
+def test_a_lost_rob_is_lost_statuses_and_missed_cycles_once_the_next_datagram_confirms_the_gap():
     rig = RsiRig(cycle_period_ms=4.0)
-    for k in (1, 2, 4):  # <Rob> 3 lost on the way
+    for k in (1, 2):
         rig.status(cycle=k)
         rig.command(dp_mm=(0.1, 0, 0))
-    assert rig.gw.counters["status_lost"] == 1 and "status_lost" in rig.codes()
-    assert rig.states()[-1].missed_cycles == 1
+    n_states, n_answers = len(rig.states()), len(rig.corrections)
+    rig.status(cycle=4)  # <Rob> 3 lost on the way: 4 is out of sequence until 5 continues it
+    assert (len(rig.states()), len(rig.corrections)) == (n_states, n_answers)
+    assert rig.gw.counters["status_lost"] == 0 and rig.gw.link.counters["out_of_sequence"] == 1
+    rig.status(cycle=5)
+    # 3 lost and 4 unanswered (held back until confirmed): two cycles the robot had no answer for
+    assert rig.gw.counters["status_lost"] == 2 and "status_lost" in rig.codes()
+    assert rig.states()[-1].cycle == 5 and rig.states()[-1].missed_cycles == 2
+    assert rig.gw.link.counters["sessions"] == 1 and rig.gw.link.counters["confirmed"] == 1
 
 
 def test_a_late_answer_reported_by_the_robots_delay_counter_is_a_robot_missed_cycle():
@@ -183,14 +193,16 @@ def test_a_late_answer_reported_by_the_robots_delay_counter_is_a_robot_missed_cy
     assert rig.gw.counters["robot_missed"] == 1 and "robot_missed" in rig.codes()
 
 
-def test_an_ipoc_going_back_is_a_new_rsi_session():
+def test_an_ipoc_going_back_is_a_new_rsi_session_once_the_next_datagram_continues_it():
     rig = RsiRig(cycle_period_ms=4.0)
     for _ in range(3):
         rig.status()
         rig.command(dp_mm=(0.1, 0, 0))
     rig.status(cycle=1)  # RSI restarted at the robot: IPOC from the start
+    assert rig.gw.link.counters["sessions"] == 1 and rig.states()[-1].cycle == 3
+    rig.status(cycle=2)  # ... and it goes on from there: a new session
     assert rig.gw.link.counters["sessions"] == 2
-    assert rig.states()[-1].cycle == 1 and rig.gw.counters["status_lost"] == 0
+    assert rig.states()[-1].cycle == 2 and rig.gw.counters["status_lost"] == 0
 
 
 def test_a_silent_robot_is_link_down_then_its_next_datagram_link_up():

@@ -28,8 +28,11 @@ def test_round_trip_over_udp_on_loopback(cycle_ms, cycles):
     assert run.cycles == cycles
     # A shared 2-core machine may be slow now and then; most cycles are answered in time.
     assert run.on_time >= cycles // 2, (run.on_time, run.histogram)
-    assert run.gateway["status_lost"] == 1  # the <Rob> dropped on the way
-    assert run.gateway["fresh"] >= cycles // 2 and run.gateway["link_errors"] == 0
+    # The <Rob> dropped on the way, and the next one (out of sequence: held back until the one
+    # after it confirmed the gap, so unanswered).
+    assert run.gateway["status_lost"] == 2
+    # (the held-back one is the only link error: "out of sequence")
+    assert run.gateway["fresh"] >= cycles // 2 and run.gateway["link_errors"] == 1
     # The scripted circle lies in the world (= base) XY plane: the flange moved in it.
     assert np.linalg.norm(run.moved_mm[:2]) > 1.0 and abs(run.moved_mm[2]) < 1e-3
     assert sum(run.histogram.values()) >= run.on_time
