@@ -59,6 +59,7 @@ RECOVERY_TIMEOUT_S = 10.0    # the loop must be back within this after an attack
 REACTION_TIMEOUT_S = 5.0     # an event or reply must come within this of the injection
 STEADY_S = 1.0               # the loop counts as back after this long without a fault
 MAX_SERVO_ERROR_MM = 5.0     # servo error (controller/status) that counts as "small"
+FENCE_TIMEOUT_S = 60.0      # a fence behind a flood's backlog on a loaded machine: bounds a hang
 FAULT_GIVE_UP_S = 2.0        # a robot faulted this long after an attack needs the operator's reset
 OPERATOR = "humanpt-bench-faults"  # the operator name the bench's own resets are logged with
 
@@ -476,7 +477,7 @@ def _fence(ctx: Ctx, rogue) -> bool:
         t0 = time.monotonic()
         pub.put(pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_INFO, source=ROGUE,
                          code="bench_fence", text=marker).SerializeToString())
-        deadline = t0 + REACTION_TIMEOUT_S
+        deadline = t0 + FENCE_TIMEOUT_S
         while time.monotonic() < deadline:
             if any(ev.code == "bench_fence" and ev.text == marker for ev in ctx.mon.events_since(t0)):
                 return True
