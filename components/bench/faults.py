@@ -19,6 +19,14 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
 
 Every wait has a timeout; what does not come is reported as "not observed".
 
+Each row's **verdict** (:attr:`FaultRow.ok`) is its security or safety claim: the system
+answered the attack as it should and the robot held. The loop's liveness (recovered, robot
+states' gaps, link restarts: :attr:`FaultRow.liveness`) is reported beside it, never part of
+it (issue 31: a row failed on "5 tob_states not FULL" under load with its verdict met).
+``link="rsi"`` (``--link rsi``) runs the twin over the RSI link (UDP, 12 ms) instead of the
+Puma's serial ALTER line; issue 29's attacks on the robot link are in
+:mod:`humanpt.bench.link_faults`; an attack that does not apply to the link is a skipped row.
+
 With ``secure=True`` (``--secure``, issue 19 item 5) the twin runs under mTLS with a
 throwaway PKI (:func:`humanpt.twin.live.run_live`); the bench's session presents the run's
 operator certificate, and each injection of :data:`ATTACKS` on a topic comes from a session

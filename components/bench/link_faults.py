@@ -51,6 +51,8 @@ from humanpt.schemas.convert import from_pose
 KILL_SPEED_MM_S = 40.0        # the robot's speed when the gateway is killed (issue 29 item 1's)
 KILL_BOUND_CYCLES = 2         # after the kill: the correction in flight and the one the robot had
 KILL_LINE_MM = 150.0          # the line played (at 40 mm/s: 3.75 s)
+KILL_WAIT_S = 3.0             # for the robot to reach 40 mm/s (else killed while it moves, MOVING_MM_S at least)
+MOVING_MM_S = 5.0
 INJECT_ROBS = 80              # item 5: <Rob>s sent by the attacker
 JUNK_S = 3.0                  # item 6: the junk flood's length
 IPOC_JUMP_CYCLES = 500        # item 7: the spoofed IPOC's jump (under the gateway's 1000-cycle limit)
@@ -231,8 +233,11 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
         return
     bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm
     try:
-        if not _wait(lambda: _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S, 20.0, ctx):
-            row.note = f"the robot never reached {KILL_SPEED_MM_S:g} mm/s (at {_speed_mm_s(ctx):.1f} mm/s)"
+        # Killed at the playback's speed; on a loaded machine the robot may lag its carrot
+        # and go slower: then killed while it moves, at the speed it has (in the note).
+        if not _wait(lambda: _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S, KILL_WAIT_S, ctx) \
+                and not _wait(lambda: _speed_mm_s(ctx) >= MOVING_MM_S, KILL_WAIT_S, ctx):
+            row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
             return
         speed = _speed_mm_s(ctx)
         t_kill, wall_kill = time.monotonic(), time.time_ns()

@@ -528,8 +528,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--link", choices=["alter", "rsi"], default="alter",
                    help="the twin's robot link: the Puma's serial ALTER line (default) or RSI over UDP (12 ms); "
                    "the rows that do not apply to it are skipped, with the reason")
-    q.add_argument("--quick", action="store_true", help="all but the bus flood (which takes both cores of a "
-                   "small machine)")
+    q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
+                   "cores of a small machine); with --secure also issue 19's but the floods and the partition")
     q.add_argument("--scenario", dest="faults_scenario", default="static",
                    help="scenario of the live twin (default static)")
     q.add_argument("--run-dir", help="keep the twin's recordings here (default: a temporary directory, removed)")
