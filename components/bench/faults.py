@@ -19,6 +19,14 @@ on Ctrl-C too). For each attack it measures, from its own subscriber:
 
 Every wait has a timeout; what does not come is reported as "not observed".
 
+Each row's **verdict** (:attr:`FaultRow.ok`) is its security or safety claim: the system
+answered the attack as it should and the robot held. The loop's liveness (recovered, robot
+states' gaps, link restarts: :attr:`FaultRow.liveness`) is reported beside it, never part of
+it (issue 31: a row failed on "5 tob_states not FULL" under load with its verdict met).
+``link="rsi"`` (``--link rsi``) runs the twin over the RSI link (UDP, 12 ms) instead of the
+Puma's serial ALTER line; issue 29's attacks on the robot link are in
+:mod:`humanpt.bench.link_faults`; an attack that does not apply to the link is a skipped row.
+
 With ``secure=True`` (``--secure``, issue 19 item 5) the twin runs under mTLS with a
 throwaway PKI (:func:`humanpt.twin.live.run_live`); the bench's session presents the run's
 operator certificate, and each injection of :data:`ATTACKS` on a topic comes from a session
@@ -59,6 +67,7 @@ RECOVERY_TIMEOUT_S = 10.0    # the loop must be back within this after an attack
 REACTION_TIMEOUT_S = 5.0     # an event or reply must come within this of the injection
 STEADY_S = 1.0               # the loop counts as back after this long without a fault
 MAX_SERVO_ERROR_MM = 5.0     # servo error (controller/status) that counts as "small"
+FENCE_TIMEOUT_S = 60.0      # a fence behind a flood's backlog on a loaded machine: bounds a hang
 FAULT_GIVE_UP_S = 2.0        # a robot faulted this long after an attack needs the operator's reset
 OPERATOR = "humanpt-bench-faults"  # the operator name the bench's own resets are logged with
 
@@ -80,10 +89,15 @@ class FaultRow:
     expected: bool = False               # the system answered the attack as it should (see each attack)
     note: str = ""
     skipped: str = ""                    # why the attack was not run (e.g. it needs mTLS); "" when it ran
+    liveness: str = ""                   # how the loop fared (reported beside the verdict, never part of it)
 
     @property
     def ok(self) -> bool:
-        return bool(self.skipped or (self.expected and self.held and self.recovered))
+        """The row's verdict: the system answered the attack as it should (security: refused;
+        safety: no fault latched, no late command...) and the robot held. Whether the servo
+        loop stayed up or came back (``recovered``) is liveness: reported, not judged here (a
+        loaded machine can starve the loop while the robot holds and every client is refused)."""
+        return bool(self.skipped or (self.expected and self.held))
 
 
 class Monitor:
@@ -169,6 +183,9 @@ class Ctx:
     # None: one session does everything (no access control to pass).
     as_identity: Callable[[str], object] | None = None
     control: object = None                                  # the twin's LiveControl, or None
+    link: str = "alter"                                     # the robot link: alter (serial, pty) or rsi (UDP)
+    gw: object = None                                       # the gateway's config (AlterGatewayConfig / RsiGatewayConfig)
+    file_cfg: object = None                                 # the run's config file (humanpt.runtime.config.ConfigFile)
 
     def pub(self, short: str):
         if short not in self.pubs:
@@ -281,10 +298,18 @@ def attack_strt(ctx: Ctx, row: FaultRow) -> None:
                 + (f"link_up ({up[1].source})" if up else "no link_up"))
 
 
-def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
-    """Junk commands (cycle 2**31) on controller/command as fast as this process can put them."""
+def row_marker(row: FaultRow) -> str:
+    """A frame_id naming this row's own forgeries and nothing else: a flood's backlog still
+    arriving during the next row is not counted there (issue 29 item 15: the ACL flood row
+    counted 7082 of the insider flood's junk as "delivered")."""
+    return f"bench-{row.key}-{time.monotonic_ns()}"
+
+
+def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0, marker: str | None = None) -> None:
+    """Junk commands (cycle 2**31, frame_id ``marker``) on controller/command as fast as this
+    process can put them."""
     pub = ctx.pub("controller/command")
-    junk = pb.FlangeCommand(header=header(time.time_ns(), 0, "world"), cycle=2**31,
+    junk = pb.FlangeCommand(header=header(time.time_ns(), 0, marker or row_marker(row)), cycle=2**31,
                             mode=pb.CONTROL_MODE_TRACK).SerializeToString()
     t0 = time.monotonic()
     n = 0
@@ -302,10 +327,14 @@ def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
     late = sum(ev.code in ("deadline_missed", "stale_command") for ev in evs)
     faulted = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
     hit = ctx.mon.wait_event(t0, ("bad_command",), "robot_gateway", timeout_s=0.5)
-    row.expected = len(stamps) > 1 and gap_ms < 10 * 1e3 * ctx.cycle_s and not faults and not faulted
+    # The verdict is safety (the robot holds: run_attack's step against the limit); whether
+    # robot states kept their cycle, faults and link restarts are the loop's liveness.
+    row.expected = True
     row.reaction_ms = _ms(hit and hit[0], t0)
-    row.note = (f"{n / (t1 - t0):.0f} puts/s; robot_state max gap {gap_ms:.0f} ms; {late} late-command events"
-                + (f"; {', '.join(faults)}" if faults else "") + ("; FAULT" if faulted else ""))
+    row.note = f"{n / (t1 - t0):.0f} puts/s"
+    row.liveness = (f"robot_state max gap {gap_ms:.0f} ms; {late} late-command events"
+                    + (f"; {len(faults)} {'/'.join(sorted(set(faults)))}" if faults else "")
+                    + ("; robot FAULT latched" if faulted else ""))
 
 
 def _console(ctx: Ctx, component: str, verb: str, args: dict, codes: tuple[str, ...]) -> float | None:
@@ -396,6 +425,7 @@ class Attack:
     fault: str
     run: Callable[[Ctx, FaultRow], None]
     keeps_loop: bool = True
+    links: tuple[str, ...] = ("alter", "rsi")  # the robot links it applies to
 
 
 ATTACKS: tuple[Attack, ...] = (
@@ -403,7 +433,7 @@ ATTACKS: tuple[Attack, ...] = (
     Attack("forged", "forged robot_state, future stamp", attack_forged_state),
     Attack("nan", "NaN / 1e308 measurement", attack_nan),
     Attack("absurd", "absurd command (1.7e305 m, tool frame)", attack_absurd),
-    Attack("strt", "forged STRT on the serial line", attack_strt, keeps_loop=False),
+    Attack("strt", "forged STRT on the serial line", attack_strt, keeps_loop=False, links=("alter",)),
     Attack("flood", "bus flood (2 s junk commands)", attack_flood, keeps_loop=False),
     Attack("console", "bad console commands", attack_console),
     Attack("reset", "reset_fault without operator", attack_reset_fault),
@@ -448,18 +478,30 @@ def _router_denied(ctx: Ctx, t0: float, key: str, timeout_s: float = REACTION_TI
 
 def _fence(ctx: Ctx, rogue) -> bool:
     """Put an info event on the rogue's own events key and wait until the bench sees it: the
-    rogue's earlier messages went the same link before it, so the router has handled them."""
+    rogue's earlier messages went the same link before it, so the router has handled them.
+    Put with congestion control BLOCK (a session still sending a flood's backlog would
+    drop it), and again every second until seen: a fence lost on the way (as one was, at load
+    14, behind 420 k refused puts) is not a verdict on the flood."""
+    import zenoh
+
     marker = f"fence {time.monotonic_ns()}"
-    pub = rogue.declare_publisher(topics.TOPICS[f"{ROGUE}/events"].key(ctx.cell))
+    pub = rogue.declare_publisher(topics.TOPICS[f"{ROGUE}/events"].key(ctx.cell),
+                                  congestion_control=zenoh.CongestionControl.BLOCK)
+    fence = pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_INFO, source=ROGUE,
+                     code="bench_fence", text=marker).SerializeToString()
     try:
         t0 = time.monotonic()
-        pub.put(pb.Event(header=header(time.time_ns()), severity=pb.SEVERITY_INFO, source=ROGUE,
-                         code="bench_fence", text=marker).SerializeToString())
-        deadline = t0 + REACTION_TIMEOUT_S
+        deadline = t0 + FENCE_TIMEOUT_S
+        next_put = t0
         while time.monotonic() < deadline:
-            if any(ev.code == "bench_fence" and ev.text == marker for ev in ctx.mon.events_since(t0)):
+            if time.monotonic() >= next_put:
+                pub.put(fence)
+                next_put = time.monotonic() + 1.0
+            hit = ctx.mon.wait_event(t0, ("bench_fence",), ROGUE, timeout_s=max(0.0, min(1.0, next_put
+                                                                                        - time.monotonic())))
+            if hit is not None and any(ev.code == "bench_fence" and ev.text == marker
+                                       for ev in ctx.mon.events_since(t0)):
                 return True
-            time.sleep(0.01)
         return False
     finally:
         pub.undeclare()
@@ -602,20 +644,21 @@ def attack_acl_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0) -> None:
     flood_ctx = Ctx(ctx.session, ctx.mon, ctx.cell, ctx.gateway_port, ctx.cycle_s,
                     pubs={"controller/command": rogue.declare_publisher(
                         topics.TOPICS["controller/command"].key(ctx.cell))})
-    seen = _Seen(ctx, lambda c: c.cycle == 2**31)  # attack_flood's junk
+    marker = row_marker(row)
+    seen = _Seen(ctx, lambda c: c.header.frame_id == marker)  # this row's junk only
     t0 = time.monotonic()
     try:
-        attack_flood(flood_ctx, row, seconds)
+        attack_flood(flood_ctx, row, seconds, marker)
     finally:
         flood_ctx.pubs["controller/command"].undeclare()
     fenced = _fence(ctx, rogue)
     seen.close()
     key = topics.TOPICS["controller/command"].key(ctx.cell)
     denied = [(t, ev) for t, ev in _timed_events(ctx.mon, t0) if _denial_of(ev, key)]
-    row.expected = row.expected and fenced and seen.n == 0
+    row.expected = fenced and seen.n == 0
     row.reaction_ms = _ms(denied[0][0] if denied else None, t0)
-    row.note += (f"; {seen.n} junk commands delivered; router: {len(denied)} access_denied events "
-                 "(it reports the 1st, 10th, 100th...)")
+    row.note = (f"{seen.n} junk commands delivered" + ("" if fenced else " (the fence never came)")
+                + f"; {row.note}; router: {len(denied)} access_denied events (it reports the 1st, 10th, 100th...)")
 
 
 SECURE_ATTACKS: tuple[Attack, ...] = (
@@ -633,8 +676,11 @@ QUICK_SECURE = tuple(a.key for a in SECURE_ATTACKS if a.key not in ("aclflood", 
 
 
 def all_attacks() -> tuple[Attack, ...]:
-    """Every attack: issue 14's (:data:`ATTACKS`), then those that need mTLS."""
-    return ATTACKS + SECURE_ATTACKS
+    """Every attack: issue 14's (:data:`ATTACKS`), then issue 29's on the robot link
+    (:data:`humanpt.bench.link_faults.LINK_ATTACKS`), then those that need mTLS."""
+    from humanpt.bench.link_faults import LINK_ATTACKS
+
+    return ATTACKS + LINK_ATTACKS + SECURE_ATTACKS
 
 
 # -- the loop's health ----------------------------------------------------------------------
@@ -693,19 +739,48 @@ def wait_loop(mon: Monitor, cycle_s: float, timeout_s: float, stop: threading.Ev
 
 
 def operator_reset(ctx: Ctx) -> bool:
-    """What the operator does after a fault: reset_fault on the gateway, then ALTER on."""
+    """What the operator does after a fault: reset_fault on the gateway, then ALTER on (over
+    ALTER; the simulated RSI controller has no console: a stopped RSI is restarted, see
+    :func:`restart_rsi`)."""
     ok = _console(ctx, "robot_gateway", "reset_fault", {"operator": OPERATOR},
                   ("fault_cleared", "no_fault", "bad_console_command")) is not None
+    if ctx.link == "rsi":
+        return ok
     return _console(ctx, "sim_robot", "alter_on", {"operator": OPERATOR}, ("alter_on", "bad_console_command")) \
         is not None and ok
 
 
+RSI_STOPPED = ("rsi_stopped", "correction_limit", "fault")  # sim_robot's codes for an RSI that stopped
+
+
+def rsi_stopped_since(ctx: Ctx, t0: float) -> pb.Event | None:
+    """The simulated RSI controller's event saying RSI stopped (since ``t0``), or None."""
+    return next((ev for ev in ctx.mon.events_since(t0) if ev.source == "sim_robot" and ev.code in RSI_STOPPED),
+                None)
+
+
+def restart_rsi(ctx: Ctx) -> bool:
+    """What the operator does at the robot after RSI stopped (no more datagrams; the robot
+    holds): restart RSI, here the simulated controller's process (it starts again where it
+    was mounted; the gateway sees a new RSI session)."""
+    if ctx.control is None:
+        return False
+    import signal as sig
+
+    ctx.control.kill("sim_robot", sig.SIGTERM)
+    ctx.control.start("sim_robot")
+    return True
+
+
 def max_step_mm(mon: Monitor, t0: float, t1: float, cycle_s: float) -> float:
-    """The largest flange step per ALTER cycle in ``sim_robot/truth`` between t0 and t1 (mm);
-    a step over missing cycles is divided by the cycles it spans."""
+    """The largest flange step per robot cycle in ``sim_robot/truth`` between t0 and t1 (mm);
+    a step over missing cycles is divided by the cycles it spans. A restarted simulated
+    robot (its sequence numbers start again) starts where it was mounted: no step across it."""
     truth = [m for _, m in mon.since("sim_robot/truth", t0 - cycle_s, t1)]
     best = 0.0
     for a, b in zip(truth, truth[1:], strict=False):
+        if b.header.seq <= a.header.seq:
+            continue
         step = 1e3 * float(np.linalg.norm(from_pose(b.world_T_flange)[:3, 3] - from_pose(a.world_T_flange)[:3, 3]))
         cycles = max(1, round((b.header.stamp_ns - a.header.stamp_ns) * 1e-9 / cycle_s))
         best = max(best, step / cycles)
@@ -713,9 +788,35 @@ def max_step_mm(mon: Monitor, t0: float, t1: float, cycle_s: float) -> float:
 
 
 def seq_gaps(mon: Monitor, short: str, t0: float, t1: float) -> int:
-    """Messages missing on ``short`` between t0 and t1: the sum of its sequence gaps."""
+    """Messages missing on ``short`` between t0 and t1: the sum of its sequence gaps (a
+    restarted publisher's sequence starting again is not a gap)."""
     seqs = [m.header.seq for _, m in mon.since(short, t0, t1)]
     return int(sum(max(0, b - a - 1) for a, b in zip(seqs, seqs[1:], strict=False)))
+
+
+def latched_fault(ctx: Ctx, t0: float) -> bool:
+    """Whether the gateway latched a fault since ``t0`` that is not cleared yet."""
+    state = None
+    for ev in ctx.mon.events_since(t0):
+        if ev.source == "robot_gateway" and ev.code in ("fault", "fault_cleared"):
+            state = ev.code
+    return state == "fault"
+
+
+def recover(ctx: Ctx, t0: float) -> str:
+    """Bring the loop back as the operator would (restart a stopped RSI, reset a latched
+    fault), for the next row; what was done, for the liveness column."""
+    done = []
+    if ctx.link == "rsi" and rsi_stopped_since(ctx, t0) is not None and restart_rsi(ctx):
+        done.append("RSI restarted at the robot")
+    t_reset = time.monotonic()
+    if operator_reset(ctx):
+        done.append("the operator's reset_fault" + (" + ALTER on" if ctx.link == "alter" else ""))
+    again, why = wait_loop(ctx.mon, ctx.cycle_s, 2 * RECOVERY_TIMEOUT_S)
+    what = " + ".join(done) or "nothing to reset"
+    if again is None:
+        return f"not back after {what} either ({why})"
+    return f"back {1e3 * (again - t_reset):.0f} ms after {what}"
 
 
 def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
@@ -725,29 +826,32 @@ def run_attack(ctx: Ctx, attack: Attack, limit_mm: float) -> FaultRow:
         attack.run(ctx, row)
     except Exception as e:  # noqa: BLE001 -- the bench reports a failed injection as a row
         row.note = f"injection failed: {type(e).__name__}: {e}"
+        row.expected = False
     t_end = time.monotonic()
     back, why = wait_loop(ctx.mon, ctx.cycle_s, RECOVERY_TIMEOUT_S, faulted_s=FAULT_GIVE_UP_S)
     row.recovered = back is not None
     row.recovery_ms = None if back is None else max(0.0, 1e3 * (back - t_end))
+    live = [row.liveness] if row.liveness else []
     if back is None:
-        row.note += f"; not back by itself ({why})"
-        if why == FAULTED:
-            # Not a recovery, but the next attack needs a running loop: reset as the operator would.
-            t_reset = time.monotonic()
-            again, why = wait_loop(ctx.mon, ctx.cycle_s, RECOVERY_TIMEOUT_S) if operator_reset(ctx) else (None, "")
-            row.note += (f"; back {1e3 * (again - t_reset):.0f} ms after the operator's reset_fault + ALTER on"
-                         if again is not None else f"; not back after the operator's reset either ({why})")
+        # Not a recovery, but the next attack needs a running loop: as the operator would.
+        live.append(f"not back by itself ({why}); " + recover(ctx, t0))
+    elif latched_fault(ctx, t0):
+        # The loop runs but the gateway holds a latched fault (the robot stands): the next
+        # row needs it cleared, as the operator would.
+        live.append("a fault latched; " + recover(ctx, t0))
     t1 = time.monotonic()
-    row.max_step_mm = max_step_mm(ctx.mon, t0, t1, ctx.cycle_s)
-    row.held = row.max_step_mm <= limit_mm * STEP_TOLERANCE
+    if row.max_step_mm is None:  # (an attack may judge its own window: the gateway killed)
+        row.max_step_mm = max_step_mm(ctx.mon, t0, t1, ctx.cycle_s)
+        row.held = row.max_step_mm <= limit_mm * STEP_TOLERANCE
     errors = [1e3 * m.error_translation_m for _, m in ctx.mon.since("controller/status", t0, t1)]
     worst = max(errors, default=math.nan)
     not_full = sum(m.status != pb.TOB_STATUS_FULL or not _finite_pose(m.world_T_tob)
                    for _, m in ctx.mon.since("pose_filter/tob_state", t0, t1))
-    row.note += f"; servo error max {worst:.2f} mm"
+    live.append(f"servo error max {worst:.2f} mm")
     if attack.keeps_loop and (not worst <= MAX_SERVO_ERROR_MM or not_full):
         row.recovered = False
-        row.note += f"; the loop broke during it ({not_full} tob_states not FULL and finite)"
+        live.append(f"the loop broke during it ({not_full} tob_states not FULL and finite)")
+    row.liveness = "; ".join(live)
     stamps = [m.header.stamp_ns for _, m in ctx.mon.since("robot_gateway/robot_state", t0, t1)]
     row.down_ms = float(sum(1e-6 * g - 1e3 * ctx.cycle_s for g in np.diff(stamps) if g > 2e9 * ctx.cycle_s)) \
         if len(stamps) > 1 else 0.0
@@ -760,29 +864,33 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
                run_dir: str | Path | None = None, start_timeout_s: float = 90.0,
                on_row: Callable[[FaultRow], None] | None = None,
                say: Callable[[str], None] = lambda text: None,
-               secure: bool = False) -> tuple[list[FaultRow], str]:
+               secure: bool = False, link: str = "alter") -> tuple[list[FaultRow], str]:
     """Run the attacks ``only`` (keys of :func:`all_attacks`; default all) against a live
     twin of ``scenario``; (rows, failure text or ""). The twin is stopped before this
     returns, whatever happens; ``run_dir`` keeps its recordings (default: a temporary
     directory, removed).  ``secure``: the twin under mTLS with a throwaway PKI
     (:func:`humanpt.twin.live.run_live`), the bench's session an operator's, each
     injection of issue 14 from the session of the key's publisher (an insider); without
-    it the attacks of :data:`SECURE_ATTACKS` give skipped rows."""
+    it the attacks of :data:`SECURE_ATTACKS` give skipped rows.  ``link``: the robot link,
+    ``alter`` (the Puma's serial line, a pty, 28 ms) or ``rsi`` (UDP on loopback, 12 ms); an
+    attack that does not apply to it gives a skipped row."""
     from humanpt.runtime import config as cfgmod
-    from humanpt.runtime.bus import open_tool_session
     from humanpt.twin.live import LiveControl, run_live
     from humanpt.twin.run import SystemConfig
 
+    if link not in ("alter", "rsi"):
+        raise ValueError(f"unknown robot link {link!r}: alter or rsi")
     every = all_attacks()
     unknown = set(only or ()) - {a.key for a in every}
     if unknown:
         raise ValueError(f"unknown attack(s) {', '.join(sorted(unknown))}: choose from "
                          f"{', '.join(a.key for a in every)}")
     chosen = [a for a in every if only is None or a.key in only]
-    skipped = [] if secure else [a for a in chosen if a in SECURE_ATTACKS]
+    why_not = {a.key: not_applicable(a, secure, link) for a in chosen}
+    skipped = [a for a in chosen if why_not[a.key]]
     attacks = [a for a in chosen if a not in skipped]
     if not attacks:  # nothing to run: no twin
-        rows = [FaultRow(a.key, a.fault, skipped=NEEDS_MTLS) for a in skipped]
+        rows = [FaultRow(a.key, a.fault, skipped=why_not[a.key]) for a in skipped]
         for row in rows:
             if on_row is not None:
                 on_row(row)
@@ -798,7 +906,7 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         try:
             result["live"] = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=3600.0,
                                       stop=stop, on_started=lambda _c: started.set(), secure=secure,
-                                      control=control)
+                                      control=control, link=link)
         except BaseException as e:  # noqa: BLE001 -- reported by the caller
             result["error"] = e
         finally:
@@ -809,22 +917,21 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     failure = ""
     try:
         thread.start()
-        say(f"starting the live twin ({scenario}) in {run_dir}")
+        say(f"starting the live twin ({scenario}, {link.upper()} link) in {run_dir}")
         started.wait(start_timeout_s)
         cfg_path = run_dir / "humanpt.toml"
         if "error" in result or not cfg_path.exists():
             raise RuntimeError(f"the live twin did not start: {result.get('error', 'no config written')}")
         file_cfg = cfgmod.load(cfg_path)
-        from humanpt.robot_gateway.config import AlterGatewayConfig
-
-        gw = file_cfg.component("robot_gateway", AlterGatewayConfig)
+        gw = gateway_config(file_cfg, link)
         cycle_s = gw.cycle_period_ms * 1e-3
         limit_mm = gw.max_step_mm
+        session = open_router_session(file_cfg.runtime, control, run_dir, start_timeout_s, _dead(thread))
         as_identity, opened = _identity_sessions(file_cfg.runtime) if secure else (None, {})
-        with open_tool_session(file_cfg.runtime, patient=True) as session:
+        with session:
             mon = Monitor(session, file_cfg.runtime.cell)
-            ctx = Ctx(session, mon, file_cfg.runtime.cell, gw.port, cycle_s, rt=file_cfg.runtime,
-                      as_identity=as_identity, control=control)
+            ctx = Ctx(session, mon, file_cfg.runtime.cell, getattr(gw, "port", ""), cycle_s, rt=file_cfg.runtime,
+                      as_identity=as_identity, control=control, link=link, gw=gw, file_cfg=file_cfg)
             try:
                 back, why = wait_loop(mon, cycle_s, start_timeout_s, stop=_dead(thread))
                 if back is None:
@@ -844,7 +951,7 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
                 mon.close()
                 for s in opened.values():
                     _close(s)
-    except RuntimeError as e:
+    except (RuntimeError, ConnectionError, OSError) as e:
         failure = str(e)
     finally:
         stop.set()
@@ -859,11 +966,65 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     if live_fail and not failure:
         failure = f"the live twin reported: {live_fail}"
     for a in skipped:
-        row = FaultRow(a.key, a.fault, skipped=NEEDS_MTLS)
+        row = FaultRow(a.key, a.fault, skipped=why_not[a.key])
         rows.append(row)
         if on_row is not None:
             on_row(row)
     return rows, failure
+
+
+def not_applicable(attack: Attack, secure: bool, link: str) -> str:
+    """Why ``attack`` is not run in this bench (a skipped row), or ""."""
+    if attack in SECURE_ATTACKS and not secure:
+        return NEEDS_MTLS
+    if link not in attack.links:
+        return f"not over {link.upper()} (--link {' or '.join(attack.links)})"
+    return ""
+
+
+def gateway_config(file_cfg, link: str):
+    """The run's gateway config: the ALTER gateway's or the RSI gateway's."""
+    if link == "rsi":
+        from humanpt.rsi.config import RsiGatewayConfig
+
+        return file_cfg.component("robot_gateway", RsiGatewayConfig)
+    from humanpt.robot_gateway.config import AlterGatewayConfig
+
+    return file_cfg.component("robot_gateway", AlterGatewayConfig)
+
+
+def _router_address(rt) -> tuple[str, int]:
+    """(host, port) of the run's first router endpoint (``tcp/127.0.0.1:7447``)."""
+    _, _, addr = rt.connect[0].partition("/")
+    host, _, port = addr.rpartition(":")
+    return host.strip("[]"), int(port)
+
+
+def open_router_session(rt, control, run_dir: Path, timeout_s: float, twin_ended: threading.Event):
+    """The bench's session on the router the twin started: wait until that router listens
+    (its process alive: under load a Python process takes seconds to get there), then open
+    a client session, patiently, trying again until ``timeout_s`` (issue 29 item 15: two
+    starts under load failed with "cannot reach the router"). RuntimeError naming the
+    router, the time waited and its log when it never answers (the bench's exit status 2:
+    the twin failed)."""
+    from humanpt.runtime.bus import open_tool_session
+    from humanpt.twin.live import wait_listening
+
+    host, port = _router_address(rt)
+    t0 = time.monotonic()
+    log = run_dir / "processes.log"
+    why = wait_listening(host, port, timeout_s, alive=lambda: control is None or control.pid("router") is not None,
+                         stop=twin_ended)
+    while not why:
+        try:
+            return open_tool_session(rt, patient=True)
+        except ConnectionError as e:
+            why = str(e).split(". Start one")[0]
+            if time.monotonic() - t0 < timeout_s and not twin_ended.is_set():
+                why = ""
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+    raise RuntimeError(f"the twin's router at {host}:{port} did not take the bench's session within "
+                       f"{time.monotonic() - t0:.0f} s (load average {load:.1f}): {why}; see {log}")
 
 
 def _close(session) -> None:
@@ -911,21 +1072,25 @@ def _live_failure(result: dict) -> str:
 
 
 # -- the table ------------------------------------------------------------------------------
-HEADERS = ("fault", "reaction", "robot held", "recovered", "data lost", "note")
+HEADERS = ("fault", "verdict", "reaction", "robot held", "recovered", "data lost", "note")
 
 
 def row_cells(r: FaultRow) -> tuple[str, ...]:
+    """The row's cells: the verdict (security or safety: :attr:`FaultRow.ok`) first; the
+    loop's liveness (recovered, and the note's "loop:" part) reported beside it."""
     if r.skipped:
-        return (r.fault, "-", "-", "-", "-", f"skipped: {r.skipped}")
+        return (r.fault, "skipped", "-", "-", "-", "-", f"skipped: {r.skipped}")
     react = "not observed" if r.reaction_ms is None else f"{r.reaction_ms:.1f} ms"
-    held = ("not observed" if r.held is None
+    held = ("not observed" if r.held is None or r.max_step_mm is None
             else f"{'yes' if r.held else 'NO'} ({r.max_step_mm:.2f} / {r.limit_mm:.2f} mm)")
     rec = ("not observed" if r.recovered is None else
            f"yes ({r.recovery_ms:.0f} ms" + (f"; down {r.down_ms:.0f} ms)" if r.down_ms else ")")
            if r.recovered else "NO" + (f" (down {r.down_ms:.0f} ms)" if r.down_ms else ""))
     lost = ", ".join(f"{k.split('/')[-1]} {v}" for k, v in r.lost.items())
     note = r.note if r.expected else f"UNEXPECTED: {r.note}"
-    return (r.fault, react, held, rec, lost, note)
+    if r.liveness:
+        note += f" | loop: {r.liveness}"
+    return (r.fault, "ok" if r.ok else "FAILED", react, held, rec, lost, note)
 
 
 def format_table(rows: list[FaultRow]) -> str:

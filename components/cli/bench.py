@@ -160,25 +160,35 @@ def bench_all(args) -> int:
 
 
 def bench_faults(args) -> int:
-    """The attacks of issue 14 against a live twin (:func:`humanpt.bench.faults.run_faults`);
-    exit status 1 if one was not seen, not held or not recovered, 2 if the twin failed."""
+    """The attacks of issues 14 and 29 against a live twin (:func:`humanpt.bench.faults.run_faults`);
+    exit status 1 if one's verdict failed (not answered as it should, or the robot not held),
+    2 if the twin failed (it did not start, its router never took the bench's session, a
+    process died). Whether the loop stayed up is reported beside each verdict, not judged."""
     from humanpt.bench.faults import QUICK, QUICK_SECURE, format_table, run_faults
 
     secure = getattr(args, "secure", False)
+    link = getattr(args, "link", "alter") or "alter"
     only = tuple(a.strip() for a in args.only.split(",") if a.strip()) if args.only else (
         QUICK + (QUICK_SECURE if secure else ()) if args.quick else None)
-    print("humanpt bench faults: attacks on a live twin (router + 7 processes; reaction = injection to the "
-          "first event or reply; held = largest flange step per cycle / the gateway's limit)"
+    print(f"humanpt bench faults: attacks on a live twin over {link.upper()} (router + 7 processes; reaction = "
+          "injection to the first event or reply; held = largest flange step per cycle / the gateway's limit; "
+          "verdict = answered as it should and held; recovered and 'loop:' = liveness, reported, not judged)"
           + ("; under mTLS, a throwaway PKI: issue 14's injections come from the key's own publisher's "
              "certificate (an insider), the bench's session is an operator's" if secure else ""),
           file=sys.stderr, flush=True)
 
     def on_row(r) -> None:
         state = "skipped" if r.skipped else "ok" if r.ok else "FAILED"
-        print(f"  {r.key}: {state} {r.skipped or r.note}", file=sys.stderr, flush=True)
+        print(f"  {r.key}: {state} {r.skipped or r.note}" + (f" | loop: {r.liveness}" if r.liveness else ""),
+              file=sys.stderr, flush=True)
 
-    rows, failure = run_faults(only, args.faults_scenario, args.run_dir, on_row=on_row,
-                               say=lambda t: print(f"  {t}", file=sys.stderr, flush=True), secure=secure)
+    try:
+        rows, failure = run_faults(only, args.faults_scenario, args.run_dir, on_row=on_row,
+                                   say=lambda t: print(f"  {t}", file=sys.stderr, flush=True), secure=secure,
+                                   link=link)
+    except ValueError as e:  # an unknown attack or link: the user's words
+        print(f"humanpt bench faults: {e}", file=sys.stderr)
+        return 2
     if rows:
         print("")
         print(format_table(rows))

@@ -524,15 +524,21 @@ def build_parser() -> argparse.ArgumentParser:
                         description="Start the whole system live (scenario --scenario, default static), wait for "
                         "the servo loop, inject each attack (param loosening, forged robot_state, NaN/1e308 "
                         "measurement, absurd command, forged STRT on the serial line, bus flood, bad console "
-                        "commands, reset_fault without operator) with a recovery check after each, stop the "
-                        "twin and print one row per attack: reaction time, robot held (largest flange step "
-                        "per cycle against the gateway's limit), recovered, data lost (sequence gaps). Exit "
-                        "status 1 if any attack was not seen, not held or not recovered.")
+                        "commands, reset_fault without operator; issue 29's on the robot link: the gateway killed "
+                        "mid-motion, a 1795-point seam played, and over RSI <Rob> injection, a junk flood and a "
+                        "spoofed IPOC from another UDP port) with a recovery check after each, stop the "
+                        "twin and print one row per attack: verdict, reaction time, robot held (largest flange "
+                        "step per cycle against the gateway's limit), recovered, data lost (sequence gaps). Exit "
+                        "status 1 if a verdict failed (not answered as it should, or not held), 2 if the twin "
+                        "failed; whether the loop stayed up is reported, not judged.")
     q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
-                   "console, reset; with --secure also unauthorised, uncertified, token, aclflood, partition; "
-                   "default all)")
-    q.add_argument("--quick", action="store_true", help="all but the bus flood (which takes both cores of a "
-                   "small machine)")
+                   "console, reset; the robot link's (issue 29): kill, bigseam, and with --link rsi inject, junk, "
+                   "ipoc; with --secure also unauthorised, uncertified, token, aclflood, partition; default all)")
+    q.add_argument("--link", choices=["alter", "rsi"], default="alter",
+                   help="the twin's robot link: the Puma's serial ALTER line (default) or RSI over UDP (12 ms); "
+                   "the rows that do not apply to it are skipped, with the reason")
+    q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
+                   "cores of a small machine); with --secure also issue 19's but the floods and the partition")
     q.add_argument("--scenario", dest="faults_scenario", default="static",
                    help="scenario of the live twin (default static)")
     q.add_argument("--run-dir", help="keep the twin's recordings here (default: a temporary directory, removed)")

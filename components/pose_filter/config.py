@@ -67,6 +67,10 @@ class PoseFilterConfig:
     # Prediction to the ALTER cycle being commanded.
     predict_ahead_ms: Annotated[float, Range(0, 1000, "ms")] = live(28.0, "how far past a robot state's stamp the state is predicted")
     lost_after_ms: Annotated[float, Range(1, 60000, "ms")] = live(250.0, "no measurement for this long: status LOST")
+    # Hysteresis: a lost track is tracked again only after this many measurements accepted
+    # in a row, none more than lost_after_ms after the one before (the first acquisition is
+    # at once). A track that keeps dropping out stays LOST instead of flapping.
+    reacquire_measurements: Annotated[int, Range(1, 1000, "measurements")] = live(3, "after LOST, measurements accepted in a row before the status is tracked again")
     # Robot poses at the image stamp: interpolate, or extrapolate at most this far.
     max_extrapolation_ms: Annotated[float, Range(0, 1000, "ms")] = 60.0
     # A measurement newer than the latest robot state waits (at most this long) for the

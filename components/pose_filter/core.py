@@ -21,6 +21,7 @@ from collections import deque
 
 import numpy as np
 
+from humanpt.alter.limiter import EventLimiter, suffix
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
@@ -32,7 +33,7 @@ from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 
 TOPIC_STATE = "pose_filter/tob_state"
 STILL_DRIFT_WINDOW = 15  # measurements (0.5 s at 30 images/s) whose mean offset shows a drift
-MANOEUVRE_EVENT_NS = 1_000_000_000  # at most one "manoeuvre" event per second
+EVENT_INTERVAL_NS = 1_000_000_000  # at most one event of a code per second of input time (rate-limited codes)
 
 
 class PoseFilterCore(Core):
@@ -61,13 +62,22 @@ class PoseFilterCore(Core):
         # never on a burst of inconsistent wrong poses (wrong pairings, reflections).
         self._rejected: deque[tuple[int, np.ndarray, np.ndarray, bool]] = deque(maxlen=config.reset_after_rejects)
         self._manoeuvring = False  # a manoeuvre mode probability above 0.5
-        self._manoeuvre_said_ns: int | None = None
-        self._manoeuvres_unsaid = 0
+        # "manoeuvre", "no_robot_pose", "out_of_order": at most one a second of input time,
+        # the next one saying how many were held back (robot states stamped 2 s off gave
+        # 24 444 "no_robot_pose" in 4 s, issue 29).
+        self._limiter = EventLimiter(EVENT_INTERVAL_NS)
         self.manoeuvres = 0
         self.gated_total = 0
         self.accepted = 0
         self.last_measurement_ns: int | None = None
         self.last_status = pb.TOB_STATUS_LOST
+        # Tracking hysteresis: LOST as soon as no measurement came for lost_after_ms, but once
+        # lost, tracked again only after reacquire_measurements accepted in a row, none more
+        # than lost_after_ms after the one before (a track that keeps dropping out stays
+        # LOST instead of flapping: 48 LOST/TRACK switches in 4 s, issue 29).
+        self._tracking = False  # published as tracked (once a measurement is in)
+        self._lost_once = False  # the track was lost after the first acquisition
+        self._run = 0  # measurements accepted in a row, each within lost_after_ms of the one before
         self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
         self._fresh = False
         self._pose_at_measurement: tuple[tuple[int, int], pb.Pose] | None = None
@@ -199,7 +209,9 @@ class PoseFilterCore(Core):
         target_ns = robot_stamp_ns + int(c.predict_ahead_ms * 1e6)
         lost = (self.last_measurement_ns is None
                 or robot_stamp_ns - self.last_measurement_ns > c.lost_after_ms * 1e6)
-        status = pb.TOB_STATUS_LOST if lost or not self.kf.initialised else self.last_status
+        if lost and self._tracking:
+            self._tracking, self._lost_once, self._run = False, True, 0
+        status = pb.TOB_STATUS_LOST if lost or not self._tracking or not self.kf.initialised else self.last_status
         out = pb.TobState(header=self.next_header(TOPIC_STATE, target_ns, "world"), status=status,
                           gated_outliers=self.gated_total, cycle=cycle, measurements=self.accepted)
         if self.kf.initialised:
@@ -238,12 +250,12 @@ class PoseFilterCore(Core):
                 self._waiting_said = True
                 return [self.event(t_ns, pb.SEVERITY_INFO, "waiting_for_robot",
                                    "no robot state yet: measurements dropped until the first one")]
-            return [self.event(t_ns, pb.SEVERITY_WARNING, "no_robot_pose",
-                               f"no robot state near the image stamp {stamp} ns; measurement dropped")]
+            return self._limited(t_ns, pb.SEVERITY_WARNING, "no_robot_pose",
+                                 f"no robot state near the image stamp {stamp} ns; measurement dropped")
         world_T_camera = world_T_flange @ self.flange_T_camera_m
         if self.kf.initialised and stamp < self.kf.t_ns:
-            return [self.event(t_ns, pb.SEVERITY_DEBUG, "out_of_order",
-                               f"measurement at {stamp} ns is older than the filter ({self.kf.t_ns} ns)")]
+            return self._limited(t_ns, pb.SEVERITY_DEBUG, "out_of_order",
+                                 f"measurement at {stamp} ns is older than the filter ({self.kf.t_ns} ns)")
         try:
             if msg.status == pb.TOB_STATUS_FULL:
                 world_T_tob = world_T_camera @ from_pose(msg.camera_T_tob)
@@ -432,16 +444,23 @@ class PoseFilterCore(Core):
         if not started:
             return []
         self.manoeuvres += 1
-        if self._manoeuvre_said_ns is not None and t_ns - self._manoeuvre_said_ns < MANOEUVRE_EVENT_NS:
-            self._manoeuvres_unsaid += 1
-            return []
         what = " and ".join(w for w, p in (("moves", p_trans), ("turns", p_rot)) if p > 0.5)
-        more = f" ({self._manoeuvres_unsaid} more since the last report)" if self._manoeuvres_unsaid else ""
-        self._manoeuvre_said_ns, self._manoeuvres_unsaid = t_ns, 0
-        return [self.event(t_ns, pb.SEVERITY_INFO, "manoeuvre",
-                           f"the target {what} abruptly: the manoeuvring model follows it{more}")]
+        return self._limited(t_ns, pb.SEVERITY_INFO, "manoeuvre",
+                             f"the target {what} abruptly: the manoeuvring model follows it")
+
+    def _limited(self, t_ns: int, severity: int, code: str, text: str) -> list[Output]:
+        """The event, unless one of ``code`` went out less than a second of input time ago
+        (then it is counted, and the next one says how many were held back)."""
+        held = self._limiter.allow(code, t_ns)
+        return [] if held is None else [self.event(t_ns, severity, code, text + suffix(held))]
 
     def _accepted(self, stamp: int, status: int) -> None:
+        gap_ok = (self.last_measurement_ns is not None
+                  and stamp - self.last_measurement_ns <= self.config.lost_after_ms * 1e6)
+        if not gap_ok and self.last_measurement_ns is not None:
+            self._lost_once = True  # a gap over lost_after_ms: lost in between
+        self._run = self._run + 1 if gap_ok else 1
+        self._tracking = not self._lost_once or self._run >= self.config.reacquire_measurements
         self.rejects_in_a_row = 0
         self._rejected.clear()
         self.accepted += 1

@@ -153,6 +153,31 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     return dataclasses.replace(cfg, operator=op), sections
 
 
+ROUTER_START_TIMEOUT_S = 120.0  # bounds a hang: a router that never listens
+
+
+def wait_listening(host: str, port: int, timeout_s: float, alive: Callable[[], bool] = lambda: True,
+                   stop: threading.Event | None = None) -> str:
+    """Wait until something accepts TCP connections on ``host:port`` (a router that
+    finished starting); "" then, else why not: the process died (``alive()`` false), ``stop``
+    was set, or ``timeout_s`` passed."""
+    deadline = time.monotonic() + timeout_s
+    pause = stop or threading.Event()
+    why = "nothing listened"
+    while time.monotonic() < deadline:
+        if not alive():
+            return f"it exited before listening on {host}:{port}"
+        if stop is not None and stop.is_set():
+            return "stopped"
+        try:
+            with socket.create_connection((host, port), timeout=1.0):
+                return ""
+        except OSError as e:
+            why = f"nothing listens on {host}:{port} ({e.strerror or e})"
+        pause.wait(0.05)  # a port being opened tells no one: try again shortly
+    return f"{why} after {timeout_s:g} s"
+
+
 def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], timeout_s: float, procs) -> bool:
     deadline = time.monotonic() + timeout_s
     with open_tool_session(cfg.runtime, patient=True) as s:
@@ -266,8 +291,15 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     with open(run_dir / "processes.log", "w") as log:
         ctl._log = log
         try:
-            ctl._spawn("router", base + ["router", "--config", str(cfg_path)])
-            time.sleep(0.5)
+            router = ctl._spawn("router", base + ["router", "--config", str(cfg_path)])
+            # The components start once the router listens: started beside it on a loaded
+            # machine they starved its start-up past their 30 s connect timeout (issue 29
+            # item 15: "cannot reach the router" at load 8-12).
+            why = wait_listening("127.0.0.1", port, ROUTER_START_TIMEOUT_S, alive=lambda: router.poll() is None,
+                                 stop=stop)
+            if why:
+                failed.append(f"the router did not listen: {why}; see {run_dir / 'processes.log'}")
+                return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, time.time_ns(), failed)
             for name in comps + ["operator"]:
                 p = ctl._spawn(name, base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)])
                 if name == "operator":

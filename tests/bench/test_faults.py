@@ -11,9 +11,11 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from humanpt.runtime.recording import read
+from humanpt.schemas.convert import from_pose
 from tests.conftest import ROOT, humanpt_cmd, run_cli
 
 # The rows --quick must print, in order: the attack set of issue 14 without the bus flood.
@@ -26,7 +28,8 @@ QUICK_FAULTS = [
     "bad console commands",
     "reset_fault without operator",
 ]
-COLUMNS = ["fault", "reaction", "robot held", "recovered", "data lost", "note"]
+COLUMNS = ["fault", "verdict", "reaction", "robot held", "recovered", "data lost", "note"]
+HELD = re.compile(r"yes \(([\d.]+) / ([\d.]+) mm\)")
 
 
 def table(stdout: str) -> dict[str, dict[str, str]]:
@@ -66,14 +69,15 @@ def test_quick_attacks_are_seen_held_and_recovered(tmp_path):
     rows = table(p.stdout)
     assert list(rows) == QUICK_FAULTS
     for fault, row in rows.items():
+        # The verdicts: each attack answered as it should, the robot held. (Whether the loop
+        # stayed up, "recovered", is liveness: reported, not asserted; issue 31.)
+        assert row["verdict"] == "ok", (fault, row)
         assert row["reaction"].endswith(" ms"), (fault, row)
-        assert float(row["reaction"].split()[0]) < 5000, (fault, row)
         # held: "yes (largest step / limit mm)", the limit the demo gateway's 100 mm/s x 28 ms
-        held = re.fullmatch(r"yes \(([\d.]+) / ([\d.]+) mm\)", row["robot held"])
+        held = HELD.fullmatch(row["robot held"])
         assert held, (fault, row)
         assert float(held[2]) == pytest.approx(100.0 * 0.028)
         assert float(held[1]) <= 1.05 * float(held[2])
-        assert re.fullmatch(r"yes \(\d+ ms(; down \d+ ms)?\)", row["recovered"]), (fault, row)
         assert re.fullmatch(r"robot_state \d+, tob_state \d+", row["data lost"]), (fault, row)
         assert not row["note"].startswith("UNEXPECTED"), (fault, row)
     assert "5/5 keys refused" in rows[QUICK_FAULTS[0]]["note"]
@@ -116,16 +120,31 @@ def test_ctrl_c_ends_the_twin(tmp_path):
     assert leftovers(run_dir) == []
 
 
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(150)
 def test_bus_flood_holds_the_robot(tmp_path):
+    """Issue 14 item 6 (and issue 31: this row accepted any exit status): 2 s of junk
+    commands at full rate on the command key. The verdict is safety: the robot's largest
+    flange step in the window within the gateway's per-cycle limit (100 mm/s x 28 ms,
+    + 5 %), read from the simulated robot's own recording too; exit status 0 (the verdict
+    held). Whether the loop rides out a flood that takes both cores (the bench and the
+    router) is liveness, machine-dependent: the row reports it (robot states' largest gap,
+    late commands, link restarts) and the README gives the figures; it is not asserted."""
     run_dir = tmp_path / "run"
-    p = run_cli("bench", "faults", "--only", "flood", "--run-dir", str(run_dir), timeout=100)
-    assert p.returncode in (0, 1), p.stdout + p.stderr
+    p = run_cli("bench", "faults", "--only", "flood", "--run-dir", str(run_dir), timeout=130)
+    assert p.returncode == 0, p.stdout + p.stderr
     row = table(p.stdout)["bus flood (2 s junk commands)"]
-    assert row["robot held"].startswith("yes ("), row
-    assert re.search(r"robot_state max gap \d+ ms", row["note"]), row
+    assert row["verdict"] == "ok", row
+    held = HELD.fullmatch(row["robot held"])
+    assert held, row
+    limit = 100.0 * 0.028
+    assert float(held[2]) == pytest.approx(limit)
+    assert float(held[1]) <= 1.05 * limit, row
+    assert re.search(r"\| loop: robot_state max gap \d+ ms", row["note"]), row
     assert leftovers(run_dir) == []
-    # What this test holds the flood to is safety: the robot held and nothing was left
-    # running. Whether the loop rides out a flood that takes both cores (the bench and the
-    # router) is machine-dependent and is what the bench's table reports (the closing note
-    # and README say it is not yet met on 2 shared cores); it is not asserted here.
+    # The robot's own truth: no step over the limit per cycle through the whole run.
+    truth = [e.decode() for e in read(run_dir / "sim_robot.mcap").outputs if e.topic == "sim_robot/truth"]
+    assert len(truth) > 100
+    xyz = np.array([from_pose(t.world_T_flange)[:3, 3] for t in truth])
+    stamps = np.array([t.header.stamp_ns for t in truth])
+    cycles = np.maximum(1, np.round(np.diff(stamps) / 28e6))
+    assert (1e3 * np.linalg.norm(np.diff(xyz, axis=0), axis=1) / cycles).max() <= 1.05 * limit

@@ -1,0 +1,398 @@
+"""Issue 29's attacks on the robot link, as rows of ``humanpt bench faults``.
+
+Each reproduces the attack as it was done, against the live twin (real processes, the real
+UDP link over loopback or the Puma's serial line behind a pty), and reports the figures:
+
+- ``kill`` (item 1; ALTER and RSI): the robot plays a straight line at 40 mm/s (the
+  controller's ``playback``, as ``humanpt path play`` sends it); the gateway is killed
+  (SIGKILL) mid-motion; how far the flange moved after the kill, against the bound of
+  :data:`KILL_BOUND_CYCLES` cycles at the gateway's per-cycle limit (the correction in flight
+  and the one the robot had; a robot repeating its last correction with HOLDON moved
+  50.1 mm in 99 cycles). The gateway is started again, RSI restarted at the robot if it
+  stopped.
+- ``inject`` (item 5; RSI): 80 ``<Rob>`` with the robot's next IPOC from another UDP port of
+  the robot's host, one a robot cycle: answers the attacker got (must be 0), and the robot's
+  late replies meanwhile.
+- ``junk`` (item 6; RSI): 3 s of junk datagrams from another port, as fast as this process
+  sends them: RSI must still run afterwards (no ``rsi_stopped``; robot states go on).
+- ``ipoc`` (item 7; RSI): one ``<Rob>`` with IPOC + 500 cycles (under the 1000-cycle jump
+  limit) from another port: no fault latched. (Sent from another port: a datagram from the
+  robot's own port needs raw sockets, root; the gateway taking it from any port of the host
+  is item 5's defect.)
+- ``bigseam`` (item 9; ALTER and RSI): a seam of 1795 points (out and back 20 mm, timed at
+  20 mm/s) played as ``humanpt path play`` sends it: refused before anything is sent, or
+  played without a late or stale command and without a fault.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import socket
+import threading
+import time
+
+import numpy as np
+
+from humanpt.bench.faults import (
+    REACTION_TIMEOUT_S,
+    Attack,
+    Ctx,
+    FaultRow,
+    _console,
+    _ms,
+    restart_rsi,
+    rsi_stopped_since,
+)
+from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import from_pose
+
+KILL_SPEED_MM_S = 40.0        # the robot's speed when the gateway is killed (issue 29 item 1's)
+KILL_BOUND_CYCLES = 2         # after the kill: the correction in flight and the one the robot had
+KILL_LINE_MM = 150.0          # the line played (at 40 mm/s: 3.75 s)
+KILL_WAIT_S = 3.0             # for the robot to reach 40 mm/s (else killed while it moves, MOVING_MM_S at least)
+MOVING_MM_S = 5.0
+INJECT_ROBS = 80              # item 5: <Rob>s sent by the attacker
+JUNK_S = 3.0                  # item 6: the junk flood's length
+IPOC_JUMP_CYCLES = 500        # item 7: the spoofed IPOC's jump (under the gateway's 1000-cycle limit)
+SEAM_POINTS = 1795            # item 9: the seam's points (the issue's)
+SEAM_MM = 20.0                # out and back this far
+SEAM_SPEED_MM_S = 20.0
+LATE_CODES = ("late_command", "late_commands", "deadline_missed", "stale_command")
+
+
+# -- helpers ----------------------------------------------------------------------------------
+def _flange_mm(state) -> np.ndarray:
+    T = from_pose(state.world_T_flange)
+    T[:3, 3] *= 1e3
+    return T
+
+
+def _truth_after(ctx: Ctx, wall_ns: int) -> list[tuple[int, np.ndarray]]:
+    """(stamp ns, flange position mm) of sim_robot/truth stamped after ``wall_ns`` by the
+    robot process alive then (a restarted one starts again where it was mounted)."""
+    out = []
+    for _, m in ctx.mon.since("sim_robot/truth", 0.0):
+        if m.header.stamp_ns > wall_ns:
+            if out and m.header.seq <= out[-1][2]:
+                break
+            out.append((m.header.stamp_ns, 1e3 * from_pose(m.world_T_flange)[:3, 3], m.header.seq))
+    return [(t, p) for t, p, _ in out]
+
+
+def _truth_at(ctx: Ctx, wall_ns: int) -> np.ndarray | None:
+    before = [m for _, m in ctx.mon.since("sim_robot/truth", 0.0) if m.header.stamp_ns <= wall_ns]
+    return None if not before else 1e3 * from_pose(before[-1].world_T_flange)[:3, 3]
+
+
+def _speed_mm_s(ctx: Ctx, n: int = 6) -> float:
+    """The flange's speed over the latest ``n`` truth messages (mm/s)."""
+    with ctx.mon.lock:
+        last = [m for _, m in ctx.mon.msgs["sim_robot/truth"][-n:]]
+    if len(last) < 2 or last[-1].header.stamp_ns <= last[0].header.stamp_ns:
+        return 0.0
+    d = np.linalg.norm(from_pose(last[-1].world_T_flange)[:3, 3] - from_pose(last[0].world_T_flange)[:3, 3])
+    return 1e3 * float(d) / ((last[-1].header.stamp_ns - last[0].header.stamp_ns) * 1e-9)
+
+
+def _wait(pred, timeout_s: float, ctx: Ctx) -> bool:
+    """Wait on the monitor (woken by every message it gets) until ``pred()``; False after
+    ``timeout_s``. ``pred`` reads the monitor, so it is called without its lock held."""
+    deadline = time.monotonic() + timeout_s
+    while not pred():
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return False
+        with ctx.mon.changed:
+            # (a message that came between pred() and here is seen within this bound)
+            ctx.mon.changed.wait(min(left, 0.02))
+    return True
+
+
+def _tool_now_mm_deg(ctx: Ctx) -> tuple[np.ndarray, float] | None:
+    """(the tool's pose now, X mm deg in the world; +1 or -1: the x direction toward the
+    middle of the gateway's envelope), from the latest robot state."""
+    from humanpt.controller.config import ControllerConfig
+
+    last = ctx.mon.latest("robot_gateway/robot_state")
+    if last is None:
+        return None
+    ctl = ctx.file_cfg.component("controller", ControllerConfig)
+    world_T_tool = _flange_mm(last[1]) @ transform_from_x(np.asarray(ctl.flange_T_tool_x, dtype=float))
+    x = x_from_transform(world_T_tool)
+    mid = 0.5 * (ctx.gw.envelope_min_mm[0] + ctx.gw.envelope_max_mm[0])
+    return x, (1.0 if mid >= _flange_mm(last[1])[0, 3] else -1.0)
+
+
+def _line(x0: np.ndarray, sign: float, length_mm: float, n: int, out_and_back: bool) -> np.ndarray:
+    """``n`` tool poses from ``x0`` along world x (``sign``), ``length_mm`` (and back)."""
+    s = np.linspace(0.0, 1.0, n)
+    d = length_mm * (1.0 - np.abs(1.0 - 2.0 * s)) if out_and_back else length_mm * s
+    pts = np.repeat(np.asarray(x0, dtype=float)[None, :], n, axis=0)
+    pts[:, 0] += sign * d
+    return pts
+
+
+def _events(ctx: Ctx, t0: float, source: str, codes: tuple[str, ...]) -> list[pb.Event]:
+    return [ev for ev in ctx.mon.events_since(t0) if ev.source == source and ev.code in codes]
+
+
+def _first(ctx: Ctx, t0: float, codes: tuple[str, ...], source: str | None = None):
+    """(time, event) of the first event since ``t0`` with one of ``codes``, or None (now)."""
+    return ctx.mon.wait_event(t0, codes, source, timeout_s=0.0) if codes else None
+
+
+def _late_replies(ctx: Ctx, t0: float) -> int:
+    """Late replies the simulated RSI controller reported since ``t0`` (each run of them is
+    one ``late_reply``, its length told when answers are in time again, or by rsi_stopped)."""
+    n = 0
+    for ev in ctx.mon.events_since(t0):
+        if ev.source != "sim_robot":
+            continue
+        m = re.search(r"after (\d+) late", ev.text) if ev.code == "reply_in_time" else (
+            re.search(r"(\d+) late answers in a row", ev.text) if ev.code == "rsi_stopped" else None)
+        if m:
+            n += int(m[1])
+    return n
+
+
+def _rob(ctx: Ctx, cycles_ahead: int) -> bytes:
+    """A ``<Rob>`` for the robot's cycle ``cycles_ahead`` after its latest robot state, with
+    its pose: what the robot itself would send (IPOC = cycle x cycle time + the simulated
+    controller's first IPOC's remainder)."""
+    from humanpt.rsi.protocol import RobState, encode_rob
+    from humanpt.sim_robot.rsi import FIRST_IPOC
+
+    cycle_ms = int(ctx.gw.cycle_period_ms)
+    _, st = ctx.mon.latest("robot_gateway/robot_state")
+    base_T_flange = invert_transform(transform_from_x(np.asarray(ctx.gw.world_T_base_mm_deg, dtype=float))) \
+        @ _flange_mm(st)
+    ipoc = (st.cycle + cycles_ahead) * cycle_ms + FIRST_IPOC % cycle_ms
+    return encode_rob(RobState(ipoc, tuple(float(v) for v in x_from_transform(base_T_flange)), (0.0,) * 6, 0))
+
+
+class Attacker:
+    """A UDP socket of the robot's host on a port of its own; counts what comes back."""
+
+    def __init__(self, ctx: Ctx):
+        from humanpt.rsi.config import parse_address
+
+        self.target = parse_address(ctx.gw.udp_bind)
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((self.target[0], 0))
+        self.sock.settimeout(0.05)
+        self.answers = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, daemon=True, name="bench-attacker")
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.sock.recvfrom(65536)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            self.answers += 1
+
+    def send(self, data: bytes) -> None:
+        try:
+            self.sock.sendto(data, self.target)
+        except OSError:  # a full socket buffer under the flood: the datagram is lost
+            pass
+
+    def close(self, linger_s: float = 0.0) -> None:
+        """Stop reading, after ``linger_s`` more of answers (late ones count too)."""
+        self._stop.wait(linger_s)
+        self._stop.set()
+        self._thread.join(1.0)
+        self.sock.close()
+
+
+# -- the attacks ------------------------------------------------------------------------------
+def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
+    """Item 1: the gateway SIGKILLed while the robot plays a line at 40 mm/s."""
+    if ctx.control is None:
+        row.note = "no handle on the twin's processes: cannot kill the gateway"
+        return
+    start = _tool_now_mm_deg(ctx)
+    if start is None:
+        row.note = "no robot state"
+        return
+    x0, sign = start
+    t0 = time.monotonic()
+    pts = _line(x0, sign, KILL_LINE_MM, 31, out_and_back=False)
+    got = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(), "speed_mm_s": KILL_SPEED_MM_S},
+                   ("playback_started", "bad_command"))
+    started = [e for e in ctx.mon.events_since(t0) if e.source == "controller" and e.code == "playback_started"]
+    if got is None or not started:
+        row.note = "the controller did not start the playback: " + (
+            "; ".join(e.text for e in _events(ctx, t0, "controller", ("bad_command",))) or "no answer")
+        return
+    bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm
+    try:
+        # Killed at the playback's speed; on a loaded machine the robot may lag its carrot
+        # and go slower: then killed while it moves, at the speed it has (in the note).
+        if not _wait(lambda: _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S, KILL_WAIT_S, ctx) \
+                and not _wait(lambda: _speed_mm_s(ctx) >= MOVING_MM_S, KILL_WAIT_S, ctx):
+            row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
+            return
+        speed = _speed_mm_s(ctx)
+        t_kill, wall_kill = time.monotonic(), time.time_ns()
+        ctx.control.kill("robot_gateway")
+        p_kill = _truth_at(ctx, wall_kill)
+
+        def settled() -> bool:
+            if rsi_stopped_since(ctx, t_kill) is not None or _events(ctx, t_kill, "sim_robot", ("fault",)):
+                return True
+            tr = _truth_after(ctx, wall_kill)
+            # still: the last half second of truth within 0.01 mm
+            recent = [p for t, p in tr if t >= tr[-1][0] - 500_000_000] if tr else []
+            return (len(tr) > 1 and tr[-1][0] - tr[0][0] > 500_000_000
+                    and float(np.ptp(np.array(recent), axis=0).max()) < 0.01)
+        _wait(settled, 10.0, ctx)
+        tr = _truth_after(ctx, wall_kill)
+        moved = max((float(np.linalg.norm(p - p_kill)) for _, p in tr), default=0.0) if p_kill is not None else math.nan
+        stop = rsi_stopped_since(ctx, t_kill) or next(iter(_events(ctx, t_kill, "sim_robot", ("fault",))), None)
+        row.max_step_mm, row.limit_mm = moved, bound
+        row.held = moved <= bound
+        row.expected = bool(row.held)
+        seen = _first(ctx, t_kill, ("late_reply", "rsi_stopped", "fault", "robot_missed", "link_down"))
+        row.reaction_ms = _ms(seen and seen[0], t_kill)
+        cycles = (tr[-1][0] - wall_kill) / (1e6 * ctx.gw.cycle_period_ms) if tr else 0.0
+        row.note = (f"killed at {speed:.1f} mm/s; the robot moved {moved:.2f} mm after the kill (bound "
+                    f"{KILL_BOUND_CYCLES} cycles x {ctx.gw.max_step_mm:.2f} mm = {bound:.2f} mm) in {cycles:.0f} cycles"
+                    + (f"; sim_robot: {stop.code}" if stop else ""))
+    finally:
+        _console(ctx, "controller", "stop", {}, ("command",))
+        if ctx.control.pid("robot_gateway") is None:
+            ctx.control.start("robot_gateway")
+        if ctx.link == "rsi" and rsi_stopped_since(ctx, t0) is not None:
+            restart_rsi(ctx)
+        ctx.mon.wait_event(t0, ("link_up",), "robot_gateway", timeout_s=60.0)
+        _console(ctx, "controller", "track", {}, ("command",))
+
+
+def attack_inject(ctx: Ctx, row: FaultRow) -> None:
+    """Item 5: 80 <Rob> with the robot's next IPOC from another port, one a cycle."""
+    att = Attacker(ctx)
+    t0 = time.monotonic()
+    try:
+        for _ in range(INJECT_ROBS):
+            last = ctx.mon.latest("robot_gateway/robot_state")
+            att.send(_rob(ctx, 1))
+            # paced by the robot: the next robot state (or a cycle and a half without one)
+            _wait(lambda last=last: ctx.mon.latest("robot_gateway/robot_state") is not last,
+                  1.5 * ctx.cycle_s, ctx)
+    finally:
+        att.close(linger_s=0.2)
+    stopped = rsi_stopped_since(ctx, t0)
+    late = _late_replies(ctx, t0)
+    first = ctx.mon.wait_event(t0, ("late_reply",), "sim_robot", timeout_s=0.0)
+    row.expected = att.answers == 0 and stopped is None
+    row.reaction_ms = None
+    row.note = (f"{att.answers}/{INJECT_ROBS} answers to the attacker; the robot: {late} late replies"
+                + (f" (first {_ms(first[0], t0):.0f} ms in)" if first else "")
+                + (f"; {stopped.code}" if stopped else ""))
+
+
+def attack_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
+    """Item 6: junk datagrams from another port for ``seconds``, as fast as they go."""
+    att = Attacker(ctx)
+    junk = [b"junk", b"<Rob", b"\x00" * 64, b"<Rob><IPOC>x</IPOC></Rob>", bytes(range(256))]
+    t0 = time.monotonic()
+    n = 0
+    try:
+        while time.monotonic() - t0 < seconds:
+            for j in junk * 40:
+                att.send(j)
+            n += 40 * len(junk)
+    finally:
+        t1 = time.monotonic()
+        att.close()
+    # RSI still running: a robot state stamped after the flood, and no rsi_stopped.
+    wall1 = time.time_ns()
+    going = _wait(lambda: (ctx.mon.latest("robot_gateway/robot_state") or (0, pb.RobotState()))[1].header.stamp_ns
+                  > wall1, REACTION_TIMEOUT_S, ctx)
+    stopped = rsi_stopped_since(ctx, t0)
+    late = _late_replies(ctx, t0)
+    downs = len(_events(ctx, t0, "robot_gateway", ("link_down",)))
+    row.expected = stopped is None and going
+    row.note = (f"{n / (t1 - t0):.0f} datagrams/s for {t1 - t0:.1f} s; RSI "
+                + ("still running" if row.expected else f"STOPPED ({stopped.code if stopped else 'no robot state'})")
+                + f"; the robot: {late} late replies; {att.answers} answers to the attacker")
+    row.liveness = f"{downs} link_down" if downs else ""
+
+
+def attack_ipoc_jump(ctx: Ctx, row: FaultRow) -> None:
+    """Item 7: one <Rob> with IPOC + 500 cycles from another port: no fault latched."""
+    att = Attacker(ctx)
+    t0 = time.monotonic()
+    try:
+        att.send(_rob(ctx, IPOC_JUMP_CYCLES))
+    finally:
+        att.close(linger_s=0.2)
+    # What a latched fault looks like: the gateway's "fault" event, robot states flagged
+    # faulted; a second (tens of cycles) to show, bounded.
+    fault = ctx.mon.wait_event(t0, ("fault",), "robot_gateway", timeout_s=1.0)
+    flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
+    seen = [e for e in ctx.mon.events_since(t0) if e.source == "robot_gateway"]
+    row.expected = fault is None and not flagged
+    first = _first(ctx, t0, tuple({e.code for e in seen}), "robot_gateway")
+    row.reaction_ms = _ms(first and first[0], t0)
+    row.note = ("no fault latched" if row.expected else "FAULT latched: " + (fault[1].text if fault else "robot state"))
+    if seen:
+        row.note += "; robot_gateway: " + ", ".join(sorted({e.code for e in seen}))
+
+
+def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
+    """Item 9: a 1795-point seam played as `humanpt path play` sends it."""
+    start = _tool_now_mm_deg(ctx)
+    if start is None:
+        row.note = "no robot state"
+        return
+    x0, sign = start
+    pts = _line(x0, sign, SEAM_MM, SEAM_POINTS, out_and_back=True)
+    s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts[:, :3], axis=0), axis=1))]
+    times = s / SEAM_SPEED_MM_S
+    t0 = time.monotonic()
+    try:
+        hit = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(),
+                                                       "times_s": times.round(6).tolist()},
+                       ("playback_started", "bad_command"))
+        answer = next((e for e in ctx.mon.events_since(t0) if e.source == "controller"
+                       and e.code in ("playback_started", "bad_command")), None)
+        row.reaction_ms = _ms(hit, t0)
+        if answer is None:
+            row.note = "the controller did not answer"
+            return
+        if answer.code == "bad_command":
+            late = _events(ctx, t0, "robot_gateway", LATE_CODES + ("fault",))
+            row.expected = not late
+            row.note = f"refused before sending: {answer.text}" + (f"; {len(late)} late/fault events" if late else "")
+            return
+        done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + 30.0)
+        late = _events(ctx, t0, "robot_gateway", LATE_CODES)
+        faults = _events(ctx, t0, "robot_gateway", ("fault",))
+        flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
+        row.expected = done is not None and not late and not faults and not flagged
+        row.note = (f"played ({SEAM_POINTS} points, {times[-1]:.1f} s): "
+                    + ("done" if done else "NOT done") + f"; {len(late)} late/stale-command events"
+                    + (f" ({', '.join(sorted({e.code for e in late}))})" if late else "")
+                    + ("; FAULT latched" if faults or flagged else ""))
+    finally:
+        _console(ctx, "controller", "stop", {}, ("command",))
+        _console(ctx, "controller", "track", {}, ("command",))
+
+
+LINK_ATTACKS: tuple[Attack, ...] = (
+    Attack("kill", "gateway killed mid-motion (40 mm/s)", attack_gateway_killed, keeps_loop=False),
+    Attack("inject", "<Rob> injection from another UDP port (80)", attack_inject, keeps_loop=False, links=("rsi",)),
+    Attack("junk", f"junk UDP flood from another port ({JUNK_S:g} s)", attack_junk, keeps_loop=False,
+           links=("rsi",)),
+    Attack("ipoc", f"spoofed <Rob>, IPOC +{IPOC_JUMP_CYCLES} cycles", attack_ipoc_jump, keeps_loop=False,
+           links=("rsi",)),
+    Attack("bigseam", f"path play of a {SEAM_POINTS}-point seam", attack_big_seam, keeps_loop=False),
+)

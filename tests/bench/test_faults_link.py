@@ -1,0 +1,151 @@
+"""``humanpt bench faults`` rows of issue 29: the attacks on the robot link (the gateway
+killed mid-motion, <Rob> injection, a junk flood and a spoofed IPOC from another UDP port,
+a 1795-point seam played), over RSI and ALTER, against the live twin (router + seven
+processes, real UDP sockets / a real pty); and the bench's start (issue 29 item 15): it
+waits on the router the twin started, and says so with exit status 2 when it never comes.
+
+Asserted: the verdicts (held within the bound, refused, no fault latched, RSI still
+running), never rates. Until the fixes of items 1, 5, 6, 7 and 9 (the RSI link, the
+controller) are in, the rows show the defects and these tests fail on them (reproduced:
+52 mm after the kill, 74/80 answers to the attacker, RSI stopped, a fault latched, a late
+command)."""
+
+from __future__ import annotations
+
+import re
+import threading
+
+import pytest
+
+from humanpt.bench.faults import open_router_session
+from humanpt.runtime.config import load
+from humanpt.twin.live import wait_listening
+from tests.bench.test_faults import HELD, leftovers, table
+from tests.conftest import free_port, run_cli, write_config
+
+ROWS = {
+    "kill": "gateway killed mid-motion (40 mm/s)",
+    "inject": "<Rob> injection from another UDP port (80)",
+    "junk": "junk UDP flood from another port (3 s)",
+    "ipoc": "spoofed <Rob>, IPOC +500 cycles",
+    "bigseam": "path play of a 1795-point seam",
+}
+
+
+def _kill_within_bound(row: dict[str, str], cycle_limit_mm: float) -> None:
+    # "robot held": the distance moved after the kill / the bound: 2 cycles at the limit.
+    held = HELD.fullmatch(row["robot held"])
+    assert held, row
+    assert float(held[2]) == pytest.approx(2 * cycle_limit_mm)
+    assert float(held[1]) <= float(held[2]), row
+    assert re.search(r"killed at [\d.]+ mm/s", row["note"]), row
+
+
+def _seam_played_or_refused(row: dict[str, str]) -> None:
+    note = row["note"]
+    assert note.startswith("refused before sending") or re.match(
+        r"played \(1795 points, [\d.]+ s\): done; 0 late/stale-command events", note), row
+
+
+@pytest.mark.timeout(420)
+def test_link_rows_over_rsi(tmp_path):
+    run_dir = tmp_path / "run"
+    p = run_cli("bench", "faults", "--link", "rsi", "--only", ",".join(ROWS), "--run-dir", str(run_dir),
+                timeout=400)
+    rows = table(p.stdout)
+    assert list(rows) == list(ROWS.values()), p.stdout + p.stderr
+    assert leftovers(run_dir) == []
+    # Every row judged before any assertion fails: the message names each defect left.
+    checks = {
+        "kill": lambda: _kill_within_bound(rows[ROWS["kill"]], 100.0 * 0.012),  # 100 mm/s x 12 ms
+        # Item 5: no answer reaches the attacker (issue: 73 of 80).
+        "inject": lambda: _assert(rows[ROWS["inject"]]["note"].startswith("0/80 answers to the attacker")),
+        # Item 6: RSI still runs after 3 s of junk (issue: rsi_stopped in 2 of 2 runs).
+        "junk": lambda: _assert("RSI still running" in rows[ROWS["junk"]]["note"]),
+        # Item 7: one spoofed IPOC + 500 latches no fault (issue: "498 consecutive missed cycles").
+        "ipoc": lambda: _assert(rows[ROWS["ipoc"]]["note"].startswith("no fault latched")),
+        "bigseam": lambda: _seam_played_or_refused(rows[ROWS["bigseam"]]),
+    }
+    failed = []
+    for key, check in checks.items():
+        try:
+            check()
+            assert rows[ROWS[key]]["verdict"] == "ok"
+        except AssertionError:
+            failed.append(f"{key}: {rows[ROWS[key]]}")
+    assert not failed, "\n".join(failed)
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
+def _assert(ok: bool) -> None:
+    assert ok
+
+
+@pytest.mark.timeout(300)
+def test_link_rows_over_alter(tmp_path):
+    run_dir = tmp_path / "run"
+    p = run_cli("bench", "faults", "--only", "kill,bigseam,inject", "--run-dir", str(run_dir), timeout=280)
+    rows = table(p.stdout)
+    assert list(rows) == [ROWS["kill"], ROWS["bigseam"], ROWS["inject"]], p.stdout + p.stderr
+    assert leftovers(run_dir) == []
+    _kill_within_bound(rows[ROWS["kill"]], 100.0 * 0.028)  # 100 mm/s x 28 ms
+    assert rows[ROWS["inject"]]["verdict"] == "skipped"
+    assert rows[ROWS["inject"]]["note"] == "skipped: not over ALTER (--link rsi)"
+    _seam_played_or_refused(rows[ROWS["bigseam"]])
+    assert p.returncode == 0, p.stdout + p.stderr
+
+
+def test_rows_for_the_other_link_start_no_twin(tmp_path):
+    p = run_cli("bench", "faults", "--only", "inject,junk,ipoc", "--run-dir", str(tmp_path / "run"), timeout=30)
+    assert p.returncode == 0, p.stdout + p.stderr
+    rows = table(p.stdout)
+    assert [r["verdict"] for r in rows.values()] == ["skipped"] * 3
+    assert not (tmp_path / "run" / "humanpt.toml").exists()
+    p = run_cli("bench", "faults", "--only", "nosuch", timeout=30)
+    assert p.returncode == 2 and "unknown attack(s) nosuch" in p.stderr and "Traceback" not in p.stderr, p.stderr
+
+
+# -- the bench's start: it waits on the router the twin started (item 15) ------------------------
+@pytest.mark.timeout(120)
+def test_the_bench_waits_for_a_router_that_comes_late(tmp_path, procs):
+    """The router is started only after the bench began to wait for it (as on a loaded
+    machine, where the twin's router took longer than a tool's connect timeout): the bench's
+    session opens once it listens, instead of "cannot reach the router"."""
+    port = free_port()
+    # A connect timeout far shorter than the router's start-up (a Python process: ~1 s idle):
+    # one patient open, what the bench did, fails ("cannot reach the router").
+    cfg = tmp_path / "humanpt.toml"
+    cfg.write_text(f'[runtime]\ncell = "test"\nconnect = ["tcp/127.0.0.1:{port}"]\n'
+                   f'listen = ["tcp/127.0.0.1:{port}"]\nrun_dir = "{tmp_path / "runs"}"\nconnect_timeout_s = 0.2\n')
+    rt = load(cfg).runtime
+    got: dict = {}
+    ended = threading.Event()
+
+    def bench() -> None:
+        try:
+            got["session"] = open_router_session(rt, None, tmp_path, 90.0, ended)
+        except Exception as e:  # noqa: BLE001 -- reported below
+            got["error"] = e
+
+    waiter = threading.Thread(target=bench)
+    waiter.start()
+    try:
+        router = procs.start("router", "--config", str(cfg))
+        waiter.join(100)
+        assert "error" not in got, got.get("error")
+        assert "session" in got
+        assert router.poll() is None
+    finally:
+        ended.set()
+        waiter.join(5)
+        if "session" in got:
+            got["session"].close()
+
+
+def test_a_router_that_never_listens_is_named_with_its_log(tmp_path):
+    port = free_port()
+    rt = load(write_config(tmp_path / "humanpt.toml", port)).runtime
+    with pytest.raises(RuntimeError, match=rf"router at 127\.0\.0\.1:{port} did not take the bench's session "
+                       r"within \d+ s \(load average [\d.]+\): nothing listens .*processes\.log"):
+        open_router_session(rt, None, tmp_path, 1.0, threading.Event())
+    assert "exited before listening" in wait_listening("127.0.0.1", port, 5.0, alive=lambda: False)
