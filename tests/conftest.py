@@ -121,6 +121,17 @@ def zenoh_client(port: int):
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
 
 
+# -- Hypothesis ------------------------------------------------------------------------------
+# Derandomised by default: every run (CI's, a developer's) tries the same examples, so a
+# failure seen once is seen again; no example database carries one run into the next.
+# HYPOTHESIS_PROFILE=explore draws new examples each run (the seed of a failure is printed).
+from hypothesis import settings as _hypothesis_settings  # noqa: E402
+
+_hypothesis_settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+_hypothesis_settings.register_profile("explore", derandomize=False, print_blob=True)
+_hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
+
+
 # -- process-wide settings ------------------------------------------------------------------
 # A test must leave the interpreter as it found it: the GIL switch interval and the logging
 # set-up are process-wide, and a test that changes them changes the timing and the output of
@@ -179,3 +190,136 @@ def cli_main(monkeypatch):
         for h in root.handlers:
             if h not in handlers:
                 root.removeHandler(h)
+
+
+# -- tiers -------------------------------------------------------------------------------------
+# Markers (pyproject: --strict-markers): ``live`` tests start processes, routers, ptys, UDP
+# sockets or network namespaces; ``twin`` tests run the lock-step twin for seconds; ``root``
+# tests need root. ``python -m pytest -m "not live and not twin"`` is the inner loop.
+#
+# A test is marked here from what it uses: the fixtures in its closure (a fixture of this
+# file, or a module's own fixture whose code does one of those things) and the names its
+# code and the module's helpers it calls refer to (``run_cli``, ``subprocess``, ``LiveShell``,
+# ...). A module whose tests do it some other way says so with ``pytestmark``.
+
+LIVE_FIXTURES = frozenset({"router", "procs"})
+# Names that, referred to by a test or by a helper/fixture of its module it calls, start a
+# process, a Zenoh session (router or client), a pty or a UDP socket.
+LIVE_NAMES = frozenset({"run_cli", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
+                        "openpty", "pty", "PtyAdapter", "SOCK_DGRAM", "open_tool_session", "wait_port"})
+
+# Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs
+# (a run, an experiment, a calibration or a teach on the twin, the error budget).
+TWIN_NAMES = frozenset({"run_for", "run_until", "build_system", "run", "run_world", "run_budget", "run_case",
+                        "run_cases", "run_experiment", "run_live", "calibrate_then_teach", "calibrate_camera_on_twin",
+                        "calibrate_hand_eye_on_twin", "calibrate_psvs_on_twin", "check_mirrors_on_twin",
+                        "calibrate_tip_on_twin"})
+
+
+def _twin_names(names: set[str], module_globals: dict) -> bool:
+    """Whether ``names`` name a twin run: an attribute ``run_for``/``run_until`` (a world's
+    or a Lockstep's clock) or a function of humanpt.twin listed in TWIN_NAMES."""
+    if names & {"run_for", "run_until"}:
+        return True
+    for n in names & TWIN_NAMES:
+        obj = module_globals.get(n)
+        if getattr(obj, "__module__", "").startswith("humanpt.twin"):
+            return True
+    return False
+
+
+def _names(code, module_globals: dict, seen: set) -> set[str]:
+    """The global names ``code`` (and its nested functions, and the functions of the same
+    module it calls, transitively) refers to."""
+    if code in seen:
+        return set()
+    seen.add(code)
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if hasattr(const, "co_names"):
+            names |= _names(const, module_globals, seen)
+    for n in list(names):
+        obj = module_globals.get(n)
+        if callable(obj) and getattr(obj, "__module__", None) == module_globals.get("__name__"):
+            fn = getattr(obj, "__wrapped__", obj)
+            inner = getattr(fn, "__code__", None)
+            if inner is None and isinstance(fn, type):  # a class of the module: its methods
+                for m in vars(fn).values():
+                    if hasattr(m, "__code__"):
+                        names |= _names(m.__code__, module_globals, seen)
+            elif inner is not None:
+                names |= _names(inner, module_globals, seen)
+    return names
+
+
+def _tiers(item) -> set[str]:
+    """The tiers (``live``, ``twin``) ``item`` belongs to by what it uses."""
+    info = getattr(item, "_fixtureinfo", None)
+    closure = set(info.names_closure) if info else set()
+    tiers = {"live"} if closure & LIVE_FIXTURES else set()
+    funcs = [getattr(item, "function", None)]
+    for name in closure:  # a module's own fixtures (conftest's are judged by name above)
+        for fdef in (info.name2fixturedefs.get(name) or ()) if info else ():
+            if getattr(fdef.func, "__module__", "") == getattr(item.module, "__name__", None):
+                funcs.append(fdef.func)
+    g = vars(item.module) if getattr(item, "module", None) else {}
+    for fn in funcs:
+        code = getattr(getattr(fn, "__wrapped__", fn), "__code__", None)
+        if code is None:
+            continue
+        names = _names(code, g, set())
+        if names & LIVE_NAMES:
+            tiers.add("live")
+        if _twin_names(names, g):
+            tiers.add("twin")
+    return tiers
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for tier in _tiers(item):
+            if not item.get_closest_marker(tier):
+                item.add_marker(getattr(pytest.mark, tier))
+        if item.get_closest_marker("root") and os.geteuid() != 0:
+            item.add_marker(pytest.mark.skip(reason="needs root"))
+
+
+# What a test not marked live started anyway (a process, a Zenoh session, a pty): listed at
+# the end of the run, so the inner loop stays what it says.
+_UNMARKED_LIVE: dict[str, set[str]] = {}
+
+
+@pytest.fixture(autouse=True)
+def _live_watch(request, monkeypatch):
+    if request.node.get_closest_marker("live"):
+        yield
+        return
+    import pty as pty_mod
+
+    import zenoh
+
+    seen = _UNMARKED_LIVE.setdefault(request.node.nodeid, set())
+
+    def watch(owner, attr, what):
+        orig = getattr(owner, attr)
+
+        def wrapper(*a, **k):
+            seen.add(what)
+            return orig(*a, **k)
+
+        monkeypatch.setattr(owner, attr, wrapper)
+
+    watch(subprocess.Popen, "__init__", "a process")
+    watch(zenoh, "open", "a Zenoh session")
+    watch(os, "openpty", "a pty")
+    watch(pty_mod, "openpty", "a pty")
+    yield
+    if not seen:
+        del _UNMARKED_LIVE[request.node.nodeid]
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _UNMARKED_LIVE:
+        terminalreporter.write_sep("-", "tests not marked live that started one (mark them: tests/conftest.py)")
+        for nodeid, what in sorted(_UNMARKED_LIVE.items()):
+            terminalreporter.write_line(f"{nodeid}: {', '.join(sorted(what))}")
