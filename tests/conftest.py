@@ -206,7 +206,7 @@ LIVE_FIXTURES = frozenset({"router", "procs"})
 # Names that, referred to by a test or by a helper/fixture of its module it calls, start a
 # process, a Zenoh session (router or client), a pty or a UDP socket.
 LIVE_NAMES = frozenset({"run_cli", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
-                        "openpty", "pty", "PtyAdapter", "SOCK_DGRAM", "open_tool_session", "wait_port"})
+                        "openpty", "pty", "PtyAdapter", "SerialAdapter", "UdpAdapter", "RsiRobotServer", "SOCK_DGRAM", "open_tool_session", "wait_port"})
 
 # Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs
 # (a run, an experiment, a calibration or a teach on the twin, the error budget).
@@ -217,11 +217,11 @@ TWIN_NAMES = frozenset({"run_for", "run_until", "build_system", "run", "run_worl
 
 
 def _twin_names(names: set[str], module_globals: dict) -> bool:
-    """Whether ``names`` name a twin run: an attribute ``run_for``/``run_until`` (a world's
-    or a Lockstep's clock) or a function of humanpt.twin listed in TWIN_NAMES."""
-    if names & {"run_for", "run_until"}:
+    """Whether ``names`` name a twin run: one of TWIN_NAMES (``run_for``/``run_until``: a
+    world's or a Lockstep's clock), or ``run`` when it is humanpt.twin.run's."""
+    if names & (TWIN_NAMES - {"run"}):  # a world's clock, or a twin run called by name (teach.calibrate_then_teach)
         return True
-    for n in names & TWIN_NAMES:
+    for n in names & {"run"}:
         obj = module_globals.get(n)
         if getattr(obj, "__module__", "").startswith("humanpt.twin"):
             return True
@@ -268,7 +268,7 @@ def _tiers(item) -> set[str]:
         if code is None:
             continue
         names = _names(code, g, set())
-        if names & LIVE_NAMES:
+        if names & LIVE_NAMES or {"zenoh", "open"} <= names:  # zenoh.open: a session, a router
             tiers.add("live")
         if _twin_names(names, g):
             tiers.add("twin")
@@ -309,7 +309,23 @@ def _live_watch(request, monkeypatch):
 
         monkeypatch.setattr(owner, attr, wrapper)
 
-    watch(subprocess.Popen, "__init__", "a process")
+    orig_popen = subprocess.Popen.__init__
+
+    def popen(self, args, *a, **k):  # a humanpt process (a git query is no live test)
+        argv = [args] if isinstance(args, str | os.PathLike) else list(args)
+        if argv and Path(str(argv[0])).name != "git":
+            seen.add("a process")
+        return orig_popen(self, args, *a, **k)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", popen)
+    orig_socket = socket.socket.__init__
+
+    def udp(self, family=-1, type=-1, *a, **k):  # noqa: A002 - socket.socket's own names
+        if type != -1 and type & socket.SOCK_DGRAM:
+            seen.add("a UDP socket")
+        return orig_socket(self, family, type, *a, **k)
+
+    monkeypatch.setattr(socket.socket, "__init__", udp)
     watch(zenoh, "open", "a Zenoh session")
     watch(os, "openpty", "a pty")
     watch(pty_mod, "openpty", "a pty")
