@@ -211,6 +211,7 @@ def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str,
 
 
 READY_TIMEOUT_S = 120.0  # bounds a hang only: a component that cannot start exits sooner
+ROUTER_LISTEN_TIMEOUT_S = 60.0  # likewise (a loaded machine took more than 10 s to start one)
 
 
 def _wait_ready(rt: cfgmod.RuntimeConfig, comps: tuple[str, ...], children: list[tuple[str, subprocess.Popen]],
@@ -267,7 +268,7 @@ def up(args) -> int:
             proc = subprocess.Popen(base + ["router"] + _passthrough(args))
             children.append(("router", proc))
             addr = _endpoint_addr(cfg.runtime.listen[0])
-            if addr and not _wait_port(addr, 10.0, proc):
+            if addr and not _wait_port(addr, ROUTER_LISTEN_TIMEOUT_S, proc):  # a dead router returns at once
                 failed.append("router (did not start listening)")
                 return 1
         for name in comps:
