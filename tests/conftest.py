@@ -215,6 +215,8 @@ TWIN_NAMES = frozenset({"run_for", "run_until", "build_system", "run", "run_worl
                         "calibrate_hand_eye_on_twin", "calibrate_psvs_on_twin", "check_mirrors_on_twin",
                         "calibrate_tip_on_twin"})
 
+TWIN_FLAGS = frozenset({"--twin", "--lockstep"})  # CLI arguments that run the twin
+
 
 def _twin_names(names: set[str], module_globals: dict) -> bool:
     """Whether ``names`` name a twin run: one of TWIN_NAMES (``run_for``/``run_until``: a
@@ -238,6 +240,8 @@ def _names(code, module_globals: dict, seen: set) -> set[str]:
     for const in code.co_consts:
         if hasattr(const, "co_names"):
             names |= _names(const, module_globals, seen)
+        elif const in TWIN_FLAGS:  # a CLI called with --twin/--lockstep: a twin run
+            names.add("run_for")
     for n in list(names):
         obj = module_globals.get(n)
         if callable(obj) and getattr(obj, "__module__", None) == module_globals.get("__name__"):
