@@ -37,15 +37,19 @@ def run_cli(*args: str, timeout: float = 60, **kw) -> subprocess.CompletedProces
                           **kw)
 
 
-def wait_port(port: int, timeout: float = 15.0) -> None:
+def wait_port(port: int, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> None:
+    """Wait until something listens on ``port`` (``timeout`` only bounds a hang: a loaded
+    machine took over 15 s to start a router); fails at once if ``proc`` exits."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the process for port {port} exited ({proc.returncode}) before it listened")
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.2):
                 return
         except OSError:
             time.sleep(0.05)
-    raise TimeoutError(f"nothing listens on port {port}")
+    raise TimeoutError(f"nothing listens on port {port} after {timeout:g} s")
 
 
 def wait_for(pred, timeout: float, what: str, poll_s: float = 0.02) -> None:
@@ -103,8 +107,7 @@ def router(tmp_path, procs):
     """A real router (``humanpt router``) on a free port; yields (port, config path)."""
     port = free_port()
     cfg = write_config(tmp_path / "humanpt.toml", port)
-    procs.start("router", "--config", str(cfg))
-    wait_port(port)
+    wait_port(port, proc=procs.start("router", "--config", str(cfg)))
     return port, cfg
 
 
