@@ -64,7 +64,7 @@ class LineTap:
                 os.close(fd)
 
 
-@pytest.mark.timeout(90)
+@pytest.mark.timeout(240)
 @pytest.mark.parametrize("toward", ["robot", "gateway"])
 def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, tmp_path, toward):
     port, _ = router
@@ -74,7 +74,7 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
                              f'[robot_gateway]\nport = "{gateway_link}"\n')
     run = tmp_path / "run"
     procs.start("sim_robot", "--config", str(cfg), "--run-dir", str(run))
-    deadline = time.monotonic() + 20
+    deadline = time.monotonic() + 120  # bounds a hang only: a loaded machine starts a process slowly
     while not robot_link.exists():
         assert time.monotonic() < deadline, "sim_robot made no pty"
         time.sleep(0.05)
@@ -93,7 +93,7 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
                     s.declare_subscriber("humanpt/test/*/events", lambda smp: codes.append(
                         pb.Event.FromString(smp.payload.to_bytes()).code))]
             procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
-            assert got_state.wait(30), "no robot state: the link never came up"
+            assert got_state.wait(120), "no robot state: the link never came up"  # bounds a hang only
             # Let it run a second, then forge one STRT toward the robot.
             t_run = time.monotonic()
             while time.monotonic() - t_run < 1.0:
@@ -121,7 +121,7 @@ def test_one_forged_strt_on_the_line_does_not_deadlock_the_link(router, procs, t
         tap.close()
 
 
-@pytest.mark.timeout(120)
+@pytest.mark.timeout(240)
 def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
     """The attack: a flood of messages the gateway drops shared one unbounded queue with the
     serial input; serial input waited 2 s and the link restarted. Serial bytes and ticks now
@@ -148,7 +148,7 @@ def test_a_bus_flood_does_not_delay_the_serial_line(router, procs, tmp_path):
             got.set()
 
         sub = s.declare_subscriber("humanpt/test/robot_gateway/robot_state", on_state)
-        assert got.wait(30), "no robot state: the link never came up"
+        assert got.wait(120), "no robot state: the link never came up"  # bounds a hang only
         # Commands for a cycle far ahead: the gateway drops each (bad_command, rate-limited).
         pub = s.declare_publisher("humanpt/test/controller/command")
         payload = pb.FlangeCommand(cycle=2**31, header=pb.Header(frame_id="world")).SerializeToString()
