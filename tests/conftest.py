@@ -37,15 +37,19 @@ def run_cli(*args: str, timeout: float = 60, **kw) -> subprocess.CompletedProces
                           **kw)
 
 
-def wait_port(port: int, timeout: float = 15.0) -> None:
+def wait_port(port: int, timeout: float = 60.0, proc: subprocess.Popen | None = None) -> None:
+    """Wait until something listens on ``port`` (``timeout`` only bounds a hang: a loaded
+    machine took over 15 s to start a router); fails at once if ``proc`` exits."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f"the process for port {port} exited ({proc.returncode}) before it listened")
         try:
             with socket.create_connection(("127.0.0.1", port), timeout=0.2):
                 return
         except OSError:
             time.sleep(0.05)
-    raise TimeoutError(f"nothing listens on port {port}")
+    raise TimeoutError(f"nothing listens on port {port} after {timeout:g} s")
 
 
 def wait_for(pred, timeout: float, what: str, poll_s: float = 0.02) -> None:
@@ -103,8 +107,7 @@ def router(tmp_path, procs):
     """A real router (``humanpt router``) on a free port; yields (port, config path)."""
     port = free_port()
     cfg = write_config(tmp_path / "humanpt.toml", port)
-    procs.start("router", "--config", str(cfg))
-    wait_port(port)
+    wait_port(port, proc=procs.start("router", "--config", str(cfg)))
     return port, cfg
 
 
@@ -119,6 +122,17 @@ def zenoh_client(port: int):
 
 
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
+
+
+# -- Hypothesis ------------------------------------------------------------------------------
+# Derandomised by default: every run (CI's, a developer's) tries the same examples, so a
+# failure seen once is seen again; no example database carries one run into the next.
+# HYPOTHESIS_PROFILE=explore draws new examples each run (the seed of a failure is printed).
+from hypothesis import settings as _hypothesis_settings  # noqa: E402
+
+_hypothesis_settings.register_profile("ci", derandomize=True, database=None, print_blob=True)
+_hypothesis_settings.register_profile("explore", derandomize=False, print_blob=True)
+_hypothesis_settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "ci"))
 
 
 # -- process-wide settings ------------------------------------------------------------------
@@ -179,3 +193,156 @@ def cli_main(monkeypatch):
         for h in root.handlers:
             if h not in handlers:
                 root.removeHandler(h)
+
+
+# -- tiers -------------------------------------------------------------------------------------
+# Markers (pyproject: --strict-markers): ``live`` tests start processes, routers, ptys, UDP
+# sockets or network namespaces; ``twin`` tests run the lock-step twin for seconds; ``root``
+# tests need root. ``python -m pytest -m "not live and not twin"`` is the inner loop.
+#
+# A test is marked here from what it uses: the fixtures in its closure (a fixture of this
+# file, or a module's own fixture whose code does one of those things) and the names its
+# code and the module's helpers it calls refer to (``run_cli``, ``subprocess``, ``LiveShell``,
+# ...). A module whose tests do it some other way says so with ``pytestmark``.
+
+LIVE_FIXTURES = frozenset({"router", "procs"})
+# Names that, referred to by a test or by a helper/fixture of its module it calls, start a
+# process, a Zenoh session (router or client), a pty or a UDP socket.
+LIVE_NAMES = frozenset({"run_cli", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
+                        "openpty", "pty", "PtyAdapter", "SerialAdapter", "UdpAdapter", "RsiRobotServer", "SOCK_DGRAM", "open_tool_session", "wait_port"})
+
+# Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs
+# (a run, an experiment, a calibration or a teach on the twin, the error budget).
+TWIN_NAMES = frozenset({"run_for", "run_until", "build_system", "run", "run_world", "run_budget", "run_case",
+                        "run_cases", "run_experiment", "run_live", "calibrate_then_teach", "calibrate_camera_on_twin",
+                        "calibrate_hand_eye_on_twin", "calibrate_psvs_on_twin", "check_mirrors_on_twin",
+                        "calibrate_tip_on_twin"})
+
+TWIN_FLAGS = frozenset({"--twin", "--lockstep"})  # CLI arguments that run the twin
+
+
+def _twin_names(names: set[str], module_globals: dict) -> bool:
+    """Whether ``names`` name a twin run: one of TWIN_NAMES (``run_for``/``run_until``: a
+    world's or a Lockstep's clock), or ``run`` when it is humanpt.twin.run's."""
+    if names & (TWIN_NAMES - {"run"}):  # a world's clock, or a twin run called by name (teach.calibrate_then_teach)
+        return True
+    for n in names & {"run"}:
+        obj = module_globals.get(n)
+        if getattr(obj, "__module__", "").startswith("humanpt.twin"):
+            return True
+    return False
+
+
+def _names(code, module_globals: dict, seen: set) -> set[str]:
+    """The global names ``code`` (and its nested functions, and the functions of the same
+    module it calls, transitively) refers to."""
+    if code in seen:
+        return set()
+    seen.add(code)
+    names = set(code.co_names)
+    for const in code.co_consts:
+        if hasattr(const, "co_names"):
+            names |= _names(const, module_globals, seen)
+        elif const in TWIN_FLAGS:  # a CLI called with --twin/--lockstep: a twin run
+            names.add("run_for")
+    for n in list(names):
+        obj = module_globals.get(n)
+        if callable(obj) and getattr(obj, "__module__", None) == module_globals.get("__name__"):
+            fn = getattr(obj, "__wrapped__", obj)
+            inner = getattr(fn, "__code__", None)
+            if inner is None and isinstance(fn, type):  # a class of the module: its methods
+                for m in vars(fn).values():
+                    if hasattr(m, "__code__"):
+                        names |= _names(m.__code__, module_globals, seen)
+            elif inner is not None:
+                names |= _names(inner, module_globals, seen)
+    return names
+
+
+def _tiers(item) -> set[str]:
+    """The tiers (``live``, ``twin``) ``item`` belongs to by what it uses."""
+    info = getattr(item, "_fixtureinfo", None)
+    closure = set(info.names_closure) if info else set()
+    tiers = {"live"} if closure & LIVE_FIXTURES else set()
+    funcs = [getattr(item, "function", None)]
+    for name in closure:  # a module's own fixtures (conftest's are judged by name above)
+        for fdef in (info.name2fixturedefs.get(name) or ()) if info else ():
+            if getattr(fdef.func, "__module__", "") == getattr(item.module, "__name__", None):
+                funcs.append(fdef.func)
+    g = vars(item.module) if getattr(item, "module", None) else {}
+    for fn in funcs:
+        code = getattr(getattr(fn, "__wrapped__", fn), "__code__", None)
+        if code is None:
+            continue
+        names = _names(code, g, set())
+        if names & LIVE_NAMES or {"zenoh", "open"} <= names:  # zenoh.open: a session, a router
+            tiers.add("live")
+        if _twin_names(names, g):
+            tiers.add("twin")
+    return tiers
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        for tier in _tiers(item):
+            if not item.get_closest_marker(tier):
+                item.add_marker(getattr(pytest.mark, tier))
+        if item.get_closest_marker("root") and os.geteuid() != 0:
+            item.add_marker(pytest.mark.skip(reason="needs root"))
+
+
+# What a test not marked live started anyway (a process, a Zenoh session, a pty): listed at
+# the end of the run, so the inner loop stays what it says.
+_UNMARKED_LIVE: dict[str, set[str]] = {}
+
+
+@pytest.fixture(autouse=True)
+def _live_watch(request, monkeypatch):
+    if request.node.get_closest_marker("live"):
+        yield
+        return
+    import pty as pty_mod
+
+    import zenoh
+
+    seen = _UNMARKED_LIVE.setdefault(request.node.nodeid, set())
+
+    def watch(owner, attr, what):
+        orig = getattr(owner, attr)
+
+        def wrapper(*a, **k):
+            seen.add(what)
+            return orig(*a, **k)
+
+        monkeypatch.setattr(owner, attr, wrapper)
+
+    orig_popen = subprocess.Popen.__init__
+
+    def popen(self, args, *a, **k):  # a humanpt process (a git query is no live test)
+        argv = [args] if isinstance(args, str | os.PathLike) else list(args)
+        if argv and Path(str(argv[0])).name != "git":
+            seen.add("a process")
+        return orig_popen(self, args, *a, **k)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", popen)
+    orig_socket = socket.socket.__init__
+
+    def udp(self, family=-1, type=-1, *a, **k):  # noqa: A002 - socket.socket's own names
+        if type != -1 and type & socket.SOCK_DGRAM:
+            seen.add("a UDP socket")
+        return orig_socket(self, family, type, *a, **k)
+
+    monkeypatch.setattr(socket.socket, "__init__", udp)
+    watch(zenoh, "open", "a Zenoh session")
+    watch(os, "openpty", "a pty")
+    watch(pty_mod, "openpty", "a pty")
+    yield
+    if not seen:
+        del _UNMARKED_LIVE[request.node.nodeid]
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _UNMARKED_LIVE:
+        terminalreporter.write_sep("-", "tests not marked live that started one (mark them: tests/conftest.py)")
+        for nodeid, what in sorted(_UNMARKED_LIVE.items()):
+            terminalreporter.write_line(f"{nodeid}: {', '.join(sorted(what))}")

@@ -211,6 +211,48 @@ def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str,
     return label, with_router, comps
 
 
+READY_TIMEOUT_S = 120.0  # bounds a hang only: a component that cannot start exits sooner
+ROUTER_LISTEN_TIMEOUT_S = 60.0  # likewise (a loaded machine took more than 10 s to start one)
+
+
+def _wait_ready(rt: cfgmod.RuntimeConfig, comps: tuple[str, ...], children: list[tuple[str, subprocess.Popen]],
+                stop: threading.Event, timeout_s: float = READY_TIMEOUT_S) -> str:
+    """Wait until every component of ``comps`` is up (its liveliness token, which a live
+    shell declares last, when it serves), a child died, ``stop`` is set or ``timeout_s``
+    passed; watched as a tool (under mTLS the ``tool`` identity, or ``[runtime] identity``).
+    Returns the line ``up`` prints: when they were up, or why it could not tell."""
+    import zenoh
+
+    t0 = time.monotonic()
+    want, alive = set(comps), set()
+    changed = threading.Condition()
+
+    def on_token(sample):
+        name = str(sample.key_expr).rsplit("/", 1)[-1]
+        with changed:
+            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
+            changed.notify_all()
+
+    try:
+        session = open_tool_session(rt, patient=True)
+    except Exception as e:  # noqa: BLE001 - no router reachable, no tool certificate: say so, run anyway
+        return f"cannot watch the components come up ({e}); --duration counts from their start"
+    with session:
+        sub = session.liveliness().declare_subscriber(liveliness_key(rt.cell, "*"), on_token, history=True)
+        try:
+            with changed:
+                while not want <= alive:
+                    if stop.is_set() or any(p.poll() is not None for _, p in children):
+                        return "stopped before every component was up"
+                    if time.monotonic() - t0 > timeout_s:
+                        return (f"not up after {timeout_s:g} s: {', '.join(sorted(want - alive))}; "
+                                "--duration counts from now")
+                    changed.wait(0.2)
+        finally:
+            sub.undeclare()
+    return f"all {len(want)} components up after {time.monotonic() - t0:.1f} s; --duration counts from now"
+
+
 def up(args) -> int:
     cfg = load_cfg(args)
     label, with_router, comps = resolve_profile(args, cfg)
@@ -227,12 +269,14 @@ def up(args) -> int:
             proc = subprocess.Popen(base + ["router"] + _passthrough(args))
             children.append(("router", proc))
             addr = _endpoint_addr(cfg.runtime.listen[0])
-            if addr and not _wait_port(addr, 10.0, proc):
+            if addr and not _wait_port(addr, ROUTER_LISTEN_TIMEOUT_S, proc):  # a dead router returns at once
                 failed.append("router (did not start listening)")
                 return 1
         for name in comps:
             proc = subprocess.Popen(base + [name, "--run-dir", str(run_dir)] + _passthrough(args))
             children.append((name, proc))
+        if args.duration:  # seconds of the running cell: counted from when every component is up
+            print(f"humanpt up: {_wait_ready(cfg.runtime, comps, children, stop)}", flush=True)
         deadline = time.monotonic() + args.duration if args.duration else None
         while not stop.wait(0.2):
             if deadline and time.monotonic() >= deadline:

@@ -176,7 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--components", help="comma-separated components instead of a profile")
     p.add_argument("--no-router", action="store_true", help="do not start a router (one runs elsewhere)")
     p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<profile>)")
-    p.add_argument("--duration", type=float, help="stop everything after this many seconds")
+    p.add_argument("--duration", type=float, help="stop everything after this many seconds, counted from when "
+                   "every component is up (its liveliness token; under mTLS watched as the tool identity)")
 
     old_names = {new: old for old, new in RENAMED_COMPONENTS.items()}
     for name in sorted(COMPONENTS):

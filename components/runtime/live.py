@@ -343,6 +343,9 @@ class LiveShell:
             self._feed(t_ns, "liveliness", pb.Liveliness(header=header(t_ns), component=short, alive=item))
         elif kind == "tick":
             if self.core.realtime:  # _tick_loop waits for it
+                # The tick's stamp (t_ns, taken as the worker took the tick) comes before the
+                # instant the next cycle counts from: a realtime core's tick stamps are a
+                # period apart at least, however late its step runs after them.
                 self._tick_handled_at = time.monotonic()
                 self._tick_handled.set()
             self._feed(t_ns, "tick", pb.Tick(header=header(t_ns), period_ns=self.core.tick_period_ns() or 0))

@@ -139,6 +139,56 @@ def test_opencv_agrees_on_clean_pairs(poses):
         assert dt < 0.1 and da < 0.01, name
 
 
+def park_martin_x(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """X of A_i X B_i = Y by Park & Martin (1994), "Robot sensor calibration: solving AX = XB
+    on the Euclidean group", IEEE Trans. Robot. Automat. 10(5), written here from the paper
+    with scipy's rotation logarithm (independent of humanpt's maths and of OpenCV): each
+    pair (i, j) of poses gives a motion Ai X = X Bi with Ai = inv(A_j) A_i, Bi = B_j inv(B_i);
+    the rotation is (M^T M)^(-1/2) M^T with M = sum beta alpha^T (alpha, beta: the motions'
+    rotation logarithms), the translation the least squares of (R_Ai - I) t = R t_Bi - t_Ai."""
+    from scipy.spatial.transform import Rotation
+
+    motions = []
+    for i in range(len(A)):
+        for j in range(i + 1, len(A)):
+            motions.append((np.linalg.inv(A[j]) @ A[i], B[j] @ np.linalg.inv(B[i])))
+    M = np.zeros((3, 3))
+    for Ai, Bi in motions:
+        alpha = Rotation.from_matrix(Ai[:3, :3]).as_rotvec()
+        beta = Rotation.from_matrix(Bi[:3, :3]).as_rotvec()
+        M += np.outer(beta, alpha)
+    w, V = np.linalg.eigh(M.T @ M)
+    R = V @ np.diag(w ** -0.5) @ V.T @ M.T
+    C = np.vstack([Ai[:3, :3] - np.eye(3) for Ai, _ in motions])
+    d = np.concatenate([R @ Bi[:3, 3] - Ai[:3, 3] for Ai, Bi in motions])
+    X = np.eye(4)
+    X[:3, :3], X[:3, 3] = R, np.linalg.lstsq(C, d, rcond=None)[0]
+    return X
+
+
+def test_park_martin_solver_finds_the_truth_of_exact_pairs(poses):
+    """The reference itself, before it judges the solver: exact pairs give X_TRUE."""
+    dt, da = pose_difference(park_martin_x(poses, pairs(poses)), X_TRUE)
+    assert dt < 1e-6 and da < 1e-6
+
+
+def test_an_independent_published_solver_agrees_on_clean_pairs(poses):
+    """The cross-check every install runs (OpenCV 5.0 has no calibrateHandEye): the solver's
+    X against Park & Martin's on the same slightly noisy pairs, and both against the truth
+    within what that noise allows (0.005 mm, 0.002 deg per axis)."""
+    B = pairs(poses, noise_mm=0.005, noise_deg=0.002)
+    r = solve_ax_yb(poses, B, cross_check=False)
+    ref = park_martin_x(poses, B)
+    dt, da = pose_difference(r.flange_T_camera_mm, ref)
+    assert dt < 0.1 and da < 0.01, (dt, da)
+    for X in (r.flange_T_camera_mm, ref):
+        dt, da = pose_difference(X, X_TRUE)
+        assert dt < 0.1 and da < 0.01, (dt, da)
+    # a wrong solver would not pass: X off by 0.5 mm along x is told apart
+    dt, _ = pose_difference(r.flange_T_camera_mm @ transform_from_x([0.5, 0, 0, 0, 0, 0]), ref)
+    assert dt > 0.4
+
+
 def test_without_opencv_solvers_the_cross_check_says_it_was_skipped(poses, monkeypatch):
     monkeypatch.delattr(cv2, "calibrateHandEye", raising=False)
     monkeypatch.delattr(cv2, "calibrateRobotWorldHandEye", raising=False)

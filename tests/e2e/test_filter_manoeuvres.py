@@ -11,7 +11,7 @@ import pytest
 
 from humanpt.pose_filter.bench import filter_errors, run_scenario
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.twin]
 FRAME_MS = 1000 / 30  # sim_camera's 30 images/s
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from humanpt.twin.hard import HARD_SCENARIOS, HARD_SPEEDS_MM_S, run_case
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.twin]
 
 
 @pytest.mark.parametrize("speed", HARD_SPEEDS_MM_S)

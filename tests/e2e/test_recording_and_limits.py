@@ -24,7 +24,7 @@ from humanpt.twin.system import build_system, tracking_errors
 from humanpt.viz.config import VizConfig
 from humanpt.viz.logger import ENTITIES, RerunLogger
 
-pytestmark = pytest.mark.timeout(120)
+pytestmark = [pytest.mark.timeout(120), pytest.mark.twin]
 FRAME_NS = 1e9 / 30  # the camera's frame period
 
 @pytest.fixture(scope="module")
@@ -250,8 +250,10 @@ def test_position_first_changes_nothing_within_the_limits():
     assert cmds["position_first"] == cmds["scale"]
 
 
-def test_a_param_switches_the_saturation_live(turns):
-    w = turns["position_first"]
+def test_a_param_switches_the_saturation_live():
+    # A world of its own: the module's ``turns`` are read by other tests, unchanged.
+    w = build_system("arc", seed=2, digest=False, controller=ControllerConfig(saturation="position_first"))
+    w.run_for(1.0)
     w.lockstep.set_param(w.now_ns, "controller", "saturation", '"scale"')
     w.run_for(0.1)
     ev = [pb.Event.FromString(o.data) for o in w.outputs("controller/events")]

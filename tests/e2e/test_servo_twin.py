@@ -19,7 +19,7 @@ from humanpt.schemas.convert import header, pose
 from humanpt.twin.cal_tip import pivot_scenario
 from humanpt.twin.system import build_system, path_points, tracking_errors
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.timeout(300), pytest.mark.twin]
 OFFSET = (12.0, -9.0, 7.0, 2.0, -1.5, 2.5)  # the robot starts off the target: mm, deg
 
 

@@ -23,6 +23,8 @@ from humanpt.testing.perception_eval import (
 )
 from humanpt.twin import build_world
 
+pytestmark = pytest.mark.twin  # runs the lock-step twin for seconds
+
 
 @pytest.fixture(scope="module")
 def standard():

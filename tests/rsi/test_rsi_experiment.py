@@ -3,7 +3,11 @@ the RSI link, the controller and the filter on its cycle."""
 
 from __future__ import annotations
 
+import pytest
+
 from humanpt.runtime.recording import read
+
+pytestmark = pytest.mark.twin  # runs the lock-step twin for seconds
 
 
 def test_the_static_experiment_runs_over_rsi_at_12_ms(tmp_path, cli_main, capsys):

@@ -20,6 +20,8 @@ from humanpt.runtime.live import LiveShell
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot, RsiRobotServer
 
+pytestmark = pytest.mark.live  # real UDP sockets on loopback (humanpt.bench.rsi)
+
 
 @pytest.mark.parametrize("cycle_ms, cycles", [(12.0, 100), (4.0, 250)])
 def test_round_trip_over_udp_on_loopback(cycle_ms, cycles):

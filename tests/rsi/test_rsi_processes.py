@@ -63,13 +63,21 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
         last = states[-200:]
         cycles = last[-1].cycle - last[0].cycle
         assert cycles >= 199  # (a lost <Rob> would be a gap; loopback loses none)
+        # How many commands came on time depends on the machine's load: printed (a figure
+        # for `humanpt bench rsi`, which measures it), not asserted.
         fresh = sum(st.missed_cycles == 0 for st in last)
-        assert fresh >= 0.8 * len(last), [st.missed_cycles for st in last]
-        p0, p1 = (from_pose(st.world_T_flange)[:3, 3] * 1000.0 for st in (last[0], last[-1]))
-        moved = p1 - p0
-        # Every cycle moves 0.1 mm along x: on time, or HOLDON repeating the same constant
-        # step when late; a stale command (held) moves nothing: at most the cycles.
-        assert 0.8 * cycles * STEP_MM <= moved[0] <= cycles * STEP_MM + 0.01, (moved, cycles)
+        print(f"RSI at 12 ms beside pytest: {fresh} of {len(last)} cycles had a fresh command")
+        assert fresh > 0, "no command reached the robot on time"
+        xyz = np.array([from_pose(st.world_T_flange)[:3, 3] * 1000.0 for st in last])
+        moved = xyz[-1] - xyz[0]
+        # Every cycle moves 0.1 mm along x (on time, or HOLDON repeating the same constant
+        # step when late) or nothing (a stale command is held): at most the cycles' sum,
+        # and each state's step a whole number of 0.1 mm steps, at most one per cycle.
+        assert STEP_MM - 0.01 <= moved[0] <= cycles * STEP_MM + 0.01, (moved, cycles)
+        steps = np.diff(xyz[:, 0]) / STEP_MM
+        dcycles = np.diff([st.cycle for st in last])
+        assert np.all(np.abs(steps - np.round(steps)) < 0.1) and np.all(steps > -0.1), steps
+        assert np.all(np.round(steps) <= dcycles), (steps, dcycles)
         assert np.abs(moved[1:]).max() < 0.01, moved
         assert len(truths) > 100 and truths[-1][0] - truths[0][0] > 10.0
         for sub in subs:

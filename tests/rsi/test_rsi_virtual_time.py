@@ -16,6 +16,8 @@ from humanpt.schemas.convert import header
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot
 
+pytestmark = pytest.mark.twin  # runs the lock-step twin for seconds
+
 CYCLES = 400
 MS = 1_000_000
 

@@ -1,7 +1,12 @@
 """A realtime core (a robot link's cycle) never gets a tick sooner than a period after the
 worker took the last one, however long a step took; an ordinary core's ticks keep their
-fixed rate and catch up (two ticks close together after a slow step). In the live shell,
-over a real router. And a realtime core's process is tuned (switch interval, nice)."""
+fixed rate and catch up (two ticks closer than a period after a slow step). In the live
+shell, over a real router. And a realtime core's process is tuned (switch interval, nice).
+
+The intervals are those of the ticks' stamps (taken by the shell as its worker took each
+tick), not of clock readings in the step, which a loaded machine delays by any amount: the
+realtime bound holds at any load; the ordinary core's catching up needs only one slow step
+of the dozen to be followed by a tick already due."""
 
 from __future__ import annotations
 
@@ -32,14 +37,14 @@ class SlowSteps(Core):
 
     def __init__(self, config=None):
         super().__init__(config)
-        self.taken: list[float] = []  # time.monotonic() at each tick's step
+        self.taken: list[float] = []  # each tick's stamp (s): when the shell took it
         self.enough = threading.Event()
 
     def tick_period_ns(self) -> int | None:
         return PERIOD_NS
 
     def _on_tick(self, t_ns: int, msg: pb.Tick) -> list[Output]:
-        self.taken.append(time.monotonic())
+        self.taken.append(t_ns / 1e9)
         if len(self.taken) >= TICKS:
             self.enough.set()
         elif len(self.taken) % 3 == 0:
@@ -68,13 +73,14 @@ def _intervals_ms(core_type, port: int) -> np.ndarray:
 def test_a_realtime_cycle_is_never_cut_short_and_an_ordinary_one_catches_up(router):
     port, _ = router
     realtime = _intervals_ms(RealtimeSlowSteps, port)
-    # Each interval is at least the period (less the few microseconds between the shell
-    # taking the tick and the step reading the clock).
-    assert realtime.min() >= PERIOD_NS / 1e6 - 0.2, realtime
+    # Each interval is at least the period (the stamps are wall-clock, the schedule is
+    # monotonic: 0.003 ms allows an NTP slew, at most 500 ppm, 2.5 us in 5 ms).
+    assert realtime.min() >= PERIOD_NS / 1e6 - 0.003, realtime
     ordinary = _intervals_ms(SlowSteps, port)
-    # At a fixed rate a tick due during a slow step comes right after it: 5 - (8 - 5) = 2 ms
-    # or less, whatever the machine's load.
-    assert ordinary.min() < 3.0, ordinary
+    # At a fixed rate a tick due during a slow step (8 ms > 5 ms) is taken right after it
+    # and the next comes on schedule: an interval shorter than the period (2 ms on an idle
+    # machine; any length below 5 ms shows the catching up a realtime core never does).
+    assert ordinary.min() < PERIOD_NS / 1e6, ordinary
 
 
 def test_a_realtime_core_process_gets_a_short_switch_interval_and_a_higher_priority():

@@ -20,13 +20,16 @@ def test_the_loop_runs_under_mtls(tmp_path):
     comps = PROFILES["loop"]["components"]
     pki = tmp_path / "certs"
     init_ca(pki, "test")
-    for name in ("router", *comps):
+    for name in ("router", *comps, "tool"):  # tool: what `up` watches the components come up as
         issue(pki, name)
     cfg = write_config(tmp_path / "cell.toml", free_port(), extra='security = "mtls"\npki = "certs"\n')
     run_dir = tmp_path / "run"
-    r = run_cli("up", "--config", str(cfg), "--duration", "12", "--run-dir", str(run_dir), timeout=90)
+    r = run_cli("up", "--config", str(cfg), "--duration", "12", "--run-dir", str(run_dir), timeout=240)
     assert r.returncode == 0, r.stdout + r.stderr
     assert "mTLS" in r.stdout and "tls/127.0.0.1" in r.stdout
+    # --duration is seconds of the running loop, counted from when every component is up
+    # (not from their start: under load the start took most of 12 s, and no command came)
+    assert f"all {len(comps)} components up after" in r.stdout, r.stdout
     for name in comps:
         info = file_info(run_dir / f"{name}.mcap")
         got = {t for (d, t), ti in info.topics.items() if d == IN and ti.count > 0}

@@ -16,6 +16,8 @@ from humanpt.geometry.rig import Rig
 from humanpt.twin.budget import CSV_COLUMNS, plan, run_world
 from humanpt.twin.worlds import ERROR_SOURCES, World
 
+pytestmark = pytest.mark.twin  # runs the lock-step twin for seconds
+
 ONLY = ("focal", "mirror_tilt", "kinematics")
 
 
