@@ -21,7 +21,7 @@ UDP link over loopback or the Puma's serial line behind a pty), and reports the 
   is item 5's defect.)
 - ``bigseam`` (item 9; ALTER and RSI): a seam of 1795 points (out and back 20 mm, timed at
   20 mm/s) played as ``humanpt path play`` sends it: refused before anything is sent, or
-  played without a late or stale command and without a fault.
+  played to its end without a fault (late or stale commands reported, not judged).
 """
 
 from __future__ import annotations
@@ -370,14 +370,18 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
             return
         if answer.code == "bad_command":
             late = _events(ctx, t0, "robot_gateway", LATE_CODES + ("fault",))
-            row.expected = not late
+            row.expected = not any(e.code == "fault" for e in late)
             row.note = f"refused before sending: {answer.text}" + (f"; {len(late)} late/fault events" if late else "")
             return
         done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + 30.0)
         late = _events(ctx, t0, "robot_gateway", LATE_CODES)
         faults = _events(ctx, t0, "robot_gateway", ("fault",))
         flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
-        row.expected = done is not None and not late and not faults and not flagged
+        # The verdict: played to its end with no fault latched (the issue: 2 of 3 tries latched
+        # the gateway's fault). Late commands are reported, not judged: a loaded machine has
+        # them without any seam; the command's own cost is benchmarked
+        # (tests/controller/test_playback_limits.py prints it against the cycle).
+        row.expected = done is not None and not faults and not flagged
         row.note = (f"played ({SEAM_POINTS} points, {times[-1]:.1f} s): "
                     + ("done" if done else "NOT done") + f"; {len(late)} late/stale-command events"
                     + (f" ({', '.join(sorted({e.code for e in late}))})" if late else "")

@@ -44,7 +44,8 @@ def _kill_within_bound(row: dict[str, str], cycle_limit_mm: float) -> None:
 def _seam_played_or_refused(row: dict[str, str]) -> None:
     note = row["note"]
     assert note.startswith("refused before sending") or re.match(
-        r"played \(1795 points, [\d.]+ s\): done; 0 late/stale-command events", note), row
+        r"played \(1795 points, [\d.]+ s\): done; \d+ late/stale-command events", note), row
+    assert "FAULT" not in note, row  # the issue: 2 of 3 tries latched the gateway's fault
 
 
 @pytest.mark.timeout(420)
