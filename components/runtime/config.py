@@ -316,7 +316,9 @@ class RuntimeConfig:
     peer_listen: tuple[str, ...] = ("tcp/127.0.0.1:0",)
     run_dir: str = "runs"
     record: bool = True
-    chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 1024 * 1024  # 1 MB: ~3 camera images; zstd per chunk has a fixed cost
+    # At most 64 MiB: a chunk holds chunk_size plus one message, and the reader refuses a chunk
+    # declaring more than 256 MiB (runtime.recording.MAX_CHUNK_BYTES: a crafted file's 2 GiB).
+    chunk_size: Annotated[int, Range(1024, 64 * 2**20, "bytes")] = 1024 * 1024  # 1 MB: ~3 camera images; zstd per chunk has a fixed cost
     flush_interval_s: Annotated[float, Range(0.01, 3600, "s")] = 1.0
     multicast_scouting: bool = False
     connect_timeout_s: Annotated[float, Range(0.1, 3600, "s")] = 10.0
@@ -422,7 +424,7 @@ class RecordConfig:
     # background noise is drawn from one bank: 4 MiB chunks hold ~13 frames and make its
     # recording ~35 % smaller; a real sensor's noise is not shared). A crash loses at most
     # the chunk in progress, and it is flushed every [runtime] flush_interval_s anyway.
-    image_chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 4 * 1024 * 1024
+    image_chunk_size: Annotated[int, Range(1024, 64 * 2**20, "bytes")] = 4 * 1024 * 1024
 
     def __post_init__(self):
         keep_every(self.images)
