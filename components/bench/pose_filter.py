@@ -1,7 +1,7 @@
 """The pose filter judged against the twin's ground truth (issue 18): how far its estimate
 at each measurement's stamp is from where the operator really held the target, how many
 measurements it gated out, whether it restarted, and the longest hole in the accepted
-measurements. ``python -m humanpt.pose_filter.bench [scenario ...] [--speed 20 60]``
+measurements. ``python -m humanpt.bench.pose_filter [scenario ...] [--speed 20 60]``
 prints a table (lock-step twin, ideal world); the tests use :func:`filter_errors`.
 """
 
@@ -115,7 +115,7 @@ def run_scenario(scenario, speed_mm_s: float = 0.0, *, seed: int = 0, pose_filte
 def main(argv: list[str] | None = None) -> int:
     from humanpt.operator.scenario import BUILTIN_SCENARIOS
 
-    ap = argparse.ArgumentParser(prog="python -m humanpt.pose_filter.bench", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m humanpt.bench.pose_filter", description=__doc__)
     ap.add_argument("scenarios", nargs="*", default=["trapezium", "arc"],
                     help=f"built-in names ({', '.join(BUILTIN_SCENARIOS)}) or scenario files")
     ap.add_argument("--speed", type=float, nargs="+", default=[20.0, 60.0], help="mm/s (built-ins)")

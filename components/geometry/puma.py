@@ -1,5 +1,10 @@
 """Puma kinematics: standard (classic Paul) DH, forward, analytic inverse, Jacobian.
 
+A model of the robot, not a simulator: the product plans with it (hand-eye poses a Puma can
+reach, :func:`humanpt.calibration.handeye.puma_move_check`) and the simulated Puma
+(:mod:`humanpt.sim_robot`) moves with it. (Until issue 30 it was ``humanpt.sim_robot.kinematics``,
+which still re-exports it.)
+
 numpy and plain floats (the same numbers, see below). Lengths in mm, angles in radians
 unless a name says ``_deg``.
 
@@ -86,6 +91,12 @@ GEOMETRY = {
         d2_mm=149.09, a2_mm=431.8, a3_mm=-20.32, d4_mm=433.07, d6_mm=56.25
     ),
 }
+
+# Flange straight down in front of the robot, elbow up: (786.0, 190.0, -296.0) mm in the
+# base frame, yaw 0, pitch 0, roll 180 deg (puma762). Well inside every joint limit and
+# away from the wrist singularity (q5 = 25 deg). The simulated Puma starts here; a planner
+# takes it as the reference branch of the first inverse kinematics.
+HOME_JOINTS_DEG = (0.0, -35.0, 190.0, 0.0, 25.0, -180.0)
 
 # Puma 560-like limits (Corke's mdl_puma560 qlim, mapped to this table's signs: joints 2
 # and 3 turn the other way here). Assumed for the 761/762 as well; no verified 762 values.

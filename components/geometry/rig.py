@@ -20,7 +20,7 @@ from typing import Annotated
 
 import numpy as np
 
-from humanpt.runtime.config import Deg, Mm, Range
+from humanpt.runtime.config_types import Deg, Mm, Range
 
 from .config import PsvsConfig
 from .psvs import PsvsParams

@@ -26,6 +26,7 @@ from humanpt.calibration.handeye import (
     PoseCollector,
     plan_poses,
     pose_difference,
+    puma_move_check,
     solve_ax_yb,
 )
 from humanpt.geometry.rig import Rig
@@ -149,39 +150,6 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
     report += result.summary_lines()
     truth = sys_.camera.config.flange_T_camera  # the world's truth: reported, never estimated from
     return result, report, truth_lines(result, truth, rig)
-
-
-def puma_move_check(world_T_base_mm_deg, model: str = "puma762", min_wrist_deg: float = 8.0,
-                    max_step_deg: float = 3.0, samples: int = 40) -> Callable[[np.ndarray, np.ndarray], str | None]:
-    """The robot's own test of a planned move (the nominal Puma model where the gateway
-    believes the base is, as a real cell's planner would use its robot's model): the
-    straight move from one flange pose to the next (world, mm) must stay reachable, keep
-    the wrist (q5) ``min_wrist_deg`` from its singularity and never jump more than
-    ``max_step_deg`` in a joint between ``samples`` points (a branch flip)."""
-    from humanpt.geometry.transforms import interpolate_transform, invert_transform
-    from humanpt.sim_robot.config import SimRobotConfig
-    from humanpt.sim_robot.kinematics import UnreachableError
-
-    robot = SimRobotConfig(model=model)
-    kin = robot.kinematics()
-    base_T_world = invert_transform(transform_from_x(np.asarray(world_T_base_mm_deg, dtype=float)))
-    q_home = robot.start_joints_rad()
-
-    def check(a: np.ndarray, b: np.ndarray) -> str | None:
-        try:
-            q = kin.inverse(base_T_world @ a, q_home)
-            for s in np.linspace(0.0, 1.0, samples)[1:]:
-                qn = kin.inverse(base_T_world @ interpolate_transform(a, b, s), q)
-                if np.degrees(np.abs(qn - q)).max() > max_step_deg:
-                    return "the move flips a joint (a singularity on the way)"
-                if abs(np.degrees(qn[4])) < min_wrist_deg:
-                    return f"the move passes within {min_wrist_deg:g} deg of the wrist singularity"
-                q = qn
-        except UnreachableError as e:
-            return f"unreachable ({e})"
-        return None
-
-    return check
 
 
 def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig: Rig) -> list[str]:
