@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 
@@ -73,9 +74,7 @@ def filter_errors(world, after_ns: int | None = None) -> FilterErrors:
         # The first state after a measurement carries the filter's pose at its stamp.
         if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns not in at \
                 and st.measurement_stamp_ns >= after_ns:
-            T = from_pose(st.world_T_tob_at_measurement)
-            T[:3, 3] *= 1e3
-            at[st.measurement_stamp_ns] = T
+            at[st.measurement_stamp_ns] = to_mm(from_pose(st.world_T_tob_at_measurement))
             full[st.measurement_stamp_ns] = st.status == pb.TOB_STATUS_FULL
     stamps = np.array(sorted(at), dtype=np.int64)
     est = [at[s] for s in stamps]

@@ -31,6 +31,7 @@ from humanpt.calibration.handeye import (
 )
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
 
@@ -44,12 +45,6 @@ DEFAULT_POSES = 12
 # The TOB sits on a fixture: no hand holds it (whatever the world's operator does).
 FIXTURE = {"operator": {"tremor_mm": 0.0, "tremor_deg": 0.0}}
 STEP_S = 0.05  # how often the collector is asked for its next command (twin time)
-
-
-def _mm(T_m: np.ndarray) -> np.ndarray:
-    T = np.array(T_m, dtype=float)
-    T[:3, 3] *= 1e3
-    return T
 
 
 def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
@@ -84,7 +79,7 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         start = None
         for o in ls.outputs:
             if o.topic == "robot_gateway/robot_state":
-                start = _mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
+                start = to_mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
             elif o.topic == "robot_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
                 raise HandEyeError(f"the robot faulted before the calibration could start "
                                    f"({pb.Event.FromString(o.data).text}); nothing written")
@@ -166,11 +161,11 @@ def _feed(collector: PoseCollector, outputs) -> None:
     for o in outputs:
         if o.topic == "robot_gateway/robot_state":
             msg = pb.RobotState.FromString(o.data)
-            collector.on_robot_state(o.t_ns, _mm(from_pose(msg.world_T_flange)))
+            collector.on_robot_state(o.t_ns, to_mm(from_pose(msg.world_T_flange)))
         elif o.topic == "perception/tob":
             msg = pb.TobMeasurement.FromString(o.data)
             full = msg.status == pb.TOB_STATUS_FULL
-            collector.on_measurement(o.t_ns, _mm(from_pose(msg.camera_T_tob)) if full else None)
+            collector.on_measurement(o.t_ns, to_mm(from_pose(msg.camera_T_tob)) if full else None)
         elif o.topic == "robot_gateway/events":
             msg = pb.Event.FromString(o.data)
             if msg.code == "robot_fault":
