@@ -19,10 +19,10 @@ import pytest
 
 from tests.conftest import ROOT
 
-# Never loaded by a product package (DESIGN.md: the twin and the tools sit on top).
+# The tool packages: never imported nor loaded by a product package (DESIGN.md: the twin and
+# the tools sit on top; ARCHITECTURE.md).
 TOOLS = ("twin", "bench", "testing", "sim_camera", "sim_robot", "operator", "cli")
-FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt.operator",
-             "humanpt.testing", "humanpt.bench", "humanpt.cli")
+FORBIDDEN = tuple(f"humanpt.{t}" for t in TOOLS)
 # What each product package may load besides itself.
 SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.alter", "humanpt.schemas")
 PRODUCT = ("camera", "perception", "pose_filter", "controller", "robot_gateway", "viz", "calibration", "seam",
