@@ -1,20 +1,28 @@
-"""Packages depend one way (issue 15.4): a product package, with every one of its modules
-loaded, has not loaded the twin, the simulators, the test machinery, the benches or the
-CLI. Each check runs in a fresh interpreter, so nothing another test imported counts."""
+"""Packages depend one way (issue 15.4, issue 30.3; the rule is ARCHITECTURE.md's).
+
+Two checks. The AST scan reads every import statement of every module, at module level and
+inside functions, so an import that only runs when a function is called is seen too: a
+product package never imports a tool package (the twin, the simulators, the operator, the
+test machinery, the benches, the CLI) and imports only the packages ARCHITECTURE.md allows
+it. The load probe imports a package and all its submodules in a fresh interpreter and
+lists what got loaded (what a process of that component really carries)."""
 
 from __future__ import annotations
 
+import ast
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
 from tests.conftest import ROOT
 
-# Never loaded by a product package (DESIGN.md: the twin and the tools sit on top).
-FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt.operator",
-             "humanpt.testing", "humanpt.bench", "humanpt.cli")
+# The tool packages: never imported nor loaded by a product package (DESIGN.md: the twin and
+# the tools sit on top; ARCHITECTURE.md).
+TOOLS = ("twin", "bench", "testing", "sim_camera", "sim_robot", "operator", "cli")
+FORBIDDEN = tuple(f"humanpt.{t}" for t in TOOLS)
 # What each product package may load besides itself.
 SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.alter", "humanpt.schemas")
 PRODUCT = ("camera", "perception", "pose_filter", "controller", "robot_gateway", "viz", "calibration", "seam",
@@ -66,3 +74,135 @@ def test_the_rsi_link_loads_only_the_gateway_and_the_shared_packages():
     modules, loaded = loaded_by("humanpt.rsi")
     assert len(modules) > 1 and not loaded & set(FORBIDDEN), sorted(loaded & set(FORBIDDEN))
     assert loaded <= {"humanpt.rsi", "humanpt.robot_gateway", *SHARED}, sorted(loaded)
+
+
+# --------------------------------------------------------------------------- the AST scan
+
+# Every package but the tools is product code (a new package is product until it is listed
+# as a tool). What a product package may import besides itself (ARCHITECTURE.md): the
+# shared packages, and the few edges listed here.
+SHARED_PACKAGES = {"runtime", "geometry", "schemas", "alter"}
+MAY_IMPORT = {
+    # the bottom: pure maths and the Puma model; its configs are annotated with the leaf
+    # module runtime.config_types (below, checked by module), nothing else
+    "geometry": set(),
+    "schemas": set(),
+    "runtime": {"geometry", "schemas"},  # runtime.config builds the rig, runtime.rigfile reads it
+    "alter": {"geometry", "schemas", "runtime"},
+    "controller": SHARED_PACKAGES | {"seam"},  # a path file is checked against the seam's limits
+    "robot_gateway": SHARED_PACKAGES | {"rsi"},  # a link of the gateway (its own folder: issue 30.1)
+    "rsi": SHARED_PACKAGES | {"robot_gateway"},
+}
+# Modules of another package that a package may import (the leaf config types).
+MAY_IMPORT_MODULES = {"geometry": {"humanpt.runtime.config_types"}}
+# Leaf modules: import nothing from humanpt.
+LEAVES = ("humanpt.runtime.config_types",)
+
+
+def package_dirs() -> dict[str, Path]:
+    """humanpt's subpackages -> their folder (components/*, and schemas/)."""
+    dirs = {p.parent.name: p.parent for p in sorted((ROOT / "components").glob("*/__init__.py"))}
+    dirs["schemas"] = ROOT / "schemas"
+    return dirs
+
+
+def module_name(package: str, path: Path, folder: Path) -> str:
+    parts = [package, *path.relative_to(folder).with_suffix("").parts]
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(["humanpt", *parts])
+
+
+def imports_of(source: str, module: str, is_package: bool = False) -> list[tuple[str, int]]:
+    """Every humanpt module ``source`` imports, anywhere in it (module level, functions,
+    classes, ``if TYPE_CHECKING``), as (absolute dotted name, line); relative imports are
+    resolved against ``module``. ``from humanpt.a import b`` gives ``humanpt.a.b`` (b may be
+    a module)."""
+    here = module.split(".") if is_package else module.split(".")[:-1]
+    out: list[tuple[str, int]] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            out += [(a.name, node.lineno) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = here[: len(here) - node.level + 1] if node.level else []
+            mod = ".".join(base + ([node.module] if node.module else []))
+            out += [(f"{mod}.{a.name}", node.lineno) for a in node.names]
+    return [(name, line) for name, line in out if name == "humanpt" or name.startswith("humanpt.")]
+
+
+def scan() -> dict[str, list[tuple[str, str]]]:
+    """package -> [(imported humanpt module, "file:line")] over every module of every package."""
+    found: dict[str, list[tuple[str, str]]] = {}
+    for package, folder in package_dirs().items():
+        rows = found.setdefault(package, [])
+        for path in sorted(folder.rglob("*.py")):
+            module = module_name(package, path, folder)
+            for name, line in imports_of(path.read_text(), module, path.name == "__init__.py"):
+                rows.append((name, f"{path.relative_to(ROOT)}:{line}"))
+    return found
+
+
+def package_of(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def test_the_scan_sees_every_package_and_its_imports():
+    found = scan()
+    # the tools and the product are both there, and the scan resolves relative imports
+    assert {"twin", "cli", "geometry", "runtime", "controller", "schemas"} <= set(found), sorted(found)
+    assert ("humanpt.twin.run.SystemConfig", "components/twin/cal_handeye.py") in {
+        (n, w.split(":")[0]) for n, w in found["twin"]}
+
+
+def test_the_scan_sees_an_import_inside_a_function():
+    # what the load probe cannot see (issue 30: pose_filter/bench.py imported the twin and
+    # the operator inside functions): an import that runs only when a function is called
+    src = ("def f():\n    from humanpt.twin.evaluate import truth_at\n"
+           "class C:\n    def g(self):\n        import humanpt.operator.scenario\n"
+           "        from ..sim_robot import core\n")
+    got = imports_of(src, "humanpt.pose_filter.bench")
+    assert got == [("humanpt.twin.evaluate.truth_at", 2), ("humanpt.operator.scenario", 5),
+                   ("humanpt.sim_robot.core", 6)]
+
+
+def test_no_product_module_imports_a_tool_anywhere():
+    bad = [f"{where}: {package} imports {name}" for package, rows in scan().items() if package not in TOOLS
+           for name, where in rows if package_of(name) in TOOLS]
+    assert not bad, "product code imports a tool package:\n" + "\n".join(bad)
+
+
+def test_each_product_package_imports_only_what_it_may():
+    bad = []
+    for package, rows in scan().items():
+        if package in TOOLS:
+            continue
+        allowed = MAY_IMPORT.get(package, SHARED_PACKAGES) | {package}
+        modules = MAY_IMPORT_MODULES.get(package, set())
+        for name, where in rows:
+            if name == "humanpt":  # the top package (its version; components/__init__.py imports nothing)
+                continue
+            if package_of(name) not in allowed and not any(name == m or name.startswith(m + ".")
+                                                           for m in modules):
+                bad.append(f"{where}: {package} imports {name}")
+    assert not bad, "imports against ARCHITECTURE.md:\n" + "\n".join(bad)
+
+
+def test_geometry_does_not_import_runtime_config():
+    # issue 30: geometry <-> runtime was a cycle (geometry took Range from runtime.config,
+    # runtime.config builds the Rig). Now runtime may import geometry, geometry only the
+    # leaf runtime.config_types; and that leaf imports nothing of humanpt.
+    found = scan()
+    into_runtime = sorted({name for name, _ in found["geometry"] if package_of(name) == "runtime"})
+    assert into_runtime == ["humanpt.runtime.config_types.Deg", "humanpt.runtime.config_types.Mm",
+                            "humanpt.runtime.config_types.Range"], into_runtime
+    for leaf in LEAVES:
+        rows = [(n, w) for n, w in found["runtime"] if w.startswith(f"components/runtime/{leaf.split('.')[-1]}.py")]
+        assert not rows, f"{leaf} must import nothing of humanpt: {rows}"
+
+
+def test_the_old_config_import_path_still_works():
+    from humanpt.runtime import config, config_types
+
+    for name in config_types.__all__:
+        assert getattr(config, name) is getattr(config_types, name), name

@@ -45,6 +45,7 @@ from humanpt.bench.faults import (
     rsi_stopped_since,
 )
 from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 
@@ -64,9 +65,7 @@ LATE_CODES = ("late_command", "late_commands", "deadline_missed", "stale_command
 
 # -- helpers ----------------------------------------------------------------------------------
 def _flange_mm(state) -> np.ndarray:
-    T = from_pose(state.world_T_flange)
-    T[:3, 3] *= 1e3
-    return T
+    return to_mm(from_pose(state.world_T_flange))
 
 
 def _truth_after(ctx: Ctx, wall_ns: int) -> list[tuple[int, np.ndarray]]:

@@ -34,19 +34,27 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from humanpt.geometry.puma import (
+    HOME_JOINTS_DEG,
+    PumaKinematics,
+    RobotModelConfig,
+    UnreachableError,
+)
 from humanpt.geometry.rig import Calibration, HandEye, Rig
 from humanpt.geometry.transforms import (
     check_rigid,
+    interpolate_transform,
     invert_transform,
     make_transform,
     matrix_from_rotvec,
     rotation_angle_rad,
     rotvec_from_matrix,
+    transform_from_x,
     x_from_transform,
 )
 
 __all__ = ["HandEyeError", "HandEyeResult", "solve_ax_yb", "closed_form_ax_yb", "check_motion",
-           "opencv_cross_check", "apply_to_rig", "plan_poses", "METHOD"]
+           "opencv_cross_check", "apply_to_rig", "plan_poses", "puma_move_check", "METHOD"]
 
 METHOD = "ax=yb"
 """The rig's ``hand_eye.calibration.method`` this tool writes."""
@@ -447,6 +455,36 @@ def plan_poses(world_T_flange_start_mm: np.ndarray, flange_T_camera_mm: np.ndarr
             continue
         poses.append(F)
     return np.array(poses), notes
+
+
+def puma_move_check(world_T_base_mm_deg, model: str = "puma762", min_wrist_deg: float = 8.0,
+                    max_step_deg: float = 3.0, samples: int = 40) -> Callable[[np.ndarray, np.ndarray], str | None]:
+    """The robot's own test of a planned move (the nominal Puma model,
+    :mod:`humanpt.geometry.puma`, where the gateway believes the base is, as a real cell's
+    planner would use its robot's model): the straight move from one flange pose to the next
+    (world, mm) must stay reachable, keep the wrist (q5) ``min_wrist_deg`` from its
+    singularity and never jump more than ``max_step_deg`` in a joint between ``samples``
+    points (a branch flip). The first pose's branch is the one nearest the Puma's home
+    joints (:data:`humanpt.geometry.puma.HOME_JOINTS_DEG`)."""
+    kin = PumaKinematics(RobotModelConfig(model=model))
+    base_T_world = invert_transform(transform_from_x(np.asarray(world_T_base_mm_deg, dtype=float)))
+    q_home = np.radians(np.asarray(HOME_JOINTS_DEG, dtype=float))
+
+    def check(a: np.ndarray, b: np.ndarray) -> str | None:
+        try:
+            q = kin.inverse(base_T_world @ a, q_home)
+            for s in np.linspace(0.0, 1.0, samples)[1:]:
+                qn = kin.inverse(base_T_world @ interpolate_transform(a, b, s), q)
+                if np.degrees(np.abs(qn - q)).max() > max_step_deg:
+                    return "the move flips a joint (a singularity on the way)"
+                if abs(np.degrees(qn[4])) < min_wrist_deg:
+                    return f"the move passes within {min_wrist_deg:g} deg of the wrist singularity"
+                q = qn
+        except UnreachableError as e:
+            return f"unreachable ({e})"
+        return None
+
+    return check
 
 
 

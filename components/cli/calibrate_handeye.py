@@ -194,8 +194,8 @@ def collect_live(cfg, rig, n_poses: int, timeout_s: float) -> tuple[np.ndarray, 
                 first = time.monotonic() if first is None else first
             elif n == "robot_gateway/events" and pb.Event.FromString(data).code == "robot_fault":
                 raise HandEyeError(f"the robot is in FAULT ({pb.Event.FromString(data).text}); clear it first")
+        from humanpt.calibration.handeye import puma_move_check
         from humanpt.sim_robot.config import SimRobotConfig
-        from humanpt.twin.cal_handeye import puma_move_check
 
         model = cfg.component("sim_robot", SimRobotConfig).model  # the cell's Puma (puma762 unless set)
         poses, notes = plan_poses(start, rig.hand_eye.flange_T_camera_mm(), ctl.dz_mm, n_poses=n_poses,

@@ -50,24 +50,13 @@ from humanpt.geometry.transforms import (
     transform_from_x,
     x_from_transform,
 )
+from humanpt.geometry.units import to_m, to_mm
 from humanpt.runtime.config import ConfigError, Mm, Range, SpeedMmS, coerce
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose, vector3
 
 T_CMD, T_STATUS, T_PATH = "controller/command", "controller/status", "controller/path"
-
-
-def _m(T_mm: np.ndarray) -> np.ndarray:
-    T = np.array(T_mm, dtype=float)
-    T[:3, 3] *= 1e-3
-    return T
-
-
-def _mm(T_m: np.ndarray) -> np.ndarray:
-    T = np.array(T_m, dtype=float)
-    T[:3, 3] *= 1e3
-    return T
 
 
 def _next(cycle: int) -> int:
@@ -88,7 +77,7 @@ def flange_T_desired_mm(c: ControllerConfig, rig: Rig | None = None) -> np.ndarr
 
 def flange_T_desired_m(c: ControllerConfig, rig: Rig | None = None) -> np.ndarray:
     """:func:`flange_T_desired_mm` in metres."""
-    return _m(flange_T_desired_mm(c, rig))
+    return to_m(flange_T_desired_mm(c, rig))
 
 
 def _pose_covariance(st: pb.TobState) -> np.ndarray | None:
@@ -155,8 +144,8 @@ class ControllerCore(Core):
         self.tob_p_sources_mm = np.asarray(self.rig.target_model().source_positions_mm, dtype=float)
         self.camera_p_d_mm = np.array([0.0, 0.0, c.dz_mm])
         self.flange_T_desired = flange_T_desired_m(c, self.rig)
-        self.flange_T_tool = _m(transform_from_x(np.asarray(c.flange_T_tool_x)))
-        self.tob_T_tip = _m(self.rig.tip.tob_T_tip_mm())
+        self.flange_T_tool = to_m(transform_from_x(np.asarray(c.flange_T_tool_x)))
+        self.tob_T_tip = to_m(self.rig.tip.tob_T_tip_mm())
         self.dt = c.cycle_period_ms * 1e-3
         self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
         self.max_step_rad = np.radians(c.max_rotation_deg_s) * self.dt
@@ -282,7 +271,7 @@ class ControllerCore(Core):
                                                  _pose_covariance(st)))
         fov = img = 0.0
         if valid:
-            camera_T_tob_mm = _mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
+            camera_T_tob_mm = to_mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
             fov = law.fov_margin_px(self.psvs, camera_T_tob_mm, self.tob_p_sources_mm)
             img = law.image_offset_px(self.psvs, camera_T_tob_mm[:3, 3], self.camera_p_d_mm)
         status = pb.ControllerStatus(
@@ -345,7 +334,7 @@ class ControllerCore(Core):
         self.path_last_stamp_ns = stamp_ns
         self.path.append(pt)
         world_T_point = world_T_tob @ self.tob_T_tip if self.config.has_driver else world_T_tob
-        self._path_x.append(x_from_transform(_mm(world_T_point)))
+        self._path_x.append(x_from_transform(to_mm(world_T_point)))
         self._path_held.append(orientation_held)
         self._path_stamps.append(stamp_ns)
         return T_PATH, pt
@@ -366,7 +355,7 @@ class ControllerCore(Core):
         return self._finish_calibration(t_ns)
 
     def _finish_calibration(self, t_ns) -> list[Output]:
-        tobs = np.array([_mm(a) for a, _ in self.cal_samples])
+        tobs = np.array([to_mm(a) for a, _ in self.cal_samples])
         self.mode = pb.CONTROL_MODE_TRACK
         try:
             res = calibrate_tip_pivot(tobs)
@@ -378,11 +367,11 @@ class ControllerCore(Core):
                   "residual_rms_mm": round(float(res.residual_rms_mm), 5), "samples": len(tobs)}
         outs = []
         if self.cal_pivot_mm is not None:
-            flanges = np.array([_mm(f) for _, f in self.cal_samples])
-            cams = np.array([invert_transform(_mm(self.flange_T_camera)) @ invert_transform(f) @ t
+            flanges = np.array([to_mm(f) for _, f in self.cal_samples])
+            cams = np.array([invert_transform(to_mm(self.flange_T_camera)) @ invert_transform(f) @ t
                              for f, t in zip(flanges, tobs, strict=True)])
             try:
-                paper = calibrate_tip_paper(flanges, _mm(self.flange_T_camera), cams, self.cal_pivot_mm)
+                paper = calibrate_tip_paper(flanges, to_mm(self.flange_T_camera), cams, self.cal_pivot_mm)
                 result["paper_tob_t_tip_mm"] = np.asarray(paper.tob_t_tip_mm).round(4).tolist()
                 result["paper_residual_rms_mm"] = round(float(paper.residual_rms_mm), 5)
             except (GeometryError, ValueError) as e:
@@ -407,9 +396,8 @@ class ControllerCore(Core):
         ``times_s`` (N,) (a re-timed seam: humanpt path retime), reaching each point at its
         time from the start (the feed, its ramps and stops are the timing's).
         ``world_T_tool_mm`` (N, 4, 4): the poses as transforms, when the caller has them."""
-        tips = (transform_from_x(np.asarray(points_mm_deg, dtype=float).reshape(-1, 6))
-                if world_T_tool_mm is None else np.array(world_T_tool_mm, dtype=float))
-        tips[:, :3, 3] *= 1e-3
+        tips = to_m(transform_from_x(np.asarray(points_mm_deg, dtype=float).reshape(-1, 6))
+                    if world_T_tool_mm is None else world_T_tool_mm)
         flanges = tips @ invert_transform(self.flange_T_tool)
         seg = np.linalg.norm(np.diff(tips[:, :3, 3], axis=0), axis=1)
         self.playback = {"flanges": flanges, "tips": tips, "s": np.r_[0.0, np.cumsum(seg)], "pos": 0.0,
@@ -508,7 +496,7 @@ class ControllerCore(Core):
         if len(pts) < 1:
             return refuse("no points given and no path recorded")
         world_T_tool_mm = transform_from_x(pts)
-        flange_p_mm = (world_T_tool_mm @ invert_transform(_mm(self.flange_T_tool)))[:, :3, 3]
+        flange_p_mm = (world_T_tool_mm @ invert_transform(to_mm(self.flange_T_tool)))[:, :3, 3]
         why = playback.envelope_refusal(pts, None, c.envelope_min_mm, c.envelope_max_mm, flange_p_mm=flange_p_mm)
         if why is not None:
             return refuse(why)

@@ -35,6 +35,7 @@ from humanpt.geometry.transforms import (
     rotvec_from_matrix,
     x_from_transform,
 )
+from humanpt.geometry.units import to_mm
 
 
 def norm3(v: np.ndarray) -> float:
@@ -304,8 +305,8 @@ def paper_step(
 ) -> Step:
     """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame."""
     flange_T_tob = invert_transform(world_T_flange) @ world_T_tob
-    x_fg = x_from_transform(_mm(flange_T_tob))
-    x_fd = x_from_transform(_mm(flange_T_desired))
+    x_fg = x_from_transform(to_mm(flange_T_tob))
+    x_fd = x_from_transform(to_mm(flange_T_desired))
     e = x_fg - x_fd
     e[3:] = (e[3:] + 180.0) % 360.0 - 180.0  # wrap the angle errors
     if position_only:
@@ -321,8 +322,3 @@ def paper_step(
         d_t, d_r, sat, float(np.linalg.norm(e[:3])) * 1e-3, float(np.linalg.norm(np.radians(e[3:])))
     )
 
-
-def _mm(T_m: np.ndarray) -> np.ndarray:
-    T = np.array(T_m, dtype=float)
-    T[:3, 3] *= 1e3
-    return T

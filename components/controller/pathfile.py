@@ -107,12 +107,11 @@ def from_path_points(points) -> Path6:
     """A :class:`Path6` (mm, deg; held flags and covariances in mm^2, deg^2) of recorded
     ``controller/path`` messages (humanpt.PathPoint, all with or all without a tip)."""
     from humanpt.geometry.transforms import x_from_transform
+    from humanpt.geometry.units import to_mm
     from humanpt.schemas.convert import from_pose
 
     def x(p):
-        T = from_pose(p)
-        T[:3, 3] *= 1e3
-        return x_from_transform(T)
+        return x_from_transform(to_mm(from_pose(p)))
 
     def cov(values, scale):
         return np.asarray(values, dtype=float).reshape(3, 3) * scale if len(values) == 9 else np.zeros((3, 3))

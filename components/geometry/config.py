@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated
 
-from humanpt.runtime.config import Range
+from humanpt.runtime.config_types import Range
 
 from .psvs import PsvsParams, psvs_m_l_mm
 

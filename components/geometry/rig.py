@@ -20,7 +20,7 @@ from typing import Annotated
 
 import numpy as np
 
-from humanpt.runtime.config import Deg, Mm, Range
+from humanpt.runtime.config_types import Deg, Mm, Range
 
 from .config import PsvsConfig
 from .psvs import PsvsParams
@@ -32,6 +32,7 @@ from .transforms import (
     transform_from_x,
     x_from_transform,
 )
+from .units import to_m
 
 __all__ = [
     "RIG_VERSION",
@@ -129,9 +130,7 @@ class HandEye:
 
     def flange_T_camera_m(self) -> np.ndarray:
         """(4, 4), translation in metres (what the messages use)."""
-        T = self.flange_T_camera_mm()
-        T[:3, 3] *= 1e-3
-        return T
+        return to_m(self.flange_T_camera_mm())
 
 
 @dataclass(frozen=True)

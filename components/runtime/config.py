@@ -28,52 +28,21 @@ import tomllib
 import types
 import typing
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+from humanpt.runtime.config_types import (  # noqa: F401 (re-exported: the old import path)
+    ConfigError,
+    Deg,
+    Mm,
+    Range,
+    RateDegS,
+    SpeedMmS,
+    live,
+    live_keys,
+)
 from humanpt.schemas.topics import RENAMED_COMPONENTS, current_name  # noqa: F401 (re-exported)
-
-
-class ConfigError(ValueError):
-    """A configuration problem; the message names the file, section and key."""
-
-
-@dataclass(frozen=True)
-class Range:
-    """The physical range of a numeric parameter, ``lo <= value <= hi`` (closed)."""
-
-    lo: float
-    hi: float
-    unit: str = ""
-
-    def check(self, value: float, where: str) -> None:
-        if not self.lo <= value <= self.hi:
-            unit = f" {self.unit}" if self.unit else ""
-            raise ConfigError(f"{where}: {value!r} is outside its range [{self.lo:g}, {self.hi:g}]{unit}")
-
-
-# Ranges shared by several components.  Lengths and angles of poses (the Puma's reach is
-# 1.25 m; a cell is a few metres); speeds of the tool at most ISO 10218-1's reduced speed for
-# a person in the cell (250 mm/s, the paper's 100 mm/s is the default).
-Mm = Annotated[float, Range(-5000.0, 5000.0, "mm")]
-Deg = Annotated[float, Range(-360.0, 360.0, "deg")]
-SpeedMmS = Annotated[float, Range(1e-3, 250.0, "mm/s")]
-RateDegS = Annotated[float, Range(1e-3, 180.0, "deg/s")]
-
-
-def live(default: Any, doc: str = "", *, stricter: Literal["lower", "higher"] | None = None) -> Any:
-    """A dataclass field that may be changed at run time.
-
-    ``stricter``: a safety limit that may only become stricter than the value the component
-    started with - ``"lower"`` (a speed, a count of cycles; for a tuple, every element) or
-    ``"higher"`` (a lower corner of a box)."""
-    return field(default=default, metadata={"live": True, "doc": doc, "stricter": stricter})
-
-
-def live_keys(cls_or_obj) -> list[str]:
-    """Names of the fields of a config dataclass that may change at run time."""
-    return [f.name for f in dataclasses.fields(cls_or_obj) if f.metadata.get("live")]
 
 
 def _type_name(tp) -> str:

@@ -58,6 +58,7 @@ from google.protobuf.timestamp_pb2 import Timestamp
 
 from humanpt.geometry import camera_T_desired, invert_transform, make_transform, transform_from_x
 from humanpt.geometry.rig import Rig
+from humanpt.geometry.units import to_m
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.scene.config import SceneConfig
 from humanpt.schemas import humanpt_pb2 as pb
@@ -135,12 +136,6 @@ def _transform(stamp_ns: int, parent: str, child: str, parent_T_child: pb.Pose) 
                           rotation=Quaternion(x=q.x, y=q.y, z=q.z, w=q.w))
 
 
-def _metres(T_mm: np.ndarray) -> np.ndarray:
-    T = np.array(T_mm, dtype=float)
-    T[:3, 3] *= 1e-3
-    return T
-
-
 class SceneCore(Core):
     """humanpt topics -> foxglove.FrameTransforms, PosesInFrame, ImageAnnotations,
     CameraCalibration, Log and SceneUpdate (module docstring: frames; README.md: topics)."""
@@ -165,7 +160,7 @@ class SceneCore(Core):
         # Rig-fixed transforms (metres), as messages once.
         params = rig.params()
         self._params = params
-        self._world_T_base = _metres(transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float)))
+        self._world_T_base = to_m(transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float)))
         self._base_T_world = invert_transform(self._world_T_base)
         self._rig_poses: list[tuple[str, str, pb.Pose]] = [
             (WORLD, BASE, pose(self._world_T_base)),
@@ -175,7 +170,7 @@ class SceneCore(Core):
             camera_T_virtual = make_transform(np.asarray(cam.camera_R_virtual, dtype=float),
                                               np.asarray(cam.centre_mm, dtype=float) * 1e-3)
             self._rig_poses.append((config.camera_frame, child, pose(camera_T_virtual)))
-        self._tob_T_tip = pose(_metres(rig.tip.tob_T_tip_mm()))
+        self._tob_T_tip = pose(to_m(rig.tip.tob_T_tip_mm()))
         self._sources_m = np.asarray(rig.target_model().source_positions_mm, dtype=float) * 1e-3  # (3, 3) TOB
         self.measurements = 0
         # The recorded path (controller/path) in world, as PathPoints; paths counted from 1.
@@ -208,7 +203,7 @@ class SceneCore(Core):
         base_T_flange = self._base_T_world @ from_pose(msg.world_T_flange)
         out = [_transform(stamp, parent, child, p) for parent, child, p in self._rig_poses]
         out.append(_transform(stamp, BASE, FLANGE, pose(base_T_flange)))
-        out.append(_transform(stamp, self.config.camera_frame, DESIRED, pose(_metres(camera_T_desired(self.dz_mm)))))
+        out.append(_transform(stamp, self.config.camera_frame, DESIRED, pose(to_m(camera_T_desired(self.dz_mm)))))
         return [(T_TRANSFORMS, FrameTransforms(transforms=out))]
 
     def _on_tob_state(self, t_ns: int, msg: pb.TobState) -> list[Output]:

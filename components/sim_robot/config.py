@@ -8,19 +8,18 @@ from typing import Annotated, Literal
 
 import numpy as np
 
-from humanpt.runtime.config import Deg, Mm, Range
-from humanpt.sim_robot.kinematics import (
+from humanpt.geometry.puma import (
+    HOME_JOINTS_DEG,
     PumaKinematics,
     RobotModelConfig,
     TrueArm,
     UnreachableError,
     perturbed_geometry,
 )
+from humanpt.runtime.config import Deg, Mm, Range
 
-# Flange straight down in front of the robot, elbow up: (786.0, 190.0, -296.0) mm in the
-# base frame, yaw 0, pitch 0, roll 180 deg (puma762). Well inside every joint limit and
-# away from the wrist singularity (q5 = 25 deg).
-DEFAULT_START_JOINTS_DEG = (0.0, -35.0, 190.0, 0.0, 25.0, -180.0)
+# Flange straight down in front of the robot, elbow up (humanpt.geometry.puma).
+DEFAULT_START_JOINTS_DEG = HOME_JOINTS_DEG
 
 
 

@@ -26,10 +26,12 @@ from humanpt.calibration.handeye import (
     PoseCollector,
     plan_poses,
     pose_difference,
+    puma_move_check,
     solve_ax_yb,
 )
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
 
@@ -43,12 +45,6 @@ DEFAULT_POSES = 12
 # The TOB sits on a fixture: no hand holds it (whatever the world's operator does).
 FIXTURE = {"operator": {"tremor_mm": 0.0, "tremor_deg": 0.0}}
 STEP_S = 0.05  # how often the collector is asked for its next command (twin time)
-
-
-def _mm(T_m: np.ndarray) -> np.ndarray:
-    T = np.array(T_m, dtype=float)
-    T[:3, 3] *= 1e3
-    return T
 
 
 def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
@@ -83,7 +79,7 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         start = None
         for o in ls.outputs:
             if o.topic == "robot_gateway/robot_state":
-                start = _mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
+                start = to_mm(from_pose(pb.RobotState.FromString(o.data).world_T_flange))
             elif o.topic == "robot_gateway/events" and pb.Event.FromString(o.data).code == "robot_fault":
                 raise HandEyeError(f"the robot faulted before the calibration could start "
                                    f"({pb.Event.FromString(o.data).text}); nothing written")
@@ -151,39 +147,6 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
     return result, report, truth_lines(result, truth, rig)
 
 
-def puma_move_check(world_T_base_mm_deg, model: str = "puma762", min_wrist_deg: float = 8.0,
-                    max_step_deg: float = 3.0, samples: int = 40) -> Callable[[np.ndarray, np.ndarray], str | None]:
-    """The robot's own test of a planned move (the nominal Puma model where the gateway
-    believes the base is, as a real cell's planner would use its robot's model): the
-    straight move from one flange pose to the next (world, mm) must stay reachable, keep
-    the wrist (q5) ``min_wrist_deg`` from its singularity and never jump more than
-    ``max_step_deg`` in a joint between ``samples`` points (a branch flip)."""
-    from humanpt.geometry.transforms import interpolate_transform, invert_transform
-    from humanpt.sim_robot.config import SimRobotConfig
-    from humanpt.sim_robot.kinematics import UnreachableError
-
-    robot = SimRobotConfig(model=model)
-    kin = robot.kinematics()
-    base_T_world = invert_transform(transform_from_x(np.asarray(world_T_base_mm_deg, dtype=float)))
-    q_home = robot.start_joints_rad()
-
-    def check(a: np.ndarray, b: np.ndarray) -> str | None:
-        try:
-            q = kin.inverse(base_T_world @ a, q_home)
-            for s in np.linspace(0.0, 1.0, samples)[1:]:
-                qn = kin.inverse(base_T_world @ interpolate_transform(a, b, s), q)
-                if np.degrees(np.abs(qn - q)).max() > max_step_deg:
-                    return "the move flips a joint (a singularity on the way)"
-                if abs(np.degrees(qn[4])) < min_wrist_deg:
-                    return f"the move passes within {min_wrist_deg:g} deg of the wrist singularity"
-                q = qn
-        except UnreachableError as e:
-            return f"unreachable ({e})"
-        return None
-
-    return check
-
-
 def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig: Rig) -> list[str]:
     """The estimate and the rig's value against the twin's true hand-eye."""
     dt, da = pose_difference(result.flange_T_camera_mm, np.asarray(true_flange_T_camera_mm, dtype=float))
@@ -198,11 +161,11 @@ def _feed(collector: PoseCollector, outputs) -> None:
     for o in outputs:
         if o.topic == "robot_gateway/robot_state":
             msg = pb.RobotState.FromString(o.data)
-            collector.on_robot_state(o.t_ns, _mm(from_pose(msg.world_T_flange)))
+            collector.on_robot_state(o.t_ns, to_mm(from_pose(msg.world_T_flange)))
         elif o.topic == "perception/tob":
             msg = pb.TobMeasurement.FromString(o.data)
             full = msg.status == pb.TOB_STATUS_FULL
-            collector.on_measurement(o.t_ns, _mm(from_pose(msg.camera_T_tob)) if full else None)
+            collector.on_measurement(o.t_ns, to_mm(from_pose(msg.camera_T_tob)) if full else None)
         elif o.topic == "robot_gateway/events":
             msg = pb.Event.FromString(o.data)
             if msg.code == "robot_fault":

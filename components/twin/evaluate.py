@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.runtime import tables
 from humanpt.runtime.lockstep import Delivered
 from humanpt.runtime.recording import iter_entries, read_metadata
@@ -96,9 +97,7 @@ def tracking_errors(src, flange_T_desired_mm: np.ndarray) -> tuple[np.ndarray, n
 
 
 def _x(p: pb.Pose) -> np.ndarray:
-    T = from_pose(p)
-    T[:3, 3] *= 1e3
-    return x_from_transform(T)
+    return x_from_transform(to_mm(from_pose(p)))
 
 
 def path_points(src) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:

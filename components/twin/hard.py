@@ -33,6 +33,7 @@ from humanpt.controller.config import ControllerConfig
 from humanpt.controller.servo_report import servo_summary
 from humanpt.geometry.rig import flange_T_desired
 from humanpt.geometry.transforms import rotation_angle_rad
+from humanpt.geometry.units import to_mm
 from humanpt.runtime import tables
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
@@ -100,8 +101,7 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
     if points:
         truth = evaluate.truth_at(w, stamps, field="world_T_tob")
         for p, T_true in zip(points, truth, strict=True):
-            T = from_pose(p.world_T_tob)
-            T[:3, 3] *= 1e3
+            T = to_mm(from_pose(p.world_T_tob))
             g_mm = max(g_mm, float(np.linalg.norm(T[:3, 3] - T_true[:3, 3])))
             if p.orientation_held:  # position only: the orientation was held, not measured
                 held += 1

@@ -33,6 +33,7 @@ from humanpt.controller.pathfile import smooth
 from humanpt.controller.playback import thin
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, transform_from_x
+from humanpt.geometry.units import to_mm
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
@@ -183,8 +184,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         taught_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in taught]), seam)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
         ctl = next(c for c in w.extra if isinstance(c, ControllerCore))
-        tool_mm = ctl.flange_T_tool.copy()
-        tool_mm[:3, 3] *= 1e3
+        tool_mm = to_mm(ctl.flange_T_tool)
         truth_topic = "sim_robot/truth"  # the stand-in publishes its truth there too
         n_before = len(w.outputs(truth_topic))
         # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so

@@ -70,6 +70,7 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
 from humanpt.geometry.rig import Rig
+from humanpt.geometry.units import to_m, to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
 from humanpt.viz.config import VizConfig
@@ -346,9 +347,7 @@ class RerunLogger:
     def _camera_T_tob_mm(
         self, world_T_flange_m: np.ndarray, world_T_tob_m: np.ndarray
     ) -> np.ndarray:
-        T = np.linalg.inv(world_T_flange_m @ self.flange_T_camera) @ world_T_tob_m
-        T[:3, 3] *= 1e3
-        return T
+        return to_mm(np.linalg.inv(world_T_flange_m @ self.flange_T_camera) @ world_T_tob_m)
 
     # -- overlays on the complex image ------------------------------------------------------------
     def _overlay(self, stamp_ns: int, items: list) -> None:
@@ -579,7 +578,7 @@ class RerunLogger:
         ):
             # At each image's capture: the true servo error and the sources' true pixels.
             world_T_flange, world_T_tob = from_pose(msg.world_T_flange), from_pose(msg.world_T_tob)
-            desired = world_T_flange @ self.flange_T_camera @ _metres(camera_T_desired(self.dz_mm))
+            desired = world_T_flange @ self.flange_T_camera @ to_m(camera_T_desired(self.dz_mm))
             e_t = np.linalg.norm(world_T_tob[:3, 3] - desired[:3, 3]) * 1e3
             e_r = np.degrees(rotation_angle_rad(world_T_tob[:3, :3] @ desired[:3, :3].T))
             self.rec.log(ENTITIES["true_error_t"], rr.Scalars(e_t))
@@ -641,12 +640,6 @@ def log_seam(rec: rr.RecordingStream, name: str, strips_mm: list[np.ndarray], ki
     if len(corners_mm):
         rec.log(f"{base}/corners", rr.Points3D(np.asarray(corners_mm) * 1e-3, radii=0.002, colors=SEAM_CORNER_RGB,
                                                labels=corner_labels), static=True)
-
-
-def _metres(T_mm: np.ndarray) -> np.ndarray:
-    T = np.array(T_mm, dtype=float)
-    T[:3, 3] *= 1e-3
-    return T
 
 
 _HANDLERS = {

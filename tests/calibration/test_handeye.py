@@ -17,6 +17,7 @@ from humanpt.calibration.handeye import (
     closed_form_ax_yb,
     plan_poses,
     pose_difference,
+    puma_move_check,
     solve_ax_yb,
 )
 from humanpt.geometry.rig import Rig
@@ -221,6 +222,29 @@ def test_the_planner_skips_what_the_envelope_or_the_robot_refuses():
     refuse_x = lambda a, b: "joint limit" if b[0, 3] > p0[0] else None  # noqa: E731
     A, notes = plan_poses(F0, NOMINAL_X, 600.0, n_poses=6, check=refuse_x)
     assert all(a[0, 3] <= p0[0] + 1e-9 for a in A) and any("joint limit: skipped" in n for n in notes)
+
+
+def test_a_real_cell_plans_with_the_products_puma_model():
+    # issue 30: the check lives in the product (calibration, with geometry.puma), not the
+    # twin. The Puma 762's home flange (sim_robot's start: 786, 190, -296 mm, roll 180 deg,
+    # geometry/puma.py) moved 20 mm sideways is a fine move; 3 m away is out of its reach
+    # (the 762's arm is 1.25 m); the wrist straightened to q5 = 2 deg is a singularity.
+    from humanpt.geometry.puma import HOME_JOINTS_DEG, PumaKinematics, RobotModelConfig
+
+    home = transform_from_x(np.array([786.0, 190.0, -296.0, 0.0, 0.0, 180.0]))
+    check = puma_move_check((0.0,) * 6)
+    assert check(home, home @ transform_from_x(np.array([0.0, 20.0, 0.0, 0, 0, 0]))) is None
+    far = transform_from_x(np.array([3000.0, 190.0, -296.0, 0.0, 0.0, 180.0]))
+    assert check(far, home).startswith("unreachable")  # (from far: its first IK fails)
+    q = np.radians(np.array(HOME_JOINTS_DEG, dtype=float))
+    q[4] = np.radians(2.0)
+    straight = PumaKinematics(RobotModelConfig()).forward(q)
+    assert "wrist singularity" in check(home, straight)
+    # the base elsewhere in the world: the same move, shifted with it, is still fine
+    world_T_base = transform_from_x(np.array([1000.0, 0, 0, 0, 0, 0]))
+    moved = puma_move_check((1000.0, 0, 0, 0, 0, 0))
+    assert moved(world_T_base @ home, world_T_base @ home @ transform_from_x(np.array([0.0, 20.0, 0, 0, 0, 0]))) is None
+    assert moved(far, home).startswith("unreachable")
 
 
 def test_apply_to_rig_sets_the_hand_eye_and_its_calibration(poses):

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pytest
 
-from humanpt.pose_filter.bench import filter_errors, run_scenario
+from humanpt.bench.pose_filter import filter_errors, run_scenario
 
 pytestmark = [pytest.mark.timeout(300), pytest.mark.twin]
 FRAME_MS = 1000 / 30  # sim_camera's 30 images/s

@@ -129,8 +129,7 @@ def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path, capsys, cli_
 
 
 def test_the_puma_check_drops_moves_through_the_wrist_singularity():
-    from humanpt.calibration.handeye import plan_poses
-    from humanpt.twin.cal_handeye import puma_move_check
+    from humanpt.calibration.handeye import plan_poses, puma_move_check
     from humanpt.twin.run import SystemConfig
     from humanpt.twin.system import puma_cores
     from humanpt.twin.world import start_flange_for

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from humanpt.sim_robot.kinematics import (
+from humanpt.geometry.puma import (
     PUMA_JOINT_LIMITS_DEG,
     PumaKinematics,
     PumaModel,

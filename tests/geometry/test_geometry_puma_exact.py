@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.sim_robot.kinematics import (
+from humanpt.geometry.puma import (
     TWO_PI,
     PumaKinematics,
     PumaModel,

@@ -1,7 +1,7 @@
 """The pose filter judged against the twin's ground truth (issue 18): how far its estimate
 at each measurement's stamp is from where the operator really held the target, how many
 measurements it gated out, whether it restarted, and the longest hole in the accepted
-measurements. ``python -m humanpt.pose_filter.bench [scenario ...] [--speed 20 60]``
+measurements. ``python -m humanpt.bench.pose_filter [scenario ...] [--speed 20 60]``
 prints a table (lock-step twin, ideal world); the tests use :func:`filter_errors`.
 """
 
@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
+from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 
@@ -73,9 +74,7 @@ def filter_errors(world, after_ns: int | None = None) -> FilterErrors:
         # The first state after a measurement carries the filter's pose at its stamp.
         if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns not in at \
                 and st.measurement_stamp_ns >= after_ns:
-            T = from_pose(st.world_T_tob_at_measurement)
-            T[:3, 3] *= 1e3
-            at[st.measurement_stamp_ns] = T
+            at[st.measurement_stamp_ns] = to_mm(from_pose(st.world_T_tob_at_measurement))
             full[st.measurement_stamp_ns] = st.status == pb.TOB_STATUS_FULL
     stamps = np.array(sorted(at), dtype=np.int64)
     est = [at[s] for s in stamps]
@@ -115,7 +114,7 @@ def run_scenario(scenario, speed_mm_s: float = 0.0, *, seed: int = 0, pose_filte
 def main(argv: list[str] | None = None) -> int:
     from humanpt.operator.scenario import BUILTIN_SCENARIOS
 
-    ap = argparse.ArgumentParser(prog="python -m humanpt.pose_filter.bench", description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m humanpt.bench.pose_filter", description=__doc__)
     ap.add_argument("scenarios", nargs="*", default=["trapezium", "arc"],
                     help=f"built-in names ({', '.join(BUILTIN_SCENARIOS)}) or scenario files")
     ap.add_argument("--speed", type=float, nargs="+", default=[20.0, 60.0], help="mm/s (built-ins)")
