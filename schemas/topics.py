@@ -133,6 +133,14 @@ def shown_short(local: str) -> str:
 RENAMED_COMPONENTS: dict[str, str] = {"alter_gateway": "robot_gateway"}
 
 
+# Core classes that changed their name or place (after the renames above): a recording that
+# names the old one replays with the new one (issue 30: one GatewayCore for every link).
+RENAMED_CORES: dict[str, str] = {
+    "humanpt.robot_gateway.core:AlterGatewayCore": "humanpt.robot_gateway.core:GatewayCore",
+    "humanpt.rsi.core:RsiGatewayCore": "humanpt.robot_gateway.core:GatewayCore",
+}
+
+
 def current_name(component: str) -> str:
     """A component's name now (``alter_gateway`` -> ``robot_gateway``)."""
     return RENAMED_COMPONENTS.get(component, component)

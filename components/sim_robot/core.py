@@ -32,7 +32,8 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.links.alter import (
     ControllerConfig,
     ControllerEndpoint,
     ControllerStatus,
@@ -47,9 +48,8 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
-from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output, Port, command_operator
+from humanpt.runtime.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig

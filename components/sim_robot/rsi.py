@@ -37,8 +37,8 @@ from typing import Any
 import numpy as np
 
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
-from humanpt.rsi.config import parse_address
-from humanpt.rsi.protocol import (
+from humanpt.robot_gateway.links.rsi.config import parse_address
+from humanpt.robot_gateway.links.rsi.protocol import (
     RobState,
     RsiCorrection,
     RsiProtocolError,

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter import (
     ControllerEndpoint,
     ControllerStatus,
     Correction,
@@ -12,9 +14,7 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.geometry.transforms import transform_from_x
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 
@@ -26,14 +26,14 @@ ACTIVE = StatusBits.ALTER_ACTIVE | StatusBits.ARM_POWER | StatusBits.CUMULATIVE
 
 
 class Rig:
-    """Drive an AlterGatewayCore with scripted statuses, commands, ticks and liveliness.
+    """Drive an GatewayCore with scripted statuses, commands, ticks and liveliness.
 
     ``corrections``: (cycle, Correction) the fake robot received (validated by the real
     controller endpoint). ``outs``: every gateway output. Bytes cross instantly.
     """
 
-    def __init__(self, config: AlterGatewayConfig | None = None, **kw):
-        self.gw = AlterGatewayCore(config or AlterGatewayConfig(**kw))
+    def __init__(self, config: AlterConfig | None = None, **kw):
+        self.gw = GatewayCore(config or AlterConfig(**kw))
         self.robot = ControllerEndpoint()
         self.t_ns = 0
         self.cycle = 0

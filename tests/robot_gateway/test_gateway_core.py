@@ -10,10 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanpt.alter import ControllerEndpoint, CorrectionFlags, StatusBits
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.config import GatewayConfig
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter import ControllerEndpoint, CorrectionFlags, StatusBits
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.config import ConfigError, build
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
@@ -448,15 +449,15 @@ def test_bad_commands_are_dropped_with_an_event():
 )
 def test_config_rejects_bad_values_naming_the_key(key, value, needle):
     with pytest.raises(ConfigError) as e:
-        build(AlterGatewayConfig, {key: value}, source="x.toml", section="robot_gateway")
+        build(GatewayConfig, {key: value}, source="x.toml", section="robot_gateway")
     assert needle in str(e.value)
 
 
 def test_config_defaults_and_19200_baud():
-    cfg = AlterGatewayConfig(baud=19_200)
+    cfg = AlterConfig(baud=19_200)
     assert cfg.max_step_mm == pytest.approx(2.8) and cfg.max_step_deg == pytest.approx(1.68)
     assert cfg.cycle_period_ns == CYCLE_NS
-    core = AlterGatewayCore(cfg)
+    core = GatewayCore(cfg)
     assert core.tick_period_ns() == 2 * MS
     assert dataclasses.asdict(cfg)["envelope_max_mm"] == (1600.0, 1600.0, 1600.0)
 

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
-from humanpt.rsi.config import RsiGatewayConfig
+from humanpt.robot_gateway.config import GatewayConfig
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.runtime.config import ConfigError, from_dict
 from humanpt.runtime.recording import IN, OUT, Recorder, read
 from humanpt.runtime.registry import adapters_for, config_types, core_class
@@ -23,13 +23,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_an_old_config_section_configures_the_gateway():
     cfg = from_dict({"alter_gateway": {"max_speed_mm_s": 50.0}}, "old.toml", config_types())
-    gw = cfg.component("robot_gateway", AlterGatewayConfig)
+    gw = cfg.component("robot_gateway", GatewayConfig)
     assert gw.max_speed_mm_s == 50.0
     # ... whichever link it names
     one_cycle = {s: {"cycle_period_ms": 12.0} for s in ("controller", "sim_robot", "viz")}
     cfg = from_dict({"alter_gateway": {"link": "rsi", "cycle_period_ms": 12.0}, **one_cycle}, "old.toml",
                     config_types())
-    assert isinstance(cfg.component("robot_gateway", AlterGatewayConfig), RsiGatewayConfig)
+    assert isinstance(cfg.component("robot_gateway", GatewayConfig), RsiConfig)
 
 
 def test_both_names_in_one_file_is_an_error_naming_both():
@@ -40,8 +40,8 @@ def test_both_names_in_one_file_is_an_error_naming_both():
 def test_a_profile_and_the_registry_take_the_old_name():
     cfg = from_dict({"profiles": {"mine": ["alter_gateway", "controller"]}}, "p.toml", config_types())
     assert cfg.profiles["mine"] == ("robot_gateway", "controller")
-    assert core_class("alter_gateway") is core_class("robot_gateway") is AlterGatewayCore
-    rsi = RsiGatewayConfig(udp_bind="127.0.0.1:0")
+    assert core_class("alter_gateway") is core_class("robot_gateway") is GatewayCore
+    rsi = RsiConfig(udp_bind="127.0.0.1:0")
     (adapter,) = adapters_for("alter_gateway", rsi)
     assert type(adapter).__name__ == "UdpAdapter"
 

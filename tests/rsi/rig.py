@@ -5,21 +5,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
-from humanpt.rsi.protocol import RobState, RsiCorrection, decode_sen, encode_rob
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.protocol import RobState, RsiCorrection, decode_sen, encode_rob
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 from tests.robot_gateway.rig import MS, START_X
 
 
 class RsiRig:
-    """Drive an RsiGatewayCore with scripted <Rob> datagrams, commands, ticks, liveliness.
+    """Drive an GatewayCore with scripted <Rob> datagrams, commands, ticks, liveliness.
     ``corrections``: (cycle, RsiCorrection) the robot received; ``outs``: every output."""
 
-    def __init__(self, config: RsiGatewayConfig | None = None, **kw):
+    def __init__(self, config: RsiConfig | None = None, **kw):
         kw.setdefault("udp_bind", "127.0.0.1:0")
-        self.gw = RsiGatewayCore(config or RsiGatewayConfig(**kw))
+        self.gw = GatewayCore(config or RsiConfig(**kw))
         self.cycle_ms = int(self.gw.config.cycle_period_ms)
         self.t_ns = 0
         self.cycle = 0

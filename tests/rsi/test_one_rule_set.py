@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.rsi.config import RsiGatewayConfig
+from humanpt.robot_gateway.links.alter.config import AlterConfig
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.schemas import humanpt_pb2 as pb
 from tests.robot_gateway.rig import MS, START_X, Rig
 from tests.rsi.rig import RsiRig
@@ -46,10 +46,10 @@ def _sequence(rig) -> None:
 
 @pytest.fixture(scope="module")
 def rigs():
-    alter = Rig(AlterGatewayConfig(**COMMON))
+    alter = Rig(AlterConfig(**COMMON))
     # robot_late_limit 0: a robot that applies zero when late (HOLDON off), as ALTER's does;
     # with HOLDON's repeats the envelope cuts earlier (tests/rsi/test_rsi_holdon.py).
-    rsi = RsiRig(RsiGatewayConfig(udp_bind="127.0.0.1:0", robot_late_limit=0, **COMMON))
+    rsi = RsiRig(RsiConfig(udp_bind="127.0.0.1:0", robot_late_limit=0, **COMMON))
     for rig in (alter, rsi):
         _sequence(rig)
     return alter, rsi

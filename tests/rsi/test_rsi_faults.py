@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.rsi.protocol import RsiCorrection, decode_rob, encode_sen
+from humanpt.robot_gateway.links.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot, RsiRobotServer
 from tests.rsi.rig import RsiRig

@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from humanpt.robot_gateway.links.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.robot_gateway.safety import clip_to_envelope
-from humanpt.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot
 from tests.conftest import wait_for

@@ -12,10 +12,15 @@ import threading
 
 import pytest
 
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
-from humanpt.rsi.protocol import RsiProtocolError, check_bytes, decode_rob, decode_sen
-from humanpt.rsi.shell import UdpAdapter
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.protocol import (
+    RsiProtocolError,
+    check_bytes,
+    decode_rob,
+    decode_sen,
+)
+from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.live import LiveShell
 from humanpt.testing.rsi_attacks import CRAFTED, rob
@@ -84,7 +89,7 @@ def test_live_an_entity_bearing_rob_from_the_robots_address_publishes_no_state(r
     socket, then a valid one. Only the valid ones are answered and become robot states; the
     log has no traceback."""
     port, _ = router
-    core = RsiGatewayCore(RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=12.0))
+    core = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=12.0))
     adapter = UdpAdapter("127.0.0.1:0")
     adapter.open()
     shell = LiveShell(core, RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",), listen=(), record=False),

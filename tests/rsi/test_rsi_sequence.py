@@ -1,15 +1,15 @@
 """Issue 29 item 7: out-of-sequence IPOCs. One spoofed <Rob> with IPOC +500 cycles logged
 "498 consecutive missed cycles" and latched a fault; replays, reorderings and late
 duplicates each restarted the session. Now an out-of-sequence datagram is dropped and only
-counts once the next datagram continues it (humanpt.rsi.link)."""
+counts once the next datagram continues it (humanpt.robot_gateway.links.rsi.link)."""
 
 from __future__ import annotations
 
 import pytest
 
-from humanpt.alter import LinkUp
 from humanpt.robot_gateway.link import CycleReceived, LinkError
-from humanpt.rsi.link import MAX_GAP_CYCLES, RsiLink
+from humanpt.robot_gateway.links.alter import LinkUp
+from humanpt.robot_gateway.links.rsi.link import MAX_GAP_CYCLES, RsiLink
 from humanpt.testing.rsi_attacks import rob
 from tests.rsi.live_cell import CYCLE_MS, LiveCell
 from tests.rsi.rig import RsiRig

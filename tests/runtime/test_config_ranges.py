@@ -14,8 +14,8 @@ import typing
 
 import pytest
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
 from humanpt.schemas import humanpt_pb2 as pb
@@ -121,8 +121,8 @@ def _param(core, key, value) -> pb.Event:
     ("fault_after_missed", 10_000),
 ])
 def test_gateway_limits_cannot_be_loosened_at_run_time(key, value):
-    start = AlterGatewayConfig()  # 100 mm/s, 60 deg/s, the box, 3 stale cycles, 10 misses
-    core = AlterGatewayCore(start)
+    start = AlterConfig()  # 100 mm/s, 60 deg/s, the box, 3 stale cycles, 10 misses
+    core = GatewayCore(start)
     ev = _param(core, key, value)
     assert ev.code == "param_rejected" and ev.severity == pb.SEVERITY_WARNING, ev
     assert key in ev.text
@@ -130,7 +130,7 @@ def test_gateway_limits_cannot_be_loosened_at_run_time(key, value):
 
 
 def test_gateway_limits_may_become_stricter_and_back_to_the_start_value():
-    core = AlterGatewayCore(AlterGatewayConfig())
+    core = GatewayCore(AlterConfig())
     assert _param(core, "max_speed_mm_s", 50.0).code == "param_changed"
     assert core.config.max_speed_mm_s == 50.0
     assert core.config.max_step_mm == pytest.approx(50.0 * 0.028)  # 50 mm/s x 28 ms
