@@ -16,7 +16,7 @@ from tests.conftest import ROOT
 FORBIDDEN = ("humanpt.twin", "humanpt.sim_camera", "humanpt.sim_robot", "humanpt.operator",
              "humanpt.testing", "humanpt.bench", "humanpt.cli")
 # What each product package may load besides itself.
-SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.robot_gateway.links.alter", "humanpt.schemas")
+SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.schemas")
 PRODUCT = ("camera", "perception", "pose_filter", "controller", "robot_gateway", "viz", "calibration", "seam",
            "scene")
 
@@ -61,8 +61,9 @@ def test_the_probe_sees_a_forbidden_import():
     assert {"humanpt.sim_camera", "humanpt.operator"} <= loaded
 
 
-def test_the_rsi_link_loads_only_the_gateway_and_the_shared_packages():
+@pytest.mark.parametrize("link", ["alter", "rsi"])
+def test_a_link_loads_only_the_gateway_and_the_shared_packages(link):
     # issue 22: RSI is a link of the one gateway (its safety core), not a simulator's
-    modules, loaded = loaded_by("humanpt.robot_gateway.links.rsi")
+    modules, loaded = loaded_by(f"humanpt.robot_gateway.links.{link}")
     assert len(modules) > 1 and not loaded & set(FORBIDDEN), sorted(loaded & set(FORBIDDEN))
-    assert loaded <= {"humanpt.robot_gateway.links.rsi", "humanpt.robot_gateway", *SHARED}, sorted(loaded)
+    assert loaded <= {"humanpt.robot_gateway", *SHARED}, sorted(loaded)

@@ -798,7 +798,8 @@ class Recording:
 
     def config(self) -> dict[str, Any]:
         """The recorded config (raises RecordingError, one line, when it is not a JSON table)."""
-        return recorded_json(self.metadata.get("config", "{}"), f"{self.path}: its recorded config")
+        table = recorded_json(self.metadata.get("config", "{}"), f"{self.path}: its recorded config")
+        return topics.current_config(self.component, table)  # (keys an older version had, dropped)
 
 
 def recorded_json(text: str, what: str) -> dict[str, Any]:

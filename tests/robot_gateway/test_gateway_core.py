@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.robot_gateway.config import GatewayConfig
 from humanpt.robot_gateway.core import GatewayCore
-from humanpt.robot_gateway.links.alter import ControllerEndpoint, CorrectionFlags, StatusBits
+from humanpt.robot_gateway.links.alter import CorrectionFlags, StatusBits
 from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.config import ConfigError, build
 from humanpt.schemas import humanpt_pb2 as pb
@@ -27,7 +27,7 @@ from tests.robot_gateway.oracle import (
     wire_euler_deg,
     wire_translation_mm,
 )
-from tests.robot_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, Rig
+from tests.robot_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, AlterRobot, Rig
 
 HOLD = CorrectionFlags.HOLD
 
@@ -378,11 +378,11 @@ def test_silence_is_a_link_down_event_and_no_corrections_then_link_back():
 def test_a_peer_restart_is_link_down_then_up_with_a_new_session():
     rig = _rig()
     rig.cycle_with_command(dp_mm=(1.0, 0, 0))
-    rig.robot = ControllerEndpoint()  # the controller restarts (a fresh link, STRT)
+    rig.robot = AlterRobot()  # the controller restarts (a fresh link, STRT)
     rig.cycle = 0
     outs = []
-    for e in rig.robot.start(rig.t_ns):
-        outs += rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    for data in rig.robot.begin(rig.t_ns):
+        outs += rig.from_robot(data)
     codes = rig.codes(outs)
     assert codes[0] == "link_down" and "peer restarted" in rig.events(outs)[0].text
     assert codes[-1] == "link_up"
@@ -490,10 +490,10 @@ def test_after_a_peer_restart_the_watchdog_rearms_with_the_new_sessions_first_co
         rig.advance(CYCLE_NS)
     for _ in range(5):
         rig.cycle_with_command()  # armed from cycle 51
-    rig.robot = ControllerEndpoint()  # the controller restarts, counting from 1 again
+    rig.robot = AlterRobot()  # the controller restarts, counting from 1 again
     rig.cycle = 0
-    for e in rig.robot.start(rig.t_ns):
-        rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    for data in rig.robot.begin(rig.t_ns):
+        rig.from_robot(data)
     rig.cycle_with_command()  # cycle 1 of the new session: re-arms
     before = rig.codes().count("deadline_missed")
     for _ in range(3):

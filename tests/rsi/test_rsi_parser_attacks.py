@@ -25,7 +25,7 @@ from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.live import LiveShell
 from humanpt.testing.rsi_attacks import CRAFTED, rob
 from tests.conftest import wait_for
-from tests.rsi.rig import RsiRig
+from tests.robot_gateway.rig import Rig
 
 # Refused by the byte check alone, before any XML parsing (what could expand or decode otherwise).
 BEFORE_PARSING = ("superscript_ipoc", "arabic_indic_ipoc", "char_reference_ipoc", "entity_rob_ascii",
@@ -64,19 +64,19 @@ def test_an_ascii_or_utf8_declaration_is_still_an_rsi_message(decl):
 
 
 def test_the_gateway_reports_crafted_datagrams_rate_limited_with_a_count_and_answers_none():
-    rig = RsiRig(cycle_period_ms=12.0)  # event_interval_ms 1000: one link_error a second per code
+    rig = Rig(link="rsi", cycle_period_ms=12.0)  # event_interval_ms 1000: one link_error a second per code
     rig.status()
     n_states, n_answers = len(rig.states()), len(rig.corrections)
     outs = []
     for _ in range(5):
         for data in CRAFTED.values():
-            outs += rig.datagram(data)  # all at the same instant: raises nothing
+            outs += rig.from_robot(data)  # all at the same instant: raises nothing
     n = 5 * len(CRAFTED)
     assert rig.gw.link.counters["malformed"] == n and rig.gw.counters["link_errors"] == n
     assert rig.codes(outs) == ["link_error"]  # one report for the burst
     assert (len(rig.states()), len(rig.corrections)) == (n_states, n_answers)  # no state, no answer
     rig.advance(1_100_000_000)
-    outs = rig.datagram(CRAFTED["superscript_ipoc"])
+    outs = rig.from_robot(CRAFTED["superscript_ipoc"])
     [ev] = rig.events(outs)
     assert f"(+{n - 1} more since the last report)" in ev.text and f"({n + 1} malformed so far)" in ev.text
     rig.status()
