@@ -56,8 +56,8 @@ def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.
     # the pose at the frame's start, not at its reception.
     status_delay_ms = 41 * 10 / baud * 1e3
     gateway = AlterConfig(world_T_base_mm_deg=base, baud=baud, status_delay_ms=status_delay_ms,
-                                 envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
-                                 envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
+                          envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
+                          envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
     return robot, gateway
 
 
@@ -74,8 +74,8 @@ def rsi_link(robot, gateway, cycle_ms: float, udp_bind: str = "127.0.0.1:49152")
     from humanpt.robot_gateway.links.rsi.config import RsiConfig
 
     rsi_gateway = RsiConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
-                                   udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
-                                   correction_frame="tool" if robot.alter_mode == "tool" else "base")
+                            udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
+                            correction_frame="tool" if robot.alter_mode == "tool" else "base")
     return dataclasses.replace(robot, protocol="rsi", cycle_period_ms=cycle_ms, rsi_gateway=udp_bind), rsi_gateway
 
 
