@@ -15,6 +15,8 @@ import typing
 import pytest
 
 from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links import LINKS
+from humanpt.robot_gateway.links import config_type as gateway_config_type
 from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
@@ -54,9 +56,16 @@ def _config_classes():
             if dataclasses.is_dataclass(tp):
                 walk(f"{name}.{f.name}", tp)
 
-    for name, cls in {**config_types(), "runtime": cfg.RuntimeConfig}.items():
+    for name, cls in _sections().items():
         walk(name, cls)
     return seen
+
+
+def _sections() -> dict[str, type]:
+    """Every section's config class; the gateway's once per link (its section is its link's)."""
+    sections = {**config_types(), "runtime": cfg.RuntimeConfig}
+    del sections["robot_gateway"]
+    return {**sections, **{f"robot_gateway link={link}": gateway_config_type(link) for link in LINKS}}
 
 
 def test_every_numeric_parameter_has_a_physical_range():
@@ -68,7 +77,7 @@ def test_every_numeric_parameter_has_a_physical_range():
 
 def test_every_default_is_inside_its_range():
     # The builder checks ranges; building every section from its own defaults must pass.
-    for name, cls in {**config_types(), "runtime": cfg.RuntimeConfig}.items():
+    for name, cls in _sections().items():
         table = cfg.to_table(cls())
         cfg.build(cls, table, source="<defaults>", section=name)
 
