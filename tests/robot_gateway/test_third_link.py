@@ -17,6 +17,7 @@ from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError, Lin
 from humanpt.robot_gateway.links import LINKS, LinkKind, gateway_config, link_kind
 from humanpt.runtime.config import ConfigError, build
 from tests.robot_gateway import rig as rigmod
+from tests.robot_gateway.rig import Rig
 from tests.robot_gateway.test_one_rule_set import assert_the_rule_set, run_rule_set
 
 
@@ -141,3 +142,15 @@ def test_without_its_registry_line_the_link_is_refused_by_name():
     assert "text" not in LINKS
     with pytest.raises(ConfigError, match=r"link 'text' is not a robot link of this version; known links: alter, rsi"):
         build(GatewayConfig, {"link": "text"}, source="cell.toml", section="robot_gateway")
+
+
+def test_a_gateway_reads_only_its_own_links_receive_topic():
+    from humanpt.runtime.core import UndeclaredInputError
+    from humanpt.schemas import humanpt_pb2 as pb
+
+    alter = Rig()
+    with pytest.raises(UndeclaredInputError, match="'udp_rx' is another link's; this gateway's ALTER link reads "
+                                                   "'serial_rx'"):
+        alter.gw.step(0, "udp_rx", pb.SerialChunk(data=b"<Rob/>"))
+    with pytest.raises(ValueError, match="link 'alter' takes .*AlterConfig, not GatewayConfig"):
+        GatewayConfig()  # the safety rules alone make no gateway: a config is its link's
