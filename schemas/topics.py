@@ -133,6 +133,30 @@ def shown_short(local: str) -> str:
 RENAMED_COMPONENTS: dict[str, str] = {"alter_gateway": "robot_gateway"}
 
 
+# Core classes that changed their name or place (after the renames above): a recording that
+# names the old one replays with the new one (issue 30: one GatewayCore for every link).
+RENAMED_CORES: dict[str, str] = {
+    "humanpt.robot_gateway.core:AlterGatewayCore": "humanpt.robot_gateway.core:GatewayCore",
+    "humanpt.rsi.core:RsiGatewayCore": "humanpt.robot_gateway.core:GatewayCore",
+}
+
+
+# Keys a component's config held in an older version and holds no more, per (component, key,
+# value): a recorded config with key = value drops them when it is read (issue 30: the gateway
+# over RSI recorded ALTER's serial port and baud, which its config then inherited).
+RETIRED_CONFIG_KEYS: dict[tuple[str, str, str], tuple[str, ...]] = {
+    ("robot_gateway", "link", "rsi"): ("port", "baud"),
+}
+
+
+def current_config(component: str, table: dict) -> dict:
+    """A recorded config of ``component`` as this version reads it (RETIRED_CONFIG_KEYS dropped)."""
+    for (name, key, value), retired in RETIRED_CONFIG_KEYS.items():
+        if name == component and table.get(key) == value and any(k in table for k in retired):
+            table = {k: v for k, v in table.items() if k not in retired}
+    return table
+
+
 def current_name(component: str) -> str:
     """A component's name now (``alter_gateway`` -> ``robot_gateway``)."""
     return RENAMED_COMPONENTS.get(component, component)

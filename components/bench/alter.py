@@ -10,7 +10,7 @@ a cycle counts as on time when its robot state reports ``missed_cycles == 0``).
 
 A pty has no baud rate: bytes cross at once, so these figures are what the software
 sustains; the ``38400 line`` column says whether a real 38 400 baud line could carry
-the cycle (``humanpt.alter.budget``).
+the cycle (``humanpt.robot_gateway.links.alter.budget``).
 """
 
 from __future__ import annotations
@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from humanpt.alter.budget import cycle_budget
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
-from humanpt.robot_gateway.shell import PatientSerialAdapter
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter.budget import cycle_budget
+from humanpt.robot_gateway.links.alter.config import AlterConfig
+from humanpt.robot_gateway.links.alter.shell import PatientSerialAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.shell import PtyAdapter
@@ -67,9 +67,9 @@ class AlterRun:
         return float(np.percentile(values, q)) if values else float("nan")
 
 
-def gateway_config(period_ms: float, port: str) -> AlterGatewayConfig:
+def gateway_config(period_ms: float, port: str) -> AlterConfig:
     """Gateway settings scaled to the cycle: tick and reply deadline shrink with it."""
-    return AlterGatewayConfig(
+    return AlterConfig(
         port=port,
         cycle_period_ms=period_ms,
         tick_ms=min(2.0, period_ms / 4.0),
@@ -83,7 +83,7 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
     with tempfile.TemporaryDirectory() as d:
         link = Path(d) / "alter-pty"
         sim = SimRobotCore(SimRobotConfig(cycle_period_ms=period_ms, pty_link=str(link)))
-        gw = AlterGatewayCore(gateway_config(period_ms, str(link)))
+        gw = GatewayCore(gateway_config(period_ms, str(link)))
         rx_ns: dict[int, int] = {}
         measuring = threading.Event()
         seq = [0]
@@ -251,7 +251,7 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
 
 def line_capacity(period_ms: float) -> str:
     """Whether a real 38 400 baud line carries a cycle of ``period_ms``: ``same cycle``
-    (the reply fits in the same cycle), ``next cycle`` or ``no`` (:mod:`humanpt.alter.budget`)."""
+    (the reply fits in the same cycle), ``next cycle`` or ``no`` (:mod:`humanpt.robot_gateway.links.alter.budget`)."""
     b = cycle_budget(38_400, round(period_ms * 1e6))
     return "same cycle" if b.same_cycle_reply else ("next cycle" if b.fits else "no")
 

@@ -184,7 +184,7 @@ class Ctx:
     as_identity: Callable[[str], object] | None = None
     control: object = None                                  # the twin's LiveControl, or None
     link: str = "alter"                                     # the robot link: alter (serial, pty) or rsi (UDP)
-    gw: object = None                                       # the gateway's config (AlterGatewayConfig / RsiGatewayConfig)
+    gw: object = None                                       # the gateway's config (AlterConfig / RsiConfig)
     file_cfg: object = None                                 # the run's config file (humanpt.runtime.config.ConfigFile)
 
     def pub(self, short: str):
@@ -282,7 +282,7 @@ def attack_absurd(ctx: Ctx, row: FaultRow) -> None:
 
 def attack_strt(ctx: Ctx, row: FaultRow) -> None:
     """One DDCMP STRT frame written on the gateway's side of the serial line (toward sim_robot)."""
-    from humanpt.alter.ddcmp import encode_frame, strt
+    from humanpt.robot_gateway.links.alter.ddcmp import encode_frame, strt
 
     fd = os.open(ctx.gateway_port, os.O_WRONLY | os.O_NOCTTY)
     try:
@@ -985,12 +985,12 @@ def not_applicable(attack: Attack, secure: bool, link: str) -> str:
 def gateway_config(file_cfg, link: str):
     """The run's gateway config: the ALTER gateway's or the RSI gateway's."""
     if link == "rsi":
-        from humanpt.rsi.config import RsiGatewayConfig
+        from humanpt.robot_gateway.links.rsi.config import RsiConfig
 
-        return file_cfg.component("robot_gateway", RsiGatewayConfig)
-    from humanpt.robot_gateway.config import AlterGatewayConfig
+        return file_cfg.component("robot_gateway", RsiConfig)
+    from humanpt.robot_gateway.links.alter.config import AlterConfig
 
-    return file_cfg.component("robot_gateway", AlterGatewayConfig)
+    return file_cfg.component("robot_gateway", AlterConfig)
 
 
 def _router_address(rt) -> tuple[str, int]:

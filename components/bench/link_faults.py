@@ -160,7 +160,7 @@ def _rob(ctx: Ctx, cycles_ahead: int) -> bytes:
     """A ``<Rob>`` for the robot's cycle ``cycles_ahead`` after its latest robot state, with
     its pose: what the robot itself would send (IPOC = cycle x cycle time + the simulated
     controller's first IPOC's remainder)."""
-    from humanpt.rsi.protocol import RobState, encode_rob
+    from humanpt.robot_gateway.links.rsi.protocol import RobState, encode_rob
     from humanpt.sim_robot.rsi import FIRST_IPOC
 
     cycle_ms = int(ctx.gw.cycle_period_ms)
@@ -175,7 +175,7 @@ class Attacker:
     """A UDP socket of the robot's host on a port of its own; counts what comes back."""
 
     def __init__(self, ctx: Ctx):
-        from humanpt.rsi.config import parse_address
+        from humanpt.robot_gateway.links.rsi.config import parse_address
 
         self.target = parse_address(ctx.gw.udp_bind)
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)

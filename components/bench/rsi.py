@@ -22,10 +22,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from humanpt.robot_gateway.core import ROBOT_STATE
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
-from humanpt.rsi.shell import UdpAdapter
+from humanpt.robot_gateway.core import ROBOT_STATE, GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 from humanpt.sim_robot.config import SimRobotConfig
@@ -130,7 +129,7 @@ def _robot_process(conn, robot_cfg: SimRobotConfig, gateway: str, cycles: int) -
 
 
 def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig | None = None,
-            gateway: RsiGatewayConfig | None = None,
+            gateway: RsiConfig | None = None,
             step: Callable[[int, float], np.ndarray] | None = None,
             lose: Callable[[int], bool] | None = None, robot_process: bool = False) -> RsiRun:
     """One round trip run of ``cycles`` robot cycles (blocks ~cycles x cycle_ms); ``step``
@@ -141,8 +140,8 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     import multiprocessing
     import threading
 
-    gw_cfg = gateway or RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms)
-    core = RsiGatewayCore(gw_cfg)
+    gw_cfg = gateway or RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms)
+    core = GatewayCore(gw_cfg)
     adapter = UdpAdapter(gw_cfg.udp_bind)
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     adapter.start(lambda topic, msg: inbox.put((topic, msg)))

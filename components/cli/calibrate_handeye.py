@@ -145,14 +145,14 @@ def collect_live(cfg, rig, n_poses: int, timeout_s: float) -> tuple[np.ndarray, 
     from humanpt.calibration.handeye import HandEyeError, PoseCollector, plan_poses
     from humanpt.controller.config import ControllerConfig
     from humanpt.geometry.transforms import transform_from_x
-    from humanpt.robot_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.config import GatewayConfig
     from humanpt.runtime.bus import open_tool_session
     from humanpt.schemas import humanpt_pb2 as pb
     from humanpt.schemas import topics
     from humanpt.schemas.convert import from_pose
 
     ctl = cfg.component("controller", ControllerConfig)
-    gw = cfg.component("robot_gateway", AlterGatewayConfig)
+    gw = cfg.component("robot_gateway", GatewayConfig)
     cell = cfg.runtime.cell
     inbox: queue.Queue = queue.Queue()
     session = open_tool_session(cfg.runtime)

@@ -133,7 +133,7 @@ def run_live(args, cfg, run_dir: Path) -> int:
     print(report(RunOutputs(run_dir), res.config, run_dir, res.wall_s, res.duration_s, "live",
                  stop_ns=res.stop_ns))
     if getattr(args, "link", "alter") == "rsi":
-        from humanpt.rsi.runstats import rsi_cycles
+        from humanpt.robot_gateway.links.rsi.runstats import rsi_cycles
 
         print(rsi_cycles(run_dir) or "RSI: no <Rob> recorded by sim_robot")
     return 0

@@ -2,8 +2,7 @@
 
 A model of the robot, not a simulator: the product plans with it (hand-eye poses a Puma can
 reach, :func:`humanpt.calibration.handeye.puma_move_check`) and the simulated Puma
-(:mod:`humanpt.sim_robot`) moves with it. (Until issue 30 it was ``humanpt.sim_robot.kinematics``,
-which still re-exports it.)
+(:mod:`humanpt.sim_robot`) moves with it. (Until issue 30 it was ``humanpt.sim_robot.kinematics``.)
 
 numpy and plain floats (the same numbers, see below). Lengths in mm, angles in radians
 unless a name says ``_deg``.

@@ -21,13 +21,13 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.alter.limiter import EventLimiter, suffix
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.kalman import PoseIMM, PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime.core import Core, Output, Port, count_decades
+from humanpt.runtime.limiter import EventLimiter, suffix
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, from_vector3, pose
 

@@ -1,9 +1,11 @@
-"""robot_gateway: the host end of the ALTER serial link and the last line of safety.
+"""robot_gateway: the host end of the robot link and the last line of safety.
 
-``core.AlterGatewayCore`` (pure) turns the controller's per-cycle STATUS into
-``robot_gateway/robot_state`` and answers each with a clamped, enveloped, fresh-or-zero
-CORRECTION; ``shell.adapters`` binds it to a serial port. The safety rules are
-``core.GatewayCore``, one implementation behind a small ``link.Link`` interface (ALTER
-in ``alter_link``, KUKA RSI-style UDP/XML in ``humanpt.rsi``). Cores on threads without
-Zenoh (benches, tests) are in ``humanpt.testing.harness``. See README.md.
+``core.GatewayCore`` (pure) turns what the robot reports every cycle into
+``robot_gateway/robot_state`` and answers each cycle with a clamped, enveloped,
+fresh-or-zero correction: one implementation of the safety rules (``config.GatewayConfig``)
+behind a small ``link.Link`` interface. The links are folders of ``links/`` behind one
+registry (``links.LINKS``: ALTER over a serial line, KUKA RSI-style UDP/XML), chosen by
+``[robot_gateway] link``; ``shell.adapters`` binds the gateway to its link's port or socket.
+Cores on threads without Zenoh (benches, tests) are in ``humanpt.testing.harness``. See
+README.md.
 """

@@ -4,21 +4,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, ClassVar
 
 import numpy as np
 
+from humanpt.robot_gateway.links import DEFAULT_LINK, UnknownLinkError, config_type
 from humanpt.runtime import cell_limits
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 
-SUPPORTED_BAUDS = (19_200, 38_400)
-# int16 wire units: 327.67 mm or 327.67 deg per cycle at most (messages.py).
-_WIRE_MAX_PER_CYCLE = 327.67
-
 
 @dataclass(frozen=True)
-class AlterGatewayConfig:
-    """The ALTER gateway: serial port, cycle, safety limits and watchdogs.
+class GatewayConfig:
+    """The gateway's safety rules, whatever its link: cycle, limits, envelope, watchdogs.
+
+    A gateway's config is its link's (``links.<name>.config``): this class plus the link's
+    own fields (a serial port, a UDP address) and its defaults for the cycle and timers;
+    ``[robot_gateway] link`` chooses it (:meth:`config_class_for`, ``links.LINKS``).
 
     Lengths in mm, angles in degrees (what a person edits); the envelope is an
     axis-aligned box in the world frame. ``world_T_base_mm_deg`` places the robot base
@@ -26,9 +27,7 @@ class AlterGatewayConfig:
     (Z-Y-X); identity by default, as in the paper (world frame at the robot base).
     """
 
-    # Serial device (/dev/ttyS0) or pyserial URL; the default is sim_robot's pty link.
-    port: str = "/tmp/humanpt-alter"
-    baud: Annotated[int, Range(1200, 115200, "baud")] = 38_400
+    # The link's cycle: what the robot sends every cycle and expects an answer to.
     cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Gateway timer: link timers, reply deadline, silence watchdog are checked this often.
     tick_ms: Annotated[float, Range(0.1, 1000, "ms")] = 2.0
@@ -72,31 +71,29 @@ class AlterGatewayConfig:
     # a second controller session, a replay, a forger) holds the robot for this long after
     # its last command (controller_conflict).
     conflict_hold_ms: Annotated[float, Range(0, 60000, "ms")] = 500.0
-    # The link to the robot controller: "alter" (the Puma's serial ALTER line, the fields
-    # above) or "rsi" (a KUKA RSI-style UDP link: humanpt.rsi, its own fields and defaults,
-    # see components/rsi/README.md). Component name, topics and rules are the same.
-    link: Literal["alter", "rsi"] = "alter"
+    # The link to the robot controller: "alter" (the Puma's serial ALTER line) or "rsi" (a
+    # KUKA RSI-style UDP link), one of links.LINKS; each adds its own keys to this section
+    # (links/<name>/config.py). Component name, topics and rules are the same.
+    link: str = DEFAULT_LINK
+    # The largest step per cycle the link's wire can carry (mm or deg); None: no limit.
+    wire_max_per_cycle: ClassVar[float | None] = None
 
     @classmethod
     def config_class_for(cls, table) -> type:
-        """The config class of an ``[robot_gateway]`` table: the RSI gateway's for
-        ``link = "rsi"`` (its keys: udp_bind, ...), else this one (runtime.config.build)."""
-        if cls is AlterGatewayConfig and table.get("link") == "rsi":
-            from humanpt.rsi.config import RsiGatewayConfig  # (rsi imports this module)
-
-            return RsiGatewayConfig
-        return cls
+        """The config class of a ``[robot_gateway]`` table: its link's (``link``, default
+        "alter"), from the registry (runtime.config.build calls this)."""
+        if cls is not GatewayConfig:
+            return cls
+        try:
+            return config_type(table.get("link", DEFAULT_LINK))
+        except UnknownLinkError:
+            return cls  # (its __post_init__ names the known links)
 
     def __post_init__(self) -> None:
-        if type(self) is AlterGatewayConfig and self.link != "alter":
-            raise ValueError(f"link {self.link!r}: this is the ALTER link's config; "
-                             "link = \"rsi\" takes humanpt.rsi.config.RsiGatewayConfig")
-        if not self.port:
-            raise ValueError("port must name a serial device or a pyserial URL")
-        if self.baud not in SUPPORTED_BAUDS:
-            raise ValueError(
-                f"baud must be one of {SUPPORTED_BAUDS} (the ALTER board), got {self.baud}"
-            )
+        own = config_type(self.link)  # (UnknownLinkError, a ValueError, for a link not registered)
+        if type(self) is not own:
+            raise ValueError(f"link {self.link!r} takes {own.__module__}.{own.__qualname__}, "
+                             f"not {type(self).__qualname__}")
         if not 1.0 <= self.cycle_period_ms <= 1000.0:
             raise ValueError(
                 f"cycle_period_ms must be within 1 and 1000, got {self.cycle_period_ms}"
@@ -114,10 +111,9 @@ class AlterGatewayConfig:
         ):
             if not (np.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be > 0, got {value}")
-            if value * cycle_s > _WIRE_MAX_PER_CYCLE:
-                raise ValueError(
-                    f"{name} = {value} exceeds the wire range ({_WIRE_MAX_PER_CYCLE} per cycle)"
-                )
+            wire = self.wire_max_per_cycle
+            if wire is not None and value * cycle_s > wire:
+                raise ValueError(f"{name} = {value} exceeds the wire range ({wire} per cycle)")
         lo, hi = np.asarray(self.envelope_min_mm, float), np.asarray(self.envelope_max_mm, float)
         if (
             lo.shape != (3,)

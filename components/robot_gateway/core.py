@@ -28,11 +28,11 @@ command, and disarms while the controller is gone (then the gateway just holds a
 Every such action is an event on ``robot_gateway/events``, rate-limited per code to one per
 ``event_interval_ms``. See README.md for every rule and event.
 
-Links: :class:`AlterGatewayCore` (below) over ALTER (``alter_link.AlterLink``: STATUS k on
-``serial_rx``, a CORRECTION echoing k quantised to 0.01 mm / 0.01 deg on ``serial_tx``,
-the TOOL_MODE bit choosing the frame) and ``humanpt.rsi.core.RsiGatewayCore`` over KUKA
-RSI-style UDP/XML. The component is ``robot_gateway`` whatever the link (its topics and events
-are unchanged) whatever the link.
+Links (``links.LINKS``, chosen by ``config.link``): ALTER (``links.alter.link.AlterLink``:
+STATUS k on ``serial_rx``, a CORRECTION echoing k quantised to 0.01 mm / 0.01 deg on
+``serial_tx``, the TOOL_MODE bit choosing the frame) and KUKA RSI-style UDP/XML
+(``links.rsi.link.RsiLink``: ``udp_rx``, ``udp_tx``). The component is ``robot_gateway``
+with the same topics and events whatever the link.
 
 Frames: ``world`` (the cell), ``base`` (the robot base, placed by ``world_T_base_mm_deg``),
 ``tool`` (the flange). A FlangeCommand's header.frame_id says whether its step is in
@@ -48,19 +48,20 @@ from typing import Any
 
 import numpy as np
 
-from humanpt.alter import (
-    HostEndpoint,
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.config import GatewayConfig
+from humanpt.robot_gateway.link import (
+    CycleReceived,
+    CycleState,
+    Link,
     LinkDown,
+    LinkError,
     LinkUp,
     RepSent,
     SendRejected,
     Transmit,
 )
-from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
-from humanpt.geometry.transforms import transform_from_x
-from humanpt.robot_gateway.alter_link import AlterLink
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.link import CycleReceived, CycleState, Link, LinkError
+from humanpt.robot_gateway.links import LINKS, link_kind
 from humanpt.robot_gateway.safety import (
     clamp_norm,
     clip_to_envelope,
@@ -68,7 +69,8 @@ from humanpt.robot_gateway.safety import (
     safe_norm,
 )
 from humanpt.runtime.config import current_name
-from humanpt.runtime.core import Core, Output, Port, command_operator
+from humanpt.runtime.core import Core, Output, Port, UndeclaredInputError, command_operator
+from humanpt.runtime.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 
@@ -108,8 +110,8 @@ class Command:
 class Sent:
     """One correction the gateway sent (for benches and tests; not an output).
 
-    ``correction`` is the link's wire object (humanpt.alter.Correction for ALTER,
-    humanpt.rsi.protocol.RsiCorrection for RSI); ``step`` the decided step before the
+    ``correction`` is the link's wire object (``links.alter.messages.Correction`` for ALTER,
+    ``links.rsi.protocol.RsiCorrection`` for RSI); ``step`` the decided step before the
     link quantised it: (dp_mm (3,), rv_rad (3,)) in the robot's correction frame (base or
     tool), None for a hold."""
 
@@ -124,37 +126,41 @@ class Sent:
 WATCH = ("controller",)  # the liveliness the gateway watches
 
 
-def gateway_ports(rx_topic: str) -> tuple[Port, ...]:
-    """The gateway's inputs with its link's receive topic (``serial_rx``, ``udp_rx``)."""
+def gateway_ports(*rx_topics: str) -> tuple[Port, ...]:
+    """The gateway's inputs with the links' receive topics (``serial_rx``, ``udp_rx``)."""
     return (
         Port("tick", pb.Tick, "_on_tick"),
-        Port(rx_topic, pb.SerialChunk, "_on_rx"),
+        *(Port(t, pb.SerialChunk, "_on_rx") for t in rx_topics),
         Port("controller/command", pb.FlangeCommand, "_on_command", queue=8),
         Port("liveliness", pb.Liveliness, "_on_liveliness"),
         Port("console/command", pb.Command, "_on_console", queue=8),
     )
 
 
+# Every registered link's receive topic is a port; a gateway reads its own link's only.
+_RX_TOPICS = tuple(sorted({link_kind(name).rx_topic for name in LINKS}))
+
+
 class GatewayCore(SerialLinkCoreMixin, Core):
-    """The gateway's safety rules over a :class:`Link`. Subclasses give ``config_type``,
-    ``ports`` (:func:`gateway_ports` with the link's receive topic), ``watch = WATCH``,
-    ``tick_period_ns`` (``config.tick_period_ns``) and :meth:`make_link`."""
+    """The gateway's safety rules over the :class:`Link` its config names (``config.link``,
+    made by the link registry ``links.LINKS``): one core for every link."""
 
     name = "robot_gateway"
+    config_type = GatewayConfig
+    ports = gateway_ports(*_RX_TOPICS)
+    watch = WATCH
     realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
 
-    def make_link(self, config: Any) -> Link:
-        raise NotImplementedError
-
-    def late_repeat_cycles(self, config: Any) -> int:
-        """How many times the robot may repeat a correction on its own when answers are late
-        (RSI with HOLDON on: up to its late limit); the envelope keeps them all inside. ALTER: 0."""
-        return 0
-
-    def __init__(self, config: AlterGatewayConfig):
-        super().__init__(config)
-        self.link: Link = self.make_link(config)
-        self.late_repeats = self.late_repeat_cycles(config)
+    def __init__(self, config: GatewayConfig):
+        kind = link_kind(config.link) if isinstance(config, GatewayConfig) else None
+        if kind is not None:
+            # The link first: which receive port is this gateway's (_bind) depends on it.
+            self.link: Link = kind.make(config)
+            self.rx_topic = kind.rx_topic
+        super().__init__(config)  # (TypeError for a config that is not a GatewayConfig)
+        # How many times the robot may repeat a correction on its own when answers are late
+        # (RSI with HOLDON on: up to its late limit); the envelope keeps them all inside.
+        self.late_repeats = kind.late_repeats(config)
         self._limiter = EventLimiter(round(config.event_interval_ms * 1e6))
         self._world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         self._started = False
@@ -216,7 +222,17 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             0,
         )
 
-    # -- contract (a concrete gateway also gives tick_period_ns: config.tick_period_ns) -----
+    def tick_period_ns(self) -> int | None:
+        return self.config.tick_period_ns
+
+    def _bind(self, port: Port):
+        if port.handler == "_on_rx" and port.topic != self.rx_topic:
+            def other_link(t_ns: int, msg: Any) -> list[Output]:
+                raise UndeclaredInputError(f"{port.topic!r} is another link's; this gateway's {self.link.name} "
+                                           f"link reads {self.rx_topic!r}")
+            return other_link
+        return super()._bind(port)
+
     @property
     def fault(self) -> str | None:
         return self._fault
@@ -840,30 +856,3 @@ class GatewayCore(SerialLinkCoreMixin, Core):
         self._fault = None
         self._missed = 0
         self._commands.clear()
-
-
-class AlterGatewayCore(GatewayCore):
-    name = "robot_gateway"
-    config_type = AlterGatewayConfig
-    ports = gateway_ports(AlterLink.rx_topic)
-    watch = WATCH
-
-    def tick_period_ns(self) -> int | None:
-        return self.config.tick_period_ns
-
-    def make_link(self, config: AlterGatewayConfig) -> AlterLink:
-        return AlterLink(config.cycle_period_ns)
-
-    @classmethod
-    def create(cls, config: AlterGatewayConfig, rig: Any = None) -> Core:
-        """The gateway of ``config.link``: this core over ALTER, ``RsiGatewayCore`` over RSI
-        (the registry names this class for the component; ``link`` chooses)."""
-        if cls is AlterGatewayCore and config.link == "rsi":
-            from humanpt.rsi.core import RsiGatewayCore  # (rsi imports this module)
-
-            return RsiGatewayCore.create(config, rig)
-        return super().create(config, rig)
-
-    @property
-    def _host(self) -> HostEndpoint:  # (tests and benches reach the endpoint by this name)
-        return self.link.host

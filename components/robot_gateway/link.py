@@ -1,7 +1,8 @@
 """The gateway's link interface: what a robot link protocol gives the safety rules
-(:class:`CycleState` per robot cycle) and what it must do (:class:`Link`). Implementations:
-``humanpt.robot_gateway.alter_link.AlterLink`` (ALTER, serial) and
-``humanpt.rsi.link.RsiLink`` (KUKA RSI-style, UDP/XML)."""
+(:class:`CycleState` per robot cycle), the events it returns, and what it must do
+(:class:`Link`). Implementations, one folder each (``links.LINKS``):
+``links.alter.link.AlterLink`` (ALTER, serial) and ``links.rsi.link.RsiLink`` (KUKA
+RSI-style, UDP/XML)."""
 
 from __future__ import annotations
 
@@ -38,6 +39,44 @@ class CycleReceived:
     state: CycleState
 
 
+@dataclass(frozen=True)
+class Transmit:
+    """Link event: bytes to write to the wire now (whole frames or one datagram)."""
+
+    data: bytes
+
+
+@dataclass(frozen=True)
+class LinkUp:
+    """Link event: the link (re)started a session (ALTER: the DDCMP start-up STRT/STACK/ACK
+    completed, sequence numbers start at 0; RSI: the first datagram of a session)."""
+
+
+@dataclass(frozen=True)
+class LinkDown:
+    """Link event: the link left its running state. ``unacked``: messages sent but never
+    acknowledged (lost)."""
+
+    reason: str
+    unacked: int = 0
+
+
+@dataclass(frozen=True)
+class RepSent:
+    """Link event: the reply timer expired with data outstanding; the link asked the peer
+    again (ALTER's DDCMP REP)."""
+
+    num: int
+    consecutive: int
+
+
+@dataclass(frozen=True)
+class SendRejected:
+    """Link event: ``send`` could not queue the message (link not running, window full)."""
+
+    why: str
+
+
 @dataclass(frozen=True, slots=True)
 class LinkError:
     """Link event: something on the wire could not be used (a bad frame, malformed XML)."""
@@ -48,9 +87,10 @@ class LinkError:
 class Link(Protocol):
     """A robot link protocol as the gateway sees it (pure: times are given, never read).
 
-    ``start``/``receive``/``poll``/``send`` return link events: ``Transmit`` (bytes for the
-    wire), :class:`CycleReceived`, ``LinkUp``, ``LinkDown``, :class:`LinkError`,
-    ``SendRejected``, ``RepSent`` (the last four from humanpt.alter, shared)."""
+    ``start``/``receive``/``poll``/``send`` return link events: :class:`Transmit` (bytes for
+    the wire), :class:`CycleReceived`, :class:`LinkUp`, :class:`LinkDown`, :class:`LinkError`,
+    :class:`SendRejected`, :class:`RepSent` (others are ignored). A link is made from its
+    config by its kind (``links.LinkKind.make``); its config is a ``GatewayConfig``."""
 
     name: str  # "ALTER", "RSI": in event texts
     rx_topic: str  # local topic of what the robot sent ("serial_rx", "udp_rx")

@@ -798,7 +798,8 @@ class Recording:
 
     def config(self) -> dict[str, Any]:
         """The recorded config (raises RecordingError, one line, when it is not a JSON table)."""
-        return recorded_json(self.metadata.get("config", "{}"), f"{self.path}: its recorded config")
+        table = recorded_json(self.metadata.get("config", "{}"), f"{self.path}: its recorded config")
+        return topics.current_config(self.component, table)  # (keys an older version had, dropped)
 
 
 def recorded_json(text: str, what: str) -> dict[str, Any]:
@@ -1266,12 +1267,15 @@ def read_metadata(path: str | Path) -> tuple[dict[str, str], bool]:
 
 def _current_names(meta: dict[str, str]) -> None:
     """A recording of a renamed component (topics.RENAMED_COMPONENTS) reads under its name now:
-    its ``component`` and its core's class path (``humanpt.<old>.`` -> ``humanpt.<new>.``)."""
+    its ``component`` and its core's class path (``humanpt.<old>.`` -> ``humanpt.<new>.``, then
+    a renamed core class, topics.RENAMED_CORES)."""
     for old, new in topics.RENAMED_COMPONENTS.items():
         if meta.get("component") == old:
             meta["component"] = new
         if meta.get("core", "").startswith(f"humanpt.{old}."):
             meta["core"] = f"humanpt.{new}." + meta["core"][len(f"humanpt.{old}."):]
+    if meta.get("core") in topics.RENAMED_CORES:
+        meta["core"] = topics.RENAMED_CORES[meta["core"]]
 
 
 def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:

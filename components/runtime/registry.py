@@ -15,7 +15,7 @@ COMPONENTS: dict[str, str] = {
     "perception": "humanpt.perception.core:PerceptionCore",
     "pose_filter": "humanpt.pose_filter.core:PoseFilterCore",
     "controller": "humanpt.controller.core:ControllerCore",
-    "robot_gateway": "humanpt.robot_gateway.core:AlterGatewayCore",
+    "robot_gateway": "humanpt.robot_gateway.core:GatewayCore",
     "sim_robot": "humanpt.sim_robot.core:SimRobotCore",
     "camera": "humanpt.camera.core:CameraCore",
     "sim_camera": "humanpt.sim_camera.core:SimCameraCore",

@@ -32,7 +32,9 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.geometry.puma import UnreachableError
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.links.alter import (
     ControllerConfig,
     ControllerEndpoint,
     ControllerStatus,
@@ -47,13 +49,11 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter.limiter import EventLimiter, SerialLinkCoreMixin
-from humanpt.geometry.transforms import transform_from_x
 from humanpt.runtime.core import Core, Output, Port, command_operator
+from humanpt.runtime.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig
-from humanpt.sim_robot.kinematics import UnreachableError
 
 TRUTH = "sim_robot/truth"
 # Status bits as plain ints (IntFlag arithmetic is slow on this hot path).

@@ -36,9 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from humanpt.geometry.puma import UnreachableError
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
-from humanpt.rsi.config import parse_address
-from humanpt.rsi.protocol import (
+from humanpt.robot_gateway.links.rsi.config import parse_address
+from humanpt.robot_gateway.links.rsi.protocol import (
     RobState,
     RsiCorrection,
     RsiProtocolError,
@@ -50,7 +51,6 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import TRUTH, JointStepError, corrected_joints
-from humanpt.sim_robot.kinematics import UnreachableError
 
 FIRST_IPOC = 1_000_000  # the IPOC of the first <Rob> (ms)
 # Reply latency histogram (send of <Rob> -> valid <Sen>) bucket upper edges, ms; the last

@@ -130,7 +130,7 @@ def adapters(config: SimRobotConfig) -> list:
     RSI (``protocol = "rsi"``) a UDP socket on an ephemeral loopback port that sends each
     ``<Rob>`` to ``rsi_gateway`` and takes answers only from there."""
     if config.protocol == "rsi":
-        from humanpt.rsi.shell import UdpAdapter
+        from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
         return [UdpAdapter("127.0.0.1:0", robot=config.rsi_gateway, peer=config.rsi_gateway)]
     return [PtyAdapter(config.pty_link)]

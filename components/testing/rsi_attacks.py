@@ -2,7 +2,7 @@
 imported by product code.
 
 - :data:`CRAFTED`: datagrams that are not RSI messages although they look like one (item 8):
-  each must be refused by ``humanpt.rsi.protocol.decode_rob`` with one line, before the XML
+  each must be refused by ``humanpt.robot_gateway.links.rsi.protocol.decode_rob`` with one line, before the XML
   parser expands anything.
 - :func:`flood` / :func:`start_flood`: junk datagrams at a given rate from a port of their
   own (item 6), in this thread or as a process of its own
@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 
-from humanpt.rsi.protocol import RobState, encode_rob
+from humanpt.robot_gateway.links.rsi.protocol import RobState, encode_rob
 
 # What the simulated robot reports at rest (its default start: flange straight down).
 REST_RIST = (786.0, 190.0, -296.0, 0.0, 0.0, 180.0)

@@ -70,7 +70,7 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
 def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
     """The cycle period (ms) of ``link`` ("alter": 28; "rsi": ``cycle_ms``, 4 or 12, default
     12); ValueError, one line, for a cycle the link does not have."""
-    from humanpt.rsi.config import RSI_CYCLES_MS
+    from humanpt.robot_gateway.links.rsi.config import RSI_CYCLES_MS
 
     if link == "alter":
         if cycle_ms not in (None, 28.0):
@@ -90,18 +90,18 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     One cycle period goes to the gateway, the simulated controller, the controller, the
     pose filter's prediction and viz; the gateway's safety fields (speeds, envelope,
     stale commands, world_T_base) carry over from the ALTER gateway's, the rest are RSI's
-    defaults (humanpt.rsi.config)."""
+    defaults (humanpt.robot_gateway.links.rsi.config)."""
     cycle_ms = link_cycle_ms(link, cycle_ms)
     if link == "alter":
         return
-    from humanpt.robot_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.config import GatewayConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
     robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
-                              cfgmod.build(AlterGatewayConfig, sections["robot_gateway"], source="demo",
+                              cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo",
                                            section="robot_gateway"), cycle_ms, udp)
     sections["sim_robot"], sections["robot_gateway"] = to_table(robot), to_table(gateway)
     sections["controller"]["cycle_period_ms"] = cycle_ms

@@ -46,7 +46,7 @@ def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") 
 def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400):
     """(sim_robot config, robot_gateway config) for a Puma 762 twin starting at the given
     flange pose, with a workspace envelope of +-``envelope_mm`` around it."""
-    from humanpt.robot_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.links.alter.config import AlterConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
     base = puma_placement(world_T_flange_start_mm)
@@ -55,9 +55,9 @@ def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.
     # A STATUS frame (41 bytes, 8N1) takes this long on the line: the robot state is about
     # the pose at the frame's start, not at its reception.
     status_delay_ms = 41 * 10 / baud * 1e3
-    gateway = AlterGatewayConfig(world_T_base_mm_deg=base, baud=baud, status_delay_ms=status_delay_ms,
-                                 envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
-                                 envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
+    gateway = AlterConfig(world_T_base_mm_deg=base, baud=baud, status_delay_ms=status_delay_ms,
+                          envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
+                          envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
     return robot, gateway
 
 
@@ -68,14 +68,14 @@ SAFETY_KEYS = ("max_speed_mm_s", "max_angular_speed_deg_s", "envelope_min_mm", "
 
 
 def rsi_link(robot, gateway, cycle_ms: float, udp_bind: str = "127.0.0.1:49152"):
-    """(sim_robot config, RsiGatewayConfig) over RSI at ``cycle_ms`` (4 or 12) from the ALTER
+    """(sim_robot config, RsiConfig) over RSI at ``cycle_ms`` (4 or 12) from the ALTER
     pair of :func:`puma_cores`: the gateway keeps ``SAFETY_KEYS``, the rest RSI's defaults;
     RKorr in the frame the robot applies corrections in (``alter_mode``)."""
-    from humanpt.rsi.config import RsiGatewayConfig
+    from humanpt.robot_gateway.links.rsi.config import RsiConfig
 
-    rsi_gateway = RsiGatewayConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
-                                   udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
-                                   correction_frame="tool" if robot.alter_mode == "tool" else "base")
+    rsi_gateway = RsiConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
+                            udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
+                            correction_frame="tool" if robot.alter_mode == "tool" else "base")
     return dataclasses.replace(robot, protocol="rsi", cycle_period_ms=cycle_ms, rsi_gateway=udp_bind), rsi_gateway
 
 
@@ -125,7 +125,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
         start[:3, :3] = D[:3, :3] @ start[:3, :3]
         start[:3, 3] += off[:3]
         if robot == "puma":
-            from humanpt.robot_gateway.core import AlterGatewayCore
+            from humanpt.robot_gateway.core import GatewayCore
             from humanpt.sim_robot.core import SimRobotCore
 
             # The robot is mounted so that it starts where the camera sees the target (or
@@ -140,7 +140,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                 rcfg, gcfg = rsi_link(rcfg, gcfg, float(rsi_cycle_ms))
                 ctl = dataclasses.replace(ctl, cycle_period_ms=float(rsi_cycle_ms))
                 pose_filter = dataclasses.replace(pose_filter or PoseFilterConfig(), predict_ahead_ms=float(rsi_cycle_ms))
-            robot_cores = [SimRobotCore.create(rcfg), AlterGatewayCore.create(gcfg)]
+            robot_cores = [SimRobotCore.create(rcfg), GatewayCore.create(gcfg)]
             wire = True
         elif robot == "standin":
             standin = StandInRobotConfig(start_flange_mm_deg=tuple(float(v) for v in x_from_transform(start)))

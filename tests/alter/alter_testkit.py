@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.robot_gateway.links.alter import (
     ControllerEndpoint,
     ControllerStatus,
     Correction,
@@ -18,7 +18,7 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.alter.events import Event
+from humanpt.robot_gateway.links.alter.events import Event
 
 CYCLE_NS = 28_000_000
 MS = 1_000_000

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import pytest
 
-from humanpt.alter import (
+from humanpt.robot_gateway.links.alter import (
     ALTER_CYCLE_NS,
     ControllerEndpoint,
     HostEndpoint,
     bytes_per_cycle,
     cycle_budget,
 )
-from humanpt.alter.budget import (
+from humanpt.robot_gateway.links.alter.budget import (
     ACK_FRAME_BYTES,
     CORRECTION_FRAME_BYTES,
     STATUS_FRAME_BYTES,

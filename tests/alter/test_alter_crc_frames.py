@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanpt.alter.crc import crc16, crc16_bitwise, crc16_bytes
-from humanpt.alter.ddcmp import (
+from humanpt.robot_gateway.links.alter.crc import crc16, crc16_bitwise, crc16_bytes
+from humanpt.robot_gateway.links.alter.ddcmp import (
     ENQ,
     SOH,
     ControlFrame,
@@ -199,7 +199,7 @@ def test_frame_fields_are_validated():
 
 
 def test_protocol_md_examples_are_what_the_encoders_produce():
-    from humanpt.alter.messages import (
+    from humanpt.robot_gateway.links.alter.messages import (
         ControllerStatus,
         Correction,
         CorrectionFlags,

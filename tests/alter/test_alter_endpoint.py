@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from humanpt.alter import (
+from humanpt.robot_gateway.links.alter import (
     ControllerConfig,
     ControllerEndpoint,
     Correction,
@@ -15,8 +15,8 @@ from humanpt.alter import (
     SendRejected,
     StatusReceived,
 )
-from humanpt.alter.ddcmp import DataFrame, encode_frame
-from humanpt.alter.messages import encode_correction, encode_status
+from humanpt.robot_gateway.links.alter.ddcmp import DataFrame, encode_frame
+from humanpt.robot_gateway.links.alter.messages import encode_correction, encode_status
 from tests.alter.alter_testkit import (
     CYCLE_NS,
     correction_for,

@@ -9,7 +9,7 @@ from functools import cache
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from humanpt.alter import (
+from humanpt.robot_gateway.links.alter import (
     ControllerEndpoint,
     CorrectionReceived,
     DataReceived,
@@ -20,7 +20,7 @@ from humanpt.alter import (
     LinkUp,
     encode_frame,
 )
-from humanpt.alter.ddcmp import CRC_BYTES, HEADER_BYTES
+from humanpt.robot_gateway.links.alter.ddcmp import CRC_BYTES, HEADER_BYTES
 from tests.alter.alter_testkit import (
     apply_mutations,
     handshake,

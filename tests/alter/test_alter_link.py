@@ -6,7 +6,7 @@ import random
 
 import pytest
 
-from humanpt.alter import (
+from humanpt.robot_gateway.links.alter import (
     Acknowledged,
     DataFrame,
     DataReceived,
@@ -25,7 +25,7 @@ from humanpt.alter import (
     SendRejected,
     encode_frame,
 )
-from humanpt.alter.ddcmp import ControlType, ack, rep, strt
+from humanpt.robot_gateway.links.alter.ddcmp import ControlType, ack, rep, strt
 from tests.alter.alter_testkit import MS, handshake, tx_bytes
 
 

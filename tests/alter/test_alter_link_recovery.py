@@ -15,9 +15,17 @@ import heapq
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanpt.alter.ddcmp import NakReason, ack, encode_frame, nak, rep, stack, strt
-from humanpt.alter.events import DataReceived, LinkDown, LinkUp, Transmit
-from humanpt.alter.link import DdcmpLink, LinkConfig, LinkState
+from humanpt.robot_gateway.links.alter.ddcmp import (
+    NakReason,
+    ack,
+    encode_frame,
+    nak,
+    rep,
+    stack,
+    strt,
+)
+from humanpt.robot_gateway.links.alter.ddcmp_link import DdcmpLink, LinkConfig, LinkState
+from humanpt.robot_gateway.links.alter.events import DataReceived, LinkDown, LinkUp, Transmit
 from tests.alter.alter_testkit import CYCLE_NS, MS
 
 LINE_DELAY_NS = 1 * MS

@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from humanpt.alter.budget import ALTER_CYCLE_NS
-from humanpt.alter.messages import (
+from humanpt.robot_gateway.links.alter.budget import ALTER_CYCLE_NS
+from humanpt.robot_gateway.links.alter.messages import (
     CORRECTION_PAYLOAD_BYTES,
     INT16_MAX,
     STATUS_PAYLOAD_BYTES,

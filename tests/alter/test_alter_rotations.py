@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.alter import ControllerStatus, Correction, StatusBits
-from humanpt.alter.messages import NO_FLAGS
-from humanpt.robot_gateway.safety import correction_angle_deg, wire_rotation_deg
+from humanpt.robot_gateway.links.alter import ControllerStatus, Correction, StatusBits
+from humanpt.robot_gateway.links.alter.messages import NO_FLAGS
+from humanpt.robot_gateway.links.alter.quantize import correction_angle_deg
+from humanpt.robot_gateway.safety import wire_rotation_deg
 
 
 def _rz_ry_rx(z_deg: float, y_deg: float, x_deg: float) -> np.ndarray:

@@ -16,8 +16,8 @@ import pytest
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.playback import MAX_ARGS_CHARS, MAX_PLAYBACK_POINTS, PlaybackError, thin
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.rsi.config import RsiGatewayConfig
+from humanpt.robot_gateway.links.alter.config import AlterConfig
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.runtime import config as cfgmod
 from humanpt.schemas import humanpt_pb2 as pb
 
@@ -80,10 +80,10 @@ def test_the_controller_takes_the_gateways_envelope_from_the_cells_config():
     ev = _send(ControllerCore(ctl), {"points": [[750.0, 0.0, 300.0, 0.0, 0.0, 0.0]]})
     assert "x 750.0 is above" in ev[0].text and "max 700 mm" in ev[0].text, ev[0].text
     # Without an envelope in the file both take the gateway's defaults (ALTER's and RSI's).
-    assert ControllerConfig().envelope_min_mm == AlterGatewayConfig().envelope_min_mm == \
-        RsiGatewayConfig().envelope_min_mm
-    assert ControllerConfig().envelope_max_mm == AlterGatewayConfig().envelope_max_mm == \
-        RsiGatewayConfig().envelope_max_mm
+    assert ControllerConfig().envelope_min_mm == AlterConfig().envelope_min_mm == \
+        RsiConfig().envelope_min_mm
+    assert ControllerConfig().envelope_max_mm == AlterConfig().envelope_max_mm == \
+        RsiConfig().envelope_max_mm
     with pytest.raises(cfgmod.ConfigError, match="envelope_min_mm"):
         cfgmod.from_dict({"controller": {"envelope_min_mm": [0, 0, 0], "envelope_max_mm": [0, 1, 1]}},
                          "cell.toml").component("controller", ControllerConfig)

@@ -30,7 +30,7 @@ from pathlib import Path
 import pytest
 
 from humanpt.bench.partition import holds, late_commands, output_gaps, robot_track
-from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.recording import OUT, iter_entries
 from humanpt.runtime.security import init_ca, issue
 
@@ -43,7 +43,7 @@ VETH_S, VETH_C = f"h19s{TAG}", f"h19c{TAG}"  # <= 15 characters
 PORT = 7447
 CLIENT_COMPONENTS = ("operator", "sim_camera", "perception", "pose_filter", "controller")
 SERVER_COMPONENTS = ("robot_gateway", "sim_robot")
-GW = AlterGatewayConfig()
+GW = AlterConfig()
 CYCLE_NS = GW.cycle_period_ns
 
 # The torch goes 40 mm back and forth at 20 mm/s for a minute, so that the robot servos

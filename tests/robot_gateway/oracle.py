@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from humanpt.alter import Correction
+from humanpt.robot_gateway.links.alter import Correction
 
 MM_PER_UNIT = 0.01  # PROTOCOL.md: dx, dy, dz in 0.01 mm
 DEG_PER_UNIT = 0.01  # PROTOCOL.md: drx, dry, drz in 0.01 deg
@@ -33,7 +33,7 @@ def step_limits(max_speed_mm_s: float, max_angular_speed_deg_s: float, cycle_per
     return max_speed_mm_s * cycle_s, max_angular_speed_deg_s * cycle_s
 
 
-# The default limits (AlterGatewayConfig: 100 mm/s, 60 deg/s, 28 ms cycle) per cycle.
+# The default limits (AlterConfig: 100 mm/s, 60 deg/s, 28 ms cycle) per cycle.
 LIMIT_MM, LIMIT_DEG = step_limits(100.0, 60.0, 28.0)
 
 

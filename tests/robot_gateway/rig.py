@@ -1,10 +1,20 @@
-"""A gateway core wired, in memory and instantly, to a pure ControllerEndpoint (a fake robot)."""
+"""One test rig for any link: a gateway core wired, in memory and instantly, to a scripted
+robot that speaks the core's link (its robot side, :data:`ROBOTS`; the real codecs on both
+ends: ALTER's controller endpoint validates what it receives, RSI's answers are decoded).
+
+A link's robot side: ``begin(t_ns)`` the bytes the robot sends at start; ``send(cycle,
+base_T_flange_mm, bits, t_ns)`` the bytes of its state for ``cycle``; ``take(data, t_ns)``
+-> (bytes back to the gateway, [(cycle, correction)] the robot accepted); ``fields``: what
+the link's config needs in a test (a free UDP port...)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.geometry.transforms import transform_from_x
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links import gateway_config
+from humanpt.robot_gateway.links.alter import (
     ControllerEndpoint,
     ControllerStatus,
     Correction,
@@ -12,39 +22,89 @@ from humanpt.alter import (
     StatusBits,
     Transmit,
 )
-from humanpt.geometry.transforms import transform_from_x
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.links.rsi.protocol import RobState, decode_sen, encode_rob
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, vector3
 
 MS = 1_000_000
-CYCLE_NS = 28 * MS
+CYCLE_NS = 28 * MS  # ALTER's default cycle
 # The sim_robot's default start: flange down at (786, 190, -296) mm.
 START_X = np.array([786.0, 190.0, -296.0, 0.0, 0.0, 180.0])
 ACTIVE = StatusBits.ALTER_ACTIVE | StatusBits.ARM_POWER | StatusBits.CUMULATIVE
 
 
+class AlterRobot(ControllerEndpoint):
+    """ALTER's robot side: the codec's controller end (DDCMP, STATUS out, CORRECTION in)."""
+
+    fields: dict = {}
+
+    def __init__(self, config=None):
+        super().__init__()
+
+    def begin(self, t_ns: int) -> list[bytes]:
+        return [e.data for e in self.start(t_ns) if isinstance(e, Transmit)]
+
+    def send(self, cycle: int, base_T_flange_mm: np.ndarray, bits, t_ns: int) -> list[bytes]:
+        st = ControllerStatus.from_pose(cycle, bits, base_T_flange_mm)
+        return [e.data for e in self.send_status(st, t_ns) if isinstance(e, Transmit)]
+
+    def take(self, data: bytes, t_ns: int) -> tuple[list[bytes], list[tuple[int, Correction]]]:
+        events = self.receive(data, t_ns)
+        return ([e.data for e in events if isinstance(e, Transmit)],
+                [(e.correction.echo_cycle, e.correction) for e in events if isinstance(e, CorrectionReceived)])
+
+
+class RsiRobot:
+    """RSI's robot side: a <Rob> datagram per cycle (IPOC = cycle x cycle time, ``rist`` the
+    flange X, Y, Z mm, A, B, C deg; ``delay`` its late-answer count), <Sen> answers decoded."""
+
+    fields = {"udp_bind": "127.0.0.1:0"}
+
+    def __init__(self, config):
+        self.cycle_ms = int(config.cycle_period_ms)
+        self.rist = tuple(float(v) for v in START_X)
+        self.delay = 0
+
+    def begin(self, t_ns: int) -> list[bytes]:
+        return []  # RSI has no handshake
+
+    def send(self, cycle: int, base_T_flange_mm: np.ndarray, bits, t_ns: int) -> list[bytes]:
+        return [encode_rob(RobState(cycle * self.cycle_ms, self.rist, (0.0,) * 6, self.delay))]
+
+    def take(self, data: bytes, t_ns: int) -> tuple[list[bytes], list]:
+        c = decode_sen(data)
+        return [], [(c.ipoc // self.cycle_ms, c)]
+
+
+# link name -> its robot side (a test of a new link adds its own).
+ROBOTS: dict[str, type] = {"alter": AlterRobot, "rsi": RsiRobot}
+
+
 class Rig:
-    """Drive an AlterGatewayCore with scripted statuses, commands, ticks and liveliness.
+    """Drive a GatewayCore over any link with scripted robot cycles, commands, ticks and
+    liveliness. ``Rig(config)`` or ``Rig(link="rsi", **fields)`` (default ALTER).
 
-    ``corrections``: (cycle, Correction) the fake robot received (validated by the real
-    controller endpoint). ``outs``: every gateway output. Bytes cross instantly.
-    """
+    ``robot``: the link's robot side (``ROBOTS``); ``corrections``: (cycle, correction) the
+    robot received; ``outs``: every gateway output. Bytes cross instantly; with
+    ``robot_connected`` False they are lost both ways."""
 
-    def __init__(self, config: AlterGatewayConfig | None = None, **kw):
-        self.gw = AlterGatewayCore(config or AlterGatewayConfig(**kw))
-        self.robot = ControllerEndpoint()
+    def __init__(self, config=None, **kw):
+        if config is None:
+            link = kw.setdefault("link", "alter")
+            config = gateway_config(**{**ROBOTS[link].fields, **kw})
+        self.gw = GatewayCore(config)
+        self.robot = ROBOTS[config.link](config)
+        self.rx_topic, self.tx_topic = self.gw.rx_topic, self.gw.link.tx_topic
+        self.cycle_ns = config.cycle_period_ns
         self.t_ns = 0
         self.cycle = 0
         self.base_T_flange = transform_from_x(START_X)
         self.bits = ACTIVE
         self.outs: list = []
-        self.corrections: list[tuple[int, Correction]] = []
+        self.corrections: list = []
         self.robot_connected = True
         self.seq = 0  # the controller session's header.seq: +1 per command
-        self._to_gw: list[bytes] = []
-        self._deliver(self.robot.start(0))
+        self._to_gw: list[bytes] = list(self.robot.begin(0))
         self.step("tick", pb.Tick(header=header(0)))
 
     # -- plumbing ---------------------------------------------------------------------
@@ -52,20 +112,17 @@ class Rig:
         outs = self.gw.step(self.t_ns, topic, msg)
         self.outs += outs
         for t, m in outs:
-            if t == "serial_tx" and self.robot_connected:
-                self._deliver(self.robot.receive(m.data, self.t_ns))
+            if t == self.tx_topic and self.robot_connected:
+                back, got = self.robot.take(m.data, self.t_ns)
+                self._to_gw += back
+                self.corrections += got
         while self._to_gw:
-            data = self._to_gw.pop(0)
-            outs += self.step("serial_rx", pb.SerialChunk(header=header(self.t_ns), data=data))
+            outs += self.from_robot(self._to_gw.pop(0))
         return outs
 
-    def _deliver(self, events) -> None:
-        for e in events:
-            if isinstance(e, Transmit):
-                if self.robot_connected:
-                    self._to_gw.append(e.data)
-            elif isinstance(e, CorrectionReceived):
-                self.corrections.append((e.correction.echo_cycle, e.correction))
+    def from_robot(self, data: bytes) -> list:
+        """Bytes from the robot (any: a malformed datagram, a forged frame) reach the gateway now."""
+        return self.step(self.rx_topic, pb.SerialChunk(header=header(self.t_ns), data=data))
 
     # -- scripting ----------------------------------------------------------------------
     def advance(self, dt_ns: int, tick_ns: int = 2 * MS) -> list:
@@ -79,17 +136,13 @@ class Rig:
         return outs
 
     def status(self, bits: StatusBits | None = None, cycle: int | None = None) -> list:
-        """The robot sends STATUS for its next cycle (now)."""
+        """The robot sends its state for its next cycle (now); ``bits``: ALTER's status bits."""
         self.cycle = self.cycle + 1 if cycle is None else cycle
-        st = ControllerStatus.from_pose(
-            self.cycle, self.bits if bits is None else bits, self.base_T_flange
-        )
-        self._deliver(self.robot.send_status(st, self.t_ns))
+        sent = self.robot.send(self.cycle, self.base_T_flange, self.bits if bits is None else bits, self.t_ns)
         outs = []
-        while self._to_gw:
-            outs += self.step(
-                "serial_rx", pb.SerialChunk(header=header(self.t_ns), data=self._to_gw.pop(0))
-            )
+        if self.robot_connected:
+            for data in sent:
+                outs += self.from_robot(data)
         return outs
 
     def command(
@@ -120,7 +173,7 @@ class Rig:
         if not states:
             return self.t_ns
         last = states[-1]
-        return last.header.stamp_ns + (cycle - last.cycle) * CYCLE_NS
+        return last.header.stamp_ns + (cycle - last.cycle) * self.cycle_ns
 
     def liveliness(self, alive: bool) -> list:
         return self.step(
@@ -129,10 +182,10 @@ class Rig:
         )
 
     def cycle_with_command(self, dp_mm=(0, 0, 0), rv_deg=(0, 0, 0), **kw) -> list:
-        """STATUS, then the command for it at once, then the rest of the cycle."""
+        """The robot's state, then the command for it at once, then the rest of the cycle."""
         outs = self.status()
         outs += self.command(dp_mm=dp_mm, rv_deg=rv_deg, **kw)
-        outs += self.advance(CYCLE_NS)
+        outs += self.advance(self.cycle_ns)
         return outs
 
     # -- reading -------------------------------------------------------------------------
@@ -145,5 +198,6 @@ class Rig:
     def states(self) -> list[pb.RobotState]:
         return [m for t, m in self.outs if t == "robot_gateway/robot_state"]
 
-    def last_correction(self) -> Correction:
+    def last_correction(self):
         return self.corrections[-1][1]
+

@@ -10,10 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from humanpt.alter import ControllerEndpoint, CorrectionFlags, StatusBits
 from humanpt.geometry.transforms import transform_from_x
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.config import GatewayConfig
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter import CorrectionFlags, StatusBits
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.config import ConfigError, build
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
@@ -26,7 +27,7 @@ from tests.robot_gateway.oracle import (
     wire_euler_deg,
     wire_translation_mm,
 )
-from tests.robot_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, Rig
+from tests.robot_gateway.rig import ACTIVE, CYCLE_NS, MS, START_X, AlterRobot, Rig
 
 HOLD = CorrectionFlags.HOLD
 
@@ -377,11 +378,11 @@ def test_silence_is_a_link_down_event_and_no_corrections_then_link_back():
 def test_a_peer_restart_is_link_down_then_up_with_a_new_session():
     rig = _rig()
     rig.cycle_with_command(dp_mm=(1.0, 0, 0))
-    rig.robot = ControllerEndpoint()  # the controller restarts (a fresh link, STRT)
+    rig.robot = AlterRobot()  # the controller restarts (a fresh link, STRT)
     rig.cycle = 0
     outs = []
-    for e in rig.robot.start(rig.t_ns):
-        outs += rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    for data in rig.robot.begin(rig.t_ns):
+        outs += rig.from_robot(data)
     codes = rig.codes(outs)
     assert codes[0] == "link_down" and "peer restarted" in rig.events(outs)[0].text
     assert codes[-1] == "link_up"
@@ -448,15 +449,15 @@ def test_bad_commands_are_dropped_with_an_event():
 )
 def test_config_rejects_bad_values_naming_the_key(key, value, needle):
     with pytest.raises(ConfigError) as e:
-        build(AlterGatewayConfig, {key: value}, source="x.toml", section="robot_gateway")
+        build(GatewayConfig, {key: value}, source="x.toml", section="robot_gateway")
     assert needle in str(e.value)
 
 
 def test_config_defaults_and_19200_baud():
-    cfg = AlterGatewayConfig(baud=19_200)
+    cfg = AlterConfig(baud=19_200)
     assert cfg.max_step_mm == pytest.approx(2.8) and cfg.max_step_deg == pytest.approx(1.68)
     assert cfg.cycle_period_ns == CYCLE_NS
-    core = AlterGatewayCore(cfg)
+    core = GatewayCore(cfg)
     assert core.tick_period_ns() == 2 * MS
     assert dataclasses.asdict(cfg)["envelope_max_mm"] == (1600.0, 1600.0, 1600.0)
 
@@ -489,10 +490,10 @@ def test_after_a_peer_restart_the_watchdog_rearms_with_the_new_sessions_first_co
         rig.advance(CYCLE_NS)
     for _ in range(5):
         rig.cycle_with_command()  # armed from cycle 51
-    rig.robot = ControllerEndpoint()  # the controller restarts, counting from 1 again
+    rig.robot = AlterRobot()  # the controller restarts, counting from 1 again
     rig.cycle = 0
-    for e in rig.robot.start(rig.t_ns):
-        rig.step("serial_rx", pb.SerialChunk(header=header(rig.t_ns), data=e.data))
+    for data in rig.robot.begin(rig.t_ns):
+        rig.from_robot(data)
     rig.cycle_with_command()  # cycle 1 of the new session: re-arms
     before = rig.codes().count("deadline_missed")
     for _ in range(3):

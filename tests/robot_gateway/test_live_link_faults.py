@@ -20,7 +20,7 @@ import tty
 
 import pytest
 
-from humanpt.alter.ddcmp import encode_frame, strt
+from humanpt.robot_gateway.links.alter.ddcmp import encode_frame, strt
 from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from tests.conftest import write_config, zenoh_client

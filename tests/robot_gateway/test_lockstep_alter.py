@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.core import Core, Port
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import factory_with, replay
@@ -44,7 +44,7 @@ def _run(
     actions=(),
     latency_ns=1 * MS,
 ):
-    gateway = AlterGatewayCore(gw or AlterGatewayConfig(baud=baud))
+    gateway = GatewayCore(gw or AlterConfig(baud=baud))
     robot = SimRobotCore(sim or SimRobotConfig())
     controller = (
         ctl if isinstance(ctl, Core) else ScriptedControllerCore(ctl or ScriptedControllerConfig())
@@ -302,7 +302,7 @@ def test_the_envelope_stops_the_flange_at_its_wall():
     ls, gw, sim = _run(
         n_cycles=120,
         ctl=_PushOut(ScriptedControllerConfig()),
-        gw=AlterGatewayConfig(envelope_max_mm=(x0 + 100.0, 1600.0, 1600.0)),
+        gw=AlterConfig(envelope_max_mm=(x0 + 100.0, 1600.0, 1600.0)),
     )
     truths = _truths(ls)
     assert truths[-1][0, 3] == pytest.approx(x0 + 100.0, abs=0.02)
@@ -319,7 +319,7 @@ def test_lockstep_serial_line_timing_is_sequential():
 
 def test_rotation_integral_uses_world_frame_composition():
     # A sanity check of the helper itself: two rotations about different axes do not commute.
-    from humanpt.alter import Correction
+    from humanpt.robot_gateway.links.alter import Correction
 
     T0 = np.eye(4)
     a = Correction.from_mm_deg(1, np.zeros(3), np.array([1.0, 0, 0]))

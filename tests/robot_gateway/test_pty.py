@@ -15,8 +15,8 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.replay import replay
 from humanpt.runtime.serial_io import SerialAdapter
 from humanpt.schemas import humanpt_pb2 as pb
@@ -86,7 +86,7 @@ def test_gateway_and_sim_robot_over_a_real_pty(tmp_path):
     )
     assert link.is_symlink()
     # 25 missed cycles to a fault: room for a slow machine in the silent-controller phase.
-    gw = AlterGatewayCore(AlterGatewayConfig(port=str(link), fault_after_missed=25))
+    gw = GatewayCore(AlterConfig(port=str(link), fault_after_missed=25))
     ctl = Controller()
     gw_shell = ThreadShell(
         gw, [SerialAdapter(str(link), 38_400)], on_output=ctl.on_gateway_output, run_dir=tmp_path

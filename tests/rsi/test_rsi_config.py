@@ -7,8 +7,8 @@ import time
 
 import pytest
 
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.shell import UdpAdapter
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
 from tests.conftest import run_cli
@@ -22,7 +22,7 @@ from tests.conftest import run_cli
 ])
 def test_bad_gateway_settings_are_refused(kw, says):
     with pytest.raises(ValueError, match=says.replace("(", r"\(").replace(")", r"\)")):
-        RsiGatewayConfig(**kw)
+        RsiConfig(**kw)
 
 
 def test_an_rsi_sim_robot_is_not_silently_run_as_an_alter_one():
@@ -65,9 +65,8 @@ def test_datagrams_from_another_sender_than_the_robot_are_dropped():
 
 
 def test_the_link_key_chooses_the_gateway_and_the_protocol_the_simulated_robot():
-    from humanpt.robot_gateway.config import AlterGatewayConfig
-    from humanpt.robot_gateway.core import AlterGatewayCore
-    from humanpt.rsi.core import RsiGatewayCore
+    from humanpt.robot_gateway.core import GatewayCore
+    from humanpt.robot_gateway.links.alter.config import AlterConfig
     from humanpt.runtime.config import ConfigError, from_dict
     from humanpt.runtime.registry import config_types, core_class
     from humanpt.sim_robot.rsi import RsiSimRobotCore
@@ -82,13 +81,15 @@ def test_the_link_key_chooses_the_gateway_and_the_protocol_the_simulated_robot()
         made[name] = cls.create(cfg.component(name, cls.config_type), cfg.rig())
         # a recording names the registry's class: replay rebuilds the RSI core from it
         assert made[name].recording_metadata("live")["core"] == f"{cls.__module__}:{cls.__qualname__}"
-    assert type(made["robot_gateway"]) is RsiGatewayCore and made["robot_gateway"].config.udp_bind == "127.0.0.1:0"
+    assert type(made["robot_gateway"]) is GatewayCore and made["robot_gateway"].config.udp_bind == "127.0.0.1:0"
+    assert made["robot_gateway"].link.name == "RSI" and made["robot_gateway"].rx_topic == "udp_rx"
     assert type(made["sim_robot"]) is RsiSimRobotCore
-    assert type(AlterGatewayCore.create(AlterGatewayConfig())) is AlterGatewayCore  # the default: ALTER
+    assert type(GatewayCore.create(AlterConfig())) is GatewayCore  # the default: ALTER
     # RSI keys without link = "rsi", and a link that does not exist: one line naming the key
     with pytest.raises(ConfigError, match=r"\[robot_gateway\] unknown key 'udp_bind'"):
         from_dict({"robot_gateway": {"udp_bind": "127.0.0.1:1"}}, "cell.toml", config_types())
-    with pytest.raises(ConfigError, match=r"\[robot_gateway\] link: 'can' is not one of"):
+    with pytest.raises(ConfigError, match=r"\[robot_gateway\]: link 'can' is not a robot link of this version; "
+                                          r"known links: alter, rsi$"):
         from_dict({"robot_gateway": {"link": "can"}}, "cell.toml", config_types())
-    with pytest.raises(ValueError, match="RsiGatewayConfig"):
-        AlterGatewayConfig(link="rsi")
+    with pytest.raises(ValueError, match="RsiConfig"):
+        AlterConfig(link="rsi")

@@ -14,10 +14,10 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.rsi.protocol import RsiCorrection, decode_rob, encode_sen
+from humanpt.robot_gateway.links.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot, RsiRobotServer
-from tests.rsi.rig import RsiRig
+from tests.robot_gateway.rig import Rig
 
 LIMIT = 20  # late answers in a row that stop RSI (the robot's default is 100)
 
@@ -155,12 +155,12 @@ def test_holdon_repeats_the_last_correction_or_holds_for_a_missed_answer(holdon)
 
 
 def test_malformed_xml_from_the_robot_is_a_link_error_without_answer_and_the_next_datagram_works():
-    rig = RsiRig(cycle_period_ms=4.0)
+    rig = Rig(link="rsi", cycle_period_ms=4.0)
     rig.status()
     n_states, n_answers = len(rig.states()), len(rig.corrections)
-    outs = rig.datagram(b'<Rob TYPE="KUKA"><RIst X="1" Y=')
-    outs += rig.datagram(b"\xff\xfe not xml")
-    outs += rig.datagram(b'<Rob TYPE="KUKA"><RIst X="nan" Y="0" Z="0" A="0" B="0" C="0"/><IPOC>8</IPOC></Rob>')
+    outs = rig.from_robot(b'<Rob TYPE="KUKA"><RIst X="1" Y=')
+    outs += rig.from_robot(b"\xff\xfe not xml")
+    outs += rig.from_robot(b'<Rob TYPE="KUKA"><RIst X="nan" Y="0" Z="0" A="0" B="0" C="0"/><IPOC>8</IPOC></Rob>')
     assert rig.codes(outs) == ["link_error"]  # rate-limited: one event per interval for three
     assert "RSI link" in rig.events(outs)[0].text and rig.gw.counters["link_errors"] == 3
     assert len(rig.states()) == n_states and len(rig.corrections) == n_answers
@@ -169,7 +169,7 @@ def test_malformed_xml_from_the_robot_is_a_link_error_without_answer_and_the_nex
 
 
 def test_a_lost_rob_is_lost_statuses_and_missed_cycles_once_the_next_datagram_confirms_the_gap():
-    rig = RsiRig(cycle_period_ms=4.0)
+    rig = Rig(link="rsi", cycle_period_ms=4.0)
     for k in (1, 2):
         rig.status(cycle=k)
         rig.command(dp_mm=(0.1, 0, 0))
@@ -185,16 +185,16 @@ def test_a_lost_rob_is_lost_statuses_and_missed_cycles_once_the_next_datagram_co
 
 
 def test_a_late_answer_reported_by_the_robots_delay_counter_is_a_robot_missed_cycle():
-    rig = RsiRig(cycle_period_ms=4.0)
+    rig = Rig(link="rsi", cycle_period_ms=4.0)
     rig.status()
     rig.command(dp_mm=(0.1, 0, 0))
-    rig.delay = 1  # the robot counted our answer to cycle 1 as late
+    rig.robot.delay = 1  # the robot counted our answer to cycle 1 as late
     rig.status()
     assert rig.gw.counters["robot_missed"] == 1 and "robot_missed" in rig.codes()
 
 
 def test_an_ipoc_going_back_is_a_new_rsi_session_once_the_next_datagram_continues_it():
-    rig = RsiRig(cycle_period_ms=4.0)
+    rig = Rig(link="rsi", cycle_period_ms=4.0)
     for _ in range(3):
         rig.status()
         rig.command(dp_mm=(0.1, 0, 0))
@@ -206,7 +206,7 @@ def test_an_ipoc_going_back_is_a_new_rsi_session_once_the_next_datagram_continue
 
 
 def test_a_silent_robot_is_link_down_then_its_next_datagram_link_up():
-    rig = RsiRig(cycle_period_ms=4.0, status_timeout_cycles=5)
+    rig = Rig(link="rsi", cycle_period_ms=4.0, status_timeout_cycles=5)
     rig.status()
     rig.command(dp_mm=(0.1, 0, 0))
     outs = rig.advance(30 * 1_000_000)  # > 5 cycles of 4 ms without a <Rob>
@@ -217,7 +217,7 @@ def test_a_silent_robot_is_link_down_then_its_next_datagram_link_up():
 
 
 def test_a_duplicated_rob_is_answered_once():
-    rig = RsiRig(cycle_period_ms=4.0)
+    rig = Rig(link="rsi", cycle_period_ms=4.0)
     rig.status()
     rig.command(dp_mm=(0.1, 0, 0))
     n = len(rig.corrections)

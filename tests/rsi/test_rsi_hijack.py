@@ -4,7 +4,7 @@ Item 5: with ``udp_robot = "127.0.0.1"`` (the demo's) the adapter took its peer 
 datagram of the host: 80 ``<Rob>`` with the next IPOC from another local port got 73 answers
 and the robot 79 late replies in a row. Item 6: a 3 s junk flood from another port (9-20 kHz)
 gave ``link_down`` and then ``rsi_stopped`` at the robot. Now the first valid ``<Rob>`` locks
-the adapter onto its sender (humanpt.rsi.shell.PeerLock): other senders' datagrams are
+the adapter onto its sender (humanpt.robot_gateway.links.rsi.shell.PeerLock): other senders' datagrams are
 dropped on arrival, before parsing, and answers go only to the robot."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ import socket
 
 import pytest
 
-from humanpt.rsi.shell import PeerLock, UdpAdapter
+from humanpt.robot_gateway.links.rsi.shell import PeerLock, UdpAdapter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.testing.rsi_attacks import JUNK, NextIpocSpoofer, rob, start_flood
 from tests.conftest import wait_for

@@ -22,13 +22,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from humanpt.robot_gateway.links.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.robot_gateway.safety import clip_to_envelope
-from humanpt.rsi.protocol import RsiCorrection, decode_rob, encode_sen
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiRobot
 from tests.conftest import wait_for
+from tests.robot_gateway.rig import Rig
 from tests.rsi.live_cell import LiveCell
-from tests.rsi.rig import RsiRig
 
 STEP_MM = 0.48  # 40 mm/s x 12 ms
 WIRE_MM = 0.00005  # RKorr is rounded to 4 decimals: half a wire unit per step at most
@@ -73,8 +73,8 @@ def test_clip_to_envelope_keeps_the_repeats_inside_by_hand():
 
 def test_the_gateway_cuts_a_step_so_that_its_repeats_stay_inside():
     wall = 790.0  # the +x face; the rig's flange is at x = START_X[0]
-    rig = RsiRig(cycle_period_ms=12.0, robot_late_limit=10, envelope_max_mm=(wall, 1600.0, 1600.0))
-    x = rig.rist[0]
+    rig = Rig(link="rsi", cycle_period_ms=12.0, robot_late_limit=10, envelope_max_mm=(wall, 1600.0, 1600.0))
+    x = rig.robot.rist[0]
     assert wall - x < 11 * STEP_MM  # close enough that 11 full steps would cross
     rig.status()
     rig.command(dp_mm=(STEP_MM, 0, 0))
@@ -83,7 +83,7 @@ def test_the_gateway_cuts_a_step_so_that_its_repeats_stay_inside():
     assert x + 11 * c.rkorr[0] <= wall + 11 * WIRE_MM
     assert "envelope" in rig.codes() and "10 repeats" in rig.events()[-1].text
     # robot_late_limit 0 (a robot that applies zero when late): the step is cut at the face only
-    rig0 = RsiRig(cycle_period_ms=12.0, robot_late_limit=0, envelope_max_mm=(wall, 1600.0, 1600.0))
+    rig0 = Rig(link="rsi", cycle_period_ms=12.0, robot_late_limit=0, envelope_max_mm=(wall, 1600.0, 1600.0))
     rig0.status()
     rig0.command(dp_mm=(STEP_MM, 0, 0))
     assert rig0.corrections[-1][1].rkorr[0] == pytest.approx(STEP_MM)

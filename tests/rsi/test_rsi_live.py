@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from humanpt.bench.rsi import run_rsi
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
-from humanpt.rsi.shell import UdpAdapter
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.live import LiveShell
 from humanpt.sim_robot.config import SimRobotConfig
@@ -47,7 +47,7 @@ def test_the_gateway_in_a_live_shell_answers_the_robot_over_udp(router):
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         bind = f"127.0.0.1:{s.getsockname()[1]}"
-    core = RsiGatewayCore(RsiGatewayConfig(udp_bind=bind, cycle_period_ms=12.0))
+    core = GatewayCore(RsiConfig(udp_bind=bind, cycle_period_ms=12.0))
     shell = LiveShell(core, RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",), listen=(), record=False),
                       adapters=[UdpAdapter(bind)])
     worker = threading.Thread(target=shell.run, daemon=True)

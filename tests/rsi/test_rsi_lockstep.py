@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import pytest
 
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.replay import replay
 from humanpt.sim_robot.config import SimRobotConfig
@@ -20,7 +20,7 @@ SECONDS = 2
 
 def _run(run_dir):
     sim = RsiSimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ms=4.0))
-    gw = RsiGatewayCore(RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=4.0))
+    gw = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=4.0))
     # Steps within the 0.4 mm / 0.24 deg per cycle limits at 4 ms.
     ctl = ScriptedControllerCore(ScriptedControllerConfig(amplitude_mm=0.2, amplitude_deg=0.1))
     with Lockstep([sim, gw, ctl], run_dir=run_dir) as ls:

@@ -12,15 +12,20 @@ import threading
 
 import pytest
 
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
-from humanpt.rsi.protocol import RsiProtocolError, check_bytes, decode_rob, decode_sen
-from humanpt.rsi.shell import UdpAdapter
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.protocol import (
+    RsiProtocolError,
+    check_bytes,
+    decode_rob,
+    decode_sen,
+)
+from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.live import LiveShell
 from humanpt.testing.rsi_attacks import CRAFTED, rob
 from tests.conftest import wait_for
-from tests.rsi.rig import RsiRig
+from tests.robot_gateway.rig import Rig
 
 # Refused by the byte check alone, before any XML parsing (what could expand or decode otherwise).
 BEFORE_PARSING = ("superscript_ipoc", "arabic_indic_ipoc", "char_reference_ipoc", "entity_rob_ascii",
@@ -59,19 +64,19 @@ def test_an_ascii_or_utf8_declaration_is_still_an_rsi_message(decl):
 
 
 def test_the_gateway_reports_crafted_datagrams_rate_limited_with_a_count_and_answers_none():
-    rig = RsiRig(cycle_period_ms=12.0)  # event_interval_ms 1000: one link_error a second per code
+    rig = Rig(link="rsi", cycle_period_ms=12.0)  # event_interval_ms 1000: one link_error a second per code
     rig.status()
     n_states, n_answers = len(rig.states()), len(rig.corrections)
     outs = []
     for _ in range(5):
         for data in CRAFTED.values():
-            outs += rig.datagram(data)  # all at the same instant: raises nothing
+            outs += rig.from_robot(data)  # all at the same instant: raises nothing
     n = 5 * len(CRAFTED)
     assert rig.gw.link.counters["malformed"] == n and rig.gw.counters["link_errors"] == n
     assert rig.codes(outs) == ["link_error"]  # one report for the burst
     assert (len(rig.states()), len(rig.corrections)) == (n_states, n_answers)  # no state, no answer
     rig.advance(1_100_000_000)
-    outs = rig.datagram(CRAFTED["superscript_ipoc"])
+    outs = rig.from_robot(CRAFTED["superscript_ipoc"])
     [ev] = rig.events(outs)
     assert f"(+{n - 1} more since the last report)" in ev.text and f"({n + 1} malformed so far)" in ev.text
     rig.status()
@@ -84,7 +89,7 @@ def test_live_an_entity_bearing_rob_from_the_robots_address_publishes_no_state(r
     socket, then a valid one. Only the valid ones are answered and become robot states; the
     log has no traceback."""
     port, _ = router
-    core = RsiGatewayCore(RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=12.0))
+    core = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=12.0))
     adapter = UdpAdapter("127.0.0.1:0")
     adapter.open()
     shell = LiveShell(core, RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",), listen=(), record=False),

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.rsi.protocol import (
+from humanpt.robot_gateway.links.rsi.protocol import (
     RobState,
     RsiCorrection,
     RsiProtocolError,

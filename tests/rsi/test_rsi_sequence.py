@@ -1,18 +1,18 @@
 """Issue 29 item 7: out-of-sequence IPOCs. One spoofed <Rob> with IPOC +500 cycles logged
 "498 consecutive missed cycles" and latched a fault; replays, reorderings and late
 duplicates each restarted the session. Now an out-of-sequence datagram is dropped and only
-counts once the next datagram continues it (humanpt.rsi.link)."""
+counts once the next datagram continues it (humanpt.robot_gateway.links.rsi.link)."""
 
 from __future__ import annotations
 
 import pytest
 
-from humanpt.alter import LinkUp
 from humanpt.robot_gateway.link import CycleReceived, LinkError
-from humanpt.rsi.link import MAX_GAP_CYCLES, RsiLink
+from humanpt.robot_gateway.links.alter import LinkUp
+from humanpt.robot_gateway.links.rsi.link import MAX_GAP_CYCLES, RsiLink
 from humanpt.testing.rsi_attacks import rob
+from tests.robot_gateway.rig import Rig
 from tests.rsi.live_cell import CYCLE_MS, LiveCell
-from tests.rsi.rig import RsiRig
 
 C = 12  # ms
 
@@ -83,9 +83,9 @@ def test_malformed_datagrams_are_link_errors_that_keep_the_sequence():
     assert _kinds(link.receive(rob(1_000_020), 0)) == ["CycleReceived"]
 
 
-def _servoing_rig() -> RsiRig:
+def _servoing_rig() -> Rig:
     """The gateway core with a controller commanding every cycle (the miss watchdog armed)."""
-    rig = RsiRig(cycle_period_ms=12.0)
+    rig = Rig(link="rsi", cycle_period_ms=12.0)
     for _ in range(10):
         rig.status()
         rig.command(dp_mm=(0.1, 0, 0))

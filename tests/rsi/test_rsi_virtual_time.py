@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from humanpt.bench.rsi import CommandAhead, circle_step
-from humanpt.robot_gateway.core import ROBOT_STATE
-from humanpt.rsi.config import RsiGatewayConfig
-from humanpt.rsi.core import RsiGatewayCore
+from humanpt.robot_gateway.core import ROBOT_STATE, GatewayCore
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 from humanpt.sim_robot.config import SimRobotConfig
@@ -23,7 +22,7 @@ MS = 1_000_000
 
 
 def _run(cycle_ms: float):
-    gw = RsiGatewayCore(RsiGatewayConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms))
+    gw = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms))
     robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms))
     controller = CommandAhead(cycle_ms, circle_step(speed_mm_s=20.0, radius_mm=30.0))
     p0 = robot.base_T_flange_mm[:3, 3].copy()

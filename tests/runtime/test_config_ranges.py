@@ -14,8 +14,10 @@ import typing
 
 import pytest
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
+from humanpt.robot_gateway.links import LINKS
+from humanpt.robot_gateway.links import config_type as gateway_config_type
+from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
 from humanpt.schemas import humanpt_pb2 as pb
@@ -54,9 +56,16 @@ def _config_classes():
             if dataclasses.is_dataclass(tp):
                 walk(f"{name}.{f.name}", tp)
 
-    for name, cls in {**config_types(), "runtime": cfg.RuntimeConfig}.items():
+    for name, cls in _sections().items():
         walk(name, cls)
     return seen
+
+
+def _sections() -> dict[str, type]:
+    """Every section's config class; the gateway's once per link (its section is its link's)."""
+    sections = {**config_types(), "runtime": cfg.RuntimeConfig}
+    del sections["robot_gateway"]
+    return {**sections, **{f"robot_gateway link={link}": gateway_config_type(link) for link in LINKS}}
 
 
 def test_every_numeric_parameter_has_a_physical_range():
@@ -68,7 +77,7 @@ def test_every_numeric_parameter_has_a_physical_range():
 
 def test_every_default_is_inside_its_range():
     # The builder checks ranges; building every section from its own defaults must pass.
-    for name, cls in {**config_types(), "runtime": cfg.RuntimeConfig}.items():
+    for name, cls in _sections().items():
         table = cfg.to_table(cls())
         cfg.build(cls, table, source="<defaults>", section=name)
 
@@ -121,8 +130,8 @@ def _param(core, key, value) -> pb.Event:
     ("fault_after_missed", 10_000),
 ])
 def test_gateway_limits_cannot_be_loosened_at_run_time(key, value):
-    start = AlterGatewayConfig()  # 100 mm/s, 60 deg/s, the box, 3 stale cycles, 10 misses
-    core = AlterGatewayCore(start)
+    start = AlterConfig()  # 100 mm/s, 60 deg/s, the box, 3 stale cycles, 10 misses
+    core = GatewayCore(start)
     ev = _param(core, key, value)
     assert ev.code == "param_rejected" and ev.severity == pb.SEVERITY_WARNING, ev
     assert key in ev.text
@@ -130,7 +139,7 @@ def test_gateway_limits_cannot_be_loosened_at_run_time(key, value):
 
 
 def test_gateway_limits_may_become_stricter_and_back_to_the_start_value():
-    core = AlterGatewayCore(AlterGatewayConfig())
+    core = GatewayCore(AlterConfig())
     assert _param(core, "max_speed_mm_s", 50.0).code == "param_changed"
     assert core.config.max_speed_mm_s == 50.0
     assert core.config.max_step_mm == pytest.approx(50.0 * 0.028)  # 50 mm/s x 28 ms

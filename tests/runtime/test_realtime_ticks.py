@@ -91,13 +91,13 @@ def test_a_realtime_core_process_gets_a_short_switch_interval_and_a_higher_prior
 import gc, json, os, sys
 from humanpt.runtime.config import RuntimeConfig
 from humanpt.runtime.tuning import tune_realtime
-from humanpt.robot_gateway.core import AlterGatewayCore
+from humanpt.robot_gateway.core import GatewayCore
 from humanpt.controller.core import ControllerCore
 from humanpt.perception.core import PerceptionCore
 state = lambda: [sys.getswitchinterval(), os.sched_getscheduler(0), os.getpriority(os.PRIO_PROCESS, 0)]
 out = {"before": state(), "ordinary": tune_realtime(PerceptionCore, RuntimeConfig())}
 out["frozen_before"] = gc.get_freeze_count()
-out["nice_said"] = tune_realtime(AlterGatewayCore, RuntimeConfig(realtime_switch_interval_ms=0.25,
+out["nice_said"] = tune_realtime(GatewayCore, RuntimeConfig(realtime_switch_interval_ms=0.25,
                                                                  realtime_fifo_priority=0, realtime_nice=-5))
 out["nice"] = state()
 out["fifo_said"] = tune_realtime(ControllerCore, RuntimeConfig())

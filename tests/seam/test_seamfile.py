@@ -159,9 +159,9 @@ def test_write_checks_before_writing(tmp_path):
 
 def test_limits_are_the_gateways():
     """One place: retime's defaults, export's and the robot gateway's defaults agree."""
-    from humanpt.robot_gateway.config import AlterGatewayConfig
+    from humanpt.robot_gateway.links.alter.config import AlterConfig
 
-    gw = AlterGatewayConfig()
+    gw = AlterConfig()
     assert limits.MAX_SPEED_MM_S == gw.max_speed_mm_s == RetimeConfig().max_speed_mm_s == 100.0
     assert limits.MAX_ANGULAR_DEG_S == gw.max_angular_speed_deg_s == RetimeConfig().max_angular_deg_s == 60.0
     assert ExportOptions().max_speed_mm_s == limits.MAX_SPEED_MM_S

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from humanpt.alter import (
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.robot_gateway.links.alter import (
     Correction,
     CorrectionFlags,
     HostEndpoint,
@@ -14,8 +15,7 @@ from humanpt.alter import (
     StatusReceived,
     Transmit,
 )
-from humanpt.alter.messages import NO_FLAGS
-from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.robot_gateway.links.alter.messages import NO_FLAGS
 from humanpt.runtime.config import ConfigError, build
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header

@@ -10,9 +10,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from humanpt.alter.ddcmp import CONTROL_FRAME_BYTES, data_frame_bytes
-from humanpt.alter.link import ALTER_CYCLE_NS
-from humanpt.alter.messages import CORRECTION_PAYLOAD_BYTES, STATUS_PAYLOAD_BYTES
+from humanpt.robot_gateway.links.alter.ddcmp import CONTROL_FRAME_BYTES, data_frame_bytes
+from humanpt.robot_gateway.links.alter.ddcmp_link import ALTER_CYCLE_NS
+from humanpt.robot_gateway.links.alter.messages import (
+    CORRECTION_PAYLOAD_BYTES,
+    STATUS_PAYLOAD_BYTES,
+)
 
 BITS_PER_BYTE_8N1 = 10
 DEFAULT_BAUD = 38_400

@@ -1,24 +1,23 @@
-"""The gateway's ALTER link: humanpt.alter's HostEndpoint (DDCMP frames over a serial line,
+"""The gateway's ALTER link: the codec's HostEndpoint (DDCMP frames over a serial line,
 STATUS in, CORRECTION out) behind the gateway's :class:`~humanpt.robot_gateway.link.Link`."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from humanpt.alter import (
+from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError
+from humanpt.robot_gateway.links.alter.config import AlterConfig
+from humanpt.robot_gateway.links.alter.ddcmp import FrameError
+from humanpt.robot_gateway.links.alter.ddcmp_link import LinkConfig
+from humanpt.robot_gateway.links.alter.endpoint import HostConfig, HostEndpoint
+from humanpt.robot_gateway.links.alter.events import MessageRejected, StatusReceived
+from humanpt.robot_gateway.links.alter.messages import (
     ControllerStatus,
     Correction,
     CorrectionFlags,
-    FrameError,
-    HostConfig,
-    HostEndpoint,
-    LinkConfig,
-    MessageRejected,
     StatusBits,
-    StatusReceived,
 )
-from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError
-from humanpt.robot_gateway.safety import quantize
+from humanpt.robot_gateway.links.alter.quantize import quantize
 
 # Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
 _ALTER_ACTIVE, _TOOL_MODE, _CUMULATIVE, _ARM_POWER, _FAULT, _MISSED = (
@@ -47,7 +46,7 @@ def cycle_state(status: ControllerStatus) -> CycleState:
 
 
 class AlterLink:
-    """The gateway's Link over humanpt.alter's HostEndpoint (DDCMP over a serial line)."""
+    """The gateway's Link over the ALTER codec's HostEndpoint (DDCMP over a serial line)."""
 
     name = "ALTER"
     rx_topic = "serial_rx"
@@ -56,6 +55,10 @@ class AlterLink:
 
     def __init__(self, cycle_period_ns: int):
         self.host = HostEndpoint(HostConfig(LinkConfig(rep_timeout_ns=3 * cycle_period_ns)))
+
+    @classmethod
+    def from_config(cls, config: AlterConfig) -> AlterLink:
+        return cls(config.cycle_period_ns)
 
     @property
     def is_running(self) -> bool:

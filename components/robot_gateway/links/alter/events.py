@@ -2,34 +2,17 @@
 
 Every call into the link or an endpoint returns ``list[Event]`` in the order things
 happened. ``Transmit`` carries bytes the shell must write to the serial port, in order.
+``Transmit``, ``LinkUp``, ``LinkDown``, ``RepSent`` and ``SendRejected`` are every link's
+(``humanpt.robot_gateway.link``); the others are ALTER's.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from humanpt.alter.ddcmp import FrameError
-from humanpt.alter.messages import ControllerStatus, Correction
-
-
-@dataclass(frozen=True)
-class Transmit:
-    """Bytes to write to the line now (one or more whole frames)."""
-
-    data: bytes
-
-
-@dataclass(frozen=True)
-class LinkUp:
-    """Start-up (STRT/STACK/ACK) completed; data may flow. Sequence numbers start at 0."""
-
-
-@dataclass(frozen=True)
-class LinkDown:
-    """The link left RUNNING. ``unacked``: data messages sent but never acknowledged (lost)."""
-
-    reason: str
-    unacked: int = 0
+from humanpt.robot_gateway.link import LinkDown, LinkUp, RepSent, SendRejected, Transmit
+from humanpt.robot_gateway.links.alter.ddcmp import FrameError
+from humanpt.robot_gateway.links.alter.messages import ControllerStatus, Correction
 
 
 @dataclass(frozen=True)
@@ -58,27 +41,12 @@ class NakReceived:
 
 
 @dataclass(frozen=True)
-class RepSent:
-    """The reply timer expired with data outstanding; we asked the peer (REP)."""
-
-    num: int
-    consecutive: int
-
-
-@dataclass(frozen=True)
 class Discarded:
     """A valid frame that was not accepted. ``why``: duplicate, out_of_order,
     wrong_address, not_running."""
 
     why: str
     num: int | None = None
-
-
-@dataclass(frozen=True)
-class SendRejected:
-    """``send`` could not queue the message (link not running, window full)."""
-
-    why: str
 
 
 @dataclass(frozen=True)

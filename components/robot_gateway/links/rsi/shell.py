@@ -1,4 +1,4 @@
-"""The RSI gateway's live-shell adapter: a UDP socket on a thread of its own.
+"""The RSI link's I/O adapter: a UDP socket on a thread of its own.
 
 Datagrams read from the robot become ``udp_rx`` inputs (humanpt.SerialChunk, stamped when
 read, frame_id = the sender's host:port); the core's ``udp_tx`` outputs go back to the
@@ -26,12 +26,12 @@ import threading
 import time
 from collections.abc import Callable
 
-from humanpt.rsi.config import RsiGatewayConfig, parse_address
-from humanpt.rsi.protocol import RsiProtocolError, decode_rob
+from humanpt.robot_gateway.links.rsi.config import RsiConfig, parse_address
+from humanpt.robot_gateway.links.rsi.protocol import RsiProtocolError, decode_rob
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
-log = logging.getLogger("humanpt.rsi")
+log = logging.getLogger("humanpt.robot_gateway.links.rsi")
 
 LOG_INTERVAL_NS = 1_000_000_000  # dropped datagrams are logged at most once a second, with a count
 
@@ -263,7 +263,7 @@ class UdpAdapter:
             self._sock = None
 
 
-def adapters(config: RsiGatewayConfig) -> list[UdpAdapter]:
+def adapters(config: RsiConfig) -> list[UdpAdapter]:
     """The live shell's adapters: one UDP socket at ``udp_bind``, locked onto the robot's
     sender; another may take over after the gateway's silence watchdog
     (``status_timeout_cycles`` x ``cycle_period_ms``)."""

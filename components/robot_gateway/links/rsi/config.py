@@ -1,4 +1,4 @@
-"""The RSI gateway's configuration: the gateway's (``AlterGatewayConfig``: limits,
+"""The gateway's config over the RSI link: the safety rules (``GatewayConfig``: limits,
 envelope, watchdogs) with the RSI link's fields and RSI's cycle times."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
-from humanpt.robot_gateway.config import AlterGatewayConfig
+from humanpt.robot_gateway.config import GatewayConfig
 from humanpt.runtime.config import Range, live
 
 RSI_CYCLES_MS = (4.0, 12.0)  # the RSI cycle times (IPO_FAST and IPO modes)
@@ -21,7 +21,7 @@ def parse_address(text: str) -> tuple[str, int]:
 
 
 @dataclass(frozen=True)
-class RsiGatewayConfig(AlterGatewayConfig):
+class RsiConfig(GatewayConfig):
     """The gateway over a KUKA RSI-style link (UDP/XML). Same safety fields as over ALTER;
     the per-cycle limits follow the RSI cycle (100 mm/s at 4 ms: 0.4 mm per cycle)."""
 
@@ -48,7 +48,7 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # Only datagrams from this host (or host:port) are the robot's; others are dropped (and
     # logged) by the adapter. Empty: any host. Either way the adapter locks onto the host and
     # port of the first valid <Rob> and takes datagrams only from there until that sender has
-    # been silent for status_timeout_cycles (humanpt.rsi.shell.PeerLock).
+    # been silent for status_timeout_cycles (shell.PeerLock).
     udp_robot: str = ""
     # The robot's late limit (the RSI ETHERNET object's limit of late answers in a row before
     # RSI stops; required on the robot: as low as the application allows, 10 here). If HOLDON
@@ -58,14 +58,12 @@ class RsiGatewayConfig(AlterGatewayConfig):
     # robot applies zero when an answer is late (HOLDON="0" on every RKorr element).
     robot_late_limit: Annotated[int, Range(0, 1000, "cycles")] = 10
     sen_type: str = "ImFree"  # <Sen Type=...>: the robot's SENTYPE
-    link: Literal["alter", "rsi"] = "rsi"  # ([robot_gateway] link = "rsi" selects this config)
+    link: str = "rsi"  # ([robot_gateway] link = "rsi" selects this config)
 
     def __post_init__(self) -> None:
         if self.reply_deadline_ms is None:
             object.__setattr__(self, "reply_deadline_ms", min(2.0, self.cycle_period_ms / 4.0))
         super().__post_init__()
-        if self.link != "rsi":
-            raise ValueError(f"link must be rsi in the RSI gateway's config, got {self.link!r}")
         if self.cycle_period_ms not in RSI_CYCLES_MS:
             raise ValueError(f"cycle_period_ms must be one of {RSI_CYCLES_MS} (RSI), got {self.cycle_period_ms}")
         parse_address(self.udp_bind)

@@ -24,9 +24,9 @@ from collections import OrderedDict
 
 import numpy as np
 
-from humanpt.alter import LinkUp, Transmit
-from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError
-from humanpt.rsi.protocol import (
+from humanpt.robot_gateway.link import CycleReceived, CycleState, LinkError, LinkUp, Transmit
+from humanpt.robot_gateway.links.rsi.config import RsiConfig
+from humanpt.robot_gateway.links.rsi.protocol import (
     RsiCorrection,
     RsiProtocolError,
     decode_rob,
@@ -58,6 +58,10 @@ class RsiLink:
         self._ipocs: OrderedDict[int, int] = OrderedDict()  # cycle -> IPOC, the last few
         self.counters = dict.fromkeys(("datagrams", "malformed", "sessions", "duplicates", "out_of_sequence",
                                        "out_of_sequence_dropped", "confirmed"), 0)
+
+    @classmethod
+    def from_config(cls, config: RsiConfig) -> RsiLink:
+        return cls(config.cycle_period_ms, config.correction_frame, config.sen_type)
 
     @property
     def is_running(self) -> bool:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from humanpt.rsi.protocol import decode_rob
+from humanpt.robot_gateway.links.rsi.protocol import decode_rob
 from humanpt.runtime.recording import read, segments_of
 from humanpt.schemas import humanpt_pb2 as pb
 

@@ -1,19 +1,22 @@
-"""ALTER serial link to the Puma controller: pure codec (assumed wire format).
+"""The gateway's ALTER link: the serial line to the Puma controller (assumed wire format).
 
-See PROTOCOL.md for the byte layout. Layers, each pure (bytes in, events out):
+The gateway's side: ``link.AlterLink`` (the gateway's Link), ``config.AlterConfig`` (its
+``[robot_gateway]`` table: port, baud), ``shell`` (the serial port), ``kind.KIND`` (its
+registry entry). The codec (pure; both ends, the simulated controller uses it too); see
+PROTOCOL.md for the byte layout. Layers, each pure (bytes in, events out):
 
 - ``crc``: CRC-16/ARC as used by DDCMP.
 - ``ddcmp``: frames, encoders, the resynchronising ``DdcmpDecoder``.
-- ``link``: ``DdcmpLink`` state machine (start-up, sequence numbers, ACK/NAK/REP).
+- ``ddcmp_link``: ``DdcmpLink`` state machine (start-up, sequence numbers, ACK/NAK/REP).
 - ``messages``: STATUS and CORRECTION payloads (fixed point, little-endian).
 - ``endpoint``: ``HostEndpoint`` (gateway) and ``ControllerEndpoint`` (robot side).
 - ``budget``: bytes per 28 ms cycle at 19 200 / 38 400 baud.
-- ``limiter``: rate-limited events and the serial-chunk output both link ends' cores share.
+- ``quantize``: a clamped step as a CORRECTION whose rounded values keep the limits.
 """
 
-from humanpt.alter.budget import CycleBudget, bytes_per_cycle, cycle_budget
-from humanpt.alter.crc import crc16
-from humanpt.alter.ddcmp import (
+from humanpt.robot_gateway.links.alter.budget import CycleBudget, bytes_per_cycle, cycle_budget
+from humanpt.robot_gateway.links.alter.crc import crc16
+from humanpt.robot_gateway.links.alter.ddcmp import (
     ControlFrame,
     ControlType,
     DataFrame,
@@ -25,8 +28,19 @@ from humanpt.alter.ddcmp import (
     decode_frame,
     encode_frame,
 )
-from humanpt.alter.endpoint import ControllerConfig, ControllerEndpoint, HostConfig, HostEndpoint
-from humanpt.alter.events import (
+from humanpt.robot_gateway.links.alter.ddcmp_link import (
+    ALTER_CYCLE_NS,
+    DdcmpLink,
+    LinkConfig,
+    LinkState,
+)
+from humanpt.robot_gateway.links.alter.endpoint import (
+    ControllerConfig,
+    ControllerEndpoint,
+    HostConfig,
+    HostEndpoint,
+)
+from humanpt.robot_gateway.links.alter.events import (
     Acknowledged,
     CorrectionReceived,
     DataReceived,
@@ -41,8 +55,7 @@ from humanpt.alter.events import (
     StatusReceived,
     Transmit,
 )
-from humanpt.alter.link import ALTER_CYCLE_NS, DdcmpLink, LinkConfig, LinkState
-from humanpt.alter.messages import (
+from humanpt.robot_gateway.links.alter.messages import (
     ControllerStatus,
     Correction,
     CorrectionFlags,

@@ -17,7 +17,8 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-from humanpt.alter.events import (
+from humanpt.robot_gateway.links.alter.ddcmp_link import DdcmpLink, LinkConfig
+from humanpt.robot_gateway.links.alter.events import (
     CorrectionReceived,
     DataReceived,
     Event,
@@ -25,8 +26,7 @@ from humanpt.alter.events import (
     MessageRejected,
     StatusReceived,
 )
-from humanpt.alter.link import DdcmpLink, LinkConfig
-from humanpt.alter.messages import (
+from humanpt.robot_gateway.links.alter.messages import (
     UINT32_MAX,
     ControllerStatus,
     Correction,

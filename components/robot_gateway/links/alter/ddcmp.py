@@ -21,7 +21,7 @@ import struct
 from dataclasses import dataclass
 from enum import IntEnum
 
-from humanpt.alter.crc import crc16
+from humanpt.robot_gateway.links.alter.crc import crc16
 
 SOH = 0x81  # data message
 ENQ = 0x05  # control message

@@ -1,7 +1,7 @@
-"""Shared by both ends of the ALTER link (robot_gateway and sim_robot cores).
-
-Rate-limited events: the first occurrence goes out at once, repeats at most once per
-interval with a count of what was held back. Pure (times are given, never read)."""
+"""Rate-limited events, shared by the cores that report per cycle (the robot gateway, the
+simulated robots, the pose filter): the first occurrence goes out at once, repeats at most
+once per interval with a count of what was held back. Pure (times are given, never read).
+And what both ends of a robot link share (:class:`SerialLinkCoreMixin`)."""
 
 from __future__ import annotations
 
@@ -36,9 +36,10 @@ def suffix(held: int) -> str:
 
 
 class SerialLinkCoreMixin:
-    """What both ends of the ALTER link share (robot_gateway and sim_robot cores): bytes to
-    send gathered in ``self._tx`` go out as one ``serial_tx`` chunk per step, and events are
-    rate-limited by ``self._limiter``.
+    """What both ends of a robot link share (robot_gateway and sim_robot cores): bytes to
+    send gathered in ``self._tx`` go out as one ``serial_tx`` chunk per step (a core may
+    send on its link's topic instead: ``_flush_tx``), and events are rate-limited by
+    ``self._limiter``.
 
     Their port handlers take ``(t_ns, msg, outs)`` and append to ``outs``; every input
     (parameters aside) starts with :meth:`_begin` and ends by sending what it wrote."""

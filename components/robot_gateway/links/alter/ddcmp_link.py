@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
 
-from humanpt.alter.ddcmp import (
+from humanpt.robot_gateway.links.alter.ddcmp import (
     DEFAULT_ADDRESS,
     ControlFrame,
     ControlType,
@@ -37,7 +37,7 @@ from humanpt.alter.ddcmp import (
     stack,
     strt,
 )
-from humanpt.alter.events import (
+from humanpt.robot_gateway.links.alter.events import (
     Acknowledged,
     DataReceived,
     Discarded,
