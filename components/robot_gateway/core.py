@@ -142,6 +142,10 @@ class GatewayCore(SerialLinkCoreMixin, Core):
 
     name = "robot_gateway"
     realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
+    # Snapshots (runtime/snapshot.py): the corrections sent are kept for benches and tests only;
+    # the commands held are Commands, the robot's last cycle a CycleState.
+    not_frozen = frozenset({"sent"})
+    state_types = (Command, CycleState)
 
     def make_link(self, config: Any) -> Link:
         raise NotImplementedError

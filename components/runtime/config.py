@@ -423,6 +423,10 @@ class RecordConfig:
     # recording ~35 % smaller; a real sensor's noise is not shared). A crash loses at most
     # the chunk in progress, and it is flushed every [runtime] flush_interval_s anyway.
     image_chunk_size: Annotated[int, Range(1024, 1073741824, "bytes")] = 4 * 1024 * 1024
+    # Every this many seconds of input time each shell freezes its core's state into the
+    # recording (runtime/snapshot.py), so that `humanpt replay --last S` need not replay a long
+    # run from its start; 0: never.  runtime/README.md "Snapshots" (size and time measured).
+    snapshot_period_s: Annotated[float, Range(0.0, 86400.0, "s")] = 10.0
 
     def __post_init__(self):
         keep_every(self.images)
