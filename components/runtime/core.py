@@ -287,7 +287,7 @@ class Core:
         parameters and within their hard limits, as a parameter change would be.  Raises
         :class:`~humanpt.runtime.snapshot.SnapshotError` (one line); the core is then to be
         thrown away."""
-        from humanpt.runtime.snapshot import Decoder, SnapshotError, reachable_classes
+        from humanpt.runtime.snapshot import Decoder, SnapshotError, held
 
         if type(frozen) is not dict or set(frozen) != {"config", "state"} or type(frozen["state"]) is not dict:
             raise SnapshotError(f"{self.name}: a snapshot is a table of 'config' and 'state'")
@@ -308,10 +308,10 @@ class Core:
             raise SnapshotError(f"{self.name}: unknown field {str(unknown[0])[:40]!r} in the snapshot")
         if missing:
             raise SnapshotError(f"{self.name}: field {missing[0]!r} missing from the snapshot")
-        classes = reachable_classes(self)
+        known = held(self)
         for cls in self.state_types:
-            classes.setdefault(cls.__qualname__, cls)
-        dec = Decoder(classes, self, self._skipped_places())
+            known.classes.setdefault(cls.__qualname__, cls)
+        dec = Decoder(known, self, self._skipped_places())
         try:
             values = {k: dec.decode(v, fresh[k], f"{self.name}.{k}") for k, v in state.items()}
         except RecursionError:

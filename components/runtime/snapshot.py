@@ -39,6 +39,7 @@ import inspect
 import json
 import math
 from collections import OrderedDict, defaultdict, deque
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -124,7 +125,7 @@ class Encoder:
         if isinstance(v, Message):
             return {"pb": {"type": v.DESCRIPTOR.full_name, "data": _b64(v.SerializeToString())}}
         if _is_function(v):
-            return {"fn": getattr(v, "__qualname__", getattr(v, "__name__", t.__name__))}
+            return {"fn": function_name(v)}
         # Mutable (or large): written once, then referenced.
         n = self._memo[id(v)] = len(self._memo)
         self._keep.append(v)
@@ -166,6 +167,11 @@ class Encoder:
         return node
 
 
+def function_name(f: Any) -> str:
+    """How a snapshot names a function an object holds (``numpy.linalg.inv``)."""
+    return f"{getattr(f, '__module__', None) or ''}.{getattr(f, '__qualname__', None) or type(f).__qualname__}"
+
+
 def _kind(v: Any) -> str:
     """What kind of value ``v`` is, for checking a thawed value against the fresh core's."""
     if isinstance(v, bool | np.bool_):
@@ -180,10 +186,20 @@ def _kind(v: Any) -> str:
     return type(v).__qualname__
 
 
-def reachable_classes(root: Any, limit: int = 200_000) -> dict[str, type]:
-    """Class name -> class of every object (and Enum) reachable from ``root``'s attributes
-    and containers: the classes a core holds once built."""
-    out: dict[str, type] = {}
+@dataclass
+class Held:
+    """What a fresh core holds, found by walking it (:func:`held`): the classes of its
+    objects and Enums by class name, an instance of each class (the template of an object a
+    snapshot adds), and the functions its objects hold, by :func:`function_name`."""
+
+    classes: dict[str, type] = field(default_factory=dict)
+    examples: dict[type, Any] = field(default_factory=dict)
+    functions: dict[str, Any] = field(default_factory=dict)
+
+
+def held(root: Any, limit: int = 200_000) -> Held:
+    """What ``root`` holds in its attributes and containers, transitively (:class:`Held`)."""
+    out = Held()
     seen: set[int] = set()
     stack = [root]
     while stack and len(seen) < limit:
@@ -192,28 +208,34 @@ def reachable_classes(root: Any, limit: int = 200_000) -> dict[str, type]:
             continue
         seen.add(id(v))
         if isinstance(v, enum.Enum):
-            out.setdefault(type(v).__qualname__, type(v))
+            out.classes.setdefault(type(v).__qualname__, type(v))
         elif isinstance(v, dict):
             stack += list(v.keys()) + list(v.values())
         elif isinstance(v, list | tuple | deque | set | frozenset):
             stack += list(v)
-        elif isinstance(v, Message) or _is_function(v):
+        elif isinstance(v, Message):
             continue
+        elif _is_function(v):
+            out.functions.setdefault(function_name(v), v)
         elif hasattr(v, "__dict__") or _slot_names(type(v)):
-            out.setdefault(type(v).__qualname__, type(v))
+            out.classes.setdefault(type(v).__qualname__, type(v))
+            out.examples.setdefault(type(v), v)
             stack += list(object_attrs(v).values())
     return out
 
 
 _NONE = object()  # no fresh value to check against
+_TAGS = frozenset({"ref", "core", "fn", "b", "n", "e", "pb", "t", "a", "ao", "ba", "l", "d", "dd", "od", "q", "s", "fs",
+                   "o"})
 
 
 class Decoder:
     """Decode an encoded state; ``classes``: the classes objects may be built of (by class
     name); ``core``: the fresh core (``{"core": attr}`` and functions come from it)."""
 
-    def __init__(self, classes: dict[str, type], core: Any, skip: frozenset[str] = frozenset()):
-        self._classes = classes
+    def __init__(self, known: Held, core: Any, skip: frozenset[str] = frozenset()):
+        self._known = known
+        self._classes = known.classes
         self._core = core
         self._skip = skip  # places not frozen: the fresh core's value is kept
         self._memo: dict[int, Any] = {}
@@ -250,6 +272,8 @@ class Decoder:
         if len(keys) != 1:
             raise SnapshotError(f"{where}: a node with keys {sorted(node)[:5]} (one tag expected)")
         tag = keys.pop()
+        if tag not in _TAGS:
+            raise SnapshotError(f"{where}: unknown tag {tag[:20]!r}")
         body = node[tag]
         if tag == "ref":
             if type(body) is not int or body not in self._memo:
@@ -260,9 +284,12 @@ class Decoder:
                 raise SnapshotError(f"{where}: refers to the core's {str(body)[:40]!r}, which is frozen, not kept")
             return getattr(self._core, body)
         if tag == "fn":
-            if fresh is _NONE or not _is_function(fresh):
+            if fresh is not _NONE and _is_function(fresh):
+                return fresh
+            f = self._known.functions.get(body) if isinstance(body, str) else None
+            if f is None or (fresh is not _NONE and fresh is not None):
                 raise SnapshotError(f"{where}: a function ({str(body)[:60]}) where this core holds none")
-            return fresh
+            return f
         if tag == "b":
             return self._bytes(body, where)
         if tag == "n":
@@ -351,9 +378,7 @@ class Decoder:
             except TypeError:
                 raise SnapshotError(f"{where}: a set of values that cannot be in a set") from None
             return v
-        if tag == "o":
-            return self._object(n, body, fresh, where, depth)
-        raise SnapshotError(f"{where}: unknown tag {tag[:20]!r}")
+        return self._object(n, body, fresh, where, depth)  # "o"
 
     def _object(self, n: int, body: Any, fresh: Any, where: str, depth: int) -> Any:
         if type(body) is not dict or type(body.get("attrs")) is not dict:
@@ -364,6 +389,9 @@ class Decoder:
         attrs: dict = body["attrs"]
         has_fresh = fresh is not _NONE and type(fresh) is cls
         fresh_attrs = object_attrs(fresh) if has_fresh else {}
+        # An object the fresh core holds none of at this place: another of its class that it
+        # holds is the template of its attributes' kinds and functions.
+        example = {} if has_fresh or cls not in self._known.examples else object_attrs(self._known.examples[cls])
         for k in attrs:
             if type(k) is not str or not k.isidentifier() or k.startswith("__"):
                 raise SnapshotError(f"{where}: attribute name {str(k)[:40]!r} refused")
@@ -387,7 +415,7 @@ class Decoder:
         for k in kept:
             object.__setattr__(obj, k, fresh_attrs[k])
         for k, x in attrs.items():
-            v = self.decode(x, fresh_attrs.get(k, _NONE), f"{where}.{k}", depth + 1)
+            v = self.decode(x, fresh_attrs.get(k, example.get(k, _NONE)), f"{where}.{k}", depth + 1)
             if k in slots or hasattr(obj, "__dict__"):
                 object.__setattr__(obj, k, v)
             else:
