@@ -272,7 +272,7 @@ class Core:
         default cannot encode overrides it and :meth:`thaw` together."""
         from humanpt.runtime.snapshot import Encoder
 
-        shared = {id(getattr(self, k)): k for k in sorted(self.unfrozen_attrs)
+        shared = {id(getattr(self, k)): k for k in sorted(self.unfrozen_attrs - {"_handlers"})
                   if not isinstance(getattr(self, k, None), (type(None), bool, int, float, str))}
         enc = Encoder(shared, self._skipped_places())
         return {"config": to_table(self.config),
@@ -314,8 +314,13 @@ class Core:
         dec = Decoder(known, self, self._skipped_places())
         try:
             values = {k: dec.decode(v, fresh[k], f"{self.name}.{k}") for k, v in state.items()}
+        except SnapshotError:
+            raise
         except RecursionError:
             raise SnapshotError(f"{self.name}: the snapshot is nested too deeply") from None
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError, MemoryError) as e:
+            raise SnapshotError(f"{self.name}: the snapshot cannot be thawed ({type(e).__name__}: "
+                                f"{str(e)[:200]})") from None
         vars(self).update(values)
 
     def _skipped_places(self) -> frozenset[str]:

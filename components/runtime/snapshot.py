@@ -280,7 +280,7 @@ class Decoder:
                 raise SnapshotError(f"{where}: a reference to {body!r}, which is not an earlier value")
             return self._memo[body]
         if tag == "core":
-            if body not in getattr(self._core, "unfrozen_attrs", ()):
+            if body == "_handlers" or body not in getattr(self._core, "unfrozen_attrs", ()):
                 raise SnapshotError(f"{where}: refers to the core's {str(body)[:40]!r}, which is frozen, not kept")
             return getattr(self._core, body)
         if tag == "fn":

@@ -181,8 +181,6 @@ CRAFTED = {
     "missing field": (_delete("core/state/pings"), "field 'pings' missing from the snapshot"),
     "class not held": (_set("core/state/pings", {"o": {"cls": "Popen", "attrs": {"args": "rm -rf /"}}, "id": 990}),
                        "class 'Popen' is not one this core holds; nothing named by a snapshot is imported"),
-    "dunder attribute": (_set("core/state/_seq", {"o": {"cls": "Popen", "attrs": {"__class__": 1}}, "id": 990}),
-                         "class 'Popen' is not one this core holds"),
     "foreign message": (_set("core/state/pings", {"pb": {"type": "google.protobuf.Any", "data": ""}}),
                         "message type 'google.protobuf.Any' is not one of humanpt's schemas"),
     "unknown tag": (_set("core/state/pings", {"exec": "print(1)"}), "unknown tag 'exec'"),
@@ -303,3 +301,36 @@ def test_a_state_that_cannot_be_frozen_stops_the_snapshots_not_the_core(tmp_path
     assert snap.after_input(a, 0) is None and snap.after_input(a, 2_000_000_000) is None
     assert snap.inputs == 2 and snap.written == 0 and "pinger.gen" in snap.error
     assert snap.news() and not snap.news()
+
+
+def test_an_object_may_not_set_a_dunder_attribute():
+    a = _Stateful(_Cfg())
+    a.items.append(Item(7, np.ones(3), Colour.BLUE))
+    frozen = loads(dumps(a.freeze()))
+    item = frozen["state"]["items"]["q"]["items"][0]["o"]
+    item["attrs"]["__class__"] = {"ref": 0}
+    with pytest.raises(SnapshotError, match=r"^pinger.items\[0\]: attribute name '__class__' refused$"):
+        _Stateful(_Cfg()).thaw(frozen)
+
+
+def test_a_snapshot_may_not_loosen_a_safety_limit_or_change_a_fixed_key():
+    """The config a snapshot carries is applied as parameter changes would be: a safety limit
+    only stricter than the recorded start value (the gateway's 100 mm/s, cell_limits), a key
+    that is not live not at all."""
+    from humanpt.runtime.registry import core_class
+
+    cls = core_class("robot_gateway")
+    frozen = loads(dumps(cls.create(cls.config_type()).freeze()))
+    frozen["config"]["max_speed_mm_s"] = 200.0
+    with pytest.raises(SnapshotError, match=r"^robot_gateway: the snapshot's config: max_speed_mm_s: 200.0 is "
+                                            r"above the hard limit 100.0"):
+        cls.create(cls.config_type()).thaw(frozen)
+    frozen["config"]["max_speed_mm_s"] = 50.0
+    core = cls.create(cls.config_type())
+    core.thaw(frozen)
+    assert core.config.max_speed_mm_s == 50.0 and core.start_config.max_speed_mm_s == 100.0
+    pinger = loads(dumps(PingerCore(PingerConfig()).freeze()))
+    pinger["config"]["payload_note"] = "other"
+    with pytest.raises(SnapshotError, match=r"^pinger: the snapshot's config changes 'payload_note', which is not a "
+                                            r"live parameter$"):
+        PingerCore(PingerConfig()).thaw(pinger)
