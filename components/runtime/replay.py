@@ -392,13 +392,14 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
     snap = choose_snapshot(rec, start_s=start_s, last_s=last_s)
     start = None
     if start_s is not None or last_s is not None:
-        asked = f"the first {start_s:g} s" if start_s is not None else f"all but the last {last_s:g} s"
+        asked = (f"{start_s:g} s after the first input" if start_s is not None
+                 else f"{last_s:g} s before the last input")
         if snap is None:
-            start = f"no snapshot before {asked} of input time: replayed from the start"
+            start = f"no snapshot at or before {asked}: replayed from the start"
         else:
             n_in = sum(1 for e in rec.entries[:snap.at] if e.direction == IN)
-            start = (f"from the snapshot at t_ns={snap.t_ns} (skipping {asked}): the core thawed after "
-                     f"input #{n_in}, the {n_in} inputs and their outputs before it not replayed")
+            start = (f"from the snapshot at t_ns={snap.t_ns} (the last at or before {asked}): the core thawed "
+                     f"after input #{n_in}; the inputs before it and their outputs not replayed")
     recorded, replayed = replay_recording(rec, core_factory, snap)
     missing = rec.missing
     # The lost chunk of a truncated file held the tail of both streams (an input without its
