@@ -282,8 +282,8 @@ class Core:
     def thaw(self, frozen: Any) -> None:
         """Put a state made by :meth:`freeze` into this core, a fresh one built from the same
         config and rig as the frozen core was.  Nothing in it is executed or imported: every
-        value is checked against this core's own at the same place (kind, an array's dtype
-        and shape, no unknown or missing attribute), a changed config only in its live
+        value is checked against this core's own at the same place (kind, an array's dtype,
+        no unknown or missing attribute), a changed config only in its live
         parameters and within their hard limits, as a parameter change would be.  Raises
         :class:`~humanpt.runtime.snapshot.SnapshotError` (one line); the core is then to be
         thrown away."""
@@ -297,11 +297,11 @@ class Core:
             self.on_config_changed(old, config)
         fresh = {k: v for k, v in vars(self).items() if k not in self.unfrozen_attrs}
         state = frozen["state"]
-        for k in state:  # an attribute set on first use, whose class gives it a default
-            default = getattr(type(self), k, None) if type(k) is str and not k.startswith("__") else None
-            if k not in fresh and k not in self.unfrozen_attrs and isinstance(default, (type(None), bool, int, float, str)) \
-                    and hasattr(type(self), k):
-                fresh[k] = default
+        # An attribute set on first use (controller's _last_mode), its default on the class.
+        lazy = [k for k in state if type(k) is str and k not in fresh and k not in self.unfrozen_attrs
+                and not k.startswith("__") and hasattr(type(self), k)]
+        fresh.update({k: getattr(type(self), k) for k in lazy
+                      if isinstance(getattr(type(self), k), (type(None), bool, int, float, str))})
         unknown = sorted(set(state) - set(fresh), key=str)
         missing = sorted(set(fresh) - set(state))
         if unknown:

@@ -615,9 +615,10 @@ class Recorder:
                 self._commit()
             # The channel once more outside the chunks (the chunk holding it may be damaged, and
             # a file never closed has no summary to repeat it): a record of its own, at once.
+            schema = msg_type.DESCRIPTOR.full_name if msg_type is not None else "json" if direction == SNAPSHOT else "raw"
             self._writer.add_metadata(CHANNELS_METADATA, {str(cid): json.dumps(
-                {"topic": topic, "schema": ("json" if direction == SNAPSHOT else "raw") if msg_type is None
-                 else msg_type.DESCRIPTOR.full_name, "encoding": enc, "metadata": {"direction": direction, **dict(variant)}}, sort_keys=True)})
+                {"topic": topic, "schema": schema, "encoding": enc,
+                 "metadata": {"direction": direction, **dict(variant)}}, sort_keys=True)})
             self._committed_pos = self._file.pos  # the file ends at a record boundary; nothing committed
         return cid
 

@@ -38,6 +38,7 @@ import enum
 import inspect
 import json
 import math
+import types
 from collections import OrderedDict, defaultdict, deque
 from dataclasses import dataclass, field
 from typing import Any
@@ -414,8 +415,11 @@ class Decoder:
         slots = set(_slot_names(cls))
         for k in kept:
             object.__setattr__(obj, k, fresh_attrs[k])
+        owner = fresh if has_fresh else self._known.examples.get(cls)
         for k, x in attrs.items():
             v = self.decode(x, fresh_attrs.get(k, example.get(k, _NONE)), f"{where}.{k}", depth + 1)
+            if inspect.ismethod(v) and v.__self__ is owner:  # a method of its own: of the new object now
+                v = types.MethodType(v.__func__, obj)
             if k in slots or hasattr(obj, "__dict__"):
                 object.__setattr__(obj, k, v)
             else:

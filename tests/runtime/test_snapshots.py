@@ -345,3 +345,35 @@ def test_every_component_thaws_its_built_state(name):
     core = cls.create(cls.config_type())
     core.thaw(loads(data))
     assert dumps(core.freeze()) == data
+
+
+class _Cb:
+    def __init__(self):
+        self.n = 0
+        self.on = self.bump  # a method of its own, held: bound to the new object after a thaw
+
+    def bump(self):
+        self.n += 1
+
+
+class _Holder(Core):
+    name = "pinger"
+    config_type = _Cfg
+
+    def __init__(self, config):
+        super().__init__(config)
+        self.cb = _Cb()
+        self.later: list = []  # a _Cb made later: built from the class the core holds
+
+
+def test_a_method_an_object_holds_is_bound_to_the_thawed_object():
+    a = _Holder(_Cfg())
+    a.cb.on()
+    a.later.append(_Cb())
+    b = _Holder(_Cfg())
+    b.thaw(loads(dumps(a.freeze())))
+    for cb in (b.cb, b.later[0]):
+        n = cb.n
+        cb.on()
+        assert cb.on.__self__ is cb and cb.n == n + 1
+    assert b.cb.n == 2 and b.later[0].n == 1
