@@ -734,7 +734,7 @@ def replay(args) -> int:
     codes = []
     for f in files:
         try:
-            res = do_replay(f)
+            res = do_replay(f, start_s=getattr(args, "from_s", None), last_s=getattr(args, "last", None))
         except (RecordingError, cfgmod.ConfigError) as e:  # say why, go on with the other files
             print(f"humanpt replay: cannot replay {f}: {e}", file=sys.stderr, flush=True)
             codes.append(EXIT_UNREADABLE)

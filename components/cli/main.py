@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import sys
 
@@ -47,6 +48,17 @@ def _add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--as", dest="identity", metavar="NAME",
                    help="under mTLS, the certificate a tool presents (default [runtime] identity, else tool: "
                    "read-only; an operator's may command)")
+
+
+def _seconds(text: str) -> float:
+    """A duration argument: a finite number of seconds >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds >= 0")
+    return v
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -255,6 +267,14 @@ def build_parser() -> argparse.ArgumentParser:
                        "recordings, the worst in that order (2, 1, 4, 3).")
     p.add_argument("run", help="a run directory (with --component) or one component's .mcap file")
     p.add_argument("--component", help="component name (default: every recording in the run)")
+    start = p.add_mutually_exclusive_group()
+    start.add_argument("--last", type=_seconds, metavar="SECONDS",
+                       help="replay only the end: start from the core's last snapshot ([record] "
+                       "snapshot_period_s) at least SECONDS of input time before the last input, and compare "
+                       "the outputs after it (no snapshot there: from the start, and said so)")
+    start.add_argument("--from", dest="from_s", type=_seconds, metavar="SECONDS",
+                       help="start from the core's last snapshot at most SECONDS of input time after its first "
+                       "input (as --last)")
 
     from humanpt.cli import console as console_cli
     from humanpt.cli import pki as pki_cli

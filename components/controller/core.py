@@ -112,6 +112,7 @@ class ControllerCore(Core):
     )
 
     uses_rig = True  # the hand-eye transform (where D is) and the driver tip
+    _last_mode: int | None = None  # the mode of the last command (an event says each change)
 
     def __init__(self, config: ControllerConfig, rig: Rig | None = None):
         super().__init__(config, Rig() if rig is None else rig)

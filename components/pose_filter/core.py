@@ -46,6 +46,8 @@ class PoseFilterCore(Core):
     )
 
     uses_rig = True  # the hand-eye transform and the target's triangle
+    # Snapshots (runtime/snapshot.py): the still target's filter is made when the target stops.
+    state_types = (PoseKalman,)
 
     def __init__(self, config: PoseFilterConfig, rig: Rig | None = None):
         super().__init__(config, Rig() if rig is None else rig)

@@ -150,6 +150,10 @@ class GatewayCore(SerialLinkCoreMixin, Core):
     ports = gateway_ports(*_RX_TOPICS)
     watch = WATCH
     realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
+    # Snapshots (runtime/snapshot.py): the corrections sent are kept for benches and tests only;
+    # the commands held are Commands, the robot's last cycle a CycleState.
+    not_frozen = frozenset({"sent"})
+    state_types = (Command, CycleState)
 
     def __init__(self, config: GatewayConfig):
         kind = link_kind(config.link) if isinstance(config, GatewayConfig) else None

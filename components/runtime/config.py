@@ -394,6 +394,15 @@ class RecordConfig:
     # recording ~35 % smaller; a real sensor's noise is not shared). A crash loses at most
     # the chunk in progress, and it is flushed every [runtime] flush_interval_s anyway.
     image_chunk_size: Annotated[int, Range(1024, 64 * 2**20, "bytes")] = 4 * 1024 * 1024
+    # Every this many seconds of input time each shell freezes its core's state into the
+    # recording (runtime/snapshot.py), so that `humanpt replay --last S` need not replay a long
+    # run from its start; 0: never.  runtime/README.md "Snapshots" (size and time measured).
+    snapshot_period_s: Annotated[float, Range(0.0, 86400.0, "s")] = 10.0
+    # Live, a realtime core (gateway, controller, pose filter, simulated robot) freezes its
+    # state on its own thread, inside the cycle: the pose filter's takes about 38 ms (its
+    # robot pose buffer), ten 4 ms cycles. So live realtime cores take no snapshots unless
+    # this is true (lock-step runs and the other cores always do, every snapshot_period_s).
+    snapshot_realtime: bool = False
 
     def __post_init__(self):
         keep_every(self.images)

@@ -154,6 +154,18 @@ class Core:
     # .tune_realtime); the live shell records off its worker thread and never gives it a
     # tick sooner than a period after the last was taken.
     realtime: ClassVar[bool] = False
+    # Snapshots (:meth:`freeze`, :meth:`thaw`, runtime/snapshot.py): the attributes a
+    # snapshot leaves out, a thawed core keeping those it was built with: what ``__init__`` and
+    # :meth:`on_config_changed` make from the config and the rig alone (a renderer's noise
+    # bank), and records kept for benches and tests that no output depends on (the
+    # corrections sent); ``"robot.applied"`` names an attribute of an object the core holds.
+    # Everything else is frozen.
+    not_frozen: ClassVar[frozenset[str]] = frozenset()
+    # Classes the core's state may hold that a freshly built core holds none of (the items
+    # of a queue that starts empty); a snapshot builds objects of these and of those only.
+    state_types: ClassVar[tuple[type, ...]] = ()
+    # What no core freezes: replay rebuilds the core from its recorded config and rig.
+    _NOT_FROZEN: ClassVar[frozenset[str]] = frozenset({"config", "start_config", "rig", "_handlers"})
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -246,6 +258,102 @@ class Core:
         """Current values of the live parameters."""
         table = to_table(self.config)
         return {k: table[k] for k in live_keys(self.config)}
+
+    # -- snapshots (copper-rs's Freezable) ----------------------------------------------
+    @property
+    def unfrozen_attrs(self) -> frozenset[str]:
+        """The attributes a snapshot does not hold: :attr:`not_frozen` and what every core
+        rebuilds from its recording (start config, rig, handlers)."""
+        return self._NOT_FROZEN | self.not_frozen
+
+    def freeze(self) -> dict[str, Any]:
+        """The core's state as plain data (JSON-able; runtime/snapshot.py): its live config
+        as a table and every attribute but :attr:`unfrozen_attrs`.  A core whose state this
+        default cannot encode overrides it and :meth:`thaw` together."""
+        from humanpt.runtime.snapshot import Encoder
+
+        shared = {id(getattr(self, k)): k for k in sorted(self.unfrozen_attrs - {"_handlers"})
+                  if not isinstance(getattr(self, k, None), (type(None), bool, int, float, str))}
+        enc = Encoder(shared, self._skipped_places())
+        return {"config": to_table(self.config),
+                "state": {k: enc.encode(v, f"{self.name}.{k}") for k, v in vars(self).items()
+                          if k not in self.unfrozen_attrs}}
+
+    def thaw(self, frozen: Any) -> None:
+        """Put a state made by :meth:`freeze` into this core, a fresh one built from the same
+        config and rig as the frozen core was.  Nothing in it is executed or imported: every
+        value is checked against this core's own at the same place (kind, an array's dtype,
+        no unknown or missing attribute), a changed config only in its live
+        parameters and within their hard limits, as a parameter change would be.  Raises
+        :class:`~humanpt.runtime.snapshot.SnapshotError` (one line); the core is then to be
+        thrown away."""
+        from humanpt.runtime.snapshot import Decoder, SnapshotError, held
+
+        if type(frozen) is not dict or set(frozen) != {"config", "state"} or type(frozen["state"]) is not dict:
+            raise SnapshotError(f"{self.name}: a snapshot is a table of 'config' and 'state'")
+        config = self._thawed_config(frozen["config"])
+        if config != self.config:
+            old, self.config = self.config, config
+            self.on_config_changed(old, config)
+        fresh = {k: v for k, v in vars(self).items() if k not in self.unfrozen_attrs}
+        state = frozen["state"]
+        # An attribute set on first use (controller's _last_mode), its default on the class.
+        lazy = [k for k in state if type(k) is str and k not in fresh and k not in self.unfrozen_attrs
+                and not k.startswith("__") and hasattr(type(self), k)]
+        fresh.update({k: getattr(type(self), k) for k in lazy
+                      if isinstance(getattr(type(self), k), (type(None), bool, int, float, str))})
+        unknown = sorted(set(state) - set(fresh), key=str)
+        missing = sorted(set(fresh) - set(state))
+        if unknown:
+            raise SnapshotError(f"{self.name}: unknown field {str(unknown[0])[:40]!r} in the snapshot")
+        if missing:
+            raise SnapshotError(f"{self.name}: field {missing[0]!r} missing from the snapshot")
+        known = held(self)
+        for cls in self.state_types:
+            known.classes.setdefault(cls.__qualname__, cls)
+        dec = Decoder(known, self, self._skipped_places())
+        try:
+            values = {k: dec.decode(v, fresh[k], f"{self.name}.{k}") for k, v in state.items()}
+        except SnapshotError:
+            raise
+        except RecursionError:
+            raise SnapshotError(f"{self.name}: the snapshot is nested too deeply") from None
+        except (TypeError, ValueError, AttributeError, KeyError, IndexError, OverflowError, MemoryError) as e:
+            raise SnapshotError(f"{self.name}: the snapshot cannot be thawed ({type(e).__name__}: "
+                                f"{str(e)[:200]})") from None
+        vars(self).update(values)
+
+    def _skipped_places(self) -> frozenset[str]:
+        """The places of :attr:`not_frozen` inside the core's objects (``robot.applied``), as
+        the snapshot names them (``sim_robot.robot.applied``)."""
+        return frozenset(f"{self.name}.{p}" for p in self.not_frozen if "." in p)
+
+    def _thawed_config(self, table: Any) -> Any:
+        """The config a snapshot holds: the start config with the live parameters that
+        differ applied as parameter changes (checked, within their hard limits)."""
+        from humanpt.runtime.snapshot import SnapshotError
+
+        start = to_table(self.start_config)
+        if type(table) is not dict:
+            raise SnapshotError(f"{self.name}: the snapshot's config is not a table")
+        extra = sorted(set(table) - set(start), key=str)
+        if extra or set(start) - set(table):
+            key = extra[0] if extra else sorted(set(start) - set(table))[0]
+            raise SnapshotError(f"{self.name}: the snapshot's config {'has an unknown' if extra else 'lacks the'} "
+                                f"key {str(key)[:40]!r}")
+        config = self.start_config
+        live = set(live_keys(config))
+        for key in start:
+            if table[key] == start[key]:
+                continue
+            if key not in live:
+                raise SnapshotError(f"{self.name}: the snapshot's config changes {key!r}, which is not a live "
+                                    f"parameter")
+            try:
+                config = replace_live(config, key, json.dumps(table[key]), hard=self.start_config)
+            except (ConfigError, TypeError, ValueError) as e:
+                raise SnapshotError(f"{self.name}: the snapshot's config: {e}") from None
+        return config
 
     # -- what subclasses implement / use -----------------------------------------------
     def _bind(self, port: Port) -> Callable[[int, Message], list[Output]]:

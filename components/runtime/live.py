@@ -53,6 +53,7 @@ from humanpt.runtime.recording import (
     Recorder,
     live_producers,
 )
+from humanpt.runtime.snapshot import Snapshotter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas import topics
 from humanpt.schemas.convert import header
@@ -171,6 +172,9 @@ class LiveShell:
         self._q = Inbox({p.topic: p.queue for p in core.ports if p.on_bus})
         self._pubs: dict[str, zenoh.Publisher] = {}
         self.recorder: Recorder | None = None
+        # used when recording; a realtime core's only if [record] snapshot_realtime (its cycle)
+        self._snapshots = Snapshotter(self.record.snapshot_period_s
+                                      if self.record.snapshot_realtime or not core.realtime else 0.0)
         self._tick_handled = threading.Event()  # a realtime core's tick was taken (_tick_loop)
         self._tick_handled_at = 0.0  # time.monotonic() then
 
@@ -266,6 +270,7 @@ class LiveShell:
         except Exception as e:  # noqa: BLE001 - last resort: a core bug must not kill the process
             if self.recorder:
                 self.recorder.write(IN, t_ns, topic, msg, data)
+                self._snapshot(t_ns)
             self.counters.core_errors += 1
             log.exception("%s: core raised on %s", self.core.name, topic)
             self._publish_raw(f"{self.core.name}/events", pb.Event(
@@ -289,7 +294,21 @@ class LiveShell:
             self.recorder.write(IN, t_ns, topic, msg, data)
             for (out_topic, out), payload in zip(outs, payloads, strict=True):
                 self.recorder.write(OUT, t_ns, out_topic, out, payload)
+            self._snapshot(t_ns)
         return outs
+
+    def _snapshot(self, t_ns: int) -> None:
+        """The core's state into the recording when one is due ([record] snapshot_period_s),
+        after the input's outputs were published; a state that cannot be frozen stops the
+        snapshots (a warning event, once), never the core."""
+        data = self._snapshots.after_input(self.core, t_ns)
+        if data is not None:
+            self.recorder.write_snapshot(t_ns, data)
+        elif self._snapshots.news():
+            log.warning("%s", self._snapshots.error)
+            self._publish_raw(f"{self.core.name}/events", pb.Event(
+                header=header(t_ns), severity=pb.SEVERITY_WARNING, source=self.core.name, code="snapshot_error",
+                text=self._snapshots.error[:500]))
 
     def _publish(self, short: str, payload: bytes) -> None:
         pub = self._pubs.get(short)

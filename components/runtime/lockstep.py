@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import heapq
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,8 +34,11 @@ from humanpt.runtime.recording import (
     ImagePolicy,
     Recorder,
 )
+from humanpt.runtime.snapshot import Snapshotter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
+
+log = logging.getLogger("humanpt.lockstep")
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,8 @@ class Lockstep:
             if c.tick_period_ns():
                 self._push(start_ns, i, "tick", b"")
         self.recorders: dict[str, Recorder] = {}
+        # Per recorded core: its state frozen into its recording every [record] snapshot_period_s.
+        self.snapshotters: dict[str, Snapshotter] = {}
         if run_dir is not None:
             record = record or RecordConfig()
             recorded = set(names)  # every core records: an image's producer is recorded if it is here
@@ -141,6 +147,7 @@ class Lockstep:
                     background=True,
                     images=ImagePolicy.from_config(c.name, record, producers),
                 )
+                self.snapshotters[c.name] = Snapshotter(record.snapshot_period_s)
 
     def _push(self, t_ns: int, core_index: int, topic: str, data: bytes) -> None:
         heapq.heappush(self._heap, (t_ns, self._order, core_index, topic, data))
@@ -252,7 +259,18 @@ class Lockstep:
                     self._transmit(t_ns, idx, out)
                 elif out_topic == "udp_tx" and idx in self._udp:
                     self._send_udp(t_ns, idx, out)
+            if rec:
+                self._snapshot(core, rec, t_ns)
         self.now_ns = max(self.now_ns, end_ns)
+
+    def _snapshot(self, core: Core, rec: Recorder, t_ns: int) -> None:
+        """The core's state into its recording when one is due (after the input's outputs)."""
+        snap = self.snapshotters[core.name]
+        data = snap.after_input(core, t_ns)
+        if data is not None:
+            rec.write_snapshot(t_ns, data)
+        elif snap.error is not None and snap.news():
+            log.warning("%s", snap.error)
 
     def digest(self) -> str:
         """SHA-256 over every output so far (time, component, topic, bytes)."""

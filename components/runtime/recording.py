@@ -70,6 +70,10 @@ RUN_METADATA = "humanpt.run"
 # a file never closed (no summary) whose chunk declaring a channel is damaged still reads its messages.
 CHANNELS_METADATA = "humanpt.channels"
 IN, OUT, DROPPED = "in", "out", "dropped"
+# A core's state frozen between two inputs (Core.freeze, runtime/snapshot.py): JSON on a
+# schema-less channel of its own (topic ``snapshot``); readers of the messages never see it
+# (iter_entries), replay starts from it (Recording.snapshots).
+SNAPSHOT = "snapshot"
 # What a channel's messages hold (channel metadata ``payload``; absent: the whole message).
 # Images only (foxglove.RawImage): the message with its ``data`` (the pixels) left out, and
 # where the pixels are: REFERENCE in the recording of the producer named by ``producers``
@@ -588,7 +592,9 @@ class Recorder:
         key = (direction, topic, variant)
         cid = self._channels.get(key)
         if cid is None:
-            if msg_type is None:
+            if direction == SNAPSHOT:
+                sid, enc = 0, "json"  # schema-less JSON (MCAP allows it; Foxglove shows it)
+            elif msg_type is None:
                 if self._raw_schema is None:
                     self._raw_schema = self._writer.register_schema(
                         name="raw", encoding="", data=b""
@@ -609,9 +615,10 @@ class Recorder:
                 self._commit()
             # The channel once more outside the chunks (the chunk holding it may be damaged, and
             # a file never closed has no summary to repeat it): a record of its own, at once.
+            schema = msg_type.DESCRIPTOR.full_name if msg_type is not None else "json" if direction == SNAPSHOT else "raw"
             self._writer.add_metadata(CHANNELS_METADATA, {str(cid): json.dumps(
-                {"topic": topic, "schema": "raw" if msg_type is None else msg_type.DESCRIPTOR.full_name,
-                 "encoding": enc, "metadata": {"direction": direction, **dict(variant)}}, sort_keys=True)})
+                {"topic": topic, "schema": schema, "encoding": enc,
+                 "metadata": {"direction": direction, **dict(variant)}}, sort_keys=True)})
             self._committed_pos = self._file.pos  # the file ends at a record boundary; nothing committed
         return cid
 
@@ -650,6 +657,11 @@ class Recorder:
         if p.keep_every == 1 or (p.keep_every and n % p.keep_every == 0):
             return ()
         return (("payload", OMITTED), ("policy", p.policy_text))
+
+    def write_snapshot(self, t_ns: int, payload: bytes) -> None:
+        """Record the core's state frozen after its input at ``t_ns`` (JSON bytes,
+        runtime/snapshot.py), between that input's outputs and the next input."""
+        self._submit(("msg", SNAPSHOT, t_ns, SNAPSHOT, None, payload, ()), len(payload))
 
     def write_dropped(self, t_ns: int, topic: str, payload: bytes) -> None:
         """Record an input that failed to decode, raw."""
@@ -770,6 +782,16 @@ class Entry:
         return msg
 
 
+@dataclass(frozen=True)
+class SnapshotEntry:
+    """A core's state frozen into its recording (:data:`SNAPSHOT`): after the first ``at``
+    entries of the file (the input it followed and that input's outputs), JSON ``data``."""
+
+    at: int
+    t_ns: int
+    data: bytes
+
+
 @dataclass
 class Recording:
     """A component recording read back: metadata, entries in file order, truncation."""
@@ -783,6 +805,7 @@ class Recording:
     # Inputs without their pixels that replay cannot get (replay.missing_inputs): what, else None.
     missing: str | None = None
     resolved: bool = False  # images recorded without their pixels were looked up (replay.missing_inputs)
+    snapshots: list[SnapshotEntry] = field(default_factory=list)  # in file order
 
     @property
     def component(self) -> str:
@@ -1070,7 +1093,7 @@ def _channel_table(meta: dict[str, str]) -> dict[int, tuple[str, str, str, dict[
 
 def iter_entries(
     path: str | Path, notes: list[str] | None = None, metadata: dict[str, str] | None = None,
-    gaps: list[int] | None = None,
+    gaps: list[int] | None = None, snapshots: list[SnapshotEntry] | None = None,
 ) -> Iterator[Entry]:
     """Messages of a recording in file order, one at a time (constant memory).
 
@@ -1081,13 +1104,15 @@ def iter_entries(
     file), the chunks, and the ``humanpt.channels`` records the :class:`Recorder` writes
     outside the chunks (a file whose chunk declaring them is damaged and which was never
     closed).  ``gaps`` gets, for each chunk or record skipped, the number of entries yielded
-    before it (messages are missing there).
+    before it (messages are missing there).  The core's snapshots are never yielded; ``snapshots``
+    gets them.
     """
     p = Path(path)
     _check_file(p)
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str, int | str, dict[str, str]]] = {}
     n = 0
+    n_snapshots = 0
     unknown = 0
     expected: int | None = None
     skipped: list[str] = []
@@ -1117,6 +1142,11 @@ def iter_entries(
                         gaps.append(n)
                     continue
                 topic, direction, sid, meta = ch
+                if direction == SNAPSHOT:
+                    n_snapshots += 1
+                    if snapshots is not None:
+                        snapshots.append(SnapshotEntry(n, r.log_time, r.data))
+                    continue
                 yield Entry(n, direction, r.log_time, topic, r.data,
                             sid if isinstance(sid, str) else schemas.get(sid, "raw"), meta.get("payload", FULL), meta)
                 n += 1
@@ -1130,8 +1160,8 @@ def iter_entries(
             if unknown:
                 notes.append(f"{p}: {unknown} messages left out: their channel was declared only in a "
                              f"skipped chunk")
-            if expected is not None and n < expected:
-                notes.append(f"{p}: {n} of the {expected} messages its summary counts were read")
+            if expected is not None and n + n_snapshots < expected:
+                notes.append(f"{p}: {n + n_snapshots} of the {expected} messages its summary counts were read")
 
 
 def merge_entries(files: list[Path], notes: list[str], keep: Callable[[Entry], bool] = lambda e: True,
@@ -1289,10 +1319,11 @@ def read(path: str | Path, *, require_humanpt: bool = True) -> Recording:
     notes: list[str] = []
     meta: dict[str, str] = {}
     gaps: list[int] = []
-    entries = list(iter_entries(p, notes, meta, gaps))
+    snapshots: list[SnapshotEntry] = []
+    entries = list(iter_entries(p, notes, meta, gaps, snapshots))
     _current_names(meta)
     rec = Recording(path=p, metadata=meta, entries=entries, truncated=notes[0] if notes else None, notes=notes,
-                    first_gap=min(gaps) if gaps else None)
+                    first_gap=min(gaps) if gaps else None, snapshots=snapshots)
     if require_humanpt:
         if not rec.metadata:
             why = f" ({rec.truncated})" if rec.truncated else ""

@@ -30,13 +30,16 @@ from humanpt.runtime.core import Core
 from humanpt.runtime.recording import (
     FULL,
     IN,
+    OUT,
     Recording,
     RecordingError,
+    SnapshotEntry,
     read,
     resolve_images,
     strip_image,
 )
 from humanpt.runtime.registry import COMPONENTS, class_path, core_class
+from humanpt.runtime.snapshot import SnapshotError, parse_snapshot
 from humanpt.schemas import topics
 
 
@@ -176,6 +179,8 @@ class ReplayResult:
     # recording cut short): the replay stops at the first. What, else None.
     missing: str | None = None
     notes: list[str] = field(default_factory=list)  # every reason it was not read in full
+    # Replayed from a snapshot (``start_s`` / ``last_s``): where, for people; None: from the start.
+    start: str | None = None
 
     @property
     def nothing_compared(self) -> bool:
@@ -209,6 +214,8 @@ class ReplayResult:
         head = (f"{self.path}: component {self.component}: {self.messages_read} messages read, "
                 f"{self.inputs} inputs replayed, {self.recorded_outputs} outputs recorded, "
                 f"{self.replayed_outputs} replayed, {self.compared} compared")
+        if self.start:
+            head += f"\n  {self.start}"
         trunc = ""
         if self.truncated:
             trunc = (f"\n  the recording could not be read in full: {self.messages_read} messages read; only the "
@@ -277,21 +284,69 @@ def missing_inputs(rec: Recording) -> str | None:
     return rec.missing
 
 
+def choose_snapshot(rec: Recording, *, start_s: float | None = None, last_s: float | None = None,
+                    ) -> SnapshotEntry | None:
+    """The last snapshot of ``rec`` at or before the start asked for: ``start_s`` seconds of
+    input time after its first input, or ``last_s`` before its last; None when there is none
+    (or neither is given).  Only snapshots within the entries kept (before a gap or a missing
+    input) count."""
+    if start_s is None and last_s is None:
+        return None
+    times = [e.t_ns for e in rec.entries if e.direction == IN]
+    if not times:
+        return None
+    start_ns = times[0] + round(start_s * 1e9) if start_s is not None else times[-1] - round(last_s * 1e9)
+    best = None
+    for s in rec.snapshots:
+        if s.at <= len(rec.entries) and s.t_ns <= start_ns:
+            best = s
+    return best
+
+
+def thaw_snapshot(rec: Recording, snap: SnapshotEntry, core: Core) -> int:
+    """Put ``snap`` into ``core`` (fresh from the recording): checks that the snapshot is this
+    component's and follows as many inputs in the file as it says; returns that number.
+    Raises RecordingError (one line) when it is refused."""
+    what = f"{rec.path}: the snapshot at t_ns={snap.t_ns}"
+    try:
+        table = parse_snapshot(snap.data, what)
+        if table.get("component") != rec.component:
+            raise SnapshotError(f"{what}: it is of component {str(table.get('component'))[:40]!r}, the "
+                                f"recording of {rec.component!r}")
+        n_in = sum(1 for e in rec.entries[:snap.at] if e.direction == IN)
+        if table["inputs"] != n_in or table["t_ns"] != snap.t_ns:
+            raise SnapshotError(f"{what}: it follows input #{table['inputs']} at t_ns={table['t_ns']}, the file "
+                                f"has {n_in} inputs before it")
+        core.thaw(table.get("core"))
+    except SnapshotError as e:
+        text = str(e)
+        raise RecordingError(text if text.startswith(what) else f"{what}: {text}") from None
+    return n_in
+
+
 def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] = build_core,
-                     ) -> tuple[Stream, Stream]:
+                     snapshot: SnapshotEntry | None = None) -> tuple[Stream, Stream]:
     """(recorded outputs, replayed outputs) of a recording: a fresh core fed every recorded
-    input (of a truncated recording, the replayed stream runs past the recorded one's cut).
+    input (of a truncated recording, the replayed stream runs past the recorded one's cut);
+    with ``snapshot`` (of ``rec.snapshots``), the fresh core thawed from it and fed the inputs
+    after it, and the outputs after it compared.
 
     Images recorded without their pixels are first resolved (:func:`missing_inputs`: the
     recording is cut before an input that cannot be); a recorded output image still without
     them (``[record] images`` did not keep it) is compared without its pixels."""
     missing_inputs(rec)
     core = core_factory(rec)
+    entries = rec.entries
+    if snapshot is not None:
+        thaw_snapshot(rec, snapshot, core)
+        entries = entries[snapshot.at:]
     replayed: Stream = []
-    for e in rec.inputs:
+    for e in entries:
+        if e.direction != IN:
+            continue
         for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
             replayed.append((e.t_ns, topic, msg.SerializeToString()))
-    outputs = rec.outputs
+    outputs = [e for e in entries if e.direction == OUT]
     recorded: Stream = [(e.t_ns, e.topic, e.data) for e in outputs]
     for i, e in enumerate(outputs):
         if e.payload != FULL and i < len(replayed) and replayed[i][1] == e.topic:
@@ -305,8 +360,20 @@ def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] =
     return recorded, replayed
 
 
-def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_core) -> ReplayResult:
-    """Replay one component recording; see the module docstring."""
+def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_core, *,
+           start_s: float | None = None, last_s: float | None = None) -> ReplayResult:
+    """Replay one component recording; see the module docstring.
+
+    ``start_s`` (seconds of input time after the first input) or ``last_s`` (seconds before
+    the last): start from the core's last snapshot at or before that time (``[record]
+    snapshot_period_s``), thawed into the fresh core, and compare the outputs after it; a
+    recording without one replays from its start (the report says which).  A snapshot that
+    is refused (crafted, of another version) raises RecordingError (one line)."""
+    if start_s is not None and last_s is not None:
+        raise ValueError("replay: give start_s or last_s, not both")
+    for v in (start_s, last_s):
+        if v is not None and not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"replay: a start of {v!r} s (a finite number of seconds >= 0 expected)")
     rec = read(path)
     if not rec.entries and rec.truncated:
         raise RecordingError(f"{rec.truncated}: no message could be read, nothing to replay")
@@ -321,7 +388,19 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
         # Messages are missing there (a chunk skipped): the core's state after it is unknown, so
         # the inputs after it cannot be replayed and the outputs after it cannot be compared.
         rec.entries = rec.entries[:rec.first_gap]
-    recorded, replayed = replay_recording(rec, core_factory)
+    missing_inputs(rec)  # (cuts the entries before an input without its pixels)
+    snap = choose_snapshot(rec, start_s=start_s, last_s=last_s)
+    start = None
+    if start_s is not None or last_s is not None:
+        asked = (f"{start_s:g} s after the first input" if start_s is not None
+                 else f"{last_s:g} s before the last input")
+        if snap is None:
+            start = f"no snapshot at or before {asked}: replayed from the start"
+        else:
+            n_in = sum(1 for e in rec.entries[:snap.at] if e.direction == IN)
+            start = (f"from the snapshot at t_ns={snap.t_ns} (the last at or before {asked}): the core thawed "
+                     f"after input #{n_in}; the inputs before it and their outputs not replayed")
+    recorded, replayed = replay_recording(rec, core_factory, snap)
     missing = rec.missing
     # The lost chunk of a truncated file held the tail of both streams (an input without its
     # pixels cut both): compare what both have.
@@ -345,8 +424,9 @@ def replay(path: str | Path, core_factory: Callable[[Recording], Core] = build_c
             div = Divergence(i, r, p, fields)
             compared = i
             break
-    return ReplayResult(rec.path, rec.component, len(rec.inputs), len(recorded), len(replayed), div,
-                        rec.truncated, compared, n_read, missing=missing, notes=rec.notes)
+    n_inputs = sum(1 for e in rec.entries[snap.at if snap else 0:] if e.direction == IN)
+    return ReplayResult(rec.path, rec.component, n_inputs, len(recorded), len(replayed), div,
+                        rec.truncated, compared, n_read, missing=missing, notes=rec.notes, start=start)
 
 
 def message_text(topic: str, data: bytes) -> str:

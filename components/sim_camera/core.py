@@ -114,6 +114,10 @@ class SimCameraCore(Core):
         Port("operator/truth", pb.Truth, "_on_tob_truth"),
         Port("sim_robot/truth", pb.Truth, "_on_flange_truth"),
     )
+    # Snapshots (runtime/snapshot.py): the renderer is made from the config (its noise bank is
+    # 1.3 MB); a capture in flight is a _Capture.
+    not_frozen = frozenset({"renderer"})
+    state_types = (_Capture,)
 
     def __init__(self, config: SimCameraConfig):
         super().__init__(config)

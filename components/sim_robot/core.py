@@ -111,6 +111,10 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         Port("serial_rx", pb.SerialChunk, "_on_serial"),
         Port("console/command", pb.Command, "_on_console"),
     )
+    # Snapshots (runtime/snapshot.py): the corrections applied are kept for benches and tests
+    # only; a correction waiting for its cycle is a Correction (with its CorrectionFlags).
+    not_frozen = frozenset({"applied"})
+    state_types = (Correction, CorrectionFlags)
 
     @classmethod
     def create(cls, config: SimRobotConfig, rig=None) -> Core:

@@ -328,6 +328,11 @@ class RsiSimRobotCore(Core):
         Port("tick", pb.Tick, "_on_cycle"),
         Port("udp_rx", pb.SerialChunk, "_on_udp"),
     )
+    # Snapshots (runtime/snapshot.py): the corrections applied are kept for benches and tests
+    # only; the last correction and the one to answer with are RsiCorrections, its events
+    # SimEvents.
+    not_frozen = frozenset({"robot.applied"})
+    state_types = (RsiCorrection, SimEvent)
 
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
