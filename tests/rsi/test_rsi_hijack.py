@@ -142,7 +142,10 @@ def test_live_a_3_s_junk_flood_from_another_port_neither_stops_rsi_nor_downs_the
         robot = cell.start_robot(rsi_late_limit=100)
         cell.wait_moving(applied=30)
         applied = robot.counters["applied"]
-        flood = start_flood(cell.udp, seconds=3.0, rate_hz=20_000)
+        # 10 kHz, the low end of the 9-20 kHz: the flood is a process of its own on a
+        # 2-core machine, and at 20 kHz it took a core from the robot, which runs in this
+        # process at ordinary priority (at load 15 it judged 100 cycles late in a row)
+        flood = start_flood(cell.udp, seconds=3.0, rate_hz=10_000)
         out, _ = flood.communicate(timeout=60)
         sent = int(out.split()[-1])
         cell.wait_moving(applied=robot.counters["applied"] + 20)  # served after the flood too
