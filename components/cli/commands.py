@@ -5,9 +5,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import signal
-import socket
-import subprocess
 import sys
 import threading
 import time
@@ -15,22 +12,21 @@ from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
+from humanpt.runtime import run, supervisor
 from humanpt.runtime.bus import (
     liveliness_key,
     open_tool_session,
     params_key,
     type_name_of,
-    zenoh_config,
 )
 from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
     COMPONENTS,
-    PROFILES,
     UnknownComponentError,
-    adapters_for,
     config_types,
     core_class,
 )
+from humanpt.runtime.run import load_config, run_router, run_stamp, stop_on_signals
 from humanpt.schemas import topics
 
 log = logging.getLogger("humanpt.cli")
@@ -38,271 +34,39 @@ log = logging.getLogger("humanpt.cli")
 
 # -- shared helpers ----------------------------------------------------------------------
 def load_cfg(args) -> cfgmod.ConfigFile:
-    """The config file of ``--config`` (validated), with ``--cell``/``--connect`` applied."""
-    cfg = cfgmod.load(getattr(args, "config", None), config_types())
-    changes = {}
-    if getattr(args, "cell", None):
-        changes["cell"] = args.cell
-    if getattr(args, "connect", None):
-        changes["connect"] = tuple(args.connect)
-    if getattr(args, "identity", None):
-        changes["identity"] = args.identity
-    if changes:
-        try:
-            rt = dataclasses.replace(cfg.runtime, **changes)
-        except ValueError as e:
-            raise cfgmod.ConfigError(f"command line: {e}") from e
-        cfg = dataclasses.replace(cfg, runtime=rt)
-    cfg.rig()  # a missing or bad rig file fails here, before anything starts
-    return cfg
-
-
-def stop_on_signals(extra: threading.Event | None = None) -> threading.Event:
-    """An Event set by SIGINT or SIGTERM (and by ``extra``'s owner)."""
-    stop = extra or threading.Event()
-
-    def handler(signum, frame):
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-    return stop
-
-
-def run_stamp() -> str:
-    return time.strftime("%Y%m%d-%H%M%S")
+    """The config file of ``--config`` (validated), with ``--cell``/``--connect``/``--as`` applied."""
+    return load_config(getattr(args, "config", None), cell=getattr(args, "cell", None),
+                       connect=getattr(args, "connect", None), identity=getattr(args, "identity", None))
 
 
 # -- router, components, up ------------------------------------------------------------------
 def router(args) -> int:
-    import zenoh
-
-    cfg = load_cfg(args)
-    listen = tuple(args.listen) if args.listen else cfg.runtime.listen
-    conf = zenoh_config(cfg.runtime, mode="router", listen=listen, connect=())
-    stop = stop_on_signals()
-    watch = reporter = None
-    if cfg.runtime.security == "mtls" and cfg.runtime.report_denied:  # before zenoh.open: it sets zenoh's logging
-        from humanpt.runtime.security import DenialReporter, DenialWatch
-
-        reporter = DenialReporter(cfg.runtime.cell)
-        watch = DenialWatch(reporter)
-        watch.start()
-    try:
-        session = zenoh.open(conf)
-    except zenoh.ZError as e:
-        print(f"humanpt router: cannot listen on {', '.join(listen)}: {e}", file=sys.stderr)
-        if watch is not None:
-            watch.stop()
-        return 1
-    if reporter is not None:
-        reporter.attach(session)
-    with session:
-        if cfg.runtime.security == "mtls":
-            from humanpt.runtime import security
-
-            listen = tuple(security.tls_endpoint(e) for e in listen)
-        print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
-              flush=True)
-        if cfg.runtime.security == "mtls":
-            certs = security.identities(security.pki_dir_of(cfg.runtime))
-            print(f"humanpt router: mTLS (CA and certificates in {security.pki_dir_of(cfg.runtime)}); access "
-                  f"control default deny, allowing {', '.join(c.name for c in certs if c.role not in ('ca', 'router'))}"
-                  f" (`humanpt pki acl` prints it)", flush=True)
-        while not stop.wait(0.5):
-            pass
-        if reporter is not None:
-            reporter.close()
-    if watch is not None:
-        watch.stop()
-    print("humanpt router: stopped", flush=True)
-    return 0
+    return run_router(load_cfg(args), args.listen)
 
 
 def run_component(args) -> int:
-    from humanpt.runtime.live import LiveShell
-    from humanpt.runtime.tuning import tune_realtime
-
-    cfg = load_cfg(args)
-    name = args.component
-    cls = core_class(name)
-    core = cls.create(cfg.component(name, cls.config_type), cfg.rig())
-    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
-    try:
-        adapters = adapters_for(name, core.config, run_dir=run_dir, rig=core.rig)
-    except Exception as e:  # a serial port that does not open, say: name it and stop
-        print(f"humanpt {name}: {e}", file=sys.stderr)
-        return 1
-    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
-    realtime = tune_realtime(core, cfg.runtime)
-    if realtime:
-        print(f"humanpt {name}: on a robot link's cycle: {realtime}", file=sys.stderr, flush=True)
-    stop_on_signals(shell.stop)
-    if args.duration:
-        threading.Timer(args.duration, shell.stop.set).start()
-    try:
-        counters = shell.run()
-    except Exception as e:  # zenoh.ZError and friends: say it plainly
-        print(f"humanpt {name}: {e}", file=sys.stderr)
-        return 1
-    print(f"humanpt {name}: stopped; consumed {counters.consumed}, produced {counters.produced}, "
-          f"dropped {counters.dropped}, core errors {counters.core_errors}; "
-          f"{shell.recorder.summary() if shell.recorder else 'recording off'}", file=sys.stderr, flush=True)
-    return 0
-
-
-def _endpoint_addr(ep: str) -> tuple[str, int] | None:
-    if not ep.startswith(("tcp/", "tls/")):
-        return None
-    host, _, port = ep[4:].rpartition(":")
-    host = host.strip("[]")
-    if host in ("0.0.0.0", "::", ""):
-        host = "127.0.0.1"
-    return host, int(port)
-
-
-def _wait_port(addr: tuple[str, int], timeout_s: float, proc: subprocess.Popen) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            return False
-        try:
-            with socket.create_connection(addr, timeout=0.2):
-                return True
-        except OSError:
-            time.sleep(0.05)
-    return False
-
-
-def _passthrough(args) -> list[str]:
-    out = []
-    if getattr(args, "config", None):
-        out += ["--config", args.config]
-    if getattr(args, "cell", None):
-        out += ["--cell", args.cell]
-    for ep in getattr(args, "connect", None) or []:
-        out += ["--connect", ep]
-    return out
-
-
-def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str, ...]]:
-    """(label, start a router?, components) of ``up``'s arguments."""
-    if args.components:
-        comps = tuple(cfgmod.current_name(c.strip()) for c in args.components.split(",") if c.strip())
-        label, with_router = "custom", True
-    elif args.profile:
-        if args.profile in cfg.profiles:
-            label, with_router, comps = args.profile, True, cfg.profiles[args.profile]
-        elif args.profile in PROFILES:
-            prof = PROFILES[args.profile]
-            label, with_router, comps = args.profile, prof["router"], tuple(prof["components"])
-        else:
-            raise cfgmod.ConfigError(f"unknown profile {args.profile!r}; known: "
-                                     f"{', '.join(sorted(set(PROFILES) | set(cfg.profiles)))}")
-    else:
-        prof = PROFILES["loop"]
-        label, with_router, comps = "loop", prof["router"], tuple(prof["components"])
-    missing = [c for c in comps if c not in COMPONENTS]
-    if missing:
-        raise UnknownComponentError(f"profile {label!r} needs {', '.join(missing)}, not available in this "
-                                    f"version (available: {', '.join(sorted(COMPONENTS))})")
-    if args.no_router:
-        with_router = False
-    return label, with_router, comps
-
-
-READY_TIMEOUT_S = 120.0  # bounds a hang only: a component that cannot start exits sooner
-ROUTER_LISTEN_TIMEOUT_S = 60.0  # likewise (a loaded machine took more than 10 s to start one)
-
-
-def _wait_ready(rt: cfgmod.RuntimeConfig, comps: tuple[str, ...], children: list[tuple[str, subprocess.Popen]],
-                stop: threading.Event, timeout_s: float = READY_TIMEOUT_S) -> str:
-    """Wait until every component of ``comps`` is up (its liveliness token, which a live
-    shell declares last, when it serves), a child died, ``stop`` is set or ``timeout_s``
-    passed; watched as a tool (under mTLS the ``tool`` identity, or ``[runtime] identity``).
-    Returns the line ``up`` prints: when they were up, or why it could not tell."""
-    import zenoh
-
-    t0 = time.monotonic()
-    want, alive = set(comps), set()
-    changed = threading.Condition()
-
-    def on_token(sample):
-        name = str(sample.key_expr).rsplit("/", 1)[-1]
-        with changed:
-            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
-            changed.notify_all()
-
-    try:
-        session = open_tool_session(rt, patient=True)
-    except Exception as e:  # noqa: BLE001 - no router reachable, no tool certificate: say so, run anyway
-        return f"cannot watch the components come up ({e}); --duration counts from their start"
-    with session:
-        sub = session.liveliness().declare_subscriber(liveliness_key(rt.cell, "*"), on_token, history=True)
-        try:
-            with changed:
-                while not want <= alive:
-                    if stop.is_set() or any(p.poll() is not None for _, p in children):
-                        return "stopped before every component was up"
-                    if time.monotonic() - t0 > timeout_s:
-                        return (f"not up after {timeout_s:g} s: {', '.join(sorted(want - alive))}; "
-                                "--duration counts from now")
-                    changed.wait(0.2)
-        finally:
-            sub.undeclare()
-    return f"all {len(want)} components up after {time.monotonic() - t0:.1f} s; --duration counts from now"
+    return run.run_component(load_cfg(args), args.component, args.run_dir, args.duration)
 
 
 def up(args) -> int:
     cfg = load_cfg(args)
-    label, with_router, comps = resolve_profile(args, cfg)
-    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{label}"
-    run_dir.mkdir(parents=True, exist_ok=True)
-    print(f"humanpt up: profile {label}: {'router, ' if with_router else ''}{', '.join(comps)}", flush=True)
+    comps = args.components.split(",") if args.components else None
+    prof = supervisor.resolve_profile(cfg, args.profile, comps, args.no_router)
+    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{prof.label}"
+    print(f"humanpt up: profile {prof.label}: {'router, ' if prof.router else ''}{', '.join(prof.components)}",
+          flush=True)
     print(f"humanpt up: recording to {run_dir}/", flush=True)
-    stop = stop_on_signals()
-    base = [sys.executable, "-m", "humanpt.cli.main"]
-    children: list[tuple[str, subprocess.Popen]] = []
-    failed: list[str] = []
-    try:
-        if with_router:
-            proc = subprocess.Popen(base + ["router"] + _passthrough(args))
-            children.append(("router", proc))
-            addr = _endpoint_addr(cfg.runtime.listen[0])
-            if addr and not _wait_port(addr, ROUTER_LISTEN_TIMEOUT_S, proc):  # a dead router returns at once
-                failed.append("router (did not start listening)")
-                return 1
-        for name in comps:
-            proc = subprocess.Popen(base + [name, "--run-dir", str(run_dir)] + _passthrough(args))
-            children.append((name, proc))
-        if args.duration:  # seconds of the running cell: counted from when every component is up
-            print(f"humanpt up: {_wait_ready(cfg.runtime, comps, children, stop)}", flush=True)
-        deadline = time.monotonic() + args.duration if args.duration else None
-        while not stop.wait(0.2):
-            if deadline and time.monotonic() >= deadline:
-                break
-            dead = [(n, p.returncode) for n, p in children if p.poll() is not None]
-            if dead:
-                failed += [f"{n} (exit {rc})" for n, rc in dead]
-                break
-    finally:
-        # Components first, the router last, so components leave cleanly.
-        for _, p in reversed(children):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        if failed:
-            print(f"humanpt up: stopped because a child died: {', '.join(failed)}", file=sys.stderr, flush=True)
+    res = supervisor.up(cfg, prof, run_dir, config_file=args.config, cell=args.cell, connect=args.connect or (),
+                        duration_s=args.duration, stop=stop_on_signals(),
+                        say=lambda line: print(f"humanpt up: {line}", flush=True))
+    if res.failed:
+        print(f"humanpt up: stopped because a child died: {', '.join(res.failed)}", file=sys.stderr, flush=True)
     print(f"humanpt up: stopped; recordings in {run_dir}/", flush=True)
     from humanpt.runtime.recording import losses_lines
 
     for line in losses_lines(run_dir):  # a component's recording lost messages to a write error
         print(f"humanpt up: {line}", flush=True)
-    return 1 if failed else 0
+    return res.exit_code
 
 
 # -- inspection ----------------------------------------------------------------------------
