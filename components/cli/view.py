@@ -26,10 +26,13 @@ examples:
 """
 
 
+HELP = "open a recorded run in rerun (or write an .rrd headless)"
+
+
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "view",
-        help="open a recorded run in rerun (or write an .rrd headless)",
+        help=HELP,
         description=DESCRIPTION,
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
