@@ -609,137 +609,38 @@ def runs_merge(args) -> int:
     return 0
 
 
-def _run_files(run: str) -> list[Path]:
-    """The .mcap recordings of a run directory, or the one file given."""
-    from humanpt.runtime.recording import RecordingError
-
-    path = Path(run)
-    if path.is_dir():
-        files = sorted(path.glob("*.mcap"))
-        if not files:
-            raise RecordingError(f"{path}: no .mcap recordings here")
-        return files
-    if path.exists():
-        return [path]
-    raise RecordingError(f"{path}: no such run directory or file")
-
-
-def _recorded_span_ns(files: list[Path]) -> int | None:
-    """Last minus first log time over ``files`` from their MCAP summaries (None when a file
-    has none: an unfinished recording)."""
-    from mcap.reader import make_reader
-
-    starts, ends = [], []
-    for f in files:
-        try:
-            with open(f, "rb") as fh:
-                stats = make_reader(fh).get_summary().statistics
-        except Exception:  # noqa: BLE001 - no summary (unfinished, damaged): the span is unknown
-            return None
-        if stats is None:
-            return None
-        if stats.message_count:
-            starts.append(stats.message_start_time)
-            ends.append(stats.message_end_time)
-    return max(ends) - min(starts) if starts else 0
-
-
-PLAY_CLOCK_TOPIC = "player/clock"
-
-
 def runs_play(args) -> int:
-    """Re-publish a recording's bus outputs at their recorded timing (``humanpt runs play``).
+    """``humanpt runs play``: :func:`humanpt.runtime.player.play` with a progress line."""
+    from humanpt.runtime import player
 
-    Every component's ``direction=out`` messages on bus topics (local topics never), merged
-    by log time, are put on ``humanpt/<cell>/<topic>`` of the live cell (``--cell``/config)
-    so that ``echo``, ``console status`` and the viewer see them; message k is put at
-    (t_k - t_0) / rate after the first.  ``--clock`` puts a ``player/clock`` Tick (header
-    stamp = the recording's time) every ``--clock-period`` of recorded time.
-    """
-    from humanpt.runtime.bus import declare_topic_publisher
-    from humanpt.runtime.recording import OUT, merge_entries
-    from humanpt.schemas import humanpt_pb2 as pb
-
-    if not args.rate > 0:
-        raise ValueError(f"--rate {args.rate:g}: must be > 0 (1 = recorded speed, 2 = twice as fast)")
-    if not args.clock_period > 0:
-        raise ValueError(f"--clock-period {args.clock_period:g}: must be > 0 s")
-    files = _run_files(args.run)
-    wanted: set[str] | None = None
-    if args.topics:
-        wanted = {t.strip() for t in args.topics.split(",") if t.strip()}
-        unknown = sorted(t for t in wanted if t not in topics.TOPICS)
-        if unknown:
-            raise ValueError(f"--topics: {', '.join(unknown)} not in the topic table (short names such as "
-                             f"controller/status; `humanpt topics --table` lists them)")
+    player.check_options(args.rate, args.clock_period)
+    files = player.run_files(args.run)
+    wanted = player.check_topics(args.topics.split(",")) if args.topics else None
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    span_ns = _recorded_span_ns(files)
-    skipped: dict[str, str] = {}  # topic -> why it is not played
-
-    def keep(e) -> bool:
-        if e.direction != OUT or e.topic not in topics.TOPICS or (wanted is not None and e.topic not in wanted):
-            return False  # inputs, local topics (serial bytes, show: copies), topics not asked for
-        if e.schema != topics.TOPICS[e.topic].type.DESCRIPTOR.full_name:
-            skipped[e.topic] = f"recorded as {e.schema}, this version's type differs"
-            return False
-        return True
-
-    stop = stop_on_signals()
+    span_ns = player.recorded_span_ns(files)
     tty = sys.stderr.isatty()
-    n = rounds = 0
     total = f" / {span_ns / 1e9:.1f}" if span_ns is not None else ""
-    with open_tool_session(cfg.runtime) as session:
-        pubs: dict[str, object] = {}
-        clock = declare_topic_publisher(session, cell, PLAY_CLOCK_TOPIC) if args.clock else None
-        clock_period_ns = int(args.clock_period * 1e9)
-        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cell} at x{args.rate:g}"
-              f"{', looping' if args.loop else ''}{', clock on ' + PLAY_CLOCK_TOPIC if clock else ''}; "
-              "Ctrl-C stops", file=sys.stderr, flush=True)
-        next_progress = time.monotonic()
-        while not stop.is_set():
-            notes: list[str] = []
-            t0 = wall0 = None
-            next_clock_ns = clock_seq = 0
-            played = 0
-            for t_ns, _f, e in merge_entries(files, notes, keep):
-                if t0 is None:
-                    t0, wall0, next_clock_ns = t_ns, time.monotonic(), t_ns
-                while clock is not None and next_clock_ns <= t_ns:  # the clock's ticks due before it
-                    if stop.wait(max(0.0, wall0 + (next_clock_ns - t0) / 1e9 / args.rate - time.monotonic())):
-                        break
-                    clock.put(pb.Tick(header=pb.Header(stamp_ns=next_clock_ns, seq=clock_seq, frame_id="recording"),
-                                      period_ns=clock_period_ns).SerializeToString())
-                    clock_seq += 1
-                    next_clock_ns += clock_period_ns
-                # wait on the stop event, not a sleep: Ctrl-C ends the wait at once
-                if stop.wait(max(0.0, wall0 + (t_ns - t0) / 1e9 / args.rate - time.monotonic())):
-                    break
-                pub = pubs.get(e.topic)
-                if pub is None:
-                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic, block=True)
-                pub.put(e.data)
-                n += 1
-                played += 1
-                now = time.monotonic()
-                if now >= next_progress:
-                    next_progress = now + 1.0
-                    print(f"{chr(13) if tty else ''}humanpt runs play: {(t_ns - t0) / 1e9:7.1f}{total} s recorded, "
-                          f"{n} messages{f', round {rounds + 1}' if args.loop else ''}",
-                          end="" if tty else "\n", file=sys.stderr, flush=True)
-            rounds += 1
-            for note in notes:
-                print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
-            if not args.loop or played == 0:
-                break
-        for pub in [*pubs.values(), *([clock] if clock else [])]:
-            pub.undeclare()
-    for topic, why in sorted(skipped.items()):
+
+    def progress(recorded_s: float, n: int, round_: int) -> None:
+        print(f"{chr(13) if tty else ''}humanpt runs play: {recorded_s:7.1f}{total} s recorded, "
+              f"{n} messages{f', round {round_}' if args.loop else ''}",
+              end="" if tty else "\n", file=sys.stderr, flush=True)
+
+    def header() -> None:
+        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cfg.runtime.cell} at "
+              f"x{args.rate:g}{', looping' if args.loop else ''}"
+              f"{', clock on ' + player.CLOCK_TOPIC if args.clock else ''}; Ctrl-C stops", file=sys.stderr, flush=True)
+
+    res = player.play(cfg, files, rate=args.rate, loop=args.loop, topics=wanted, clock=args.clock,
+                      clock_period_s=args.clock_period, stop=stop_on_signals(), on_open=header, progress=progress)
+    for note in dict.fromkeys(res.notes):
+        print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
+    for topic, why in sorted(res.skipped.items()):
         print(f"humanpt runs play: warning: {topic} not played: {why}", file=sys.stderr)
-    how = "stopped" if stop.is_set() else "done"
-    print(f"{chr(10) if tty else ''}humanpt runs play: {how}; {n} messages on {len(pubs)} topics"
-          f"{f' in {rounds} rounds' if args.loop else ''}", file=sys.stderr, flush=True)
-    if n == 0:
+    print(f"{chr(10) if tty else ''}humanpt runs play: {'stopped' if res.stopped else 'done'}; {res.messages} "
+          f"messages on {res.topics} topics{f' in {res.rounds} rounds' if args.loop else ''}",
+          file=sys.stderr, flush=True)
+    if res.messages == 0:
         print("humanpt runs play: nothing to play (no bus outputs recorded"
               f"{' on the topics asked for' if wanted else ''})", file=sys.stderr)
         return 1
