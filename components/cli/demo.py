@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from humanpt.cli.progress import Bars
 from humanpt.runtime import config as cfgmod
+from humanpt.runtime.progress import Bars
 
 
 def parse_overrides(items: list[str] | None) -> dict[str, dict]:
