@@ -16,13 +16,11 @@ from humanpt.runtime import run, supervisor
 from humanpt.runtime.bus import (
     liveliness_key,
     open_tool_session,
-    params_key,
     type_name_of,
 )
 from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
     COMPONENTS,
-    UnknownComponentError,
     config_types,
     core_class,
 )
@@ -319,31 +317,10 @@ def _field_row(key: str, payload: bytes, fields: list[str]) -> list:
     return [message_stamp_ns(msg), key, *(message_field(msg, f) for f in fields)]
 
 
-def _parse_assignment(a: str) -> tuple[str, object]:
-    key, eq, value = a.partition("=")
-    if not eq or not key:
-        raise cfgmod.ConfigError(f"{a!r} is not KEY=VALUE")
-    try:
-        return key, json.loads(value)
-    except json.JSONDecodeError:
-        return key, value
-
-
-def _param_query(session, cfg, component: str, sets: dict, timeout: float) -> dict | None:
-    """One request to ``component``'s parameter queryable (``sets`` may be empty: a read);
-    its reply body, or None when no component answered."""
-    replies = list(session.get(params_key(cfg.runtime.cell, component), payload=json.dumps({"set": sets}),
-                               timeout=timeout))
-    bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
-    return bodies[0] if bodies else None
-
-
 def _no_answer(cfg, component: str, timeout: float) -> int:
-    rt = cfg.runtime
-    why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
-           f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
-    print(f"humanpt param: no component {component!r} answered in cell {rt.cell} "
-          f"within {timeout:g} s (is it running?{why})", file=sys.stderr)
+    from humanpt.runtime.params import no_answer
+
+    print(f"humanpt param: {no_answer(cfg, component, timeout)}", file=sys.stderr)
     return 1
 
 
@@ -364,15 +341,15 @@ def _param_action(args) -> tuple[str, str, list[str]]:
 
 
 def param(args) -> int:
+    from humanpt.runtime import params
+
     action, component, rest = _param_action(args)
     if action == "dump":
         return param_dump(args, component, rest[0] if rest else None)
     if action == "load":
         return param_load(args, component, rest[0])
     cfg = load_cfg(args)
-    sets = dict(_parse_assignment(a) for a in rest)
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, sets, args.timeout)
+    body = params.query(cfg, component, dict(params.parse_assignment(a) for a in rest), args.timeout)
     if body is None:
         return _no_answer(cfg, component, args.timeout)
     for r in body.get("results", []):
@@ -382,18 +359,16 @@ def param(args) -> int:
 
 
 def param_dump(args, component: str, out: str | None) -> int:
-    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML (a ``[COMPONENT]``
-    section, which ``param load`` and a config file both read)."""
+    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML."""
+    from humanpt.runtime import params
+
     if out is not None and Path(out).exists() and not args.overwrite:
         raise FileExistsError(f"{out}: exists; give --overwrite to replace it")
     cfg = load_cfg(args)
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, {}, args.timeout)
+    body = params.query(cfg, component, {}, args.timeout)
     if body is None:
         return _no_answer(cfg, component, args.timeout)
-    text = (f"# live parameters of {component} in cell {cfg.runtime.cell}, {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
-            f"# humanpt param load {component} FILE sets them again\n"
-            + cfgmod.dumps_toml({component: body.get("params") or {}}))
+    text = params.dump_text(cfg, component, body.get("params") or {})
     if out is None:
         print(text, end="")
     else:
@@ -403,67 +378,25 @@ def param_dump(args, component: str, out: str | None) -> int:
     return 0
 
 
-def _param_file(path: str, component: str) -> dict:
-    """KEY -> value of a parameter file: a ``[COMPONENT]`` section (what ``param dump``
-    writes) or bare top-level keys."""
-    doc = cfgmod.read_toml(path, kind="parameter file")
-    if set(doc) == {component} and isinstance(doc[component], dict):
-        return doc[component]
-    sections = [k for k, v in doc.items() if isinstance(v, dict)]
-    if sections:
-        raise cfgmod.ConfigError(f"{path}: has section(s) {', '.join(sections)}; a parameter file for {component} "
-                                 f"holds [{component}] only, or bare KEY = VALUE lines")
-    return doc
-
-
 def param_load(args, component: str, path: str) -> int:
-    """``humanpt param load COMPONENT FILE``: set each parameter of FILE, all or none.
+    """``humanpt param load COMPONENT FILE``: :func:`humanpt.runtime.params.load_file`."""
+    from humanpt.runtime import params
 
-    Checked here first against the component's live parameters and its config type (an
-    unknown or non-live key, a value out of range: ConfigError, nothing sent); a key the
-    component itself refuses (a safety limit it may only tighten) rolls back the keys it
-    had set, so the component is left as it was."""
-    values = _param_file(path, component)
-    if not values:
-        raise cfgmod.ConfigError(f"{path}: no parameters in it")
+    params.read_file(path, component)  # a bad file is named before the config is read
     cfg = load_cfg(args)
-    try:
-        cls = core_class(component).config_type
-    except (UnknownComponentError, KeyError) as e:
-        raise cfgmod.ConfigError(f"unknown component {component!r}: {e}") from None
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, {}, args.timeout)
-        if body is None:
-            return _no_answer(cfg, component, args.timeout)
-        before = body.get("params") or {}
-        unknown = [k for k in values if k not in before]
-        if unknown:
-            raise cfgmod.ConfigError(f"{path}: {', '.join(map(repr, unknown))} not live parameter(s) of {component}; "
-                                     f"live: {', '.join(before)} (nothing set)")
-        obj = cfgmod.build(cls, before, source=f"{component}'s live parameters", section=component)
-        for k, v in values.items():  # in order, so checks between fields see the new values
-            try:
-                obj = cfgmod.replace_live(obj, k, json.dumps(v))
-            except cfgmod.ConfigError as e:
-                raise cfgmod.ConfigError(f"{path}: {e} (nothing set)") from None
-        body = _param_query(session, cfg, component, values, args.timeout)
-        if body is None:
-            return _no_answer(cfg, component, args.timeout)
-        results = body.get("results", [])
-        refused = [r for r in results if not r["ok"]]
-        if refused:
-            done = {r["key"]: before[r["key"]] for r in results if r["ok"]}
-            back = _param_query(session, cfg, component, done, args.timeout) if done else {"ok": True}
-            restored = back is not None and back.get("ok", False)
-            for r in refused:
-                print(f"REJECTED: {r['text']}", file=sys.stderr)
-            print(f"humanpt param load: {component} refused {len(refused)} of {len(values)}; "
-                  f"{'the others were set back' if restored else 'COULD NOT SET BACK ' + ', '.join(done)}"
-                  f" (nothing changed{'' if restored else '?'})", file=sys.stderr)
-            return 1
-    for r in results:
+    res = params.load_file(cfg, component, path, args.timeout)
+    if not res.answered:
+        return _no_answer(cfg, component, args.timeout)
+    if res.refused:
+        for r in res.refused:
+            print(f"REJECTED: {r['text']}", file=sys.stderr)
+        print(f"humanpt param load: {component} refused {len(res.refused)} of {res.keys}; "
+              f"{'the others were set back' if res.restored else 'COULD NOT SET BACK ' + ', '.join(res.set_back)}"
+              f" (nothing changed{'' if res.restored else '?'})", file=sys.stderr)
+        return 1
+    for r in res.results:
         print(f"set: {r['text']}")
-    print(f"humanpt param load: {len(values)} parameters of {component} from {path}")
+    print(f"humanpt param load: {res.keys} parameters of {component} from {path}")
     return 0
 
 
@@ -559,53 +492,13 @@ def runs_info(args) -> int:
 
 
 def runs_merge(args) -> int:
-    from mcap.writer import Writer
-    from mcap_protobuf.schema import register_schema
+    from humanpt.runtime.player import merge_run
 
-    from humanpt.runtime.recording import OUT, RecordingError, merge_entries, read_metadata
-
-    run_dir = Path(args.run_dir)
-    files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []
-    if not files:
-        raise RecordingError(f"{run_dir}: no .mcap recordings here")
-    out = Path(args.out)
-    if out.resolve().parent == run_dir.resolve() and out.suffix == ".mcap":
-        raise RecordingError(f"{out}: write the merged file outside the run directory")
-    notes: list[str] = []
-    where: dict[Path, tuple[str, str]] = {}  # file -> (cell, component)
-    for f in files:
-        try:
-            meta, _ = read_metadata(f)
-        except RecordingError:
-            meta = {}  # merge_entries says why it leaves it out
-        where[f] = (meta.get("cell", "cell0"), meta.get("component", f.stem.split(".")[0]))
-    n = 0
-    with open(out, "wb") as fh:
-        w = Writer(fh)
-        w.start(profile="humanpt", library="humanpt runs merge")
-        schema_ids: dict[str, int] = {}
-        channels: dict[str, int] = {}
-        for t_ns, f, e in merge_entries(files, notes, keep=lambda e: e.direction == OUT):
-            cell, component = where[f]
-            # Bus topics on their key; a component's local outputs (serial bytes...) apart.
-            key = (f"{topics.KEY_PREFIX}/{cell}/{e.topic}" if "/" in e.topic
-                   else f"{topics.KEY_PREFIX}/{cell}/{component}/local/{e.topic}")
-            if key not in channels:
-                try:
-                    cls = topics.message_type(e.topic)
-                except topics.UnknownTopicError:
-                    continue  # a topic this version does not know: nothing to decode it with
-                name = cls.DESCRIPTOR.full_name
-                if name not in schema_ids:
-                    schema_ids[name] = register_schema(w, cls)
-                channels[key] = w.register_channel(topic=key, message_encoding="protobuf",
-                                                   schema_id=schema_ids[name])
-            w.add_message(channel_id=channels[key], log_time=t_ns, data=e.data, publish_time=t_ns, sequence=n)
-            n += 1
-        w.finish()
-    for note in notes:
+    res = merge_run(args.run_dir, args.out)
+    for note in res.notes:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
-    print(f"humanpt runs merge: {n} messages from {len(files)} recordings on {len(channels)} topics -> {out}")
+    print(f"humanpt runs merge: {res.messages} messages from {res.recordings} recordings on {res.topics} topics "
+          f"-> {args.out}")
     return 0
 
 

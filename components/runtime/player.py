@@ -1,6 +1,7 @@
 """The recording player (``humanpt runs play``, like ``ros2 bag play``): a run's recorded bus
 outputs put back on the live cell at their recorded timing, so that ``echo``, the console's
-status and the viewer work on an old run.
+status and the viewer work on an old run; and :func:`merge_run` (``humanpt runs merge``):
+every output of a run in one MCAP, for Foxglove or rerun.
 
     from humanpt.runtime.player import play, run_files
     from humanpt.runtime.run import load_config
@@ -154,3 +155,62 @@ def play(cfg: cfgmod.ConfigFile, files: list[Path], *, rate: float = 1.0, loop: 
     res.topics = len(pubs)
     res.stopped = stop.is_set()
     return res
+
+
+@dataclass
+class MergeResult:
+    messages: int
+    recordings: int
+    topics: int
+    notes: list[str]  # recordings (or parts) that could not be read and were left out
+
+
+def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
+    """Write the outputs of every component recording of ``run_dir`` into one MCAP ``out``
+    (topics as full Zenoh keys, a component's local outputs under ``<component>/local/``,
+    time order).  RecordingError when the run has no recording, or ``out`` is inside it."""
+    from mcap.writer import Writer
+    from mcap_protobuf.schema import register_schema
+
+    from humanpt.runtime.recording import OUT, merge_entries, read_metadata
+
+    run_dir = Path(run_dir)
+    files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []
+    if not files:
+        raise RecordingError(f"{run_dir}: no .mcap recordings here")
+    out = Path(out)
+    if out.resolve().parent == run_dir.resolve() and out.suffix == ".mcap":
+        raise RecordingError(f"{out}: write the merged file outside the run directory")
+    notes: list[str] = []
+    where: dict[Path, tuple[str, str]] = {}  # file -> (cell, component)
+    for f in files:
+        try:
+            meta, _ = read_metadata(f)
+        except RecordingError:
+            meta = {}  # merge_entries says why it leaves it out
+        where[f] = (meta.get("cell", "cell0"), meta.get("component", f.stem.split(".")[0]))
+    n = 0
+    with open(out, "wb") as fh:
+        w = Writer(fh)
+        w.start(profile="humanpt", library="humanpt runs merge")
+        schema_ids: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        for t_ns, f, e in merge_entries(files, notes, keep=lambda e: e.direction == OUT):
+            cell, component = where[f]
+            # Bus topics on their key; a component's local outputs (serial bytes...) apart.
+            key = (f"{topic_table.KEY_PREFIX}/{cell}/{e.topic}" if "/" in e.topic
+                   else f"{topic_table.KEY_PREFIX}/{cell}/{component}/local/{e.topic}")
+            if key not in channels:
+                try:
+                    cls = topic_table.message_type(e.topic)
+                except topic_table.UnknownTopicError:
+                    continue  # a topic this version does not know: nothing to decode it with
+                name = cls.DESCRIPTOR.full_name
+                if name not in schema_ids:
+                    schema_ids[name] = register_schema(w, cls)
+                channels[key] = w.register_channel(topic=key, message_encoding="protobuf",
+                                                   schema_id=schema_ids[name])
+            w.add_message(channel_id=channels[key], log_time=t_ns, data=e.data, publish_time=t_ns, sequence=n)
+            n += 1
+        w.finish()
+    return MergeResult(n, len(files), len(channels), notes)

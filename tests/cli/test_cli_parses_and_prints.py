@@ -21,7 +21,8 @@ API_MODULES = (
     "humanpt.runtime.launcher",  # the one process launcher
     "humanpt.runtime.run",  # the entry point every component process runs
     "humanpt.runtime.supervisor",  # humanpt up
-    "humanpt.runtime.player",  # humanpt runs play
+    "humanpt.runtime.player",  # humanpt runs play, runs merge
+    "humanpt.runtime.params",  # humanpt param
     "humanpt.runtime.progress",  # progress bars and lines of the long jobs
     "humanpt.console.client",  # humanpt console, path play
     "humanpt.console.calibration",  # humanpt calibrate camera|hand-eye --live
