@@ -6,18 +6,10 @@ import dataclasses
 import json
 import logging
 import sys
-import threading
-import time
-from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
 from humanpt.runtime import run, supervisor
-from humanpt.runtime.bus import (
-    liveliness_key,
-    open_tool_session,
-    type_name_of,
-)
 from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
     COMPONENTS,
@@ -68,52 +60,6 @@ def up(args) -> int:
 
 
 # -- inspection ----------------------------------------------------------------------------
-def _class_by_name(type_name: str | None):
-    """The message class of a full protobuf type name known to this process (humanpt's and
-    Foxglove's messages), or None."""
-    if not type_name:
-        return None
-    from google.protobuf import descriptor_pool, message_factory
-
-    package, _, name = type_name.rpartition(".")
-    if package == "foxglove":  # Foxglove's classes register when imported: one module per message
-        import importlib
-
-        try:
-            importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2")
-        except ImportError:
-            return None
-    try:
-        return message_factory.GetMessageClass(descriptor_pool.Default().FindMessageTypeByName(type_name))
-    except KeyError:
-        return None
-
-
-def _describe(key: str, payload: bytes, full: bool = False, type_name: str | None = None) -> tuple[str, str]:
-    """(type name, text) of one sample: decoded by its topic's type, or, for a key not in the
-    topic table, by the type its encoding names (``type_name``, application/protobuf;<type>)."""
-    from google.protobuf import text_format
-
-    try:
-        _, short = topics.short_from_key(key)
-        cls = topics.message_type(short)
-    except topics.UnknownTopicError:
-        cls = _class_by_name(type_name)
-        if cls is None:
-            what = f"its encoding names {type_name}, unknown here" if type_name else "no type in its encoding"
-            return type_name or "?", f"<{len(payload)} bytes, not in the topic table; {what}>\n"
-    msg = cls()
-    try:
-        msg.ParseFromString(payload)
-    except Exception as e:  # noqa: BLE001
-        return cls.DESCRIPTOR.full_name, f"<{len(payload)} bytes that do not decode: {e}>"
-    if not full and cls.DESCRIPTOR.full_name == "foxglove.RawImage":
-        msg = type(msg)(timestamp=msg.timestamp, frame_id=msg.frame_id, width=msg.width, height=msg.height,
-                        encoding=msg.encoding, step=msg.step)
-        return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg) + f"data: <{len(payload)} bytes>\n"
-    return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg)
-
-
 def table(head: list[str], rows: list[list[str]], align: str) -> list[str]:
     """Lines of a text table whose columns fit their widest cell (``align``: one ``<`` or
     ``>`` per column); the last column is not padded."""
@@ -138,58 +84,34 @@ def topics_cmd_table(as_json: bool = False) -> int:
 
 
 def topics_cmd(args) -> int:
+    from humanpt.runtime.monitor import listen, type_of_key
+
     if args.table or args.json:
         return topics_cmd_table(args.json)
     if args.hz:
         return topics_hz(args)
     duration = 2.0 if args.duration is None else args.duration
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    stats: dict[str, list] = defaultdict(lambda: [0, 0, None, None])  # count, bytes, first, last
-    lock = threading.Lock()
-
-    def cb(sample):
-        now = time.monotonic()
-        with lock:
-            s = stats[str(sample.key_expr)]
-            s[0] += 1
-            s[1] += len(sample.payload)
-            s[2] = s[2] or now
-            s[3] = now
-
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
-        alive = sorted(str(r.ok.key_expr).rsplit("/", 1)[-1]
-                       for r in session.liveliness().get(liveliness_key(cell, "*")) if r.ok is not None)
-        time.sleep(duration)
-        sub.undeclare()
-    print(f"cell {cell}: components up: {', '.join(alive) or 'none'}")
+    alive, stats = listen(cfg, duration)
+    print(f"cell {cfg.runtime.cell}: components up: {', '.join(alive) or 'none'}")
     if not stats:
         print(f"no messages in {duration:g} s")
         return 0
-    rows = []
-    for key in sorted(stats):
-        count, nbytes, first, last = stats[key]
-        rate = (count - 1) / (last - first) if count > 1 and last > first else 0.0
-        rows.append([key, _type_of_key(key), str(count), f"{rate:.1f}", f"{nbytes / count:.0f}"])
+    rows = [[key, type_of_key(key), str(s.count), f"{s.rate_hz:.1f}", f"{s.nbytes / s.count:.0f}"]
+            for key, s in sorted(stats.items())]
     print("\n".join(table(["key", "type", "count", "rate Hz", "avg bytes"], rows, "<<>>>")))
     return 0
-
-
-def _type_of_key(key: str) -> str:
-    try:
-        return topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
-    except topics.UnknownTopicError:
-        return "?"
 
 
 def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
     """The lines of one ``topics --hz`` refresh: per key, messages and bytes in the last
     ``seconds`` as a rate (Hz) and a bandwidth (kB/s, 1 kB = 1000 bytes), then the total."""
+    from humanpt.runtime.monitor import type_of_key
+
     rows = []
     for key in sorted(window):
         count, nbytes = window[key]
-        rows.append([key, _type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
+        rows.append([key, type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
                      f"{(nbytes / count if count else 0):.0f}"])
     count = sum(c for c, _ in window.values())
     nbytes = sum(b for _, b in window.values())
@@ -200,121 +122,53 @@ def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
 def topics_hz(args) -> int:
     """``humanpt topics --hz``: rates and bandwidth per key over each --interval, until
     --duration (if given) or Ctrl-C."""
+    from humanpt.runtime.monitor import watch_rates
+
     if not args.interval > 0:
         raise ValueError(f"--interval {args.interval:g}: must be > 0 s")
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    lock = threading.Lock()
-    window: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # key -> [count, bytes] since the last print
-
-    def cb(sample):
-        with lock:
-            w = window[str(sample.key_expr)]
-            w[0] += 1
-            w[1] += len(sample.payload)
-
-    stop = stop_on_signals()
     tty = sys.stdout.isatty()
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
-        start = last = time.monotonic()
-        end = start + args.duration if args.duration else None
-        while not stop.wait(args.interval if end is None else max(0.0, min(args.interval, end - time.monotonic()))):
-            now = time.monotonic()
-            with lock:
-                snap = {k: (c, b) for k, (c, b) in window.items()}
-                window.clear()
-            head = f"cell {cell}, {now - start:.1f} s: rates over the last {now - last:.1f} s"
-            body = hz_table(snap, now - last) if snap else ["no messages"]
-            # a terminal gets a table refreshed in place; a pipe a block per interval
-            print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
-            last = now
-            if end is not None and now >= end - 1e-3:
-                break
-        sub.undeclare()
+
+    def show(snap: dict[str, tuple[int, int]], elapsed_s: float, window_s: float) -> None:
+        head = f"cell {cfg.runtime.cell}, {elapsed_s:.1f} s: rates over the last {window_s:.1f} s"
+        body = hz_table(snap, window_s) if snap else ["no messages"]
+        # a terminal gets a table refreshed in place; a pipe a block per interval
+        print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
+
+    watch_rates(cfg, args.interval, show, args.duration, stop_on_signals())
     return 0
 
 
-def _full_key(key: str, cell: str) -> str:
-    return key if key.startswith(topics.KEY_PREFIX + "/") else f"{topics.KEY_PREFIX}/{cell}/{key}"
-
-
 def echo(args) -> int:
-    import queue as _queue
+    from humanpt.runtime import monitor
 
     cfg = load_cfg(args)
-    key = _full_key(args.key, cfg.runtime.cell)
-    short = key.split("/", 2)[2] if key.count("/") >= 2 else key
-    if "*" not in key and short not in topics.TOPICS:
-        near = sorted(t for t in topics.TOPICS if short.split("/")[0] in t) or sorted(topics.TOPICS)
-        raise ValueError(f"no topic {short!r} in this version (wildcards like '*/events' are fine); "
-                         f"known: {', '.join(near)}")
+    key = monitor.full_key(args.key, cfg.runtime.cell)
     fields = list(args.field or [])
     if args.csv and not fields:
         raise ValueError("--csv prints fields: name them with --field (e.g. --field header.stamp_ns)")
-    if fields and "*" not in key:  # a field the topic's type does not have: said before listening
-        from humanpt.schemas.convert import message_field
-
-        for f in fields:
-            _check_field_path(topics.message_type(short)(), f, message_field)
+    monitor.check_echo(key, fields)
     writer = None
     if args.csv:
         import csv
 
         writer = csv.writer(sys.stdout)
         writer.writerow(["stamp_ns", "key", *fields])
-    q: _queue.Queue = _queue.Queue()
-    stop = stop_on_signals()
-    n = 0
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes(),
-                                                                type_name_of(s.encoding))))
-        deadline = time.monotonic() + args.duration if args.duration else None
-        while not stop.is_set() and (args.count is None or n < args.count):
-            if deadline and time.monotonic() >= deadline:
-                break
-            try:
-                k, payload, type_name = q.get(timeout=0.1)
-            except _queue.Empty:
-                continue
-            if fields:
-                row = _field_row(k, payload, fields)
-                if args.csv:
-                    writer.writerow(row)
-                else:
-                    print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
-                sys.stdout.flush()
+
+    def show(k: str, payload: bytes, type_name: str | None) -> None:
+        if fields:
+            row = monitor.field_row(k, payload, fields)
+            if writer is not None:
+                writer.writerow(row)
             else:
-                tname, text = _describe(k, payload, args.full, type_name)
-                print(f"--- {k} ({tname})\n{text}", end="", flush=True)
-            n += 1
-        sub.undeclare()
+                print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
+            sys.stdout.flush()
+        else:
+            tname, text = monitor.describe(k, payload, args.full, type_name)
+            print(f"--- {k} ({tname})\n{text}", end="", flush=True)
+
+    monitor.echo(cfg, key, show, count=args.count, duration_s=args.duration, stop=stop_on_signals())
     return 0
-
-
-def _check_field_path(msg, path: str, message_field) -> None:
-    """ValueError when ``path`` names no field of ``msg``'s type (an index beyond an empty
-    list is fine: a message may have entries)."""
-    from humanpt.schemas.convert import MessageError
-
-    try:
-        message_field(msg, path)
-    except MessageError as e:
-        if "entries, no [" not in str(e):
-            raise ValueError(str(e)) from None
-
-
-def _field_row(key: str, payload: bytes, fields: list[str]) -> list:
-    """[stamp ns, key, value of each field] of one message (``message_field``); a message
-    that does not decode, or lacks a field, raises ValueError naming it."""
-    from humanpt.schemas.convert import message_field, message_stamp_ns
-
-    try:
-        _, short = topics.short_from_key(key)
-        msg = topics.message_type(short).FromString(payload)
-    except Exception as e:  # noqa: BLE001 - unknown topic or undecodable bytes: one message
-        raise ValueError(f"{key}: cannot decode: {e}") from None
-    return [message_stamp_ns(msg), key, *(message_field(msg, f) for f in fields)]
 
 
 def _no_answer(cfg, component: str, timeout: float) -> int:

@@ -154,7 +154,7 @@ def run_calibrate(args, run_dir: Path) -> int:
 def demo(args) -> int:
     from humanpt.runtime.run import run_stamp
     from humanpt.twin.demo import demo_config, header_lines, scenario_label, write_world
-    from humanpt.twin.run import OverrideError
+    from humanpt.twin.run import SECTIONS, OverrideError
 
     if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
@@ -172,13 +172,14 @@ def demo(args) -> int:
     over = parse_overrides(getattr(args, "set", None))
     if getattr(args, "speed", None) is not None:  # --speed: the operator's, as --set operator.speed_mm_s
         over.setdefault("operator", {})["speed_mm_s"] = args.speed
+    unknown = set(over) - set(SECTIONS)
+    if unknown:
+        raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
     try:  # a bad key or value, world or rig fails here, before the run starts
         cfg = demo_config(args.scenario, args.seed, over, world=args.world, rig_file=getattr(args, "rig", None),
                           law=args.law)
     except (OverrideError, cfgmod.ConfigError) as e:
         raise SystemExit(f"humanpt: {e}") from None
-    except ValueError as e:
-        raise SystemExit(f"humanpt demo: {e}") from None
     run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{scenario_label(args.scenario)}"
     run_dir.mkdir(parents=True, exist_ok=True)
     for line in header_lines(cfg, args.scenario, run_dir, args.lockstep, getattr(args, "rig", None)):

@@ -1,5 +1,6 @@
 """Calibrating a running cell from Python: the live drivers of ``humanpt calibrate camera
---live`` and ``humanpt calibrate hand-eye --live`` (which parse and print).  They drive the
+--live``, ``humanpt calibrate hand-eye --live`` and ``humanpt calibrate tip --config``
+(which parse and print).  They drive the
 cell as the console does (console/command, the components' topics); the maths is
 :mod:`humanpt.calibration`'s.
 
@@ -300,3 +301,45 @@ def collect_hand_eye_live(cfg: ConfigFile, rig: Rig, n_poses: int = 12, timeout_
     A = np.array([s.world_T_flange_mm for s in collector.samples])
     B = np.array([s.camera_T_target_mm for s in collector.samples])
     return A, B, notes + collector.notes
+
+
+# -- the driver's tip ---------------------------------------------------------------------------
+def calibrate_tip_live(cfg: ConfigFile, samples: int | None = None, timeout_s: float = 120.0,
+                       say: Callable[[str], None] = _stderr):
+    """Ask the running controller to calibrate the driver's tip (``samples`` poses, default
+    its own) while the operator pivots the target on the needle's tip, and wait up to
+    ``timeout_s`` for its result (a TipResult); ValueError when it refuses, fails or says
+    nothing."""
+    import queue
+    import time
+
+    from humanpt.calibration.tip import tip_result_from_event
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas import topics
+
+    from .client import Console
+
+    con = Console(cfg)
+    try:
+        events: queue.Queue = queue.Queue()
+        sub = con.session.declare_subscriber(topics.TOPICS["controller/events"].key(cfg.runtime.cell),
+                                             lambda s: events.put(s.payload.to_bytes()))
+        try:
+            if con.command("calibrate", {"samples": samples} if samples else {}) != 0:
+                raise ValueError("the controller refused to calibrate")
+            say("pivot the target on its needle's tip now (turn it +-20 deg about two axes)")
+            deadline = time.monotonic() + timeout_s
+            while time.monotonic() < deadline:
+                try:
+                    ev = pb.Event.FromString(events.get(timeout=1.0))
+                except queue.Empty:
+                    continue
+                if ev.code == "calibration_done":
+                    return tip_result_from_event(ev.text)
+                if ev.code == "calibration_failed":
+                    raise ValueError(f"the controller's calibration failed: {ev.text}")
+            raise ValueError(f"no result within {timeout_s:g} s (is the target in view and turning?)")
+        finally:
+            sub.undeclare()
+    finally:
+        con.close()
