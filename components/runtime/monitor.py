@@ -211,3 +211,20 @@ def echo(cfg: cfgmod.ConfigFile, key: str, on_sample: Callable[[str, bytes, str 
             n += 1
         sub.undeclare()
     return n
+
+
+def rigs_in_use(cfg: cfgmod.ConfigFile, timeout_s: float = 3.0) -> dict:
+    """{component: the Rig it runs with} of every component of ``cfg``'s cell that answers
+    its rig queryable within ``timeout_s``."""
+    from humanpt.runtime.bus import open_tool_session, rig_key
+    from humanpt.runtime.rigfile import rig_from_json
+
+    with open_tool_session(cfg.runtime) as session:
+        replies = list(session.get(rig_key(cfg.runtime.cell, "*"), timeout=timeout_s))
+    rigs = {}
+    for r in replies:
+        if r.ok is None:
+            continue
+        comp = str(r.ok.key_expr).split("/")[-2]
+        rigs[comp] = rig_from_json(r.ok.payload.to_bytes().decode(), f"{comp}'s rig")
+    return rigs
