@@ -160,5 +160,5 @@ def run_live_demo(cfg: SystemConfig, run_dir: Path, *, port: int | None = None, 
     if link == "rsi":
         from humanpt.rsi.runstats import rsi_cycles
 
-        text += "\n" + (rsi_cycles(run_dir) or "RSI: no <Rob> recorded by sim_robot")
+        text += "\n" + str(rsi_cycles(run_dir) or "RSI: no <Rob> recorded by sim_robot")
     return res, text
