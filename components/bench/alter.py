@@ -18,7 +18,6 @@ from __future__ import annotations
 import contextlib
 import logging
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -167,6 +166,7 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
 
     import zenoh
 
+    from humanpt.runtime import launcher
     from humanpt.runtime.bus import liveliness_key, zenoh_config
     from humanpt.runtime.config import RuntimeConfig
     from humanpt.schemas import humanpt_pb2 as pb
@@ -187,18 +187,13 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
             f'[robot_gateway]\nport = "{link}"\ncycle_period_ms = {period_ms}\ntick_ms = {g.tick_ms}\n'
             f"reply_deadline_ms = {g.reply_deadline_ms}\n"
         )
-        base = [sys.executable, "-m", "humanpt.cli.main"]
         children = []
         try:
-            for verb in ("router", "sim_robot", "robot_gateway"):
-                children.append(
-                    subprocess.Popen(
-                        [*base, verb, "--config", str(cfg)],
-                        stdout=subprocess.DEVNULL,
-                        stderr=subprocess.DEVNULL,
-                    )
-                )
-                time.sleep(0.5 if verb == "router" else 0.0)
+            quiet = dict(config=cfg, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            router = launcher.spawn(launcher.ROUTER, **quiet)
+            children.append(router)
+            launcher.wait_listening("127.0.0.1", port, 60.0, alive=lambda: router.poll() is None)  # then the rest
+            children += [launcher.spawn(name, **quiet) for name in ("sim_robot", "robot_gateway")]
             rt = RuntimeConfig(cell="bench", connect=(f"tcp/127.0.0.1:{port}",))
             states: list[tuple[int, int]] = []  # (cycle, missed_cycles)
             measuring = threading.Event()

@@ -32,8 +32,11 @@ def add_world_args(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="with --twin: the twin's seed (poses, noise; default 0)")
 
 
+HELP = "calibrate the cell: camera, psvs, mirrors, hand-eye, tip"
+
+
 def add_parsers(sub) -> None:
-    p = sub.add_parser("calibrate", help="calibrate the cell: camera, psvs, mirrors, hand-eye, tip",
+    p = sub.add_parser("calibrate", help=HELP,
                        description="Calibrate the cell as the paper's HumanPT does: the camera (Zhang's method; "
                        "OpenCV's corner detector or the paper's appendix one), the PSVS and its mirrors' "
                        "alignment, hand-eye (AX = YB) and the driver tip. Each tool observes a live cell, "

@@ -152,121 +152,6 @@ def _from_images(args, rig, settings) -> tuple[CameraCalibration, list[str], lis
     return result, lines, []
 
 
-def _mono(msg):
-    """A foxglove.RawImage -> (h, w) uint8 grey."""
-    import cv2
-    import numpy as np
-
-    from humanpt.schemas.convert import from_image
-
-    pixels = np.asarray(from_image(msg))
-    if pixels.ndim == 3 and msg.encoding in ("rgb8", "rgba8"):
-        pixels = cv2.cvtColor(pixels, cv2.COLOR_RGB2GRAY if pixels.shape[2] == 3 else cv2.COLOR_RGBA2GRAY)
-    elif pixels.ndim == 3:
-        pixels = cv2.cvtColor(pixels, cv2.COLOR_BGR2GRAY if pixels.shape[2] == 3 else cv2.COLOR_BGRA2GRAY)
-    return np.ascontiguousarray(pixels, dtype=np.uint8)
-
-
-def _from_live(args, rig, settings, lines=None) -> tuple[CameraCalibration, list[str], list[str]]:
-    """Capture views from the camera component: each line read (Enter) takes the NEXT frame
-    of camera/image (the board has stopped moving by then), detects the board at once and
-    says so; 'q' (or the end of the input) finishes and calibrates."""
-    import queue
-    import threading
-
-    import cv2
-    from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
-
-    from humanpt.cli.commands import load_cfg
-    from humanpt.runtime.bus import open_tool_session
-    from humanpt.schemas import humanpt_pb2 as pb
-    from humanpt.schemas import topics
-
-    view = args.view or "right"
-    if view == "both":
-        raise CalibrationError("--live calibrates one view per run: --view right (left mirror covered), "
-                               "then --view left")
-    if args.detector == "both":
-        raise CalibrationError("--live: one detector (opencv or paper); compare them later on --save'd images")
-    board = _board(args)
-    cfg = load_cfg(args)
-    key = f"{topics.KEY_PREFIX}/{cfg.runtime.cell}/camera/image"
-    cond = threading.Condition()
-    state = {"n": 0, "payload": None}
-
-    def on_frame(sample) -> None:
-        with cond:
-            state["n"] += 1
-            state["payload"] = sample.payload.to_bytes()
-            cond.notify_all()
-
-    save = Path(args.save) if args.save else None
-    if save is not None:
-        save.mkdir(parents=True, exist_ok=True)
-    images, dets = [], []
-    other = "left" if view == "right" else "right"
-    print(f"live: {key}; cover the {other} mirror, hold the board still, Enter (or `humanpt console capture`) "
-          "= capture, q (or `humanpt console capture --finish`) = finish",
-          file=sys.stderr, flush=True)
-    # Enter / q at this terminal, or `humanpt console capture [--finish]` from any machine.
-    requests: queue.Queue = queue.Queue()
-    taken = threading.Event()  # the last request is done: read the next line (one at a time)
-    taken.set()
-
-    def read_lines() -> None:
-        for line in (sys.stdin if lines is None else lines):
-            requests.put(line)
-            taken.clear()
-            taken.wait()
-        requests.put(None)  # the end of the input: finish
-
-    def on_console(sample) -> None:
-        try:
-            cmd = pb.Command.FromString(sample.payload.to_bytes())
-        except Exception:  # noqa: BLE001 - a bad message on the bus is not ours to stop on
-            return
-        if cmd.component == "calibrate" and cmd.verb in ("capture", "finish"):
-            requests.put("q" if cmd.verb == "finish" else "\n")
-
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(key, on_frame)
-        console = session.declare_subscriber(topics.TOPICS["console/command"].key(cfg.runtime.cell), on_console)
-        threading.Thread(target=read_lines, name="calibrate-input", daemon=True).start()
-        try:
-            while True:
-                line = requests.get()
-                if line is None or line.strip().lower() in ("q", "quit"):
-                    break
-                with cond:
-                    seen = state["n"]
-                    if not cond.wait_for(lambda s=seen: state["n"] > s, timeout=args.frame_timeout_s):
-                        raise CalibrationError(f"no frame on {key} within {args.frame_timeout_s:g} s "
-                                               "(is the camera component up?)")
-                    payload = state["payload"]
-                grey = _mono(RawImage.FromString(payload))
-                name = f"live-{len(images):02d}"
-                images.append((name, grey))
-                d = detect_views([(name, grey)], board, args.detector)[0]
-                dets.append(d)
-                if save is not None:
-                    cv2.imwrite(str(save / f"{name}.png"), grey)
-                print(f"{name}: " + (f"board found ({len(d.image_px)} corners)" if d.image_px is not None
-                                     else "no board") + f", edge blur {d.blur_px:.2f} px", file=sys.stderr, flush=True)
-                taken.set()  # this view is done: the next line may be read
-        finally:
-            sub.undeclare()
-            console.undeclare()
-    if not images:
-        raise CalibrationError("no frames captured (press Enter to capture a view)")
-    h, w = images[0][1].shape
-    if (w, h) != tuple(rig.psvs.params().image_size_px):
-        raise CalibrationError(f"camera/image is {w} x {h} px, the rig's camera is "
-                               f"{rig.psvs.image_width_px} x {rig.psvs.image_height_px} px")
-    cal = calibrate_view(dets, (w, h), view, settings, args.detector)
-    result = CameraCalibration({view: cal})
-    return result, report_lines(result, {view: dets}), []
-
-
 def run(args) -> int:
     from humanpt.geometry.rig import Rig
     from humanpt.runtime.rigfile import load_rig, write_rig
@@ -279,7 +164,12 @@ def run(args) -> int:
         if sum(bool(x) for x in (args.twin, args.live, args.images or args.left_images)) > 1:
             raise CalibrationError("one source: --images, --live or --twin")
         if args.live:
-            result, lines, truth = _from_live(args, rig, settings)
+            from humanpt.cli.commands import load_cfg
+            from humanpt.console.calibration import calibrate_camera_live
+
+            result, lines, truth = calibrate_camera_live(
+                load_cfg(args), rig, settings, _board(args), view=args.view or "right", detector=args.detector,
+                frame_timeout_s=args.frame_timeout_s, save=args.save, lines=sys.stdin)
         elif args.twin:
             if args.images or args.left_images:
                 raise CalibrationError("--twin or --images, not both")

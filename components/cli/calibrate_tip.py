@@ -6,13 +6,11 @@ writes it into the rig.  ``--twin``: the same on the digital twin."""
 
 from __future__ import annotations
 
-import queue
 import sys
-import time
 from datetime import UTC, datetime
 from pathlib import Path
 
-from humanpt.calibration.tip import TipResult, apply_to_rig, tip_result_from_event
+from humanpt.calibration.tip import apply_to_rig
 from humanpt.cli.calibrate import add_rig_args, add_world_args
 from humanpt.geometry.rig import Rig
 from humanpt.runtime.rigfile import load_rig, write_rig
@@ -37,39 +35,6 @@ def _read_rig(path: Path) -> Rig:
     return load_rig(path) if path.exists() else Rig()
 
 
-def _live(args) -> TipResult:
-    from humanpt.cli.commands import load_cfg
-    from humanpt.cli.console import Console
-    from humanpt.schemas import humanpt_pb2 as pb
-    from humanpt.schemas import topics
-
-    cfg = load_cfg(args)
-    con = Console(cfg)
-    try:
-        events: queue.Queue = queue.Queue()
-        sub = con.session.declare_subscriber(topics.TOPICS["controller/events"].key(cfg.runtime.cell),
-                                             lambda s: events.put(s.payload.to_bytes()))
-        try:
-            if con.command("calibrate", {"samples": args.samples} if args.samples else {}) != 0:
-                raise ValueError("the controller refused to calibrate")
-            print("pivot the target on its needle's tip now (turn it +-20 deg about two axes)", file=sys.stderr)
-            deadline = time.monotonic() + args.timeout
-            while time.monotonic() < deadline:
-                try:
-                    ev = pb.Event.FromString(events.get(timeout=1.0))
-                except queue.Empty:
-                    continue
-                if ev.code == "calibration_done":
-                    return tip_result_from_event(ev.text)
-                if ev.code == "calibration_failed":
-                    raise ValueError(f"the controller's calibration failed: {ev.text}")
-            raise ValueError(f"no result within {args.timeout:g} s (is the target in view and turning?)")
-        finally:
-            sub.undeclare()
-    finally:
-        con.close()
-
-
 def run(args) -> int:
     if args.samples is not None and args.samples < 6:
         raise ValueError("--samples must be >= 6 (the pivot fit has 6 unknowns)")
@@ -90,7 +55,10 @@ def run(args) -> int:
     else:
         if not args.config:
             raise ValueError("give --config FILE (a live cell) or --twin")
-        result = _live(args)
+        from humanpt.cli.commands import load_cfg
+        from humanpt.console.calibration import calibrate_tip_live
+
+        result = calibrate_tip_live(load_cfg(args), args.samples, args.timeout)
         report = [f"tip: tob_t_tip = ({', '.join(f'{v:.3f}' for v in result.tob_t_tip_mm)}) mm +- "
                   f"{result.sigma_mm:.3f} mm ({result.samples} poses, residual RMS {result.residual_rms_mm:.3f} mm)"]
         truth = []

@@ -5,32 +5,18 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
-import signal
-import socket
-import subprocess
 import sys
-import threading
-import time
-from collections import defaultdict
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
-from humanpt.runtime.bus import (
-    liveliness_key,
-    open_tool_session,
-    params_key,
-    type_name_of,
-    zenoh_config,
-)
+from humanpt.runtime import run, supervisor
 from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
     COMPONENTS,
-    PROFILES,
-    UnknownComponentError,
-    adapters_for,
     config_types,
     core_class,
 )
+from humanpt.runtime.run import load_config, run_router, run_stamp, stop_on_signals
 from humanpt.schemas import topics
 
 log = logging.getLogger("humanpt.cli")
@@ -38,320 +24,42 @@ log = logging.getLogger("humanpt.cli")
 
 # -- shared helpers ----------------------------------------------------------------------
 def load_cfg(args) -> cfgmod.ConfigFile:
-    """The config file of ``--config`` (validated), with ``--cell``/``--connect`` applied."""
-    cfg = cfgmod.load(getattr(args, "config", None), config_types())
-    changes = {}
-    if getattr(args, "cell", None):
-        changes["cell"] = args.cell
-    if getattr(args, "connect", None):
-        changes["connect"] = tuple(args.connect)
-    if getattr(args, "identity", None):
-        changes["identity"] = args.identity
-    if changes:
-        try:
-            rt = dataclasses.replace(cfg.runtime, **changes)
-        except ValueError as e:
-            raise cfgmod.ConfigError(f"command line: {e}") from e
-        cfg = dataclasses.replace(cfg, runtime=rt)
-    cfg.rig()  # a missing or bad rig file fails here, before anything starts
-    return cfg
-
-
-def stop_on_signals(extra: threading.Event | None = None) -> threading.Event:
-    """An Event set by SIGINT or SIGTERM (and by ``extra``'s owner)."""
-    stop = extra or threading.Event()
-
-    def handler(signum, frame):
-        stop.set()
-
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
-    return stop
-
-
-def run_stamp() -> str:
-    return time.strftime("%Y%m%d-%H%M%S")
+    """The config file of ``--config`` (validated), with ``--cell``/``--connect``/``--as`` applied."""
+    return load_config(getattr(args, "config", None), cell=getattr(args, "cell", None),
+                       connect=getattr(args, "connect", None), identity=getattr(args, "identity", None))
 
 
 # -- router, components, up ------------------------------------------------------------------
 def router(args) -> int:
-    import zenoh
-
-    cfg = load_cfg(args)
-    listen = tuple(args.listen) if args.listen else cfg.runtime.listen
-    conf = zenoh_config(cfg.runtime, mode="router", listen=listen, connect=())
-    stop = stop_on_signals()
-    watch = reporter = None
-    if cfg.runtime.security == "mtls" and cfg.runtime.report_denied:  # before zenoh.open: it sets zenoh's logging
-        from humanpt.runtime.security import DenialReporter, DenialWatch
-
-        reporter = DenialReporter(cfg.runtime.cell)
-        watch = DenialWatch(reporter)
-        watch.start()
-    try:
-        session = zenoh.open(conf)
-    except zenoh.ZError as e:
-        print(f"humanpt router: cannot listen on {', '.join(listen)}: {e}", file=sys.stderr)
-        if watch is not None:
-            watch.stop()
-        return 1
-    if reporter is not None:
-        reporter.attach(session)
-    with session:
-        if cfg.runtime.security == "mtls":
-            from humanpt.runtime import security
-
-            listen = tuple(security.tls_endpoint(e) for e in listen)
-        print(f"humanpt router: listening on {', '.join(listen)} (zid {session.zid()}); Ctrl-C stops",
-              flush=True)
-        if cfg.runtime.security == "mtls":
-            certs = security.identities(security.pki_dir_of(cfg.runtime))
-            print(f"humanpt router: mTLS (CA and certificates in {security.pki_dir_of(cfg.runtime)}); access "
-                  f"control default deny, allowing {', '.join(c.name for c in certs if c.role not in ('ca', 'router'))}"
-                  f" (`humanpt pki acl` prints it)", flush=True)
-        while not stop.wait(0.5):
-            pass
-        if reporter is not None:
-            reporter.close()
-    if watch is not None:
-        watch.stop()
-    print("humanpt router: stopped", flush=True)
-    return 0
+    return run_router(load_cfg(args), args.listen)
 
 
 def run_component(args) -> int:
-    from humanpt.runtime.live import LiveShell
-    from humanpt.runtime.tuning import tune_realtime
-
-    cfg = load_cfg(args)
-    name = args.component
-    cls = core_class(name)
-    core = cls.create(cfg.component(name, cls.config_type), cfg.rig())
-    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
-    try:
-        adapters = adapters_for(name, core.config, run_dir=run_dir, rig=core.rig)
-    except Exception as e:  # a serial port that does not open, say: name it and stop
-        print(f"humanpt {name}: {e}", file=sys.stderr)
-        return 1
-    shell = LiveShell(core, cfg.runtime, run_dir=run_dir, adapters=adapters, record=cfg.record)
-    realtime = tune_realtime(core, cfg.runtime)
-    if realtime:
-        print(f"humanpt {name}: on a robot link's cycle: {realtime}", file=sys.stderr, flush=True)
-    stop_on_signals(shell.stop)
-    if args.duration:
-        threading.Timer(args.duration, shell.stop.set).start()
-    try:
-        counters = shell.run()
-    except Exception as e:  # zenoh.ZError and friends: say it plainly
-        print(f"humanpt {name}: {e}", file=sys.stderr)
-        return 1
-    print(f"humanpt {name}: stopped; consumed {counters.consumed}, produced {counters.produced}, "
-          f"dropped {counters.dropped}, core errors {counters.core_errors}; "
-          f"{shell.recorder.summary() if shell.recorder else 'recording off'}", file=sys.stderr, flush=True)
-    return 0
-
-
-def _endpoint_addr(ep: str) -> tuple[str, int] | None:
-    if not ep.startswith(("tcp/", "tls/")):
-        return None
-    host, _, port = ep[4:].rpartition(":")
-    host = host.strip("[]")
-    if host in ("0.0.0.0", "::", ""):
-        host = "127.0.0.1"
-    return host, int(port)
-
-
-def _wait_port(addr: tuple[str, int], timeout_s: float, proc: subprocess.Popen) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            return False
-        try:
-            with socket.create_connection(addr, timeout=0.2):
-                return True
-        except OSError:
-            time.sleep(0.05)
-    return False
-
-
-def _passthrough(args) -> list[str]:
-    out = []
-    if getattr(args, "config", None):
-        out += ["--config", args.config]
-    if getattr(args, "cell", None):
-        out += ["--cell", args.cell]
-    for ep in getattr(args, "connect", None) or []:
-        out += ["--connect", ep]
-    return out
-
-
-def resolve_profile(args, cfg: cfgmod.ConfigFile) -> tuple[str, bool, tuple[str, ...]]:
-    """(label, start a router?, components) of ``up``'s arguments."""
-    if args.components:
-        comps = tuple(cfgmod.current_name(c.strip()) for c in args.components.split(",") if c.strip())
-        label, with_router = "custom", True
-    elif args.profile:
-        if args.profile in cfg.profiles:
-            label, with_router, comps = args.profile, True, cfg.profiles[args.profile]
-        elif args.profile in PROFILES:
-            prof = PROFILES[args.profile]
-            label, with_router, comps = args.profile, prof["router"], tuple(prof["components"])
-        else:
-            raise cfgmod.ConfigError(f"unknown profile {args.profile!r}; known: "
-                                     f"{', '.join(sorted(set(PROFILES) | set(cfg.profiles)))}")
-    else:
-        prof = PROFILES["loop"]
-        label, with_router, comps = "loop", prof["router"], tuple(prof["components"])
-    missing = [c for c in comps if c not in COMPONENTS]
-    if missing:
-        raise UnknownComponentError(f"profile {label!r} needs {', '.join(missing)}, not available in this "
-                                    f"version (available: {', '.join(sorted(COMPONENTS))})")
-    if args.no_router:
-        with_router = False
-    return label, with_router, comps
-
-
-READY_TIMEOUT_S = 120.0  # bounds a hang only: a component that cannot start exits sooner
-ROUTER_LISTEN_TIMEOUT_S = 60.0  # likewise (a loaded machine took more than 10 s to start one)
-
-
-def _wait_ready(rt: cfgmod.RuntimeConfig, comps: tuple[str, ...], children: list[tuple[str, subprocess.Popen]],
-                stop: threading.Event, timeout_s: float = READY_TIMEOUT_S) -> str:
-    """Wait until every component of ``comps`` is up (its liveliness token, which a live
-    shell declares last, when it serves), a child died, ``stop`` is set or ``timeout_s``
-    passed; watched as a tool (under mTLS the ``tool`` identity, or ``[runtime] identity``).
-    Returns the line ``up`` prints: when they were up, or why it could not tell."""
-    import zenoh
-
-    t0 = time.monotonic()
-    want, alive = set(comps), set()
-    changed = threading.Condition()
-
-    def on_token(sample):
-        name = str(sample.key_expr).rsplit("/", 1)[-1]
-        with changed:
-            (alive.add if sample.kind == zenoh.SampleKind.PUT else alive.discard)(name)
-            changed.notify_all()
-
-    try:
-        session = open_tool_session(rt, patient=True)
-    except Exception as e:  # noqa: BLE001 - no router reachable, no tool certificate: say so, run anyway
-        return f"cannot watch the components come up ({e}); --duration counts from their start"
-    with session:
-        sub = session.liveliness().declare_subscriber(liveliness_key(rt.cell, "*"), on_token, history=True)
-        try:
-            with changed:
-                while not want <= alive:
-                    if stop.is_set() or any(p.poll() is not None for _, p in children):
-                        return "stopped before every component was up"
-                    if time.monotonic() - t0 > timeout_s:
-                        return (f"not up after {timeout_s:g} s: {', '.join(sorted(want - alive))}; "
-                                "--duration counts from now")
-                    changed.wait(0.2)
-        finally:
-            sub.undeclare()
-    return f"all {len(want)} components up after {time.monotonic() - t0:.1f} s; --duration counts from now"
+    return run.run_component(load_cfg(args), args.component, args.run_dir, args.duration)
 
 
 def up(args) -> int:
     cfg = load_cfg(args)
-    label, with_router, comps = resolve_profile(args, cfg)
-    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{label}"
-    run_dir.mkdir(parents=True, exist_ok=True)
-    print(f"humanpt up: profile {label}: {'router, ' if with_router else ''}{', '.join(comps)}", flush=True)
+    comps = args.components.split(",") if args.components else None
+    prof = supervisor.resolve_profile(cfg, args.profile, comps, args.no_router)
+    run_dir = Path(args.run_dir) if args.run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{prof.label}"
+    print(f"humanpt up: profile {prof.label}: {'router, ' if prof.router else ''}{', '.join(prof.components)}",
+          flush=True)
     print(f"humanpt up: recording to {run_dir}/", flush=True)
-    stop = stop_on_signals()
-    base = [sys.executable, "-m", "humanpt.cli.main"]
-    children: list[tuple[str, subprocess.Popen]] = []
-    failed: list[str] = []
-    try:
-        if with_router:
-            proc = subprocess.Popen(base + ["router"] + _passthrough(args))
-            children.append(("router", proc))
-            addr = _endpoint_addr(cfg.runtime.listen[0])
-            if addr and not _wait_port(addr, ROUTER_LISTEN_TIMEOUT_S, proc):  # a dead router returns at once
-                failed.append("router (did not start listening)")
-                return 1
-        for name in comps:
-            proc = subprocess.Popen(base + [name, "--run-dir", str(run_dir)] + _passthrough(args))
-            children.append((name, proc))
-        if args.duration:  # seconds of the running cell: counted from when every component is up
-            print(f"humanpt up: {_wait_ready(cfg.runtime, comps, children, stop)}", flush=True)
-        deadline = time.monotonic() + args.duration if args.duration else None
-        while not stop.wait(0.2):
-            if deadline and time.monotonic() >= deadline:
-                break
-            dead = [(n, p.returncode) for n, p in children if p.poll() is not None]
-            if dead:
-                failed += [f"{n} (exit {rc})" for n, rc in dead]
-                break
-    finally:
-        # Components first, the router last, so components leave cleanly.
-        for _, p in reversed(children):
-            if p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
-        if failed:
-            print(f"humanpt up: stopped because a child died: {', '.join(failed)}", file=sys.stderr, flush=True)
+    res = supervisor.up(cfg, prof, run_dir, config_file=args.config, cell=args.cell, connect=args.connect or (),
+                        duration_s=args.duration, stop=stop_on_signals(),
+                        say=lambda line: print(f"humanpt up: {line}", flush=True))
+    if res.failed:
+        print(f"humanpt up: stopped because a child died: {', '.join(res.failed)}", file=sys.stderr, flush=True)
     print(f"humanpt up: stopped; recordings in {run_dir}/", flush=True)
     from humanpt.runtime.recording import losses_lines
 
     for line in losses_lines(run_dir):  # a component's recording lost messages to a write error
         print(f"humanpt up: {line}", flush=True)
-    return 1 if failed else 0
+    return res.exit_code
 
 
 # -- inspection ----------------------------------------------------------------------------
-def _class_by_name(type_name: str | None):
-    """The message class of a full protobuf type name known to this process (humanpt's and
-    Foxglove's messages), or None."""
-    if not type_name:
-        return None
-    from google.protobuf import descriptor_pool, message_factory
-
-    package, _, name = type_name.rpartition(".")
-    if package == "foxglove":  # Foxglove's classes register when imported: one module per message
-        import importlib
-
-        try:
-            importlib.import_module(f"foxglove_schemas_protobuf.{name}_pb2")
-        except ImportError:
-            return None
-    try:
-        return message_factory.GetMessageClass(descriptor_pool.Default().FindMessageTypeByName(type_name))
-    except KeyError:
-        return None
-
-
-def _describe(key: str, payload: bytes, full: bool = False, type_name: str | None = None) -> tuple[str, str]:
-    """(type name, text) of one sample: decoded by its topic's type, or, for a key not in the
-    topic table, by the type its encoding names (``type_name``, application/protobuf;<type>)."""
-    from google.protobuf import text_format
-
-    try:
-        _, short = topics.short_from_key(key)
-        cls = topics.message_type(short)
-    except topics.UnknownTopicError:
-        cls = _class_by_name(type_name)
-        if cls is None:
-            what = f"its encoding names {type_name}, unknown here" if type_name else "no type in its encoding"
-            return type_name or "?", f"<{len(payload)} bytes, not in the topic table; {what}>\n"
-    msg = cls()
-    try:
-        msg.ParseFromString(payload)
-    except Exception as e:  # noqa: BLE001
-        return cls.DESCRIPTOR.full_name, f"<{len(payload)} bytes that do not decode: {e}>"
-    if not full and cls.DESCRIPTOR.full_name == "foxglove.RawImage":
-        msg = type(msg)(timestamp=msg.timestamp, frame_id=msg.frame_id, width=msg.width, height=msg.height,
-                        encoding=msg.encoding, step=msg.step)
-        return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg) + f"data: <{len(payload)} bytes>\n"
-    return cls.DESCRIPTOR.full_name, text_format.MessageToString(msg)
-
-
 def table(head: list[str], rows: list[list[str]], align: str) -> list[str]:
     """Lines of a text table whose columns fit their widest cell (``align``: one ``<`` or
     ``>`` per column); the last column is not padded."""
@@ -376,58 +84,34 @@ def topics_cmd_table(as_json: bool = False) -> int:
 
 
 def topics_cmd(args) -> int:
+    from humanpt.runtime.monitor import listen, type_of_key
+
     if args.table or args.json:
         return topics_cmd_table(args.json)
     if args.hz:
         return topics_hz(args)
     duration = 2.0 if args.duration is None else args.duration
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    stats: dict[str, list] = defaultdict(lambda: [0, 0, None, None])  # count, bytes, first, last
-    lock = threading.Lock()
-
-    def cb(sample):
-        now = time.monotonic()
-        with lock:
-            s = stats[str(sample.key_expr)]
-            s[0] += 1
-            s[1] += len(sample.payload)
-            s[2] = s[2] or now
-            s[3] = now
-
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
-        alive = sorted(str(r.ok.key_expr).rsplit("/", 1)[-1]
-                       for r in session.liveliness().get(liveliness_key(cell, "*")) if r.ok is not None)
-        time.sleep(duration)
-        sub.undeclare()
-    print(f"cell {cell}: components up: {', '.join(alive) or 'none'}")
+    alive, stats = listen(cfg, duration)
+    print(f"cell {cfg.runtime.cell}: components up: {', '.join(alive) or 'none'}")
     if not stats:
         print(f"no messages in {duration:g} s")
         return 0
-    rows = []
-    for key in sorted(stats):
-        count, nbytes, first, last = stats[key]
-        rate = (count - 1) / (last - first) if count > 1 and last > first else 0.0
-        rows.append([key, _type_of_key(key), str(count), f"{rate:.1f}", f"{nbytes / count:.0f}"])
+    rows = [[key, type_of_key(key), str(s.count), f"{s.rate_hz:.1f}", f"{s.nbytes / s.count:.0f}"]
+            for key, s in sorted(stats.items())]
     print("\n".join(table(["key", "type", "count", "rate Hz", "avg bytes"], rows, "<<>>>")))
     return 0
-
-
-def _type_of_key(key: str) -> str:
-    try:
-        return topics.message_type(topics.short_from_key(key)[1]).DESCRIPTOR.full_name
-    except topics.UnknownTopicError:
-        return "?"
 
 
 def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
     """The lines of one ``topics --hz`` refresh: per key, messages and bytes in the last
     ``seconds`` as a rate (Hz) and a bandwidth (kB/s, 1 kB = 1000 bytes), then the total."""
+    from humanpt.runtime.monitor import type_of_key
+
     rows = []
     for key in sorted(window):
         count, nbytes = window[key]
-        rows.append([key, _type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
+        rows.append([key, type_of_key(key), f"{count / seconds:.1f}", f"{nbytes / seconds / 1e3:.1f}",
                      f"{(nbytes / count if count else 0):.0f}"])
     count = sum(c for c, _ in window.values())
     nbytes = sum(b for _, b in window.values())
@@ -438,148 +122,59 @@ def hz_table(window: dict[str, tuple[int, int]], seconds: float) -> list[str]:
 def topics_hz(args) -> int:
     """``humanpt topics --hz``: rates and bandwidth per key over each --interval, until
     --duration (if given) or Ctrl-C."""
+    from humanpt.runtime.monitor import watch_rates
+
     if not args.interval > 0:
         raise ValueError(f"--interval {args.interval:g}: must be > 0 s")
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    lock = threading.Lock()
-    window: dict[str, list[int]] = defaultdict(lambda: [0, 0])  # key -> [count, bytes] since the last print
-
-    def cb(sample):
-        with lock:
-            w = window[str(sample.key_expr)]
-            w[0] += 1
-            w[1] += len(sample.payload)
-
-    stop = stop_on_signals()
     tty = sys.stdout.isatty()
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(f"{topics.KEY_PREFIX}/{cell}/**", cb)
-        start = last = time.monotonic()
-        end = start + args.duration if args.duration else None
-        while not stop.wait(args.interval if end is None else max(0.0, min(args.interval, end - time.monotonic()))):
-            now = time.monotonic()
-            with lock:
-                snap = {k: (c, b) for k, (c, b) in window.items()}
-                window.clear()
-            head = f"cell {cell}, {now - start:.1f} s: rates over the last {now - last:.1f} s"
-            body = hz_table(snap, now - last) if snap else ["no messages"]
-            # a terminal gets a table refreshed in place; a pipe a block per interval
-            print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
-            last = now
-            if end is not None and now >= end - 1e-3:
-                break
-        sub.undeclare()
+
+    def show(snap: dict[str, tuple[int, int]], elapsed_s: float, window_s: float) -> None:
+        head = f"cell {cfg.runtime.cell}, {elapsed_s:.1f} s: rates over the last {window_s:.1f} s"
+        body = hz_table(snap, window_s) if snap else ["no messages"]
+        # a terminal gets a table refreshed in place; a pipe a block per interval
+        print(("\x1b[H\x1b[J" if tty else "") + "\n".join([head, *body]) + ("" if tty else "\n"), flush=True)
+
+    watch_rates(cfg, args.interval, show, args.duration, stop_on_signals())
     return 0
 
 
-def _full_key(key: str, cell: str) -> str:
-    return key if key.startswith(topics.KEY_PREFIX + "/") else f"{topics.KEY_PREFIX}/{cell}/{key}"
-
-
 def echo(args) -> int:
-    import queue as _queue
+    from humanpt.runtime import monitor
 
     cfg = load_cfg(args)
-    key = _full_key(args.key, cfg.runtime.cell)
-    short = key.split("/", 2)[2] if key.count("/") >= 2 else key
-    if "*" not in key and short not in topics.TOPICS:
-        near = sorted(t for t in topics.TOPICS if short.split("/")[0] in t) or sorted(topics.TOPICS)
-        raise ValueError(f"no topic {short!r} in this version (wildcards like '*/events' are fine); "
-                         f"known: {', '.join(near)}")
+    key = monitor.full_key(args.key, cfg.runtime.cell)
     fields = list(args.field or [])
     if args.csv and not fields:
         raise ValueError("--csv prints fields: name them with --field (e.g. --field header.stamp_ns)")
-    if fields and "*" not in key:  # a field the topic's type does not have: said before listening
-        from humanpt.schemas.convert import message_field
-
-        for f in fields:
-            _check_field_path(topics.message_type(short)(), f, message_field)
+    monitor.check_echo(key, fields)
     writer = None
     if args.csv:
         import csv
 
         writer = csv.writer(sys.stdout)
         writer.writerow(["stamp_ns", "key", *fields])
-    q: _queue.Queue = _queue.Queue()
-    stop = stop_on_signals()
-    n = 0
-    with open_tool_session(cfg.runtime) as session:
-        sub = session.declare_subscriber(key, lambda s: q.put((str(s.key_expr), s.payload.to_bytes(),
-                                                                type_name_of(s.encoding))))
-        deadline = time.monotonic() + args.duration if args.duration else None
-        while not stop.is_set() and (args.count is None or n < args.count):
-            if deadline and time.monotonic() >= deadline:
-                break
-            try:
-                k, payload, type_name = q.get(timeout=0.1)
-            except _queue.Empty:
-                continue
-            if fields:
-                row = _field_row(k, payload, fields)
-                if args.csv:
-                    writer.writerow(row)
-                else:
-                    print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
-                sys.stdout.flush()
+
+    def show(k: str, payload: bytes, type_name: str | None) -> None:
+        if fields:
+            row = monitor.field_row(k, payload, fields)
+            if writer is not None:
+                writer.writerow(row)
             else:
-                tname, text = _describe(k, payload, args.full, type_name)
-                print(f"--- {k} ({tname})\n{text}", end="", flush=True)
-            n += 1
-        sub.undeclare()
+                print(f"{row[0]} {row[1]} " + " ".join(f"{f}={v}" for f, v in zip(fields, row[2:], strict=True)))
+            sys.stdout.flush()
+        else:
+            tname, text = monitor.describe(k, payload, args.full, type_name)
+            print(f"--- {k} ({tname})\n{text}", end="", flush=True)
+
+    monitor.echo(cfg, key, show, count=args.count, duration_s=args.duration, stop=stop_on_signals())
     return 0
 
 
-def _check_field_path(msg, path: str, message_field) -> None:
-    """ValueError when ``path`` names no field of ``msg``'s type (an index beyond an empty
-    list is fine: a message may have entries)."""
-    from humanpt.schemas.convert import MessageError
-
-    try:
-        message_field(msg, path)
-    except MessageError as e:
-        if "entries, no [" not in str(e):
-            raise ValueError(str(e)) from None
-
-
-def _field_row(key: str, payload: bytes, fields: list[str]) -> list:
-    """[stamp ns, key, value of each field] of one message (``message_field``); a message
-    that does not decode, or lacks a field, raises ValueError naming it."""
-    from humanpt.schemas.convert import message_field, message_stamp_ns
-
-    try:
-        _, short = topics.short_from_key(key)
-        msg = topics.message_type(short).FromString(payload)
-    except Exception as e:  # noqa: BLE001 - unknown topic or undecodable bytes: one message
-        raise ValueError(f"{key}: cannot decode: {e}") from None
-    return [message_stamp_ns(msg), key, *(message_field(msg, f) for f in fields)]
-
-
-def _parse_assignment(a: str) -> tuple[str, object]:
-    key, eq, value = a.partition("=")
-    if not eq or not key:
-        raise cfgmod.ConfigError(f"{a!r} is not KEY=VALUE")
-    try:
-        return key, json.loads(value)
-    except json.JSONDecodeError:
-        return key, value
-
-
-def _param_query(session, cfg, component: str, sets: dict, timeout: float) -> dict | None:
-    """One request to ``component``'s parameter queryable (``sets`` may be empty: a read);
-    its reply body, or None when no component answered."""
-    replies = list(session.get(params_key(cfg.runtime.cell, component), payload=json.dumps({"set": sets}),
-                               timeout=timeout))
-    bodies = [json.loads(r.ok.payload.to_bytes()) for r in replies if r.ok is not None]
-    return bodies[0] if bodies else None
-
-
 def _no_answer(cfg, component: str, timeout: float) -> int:
-    rt = cfg.runtime
-    why = (f"; under mTLS only an operator's certificate may query parameters, this one is "
-           f"{rt.identity or 'tool'!r} (--as NAME)" if rt.security == "mtls" else "")
-    print(f"humanpt param: no component {component!r} answered in cell {rt.cell} "
-          f"within {timeout:g} s (is it running?{why})", file=sys.stderr)
+    from humanpt.runtime.params import no_answer
+
+    print(f"humanpt param: {no_answer(cfg, component, timeout)}", file=sys.stderr)
     return 1
 
 
@@ -600,15 +195,15 @@ def _param_action(args) -> tuple[str, str, list[str]]:
 
 
 def param(args) -> int:
+    from humanpt.runtime import params
+
     action, component, rest = _param_action(args)
     if action == "dump":
         return param_dump(args, component, rest[0] if rest else None)
     if action == "load":
         return param_load(args, component, rest[0])
     cfg = load_cfg(args)
-    sets = dict(_parse_assignment(a) for a in rest)
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, sets, args.timeout)
+    body = params.query(cfg, component, dict(params.parse_assignment(a) for a in rest), args.timeout)
     if body is None:
         return _no_answer(cfg, component, args.timeout)
     for r in body.get("results", []):
@@ -618,18 +213,16 @@ def param(args) -> int:
 
 
 def param_dump(args, component: str, out: str | None) -> int:
-    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML (a ``[COMPONENT]``
-    section, which ``param load`` and a config file both read)."""
+    """``humanpt param dump COMPONENT [FILE]``: the live parameters as TOML."""
+    from humanpt.runtime import params
+
     if out is not None and Path(out).exists() and not args.overwrite:
         raise FileExistsError(f"{out}: exists; give --overwrite to replace it")
     cfg = load_cfg(args)
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, {}, args.timeout)
+    body = params.query(cfg, component, {}, args.timeout)
     if body is None:
         return _no_answer(cfg, component, args.timeout)
-    text = (f"# live parameters of {component} in cell {cfg.runtime.cell}, {time.strftime('%Y-%m-%d %H:%M:%S')}\n"
-            f"# humanpt param load {component} FILE sets them again\n"
-            + cfgmod.dumps_toml({component: body.get("params") or {}}))
+    text = params.dump_text(cfg, component, body.get("params") or {})
     if out is None:
         print(text, end="")
     else:
@@ -639,67 +232,25 @@ def param_dump(args, component: str, out: str | None) -> int:
     return 0
 
 
-def _param_file(path: str, component: str) -> dict:
-    """KEY -> value of a parameter file: a ``[COMPONENT]`` section (what ``param dump``
-    writes) or bare top-level keys."""
-    doc = cfgmod.read_toml(path, kind="parameter file")
-    if set(doc) == {component} and isinstance(doc[component], dict):
-        return doc[component]
-    sections = [k for k, v in doc.items() if isinstance(v, dict)]
-    if sections:
-        raise cfgmod.ConfigError(f"{path}: has section(s) {', '.join(sections)}; a parameter file for {component} "
-                                 f"holds [{component}] only, or bare KEY = VALUE lines")
-    return doc
-
-
 def param_load(args, component: str, path: str) -> int:
-    """``humanpt param load COMPONENT FILE``: set each parameter of FILE, all or none.
+    """``humanpt param load COMPONENT FILE``: :func:`humanpt.runtime.params.load_file`."""
+    from humanpt.runtime import params
 
-    Checked here first against the component's live parameters and its config type (an
-    unknown or non-live key, a value out of range: ConfigError, nothing sent); a key the
-    component itself refuses (a safety limit it may only tighten) rolls back the keys it
-    had set, so the component is left as it was."""
-    values = _param_file(path, component)
-    if not values:
-        raise cfgmod.ConfigError(f"{path}: no parameters in it")
+    params.read_file(path, component)  # a bad file is named before the config is read
     cfg = load_cfg(args)
-    try:
-        cls = core_class(component).config_type
-    except (UnknownComponentError, KeyError) as e:
-        raise cfgmod.ConfigError(f"unknown component {component!r}: {e}") from None
-    with open_tool_session(cfg.runtime) as session:
-        body = _param_query(session, cfg, component, {}, args.timeout)
-        if body is None:
-            return _no_answer(cfg, component, args.timeout)
-        before = body.get("params") or {}
-        unknown = [k for k in values if k not in before]
-        if unknown:
-            raise cfgmod.ConfigError(f"{path}: {', '.join(map(repr, unknown))} not live parameter(s) of {component}; "
-                                     f"live: {', '.join(before)} (nothing set)")
-        obj = cfgmod.build(cls, before, source=f"{component}'s live parameters", section=component)
-        for k, v in values.items():  # in order, so checks between fields see the new values
-            try:
-                obj = cfgmod.replace_live(obj, k, json.dumps(v))
-            except cfgmod.ConfigError as e:
-                raise cfgmod.ConfigError(f"{path}: {e} (nothing set)") from None
-        body = _param_query(session, cfg, component, values, args.timeout)
-        if body is None:
-            return _no_answer(cfg, component, args.timeout)
-        results = body.get("results", [])
-        refused = [r for r in results if not r["ok"]]
-        if refused:
-            done = {r["key"]: before[r["key"]] for r in results if r["ok"]}
-            back = _param_query(session, cfg, component, done, args.timeout) if done else {"ok": True}
-            restored = back is not None and back.get("ok", False)
-            for r in refused:
-                print(f"REJECTED: {r['text']}", file=sys.stderr)
-            print(f"humanpt param load: {component} refused {len(refused)} of {len(values)}; "
-                  f"{'the others were set back' if restored else 'COULD NOT SET BACK ' + ', '.join(done)}"
-                  f" (nothing changed{'' if restored else '?'})", file=sys.stderr)
-            return 1
-    for r in results:
+    res = params.load_file(cfg, component, path, args.timeout)
+    if not res.answered:
+        return _no_answer(cfg, component, args.timeout)
+    if res.refused:
+        for r in res.refused:
+            print(f"REJECTED: {r['text']}", file=sys.stderr)
+        print(f"humanpt param load: {component} refused {len(res.refused)} of {res.keys}; "
+              f"{'the others were set back' if res.restored else 'COULD NOT SET BACK ' + ', '.join(res.set_back)}"
+              f" (nothing changed{'' if res.restored else '?'})", file=sys.stderr)
+        return 1
+    for r in res.results:
         print(f"set: {r['text']}")
-    print(f"humanpt param load: {len(values)} parameters of {component} from {path}")
+    print(f"humanpt param load: {res.keys} parameters of {component} from {path}")
     return 0
 
 
@@ -795,187 +346,48 @@ def runs_info(args) -> int:
 
 
 def runs_merge(args) -> int:
-    from mcap.writer import Writer
-    from mcap_protobuf.schema import register_schema
+    from humanpt.runtime.player import merge_run
 
-    from humanpt.runtime.recording import OUT, RecordingError, merge_entries, read_metadata
-
-    run_dir = Path(args.run_dir)
-    files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []
-    if not files:
-        raise RecordingError(f"{run_dir}: no .mcap recordings here")
-    out = Path(args.out)
-    if out.resolve().parent == run_dir.resolve() and out.suffix == ".mcap":
-        raise RecordingError(f"{out}: write the merged file outside the run directory")
-    notes: list[str] = []
-    where: dict[Path, tuple[str, str]] = {}  # file -> (cell, component)
-    for f in files:
-        try:
-            meta, _ = read_metadata(f)
-        except RecordingError:
-            meta = {}  # merge_entries says why it leaves it out
-        where[f] = (meta.get("cell", "cell0"), meta.get("component", f.stem.split(".")[0]))
-    n = 0
-    with open(out, "wb") as fh:
-        w = Writer(fh)
-        w.start(profile="humanpt", library="humanpt runs merge")
-        schema_ids: dict[str, int] = {}
-        channels: dict[str, int] = {}
-        for t_ns, f, e in merge_entries(files, notes, keep=lambda e: e.direction == OUT):
-            cell, component = where[f]
-            # Bus topics on their key; a component's local outputs (serial bytes...) apart.
-            key = (f"{topics.KEY_PREFIX}/{cell}/{e.topic}" if "/" in e.topic
-                   else f"{topics.KEY_PREFIX}/{cell}/{component}/local/{e.topic}")
-            if key not in channels:
-                try:
-                    cls = topics.message_type(e.topic)
-                except topics.UnknownTopicError:
-                    continue  # a topic this version does not know: nothing to decode it with
-                name = cls.DESCRIPTOR.full_name
-                if name not in schema_ids:
-                    schema_ids[name] = register_schema(w, cls)
-                channels[key] = w.register_channel(topic=key, message_encoding="protobuf",
-                                                   schema_id=schema_ids[name])
-            w.add_message(channel_id=channels[key], log_time=t_ns, data=e.data, publish_time=t_ns, sequence=n)
-            n += 1
-        w.finish()
-    for note in notes:
+    res = merge_run(args.run_dir, args.out)
+    for note in res.notes:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
-    print(f"humanpt runs merge: {n} messages from {len(files)} recordings on {len(channels)} topics -> {out}")
+    print(f"humanpt runs merge: {res.messages} messages from {res.recordings} recordings on {res.topics} topics "
+          f"-> {args.out}")
     return 0
 
 
-def _run_files(run: str) -> list[Path]:
-    """The .mcap recordings of a run directory, or the one file given."""
-    from humanpt.runtime.recording import RecordingError
-
-    path = Path(run)
-    if path.is_dir():
-        files = sorted(path.glob("*.mcap"))
-        if not files:
-            raise RecordingError(f"{path}: no .mcap recordings here")
-        return files
-    if path.exists():
-        return [path]
-    raise RecordingError(f"{path}: no such run directory or file")
-
-
-def _recorded_span_ns(files: list[Path]) -> int | None:
-    """Last minus first log time over ``files`` from their MCAP summaries (None when a file
-    has none: an unfinished recording)."""
-    from mcap.reader import make_reader
-
-    starts, ends = [], []
-    for f in files:
-        try:
-            with open(f, "rb") as fh:
-                stats = make_reader(fh).get_summary().statistics
-        except Exception:  # noqa: BLE001 - no summary (unfinished, damaged): the span is unknown
-            return None
-        if stats is None:
-            return None
-        if stats.message_count:
-            starts.append(stats.message_start_time)
-            ends.append(stats.message_end_time)
-    return max(ends) - min(starts) if starts else 0
-
-
-PLAY_CLOCK_TOPIC = "player/clock"
-
-
 def runs_play(args) -> int:
-    """Re-publish a recording's bus outputs at their recorded timing (``humanpt runs play``).
+    """``humanpt runs play``: :func:`humanpt.runtime.player.play` with a progress line."""
+    from humanpt.runtime import player
 
-    Every component's ``direction=out`` messages on bus topics (local topics never), merged
-    by log time, are put on ``humanpt/<cell>/<topic>`` of the live cell (``--cell``/config)
-    so that ``echo``, ``console status`` and the viewer see them; message k is put at
-    (t_k - t_0) / rate after the first.  ``--clock`` puts a ``player/clock`` Tick (header
-    stamp = the recording's time) every ``--clock-period`` of recorded time.
-    """
-    from humanpt.runtime.bus import declare_topic_publisher
-    from humanpt.runtime.recording import OUT, merge_entries
-    from humanpt.schemas import humanpt_pb2 as pb
-
-    if not args.rate > 0:
-        raise ValueError(f"--rate {args.rate:g}: must be > 0 (1 = recorded speed, 2 = twice as fast)")
-    if not args.clock_period > 0:
-        raise ValueError(f"--clock-period {args.clock_period:g}: must be > 0 s")
-    files = _run_files(args.run)
-    wanted: set[str] | None = None
-    if args.topics:
-        wanted = {t.strip() for t in args.topics.split(",") if t.strip()}
-        unknown = sorted(t for t in wanted if t not in topics.TOPICS)
-        if unknown:
-            raise ValueError(f"--topics: {', '.join(unknown)} not in the topic table (short names such as "
-                             f"controller/status; `humanpt topics --table` lists them)")
+    player.check_options(args.rate, args.clock_period)
+    files = player.run_files(args.run)
+    wanted = player.check_topics(args.topics.split(",")) if args.topics else None
     cfg = load_cfg(args)
-    cell = cfg.runtime.cell
-    span_ns = _recorded_span_ns(files)
-    skipped: dict[str, str] = {}  # topic -> why it is not played
-
-    def keep(e) -> bool:
-        if e.direction != OUT or e.topic not in topics.TOPICS or (wanted is not None and e.topic not in wanted):
-            return False  # inputs, local topics (serial bytes, show: copies), topics not asked for
-        if e.schema != topics.TOPICS[e.topic].type.DESCRIPTOR.full_name:
-            skipped[e.topic] = f"recorded as {e.schema}, this version's type differs"
-            return False
-        return True
-
-    stop = stop_on_signals()
+    span_ns = player.recorded_span_ns(files)
     tty = sys.stderr.isatty()
-    n = rounds = 0
     total = f" / {span_ns / 1e9:.1f}" if span_ns is not None else ""
-    with open_tool_session(cfg.runtime) as session:
-        pubs: dict[str, object] = {}
-        clock = declare_topic_publisher(session, cell, PLAY_CLOCK_TOPIC) if args.clock else None
-        clock_period_ns = int(args.clock_period * 1e9)
-        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cell} at x{args.rate:g}"
-              f"{', looping' if args.loop else ''}{', clock on ' + PLAY_CLOCK_TOPIC if clock else ''}; "
-              "Ctrl-C stops", file=sys.stderr, flush=True)
-        next_progress = time.monotonic()
-        while not stop.is_set():
-            notes: list[str] = []
-            t0 = wall0 = None
-            next_clock_ns = clock_seq = 0
-            played = 0
-            for t_ns, _f, e in merge_entries(files, notes, keep):
-                if t0 is None:
-                    t0, wall0, next_clock_ns = t_ns, time.monotonic(), t_ns
-                while clock is not None and next_clock_ns <= t_ns:  # the clock's ticks due before it
-                    if stop.wait(max(0.0, wall0 + (next_clock_ns - t0) / 1e9 / args.rate - time.monotonic())):
-                        break
-                    clock.put(pb.Tick(header=pb.Header(stamp_ns=next_clock_ns, seq=clock_seq, frame_id="recording"),
-                                      period_ns=clock_period_ns).SerializeToString())
-                    clock_seq += 1
-                    next_clock_ns += clock_period_ns
-                # wait on the stop event, not a sleep: Ctrl-C ends the wait at once
-                if stop.wait(max(0.0, wall0 + (t_ns - t0) / 1e9 / args.rate - time.monotonic())):
-                    break
-                pub = pubs.get(e.topic)
-                if pub is None:
-                    pub = pubs[e.topic] = declare_topic_publisher(session, cell, e.topic, block=True)
-                pub.put(e.data)
-                n += 1
-                played += 1
-                now = time.monotonic()
-                if now >= next_progress:
-                    next_progress = now + 1.0
-                    print(f"{chr(13) if tty else ''}humanpt runs play: {(t_ns - t0) / 1e9:7.1f}{total} s recorded, "
-                          f"{n} messages{f', round {rounds + 1}' if args.loop else ''}",
-                          end="" if tty else "\n", file=sys.stderr, flush=True)
-            rounds += 1
-            for note in notes:
-                print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
-            if not args.loop or played == 0:
-                break
-        for pub in [*pubs.values(), *([clock] if clock else [])]:
-            pub.undeclare()
-    for topic, why in sorted(skipped.items()):
+
+    def progress(recorded_s: float, n: int, round_: int) -> None:
+        print(f"{chr(13) if tty else ''}humanpt runs play: {recorded_s:7.1f}{total} s recorded, "
+              f"{n} messages{f', round {round_}' if args.loop else ''}",
+              end="" if tty else "\n", file=sys.stderr, flush=True)
+
+    def header() -> None:
+        print(f"humanpt runs play: {len(files)} recordings of {args.run} -> cell {cfg.runtime.cell} at "
+              f"x{args.rate:g}{', looping' if args.loop else ''}"
+              f"{', clock on ' + player.CLOCK_TOPIC if args.clock else ''}; Ctrl-C stops", file=sys.stderr, flush=True)
+
+    res = player.play(cfg, files, rate=args.rate, loop=args.loop, topics=wanted, clock=args.clock,
+                      clock_period_s=args.clock_period, stop=stop_on_signals(), on_open=header, progress=progress)
+    for note in dict.fromkeys(res.notes):
+        print(f"\nhumanpt runs play: warning: {note}", file=sys.stderr)
+    for topic, why in sorted(res.skipped.items()):
         print(f"humanpt runs play: warning: {topic} not played: {why}", file=sys.stderr)
-    how = "stopped" if stop.is_set() else "done"
-    print(f"{chr(10) if tty else ''}humanpt runs play: {how}; {n} messages on {len(pubs)} topics"
-          f"{f' in {rounds} rounds' if args.loop else ''}", file=sys.stderr, flush=True)
-    if n == 0:
+    print(f"{chr(10) if tty else ''}humanpt runs play: {'stopped' if res.stopped else 'done'}; {res.messages} "
+          f"messages on {res.topics} topics{f' in {res.rounds} rounds' if args.loop else ''}",
+          file=sys.stderr, flush=True)
+    if res.messages == 0:
         print("humanpt runs play: nothing to play (no bus outputs recorded"
               f"{' on the topics asked for' if wanted else ''})", file=sys.stderr)
         return 1

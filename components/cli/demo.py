@@ -17,96 +17,34 @@ from pathlib import Path
 
 import numpy as np
 
-from humanpt.cli.progress import Bars
-from humanpt.controller.config import ControllerConfig
 from humanpt.runtime import config as cfgmod
+from humanpt.runtime.progress import Bars
 
 
 def parse_overrides(items: list[str] | None) -> dict[str, dict]:
-    """``--set SECTION.KEY=VALUE`` items -> {section: {key: value}}; VALUE is a TOML value
-    (a bare word that is not TOML is taken as a string); ``SECTION.SUB.KEY`` nests a table
-    (e.g. ``sim_camera.psvs.image_width_px=320``)."""
-    import tomllib
+    """``--set SECTION.KEY=VALUE`` items -> {section: {key: value}}
+    (:func:`humanpt.twin.demo.parse_overrides`); a malformed one ends the command, named."""
+    from humanpt.twin.demo import parse_overrides as parse
 
-    out: dict[str, dict] = {}
-    for item in items or []:
-        key, sep, raw = item.partition("=")
-        parts = key.strip().split(".")
-        if not sep or len(parts) < 2 or not all(parts):
-            raise SystemExit(f"humanpt: --set {item!r}: expected SECTION.KEY=VALUE, e.g. sim_camera.fps=15")
-        try:
-            value = tomllib.loads(f"v = {raw}")["v"]
-        except tomllib.TOMLDecodeError:
-            value = raw
-        table = out.setdefault(parts[0], {})
-        for p in parts[1:-1]:
-            table = table.setdefault(p, {})
-        table[parts[-1]] = value
-    return out
-
-
-def report(src, cfg, run_dir: Path, wall_s: float, sim_s: float, mode: str,
-           stop_ns: int | None = None) -> str:
-    """The accuracy table against ground truth (:func:`humanpt.twin.run.accuracy`), and
-    where things are. Warnings stamped after ``stop_ns`` (the processes being stopped: e.g.
-    the gateway seeing the controller go) are counted apart."""
-    from humanpt.twin import evaluate
-    from humanpt.twin.run import accuracy
-
-    acc = accuracy(src, cfg.controller, cfg.sim_camera.flange_T_camera, stop_ns)
-    if mode == "live":
-        lines = [f"humanpt demo (live): {sim_s:.1f} s of scenario, {wall_s:.1f} s of wall time with start-up", ""]
-    else:
-        lines = [f"humanpt demo ({mode}): {sim_s:.1f} s of twin time in {wall_s:.1f} s of wall time "
-                 f"({sim_s / max(wall_s, 1e-9):.1f}x real time)", ""]
-    lines.append(evaluate.format_stats(f"recorded path of {acc.which} against ground truth", acc.path))
-    if len(acc.servo_mm):
-        lines += ["", f"servo error |G - D| while the target moved: mean {acc.servo_mm.mean():.3f} mm, "
-                  f"max {acc.servo_mm.max():.3f} mm; angle mean {acc.servo_deg.mean():.3f} deg, "
-                  f"max {acc.servo_deg.max():.3f} deg"]
-    from humanpt.controller.servo_report import servo_summary
-
-    servo = servo_summary(src, evaluate.scenario_start_ns(src))
-    if servo.cycles:
-        lines.append(f"(the controller's own view while it moved) {servo.line()}")
-    if acc.warnings:
-        lines += ["", f"{len(acc.warnings)} warnings/errors, e.g.: "
-                  + "; ".join(f"{e.source}: {e.code}" for e in acc.warnings[:5])]
-    else:
-        lines += ["", "no warnings or errors during the run"]
-    if acc.stopping:
-        lines.append(f"(while stopping: {len(acc.stopping)}, e.g. "
-                     + "; ".join(f"{e.source}: {e.code}" for e in acc.stopping[:3]) + ")")
-    paths = sorted((run_dir / "paths").glob("*.csv"))
-    lines += ["", f"recordings: {run_dir}/*.mcap  (humanpt replay {run_dir}; humanpt view {run_dir})"]
-    if paths:
-        lines.append(f"path file:  {paths[-1]}")
-    from humanpt.runtime.recording import losses_lines
-
-    lines += losses_lines(run_dir)  # a component's recording lost messages to a write error
-    return "\n".join(lines)
+    try:
+        return parse(items)
+    except ValueError as e:
+        raise SystemExit(f"humanpt: {e}") from None
 
 
 def run_lockstep(args, cfg, run_dir: Path) -> int:
-    from humanpt.runtime.rigfile import write_rig
-    from humanpt.twin.run import run
+    from humanpt.twin.demo import run_lockstep_demo
 
-    write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believed in this run", overwrite=True)
-    # Record once the target starts to move (the servo has acquired it by then).
     with Bars("s") as bars:
-        from humanpt.twin.live import link_cycle_ms
-
-        rsi_ms = link_cycle_ms("rsi", args.cycle_ms) if getattr(args, "link", "alter") == "rsi" else None
-        res = run(cfg, robot=args.robot, duration_s=args.duration or None, record_from_s=cfg.operator.start_delay_s,
-                  run_dir=run_dir, progress=bars.stage("twin"), rsi_cycle_ms=rsi_ms)
-    res.write_path(run_dir / "paths" / "path-1.csv")
-    print(report(res.world, cfg, run_dir, res.wall_s, res.twin_s, "lock-step"))
+        text = run_lockstep_demo(cfg, run_dir, robot=args.robot, duration_s=args.duration,
+                                 link=getattr(args, "link", "alter"), cycle_ms=args.cycle_ms,
+                                 progress=bars.stage("twin"))
+    print(text)
     return 0
 
 
 def run_live(args, cfg, run_dir: Path) -> int:
-    from humanpt.twin.evaluate import RunOutputs
-    from humanpt.twin.live import run_live as run
+    from humanpt.twin.demo import run_live_demo
 
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -122,20 +60,16 @@ def run_live(args, cfg, run_dir: Path) -> int:
                   f"which enforces the access control; tools present {rt.identity!r} (operator)", flush=True)
 
     with Bars("s") as bars:
-        res = run(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
-                  overrides=parse_overrides(getattr(args, "set", None)), stop=stop, on_started=started,
-                  progress=bars.stage("live"), secure=getattr(args, "secure", False),
-                  link=getattr(args, "link", "alter"), cycle_ms=getattr(args, "cycle_ms", None))
+        res, text = run_live_demo(cfg, run_dir, port=args.port, viewer=args.viewer, duration_s=args.duration,
+                                  overrides=parse_overrides(getattr(args, "set", None)), stop=stop,
+                                  on_started=started, progress=bars.stage("live"),
+                                  secure=getattr(args, "secure", False), link=getattr(args, "link", "alter"),
+                                  cycle_ms=getattr(args, "cycle_ms", None))
     if res.failed:
         print(f"humanpt demo: stopped early: {'; '.join(res.failed)} (see {run_dir / 'processes.log'})",
               file=sys.stderr)
         return 1
-    print(report(RunOutputs(run_dir), res.config, run_dir, res.wall_s, res.duration_s, "live",
-                 stop_ns=res.stop_ns))
-    if getattr(args, "link", "alter") == "rsi":
-        from humanpt.robot_gateway.links.rsi.runstats import rsi_cycles
-
-        print(rsi_cycles(run_dir) or "RSI: no <Rob> recorded by sim_robot")
+    print(text)
     return 0
 
 
@@ -218,10 +152,9 @@ def run_calibrate(args, run_dir: Path) -> int:
 
 
 def demo(args) -> int:
-    from humanpt.cli.commands import run_stamp
-    from humanpt.runtime.rigfile import load_rig
-    from humanpt.twin.run import SECTIONS, OverrideError, SystemConfig
-    from humanpt.twin.worlds import World
+    from humanpt.runtime.run import run_stamp
+    from humanpt.twin.demo import demo_config, header_lines, scenario_label, write_world
+    from humanpt.twin.run import SECTIONS, OverrideError
 
     if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
@@ -243,24 +176,15 @@ def demo(args) -> int:
     if unknown:
         raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
     try:  # a bad key or value, world or rig fails here, before the run starts
-        world = World.named(args.world)
-        rig = load_rig(args.rig) if getattr(args, "rig", None) else None
-        cfg = SystemConfig.for_scenario(args.scenario, args.seed, over, rig=rig, world=world,
-                                        controller=ControllerConfig(law=args.law))
+        cfg = demo_config(args.scenario, args.seed, over, world=args.world, rig_file=getattr(args, "rig", None),
+                          law=args.law)
     except (OverrideError, cfgmod.ConfigError) as e:
         raise SystemExit(f"humanpt: {e}") from None
-    label = Path(args.scenario).stem if Path(args.scenario).suffix else args.scenario
-    run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{label}"
+    run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{scenario_label(args.scenario)}"
     run_dir.mkdir(parents=True, exist_ok=True)
-    print(f"humanpt demo: scenario {label}, {'lock-step' if args.lockstep else 'live'}, recording to {run_dir}/",
-          flush=True)
-    print(f"humanpt demo: world {cfg.world.name}"
-          + (f" ({len(cfg.world.sources)} error sources: {', '.join(cfg.world.sources)})" if cfg.world.sources else
-             " (the hardware is exactly as the rig says)")
-          + f"; the pipeline's rig: {args.rig or 'nominal'} ({cfg.rig.methods()})", flush=True)
-    (run_dir / "world.toml").write_text(
-        "# the twin's world in this run (humanpt demo --world " + str(args.world) + ")\n"
-        + cfgmod.dumps_toml({"name": cfg.world.name, "sources": list(cfg.world.sources), **cfg.world.extra}))
+    for line in header_lines(cfg, args.scenario, run_dir, args.lockstep, getattr(args, "rig", None)):
+        print(line, flush=True)
+    write_world(run_dir, cfg, args.world)
     from humanpt.twin.live import link_cycle_ms
 
     try:  # a cycle the link does not have fails here, before anything starts

@@ -9,10 +9,14 @@ import os
 import sys
 
 from humanpt import __version__
-from humanpt.operator.scenario import BUILTIN_SCENARIOS
-from humanpt.runtime.config import RENAMED_COMPONENTS, ConfigError, current_name
-from humanpt.runtime.recording import RecordingError
-from humanpt.runtime.registry import COMPONENTS, PROFILES, UnknownComponentError
+from humanpt.runtime.registry import COMPONENTS, PROFILES
+
+# A verb's module (and what it imports: numpy, scipy, OpenCV, zenoh...) is imported when
+# that verb runs, never to list the verbs: ``humanpt --help`` imports only the registry.
+
+# Components that exist for the tests (the runtime's self-test pair): runnable as
+# ``humanpt pinger`` and through ``python -m humanpt.runtime.run``, not listed as verbs.
+TEST_ONLY_COMPONENTS = frozenset({"pinger", "ponger"})
 
 EPILOG = """\
 examples:
@@ -61,7 +65,19 @@ def _seconds(text: str) -> float:
     return v
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _first_word(argv: list[str]) -> str | None:
+    """The verb of a command line: its first word that is not an option (top-level options
+    take no value)."""
+    return next((w for w in argv if not w.startswith("-")), None)
+
+
+def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
+    """The whole parser; with ``verb``, that verb's in full and the others only as their line
+    of the verb list (whose modules are then not imported)."""
+
+    def full(name: str) -> bool:
+        return verb is None or verb == name
+
     ap = argparse.ArgumentParser(
         prog="humanpt", description="humanpt: teach a welding robot its path by showing it "
         "(pseudo stereo visual servo middleware over Zenoh, recorded to MCAP).",
@@ -77,8 +93,14 @@ def build_parser() -> argparse.ArgumentParser:
                        "path is recorded. Live by default (every component a process over Zenoh); --lockstep runs "
                        "the same cores in one process on virtual time. Prints where the recordings and the path "
                        "file are, and an accuracy table against ground truth.")
+    if full("demo"):
+        from humanpt.operator.scenario import BUILTIN_SCENARIOS
+
+        scenarios = ", ".join(BUILTIN_SCENARIOS)
+    else:
+        scenarios = "a built-in scenario"
     p.add_argument("--scenario", "-s",
-                   help=f"{', '.join(BUILTIN_SCENARIOS)}, or a scenario file (default arc; with --calibrate "
+                   help=f"{scenarios}, or a scenario file (default arc; with --calibrate "
                    "trapezium)")
     p.add_argument("--speed", type=float, metavar="MM_S",
                    help="the operator's speed along a built-in scenario, mm/s (default: the scenario's, 20; "
@@ -191,9 +213,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=float, help="stop everything after this many seconds, counted from when "
                    "every component is up (its liveliness token; under mTLS watched as the tool identity)")
 
-    old_names = {new: old for old, new in RENAMED_COMPONENTS.items()}
+    old_names: dict[str, str] = {}
+    if verb != "":  # a verb runs (not the verb list): the old names are verbs too (robot_gateway's)
+        from humanpt.runtime.config import RENAMED_COMPONENTS
+
+        old_names = {new: old for old, new in RENAMED_COMPONENTS.items()}
     for name in sorted(COMPONENTS):
-        p = sub.add_parser(name, help=f"run the {name} component alone",
+        listed = {} if name in TEST_ONLY_COMPONENTS else {"help": f"run the {name} component alone"}
+        p = sub.add_parser(name, **listed,
                            aliases=[old_names[name]] if name in old_names else [],
                            description=f"Run the {name} component alone, as a client of the router.")
         _add_common(p)
@@ -280,9 +307,13 @@ def build_parser() -> argparse.ArgumentParser:
     from humanpt.cli import pki as pki_cli
     from humanpt.cli import view as view_cli
 
-    view_cli.add_parser(sub)
-    console_cli.add_parser(sub, _add_common)
-    pki_cli.add_parser(sub, _add_common)
+    for name, add in (("view", lambda: view_cli.add_parser(sub)),
+                      ("console", lambda: console_cli.add_parser(sub, _add_common)),
+                      ("pki", lambda: pki_cli.add_parser(sub, _add_common))):
+        if full(name):
+            add()
+        else:  # its line in the verb list only: the module's imports wait until it runs
+            sub.add_parser(name, help={"view": view_cli, "console": console_cli, "pki": pki_cli}[name].HELP)
 
     p = sub.add_parser("runs", help="work with recorded runs (info, list, merge, play, rerecord)")
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
@@ -458,7 +489,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     from humanpt.cli import calibrate as calibrate_cli
 
-    calibrate_cli.add_parsers(sub)
+    if full("calibrate"):
+        calibrate_cli.add_parsers(sub)
+    else:
+        sub.add_parser("calibrate", help=calibrate_cli.HELP)
 
     p = sub.add_parser("rig", help="the rig file: what the pipeline believes about the hardware",
                        description="The rig is everything perception, the pose filter, the controller and viz "
@@ -571,24 +605,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = build_parser()
-    args, extra = ap.parse_known_args(argv)
+    words = list(sys.argv[1:] if argv is None else argv)
+    verb = _first_word(words)
+    ap = build_parser(verb or "")
+    args, extra = ap.parse_known_args(words)
     if extra and args.verb in INTERMIXED:
         # Positionals after an option (humanpt param controller --timeout 2 a=1): argparse
         # ends a subcommand's positionals at the first option; its own parser re-reads its
         # words intermixed (a parser with subcommands cannot).
-        words = list(sys.argv[1:] if argv is None else argv)
         rest = words[words.index(args.verb) + 1:]
         args = INTERMIXED[args.verb].parse_intermixed_args(
             rest, namespace=argparse.Namespace(verb=args.verb, verbose=args.verbose))
         extra = []
     if extra:
         ap.error(f"unrecognized arguments: {' '.join(extra)}")
+
     level = logging.WARNING - 10 * min(args.verbose, 2) if args.verbose else logging.INFO
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s", stream=sys.stderr)
     if not args.verb:
         ap.print_help()
         return 2
+    from humanpt.runtime.config import ConfigError
+    from humanpt.runtime.recording import RecordingError
+    from humanpt.runtime.registry import UnknownComponentError
     from humanpt.runtime.tuning import tune_process
 
     tune_process()
@@ -612,6 +651,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     from humanpt.cli import commands
+    from humanpt.runtime.config import current_name
 
     if getattr(args, "component", None) and current_name(args.verb) == args.component:
         return commands.run_component(args)

@@ -26,10 +26,13 @@ examples:
 """
 
 
+HELP = "the cell's certificate authority and certificates (mTLS), and its access control"
+
+
 def add_parser(sub, add_common) -> argparse.ArgumentParser:
     from humanpt.runtime.security import ROLES
 
-    p = sub.add_parser("pki", help="the cell's certificate authority and certificates (mTLS), and its access control",
+    p = sub.add_parser("pki", help=HELP,
                        description=DESCRIPTION, epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     psub = p.add_subparsers(dest="pki_verb", metavar="ACTION")
 

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from humanpt.geometry.rig import Rig
-from humanpt.runtime.rigfile import load_rig, rig_from_json, rig_to_table, rig_to_toml, write_rig
+from humanpt.runtime.rigfile import load_rig, rig_to_table, rig_to_toml, write_rig
 
 
 def _flat(table: dict[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -61,17 +61,10 @@ def show(args) -> int:
         sys.stdout.write(rig_to_toml(load_rig(args.file)))
         return 0
     from humanpt.cli.commands import load_cfg
-    from humanpt.runtime.bus import open_tool_session, rig_key
+    from humanpt.runtime.monitor import rigs_in_use
 
     cfg = load_cfg(args)
-    with open_tool_session(cfg.runtime) as session:
-        replies = list(session.get(rig_key(cfg.runtime.cell, "*"), timeout=args.timeout))
-    rigs: dict[str, Rig] = {}
-    for r in replies:
-        if r.ok is None:
-            continue
-        comp = str(r.ok.key_expr).split("/")[-2]
-        rigs[comp] = rig_from_json(r.ok.payload.to_bytes().decode(), f"{comp}'s rig")
+    rigs: dict[str, Rig] = rigs_in_use(cfg, args.timeout)
     if not rigs:
         print(f"humanpt rig show: no component answered in cell {cfg.runtime.cell} within {args.timeout:g} s "
               "(is anything running?)", file=sys.stderr)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import argparse
 import sys
 import threading
-import time
 from pathlib import Path
 
 DESCRIPTION = """\
@@ -26,10 +25,13 @@ examples:
 """
 
 
+HELP = "open a recorded run in rerun (or write an .rrd headless)"
+
+
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser(
         "view",
-        help="open a recorded run in rerun (or write an .rrd headless)",
+        help=HELP,
         description=DESCRIPTION,
         epilog=EXAMPLES,
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -89,45 +91,6 @@ def draw_seams(rec, files: list[Path]) -> int:
     return len(files)
 
 
-class Progress:
-    """A progress line on stderr: rewritten in place on a terminal, a line per 10 % otherwise."""
-
-    def __init__(self, stream=None, enabled: bool = True):
-        self.stream = stream or sys.stderr
-        self.enabled = enabled
-        self.tty = self.stream.isatty()
-        self._last_decile = -1
-        self._last_write = 0.0
-
-    def __call__(self, stats) -> None:
-        if not self.enabled:
-            return
-        done = stats.messages
-        if stats.total:
-            frac = min(1.0, done / stats.total)
-            bar = "#" * int(frac * 30)
-            text = f"humanpt view: [{bar:30s}] {frac * 100:3.0f} % {done}/{stats.total} messages, {stats.seconds:.1f} s"
-            decile = int(frac * 10)
-        else:
-            text = f"humanpt view: {done} messages, {stats.seconds:.1f} s"
-            decile = int(stats.seconds // 5)  # unknown total: a line every 5 s
-        if self.tty:
-            now = time.monotonic()
-            if now - self._last_write >= 0.2 or (stats.total and done >= stats.total):
-                self.stream.write("\r" + text)
-                self.stream.flush()
-                self._last_write = now
-        elif decile != self._last_decile:
-            self._last_decile = decile
-            self.stream.write(text + "\n")
-            self.stream.flush()
-
-    def end(self) -> None:
-        if self.enabled and self.tty:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
 def run(args) -> int:
     from humanpt.runtime.recording import RecordingError
     from humanpt.viz.config import VizConfig
@@ -163,7 +126,9 @@ def run(args) -> int:
         rec, where = open_stream(cfg, mode=mode, rrd_path=args.save or "", name=run_dir.name)
     except (RuntimeError, OSError, ValueError) as e:
         raise RecordingError(f"cannot open the rerun {mode} sink: {e}") from e
-    progress = Progress(enabled=not args.no_progress)
+    from humanpt.runtime.progress import LineProgress
+
+    progress = LineProgress(enabled=not args.no_progress)
     try:
         if seams:
             from humanpt.seam.seamfile import SeamFileError

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import importlib
-import inspect
+from typing import TYPE_CHECKING
 
-from humanpt.runtime.config import current_name
-from humanpt.runtime.core import Core
+if TYPE_CHECKING:  # the registry itself loads no core (``humanpt --help`` reads it)
+    from humanpt.runtime.core import Core
 
 # name -> "module:Class".  A component appears here once its core exists.
 COMPONENTS: dict[str, str] = {
@@ -66,6 +66,8 @@ def import_path(path: str) -> type:
 
 def core_class(name: str) -> type[Core]:
     """The core class of component ``name`` (or its old name, ``RENAMED_COMPONENTS``)."""
+    from humanpt.runtime.config import current_name  # (the registry loads lightly: humanpt --help)
+
     name = current_name(name)
     if name not in COMPONENTS:
         raise UnknownComponentError(
@@ -78,9 +80,13 @@ def adapters_for(name: str, config, run_dir=None, rig=None) -> list:
 
     A factory that takes a ``run_dir`` keyword gets the run directory (to write files
     beside the recordings), one that takes ``rig`` the cell's rig."""
+    from humanpt.runtime.config import current_name
+
     path = ADAPTERS.get(current_name(name))
     if not path:
         return []
+    import inspect
+
     factory = import_path(path)
     params = inspect.signature(factory).parameters
     kwargs = {k: v for k, v in (("run_dir", run_dir), ("rig", rig)) if k in params}

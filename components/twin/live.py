@@ -17,7 +17,6 @@ import os
 import signal
 import socket
 import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable
@@ -28,8 +27,10 @@ import numpy as np
 
 from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
 from humanpt.runtime import config as cfgmod
+from humanpt.runtime import launcher
 from humanpt.runtime.bus import free_tcp_port, liveliness_key, open_tool_session
 from humanpt.runtime.config import to_table
+from humanpt.runtime.launcher import wait_listening
 from humanpt.runtime.rigfile import write_rig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
@@ -156,28 +157,6 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
 ROUTER_START_TIMEOUT_S = 120.0  # bounds a hang: a router that never listens
 
 
-def wait_listening(host: str, port: int, timeout_s: float, alive: Callable[[], bool] = lambda: True,
-                   stop: threading.Event | None = None) -> str:
-    """Wait until something accepts TCP connections on ``host:port`` (a router that
-    finished starting); "" then, else why not: the process died (``alive()`` false), ``stop``
-    was set, or ``timeout_s`` passed."""
-    deadline = time.monotonic() + timeout_s
-    pause = stop or threading.Event()
-    why = "nothing listened"
-    while time.monotonic() < deadline:
-        if not alive():
-            return f"it exited before listening on {host}:{port}"
-        if stop is not None and stop.is_set():
-            return "stopped"
-        try:
-            with socket.create_connection((host, port), timeout=1.0):
-                return ""
-        except OSError as e:
-            why = f"nothing listens on {host}:{port} ({e.strerror or e})"
-        pause.wait(0.05)  # a port being opened tells no one: try again shortly
-    return f"{why} after {timeout_s:g} s"
-
-
 def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], timeout_s: float, procs) -> bool:
     deadline = time.monotonic() + timeout_s
     with open_tool_session(cfg.runtime, patient=True) as s:
@@ -281,7 +260,6 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believes in this run", overwrite=True)
     file_cfg = cfgmod.load(cfg_path)  # fail here, clearly, if the written config does not validate
     file_cfg.rig()
-    base = [sys.executable, "-m", "humanpt.cli.main"]
     ctl = control or LiveControl()
     procs = ctl.procs
     stop = stop or threading.Event()
@@ -291,7 +269,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     with open(run_dir / "processes.log", "w") as log:
         ctl._log = log
         try:
-            router = ctl._spawn("router", base + ["router", "--config", str(cfg_path)])
+            router = ctl._spawn("router", launcher.argv(launcher.ROUTER, config=cfg_path))
             # The components start once the router listens: started beside it on a loaded
             # machine they starved its start-up past their 30 s connect timeout (issue 29
             # item 15: "cannot reach the router" at load 8-12).
@@ -301,7 +279,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
                 failed.append(f"the router did not listen: {why}; see {run_dir / 'processes.log'}")
                 return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, time.time_ns(), failed)
             for name in comps + ["operator"]:
-                p = ctl._spawn(name, base + [name, "--config", str(cfg_path), "--run-dir", str(run_dir)])
+                p = ctl._spawn(name, launcher.argv(name, config=cfg_path, run_dir=run_dir))
                 if name == "operator":
                     # The simulated operator (a stand-in for the human, not part of the
                     # system) runs at a lower priority.

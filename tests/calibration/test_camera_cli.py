@@ -212,7 +212,7 @@ def test_live_captures_on_the_consoles_capture_command(board_images, router, tmp
     import io
     import threading
 
-    from humanpt.cli.console import Console
+    from humanpt.console.client import Console
     from humanpt.runtime.config import load
     from tests.conftest import wait_for
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from humanpt.cli.main import build_parser, main
+from humanpt.cli.main import TEST_ONLY_COMPONENTS, build_parser, main
 from humanpt.runtime.registry import COMPONENTS
 
 VERBS = ["router", "up", "topics", "echo", "param", "replay", "runs", "config", "bench", *COMPONENTS]
+USER_VERBS = [v for v in VERBS if v not in TEST_ONLY_COMPONENTS]
 
 
 @pytest.mark.parametrize("verb", VERBS)
@@ -24,8 +25,21 @@ def test_top_level_help_lists_every_verb(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for verb in VERBS:
+    for verb in USER_VERBS:
         assert f"    {verb}" in out
+
+
+def test_test_only_components_are_not_user_verbs(capsys, cli_main):
+    # issue 30: pinger and ponger (the runtime's self-test pair) are not listed to users...
+    assert TEST_ONLY_COMPONENTS == {"pinger", "ponger"}
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    assert "pinger" not in out.split("options:")[0] and "ponger" not in out.split("options:")[0]
+    # ...but still run for the tests (their --help, a config check through them)
+    with pytest.raises(SystemExit) as e:
+        main(["pinger", "--help"])
+    assert e.value.code == 0 and capsys.readouterr().out.startswith("usage: humanpt pinger")
 
 
 def test_no_verb_prints_help_and_fails(capsys, cli_main):

@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from humanpt.cli.console import ConsoleError, StatusBoard, gui_values, parse_options
+from humanpt.console.client import ConsoleError, StatusBoard, gui_values, parse_options
 from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose

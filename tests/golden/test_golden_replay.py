@@ -19,7 +19,6 @@ from mcap.records import Channel, Metadata, Schema
 from mcap.records import Message as McapMessage
 from mcap.writer import Writer
 
-from humanpt.cli.rerecord import SPEC_FILE, load_specs
 from humanpt.runtime.recording import (
     RUN_METADATA,
     RecordingError,
@@ -29,6 +28,7 @@ from humanpt.runtime.recording import (
 )
 from humanpt.schemas import topics
 from humanpt.testing import golden
+from humanpt.twin.rerecord import SPEC_FILE, load_specs
 from tests.conftest import ROOT
 from tests.golden.perturb import fresh_copy, perturbed_factory
 

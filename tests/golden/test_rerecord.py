@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import re
 import shutil
@@ -11,10 +10,10 @@ from pathlib import Path
 import pytest
 from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
-from humanpt.cli import rerecord as rr
 from humanpt.cli.demo import parse_overrides
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.testing import golden
+from humanpt.twin import rerecord as rr
 from tests.conftest import ROOT, run_cli
 from tests.golden.perturb import fresh_run, perturbed_factory
 
@@ -148,16 +147,17 @@ def test_parse_overrides():
 
 
 # -- the verb, offline (a recorder that copies the reference run) ------------------------------
-def _args(root: Path, **kw) -> argparse.Namespace:
+def _args(root: Path, **kw) -> dict:
+    """rerecord()'s arguments (typed: the API, not the command line)."""
     base = {
-        "dir": str(root),
+        "root": root,
         "only": ["static"],
         "dry_run": False,
-        "out": str(root.parent / "new-runs"),  # never a stray temporary directory
+        "out": root.parent / "new-runs",  # never a stray temporary directory
         "fields": 6,
-        "timeout": 60.0,
+        "timeout_s": 60.0,
     }
-    return argparse.Namespace(**{**base, **kw})
+    return {**base, **kw}
 
 
 @pytest.fixture
@@ -197,9 +197,7 @@ def _digest(d: Path) -> dict[str, bytes]:
 def test_dry_run_summarises_and_leaves_recordings_alone(scratch, fresh, tmp_path, capsys):
     before = _digest(scratch)
     assert (
-        rr.rerecord(
-            _args(scratch, dry_run=True, out=str(tmp_path / "new")), copying_recorder(fresh)
-        )
+        rr.rerecord(**_args(scratch, dry_run=True, out=tmp_path / "new"), recorder=copying_recorder(fresh))
         == 0
     )
     out = capsys.readouterr().out
@@ -223,7 +221,7 @@ def test_dry_run_summarises_and_leaves_recordings_alone(scratch, fresh, tmp_path
 
 def test_accepting_replaces_the_run_and_rewrites_the_readme(scratch, fresh, capsys):
     readme_before = (scratch / "README.md").read_text()
-    assert rr.rerecord(_args(scratch), copying_recorder(fresh)) == 0
+    assert rr.rerecord(**_args(scratch), recorder=copying_recorder(fresh)) == 0
     info = json.loads((scratch / "static" / "reference.json").read_text())
     assert info["command"].startswith("humanpt demo --scenario static") and info["live"]
     assert info["version"]["schema_version"] == str(golden.topics.SCHEMA_VERSION)
@@ -236,7 +234,7 @@ def test_accepting_replaces_the_run_and_rewrites_the_readme(scratch, fresh, caps
 
 def test_failed_recording_replaces_nothing(scratch, fresh, capsys):
     before = _digest(scratch)
-    assert rr.rerecord(_args(scratch), lambda spec, d, t: (False, "router did not start")) == 1
+    assert rr.rerecord(**_args(scratch), recorder=lambda spec, d, t: (False, "router did not start")) == 1
     assert "recording FAILED: router did not start" in capsys.readouterr().out
     assert _digest(scratch) == before
 
@@ -249,7 +247,7 @@ def test_new_run_that_does_not_replay_is_refused(scratch, fresh, capsys):
         return True, ""
 
     before = _digest(scratch)
-    assert rr.rerecord(_args(scratch), recorder) == 1
+    assert rr.rerecord(**_args(scratch), recorder=recorder) == 1
     out = capsys.readouterr().out
     assert "the NEW recording does not replay exactly" in out and "controller" in out
     assert _digest(scratch) == before
@@ -278,7 +276,7 @@ def test_summary_shows_what_a_changed_component_does(scratch, fresh, tmp_path):
 
 
 def test_unknown_run_is_named(scratch, fresh, capsys):
-    assert rr.rerecord(_args(scratch, only=["spiral"]), copying_recorder(fresh)) == 2
+    assert rr.rerecord(**_args(scratch, only=["spiral"]), recorder=copying_recorder(fresh)) == 2
     assert "no reference run 'spiral'" in capsys.readouterr().err
 
 

@@ -138,7 +138,7 @@ def test_retime_and_play_of_a_1e308_seam(tmp_path):
     1e308 mm: the reader's one line, not retime's OverflowError."""
     f = _write(tmp_path, _set(_seam_dict(), "segments.0.start_mm", [1e308, 0.0, 0.0]))
     _refused(run_cli("path", "retime", str(f), "-o", str(tmp_path / "o.csv")), "segments[0]: start_mm", tmp_path)
-    from humanpt.cli.console import seam_playback
+    from humanpt.console.client import seam_playback
 
     with pytest.raises(seamfile.SeamFileError, match=r"segments\[0\]: start_mm"):
         seam_playback(str(f), 20.0)

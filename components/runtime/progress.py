@@ -1,4 +1,5 @@
-"""Progress bars on stderr for the CLI's long jobs (rich): one bar per stage.
+"""Progress on stderr for the tools' long jobs: rich bars, one per stage (:class:`Bars`), and
+a plain progress line (:class:`LineProgress`).
 
 The APIs report progress through plain callbacks (``progress(done, total)`` or
 ``progress(stage, done, total)``); the CLI hands them a :class:`Bars`.  On a terminal the
@@ -9,11 +10,12 @@ line per stage and no carriage-return litter.
 from __future__ import annotations
 
 import sys
+import time
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-__all__ = ["Bars"]
+__all__ = ["Bars", "LineProgress"]
 
 
 class Bars:
@@ -57,3 +59,45 @@ class Bars:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+class LineProgress:
+    """A progress line on stderr: rewritten in place on a terminal, a line per 10 % otherwise.
+    Called with stats that have ``messages``, ``total`` (0: unknown) and ``seconds``;
+    ``label`` starts the line."""
+
+    def __init__(self, stream=None, enabled: bool = True, label: str = "humanpt view"):
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.enabled = enabled
+        self.tty = self.stream.isatty()
+        self._last_decile = -1
+        self._last_write = 0.0
+
+    def __call__(self, stats) -> None:
+        if not self.enabled:
+            return
+        done = stats.messages
+        if stats.total:
+            frac = min(1.0, done / stats.total)
+            bar = "#" * int(frac * 30)
+            text = f"{self.label}: [{bar:30s}] {frac * 100:3.0f} % {done}/{stats.total} messages, {stats.seconds:.1f} s"
+            decile = int(frac * 10)
+        else:
+            text = f"{self.label}: {done} messages, {stats.seconds:.1f} s"
+            decile = int(stats.seconds // 5)  # unknown total: a line every 5 s
+        if self.tty:
+            now = time.monotonic()
+            if now - self._last_write >= 0.2 or (stats.total and done >= stats.total):
+                self.stream.write("\r" + text)
+                self.stream.flush()
+                self._last_write = now
+        elif decile != self._last_decile:
+            self._last_decile = decile
+            self.stream.write(text + "\n")
+            self.stream.flush()
+
+    def end(self) -> None:
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
