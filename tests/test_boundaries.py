@@ -90,6 +90,9 @@ MAY_IMPORT = {
     "schemas": set(),
     "runtime": {"geometry", "schemas"},  # runtime.config builds the rig, runtime.rigfile reads it
     "controller": SHARED_PACKAGES | {"seam"},  # a path file is checked against the seam's limits
+    # the operator's client (console verbs, live calibration): it prepares what it sends as the
+    # controller checks it, reads seams, runs the calibrations and reads the gateway's config
+    "console": SHARED_PACKAGES | {"controller", "calibration", "seam", "robot_gateway"},
 }
 # Modules of another package that a package may import (the leaf config types).
 MAY_IMPORT_MODULES = {"geometry": {"humanpt.runtime.config_types"}}

@@ -197,6 +197,7 @@ def collect_hand_eye_live(cfg: ConfigFile, rig: Rig, n_poses: int = 12, timeout_
     from humanpt.calibration.handeye import HandEyeError, PoseCollector, plan_poses
     from humanpt.controller.config import ControllerConfig
     from humanpt.geometry.transforms import transform_from_x
+    from humanpt.geometry.units import to_mm
     from humanpt.robot_gateway.config import GatewayConfig
     from humanpt.runtime.bus import open_tool_session
     from humanpt.schemas import humanpt_pb2 as pb
@@ -223,11 +224,6 @@ def collect_hand_eye_live(cfg: ConfigFile, rig: Rig, n_poses: int = 12, timeout_
         pub.put(pb.Command(header=pb.Header(stamp_ns=time.time_ns(), seq=seq), component="controller",
                            verb=cmd[0], args_json=json.dumps(cmd[1])).SerializeToString())
 
-    def mm(T):
-        T = np.array(T, dtype=float)
-        T[:3, 3] *= 1e3
-        return T
-
     collector = None
     try:
         # Plan from where the robot is after a second of states (the servo may still be
@@ -242,7 +238,7 @@ def collect_hand_eye_live(cfg: ConfigFile, rig: Rig, n_poses: int = 12, timeout_
                                    "running, the robot in ALTER?)") from None
             if n == "robot_gateway/robot_state":
                 state = pb.RobotState.FromString(data)
-                start = mm(from_pose(state.world_T_flange))
+                start = to_mm(from_pose(state.world_T_flange))
                 first = time.monotonic() if first is None else first
             elif n == "robot_gateway/events" and pb.Event.FromString(data).code == "robot_fault":
                 raise HandEyeError(f"the robot is in FAULT ({pb.Event.FromString(data).text}); clear it first")
@@ -266,10 +262,10 @@ def collect_hand_eye_live(cfg: ConfigFile, rig: Rig, n_poses: int = 12, timeout_
             try:
                 t, n, data = inbox.get(timeout=0.05)
                 if n == "robot_gateway/robot_state":
-                    collector.on_robot_state(t, mm(from_pose(pb.RobotState.FromString(data).world_T_flange)))
+                    collector.on_robot_state(t, to_mm(from_pose(pb.RobotState.FromString(data).world_T_flange)))
                 elif n == "perception/tob":
                     m = pb.TobMeasurement.FromString(data)
-                    collector.on_measurement(t, mm(from_pose(m.camera_T_tob)) if m.status == pb.TOB_STATUS_FULL
+                    collector.on_measurement(t, to_mm(from_pose(m.camera_T_tob)) if m.status == pb.TOB_STATUS_FULL
                                              else None)
                 elif n == "controller/events":
                     e = pb.Event.FromString(data)
