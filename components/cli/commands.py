@@ -430,7 +430,7 @@ def config(args) -> int:
         sections[name] = (cfg.component(name, cls), cls)
     for name, (value, cls) in sections.items():
         print(f"\n[{name}]")
-        notes = cfgmod.field_notes(cls)
+        notes = cfgmod.field_notes(type(value))  # the link's own class for [robot_gateway]
         for k, v in cfgmod.to_table(value).items():
             note = f"  # {notes[k]}" if k in notes else ""
             print(f"{k} = {json.dumps(v)}{note}")
