@@ -424,13 +424,12 @@ def config(args) -> int:
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
     print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
-    sections = {"runtime": (cfg.runtime, cfgmod.RuntimeConfig), "record": (cfg.record, cfgmod.RecordConfig)}
+    sections = {"runtime": cfg.runtime, "record": cfg.record}
     for name in sorted(COMPONENTS):
-        cls = core_class(name).config_type
-        sections[name] = (cfg.component(name, cls), cls)
-    for name, (value, cls) in sections.items():
+        sections[name] = cfg.component(name, core_class(name).config_type)
+    for name, value in sections.items():
         print(f"\n[{name}]")
-        notes = cfgmod.field_notes(type(value))  # the link's own class for [robot_gateway]
+        notes = cfgmod.field_notes(type(value))  # the class read: the link's own for [robot_gateway]
         for k, v in cfgmod.to_table(value).items():
             note = f"  # {notes[k]}" if k in notes else ""
             print(f"{k} = {json.dumps(v)}{note}")

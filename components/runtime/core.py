@@ -192,6 +192,13 @@ class Core:
 
     # -- what shells call -------------------------------------------------------------
     @classmethod
+    def default_config(cls) -> Any:
+        """The config a section left empty gives: ``config_type()``, or the class a config
+        type picks for an empty table (``config_class_for``: the gateway's default link's)."""
+        pick = getattr(cls.config_type, "config_class_for", None)
+        return (pick({}) if pick else cls.config_type)()
+
+    @classmethod
     def create(cls, config: Any, rig: Any = None) -> Core:
         """A core of this class from its config and the cell's rig (recorded by the shells
         with every core; only a core that ``uses_rig`` reads it)."""

@@ -56,7 +56,7 @@ PORTS = [(name, p) for name in sorted(COMPONENTS) for p in core_class(name).port
 @pytest.mark.parametrize("value", [math.nan, 1e308])
 def test_every_core_drops_a_poisoned_input_with_an_event(name, port, value):
     cls = core_class(name)
-    core = cls(cls.config_type())
+    core = cls(cls.default_config())
     msg = port.type()
     where = _poison(msg, value)
     outs = core.step(1_000, port.topic, msg)

@@ -157,7 +157,7 @@ def test_an_output_copying_its_input_image_is_recorded_once(run, tmp_path):
     w = build_system("arc", seed=3, keep_outputs=False, digest=False)
     twin_perception = next(c for c in w.lockstep.cores if c.name == "perception")
     viz_cls = core_class("viz")
-    viz = viz_cls.create(viz_cls.config_type(), twin_perception.rig)
+    viz = viz_cls.create(viz_cls.default_config(), twin_perception.rig)
     with Lockstep([*w.lockstep.cores, viz], run_dir=tmp_path / "viz", keep_outputs=False, digest=False) as ls:
         ls.run_until(int(0.5e9))
     got = Counter((i[0], i[1], i[2], i[4] > 0) for i in _images(tmp_path / "viz" / "viz.mcap"))

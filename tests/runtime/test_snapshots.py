@@ -319,13 +319,13 @@ def test_a_snapshot_may_not_loosen_a_safety_limit_or_change_a_fixed_key():
     only stricter than the recorded start value (the gateway's 100 mm/s, cell_limits), a key
     that is not live not at all."""
     cls = core_class("robot_gateway")
-    frozen = loads(dumps(cls.create(_default_config(cls)).freeze()))
+    frozen = loads(dumps(cls.create(cls.default_config()).freeze()))
     frozen["config"]["max_speed_mm_s"] = 200.0
     with pytest.raises(SnapshotError, match=r"^robot_gateway: the snapshot's config: max_speed_mm_s: 200.0 is "
                                             r"above the hard limit 100.0"):
-        cls.create(_default_config(cls)).thaw(frozen)
+        cls.create(cls.default_config()).thaw(frozen)
     frozen["config"]["max_speed_mm_s"] = 50.0
-    core = cls.create(_default_config(cls))
+    core = cls.create(cls.default_config())
     core.thaw(frozen)
     assert core.config.max_speed_mm_s == 50.0 and core.start_config.max_speed_mm_s == 100.0
     pinger = loads(dumps(PingerCore(PingerConfig()).freeze()))
@@ -335,20 +335,14 @@ def test_a_snapshot_may_not_loosen_a_safety_limit_or_change_a_fixed_key():
         PingerCore(PingerConfig()).thaw(pinger)
 
 
-def _default_config(cls):
-    """A core's default config (the gateway's is its default link's: runtime.config.build's way)."""
-    pick = getattr(cls.config_type, "config_class_for", None)
-    return (pick({}) if pick else cls.config_type)()
-
-
 @pytest.mark.parametrize("name", sorted(COMPONENTS))
 def test_every_component_thaws_its_built_state(name):
     """Every registered core (camera and viz too, which the twin's run has not) freezes as
     built, and a fresh one thaws it to the same state; the twin's cores after 60 s:
     test_snapshots_twin.py."""
     cls = core_class(name)
-    data = dumps(cls.create(_default_config(cls)).freeze())
-    core = cls.create(_default_config(cls))
+    data = dumps(cls.create(cls.default_config()).freeze())
+    core = cls.create(cls.default_config())
     core.thaw(loads(data))
     assert dumps(core.freeze()) == data
 
