@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import signal
@@ -30,6 +31,26 @@ def write_config(path: Path, port: int, extra: str = "", cell: str = "test") -> 
 
 def humanpt_cmd(*args: str) -> list[str]:
     return [sys.executable, "-m", "humanpt.cli.main", *args]
+
+
+# A command run by a small parent of its own (run_measured): a child forked from a large
+# pytest process starts with that process's pages, and its peak RSS would count them (922 MB
+# and 1787 MB seen in the whole suite for commands that peak at about 100 MB).
+_MEASURE = """
+import json, resource, subprocess, sys
+p = subprocess.run(sys.argv[1:], stdin=subprocess.DEVNULL, capture_output=True)
+print(json.dumps({"code": p.returncode, "out": p.stdout.decode(), "err": p.stderr.decode(),
+                  "rss_kb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}))
+"""
+
+
+def run_measured(*args: str, timeout: float = 300) -> tuple[int, str, str, int]:
+    """(exit status, stdout, stderr, peak RSS in kB) of a humanpt command, its own."""
+    r = subprocess.run([sys.executable, "-c", _MEASURE, *humanpt_cmd(*args)], capture_output=True, text=True,
+                       cwd=ROOT, timeout=timeout)
+    assert r.returncode == 0, r.stderr
+    got = json.loads(r.stdout)
+    return got["code"], got["out"], got["err"], got["rss_kb"]
 
 
 def run_cli(*args: str, timeout: float = 60, **kw) -> subprocess.CompletedProcess:
@@ -208,7 +229,7 @@ def cli_main(monkeypatch):
 LIVE_FIXTURES = frozenset({"router", "procs"})
 # Names that, referred to by a test or by a helper/fixture of its module it calls, start a
 # process, a Zenoh session (router or client), a pty or a UDP socket.
-LIVE_NAMES = frozenset({"run_cli", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
+LIVE_NAMES = frozenset({"run_cli", "run_measured", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
                         "openpty", "pty", "PtyAdapter", "SerialAdapter", "UdpAdapter", "RsiRobotServer", "SOCK_DGRAM", "open_tool_session", "wait_port"})
 
 # Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs

@@ -82,20 +82,6 @@ def _assert(ok: bool) -> None:
     assert ok
 
 
-@pytest.mark.timeout(300)
-def test_link_rows_over_alter(tmp_path):
-    run_dir = tmp_path / "run"
-    p = run_cli("bench", "faults", "--only", "kill,bigseam,inject", "--run-dir", str(run_dir), timeout=280)
-    rows = table(p.stdout)
-    assert list(rows) == [ROWS["kill"], ROWS["bigseam"], ROWS["inject"]], p.stdout + p.stderr
-    assert leftovers(run_dir) == []
-    _kill_within_bound(rows[ROWS["kill"]], 100.0 * 0.028)  # 100 mm/s x 28 ms
-    assert rows[ROWS["inject"]]["verdict"] == "skipped"
-    assert rows[ROWS["inject"]]["note"] == "skipped: not over ALTER (--link rsi)"
-    _seam_played_or_refused(rows[ROWS["bigseam"]])
-    assert p.returncode == 0, p.stdout + p.stderr
-
-
 def test_rows_for_the_other_link_start_no_twin(tmp_path):
     p = run_cli("bench", "faults", "--only", "inject,junk,ipoc", "--run-dir", str(tmp_path / "run"), timeout=30)
     assert p.returncode == 0, p.stdout + p.stderr

@@ -13,10 +13,8 @@ robot gateway and the controller as processes), issue 29:
 
 from __future__ import annotations
 
-import os
 import queue
 import re
-import subprocess
 
 import pytest
 
@@ -25,9 +23,8 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.seam import seamfile
 from humanpt.seam.fit import FitConfig, Seam, Segment
 from tests.conftest import (
-    ROOT,
-    humanpt_cmd,
     run_cli,
+    run_measured,
     wait_for,
     wait_matching,
     write_config,
@@ -120,17 +117,6 @@ def test_a_seam_outside_the_envelope_is_refused_by_the_client_and_by_the_control
     assert _commands(procs, ctl, run) == [("playback", "bad_command"), ("playback", "playback_started")]
 
 
-def _run_measured(tmp_path, *args: str) -> tuple[int, str, int]:
-    """(exit code, its output, its peak resident memory in MB) of a CLI run (os.wait4: the
-    run's own rusage, not the other children's)."""
-    out = tmp_path / "out.txt"
-    with out.open("w") as f:
-        p = subprocess.Popen(humanpt_cmd(*args), stdout=f, stderr=subprocess.STDOUT, cwd=ROOT)
-        _, status, usage = os.wait4(p.pid, 0)
-    p.returncode = os.waitstatus_to_exitcode(status)
-    return p.returncode, out.read_text(), usage.ru_maxrss // 1024
-
-
 def test_the_issues_seam_plays_and_oversized_ones_are_refused_before_sending(cell, procs, tmp_path):
     port, cfg, run, ctl = cell
     # The issue's seam: 1000 mm at 20 mm/s is 50.25 s, 1796 samples of 28 ms (it had 1795).
@@ -141,7 +127,8 @@ def test_the_issues_seam_plays_and_oversized_ones_are_refused_before_sending(cel
     # 8000 mm at 0.2 mm/s: 40 000 s, 1.4 million samples (the attack's 10^6 points took the
     # CLI 97 s and 3.05 GB): refused before re-timing, before connecting.
     huge = _seam(tmp_path / "huge.seam.json", (-4000.0, 0.0, 300.0), (4000.0, 0.0, 300.0))
-    code, text, _ = _run_measured(tmp_path, "path", "play", str(huge), "--speed", "0.2", "--config", str(cfg))
+    code, out, err, _ = run_measured("path", "play", str(huge), "--speed", "0.2", "--config", str(cfg))
+    text = out + err
     assert code == 1 and "too long for one playback" in text and "more than 200000 samples" in text, text
     assert "Traceback" not in text and len(text.strip().splitlines()) == 1, text
 
@@ -151,7 +138,8 @@ def test_the_issues_seam_plays_and_oversized_ones_are_refused_before_sending(cel
         f.write("index,stamp_ns,x_mm,y_mm,z_mm,psi_deg,theta_deg,phi_deg\n")
         for i in range(300_000):
             f.write(f"{i},{i * 28_000_000},{i * 1e-3:.3f},0,300,0,0,0\n")
-    code, text, peak_mb = _run_measured(tmp_path, "console", "playback", str(big), "--config", str(cfg))
+    code, out, err, peak_kb = run_measured("console", "playback", str(big), "--config", str(cfg))
+    text, peak_mb = out + err, peak_kb // 1024
     assert code == 1 and "more than 2000 points" in text and "Traceback" not in text, text
     assert peak_mb < 1000, peak_mb  # the attack's CLI grew to 3.05 GB
     # Nothing of either reached the controller.

@@ -8,11 +8,8 @@ The files are made with the mcap library from a real reference recording
 from __future__ import annotations
 
 import io
-import json
 import shutil
 import struct
-import subprocess
-import sys
 import zlib
 from pathlib import Path
 
@@ -26,7 +23,7 @@ from mcap.writer import Writer
 
 from humanpt.runtime.recording import MAX_CHUNK_BYTES, iter_entries, read
 from humanpt.runtime.replay import EXIT_INCOMPLETE, EXIT_MATCH, EXIT_NOTHING_COMPARED, replay
-from tests.conftest import ROOT, humanpt_cmd, run_cli
+from tests.conftest import ROOT, run_cli, run_measured
 
 REAL = ROOT / "recordings" / "arc_rsi" / "robot_gateway.mcap"
 FOOTER_TAIL = 1 + 8 + 20 + 8
@@ -85,26 +82,6 @@ def _splice_chunk(src: Path, dst: Path, which: int, chunk: Chunk) -> int:
     return off
 
 
-# The command is run by a small parent of its own: a child forked from this (large) pytest
-# process starts with its pages, and its peak RSS would count them (922 MB seen in the whole
-# suite for a command that peaks at about 100 MB).
-_MEASURE = """
-import json, resource, subprocess, sys
-p = subprocess.run(sys.argv[1:], stdin=subprocess.DEVNULL, capture_output=True)
-print(json.dumps({"code": p.returncode, "out": p.stdout.decode(), "err": p.stderr.decode(),
-                  "rss_kb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}))
-"""
-
-
-def _run_measured(*args: str, timeout: float = 300) -> tuple[int, str, str, int]:
-    """(exit status, stdout, stderr, peak RSS in kB) of a humanpt command, its own."""
-    r = subprocess.run([sys.executable, "-c", _MEASURE, *humanpt_cmd(*args)], capture_output=True, text=True,
-                       cwd=ROOT, timeout=timeout)
-    assert r.returncode == 0, r.stderr
-    got = json.loads(r.stdout)
-    return got["code"], got["out"], got["err"], got["rss_kb"]
-
-
 @pytest.fixture(scope="module")
 def bomb(tmp_path_factory) -> tuple[Path, int, int]:
     """The attack: a run directory whose robot_gateway.mcap has its third chunk replaced by a
@@ -135,11 +112,11 @@ def test_runs_info_and_replay_of_the_bomb_stay_small_and_say_so(bomb):
     path, off, _ = bomb
     # The issue: 2.19 GB and past 60 s each. Refused before decompression: the interpreter,
     # the libraries and the 518 kB file (a bound, not a timing: a hang is bounded by timeout).
-    code, out, err, rss_kb = _run_measured("runs", "info", str(path.parent))
+    code, out, err, rss_kb = run_measured("runs", "info", str(path.parent))
     assert code == 1, out + err
     assert f"chunk at offset {off}" in out and "Traceback" not in err
     assert rss_kb < 400_000, rss_kb
-    code, out, err, rss_kb = _run_measured("replay", str(path))
+    code, out, err, rss_kb = run_measured("replay", str(path))
     assert code == EXIT_INCOMPLETE, out + err
     assert "MATCH" not in out and "INCOMPLETE" in out and f"chunk at offset {off}" in out
     assert "Traceback" not in err
