@@ -178,7 +178,9 @@ class UdpAdapter:
     def address(self) -> tuple[str, int]:
         """The bound (host, port) (port 0 in the config: the one the system chose)."""
         assert self._sock is not None, "not open"
-        return self._sock.getsockname()
+        # (from the bound address kept in self.bind: during a relock the socket is bound afresh,
+        # and another thread asking meanwhile must not meet the closed one)
+        return parse_address(self.bind)
 
     def start(self, put: Callable[[str, object], None]) -> None:
         if self._sock is None:
