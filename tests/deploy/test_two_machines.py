@@ -33,6 +33,7 @@ from humanpt.bench.partition import holds, late_commands, output_gaps, robot_tra
 from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime.recording import OUT, iter_entries
 from humanpt.runtime.security import init_ca, issue
+from tests.conftest import wait_for
 
 HUMANPT = str(Path(sys.executable).parent / "humanpt")
 TAG = os.getpid() % 100_000
@@ -124,6 +125,22 @@ def write_config(d: Path) -> Path:
     return d / "cell.toml"
 
 
+def _moved_mm(server_cfg: Path) -> float:
+    """How far the flange moved over 20 robot states, read on the server's side (mm)."""
+    r = subprocess.run(["ip", "netns", "exec", NS_S, HUMANPT, "echo", "robot_gateway/robot_state", "--count", "20",
+                        "--duration", "10", "--csv", "--field", "world_T_flange.translation.x", "--field",
+                        "world_T_flange.translation.y", "--field", "world_T_flange.translation.z",
+                        "--config", str(server_cfg)], capture_output=True, text=True, timeout=60)
+    rows = [line.split(",")[-3:] for line in r.stdout.splitlines() if "robot_state" in line]
+    try:
+        xyz = [[float(v) for v in row] for row in rows]
+    except ValueError:
+        return 0.0
+    if len(xyz) < 2:
+        return 0.0
+    return 1e3 * sum((a - b) ** 2 for a, b in zip(xyz[-1], xyz[0], strict=True)) ** 0.5
+
+
 def start(ns: str, *args: str, log: Path) -> subprocess.Popen:
     with open(log, "w") as f:
         return subprocess.Popen(["ip", "netns", "exec", ns, HUMANPT, *args], stdout=f, stderr=subprocess.STDOUT,
@@ -167,7 +184,10 @@ def test_the_robot_holds_through_partitions_and_the_loop_resumes_by_itself(tmp_p
                 f"the loop never ran across the link: {seen.stderr[-2000:]}\n"
                 f"server: {(tmp_path / 'server.log').read_text()[-3000:]}\n"
                 f"client: {(tmp_path / 'client.log').read_text()[-3000:]}")
-            time.sleep(3.0)  # servoing for a while before the cut
+            # Servoing the moving target before the cut (the operator holds its start pose a
+            # few seconds, and a loaded machine starts later): a wait on the robot moving,
+            # 20 of its states spanning more than 1 mm, bounded at 60 s.
+            wait_for(lambda: _moved_mm(server_cfg) > 1.0, 60.0, "the robot moving before the cut", poll_s=0.1)
             for seconds, recover_s in ((5.0, 8.0), (15.0, 14.0)):
                 cut = time.time_ns()
                 ip("-n", NS_S, "link", "set", VETH_S, "down")
