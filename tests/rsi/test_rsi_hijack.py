@@ -92,7 +92,8 @@ def test_a_robot_silent_for_the_relock_time_is_replaced_by_a_sender_of_a_valid_r
         old.sendto(rob(1_000_008), gw.address)
         wait_for(lambda: len(received) == 1, 10.0, "the first robot's <Rob> taken")
         # RSI restarted at the robot from another port: its <Rob> until the old one's lock lapses
-        wait_for(lambda: (new.sendto(rob(1_000_008), gw.address), len(received) == 2)[1], 10.0,
+        # (>= 2: on a loaded machine several may be taken between two looks)
+        wait_for(lambda: (new.sendto(rob(1_000_008), gw.address), len(received) >= 2)[1], 10.0,
                  "the new sender taken after the old one's silence", poll_s=0.02)
         gw.write("udp_tx", pb.SerialChunk(data=b"answer"))
         assert new.recvfrom(100)[0] == b"answer"

@@ -65,5 +65,7 @@ def test_the_gateway_in_a_live_shell_answers_the_robot_over_udp(router):
         shell.stop.set()
         worker.join(5)
     assert robot.stopped is None and robot.counters["on_time"] >= 30, robot.counters
-    assert core.counters["statuses"] >= 55 and core.counters["zero"] == core.counters["statuses"]
+    # every answer a hold (the last <Rob> may be unanswered when the shell stops: not asserted)
+    assert core.counters["statuses"] >= 55 and core.counters["zero"] >= 55
+    assert core.counters["fresh"] == core.counters["reused"] == 0
     np.testing.assert_array_equal(robot.q_rad, q0)  # holds only: the arm stayed
