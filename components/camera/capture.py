@@ -12,6 +12,7 @@ import logging
 import threading
 import time
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -143,5 +144,14 @@ class CaptureAdapter:
 
 
 def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
-    """The registry's adapter factory for the ``camera`` component."""
+    """The registry's adapter factory for the ``camera`` component. A source that is a path
+    must exist and not be a folder (OSError naming it: the component stops at start; a
+    device index that does not open is retried, a camera may be plugged in later)."""
+    if config.device_index is None:
+        path = Path(config.source)
+        if path.is_dir():
+            raise OSError(f"camera.source {config.source!r} is a folder: give a video file, a device path "
+                          "(/dev/video0) or an index (0); an image folder is not a camera source in this version")
+        if not path.exists():
+            raise OSError(f"camera.source {config.source!r}: no such video file or device")
     return [CaptureAdapter(config)]

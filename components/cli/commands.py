@@ -84,7 +84,7 @@ def topics_cmd_table(as_json: bool = False) -> int:
 
 
 def topics_cmd(args) -> int:
-    from humanpt.runtime.monitor import listen, type_of_key
+    from humanpt.runtime.monitor import listen, publisher_of_key, type_of_key
 
     if args.table or args.json:
         return topics_cmd_table(args.json)
@@ -97,9 +97,9 @@ def topics_cmd(args) -> int:
     if not stats:
         print(f"no messages in {duration:g} s")
         return 0
-    rows = [[key, type_of_key(key), str(s.count), f"{s.rate_hz:.1f}", f"{s.nbytes / s.count:.0f}"]
-            for key, s in sorted(stats.items())]
-    print("\n".join(table(["key", "type", "count", "rate Hz", "avg bytes"], rows, "<<>>>")))
+    rows = [[key, type_of_key(key), publisher_of_key(key), str(s.count), f"{s.rate_hz:.1f}",
+             f"{s.nbytes / s.count:.0f}"] for key, s in sorted(stats.items())]
+    print("\n".join(table(["key", "type", "publisher", "count", "rate Hz", "avg bytes"], rows, "<<<>>>")))
     return 0
 
 
@@ -352,7 +352,7 @@ def runs_merge(args) -> int:
     for note in res.notes:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
     print(f"humanpt runs merge: {res.messages} messages from {res.recordings} recordings on {res.topics} topics "
-          f"-> {args.out}")
+          f"-> {res.out}")
     return 0
 
 

@@ -65,6 +65,14 @@ def _seconds(text: str) -> float:
     return v
 
 
+def _duration(text: str) -> float:
+    """A --duration argument: a finite number of seconds > 0."""
+    v = _seconds(text)
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a duration: give a number of seconds > 0")
+    return v
+
+
 def _first_word(argv: list[str]) -> str | None:
     """The verb of a command line: its first word that is not an option (top-level options
     take no value)."""
@@ -107,7 +115,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    "issue 18's hard cases are meant for 20 and 60)")
     p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
     p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
-    p.add_argument("--duration", type=float, help="seconds of twin time (default: the scenario's length + 3.5 s)")
+    p.add_argument("--duration", type=_duration, help="seconds of twin time (default: the scenario's length + 3.5 s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
     p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
     p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi"], default="puma",
@@ -187,7 +195,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    help="hard: the twin's world (default ideal, as issue 18's acceptance)")
     p.add_argument("--only", metavar="A,B,...",
                    help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
-    p.add_argument("--duration", type=float,
+    p.add_argument("--duration", type=_duration,
                    help="budget: seconds of twin time per run (default: the scenario's, as the demo)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
@@ -210,7 +218,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--components", help="comma-separated components instead of a profile")
     p.add_argument("--no-router", action="store_true", help="do not start a router (one runs elsewhere)")
     p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<profile>)")
-    p.add_argument("--duration", type=float, help="stop everything after this many seconds, counted from when "
+    p.add_argument("--duration", type=_duration, help="stop everything after this many seconds, counted from when "
                    "every component is up (its liveliness token; under mTLS watched as the tool identity)")
 
     old_names: dict[str, str] = {}
@@ -225,14 +233,14 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                            description=f"Run the {name} component alone, as a client of the router.")
         _add_common(p)
         p.add_argument("--run-dir", help="record into this directory (default: [runtime] run_dir/<time>-<name>)")
-        p.add_argument("--duration", type=float, help="stop after this many seconds")
+        p.add_argument("--duration", type=_duration, help="stop after this many seconds")
         p.set_defaults(component=name)
 
     p = sub.add_parser("topics", help="list live topics (or the topic table) and running components",
                        description="Listen for a while and print every topic seen with its type, publisher, "
                        "message count and rate, and the components whose liveliness tokens are up.")
     _add_common(p)
-    p.add_argument("--duration", type=float, help="seconds to listen (default 2; with --hz: "
+    p.add_argument("--duration", type=_duration, help="seconds to listen (default 2; with --hz: "
                    "until Ctrl-C unless given)")
     p.add_argument("--table", action="store_true", help="print the static topic table and exit (no network)")
     p.add_argument("--hz", action="store_true",
@@ -250,7 +258,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     _add_common(p)
     p.add_argument("key")
     p.add_argument("--count", "-n", type=int, help="stop after N messages")
-    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--duration", type=_duration, help="stop after this many seconds")
     p.add_argument("--full", action="store_true", help="print image bytes too (default: summarised)")
     p.add_argument("--field", "-f", action="append", metavar="PATH",
                    help="print only this field, one line per message with its stamp (repeatable; dotted, "
@@ -268,7 +276,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                        "dump writes, or bare KEY = VALUE lines), all or none: an unknown, non-live or out-of-range "
                        "key is refused before anything is sent, and keys the component refuses roll back the "
                        "others. Options may come anywhere.",
-                       epilog="examples:\n  humanpt param controller gain=0.5 --timeout 2\n"
+                       epilog="examples:\n  humanpt param controller gain_translation_1_s=2 dz_mm=300 --timeout 2\n"
                        "  humanpt param dump controller controller.toml\n"
                        "  humanpt param load controller controller.toml",
                        formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -319,12 +327,14 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     rsub = p.add_subparsers(dest="runs_verb", metavar="ACTION")
     q = rsub.add_parser("merge", help="write one MCAP of every component's outputs, for viewing",
                         description="Merge the outputs of every component recording of RUN_DIR into OUT.mcap "
-                        "(topics as full Zenoh keys, time order), for Foxglove or rerun.")
+                        "(topics as full Zenoh keys, time order), for Foxglove or rerun; OUT an existing folder: "
+                        "OUT/<run>.mcap. The run's metadata the recordings share (rig, cell, world...) goes into "
+                        "the file's humanpt.merged metadata record.")
     q.add_argument("run_dir")
     q.add_argument("out")
     q = rsub.add_parser("info", help="what a run holds: components, topics, counts, rates, missed messages, "
                         "duration, size, rig, warnings",
-                        description="Per component recording of RUN_DIR: duration, size, messages per topic in "
+                        description="Per component recording of RUN_DIR (or of the one .mcap given): duration, size, messages per topic in "
                         "and out with their rates, and the messages it never received (gaps in each input "
                         "topic's sequence numbers: a partition, a full queue), plus damage and restarts; then the run "
                         "as a whole: duration, size and MB per minute, the rig it ran with, the warnings and "
@@ -545,7 +555,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                         "controller: cycles served on time (the controller's own command, applied within its "
                         "cycle) over --duration at 28 ms, then short runs at each of --periods; prints a table "
                         "and the shortest period sustained without a miss.")
-    q.add_argument("--duration", type=float, default=60.0, help="seconds at 28 ms (default 60)")
+    q.add_argument("--duration", type=_duration, default=60.0, help="seconds at 28 ms (default 60)")
     q.add_argument("--periods", default="28,16,8,4,2", help="cycle periods to try, ms (default 28,16,8,4,2)")
     q.add_argument("--search-seconds", type=float, default=3.0, help="seconds per period tried (default 3)")
     q.add_argument("--zenoh", action="store_true", help="sim_robot and robot_gateway as child processes through "
@@ -556,7 +566,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                         "controller, at each of --cycles: cycles answered in time, the reply-latency histogram "
                         "as the robot sees it (late = after its next cycle boundary), and the gateway's "
                         "per-cycle work p50/p99 in microseconds.")
-    q.add_argument("--duration", type=float, default=10.0, help="seconds per cycle time (default 10)")
+    q.add_argument("--duration", type=_duration, default=10.0, help="seconds per cycle time (default 10)")
     q.add_argument("--cycles", default="12,4", help="RSI cycle times to run, ms: 4 and/or 12 (default 12,4)")
     q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
                    "process (sharing its GIL) instead of a process of its own")

@@ -74,6 +74,17 @@ def type_of_key(key: str) -> str:
         return "?"
 
 
+def publisher_of_key(key: str) -> str:
+    """Who publishes a full key: the topic table's publisher, else the key's component part
+    (``humanpt/<cell>/<component>/...``: every component publishes under its own name)."""
+    try:
+        short = topics.short_from_key(key)[1]
+    except topics.UnknownTopicError:
+        return "?"
+    t = topics.TOPICS.get(short)
+    return t.publisher if t is not None else short.split("/")[0]
+
+
 def full_key(key: str, cell: str) -> str:
     """A short topic (perception/tob) as the cell's full key; a full key as it is."""
     return key if key.startswith(topics.KEY_PREFIX + "/") else f"{topics.KEY_PREFIX}/{cell}/{key}"

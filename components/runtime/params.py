@@ -65,7 +65,7 @@ def dump_text(cfg: cfgmod.ConfigFile, component: str, params: dict) -> str:
 def read_file(path: str | Path, component: str) -> dict:
     """KEY -> value of a parameter file: a ``[COMPONENT]`` section (what :func:`dump_text`
     writes) or bare top-level keys; ConfigError naming the file otherwise."""
-    doc = cfgmod.read_toml(path, kind="parameter file")
+    doc = cfgmod.read_toml(path, kind="parameter")
     if set(doc) == {component} and isinstance(doc[component], dict):
         return doc[component]
     sections = [k for k, v in doc.items() if isinstance(v, dict)]

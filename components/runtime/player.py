@@ -163,6 +163,44 @@ class MergeResult:
     recordings: int
     topics: int
     notes: list[str]  # recordings (or parts) that could not be read and were left out
+    out: Path | None = None  # the file written
+
+
+MERGED_METADATA = "humanpt.merged"  # a merged file's own metadata record (not a component's humanpt.run)
+# What differs per component recording and so is not the run's: left out of the merged record.
+_PER_COMPONENT = ("component", "core", "config", "pid", "start_time_ns", "continues", "lost_before")
+
+
+def run_metadata(metas: list[dict[str, str]]) -> dict[str, str]:
+    """The run's metadata for a merged file: each key every readable recording has with one
+    value (the rig, the cell, the world, the schema version...), and the components merged.
+    A key the recordings disagree on is kept as ``<key>.<component>`` per recording, so nothing
+    recorded about the run (e.g. two different rigs) is lost."""
+    out: dict[str, str] = {"components": ",".join(sorted(m.get("component", "?") for m in metas))}
+    keys = sorted({k for m in metas for k in m} - set(_PER_COMPONENT))
+    for k in keys:
+        values = {m.get(k) for m in metas}
+        if len(values) == 1:
+            out[k] = next(iter(values))
+        else:
+            for m in metas:
+                if k in m:
+                    out[f"{k}.{m.get('component', '?')}"] = m[k]
+    return out
+
+
+def merged_path(run_dir: str | Path, out: str | Path) -> Path:
+    """Where ``runs merge RUN OUT`` writes: ``OUT``, or ``OUT/<run>.mcap`` when OUT is an
+    existing directory; RecordingError when that is inside the run directory, or its parent
+    does not exist."""
+    run_dir, out = Path(run_dir), Path(out)
+    if out.is_dir():
+        out = out / f"{run_dir.resolve().name or 'run'}.mcap"
+    if out.resolve().parent == run_dir.resolve():
+        raise RecordingError(f"{out}: write the merged file outside the run directory")
+    if not out.parent.is_dir():
+        raise RecordingError(f"{out}: no such directory {out.parent}")
+    return out
 
 
 def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
@@ -178,14 +216,14 @@ def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
     files = sorted(p for p in run_dir.glob("*.mcap")) if run_dir.is_dir() else []
     if not files:
         raise RecordingError(f"{run_dir}: no .mcap recordings here")
-    out = Path(out)
-    if out.resolve().parent == run_dir.resolve() and out.suffix == ".mcap":
-        raise RecordingError(f"{out}: write the merged file outside the run directory")
+    out = merged_path(run_dir, out)
     notes: list[str] = []
     where: dict[Path, tuple[str, str]] = {}  # file -> (cell, component)
+    metas: list[dict[str, str]] = []
     for f in files:
         try:
             meta, _ = read_metadata(f)
+            metas.append(meta)
         except RecordingError:
             meta = {}  # merge_entries says why it leaves it out
         where[f] = (meta.get("cell", "cell0"), meta.get("component", f.stem.split(".")[0]))
@@ -193,6 +231,7 @@ def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
     with open(out, "wb") as fh:
         w = Writer(fh)
         w.start(profile="humanpt", library="humanpt runs merge")
+        w.add_metadata(MERGED_METADATA, run_metadata(metas))
         schema_ids: dict[str, int] = {}
         channels: dict[str, int] = {}
         for t_ns, f, e in merge_entries(files, notes, keep=lambda e: e.direction == OUT):
@@ -213,4 +252,4 @@ def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
             w.add_message(channel_id=channels[key], log_time=t_ns, data=e.data, publish_time=t_ns, sequence=n)
             n += 1
         w.finish()
-    return MergeResult(n, len(files), len(channels), notes)
+    return MergeResult(n, len(files), len(channels), notes, out)

@@ -119,10 +119,13 @@ def file_info(path: str | Path) -> FileInfo:
 
 
 def run_info(run_dir: str | Path) -> list[FileInfo]:
-    """:func:`file_info` of every recording of a run (segments included), in name order."""
+    """:func:`file_info` of every recording of a run (segments included), in name order; of
+    the one recording given as a file (``runs play`` takes either)."""
     d = Path(run_dir)
+    if d.is_file():
+        return [file_info(d)]
     if not d.is_dir():
-        raise RecordingError(f"{d}: no such run directory")
+        raise RecordingError(f"{d}: no such run directory or .mcap file")
     files = sorted(d.glob("*.mcap"))
     if not files:
         raise RecordingError(f"{d}: no .mcap recordings here")
@@ -168,13 +171,13 @@ class RunSummary:
         return self.recordings_bytes / 1e6 / (self.duration_s / 60.0) if self.duration_s > 0 else 0.0
 
 
-def _rig_line(run_dir: Path, files: list[FileInfo]) -> str:
+def _rig_line(run_dir: Path, files: list[FileInfo], folder: bool = True) -> str:
     from humanpt.runtime.rigfile import load_rig, rig_from_json
 
     recorded = {f.metadata["rig"] for f in files if f.metadata.get("rig")}
     differ = f"; the recordings hold {len(recorded)} different rigs" if len(recorded) > 1 else ""
     path = run_dir / "rig.toml"
-    if path.exists():
+    if folder and path.exists():  # (one file given: its own recorded rig, not its folder's)
         try:
             rig = load_rig(path)
             return f"{path.name}: {rig.name} ({rig.methods()}){differ}"
@@ -191,8 +194,8 @@ def _rig_line(run_dir: Path, files: list[FileInfo]) -> str:
 
 def run_summary(run_dir: str | Path, files: list[FileInfo] | None = None) -> RunSummary:
     """The whole run of :func:`run_info` (given ``files``, not read again)."""
-    d = Path(run_dir)
-    files = run_info(d) if files is None else files
+    files = run_info(run_dir) if files is None else files
+    d = Path(run_dir) if Path(run_dir).is_dir() else Path(run_dir).parent
     warnings: Counter = Counter()
     dropped: Counter = Counter()
     for f in files:
@@ -200,5 +203,6 @@ def run_summary(run_dir: str | Path, files: list[FileInfo] | None = None) -> Run
             warnings[(f.component, sev, code)] += n
         for topic, n in f.dropped.items():
             dropped[(f.component, topic)] += n
-    total = sum(p.stat().st_size for p in d.rglob("*") if p.is_file())
-    return RunSummary(files, total, sum(f.size_bytes for f in files), _rig_line(d, files), warnings, dropped)
+    total = (sum(p.stat().st_size for p in d.rglob("*") if p.is_file()) if Path(run_dir).is_dir()
+             else Path(run_dir).stat().st_size)
+    return RunSummary(files, total, sum(f.size_bytes for f in files), _rig_line(d, files, Path(run_dir).is_dir()), warnings, dropped)
