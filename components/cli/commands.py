@@ -353,6 +353,11 @@ def runs_merge(args) -> int:
         print(f"humanpt runs merge: warning: {note}", file=sys.stderr)
     print(f"humanpt runs merge: {res.messages} messages from {res.recordings} recordings on {res.topics} topics "
           f"-> {res.out}")
+    if len(res.cells) == 1:
+        from humanpt.scene.layout import write_layout
+
+        layout = write_layout(res.out.with_suffix(".layout.json"), res.cells[0])
+        print(f"humanpt runs merge: Foxglove layout for cell {res.cells[0]} -> {layout} (Layouts > Import)")
     return 0
 
 

@@ -164,6 +164,7 @@ class MergeResult:
     topics: int
     notes: list[str]  # recordings (or parts) that could not be read and were left out
     out: Path | None = None  # the file written
+    cells: tuple[str, ...] = ()  # the cells the merged recordings are of
 
 
 MERGED_METADATA = "humanpt.merged"  # a merged file's own metadata record (not a component's humanpt.run)
@@ -252,4 +253,5 @@ def merge_run(run_dir: str | Path, out: str | Path) -> MergeResult:
             w.add_message(channel_id=channels[key], log_time=t_ns, data=e.data, publish_time=t_ns, sequence=n)
             n += 1
         w.finish()
-    return MergeResult(n, len(files), len(channels), notes, out)
+    cells = tuple(sorted({cell for cell, _ in where.values()}))
+    return MergeResult(n, len(files), len(channels), notes, out, cells)

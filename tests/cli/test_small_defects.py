@@ -108,3 +108,19 @@ def test_a_camera_source_that_is_a_folder_or_missing_stops_at_start(kind, tmp_pa
     assert cli_main(["camera", "-c", str(cfg)]) == 1
     err = capsys.readouterr().err
     assert str(source) in err and ("is a folder" if kind == "folder" else "no such video file") in err
+
+
+def test_runs_merge_writes_a_foxglove_layout_on_the_runs_own_cell(tmp_path, cli_main):
+    # issue 38 item 4: the layout hard-coded humanpt/cell0/..., the live demo publishes humanpt/demo/...
+    from humanpt.schemas import topics
+
+    assert cli_main(["runs", "merge", str(RUN), str(tmp_path / "arc.mcap")]) == 0
+    layout = json.loads((tmp_path / "arc.layout.json").read_text())
+    with open(tmp_path / "arc.mcap", "rb") as f:
+        channels = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    keys = set(re.findall(r'humanpt/[A-Za-z0-9_-]+/[A-Za-z0-9_/]+', json.dumps(layout)))
+    assert keys and all(topics.short_from_key(k)[0] == "demo" for k in keys)  # the run's cell, recorded
+    image = layout["configById"]["Image!humanptimage"]["imageMode"]
+    # what the panels draw is in the merged file (the image itself is the camera's: not a bus output here)
+    assert set(image["annotations"]) <= channels and image["calibrationTopic"] in channels
+    assert set(layout["configById"]["3D!humanpt3d"]["topics"]) & channels
