@@ -441,6 +441,19 @@ def config(args) -> int:
     return 0
 
 
+def robot_files(args) -> int:
+    from humanpt.robot_gateway.links.rsi import robot_files as rf
+
+    cfg = cfgmod.load(args.config, config_types())
+    gw = cfg.component("robot_gateway", core_class("robot_gateway").config_type)
+    paths = rf.write(gw, args.out, args.sensor_ip, args.overwrite)
+    for p in paths:
+        print(f"humanpt robot-files: {p}")
+    print(f"humanpt robot-files: {len(paths)} files for link {gw.link} at {gw.cycle_period_ms:g} ms; install them as "
+          f"{Path(paths[-1]).name} says")
+    return 0
+
+
 def check_output(out: str | Path, src: str | Path, overwrite: bool) -> None:
     """A command's output file: never its input, never an existing file unless
     ``overwrite`` (ValueError saying which)."""

@@ -535,6 +535,18 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--config", "-c", metavar="FILE")
     p.add_argument("--check", action="store_true")
 
+    p = sub.add_parser("robot-files", help="write what the robot controller needs for the cell's link (KUKA RSI: "
+                       "KRL program, Ethernet XML, context)",
+                       description="From the config's [robot_gateway] (link rsi): the RSI Ethernet object's XML "
+                       "(the elements humanpt reads and writes, HOLDON 0), a KRL program (RSI_ON relative, "
+                       "RSI_MOVECORR) and the RSI context's parameters to set in RSI Visual, all in OUT. See "
+                       "components/robot_gateway/links/rsi/README.md, 'Setting up the robot'.")
+    p.add_argument("--config", "-c", metavar="FILE")
+    p.add_argument("--out", required=True, metavar="DIR", help="folder to write the files to (made if missing)")
+    p.add_argument("--sensor-ip", metavar="IPV4", help="the gateway PC's address on the RSI network (default: "
+                   "udp_bind's host; required when that is 0.0.0.0 or loopback)")
+    p.add_argument("--overwrite", action="store_true", help="replace files that exist")
+
     p = sub.add_parser("bench", help="benchmarks that print a table (not asserted)",
                        description="Without WHAT: one table of perception images/s, lock-step speed, "
                        "image-to-command latency and ALTER cycles on time in a live demo run, replay speed "
@@ -676,6 +688,7 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
     fn = {
         "router": commands.router, "up": commands.up, "topics": commands.topics_cmd, "echo": commands.echo,
         "param": commands.param, "replay": commands.replay, "config": commands.config,
+        "robot-files": commands.robot_files,
     }.get(args.verb)
     if fn is not None:
         return fn(args)
