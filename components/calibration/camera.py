@@ -404,6 +404,19 @@ def apply_to_rig(rig: Rig, result: CameraCalibration, date: str) -> Rig:
     psvs = rig.psvs
     changes: dict = {"a_u": main.a_u, "a_v": main.a_v, "skew": 0.0,
                      "dist_coeffs": tuple(float(v) for v in main.dist_coeffs)}
+    sizes = {tuple(int(x) for x in c.image_size_px) for c in result.views.values()}
+    if len(sizes) > 1:
+        raise CalibrationError(f"the views were calibrated on images of different sizes {sorted(sizes)}: one camera, "
+                               "one size")
+    (w, h), = sizes
+    if (w, h) != (psvs.image_width_px, psvs.image_height_px):
+        # A camera of another size (issue 35): the rig takes the images' size. Its principal
+        # point comes from the right view, so that one must be calibrated at the new size.
+        if "right" not in result.views:
+            raise CalibrationError(f"the images are {w} x {h} px, the rig's camera {psvs.image_width_px} x "
+                                   f"{psvs.image_height_px} px: calibrate the right view (or both) at the new size, "
+                                   "its principal point places the left one")
+        changes.update(image_width_px=w, image_height_px=h)
     sigma = {k: v for k, v in main.sigma.items()}
     if len(result.views) == 2:  # one lens: both views' focal lengths, weighted by 1 / sigma^2
         for f in ("a_u", "a_v"):
@@ -434,7 +447,9 @@ def apply_to_rig(rig: Rig, result: CameraCalibration, date: str) -> Rig:
         sigma.pop(k, None)
     if "k1" in dist_sigma:
         sigma["dist_coeffs"] = dist_sigma["k1"]
-    note = (f"views {'+'.join(result.views)}, detector {main.detector}, distortion {main.dist_model} (sigma "
+    resized = (f"image size {psvs.image_width_px} x {psvs.image_height_px} -> {w} x {h} px; "
+               if "image_width_px" in changes else "")
+    note = (f"{resized}views {'+'.join(result.views)}, detector {main.detector}, distortion {main.dist_model} (sigma "
             + ", ".join(f"{k} {v:.2g}" for k, v in dist_sigma.items()) + "), "
             + ", ".join(f"{v}: {c.rms_px:.3f} px RMS over {len(c.view_names)} views" for v, c in result.views.items()))
     try:

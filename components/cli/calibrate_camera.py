@@ -84,9 +84,9 @@ def _board(args):
 
 
 def _progress(what: str):
-    def show(done: int, total: int) -> None:
-        print(f"\r{what}: {done}/{total}", end="\n" if done >= total else "", file=sys.stderr, flush=True)
-    return show
+    from humanpt.runtime.progress import StepProgress
+
+    return StepProgress(what)
 
 
 def read_images(folder: str | Path) -> list[tuple[str, object]]:
@@ -131,9 +131,13 @@ def _from_images(args, rig, settings) -> tuple[CameraCalibration, list[str], lis
     for v, folder in folders.items():
         images = read_images(folder)
         h, w = images[0][1].shape
-        if (w, h) != tuple(rig.psvs.params().image_size_px):
-            raise CalibrationError(f"{folder}: images are {w} x {h} px, the rig's camera is "
-                                   f"{rig.psvs.image_width_px} x {rig.psvs.image_height_px} px")
+        if (w, h) != tuple(rig.psvs.params().image_size_px):  # the rig takes the images' size (apply_to_rig)
+            if "right" not in folders:
+                raise CalibrationError(f"{folder}: images are {w} x {h} px, the rig's camera {rig.psvs.image_width_px} "
+                                       f"x {rig.psvs.image_height_px} px: calibrate the right view (or both) at the "
+                                       "new size, its principal point places the left one")
+            print(f"{folder}: images are {w} x {h} px, the rig's camera {rig.psvs.image_width_px} x "
+                  f"{rig.psvs.image_height_px} px: the calibrated rig will say {w} x {h} px", flush=True)
         for d in detectors:
             dets = detect_views(images, board, d, _progress(f"{v} view, {d} detector"))
             try:

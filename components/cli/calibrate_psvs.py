@@ -50,8 +50,10 @@ def add_parser(csub) -> None:
     q.set_defaults(calibrate_tool="mirrors")
 
 
-def _progress(done: float, total: float) -> None:
-    print(f"\r  views {int(done)}/{int(total)}", end="" if done < total else "\n", file=sys.stderr, flush=True)
+def _views():
+    from humanpt.runtime.progress import StepProgress
+
+    return StepProgress("  views")
 
 
 def _fail(tool: str, msg: str) -> int:
@@ -89,11 +91,11 @@ def run(args) -> int:
                   f"{args.poses} poses; rig {rig_path}{'' if rig_path.exists() else ' (nominal: no such file yet)'}",
                   file=sys.stderr)
             if tool == "psvs":
-                est, report, truth = cal_psvs.calibrate_psvs_on_twin(world, rig, args.seed, _progress,
+                est, report, truth = cal_psvs.calibrate_psvs_on_twin(world, rig, args.seed, _views(),
                                                                      n_poses=args.poses, frames_per_pose=args.frames,
                                                                      fit_l=args.fit_l, date=date)
             else:
-                check, report, truth = cal_psvs.check_mirrors_on_twin(world, rig, args.seed, _progress,
+                check, report, truth = cal_psvs.check_mirrors_on_twin(world, rig, args.seed, _views(),
                                                                       n_poses=args.poses, frames_per_pose=args.frames,
                                                                       budget_mm=args.budget)
         else:

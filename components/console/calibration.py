@@ -148,12 +148,16 @@ def calibrate_camera_live(cfg: ConfigFile, rig: Rig, settings: CameraSettings, b
     if not images:
         raise CalibrationError("no frames captured (press Enter to capture a view)")
     h, w = images[0][1].shape
-    if (w, h) != tuple(rig.psvs.params().image_size_px):
-        raise CalibrationError(f"camera/image is {w} x {h} px, the rig's camera is "
-                               f"{rig.psvs.image_width_px} x {rig.psvs.image_height_px} px")
+    notes = []
+    if (w, h) != tuple(rig.psvs.params().image_size_px):  # the rig takes the camera's size (apply_to_rig)
+        if view != "right":
+            raise CalibrationError(f"camera/image is {w} x {h} px, the rig's camera {rig.psvs.image_width_px} x "
+                                   f"{rig.psvs.image_height_px} px: calibrate the right view at the new size first")
+        notes.append(f"camera/image is {w} x {h} px, the rig's camera {rig.psvs.image_width_px} x "
+                     f"{rig.psvs.image_height_px} px: the calibrated rig will say {w} x {h} px")
     cal = calibrate_view(dets, (w, h), view, settings, detector)
     result = CameraCalibration({view: cal})
-    return result, report_lines(result, {view: dets}), []
+    return result, notes + report_lines(result, {view: dets}), []
 
 
 # -- hand-eye -------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ import time
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-__all__ = ["Bars", "LineProgress"]
+__all__ = ["Bars", "LineProgress", "StepProgress"]
 
 
 class Bars:
@@ -101,3 +101,29 @@ class LineProgress:
         if self.enabled and self.tty:
             self.stream.write("\n")
             self.stream.flush()
+
+
+class StepProgress:
+    """``progress(done, total)`` for counted steps (images, views): ``label: done/total``
+    rewritten in place on a terminal; in a pipe or a log one line per tenth and the last,
+    each on its own line (issue 35 item 5: they ran together on one line)."""
+
+    def __init__(self, label: str, stream=None):
+        self.label = label
+        self.stream = stream or sys.stderr
+        self.tty = self.stream.isatty()
+        self._last_tenth = -1
+
+    def __call__(self, done: float, total: float) -> None:
+        done_i, total_i = int(done), int(total)
+        finished = done_i >= total_i
+        text = f"{self.label}: {done_i}/{total_i}"
+        if self.tty:
+            self.stream.write("\r" + text + ("\n" if finished else ""))
+        else:
+            tenth = 10 if finished else int(10 * done_i / max(total_i, 1))
+            if tenth == self._last_tenth:
+                return
+            self._last_tenth = tenth
+            self.stream.write(text + "\n")
+        self.stream.flush()

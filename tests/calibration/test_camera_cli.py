@@ -104,7 +104,6 @@ def test_bad_input_is_refused_with_its_reason(board_images, tmp_path, rig_file, 
     _refused(calibrate, capsys, rig_file, "--images", tmp_path / "nowhere", match="no such folder")
     _refused(calibrate, capsys, rig_file, "--images", _folder(tmp_path, "empty", []), match="no images")
     half = [cv2.resize(v, (320, 240)) for v in views]
-    _refused(calibrate, capsys, rig_file, "--images", _folder(tmp_path, "half", half), match="the rig's camera is 640 x 480")
     mixed = _folder(tmp_path, "mixed", views[:6])
     cv2.imwrite(str(mixed / "99.png"), half[0])
     _refused(calibrate, capsys, rig_file, "--images", mixed, match="one camera, one size")
@@ -114,6 +113,54 @@ def test_bad_input_is_refused_with_its_reason(board_images, tmp_path, rig_file, 
     _refused(calibrate, capsys, rig_file, "--twin", "--board", "charuco", match="chessboard")
     _refused(calibrate, capsys, rig_file, "--images", board_images, "--cols", "7", "--rows", "7", match="must differ")
     _refused(calibrate, capsys, rig_file, match="no source")
+
+
+def _sized_views(w: int, h: int, seed: int = 4):
+    """The twin's board through the right view of a nominal camera of ``w`` x ``h`` px (a_u
+    1000, centre at the image's centre, no distortion), and that camera's rig."""
+    import dataclasses
+
+    rig = Rig()
+    rig = dataclasses.replace(rig, psvs=dataclasses.replace(rig.psvs, image_width_px=w, image_height_px=h,
+                                                            u0=w / 2.0, v0=h / 2.0))
+    p = rig.params()
+    rng = np.random.default_rng(5)
+    return [render_board(p, "right", T, TWIN_BOARD, SimCameraConfig(), rng)
+            for T in plan_board_poses(p, "right", TWIN_BOARD, N_IMAGES, seed=seed)], rig
+
+
+@pytest.mark.parametrize("w, h", [(640, 512)])  # (the issue's real camera; larger sizes cost a minute here)
+def test_images_of_another_size_calibrate_and_the_rig_takes_their_size(w, h, tmp_path, rig_file, capsys, calibrate):
+    # issue 35: 640 x 512 images were refused ("the rig's camera is 640 x 480 px") with no way on
+    views, _ = _sized_views(w, h)
+    folder = _folder(tmp_path, f"{w}x{h}", views)
+    assert calibrate("--images", folder, "--rig", rig_file) == 0
+    assert f"will say {w} x {h} px" in capsys.readouterr().out
+    rig = load_rig(rig_file)
+    assert (rig.psvs.image_width_px, rig.psvs.image_height_px) == (w, h)
+    assert abs(rig.psvs.u0 - w / 2) < 2.0 and abs(rig.psvs.v0 - h / 2) < 2.0
+    # the focal length agrees with OpenCV's own calibrateCamera on the same corners within its 1-sigma
+    board = TWIN_BOARD
+    obj = np.zeros((board.cols * board.rows, 3), np.float32)
+    obj[:, :2] = np.mgrid[0:board.cols, 0:board.rows].T.reshape(-1, 2) * board.square_mm
+    pts, objs = [], []
+    for v in views:
+        ok, c = cv2.findChessboardCorners(v, (board.cols, board.rows))
+        if ok:
+            c = cv2.cornerSubPix(v, c, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4))
+            pts.append(c.reshape(-1, 1, 2).astype(np.float32))
+            objs.append(obj)
+    flags = cv2.CALIB_FIX_K3 | cv2.CALIB_ZERO_TANGENT_DIST
+    res = cv2.calibrateCameraExtended(objs, pts, (w, h), None, None, flags=flags)
+    K, std = res[1], res[5].ravel()
+    assert abs(rig.psvs.a_u - K[0, 0]) <= max(std[0], 1e-3 * K[0, 0]), (rig.psvs.a_u, K[0, 0], std[0])
+    assert "image size 640 x 480 -> " in rig.psvs_calibration.note
+
+
+def test_a_new_size_needs_the_right_view(tmp_path, rig_file, capsys, calibrate):
+    views, _ = _sized_views(640, 512)
+    _refused(calibrate, capsys, rig_file, "--images", _folder(tmp_path, "left", views[:1]), "--view", "left",
+             match="calibrate the right view")
 
 
 def test_a_corrupt_rig_is_not_overwritten(board_images, tmp_path, calibrate):
