@@ -81,7 +81,7 @@ def _add_actions(asub) -> dict[str, str]:
     )
     q = action(
         "set",
-        help="set GUI options: threshold, invert, delay, dz, stop-on-current-location, ...",
+        help="set GUI options: threshold, invert, mask, delay, dz, stop-on-current-location, ...",
         description="Set the paper's GUI options on the running components (their live "
         "parameters; each change is recorded in the component's MCAP):\n"
         + "\n".join(f"  {k:26s} {c}.{p}: {h}" for k, (c, p, h) in OPTIONS.items())

@@ -50,6 +50,12 @@ OPTIONS: dict[str, tuple[str, str, str]] = {
         "image inversion: the sources are darker than the background (step 3)",
     ),
     "method": ("perception", "method", "perception method: weighted (default) or paper"),
+    "mask": (
+        "perception",
+        "mask",
+        "image mask: rectangles u,v,width,height (px) the perception ignores, ';' between them; "
+        "'none' clears it (paper Fig. 5: Mask)",
+    ),
     "delay": (
         "controller",
         "recording_delay_cycles",
@@ -178,6 +184,25 @@ def _bool(text) -> bool:
     raise ConsoleError(f"{text!r} is not true or false")
 
 
+def parse_mask(text: str) -> list[list[int]]:
+    """``u,v,w,h;u,v,w,h`` (px) -> [[u, v, w, h], ...]; ``none`` or empty -> [] (no mask).
+    ValueError naming the rectangle that is not four integers; the ranges are the
+    perception's own check (its config), when the value is set."""
+    text = text.strip()
+    if text.lower() in ("", "none", "[]"):
+        return []
+    rects = []
+    for part in text.split(";"):
+        fields = [f.strip() for f in part.split(",")]
+        try:
+            if len(fields) != 4:
+                raise ValueError
+            rects.append([int(f) for f in fields])
+        except ValueError:
+            raise ValueError(f"{part.strip()!r} is not a rectangle u,v,width,height of integers (px)") from None
+    return rects
+
+
 def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
     """``NAME=VALUE`` (GUI names, or ``component.key`` for any live parameter) ->
     {component: {live key: value}}, values typed as the components expect."""
@@ -199,6 +224,8 @@ def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
                     typed = int(value)
                 elif key == "method":
                     typed = value
+                elif key == "mask":
+                    typed = parse_mask(value)
                 else:
                     typed = float(value)
             except ValueError as e:

@@ -71,6 +71,24 @@ def test_options_map_to_the_owning_components_live_parameters():
     }
 
 
+def test_the_mask_is_a_gui_option_and_goes_through_the_perceptions_own_check():
+    # issue 33 item 6: the paper's Mask was reachable only through `param`
+    import dataclasses
+
+    from humanpt.perception.config import PerceptionConfig
+
+    assert parse_options(["mask=10,20,100,50; 300,0,40,40"]) == {
+        "perception": {"mask": [[10, 20, 100, 50], [300, 0, 40, 40]]}}
+    assert parse_options(["mask=none"]) == {"perception": {"mask": []}}
+    for bad in ("mask=1,2,3", "mask=a,b,c,d", "mask=1,2,3,4;5"):
+        with pytest.raises(ConsoleError, match="mask"):
+            parse_options([bad])
+    # a rectangle without area is the perception's refusal, the same as through `param`
+    with pytest.raises(ValueError, match="no area"):
+        dataclasses.replace(PerceptionConfig(), mask=parse_options(["mask=10,10,0,5"])["perception"]["mask"])
+    assert gui_values({"perception": {"mask": [[1, 2, 3, 4]]}}) == {"mask": [[1, 2, 3, 4]]}
+
+
 def test_status_board_line_and_block():
     b = StatusBoard()
     assert b.line() == "(no status yet)"
