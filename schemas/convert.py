@@ -82,6 +82,18 @@ def _matrix_rows_from_quat(x: float, y: float, z: float, w: float) -> list[list[
     ]
 
 
+def quaternion_xyzw(rotation: np.ndarray) -> tuple[float, float, float, float]:
+    """A rotation matrix (3, 3) -> unit quaternion (x, y, z, w), w >= 0 (the one conversion
+    of every pose message; no check that it is a rotation: :func:`pose` checks)."""
+    return _quat_from_rows(*np.asarray(rotation, dtype=float).reshape(9).tolist())
+
+
+def rotation_from_xyzw(x: float, y: float, z: float, w: float) -> np.ndarray:
+    """A quaternion (x, y, z, w), normalised here -> rotation matrix (3, 3); MessageError when
+    it has no usable length (zero, NaN, infinite)."""
+    return np.array(_matrix_rows_from_quat(float(x), float(y), float(z), float(w)))
+
+
 def pose(a_T_b: np.ndarray) -> pb.Pose:
     """4x4 homogeneous transform (translation in metres) -> Pose.
 

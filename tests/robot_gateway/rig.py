@@ -14,6 +14,7 @@ import numpy as np
 from humanpt.geometry.transforms import transform_from_x
 from humanpt.robot_gateway.core import GatewayCore
 from humanpt.robot_gateway.links import gateway_config
+from humanpt.robot_gateway.links.abb.protocol import EgmState, decode_sensor, encode_robot, pos_quat
 from humanpt.robot_gateway.links.alter import (
     ControllerEndpoint,
     ControllerStatus,
@@ -76,8 +77,29 @@ class RsiRobot:
         return [], [(c.ipoc // self.cycle_ms, c)]
 
 
+class AbbRobot:
+    """ABB EGM's robot side: an EgmRobot per cycle (seqno = cycle, the fed-back pose), each
+    EgmSensor decoded (its target, for the cycle last sent)."""
+
+    fields = {"udp_bind": "127.0.0.1:0"}
+
+    def __init__(self, config):
+        self.cycle = 0
+
+    def begin(self, t_ns: int) -> list[bytes]:
+        return []  # EGM has no handshake
+
+    def send(self, cycle: int, base_T_flange_mm: np.ndarray, bits, t_ns: int) -> list[bytes]:
+        self.cycle = cycle
+        pos, quat = pos_quat(base_T_flange_mm)
+        return [encode_robot(EgmState(cycle, t_ns // MS, pos, quat))]
+
+    def take(self, data: bytes, t_ns: int) -> tuple[list[bytes], list]:
+        return [], [(self.cycle, decode_sensor(data))]
+
+
 # link name -> its robot side (a test of a new link adds its own).
-ROBOTS: dict[str, type] = {"alter": AlterRobot, "rsi": RsiRobot}
+ROBOTS: dict[str, type] = {"alter": AlterRobot, "rsi": RsiRobot, "abb": AbbRobot}
 
 
 class Rig:

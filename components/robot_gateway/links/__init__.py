@@ -27,6 +27,7 @@ from typing import Any
 LINKS: dict[str, str] = {
     "alter": "humanpt.robot_gateway.links.alter.kind:KIND",  # the Puma's ALTER serial line (DDCMP)
     "rsi": "humanpt.robot_gateway.links.rsi.kind:KIND",  # KUKA RSI-style UDP/XML, 4 or 12 ms
+    "abb": "humanpt.robot_gateway.links.abb.kind:KIND",  # ABB EGM position guidance, UDP protobuf, 4 ms
 }
 
 DEFAULT_LINK = "alter"

@@ -97,15 +97,17 @@ class UdpAdapter:
     topics_out = ("udp_tx",)
 
     def __init__(self, bind: str, *, robot: str = "", rx_topic: str = "udp_rx", poll_s: float = 0.2,
-                 peer: str = "", relock_after_ms: float = 300.0):
+                 peer: str = "", relock_after_ms: float = 300.0, valid: Callable[[bytes], bool] = _is_rob):
         """``robot``: "host" or "host:port" the datagrams must come from ("": any);
         ``peer``: "host:port" to send to and take datagrams from only, for good (the
         simulated robot's side: its gateway); "": the first valid ``<Rob>`` locks
         (:class:`PeerLock`), the gateway's way; ``relock_after_ms``: how long the locked
-        sender must be silent before another may take over."""
+        sender must be silent before another may take over; ``valid``: whether a datagram
+        is the robot's message (may lock): RSI's ``<Rob>`` by default, another UDP link's
+        own check (ABB EGM's EgmRobot)."""
         self.bind = bind
         self.lock = PeerLock(robot, fixed=parse_address(peer) if peer else None,
-                             relock_after_ns=round(relock_after_ms * 1e6))
+                             relock_after_ns=round(relock_after_ms * 1e6), valid=valid)
         self.rx_topic = rx_topic
         self.poll_s = poll_s
         self._sock: socket.socket | None = None

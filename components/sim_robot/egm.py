@@ -1,0 +1,131 @@
+"""A simulated ABB controller running EGM position guidance: sim_robot's arm behind an EGM
+link (UDP protobuf), for the twin and the tests.
+
+:class:`EgmRobot` is the controller (pure: times are given). Every EGM cycle (4 ms, or a
+multiple) :meth:`EgmRobot.cycle`:
+
+1. moves the arm toward the last target a sensor sent (``EgmSensor.planned.cartesian``):
+   EGM's position controller as a first-order response of time constant
+   ``time_constant_s`` (the fraction 1 - exp(-cycle / tau) of the way each cycle), through
+   the same kinematics and joint-speed limit as the other simulated links
+   (:func:`humanpt.sim_robot.core.corrected_joints`); before any target it stays;
+2. stops EGM when no ``EgmSensor`` came for ``comm_timeout_s`` (the RAPID program's
+   EGMRunPose ``\\CommTimeout``; counted from the start too: the sensor must answer);
+   the arm then stays where it is, no more messages;
+3. sends the next ``EgmRobot``: seqno + 1, tm (ms), the flange in the base frame from the
+   nominal forward kinematics, motors on, MCI running, RAPID running.
+
+Humanpt's assumption (no controller here to check it): the convergence is first order and
+the timeout stops the motion at once; a real controller also filters the target
+(``\\LpFilter``) and ramps down (``\\RampOutTime``). Unlike RSI, EGM gives the sensor no
+count of late answers: a late answer is just an older target.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from humanpt.geometry.puma import UnreachableError
+from humanpt.geometry.transforms import interpolate_transform, invert_transform
+from humanpt.robot_gateway.links.abb.protocol import (
+    EgmProtocolError,
+    EgmState,
+    decode_sensor,
+    encode_robot,
+    pos_quat,
+)
+from humanpt.sim_robot.config import SimRobotConfig
+from humanpt.sim_robot.core import JointStepError, corrected_joints
+from humanpt.sim_robot.rsi import SimEvent
+
+
+class EgmRobot:
+    """The simulated EGM controller (pure). ``events``, ``counters`` and ``targets`` (the
+    targets taken) are for tests and benches."""
+
+    def __init__(self, config: SimRobotConfig, *, cycle_ms: float = 4.0, comm_timeout_s: float = 1.0,
+                 time_constant_s: float = 0.02):
+        if not (cycle_ms >= 4.0 and abs(cycle_ms / 4.0 - round(cycle_ms / 4.0)) < 1e-9):
+            raise ValueError(f"EGM's cycle is a multiple of 4 ms, got {cycle_ms}")
+        if not (comm_timeout_s > 0 and time_constant_s > 0):
+            raise ValueError("comm_timeout_s and time_constant_s must be > 0")
+        self.config = config
+        self.cycle_ms = cycle_ms
+        self.comm_timeout_ns = round(comm_timeout_s * 1e9)
+        self.alpha = 1.0 - math.exp(-cycle_ms / 1000.0 / time_constant_s)
+        self.kin = config.kinematics()
+        self.q_rad = config.start_joints_rad()
+        self.max_joint_step_deg = config.max_joint_speed_deg_s * cycle_ms / 1000.0
+        self.seqno = 0
+        self.target: np.ndarray | None = None
+        self.stopped: str | None = None
+        self._started_ns: int | None = None
+        self._last_answer_ns: int | None = None
+        self.events: list[SimEvent] = []
+        self.targets: list[np.ndarray] = []
+        self.counters = dict.fromkeys(("cycles", "answers", "malformed", "after_stop", "moved"), 0)
+
+    @property
+    def base_T_flange_mm(self) -> np.ndarray:
+        return self.kin.forward(self.q_rad)
+
+    def _stop(self, t_ns: int, code: str, text: str) -> None:
+        self.stopped = text
+        self.events.append(SimEvent(t_ns, "error", code, text))
+
+    def cycle(self, t_ns: int) -> bytes | None:
+        """A cycle boundary at ``t_ns``: move toward the target, then the next EgmRobot (None
+        once EGM stopped)."""
+        if self.stopped is not None:
+            return None
+        if self._started_ns is None:
+            self._started_ns = t_ns
+        heard = self._last_answer_ns if self._last_answer_ns is not None else self._started_ns
+        if t_ns - heard > self.comm_timeout_ns:
+            self._stop(t_ns, "egm_stopped", f"EGM stopped: no EgmSensor for {(t_ns - heard) / 1e9:.3f} s (the "
+                       f"communication timeout {self.comm_timeout_ns / 1e9:g} s); the robot holds")
+            return None
+        if self.target is not None:
+            self._move(t_ns)
+            if self.stopped is not None:
+                return None
+        self.seqno += 1
+        self.counters["cycles"] += 1
+        pos, quat = pos_quat(self.base_T_flange_mm)
+        return encode_robot(EgmState(self.seqno, (t_ns // 1_000_000) % (1 << 32), pos, quat))
+
+    def _move(self, t_ns: int) -> None:
+        T = self.base_T_flange_mm
+        want = interpolate_transform(T, self.target, self.alpha)
+        delta = want @ invert_transform(T)  # in the base frame: [dR, p' - dR p]
+        delta[:3, 3] = want[:3, 3] - T[:3, 3]  # (corrected_joints' base-frame step: about the flange origin)
+        if float(np.abs(delta[:3, 3]).max()) < 1e-9 and np.allclose(delta[:3, :3], np.eye(3), atol=1e-12):
+            return
+        try:
+            self.q_rad = corrected_joints(self.kin, T, delta, "world", self.q_rad, self.max_joint_step_deg)
+        except (UnreachableError, JointStepError) as e:
+            self._stop(t_ns, "fault", f"EGM stopped: the target {e}")
+            return
+        self.counters["moved"] += 1
+
+    def receive(self, data: bytes, t_ns: int, arrived_ns: int | None = None) -> None:
+        """An EgmSensor from the sensor: its target is taken (whenever it comes: EGM goes to
+        the latest target it has)."""
+        if self.stopped is not None:
+            self.counters["after_stop"] += 1
+            return
+        try:
+            t = decode_sensor(data)
+        except EgmProtocolError as e:
+            self.counters["malformed"] += 1
+            self.events.append(SimEvent(t_ns, "warning", "bad_sensor_message", f"dropped: {e}"))
+            return
+        self.target = t.base_T_target_mm()
+        self.targets.append(self.target)
+        self.counters["answers"] += 1
+        self._last_answer_ns = t_ns
+
+    def finish(self, t_ns: int) -> None:
+        """The end of the run (nothing to judge: EGM has no per-cycle answer)."""
