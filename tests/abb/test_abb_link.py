@@ -52,7 +52,7 @@ def test_the_sequence_duplicates_gaps_and_a_restart():
 def test_steps_add_to_an_absolute_target_whose_lead_is_bounded():
     link = AbbLink(max_lead_mm=2.0, max_lead_deg=1.0)
     link.receive(rob(1), 0)
-    for k in range(3):  # the robot has not moved: the target runs ahead 0.8, 1.6, then 2.0 mm
+    for _ in range(3):  # the robot has not moved: the target runs ahead 0.8, 1.6, then 2.0 mm
         target = link.correction(1, np.array([0.8, 0.0, 0.0]), np.zeros(3), 10.0, 10.0)
     np.testing.assert_allclose(np.array(target.pos_mm) - START[:3, 3], [2.0, 0.0, 0.0], atol=1e-9)
     assert link.counters["lead_limited"] == 1
