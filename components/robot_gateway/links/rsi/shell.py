@@ -173,8 +173,8 @@ class UdpAdapter:
                 if self._stop.wait(self.poll_s):
                     self._sock = None
                     return
-        log.warning("UDP %s: the robot at %s:%d silent for %.0f ms: the next valid <Rob> from an allowed "
-                    "sender locks", self.bind, *self.lock.peer, self.lock.relock_after_ns / 1e6)
+        log.warning("UDP %s: the robot at %s:%d silent for %.0f ms: the next valid robot message from an "
+                    "allowed sender locks", self.bind, *self.lock.peer, self.lock.relock_after_ns / 1e6)
 
     @property
     def address(self) -> tuple[str, int]:
