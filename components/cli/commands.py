@@ -442,15 +442,19 @@ def config(args) -> int:
 
 
 def robot_files(args) -> int:
-    from humanpt.robot_gateway.links.rsi import robot_files as rf
+    from humanpt.robot_gateway.links import link_kind
 
     cfg = cfgmod.load(args.config, config_types())
     gw = cfg.component("robot_gateway", core_class("robot_gateway").config_type)
-    paths = rf.write(gw, args.out, args.sensor_ip, args.overwrite)
+    write = link_kind(gw.link).write_robot_files
+    if write is None:
+        raise ValueError(f"[robot_gateway] link = {gw.link!r}: humanpt writes no robot-side files for it "
+                         "(robot files are written for link = \"rsi\" (KUKA) and \"abb\" (ABB EGM))")
+    paths = write(gw, args.out, args.sensor_ip, args.overwrite)
     for p in paths:
         print(f"humanpt robot-files: {p}")
-    print(f"humanpt robot-files: {len(paths)} files for link {gw.link} at {gw.cycle_period_ms:g} ms; install them as "
-          f"{Path(paths[-1]).name} says")
+    print(f"humanpt robot-files: {len(paths)} files for link {gw.link} at {gw.cycle_period_ms:g} ms; how to install "
+          f"them: components/robot_gateway/links/{gw.link}/README.md")
     return 0
 
 

@@ -43,7 +43,8 @@ class LinkKind:
     port, a UDP socket); ``rx_topic``/``tx_topic``: the local topics of what the robot sent
     and what goes to it (their messages are ``humanpt.SerialChunk``); ``late_repeats``: how
     many times the robot may repeat a correction on its own when answers are late (the
-    envelope keeps them all inside; 0 for a robot that applies nothing then)."""
+    envelope keeps them all inside; 0 for a robot that applies nothing then);
+    ``write_robot_files``: the robot-side files (``humanpt robot-files``)."""
 
     name: str
     config_type: type
@@ -52,6 +53,9 @@ class LinkKind:
     rx_topic: str
     tx_topic: str
     late_repeats: Callable[[Any], int] = lambda config: 0
+    # ``humanpt robot-files``: write(config, out_dir, sensor_ip, overwrite) -> paths, the files
+    # the robot controller needs for this link (None: nothing to write, e.g. ALTER's VAL II).
+    write_robot_files: Callable[..., list] | None = None
 
 
 class UnknownLinkError(ValueError):

@@ -3,6 +3,7 @@
 import math
 
 from humanpt.robot_gateway.links import LinkKind
+from humanpt.robot_gateway.links.abb import robot_files
 from humanpt.robot_gateway.links.abb.config import AbbConfig
 from humanpt.robot_gateway.links.abb.link import AbbLink
 from humanpt.robot_gateway.links.abb.shell import adapters
@@ -16,4 +17,5 @@ def late_repeats(config: AbbConfig) -> int:
 
 
 KIND = LinkKind(name="abb", config_type=AbbConfig, make=AbbLink.from_config, adapters=adapters,
-                rx_topic=AbbLink.rx_topic, tx_topic=AbbLink.tx_topic, late_repeats=late_repeats)
+                rx_topic=AbbLink.rx_topic, tx_topic=AbbLink.tx_topic, late_repeats=late_repeats,
+                write_robot_files=robot_files.write)

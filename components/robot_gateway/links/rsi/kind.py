@@ -1,6 +1,7 @@
 """The RSI link as the gateway's registry knows it (``links.LINKS["rsi"]``)."""
 
 from humanpt.robot_gateway.links import LinkKind
+from humanpt.robot_gateway.links.rsi import robot_files
 from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.robot_gateway.links.rsi.link import RsiLink
 from humanpt.robot_gateway.links.rsi.shell import adapters
@@ -13,4 +14,5 @@ def late_repeats(config: RsiConfig) -> int:
 
 
 KIND = LinkKind(name="rsi", config_type=RsiConfig, make=RsiLink.from_config, adapters=adapters,
-                rx_topic=RsiLink.rx_topic, tx_topic=RsiLink.tx_topic, late_repeats=late_repeats)
+                rx_topic=RsiLink.rx_topic, tx_topic=RsiLink.tx_topic, late_repeats=late_repeats,
+                write_robot_files=robot_files.write)

@@ -67,9 +67,9 @@ class RobotFiles:
         return ((ETHERNET_FILE, self.ethernet_xml), (PROGRAM_FILE, self.program_src), (CONTEXT_FILE, self.context_md))
 
 
-def sensor_address(config: RsiConfig, sensor_ip: str | None = None) -> tuple[str, int]:
-    """(IPv4, port) the robot sends to: ``sensor_ip`` (the gateway PC's address on the RSI
-    network) or ``udp_bind``'s host, with ``udp_bind``'s port. A wildcard or loopback host
+def sensor_address(config, sensor_ip: str | None = None) -> tuple[str, int]:
+    """(IPv4, port) the robot sends to: ``sensor_ip`` (the gateway PC's address on the robot's
+    network) or ``udp_bind``'s host (any UDP link's config), with ``udp_bind``'s port. A wildcard or loopback host
     needs ``sensor_ip``: the robot cannot send to 0.0.0.0 or to its own loopback."""
     host, port = parse_address(config.udp_bind)
     ip_text = sensor_ip if sensor_ip is not None else host
@@ -205,13 +205,12 @@ def robot_files(config: RsiConfig, sensor_ip: str | None = None) -> RobotFiles:
     return RobotFiles(ethernet_xml(config, sensor_ip), program_src(config), context_md(config, sensor_ip))
 
 
-def write(config: RsiConfig, out_dir: str | Path, sensor_ip: str | None = None,
-          overwrite: bool = False) -> list[Path]:
-    """Write the files into ``out_dir`` (made if missing); FileExistsError naming a file that
-    is there unless ``overwrite``. Nothing is written when any file would be refused."""
-    files = robot_files(config, sensor_ip)
+def write_files(items, out_dir: str | Path, overwrite: bool = False) -> list[Path]:
+    """Write ``items`` ((name, text), ...) into ``out_dir`` (made if missing); FileExistsError
+    naming a file that is there unless ``overwrite``: nothing is written then."""
     d = Path(out_dir)
-    paths = [d / name for name, _ in files.items()]
+    items = list(items)
+    paths = [d / name for name, _ in items]
     if not overwrite:
         there = [p for p in paths if p.exists()]
         if there:
@@ -219,6 +218,13 @@ def write(config: RsiConfig, out_dir: str | Path, sensor_ip: str | None = None,
     d.mkdir(parents=True, exist_ok=True)
     from humanpt.runtime.files import write_atomic
 
-    for p, (_, text) in zip(paths, files.items(), strict=True):
+    for p, (_, text) in zip(paths, items, strict=True):
         write_atomic(p, text)
     return paths
+
+
+def write(config: RsiConfig, out_dir: str | Path, sensor_ip: str | None = None,
+          overwrite: bool = False) -> list[Path]:
+    """Write the files into ``out_dir`` (made if missing); FileExistsError naming a file that
+    is there unless ``overwrite``. Nothing is written when any file would be refused."""
+    return write_files(robot_files(config, sensor_ip).items(), out_dir, overwrite)
