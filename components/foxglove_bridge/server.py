@@ -73,6 +73,15 @@ class _Listener(ServerListener):
     def __init__(self, adapter: FoxgloveAdapter):
         self.adapter = adapter
 
+    def on_client_advertise(self, client, channel):
+        # ClientPublish is offered (Foxglove's publish panels need it), but nothing a browser
+        # publishes reaches the bus: the operator acts through parameters and services only.
+        log.info("foxglove_bridge: client %s advertised %r: what it publishes is dropped (use the services)",
+                 client.id, channel.topic)
+
+    def on_message_data(self, client, client_channel_id, data):
+        self.adapter.dropped_client_messages += 1
+
     def on_get_parameters(self, client, param_names, request_id=None):
         try:
             return self.adapter.get_parameters(param_names)
@@ -107,6 +116,7 @@ class FoxgloveAdapter:
         self.token: str | None = None
         self._lock = threading.Lock()  # one request on the console at a time
         self._time_ns = 0
+        self.dropped_client_messages = 0  # what clients published (never forwarded)
 
     # -- the live shell's calls ----------------------------------------------------------------
     def start(self, put) -> None:

@@ -121,6 +121,8 @@ def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, pr
     crec = read(run_dir / "controller.mcap")
     verbs = [e.decode().verb for e in crec.inputs if e.topic == "console/command"]
     assert verbs[:3] == ["record_start", "record_stop", "save"] and "hold" in verbs and "reset_fault" not in verbs
+    assert "return" not in verbs  # what the client published never reached the bus
+    assert "what it publishes is dropped" in log
     # The bridge's recording: what the browser was given; images at most as many as came.
     brec = read(run_dir / "foxglove_bridge.mcap")
     images_in = sum(e.topic == "camera/image" for e in brec.inputs)

@@ -146,6 +146,11 @@ step("wrong_type", await call("calibrate_tip", { samples: "many" }));
 step("out_of_range", await call("playback", { speed_mm_s: 1000 }));
 step("unknown_service", await call(987654, {}));
 
+// Publishing (ClientPublish): a command on console/command's key, which must not reach the bus.
+const pubId = client.advertise({ topic: key("console/command"), encoding: "json", schemaName: "humanpt.Command" });
+client.sendMessage(pubId, new TextEncoder().encode(JSON.stringify({ component: "controller", verb: "return" })));
+step("published", pubId);
+
 // Garbage on a second connection; the server goes on (the first client still gets answers).
 const junk = new WebSocket(url, [SUBPROTOCOL]);
 await new Promise((r) => junk.on("open", r));
