@@ -17,6 +17,7 @@ import dataclasses
 import io
 import json
 import logging
+import queue
 import threading
 import time
 from pathlib import Path
@@ -117,6 +118,10 @@ class FoxgloveAdapter:
         self._lock = threading.Lock()  # one request on the console at a time
         self._time_ns = 0
         self.dropped_client_messages = 0  # what clients published (never forwarded)
+        # Components whose parameters changed (their param_changed events): re-read and pushed
+        # to the clients that subscribed to them, off the shell's thread.
+        self._changed: queue.Queue = queue.Queue()
+        self._pusher: threading.Thread | None = None
 
     # -- the live shell's calls ----------------------------------------------------------------
     def start(self, put) -> None:
@@ -153,6 +158,8 @@ class FoxgloveAdapter:
         log.info("foxglove_bridge: serving %s", self.url)
         if self.config_file is not None:
             self._connect()
+            self._pusher = threading.Thread(target=self._push_changes, name="foxglove_bridge-params", daemon=True)
+            self._pusher.start()
 
     def _connect(self) -> None:
         """The console session the requests go through (under mTLS: operator_identity's)."""
@@ -172,12 +179,29 @@ class FoxgloveAdapter:
         if ch is None or self.server is None:
             return
         ch.log(msg.SerializeToString())
+        if getattr(msg, "code", None) == "param_changed" and msg.source in _PARAM_COMPONENTS:
+            self._changed.put(msg.source)  # a change from anywhere: the console, humanpt param, a browser
         now = time.time_ns()
         if now - self._time_ns >= TIME_PERIOD_NS:
             self._time_ns = now
             self.server.broadcast_time(now)
 
+    def _push_changes(self) -> None:
+        """Re-read the live parameters of a component that changed one and push them to the
+        clients subscribed to them (Foxglove's Parameters panel follows the console)."""
+        while (comp := self._changed.get()) is not None:
+            try:
+                values = self._values([comp])
+                if values and self.server is not None:
+                    self.server.publish_parameter_values([_parameter(n, v) for n, v in values.items()])
+            except Exception:  # noqa: BLE001 - a failed refresh is a log line, the next one tries again
+                log.exception("foxglove_bridge: could not refresh %s's parameters", comp)
+
     def close(self) -> None:
+        if self._pusher is not None:
+            self._changed.put(None)
+            self._pusher.join(timeout=2 * self.config.request_timeout_s)
+            self._pusher = None
         if self.server is not None:
             self.server.stop()
             self.server = None
@@ -280,6 +304,9 @@ class FoxgloveAdapter:
         if rc != 0:
             raise RequestError(answer or f"{name} refused")
         return json.dumps({"ok": True, "service": name, "answer": answer}).encode()
+
+
+_PARAM_COMPONENTS = frozenset(p.component for p in PARAMETERS.values())
 
 
 def _parameter(name: str, value) -> Parameter:

@@ -16,7 +16,7 @@ import pytest
 
 from humanpt.foxglove_bridge.requests import SERVICES
 from humanpt.runtime.recording import read
-from tests.conftest import free_port, wait_for, zenoh_client
+from tests.conftest import free_port, run_cli, wait_for, zenoh_client
 
 pytestmark = pytest.mark.timeout(400)
 
@@ -56,10 +56,20 @@ def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, pr
     started = {name: procs.start(name, "--config", str(cfg), "--run-dir", str(run_dir)) for name in CELL}
     _wait_alive(port, CELL)
 
-    r = subprocess.run(["node", str(node_client / "client.mjs"), f"ws://127.0.0.1:{ws_port}", "test"],
-                       capture_output=True, text=True, timeout=300, cwd=node_client)
-    assert r.returncode == 0, f"the client failed:\n{r.stdout}\n{r.stderr}"
-    got = json.loads(r.stdout.strip().splitlines()[-1])
+    client = subprocess.Popen(["node", str(node_client / "client.mjs"), f"ws://127.0.0.1:{ws_port}", "test"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=node_client)
+    try:
+        line = client.stdout.readline()  # the client waits for a change made elsewhere
+        if line.strip() == "READY":
+            r = run_cli("console", "set", "threshold=80", "--config", str(cfg), "--timeout", "20")
+            assert r.returncode == 0, r.stdout + r.stderr
+        rest, err = client.communicate(timeout=300)
+    finally:
+        if client.poll() is None:
+            client.kill()
+            client.communicate()
+    assert client.returncode == 0, f"the client failed:\n{line}{rest}\n{err}"
+    got = json.loads(rest.strip().splitlines()[-1])
     (tmp_path / "client.json").write_text(json.dumps(got, indent=1))  # what it saw, for a failure's reader
 
     # The server speaks foxglove.sdk.v1 only: ws-protocol's own subprotocol alone is refused.
@@ -108,6 +118,8 @@ def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, pr
     assert not got["unknown_service"]["ok"]
     assert got["garbage_connection"] in ("answered",) or got["garbage_connection"].startswith("closed")
     assert got["after_garbage"]["ok"] and "hold" in got["after_garbage"]["text"]
+    # humanpt console set threshold=80, pushed to the subscribed client
+    assert got["pushed"] == [{"name": "perception.threshold", "value": 80, "type": "float64"}]
     assert got["client_errors"] == []
 
     bridge = started["foxglove_bridge"]

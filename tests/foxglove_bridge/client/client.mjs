@@ -170,6 +170,13 @@ junk.send(JSON.stringify({ op: "getParameters", parameterNames: ["perception.thr
 step("garbage_connection", await waitFor(() => junkEnd, "the garbage connection's end"));
 junk.terminate();
 step("after_garbage", await call("hold", {}));
+// The Parameters panel follows a change made elsewhere: subscribed, then the test runs
+// `humanpt console set threshold=80` when it reads READY, and the new value is pushed.
+client.subscribeParameterUpdates(["perception.threshold"]);
+console.log("READY");
+const pushed = await waitFor(() => state.params.find((p) => !p.id && p.parameters.some(
+  (q) => q.name === "perception.threshold" && q.value === 80)), "the console's threshold pushed");
+step("pushed", pushed.parameters);
 step("client_errors", state.errors);
 client.close();
 console.log(JSON.stringify(out));
