@@ -93,6 +93,8 @@ MAY_IMPORT = {
     # the operator's client (console verbs, live calibration): it prepares what it sends as the
     # controller checks it, reads seams, runs the calibrations and reads the gateway's config
     "console": SHARED_PACKAGES | {"controller", "calibration", "seam", "robot_gateway"},
+    # the operator's screen in a browser: its parameters and buttons are the console's
+    "foxglove_bridge": SHARED_PACKAGES | {"console"},
 }
 # Modules of another package that a package may import (the leaf config types).
 MAY_IMPORT_MODULES = {"geometry": {"humanpt.runtime.config_types"}}

@@ -52,9 +52,14 @@ def run_live(args, cfg, run_dir: Path) -> int:
 
     def started(comps: list[str]) -> None:
         print(f"humanpt demo: starting {', '.join(comps)}, operator (log: {run_dir / 'processes.log'})", flush=True)
-        rt = cfgmod.load(run_dir / "humanpt.toml").runtime  # written by run_live before the start
+        written = cfgmod.load(run_dir / "humanpt.toml")  # by run_live before the start
+        rt = written.runtime
         print(f"humanpt demo: router {', '.join(rt.listen)}, cell {rt.cell}; watch it with "
               f"`humanpt topics --config {run_dir / 'humanpt.toml'}` (or echo, console, view)", flush=True)
+        fox = written.sections.get("foxglove_bridge")
+        if fox and "foxglove_bridge" in comps:
+            print(f"humanpt demo: Foxglove: open ws://127.0.0.1:{fox['port']} (Open connection > Foxglove "
+                  f"WebSocket; layout docs/foxglove-layout.json on cell {rt.cell})", flush=True)
         if rt.security == "mtls":
             print(f"humanpt demo: mTLS, a throwaway PKI in {rt.pki}; every process a client of the router, "
                   f"which enforces the access control; tools present {rt.identity!r} (operator)", flush=True)

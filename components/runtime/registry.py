@@ -23,6 +23,7 @@ COMPONENTS: dict[str, str] = {
     "standin_robot": "humanpt.twin.standin:StandInRobotCore",
     "viz": "humanpt.viz.core:VizCore",
     "scene": "humanpt.scene.core:SceneCore",
+    "foxglove_bridge": "humanpt.foxglove_bridge.core:FoxgloveBridgeCore",
 }
 
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
@@ -34,14 +35,17 @@ ADAPTERS: dict[str, str] = {
     "sim_robot": "humanpt.sim_robot.shell:adapters",
     "camera": "humanpt.camera.capture:capture_adapters",
     "viz": "humanpt.viz.sink:adapters",
+    "foxglove_bridge": "humanpt.foxglove_bridge.server:adapters",
 }
 
 # The paper's two machines.  Single-machine use needs no profile ("all").
 PROFILES: dict[str, dict] = {
     "server": {"router": True, "components": ("robot_gateway",),
                "doc": "router + the robot gateway (ALTER serial or RSI UDP), beside the robot controller"},
-    "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz", "scene"),
-               "doc": "vision and control, connecting to the server's router"},
+    "client": {"router": False, "components": ("camera", "perception", "pose_filter", "controller", "viz", "scene",
+                                              "foxglove_bridge"),
+               "doc": "vision and control, connecting to the server's router; the operator's screen in "
+                      "Foxglove (foxglove_bridge, loopback)"},
     "twin": {"router": True, "components": ("operator", "standin_robot", "sim_camera"),
              "doc": "router + the digital twin: operator, stand-in robot, simulated PSVS camera"},
     "loop": {"router": True, "components": ("operator", "standin_robot", "sim_camera", "perception", "pose_filter",
@@ -75,11 +79,13 @@ def core_class(name: str) -> type[Core]:
     return import_path(COMPONENTS[name])
 
 
-def adapters_for(name: str, config, run_dir=None, rig=None) -> list:
+def adapters_for(name: str, config, run_dir=None, rig=None, config_file=None) -> list:
     """The live-shell adapters of component ``name`` (empty for most components).
 
     A factory that takes a ``run_dir`` keyword gets the run directory (to write files
-    beside the recordings), one that takes ``rig`` the cell's rig."""
+    beside the recordings), one that takes ``rig`` the cell's rig, one that takes
+    ``config_file`` the loaded config file (the cell, its session: the Foxglove bridge's
+    requests)."""
     from humanpt.runtime.config import current_name
 
     path = ADAPTERS.get(current_name(name))
@@ -89,7 +95,7 @@ def adapters_for(name: str, config, run_dir=None, rig=None) -> list:
 
     factory = import_path(path)
     params = inspect.signature(factory).parameters
-    kwargs = {k: v for k, v in (("run_dir", run_dir), ("rig", rig)) if k in params}
+    kwargs = {k: v for k, v in (("run_dir", run_dir), ("rig", rig), ("config_file", config_file)) if k in params}
     return factory(config, **kwargs)
 
 

@@ -138,7 +138,7 @@ def run_component(cfg: cfgmod.ConfigFile, name: str, run_dir: str | Path | None 
     core = cls.create(cfg.component(name, cls.config_type), cfg.rig())
     run_dir = Path(run_dir) if run_dir else Path(cfg.runtime.run_dir) / f"{run_stamp()}-{name}"
     try:
-        adapters = adapters_for(name, core.config, run_dir=run_dir, rig=core.rig)
+        adapters = adapters_for(name, core.config, run_dir=run_dir, rig=core.rig, config_file=cfg)
     except Exception as e:  # a serial port that does not open, say: name it and stop
         say(f"humanpt {name}: {e}")
         return 1

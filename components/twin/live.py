@@ -143,6 +143,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
         "sim_camera": to_table(cam), "controller": to_table(ctl),
         # Foxglove's frames: the robot base where the gateway puts it.
         "scene": {"world_T_base_mm_deg": list(gateway.world_T_base_mm_deg), "dz_mm": ctl.dz_mm},
+        "foxglove_bridge": {"port": free_tcp_port()},  # the operator's screen (loopback; the demo prints it)
     }
     if secure:
         # Peers would link to each other around the router's access control: clients only.
@@ -252,7 +253,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     run_dir = Path(run_dir)
     port = port or free_tcp_port()
     cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure, link=link, cycle_ms=cycle_ms)
-    comps = list(LIVE_COMPONENTS) + (["viz"] if viewer else [])
+    comps = list(LIVE_COMPONENTS) + ["foxglove_bridge"] + (["viz"] if viewer else [])  # the operator's screen
     if secure:
         make_pki(run_dir, sections["runtime"]["cell"], comps + ["operator"])
     cfg_path = run_dir / "humanpt.toml"

@@ -1,0 +1,1 @@
+"""The live Foxglove bridge: the cell on a Foxglove WebSocket server (README.md)."""
