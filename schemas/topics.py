@@ -89,6 +89,7 @@ EVENT_PUBLISHERS = (
     "standin_robot",
     "viz",
     "scene",
+    "foxglove_bridge",
     "pinger",
     "ponger",
 )
