@@ -16,6 +16,7 @@ from collections.abc import Callable, Iterator
 import cv2
 import numpy as np
 
+from humanpt.runtime.clock import CLOCK
 from humanpt.schemas.convert import image
 
 from .config import CameraConfig
@@ -74,7 +75,7 @@ class CaptureAdapter:
 
     topics_out: tuple[str, ...] = ()
 
-    def __init__(self, config: CameraConfig, clock: Callable[[], int] = time.time_ns):
+    def __init__(self, config: CameraConfig, clock: Callable[[], int] = CLOCK.now_ns):
         self.config = config
         self.clock = clock
         self._stop = threading.Event()

@@ -248,11 +248,17 @@ class LiveShell:
         self._q.put_local(("local", topic, (msg, self.clock.epoch)))
 
     def _restamp(self, msg, epoch: int):
-        """``msg`` with its header's stamp moved by the clock steps accepted since ``epoch``."""
+        """``msg`` with its stamp (``header.stamp_ns``, a foxglove image's ``timestamp``) moved
+        by the clock steps accepted since ``epoch``."""
         shift = self.clock.shift_since(epoch)
+        if not shift:
+            return msg
         header_ = getattr(msg, "header", None)
-        if shift and header_ is not None and getattr(header_, "stamp_ns", 0):
+        if header_ is not None and getattr(header_, "stamp_ns", 0):
             header_.stamp_ns = max(0, header_.stamp_ns + shift)
+        stamp = getattr(msg, "timestamp", None)
+        if stamp is not None and hasattr(stamp, "ToNanoseconds") and stamp.ToNanoseconds():
+            stamp.FromNanoseconds(max(0, stamp.ToNanoseconds() + shift))
         return msg
 
     def _clock_step(self, step_ns: int) -> None:
