@@ -30,6 +30,8 @@ import pytest
 
 from humanpt.camera.config import CameraConfig
 from humanpt.camera.core import CameraCore
+from humanpt.pose_filter.config import PoseFilterConfig
+from humanpt.pose_filter.core import PoseFilterCore
 from humanpt.robot_gateway.core import GatewayCore
 from humanpt.runtime.clock import Clock
 from humanpt.schemas import humanpt_pb2 as pb
@@ -169,6 +171,27 @@ def test_a_step_back_does_not_make_the_cameras_frames_stale():
             assert core.step(t1, "clock_step", pb.Event(code="clock_step", text=str(-STEP_NS))) == []
         got = frames(core, t1, 10)
         assert got == (["camera/image"] * 10 if announce else ["stale_frame"] * 10), got
+
+
+def test_a_step_does_not_cut_the_pose_filters_wait_for_the_robot():
+    # A measurement newer than the latest robot state waits wait_for_robot_ms (60 ms, input
+    # time) for the state that brackets it; a +2 s step unannounced ends the wait at once
+    # (the measurement is used on an extrapolated robot pose, or dropped).
+    from tests.pose_filter.test_pose_filter import TARGET_X, T_m, World, moving_flange
+
+    for announce in (False, True):
+        core = PoseFilterCore(PoseFilterConfig())
+        world = World(core, moving_flange, lambda t: T_m(TARGET_X))
+        t0 = 10_000_000_000
+        for k in range(3):
+            world.robot_state(t0 + k * 28_000_000)
+        world.measurement(t0 + 60_000_000)  # (given 5 ms after its stamp) newer than the robot's 56 ms
+        assert len(core._pending) == 1
+        if announce:
+            assert core.step(t0 + 70_000_000 + STEP_NS, "clock_step",
+                             pb.Event(code="clock_step", text=str(STEP_NS))) == []
+        world.measurement(t0 + 65_000_000 + STEP_NS)  # 10 ms later by the monotonic clock
+        assert len(core._pending) == (2 if announce else 1), announce
 
 
 def test_a_clock_step_input_that_is_not_a_number_is_a_warning():
