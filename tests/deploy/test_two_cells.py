@@ -1,9 +1,10 @@
 """Two cells on one router are isolated from each other (issue 31 item 5b): distinct
 ``cell`` names, each a robot gateway and a simulated robot (behind its own pty) as
-processes; this test is cell ``a``'s controller. Cell ``a``'s robot follows the commands;
-cell ``b``'s never moves, its gateway never receives a command nor sees ``a``'s controller
-(judged from ``b``'s own recordings, which keep every input its components took), and no
-topic of one cell is published under the other's key.
+processes; this test is cell ``a``'s controller. Cell ``a``'s robot follows the commands
+and takes a console command (ALTER off) sent to cell ``a``; cell ``b``'s never moves and
+stays in ALTER, its gateway never receives a command nor sees ``a``'s controller, its
+robot never a console command (judged from ``b``'s own recordings, which keep every input
+its components took), and every key on the router is one of the two cells'.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 from humanpt.testing.harness import ScriptedControllerConfig, scripted_command
-from tests.conftest import wait_for, write_config, zenoh_client
+from tests.conftest import wait_for, wait_matching, write_config, zenoh_client
 
 CELLS = ("a", "b")
 
@@ -66,6 +67,21 @@ def test_two_cells_on_one_router_do_not_see_each_other(router, procs, tmp_path):
                  "cell a's robot moving 5 mm")
         mark = len(states["b"])
         wait_for(lambda: len(states["b"]) >= mark + 20, 60.0, "20 more of cell b's robot states")
+        # A console command for cell a's robot (ALTER off): a's robot takes it, b's never hears it.
+        sim_events: list[tuple[str, pb.Event]] = []
+        subs.append(s.declare_subscriber("humanpt/*/sim_robot/events", lambda smp: sim_events.append(
+            (str(smp.key_expr), pb.Event.FromString(smp.payload.to_bytes())))))
+        console = s.declare_publisher("humanpt/a/console/command")
+        wait_matching(console)
+        console.put(pb.Command(header=pb.Header(seq=1), component="sim_robot", verb="alter_off",
+                               args_json='{"operator": "test@two-cells"}').SerializeToString())
+        wait_for(lambda: any(k.startswith("humanpt/a/") and e.code == "alter_off" for k, e in sim_events), 30.0,
+                 "cell a's robot taking ALTER off")
+        wait_for(lambda: not states["a"][-1].status.alter_active, 30.0, "cell a's robot state showing ALTER off")
+        mark = len(states["b"])
+        wait_for(lambda: len(states["b"]) >= mark + 20, 60.0, "20 more of cell b's robot states")
+        assert all(st.status.alter_active for st in states["b"]), "cell b's robot left ALTER"
+        assert not [k for k, _ in sim_events if not k.startswith("humanpt/a/")], sim_events
         token.undeclare()
         for sub in subs:
             sub.undeclare()
@@ -89,6 +105,7 @@ def test_two_cells_on_one_router_do_not_see_each_other(router, procs, tmp_path):
     # Every key is one cell's: humanpt/<cell>/<component>/...; the sim robots' states
     # arrive in their own cell only (what each recorded was its own link's bytes).
     assert {k.split("/")[1] for k in keys} == set(CELLS), sorted(keys)[:20]
-    rec_sim_b = read(run_b / "sim_robot.mcap")
-    assert not [e for e in rec_sim_b.inputs if "/" in e.topic and not e.topic.startswith("sim_robot")], \
-        sorted({e.topic for e in rec_sim_b.inputs})
+    # Cell b's robot took no console command; cell a's took the one sent to it.
+    assert not [e for e in read(run_b / "sim_robot.mcap").inputs if e.topic == "console/command"]
+    assert [e.decode().verb for e in read(run_a / "sim_robot.mcap").inputs if e.topic == "console/command"] \
+        == ["alter_off"]
