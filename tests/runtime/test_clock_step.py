@@ -9,7 +9,7 @@ input, which moves its watchdogs' times (STATUS silence, reply deadline, DDCMP's
   another machine: NTP does not step it): the step unannounced is the bug (``link_down``
   then ``link_up`` for +2 s), announced it is nothing;
 * the camera core: a step back does not make 2 s of frames stale;
-* the :class:`~humanpt.runtime.clock.Clock` accepts a step of the wall clock and no slew;
+* the :class:`~humanpt.runtime.clock.Clock` accepts a step of the wall clock (once), none in a quiet run;
 * live: ``humanpt robot_gateway`` and ``humanpt sim_robot`` as processes over a pty and a
   router, this test the controller; the gateway's wall clock is stepped +2 s then -2 s
   mid-run through the clock's hook (``HUMANPT_CLOCK_OFFSET_FILE``: the machine is shared,
