@@ -260,14 +260,15 @@ def test_a_step_of_the_gateways_wall_clock_keeps_the_live_link_up(router, procs,
                 codes.append(events.get().code)
             return codes.count(code) >= n
 
-        wait_for(lambda: len(states) >= 50, 60.0, "50 robot states")
+        wait_for(lambda: len(states) >= 25, 60.0, "25 robot states")
         seen("")
         codes.clear()  # (the link's start-up: its link_up)
         for n, offset in enumerate(("+2", "-0"), start=1):  # +2 s, then back by 2 s
             hook.write_text(offset + "\n")
             wait_for(lambda n=n: seen("clock_step", n), 30.0, f"the gateway's clock_step event {n}")
             mark = len(states)
-            wait_for(lambda mark=mark: len(states) >= mark + 50, 60.0, "50 more robot states")
+            # 25 cycles (0.7 s) after the step: far beyond the STATUS timeout (3 cycles)
+            wait_for(lambda mark=mark: len(states) >= mark + 25, 60.0, "25 more robot states")
         token.undeclare()
         for sub in subs:
             sub.undeclare()
