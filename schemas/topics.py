@@ -108,6 +108,7 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
     "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
     "capture": RawImage,  # a frame grabbed by the camera's capture adapter (stamp = capture)
     "path_file": pb.Event,  # what the controller's path writer did on save (path_saved, save_failed)
+    "clock_step": pb.Event,  # the wall clock stepped (text: the step in ns): runtime/clock.py
 }
 
 TOPICS: dict[str, Topic] = {t.short: t for t in _ROWS}

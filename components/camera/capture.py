@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from humanpt.runtime.clock import CLOCK
 from humanpt.schemas.convert import image
 
 from .config import CameraConfig
@@ -75,7 +76,7 @@ class CaptureAdapter:
 
     topics_out: tuple[str, ...] = ()
 
-    def __init__(self, config: CameraConfig, clock: Callable[[], int] = time.time_ns):
+    def __init__(self, config: CameraConfig, clock: Callable[[], int] = CLOCK.now_ns):
         self.config = config
         self.clock = clock
         self._stop = threading.Event()

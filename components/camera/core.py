@@ -30,7 +30,8 @@ class CameraCore(Core):
 
     name = "camera"
     config_type = CameraConfig
-    ports = (Port("capture", RawImage, "_on_capture"),)  # frames grabbed by the shell's adapter
+    ports = (Port("capture", RawImage, "_on_capture"),  # frames grabbed by the shell's adapter
+             Port("clock_step", pb.Event, "_on_clock_step"))  # the wall clock stepped (runtime/clock.py)
 
     def __init__(self, config: CameraConfig):
         super().__init__(config)
@@ -61,6 +62,17 @@ class CameraCore(Core):
             pixels, encoding = (pixels >> 8).astype(np.uint8), "mono8"
         self.frames += 1
         return [("camera/image", image(pixels, stamp, "camera", encoding))]
+
+    def _on_clock_step(self, t_ns: int, msg: pb.Event) -> list[Output]:
+        """The wall clock stepped by ``msg.text`` ns: the last stamp moves with it, so that
+        frames after a step back are not all stale until the clock catches up."""
+        try:
+            step = int(msg.text)
+        except ValueError:
+            return self._drop(t_ns, "bad_input", f"clock_step {msg.text[:40]!r} is not a step in ns: ignored")
+        if self.last_stamp_ns is not None:
+            self.last_stamp_ns += step
+        return []
 
     def _drop(self, t_ns: int, code: str, text: str) -> list[Output]:
         self.dropped += 1

@@ -43,6 +43,7 @@ class PoseFilterCore(Core):
     ports = (
         Port("perception/tob", pb.TobMeasurement, "_on_tob"),
         Port("robot_gateway/robot_state", pb.RobotState, "_on_robot_state"),
+        Port("clock_step", pb.Event, "_on_clock_step"),  # the wall clock stepped (runtime/clock.py)
     )
 
     uses_rig = True  # the hand-eye transform and the target's triangle
@@ -181,6 +182,19 @@ class PoseFilterCore(Core):
         self._cycle = (stamp_ns, msg.cycle)
         outs = self._release_pending(t_ns)
         return [*outs, self._state(t_ns, stamp_ns, msg.cycle)]
+
+    def _on_clock_step(self, t_ns: int, msg: pb.Event) -> list[Output]:
+        """The wall clock stepped by ``msg.text`` ns: the times kept by input time (how long a
+        measurement has waited for the robot, the event limiter) move with it. Stamps do not:
+        they name instants in the time base they were taken in."""
+        try:
+            step = int(msg.text)
+        except ValueError:
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_input", f"clock_step {msg.text[:40]!r} is not a "
+                               "step in ns: ignored")]
+        self._pending = deque((t_in + step, m) for t_in, m in self._pending)
+        self._limiter.shift(step)
+        return []
 
     # -- measurements waiting for the robot pose at their stamp ------------------------
     def _release_pending(self, t_ns: int, keep: int | None = None) -> list[Output]:

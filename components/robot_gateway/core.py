@@ -134,6 +134,7 @@ def gateway_ports(*rx_topics: str) -> tuple[Port, ...]:
         Port("controller/command", pb.FlangeCommand, "_on_command", queue=8),
         Port("liveliness", pb.Liveliness, "_on_liveliness"),
         Port("console/command", pb.Command, "_on_console", queue=8),
+        Port("clock_step", pb.Event, "_on_clock_step"),
     )
 
 
@@ -373,6 +374,34 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             self._link(self.link.start(t_ns), t_ns, outs)
 
     # -- controller side ----------------------------------------------------------------------
+    def _on_clock_step(self, t_ns: int, msg: pb.Event, outs: list[Output]) -> None:
+        """The wall clock stepped by ``msg.text`` ns (the live shell, runtime/clock.py): the
+        watchdogs' times move with it, so that the step is neither a silence (STATUS
+        timeout, link_down) nor a burst of expiries (reply deadline, the link's timers).
+        Stamps already given (robot states, the cycles' stamps commands echo) stay as they
+        were: they name the instants they were taken at."""
+        try:
+            step = int(msg.text)
+        except ValueError:
+            self._ev(outs, t_ns, pb.SEVERITY_WARNING, "bad_input", f"clock_step {msg.text[:40]!r} is not a "
+                     "step in ns: ignored")
+            return
+        moved = lambda t: None if t is None else t + step  # noqa: E731
+        self._status_t_ns = moved(self._status_t_ns)
+        if self._pending is not None:
+            self._pending = (self._pending[0], self._pending[1] + step)
+        self._seq_t_ns = moved(self._seq_t_ns)
+        if self._conflict_until_ns >= 0:
+            self._conflict_until_ns += step
+        self._last_command_ns = moved(self._last_command_ns)
+        self._starved_since = moved(self._starved_since)
+        self._limiter.shift(step)
+        shift = getattr(self.link, "shift_time", None)  # a link with timers of its own
+        if shift is not None:
+            shift(step)
+        self._ev(outs, t_ns, pb.SEVERITY_INFO, "clock_step",
+                 f"the wall clock stepped by {step / 1e9:+.3f} s: the watchdogs keep their time", limited=False)
+
     def _on_command(self, t_ns: int, msg: pb.FlangeCommand, outs: list[Output]) -> None:
         self.counters["commands"] += 1
         if self._controller_gone:

@@ -116,3 +116,6 @@ class Link(Protocol):
         mode if ``corrections_off`` and the protocol can)."""
 
     def send(self, correction: Any, t_ns: int) -> list: ...
+
+    # A link with timers of its own (ALTER's DDCMP) also has ``shift_time(step_ns)``: the
+    # gateway's clock stepped (runtime/clock.py), each timer keeps the time it had left.

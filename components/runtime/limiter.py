@@ -25,6 +25,10 @@ class EventLimiter:
         self._last_ns[code] = t_ns
         return self._held.pop(code, 0)
 
+    def shift(self, step_ns: int) -> None:
+        """Move the times kept by ``step_ns`` (the wall clock stepped: runtime/clock.py)."""
+        self._last_ns = {code: t + step_ns for code, t in self._last_ns.items()}
+
     def reset(self, code: str) -> None:
         """Forget ``code`` (an episode ended): its next occurrence goes out at once."""
         self._last_ns.pop(code, None)

@@ -3,7 +3,12 @@
 * inputs arrive from Zenoh subscribers (one per bus port of the core, decoded with the
   port's message type) and from the tick timer;
   they are queued and fed to the core one at a time from one thread, in arrival order,
-  with ``t_ns`` = the wall-clock time at which the core is given the input;
+  with ``t_ns`` = the time (shared time base, :mod:`humanpt.runtime.clock`) at which the
+  core is given the input;
+* time (runtime/clock.py): waits and the tick timer on the monotonic clock, stamps and
+  ``t_ns`` in the shared time base; a step of the wall clock (NTP) is accepted before the
+  next input and given to a core with a ``clock_step`` port as an input (recorded, so it
+  replays), and a local input stamped before the step is re-stamped in the new base;
 * outputs are published on ``humanpt/<cell>/<topic>``;
 * a liveliness token ``humanpt/<cell>/<component>`` says the component is up;
 * a queryable ``humanpt/<cell>/<component>/params`` serves the live parameters and sets
@@ -43,8 +48,9 @@ import zenoh
 from google.protobuf.message import DecodeError
 
 from humanpt.runtime.bus import liveliness_key, params_key, rig_key, zenoh_config
+from humanpt.runtime.clock import CLOCK, Clock
 from humanpt.runtime.config import RecordConfig, RuntimeConfig
-from humanpt.runtime.core import Core
+from humanpt.runtime.core import Core, UndeclaredInputError
 from humanpt.runtime.recording import (
     IMAGE_PRODUCER_NAMES,
     IN,
@@ -59,6 +65,8 @@ from humanpt.schemas import topics
 from humanpt.schemas.convert import header
 
 log = logging.getLogger("humanpt.live")
+
+CLOCK_STEP = "clock_step"  # the local input saying the wall clock stepped (runtime/clock.py)
 
 
 @dataclass
@@ -156,8 +164,16 @@ class LiveShell:
 
     def __init__(self, core: Core, rt: RuntimeConfig, *, run_dir: str | Path | None = None,
                  zconf: zenoh.Config | None = None, adapters: list[Adapter] | None = None,
-                 record: RecordConfig | None = None):
+                 record: RecordConfig | None = None, clock: Clock | None = None):
         self.core = core
+        # The one source of time (runtime/clock.py): the process's unless a test gives one.
+        self.clock = clock or CLOCK
+        self._epoch = self.clock.epoch  # the clock's steps given to the core so far
+        try:
+            core.port(CLOCK_STEP)
+            self._takes_steps = True
+        except UndeclaredInputError:
+            self._takes_steps = False
         self.record = record or RecordConfig()  # [record]: what the recording keeps of images
         self.adapters = list(adapters or [])
         self._local_out = {t: a for a in self.adapters for t in a.topics_out}
@@ -227,7 +243,34 @@ class LiveShell:
         return cb
 
     def _put_local(self, topic: str, msg) -> None:
-        self._q.put_local(("local", topic, msg))
+        # with the clock's epoch: a stamp taken before a step the worker accepts meanwhile
+        # is moved into the new base when the core is given it (_restamp)
+        self._q.put_local(("local", topic, (msg, self.clock.epoch)))
+
+    def _restamp(self, msg, epoch: int):
+        """``msg`` with its stamp (``header.stamp_ns``, a foxglove image's ``timestamp``) moved
+        by the clock steps accepted since ``epoch``."""
+        shift = self.clock.shift_since(epoch)
+        if not shift:
+            return msg
+        header_ = getattr(msg, "header", None)
+        if header_ is not None and getattr(header_, "stamp_ns", 0):
+            header_.stamp_ns = max(0, header_.stamp_ns + shift)
+        stamp = getattr(msg, "timestamp", None)
+        if stamp is not None and hasattr(stamp, "ToNanoseconds") and stamp.ToNanoseconds():
+            stamp.FromNanoseconds(max(0, stamp.ToNanoseconds() + shift))
+        return msg
+
+    def _clock_step(self, step_ns: int) -> None:
+        """The wall clock stepped by ``step_ns`` (accepted by the clock): a core that takes
+        steps is told (an input, recorded), the log says so in any case."""
+        log.warning("%s: the wall clock stepped by %+.3f s (NTP?); stamps follow it, watchdogs keep "
+                    "monotonic time%s", self.core.name, step_ns / 1e9,
+                    "" if self._takes_steps else " (this component keeps no watchdog on it)")
+        if self._takes_steps:
+            t_ns = self.clock.now_ns()
+            self._feed(t_ns, CLOCK_STEP, pb.Event(header=header(t_ns), severity=pb.SEVERITY_WARNING, source="clock",
+                                                  code=CLOCK_STEP, text=str(step_ns)))
 
     def _tick_loop(self) -> None:
         next_t = time.monotonic()
@@ -332,7 +375,7 @@ class LiveShell:
             error = code == "record_error"
             log.log(logging.ERROR if error else logging.WARNING, "%s: %s", self.core.name, text)
             self._publish_raw(f"{self.core.name}/events", pb.Event(
-                header=header(time.time_ns()), severity=pb.SEVERITY_ERROR if error else pb.SEVERITY_INFO,
+                header=header(self.clock.now_ns()), severity=pb.SEVERITY_ERROR if error else pb.SEVERITY_INFO,
                 source=self.core.name, code=code, text=text))
 
     def _drop(self, t_ns: int, short: str, payload: bytes, reason: str) -> None:
@@ -346,7 +389,7 @@ class LiveShell:
             self.recorder.write_dropped(t_ns, short, payload)
 
     def _handle(self, kind: str, short: str, item) -> None:
-        t_ns = time.time_ns()
+        t_ns = self.clock.now_ns()
         if kind == "bus":
             cls = self.core.port(short).type
             msg = cls()
@@ -357,7 +400,8 @@ class LiveShell:
                 return
             self._feed(t_ns, short, msg, item)
         elif kind == "local":
-            self._feed(t_ns, short, item)
+            msg, epoch = item
+            self._feed(t_ns, short, self._restamp(msg, epoch) if epoch != self.clock.epoch else msg)
         elif kind == "liveliness":
             self._feed(t_ns, "liveliness", pb.Liveliness(header=header(t_ns), component=short, alive=item))
         elif kind == "tick":
@@ -383,7 +427,7 @@ class LiveShell:
         if self.run_dir is not None and self.rt.record:
             self.recorder = Recorder(
                 self.run_dir / f"{name}.mcap",
-                self.core.recording_metadata("live", start_time_ns=time.time_ns(), cell=self.cell,
+                self.core.recording_metadata("live", start_time_ns=self.clock.now_ns(), cell=self.cell,
                                              host=socket.gethostname(), pid=os.getpid()),
                 chunk_size=self.rt.chunk_size if name not in IMAGE_PRODUCER_NAMES else max(
                     self.rt.chunk_size, self.record.image_chunk_size),
@@ -415,9 +459,14 @@ class LiveShell:
                 self.ready.set()
                 log.info("%s up in cell %s (bus inputs: %s)", name, self.cell, ", ".join(bus_ports) or "none")
                 rec = self.recorder
+                clock = self.clock
                 while not self.stop.is_set():
                     got = self._q.get(timeout=0.1)
                     if got is not None:
+                        if clock.check() != self._epoch:
+                            for step_ns in clock.steps[self._epoch:]:
+                                self._clock_step(step_ns)
+                            self._epoch = clock.epoch
                         self._handle(*got)
                     if rec is not None and rec.news:  # a cheap test, after every input
                         self._recording_news()

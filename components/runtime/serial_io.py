@@ -9,11 +9,11 @@ from __future__ import annotations
 
 import logging
 import threading
-import time
 from collections.abc import Callable
 
 import serial
 
+from humanpt.runtime.clock import CLOCK
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -60,7 +60,7 @@ class SerialAdapter:
                 continue
             if data:
                 self.bytes_in += len(data)
-                put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=self.url), data=data))
+                put("serial_rx", pb.SerialChunk(header=header(CLOCK.now_ns(), frame_id=self.url), data=data))
 
     def _reopen(self) -> None:
         with self._lock:

@@ -164,6 +164,14 @@ class DdcmpLink:
         times = [t for t in (self._timer_ns, self._ack_due_ns()) if t is not None]
         return min(times) if times else None
 
+    def shift_time(self, step_ns: int) -> None:
+        """Move the timers by ``step_ns``: the caller's clock stepped (runtime/clock.py), the
+        time left on each stays."""
+        if self._timer_ns is not None:
+            self._timer_ns += step_ns
+        if self._ack_owed_since is not None:
+            self._ack_owed_since += step_ns
+
     # --- inputs --------------------------------------------------------------------------
 
     def start(self, now_ns: int) -> list[Event]:

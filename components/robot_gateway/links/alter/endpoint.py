@@ -67,6 +67,9 @@ class _Endpoint:
     def next_deadline_ns(self) -> int | None:
         return self.link.next_deadline_ns
 
+    def shift_time(self, step_ns: int) -> None:
+        self.link.shift_time(step_ns)
+
     def _filter(self, events: list[Event]) -> list[Event]:
         out: list[Event] = []
         for event in events:

@@ -85,6 +85,10 @@ class AlterLink:
     def poll(self, t_ns: int) -> list:
         return self._events(self.host.poll(t_ns))
 
+    def shift_time(self, step_ns: int) -> None:
+        """The gateway's clock stepped (runtime/clock.py): DDCMP's timers keep the time left."""
+        self.host.shift_time(step_ns)
+
     def correction(self, cycle: int, dp_mm: np.ndarray, rv_rad: np.ndarray,
                    max_step_mm: float, max_step_deg: float) -> Correction:
         return quantize(cycle, dp_mm, rv_rad, max_step_mm, max_step_deg)

@@ -28,6 +28,7 @@ from collections.abc import Callable
 
 from humanpt.robot_gateway.links.rsi.config import RsiConfig, parse_address
 from humanpt.robot_gateway.links.rsi.protocol import RsiProtocolError, decode_rob
+from humanpt.runtime.clock import CLOCK
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
@@ -192,7 +193,7 @@ class UdpAdapter:
 
     def _read_loop(self, put) -> None:
         lock, topic = self.lock, self.rx_topic
-        clock, stamp_now = time.monotonic_ns, time.time_ns
+        clock, stamp_now = time.monotonic_ns, CLOCK.now_ns  # watchdog, stamp (runtime/clock.py)
         while not self._stop.is_set():
             sock = self._sock
             if sock is None:
