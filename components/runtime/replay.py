@@ -25,6 +25,7 @@ from pathlib import Path
 from google.protobuf import text_format
 from google.protobuf.message import Message
 
+from humanpt.runtime import cycle
 from humanpt.runtime.config import build
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import (
@@ -77,12 +78,18 @@ def recorded_rig(rec: Recording):
 
 def _rebuild(cls: type[Core], rec: Recording) -> Core:
     """A fresh core of ``cls`` from the recording's config and rig."""
-    cfg = build(cls.config_type, rec.config(), source=f"{rec.path} (recorded config)", section=rec.component)
+    # A recording made before the cell had one cycle (runtime/cycle.py) names the cycle its
+    # core ran with in its config: mapped on reading (its robot states carry none).
+    table, old_cycle_ns = cycle.recorded(rec.component, rec.config())
+    cfg = build(cls.config_type, table, source=f"{rec.path} (recorded config)", section=rec.component)
     rig = recorded_rig(rec)
     if cls.uses_rig and rig is None:
         raise RecordingError(f"{rec.path}: recorded without a rig (an older humanpt kept the calibration "
                              f"in the components' configs); record it again with this version")
-    return cls.create(cfg, rig)
+    core = cls.create(cfg, rig)
+    if old_cycle_ns is not None and hasattr(core, "use_cycle"):
+        core.use_cycle(old_cycle_ns)
+    return core
 
 
 def factory_with(*classes: type[Core]) -> Callable[[Recording], Core]:
