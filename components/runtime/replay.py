@@ -22,8 +22,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from google.protobuf import text_format
-from google.protobuf.message import Message
+from google.protobuf import descriptor_pb2, text_format
+from google.protobuf.message import DecodeError, Message
+from mcap.records import Schema
 
 from humanpt.runtime import cycle
 from humanpt.runtime.config import build
@@ -33,15 +34,17 @@ from humanpt.runtime.recording import (
     IN,
     OUT,
     Recording,
+    RecordingDamage,
     RecordingError,
     SnapshotEntry,
+    iter_records,
     read,
     resolve_images,
     strip_image,
 )
 from humanpt.runtime.registry import COMPONENTS, class_path, core_class
 from humanpt.runtime.snapshot import SnapshotError, parse_snapshot
-from humanpt.schemas import topics
+from humanpt.schemas import humanpt_pb2, topics
 
 
 def build_core(rec: Recording) -> Core:
@@ -331,6 +334,37 @@ def thaw_snapshot(rec: Recording, snap: SnapshotEntry, core: Core) -> int:
     return n_in
 
 
+def fields_newer_than(rec: Recording) -> dict[str, tuple[str, ...]]:
+    """Message type -> the fields this build's schema has and the recording's does not (a
+    field added since, e.g. ``RobotState.cycle_period_ns``): a replay leaves them out of its
+    outputs before comparing, as the recording could not hold them.  Empty for a recording
+    made with this schema."""
+    recorded: dict[str, frozenset[str]] = {}
+    try:
+        for r in iter_records(Path(rec.path), []):
+            if isinstance(r, Schema) and r.encoding == "protobuf" and r.name not in recorded:
+                try:
+                    fds = descriptor_pb2.FileDescriptorSet.FromString(r.data)
+                except DecodeError:
+                    continue
+                for f in fds.file:
+                    for m in f.message_type:
+                        recorded.setdefault(f"{f.package}.{m.name}" if f.package else m.name,
+                                            frozenset(fd.name for fd in m.field))
+    except (RecordingError, RecordingDamage, OSError):
+        pass  # (the replay itself reports a damaged file)
+    out = {}
+    for name, fields in recorded.items():
+        try:
+            desc = humanpt_pb2.DESCRIPTOR.pool.FindMessageTypeByName(name)
+        except KeyError:
+            continue
+        newer = tuple(fd.name for fd in desc.fields if fd.name not in fields)
+        if newer:
+            out[name] = newer
+    return out
+
+
 def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] = build_core,
                      snapshot: SnapshotEntry | None = None) -> tuple[Stream, Stream]:
     """(recorded outputs, replayed outputs) of a recording: a fresh core fed every recorded
@@ -344,6 +378,7 @@ def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] =
     missing_inputs(rec)
     core = core_factory(rec)
     entries = rec.entries
+    newer = fields_newer_than(rec)
     if snapshot is not None:
         thaw_snapshot(rec, snapshot, core)
         entries = entries[snapshot.at:]
@@ -352,6 +387,10 @@ def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] =
         if e.direction != IN:
             continue
         for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
+            unknown = newer.get(msg.DESCRIPTOR.full_name)
+            if unknown:  # fields added since the recording: not demanded of it
+                for name in unknown:
+                    msg.ClearField(name)
             replayed.append((e.t_ns, topic, msg.SerializeToString()))
     outputs = [e for e in entries if e.direction == OUT]
     recorded: Stream = [(e.t_ns, e.topic, e.data) for e in outputs]
