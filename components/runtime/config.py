@@ -426,8 +426,9 @@ class ConfigFile:
     # Deprecation notes (a retired cycle key equal to the link's: runtime/cycle.py), for the
     # tools to print; an error stops the load instead.
     notes: tuple[str, ...] = ()
-    # The cell's one cycle, ns: its robot link's ([robot_gateway] cycle_period_ms).
+    # The cell's one cycle, ns: its robot link's (runtime/cycle.py), and that link's name.
     cycle_period_ns: int = cycle.FALLBACK_NS
+    cycle_link: str = "alter"
 
     def rig_path(self) -> Path | None:
         """The rig file ``[runtime] rig`` names (relative to the config file), or None."""
@@ -530,7 +531,7 @@ def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str,
     link = cycle.link_config(sections, source, (known_sections or {}).get(cycle.OWNER))
     notes = tuple(cycle.retire(sections, source, link))
     cf = ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles, record=record,
-                    notes=notes, cycle_period_ns=link.cycle_period_ns)
+                    notes=notes, cycle_period_ns=link.cycle_period_ns, cycle_link=link.link)
     if known_sections is not None:
         for name, cls in known_sections.items():
             cf.component(name, cls)

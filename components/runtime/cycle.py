@@ -130,3 +130,12 @@ def recorded(component: str, table: Mapping[str, Any]) -> tuple[dict[str, Any], 
         out.setdefault(field, found)
         return out, None
     return out, found
+
+
+def report(cycle_ns: int, link: str) -> list[str]:
+    """Lines saying the cell's one cycle and everywhere it is used (``humanpt config``)."""
+    lines = [f"cycle: {ms(cycle_ns):g} ms, the robot link's ([{OWNER}] link = {link!r}, {KEY}); the cell's only "
+             f"cycle, used by:"]
+    width = max(len(name) for name, _ in USES)
+    lines += [f"  {name:<{width}}  {ms(cycle_ns):g} ms: {use}" for name, use in USES]
+    return lines
