@@ -302,8 +302,12 @@ def test_playback_follows_the_recorded_path():
 
 
 def test_config_rejects_unstable_gains():
+    # k dt < 0.5 at the link's cycle (the cell's config checks it: tests/runtime/test_one_cycle.py)
     with pytest.raises(ValueError, match="gain_translation_1_s"):
-        ControllerConfig(gain_translation_1_s=40.0)
+        ControllerConfig(gain_translation_1_s=40.0).check_cycle(28_000_000)  # 40 x 0.028 = 1.12
+    ControllerConfig(gain_translation_1_s=40.0).check_cycle(4_000_000)  # 40 x 0.004 = 0.16
+    with pytest.raises(ValueError, match="gain_rotation_1_s"):
+        ControllerConfig(gain_rotation_1_s=0.0)
 
 
 def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_cycle():
