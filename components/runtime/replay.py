@@ -24,6 +24,7 @@ from pathlib import Path
 
 from google.protobuf import descriptor_pb2, text_format
 from google.protobuf.message import DecodeError, Message
+from mcap.reader import make_reader
 from mcap.records import Schema
 
 from humanpt.runtime import cycle
@@ -334,25 +335,42 @@ def thaw_snapshot(rec: Recording, snap: SnapshotEntry, core: Core) -> int:
     return n_in
 
 
+def _schemas(path: Path) -> list[Schema]:
+    """The schema records of a recording: from its summary when it was closed, else read
+    through (a damaged file: those before the damage; the replay itself reports it)."""
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        if summary is not None and summary.schemas:
+            return list(summary.schemas.values())
+    except Exception:  # noqa: BLE001 - no usable summary: read through below
+        pass
+    out: list[Schema] = []
+    try:
+        for r in iter_records(path, []):
+            if isinstance(r, Schema):
+                out.append(r)
+    except (RecordingError, RecordingDamage, OSError):
+        pass
+    return out
+
+
 def fields_newer_than(rec: Recording) -> dict[str, tuple[str, ...]]:
     """Message type -> the fields this build's schema has and the recording's does not (a
     field added since, e.g. ``RobotState.cycle_period_ns``): a replay leaves them out of its
     outputs before comparing, as the recording could not hold them.  Empty for a recording
     made with this schema."""
     recorded: dict[str, frozenset[str]] = {}
-    try:
-        for r in iter_records(Path(rec.path), []):
-            if isinstance(r, Schema) and r.encoding == "protobuf" and r.name not in recorded:
-                try:
-                    fds = descriptor_pb2.FileDescriptorSet.FromString(r.data)
-                except DecodeError:
-                    continue
-                for f in fds.file:
-                    for m in f.message_type:
-                        recorded.setdefault(f"{f.package}.{m.name}" if f.package else m.name,
-                                            frozenset(fd.name for fd in m.field))
-    except (RecordingError, RecordingDamage, OSError):
-        pass  # (the replay itself reports a damaged file)
+    for r in _schemas(Path(rec.path)):
+        if r.encoding == "protobuf" and r.name not in recorded:
+            try:
+                fds = descriptor_pb2.FileDescriptorSet.FromString(r.data)
+            except DecodeError:
+                continue
+            for f in fds.file:
+                for m in f.message_type:
+                    recorded.setdefault(f"{f.package}.{m.name}" if f.package else m.name,
+                                        frozenset(fd.name for fd in m.field))
     out = {}
     for name, fields in recorded.items():
         try:

@@ -211,3 +211,30 @@ def test_a_recording_made_now_has_no_field_newer_than_it(tmp_path):
     with Recorder(path, {"component": "robot_gateway"}) as r:
         r.write("out", 1, "robot_gateway/robot_state", pb.RobotState(header=header(1), cycle_period_ns=12 * MS))
     assert fields_newer_than(read(Path(path), require_humanpt=False)) == {}
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_a_field_the_recordings_schema_lacks_is_found_closed_or_not(tmp_path, closed):
+    # A RobotState schema as an older humanpt registered it: without field 7 (cycle_period_ns).
+    from types import SimpleNamespace
+
+    from google.protobuf import descriptor_pb2
+    from mcap.writer import Writer
+
+    fdp = descriptor_pb2.FileDescriptorProto()
+    pb.DESCRIPTOR.CopyToProto(fdp)
+    state = next(m for m in fdp.message_type if m.name == "RobotState")
+    keep = [f for f in state.field if f.name != "cycle_period_ns"]
+    del state.field[:]
+    state.field.extend(keep)
+    fds = descriptor_pb2.FileDescriptorSet(file=[fdp])
+    path = tmp_path / "old.mcap"
+    with open(path, "wb") as f:
+        w = Writer(f, use_chunking=False)
+        w.start()
+        sid = w.register_schema("humanpt.RobotState", "protobuf", fds.SerializeToString())
+        cid = w.register_channel("robot_gateway/robot_state", "protobuf", sid)
+        w.add_message(cid, 1, pb.RobotState(cycle=1).SerializeToString(), 1)
+        if closed:
+            w.finish()
+    assert fields_newer_than(SimpleNamespace(path=path)) == {"humanpt.RobotState": ("cycle_period_ns",)}
