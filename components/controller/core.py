@@ -158,6 +158,10 @@ class ControllerCore(Core):
     def on_config_changed(self, old, new) -> None:
         self._derive(new)
 
+    def check_config(self, config: ControllerConfig) -> None:
+        """A gain changed at run time must stay stable at the cycle the robot runs."""
+        config.check_cycle(self.cycle_period_ns)
+
     def use_cycle(self, cycle_period_ns: int) -> None:
         """Run at this cycle (ns): a robot state's, or what an old recording's config said
         (its robot states carry none; runtime.replay)."""

@@ -238,3 +238,19 @@ def test_a_field_the_recordings_schema_lacks_is_found_closed_or_not(tmp_path, cl
         if closed:
             w.finish()
     assert fields_newer_than(SimpleNamespace(path=path)) == {"humanpt.RobotState": ("cycle_period_ns",)}
+
+
+def test_a_gain_set_at_run_time_must_be_stable_at_the_cycle_the_robot_runs():
+    import json
+
+    def set_gain(core, value):
+        (_, ev), = core.step(0, "param", pb.ParamSet(key="gain_translation_1_s", value_json=json.dumps(value)))
+        return ev
+
+    core = ControllerCore(ControllerConfig())  # no state yet: ALTER's 28 ms; 20 x 0.028 = 0.56
+    ev = set_gain(core, 20.0)
+    assert ev.code == "param_rejected" and "must be < 17.9 at the link's 28 ms cycle" in ev.text, ev.text
+    assert core.config.gain_translation_1_s == 4.0
+    state = _gateway_states(link="rsi", cycle_period_ms=4.0)[-1]
+    core.step(state.header.stamp_ns, "robot_gateway/robot_state", state)
+    assert set_gain(core, 20.0).code == "param_changed" and core.config.gain_translation_1_s == 20.0  # 0.08
