@@ -168,20 +168,22 @@ class AlterStatus(_message.Message):
     def __init__(self, alter_active: _Optional[bool] = ..., tool_mode: _Optional[bool] = ..., cumulative: _Optional[bool] = ..., arm_power: _Optional[bool] = ..., fault: _Optional[bool] = ...) -> None: ...
 
 class RobotState(_message.Message):
-    __slots__ = ("header", "world_T_flange", "joints_rad", "status", "cycle", "missed_cycles")
+    __slots__ = ("header", "world_T_flange", "joints_rad", "status", "cycle", "missed_cycles", "cycle_period_ns")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_FLANGE_FIELD_NUMBER: _ClassVar[int]
     JOINTS_RAD_FIELD_NUMBER: _ClassVar[int]
     STATUS_FIELD_NUMBER: _ClassVar[int]
     CYCLE_FIELD_NUMBER: _ClassVar[int]
     MISSED_CYCLES_FIELD_NUMBER: _ClassVar[int]
+    CYCLE_PERIOD_NS_FIELD_NUMBER: _ClassVar[int]
     header: Header
     world_T_flange: Pose
     joints_rad: _containers.RepeatedScalarFieldContainer[float]
     status: AlterStatus
     cycle: int
     missed_cycles: int
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_flange: _Optional[_Union[Pose, _Mapping]] = ..., joints_rad: _Optional[_Iterable[float]] = ..., status: _Optional[_Union[AlterStatus, _Mapping]] = ..., cycle: _Optional[int] = ..., missed_cycles: _Optional[int] = ...) -> None: ...
+    cycle_period_ns: int
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_flange: _Optional[_Union[Pose, _Mapping]] = ..., joints_rad: _Optional[_Iterable[float]] = ..., status: _Optional[_Union[AlterStatus, _Mapping]] = ..., cycle: _Optional[int] = ..., missed_cycles: _Optional[int] = ..., cycle_period_ns: _Optional[int] = ...) -> None: ...
 
 class FlangeCommand(_message.Message):
     __slots__ = ("header", "cycle", "d_translation_m", "d_rotation_rad", "mode", "request_alter_off", "measurement_stamp_ns")

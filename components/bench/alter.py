@@ -81,8 +81,9 @@ def run_threads(period_ms: float, duration_s: float, warmup_s: float = 0.5) -> A
     script = ScriptedControllerConfig(amplitude_mm=1.0, amplitude_deg=0.3)
     with tempfile.TemporaryDirectory() as d:
         link = Path(d) / "alter-pty"
-        sim = SimRobotCore(SimRobotConfig(cycle_period_ms=period_ms, pty_link=str(link)))
         gw = GatewayCore(gateway_config(period_ms, str(link)))
+        # The robot runs its link's cycle (runtime/cycle.py).
+        sim = SimRobotCore(SimRobotConfig(cycle_period_ns=gw.config.cycle_period_ns, pty_link=str(link)))
         rx_ns: dict[int, int] = {}
         measuring = threading.Event()
         seq = [0]
@@ -183,7 +184,7 @@ def run_zenoh(period_ms: float, duration_s: float, warmup_s: float = 1.0) -> Alt
         cfg.write_text(
             f'[runtime]\ncell = "bench"\nconnect = ["tcp/127.0.0.1:{port}"]\nlisten = ["tcp/127.0.0.1:{port}"]\n'
             f'run_dir = "{d}/runs"\nrecord = false\n'
-            f'[sim_robot]\npty_link = "{link}"\ncycle_period_ms = {period_ms}\n'
+            f'[sim_robot]\npty_link = "{link}"\n'
             f'[robot_gateway]\nport = "{link}"\ncycle_period_ms = {period_ms}\ntick_ms = {g.tick_ms}\n'
             f"reply_deadline_ms = {g.reply_deadline_ms}\n"
         )

@@ -147,7 +147,7 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     adapter.start(lambda topic, msg: inbox.put((topic, msg)))
     host, port = adapter.address
     address = f"{host}:{port}"
-    robot_cfg = robot or SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms)
+    robot_cfg = robot or SimRobotConfig(protocol="rsi", cycle_period_ns=gw_cfg.cycle_period_ns)  # the link's cycle
     controller = CommandAhead(cycle_ms, step)
     run = RsiRun(cycle_ms)
     tick_ns = gw_cfg.tick_period_ns

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from humanpt.runtime import config as cfgmod
+from humanpt.runtime import cycle as cell_cycle
 from humanpt.runtime import run, supervisor
 from humanpt.runtime.files import write_atomic
 from humanpt.runtime.registry import (
@@ -424,11 +425,15 @@ def config(args) -> int:
     cfg = cfgmod.load(args.config, config_types())
     rig = cfg.rig()
     rig_source = cfg.rig_path() or "nominal design values (no [runtime] rig)"
+    for note in cfg.notes:
+        print(f"note: {note}", file=sys.stderr)
     if args.check:
         print(f"{cfg.source}: OK; rig {rig_source}: OK ({rig.methods()})")
+        print("\n".join(cell_cycle.report(cfg.cycle_period_ns, cfg.cycle_link)))
         return 0
     print(f"# effective configuration ({cfg.source}; defaults where it is silent)")
     print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
+    print("\n".join(f"# {line}" for line in cell_cycle.report(cfg.cycle_period_ns, cfg.cycle_link)))
     sections = {"runtime": cfg.runtime, "record": cfg.record}
     for name in sorted(COMPONENTS):
         sections[name] = cfg.component(name, core_class(name).config_type)

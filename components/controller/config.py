@@ -52,7 +52,8 @@ class ControllerConfig:
     # 10 mm at 600 mm is ~17 px in the image).
     position_first_beyond_mm: Annotated[float, Range(0, 1000, "mm")] = live(
         10.0, "position_first: engage once |G - D| exceeds this")
-    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
+    # The cycle (dt, per-cycle limits) is the robot link's, taken from each robot state
+    # (RobotState.cycle_period_ns; humanpt.runtime.cycle): the controller has none of its own.
     # Command cycle k + 1 as soon as the state of cycle k is in (from where cycle k's step
     # will have put the flange): the gateway then answers each STATUS at once instead of
     # waiting on three bus hops within its reply deadline.
@@ -87,16 +88,10 @@ class ControllerConfig:
         return {k: table[k] for k in ENVELOPE_KEYS if k in table}
 
     def __post_init__(self):
-        for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "cycle_period_ms", "playback_speed_mm_s",
-                     "playback_max_lag_mm"):
+        for name in ("dz_mm", "max_speed_mm_s", "max_rotation_deg_s", "playback_speed_mm_s",
+                     "playback_max_lag_mm", "gain_translation_1_s", "gain_rotation_1_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("gain_translation_1_s", "gain_rotation_1_s"):
-            g = getattr(self, name)
-            # One cycle of delay in the loop: k * dt must stay well below 1 for stability.
-            if not 0 < g * self.cycle_period_ms * 1e-3 < 0.5:
-                raise ValueError(f"{name} = {g} must be > 0 and < {0.5 / (self.cycle_period_ms * 1e-3):.1f} "
-                                 f"at a {self.cycle_period_ms} ms cycle")
         if self.recording_delay_cycles < 1:
             raise ValueError("recording_delay_cycles must be >= 1")
         if not all(lo < hi for lo, hi in zip(self.envelope_min_mm, self.envelope_max_mm, strict=True)):
@@ -104,3 +99,12 @@ class ControllerConfig:
                              f"{self.envelope_max_mm} on every axis")
         if self.calibration_samples < 6:
             raise ValueError("calibration_samples must be >= 6 (the pivot fit has 6 unknowns)")
+
+    def check_cycle(self, cycle_period_ns: int) -> None:
+        """The gains at the cell's cycle (the link's; ``ConfigFile.component`` calls this):
+        with one cycle of delay in the loop, k * dt must stay well below 1 for stability."""
+        dt_s = cycle_period_ns * 1e-9
+        for name in ("gain_translation_1_s", "gain_rotation_1_s"):
+            g = getattr(self, name)
+            if not g * dt_s < 0.5:
+                raise ValueError(f"{name} = {g} must be < {0.5 / dt_s:.1f} at the link's {dt_s * 1e3:g} ms cycle")

@@ -51,6 +51,7 @@ from humanpt.geometry.transforms import (
     x_from_transform,
 )
 from humanpt.geometry.units import to_m, to_mm
+from humanpt.runtime import cycle as cell_cycle
 from humanpt.runtime.config import ConfigError, Mm, Range, SpeedMmS, coerce
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
@@ -137,6 +138,9 @@ class ControllerCore(Core):
         self._position_first = False  # the last step was position_first's (law.thetau_step's hysteresis)
         self._last_cycle: int | None = None
         self._sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # cycle -> the step last sent for it
+        # The cell's one cycle (ns): the link's, from the latest robot state that carries it
+        # (runtime/cycle.py); until then, or from states carrying none, the fallback.
+        self.cycle_period_ns = cell_cycle.FALLBACK_NS
         self._derive(config)
 
     def _derive(self, c: ControllerConfig) -> None:
@@ -147,12 +151,23 @@ class ControllerCore(Core):
         self.flange_T_desired = flange_T_desired_m(c, self.rig)
         self.flange_T_tool = to_m(transform_from_x(np.asarray(c.flange_T_tool_x)))
         self.tob_T_tip = to_m(self.rig.tip.tob_T_tip_mm())
-        self.dt = c.cycle_period_ms * 1e-3
+        self.dt = cell_cycle.ms(self.cycle_period_ns) * 1e-3
         self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
         self.max_step_rad = np.radians(c.max_rotation_deg_s) * self.dt
 
     def on_config_changed(self, old, new) -> None:
         self._derive(new)
+
+    def check_config(self, config: ControllerConfig) -> None:
+        """A gain changed at run time must stay stable at the cycle the robot runs."""
+        config.check_cycle(self.cycle_period_ns)
+
+    def use_cycle(self, cycle_period_ns: int) -> None:
+        """Run at this cycle (ns): a robot state's, or what an old recording's config said
+        (its robot states carry none; runtime.replay)."""
+        if cycle_period_ns != self.cycle_period_ns:
+            self.cycle_period_ns = cycle_period_ns
+            self._derive(self.config)
 
     # -- inputs ------------------------------------------------------------------------------
     def _on_path_file(self, t_ns: int, msg: pb.Event) -> list[Output]:
@@ -164,6 +179,9 @@ class ControllerCore(Core):
         except MessageError as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "bad_robot_state", str(e))]
         self.robot = (msg.cycle, msg.header.stamp_ns, T)
+        period_ns = cell_cycle.from_state(msg.cycle_period_ns)
+        if period_ns is not None:
+            self.use_cycle(period_ns)
         if self.start_world_T_flange is None:
             self.start_world_T_flange = T.copy()
         return []
@@ -183,7 +201,7 @@ class ControllerCore(Core):
             # The filter's state for the next cycle overtook that cycle's robot state on
             # the bus: where the flange is then follows from this cycle and its step.
             world_T_flange = law.apply_step(world_T_flange, *self._step_answering(cycle))
-            cycle, stamp = _next(cycle), stamp + round(c.cycle_period_ms * 1e6)
+            cycle, stamp = _next(cycle), stamp + self.cycle_period_ns
         ahead_s = 0.0
         base = self._step_answering(cycle) if c.command_ahead else self._sent.get(cycle)
         if (st.after_measurement or c.command_ahead) and base is not None:
@@ -191,8 +209,8 @@ class ControllerCore(Core):
             # flange, so the gateway can answer that cycle's status at once (after a new
             # image: with the freshest information).
             world_T_flange = law.apply_step(world_T_flange, *base)
-            cycle, stamp = _next(cycle), stamp + round(c.cycle_period_ms * 1e6)
-            ahead_s = c.cycle_period_ms * 1e-3
+            cycle, stamp = _next(cycle), stamp + self.cycle_period_ns
+            ahead_s = self.dt
         outs: list[Output] = []
         valid = st.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
         world_T_tob = v_tob = w_tob = None

@@ -64,8 +64,9 @@ class PoseFilterConfig:
     gate_chi2_pose: Annotated[float, Range(0.1, 1e4, "chi2, 6 dof")] = live(22.46)
     gate_chi2_position: Annotated[float, Range(0.1, 1e4, "chi2, 3 dof")] = live(16.27)
     reset_after_rejects: Annotated[int, Range(1, 1000, "measurements")] = live(5, "consecutive gated measurements, consistent with each other, before the filter restarts on them")
-    # Prediction to the ALTER cycle being commanded.
-    predict_ahead_ms: Annotated[float, Range(0, 1000, "ms")] = live(28.0, "how far past a robot state's stamp the state is predicted")
+    # The prediction horizon is one cycle of the robot link past a robot state's stamp (the
+    # cycle being commanded), taken from the state (RobotState.cycle_period_ns;
+    # humanpt.runtime.cycle): the filter has no cycle of its own.
     lost_after_ms: Annotated[float, Range(1, 60000, "ms")] = live(250.0, "no measurement for this long: status LOST")
     # Hysteresis: a lost track is tracked again only after this many measurements accepted
     # in a row, none more than lost_after_ms after the one before (the first acquisition is
@@ -100,7 +101,7 @@ class PoseFilterConfig:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.still_q_scale > 1:
             raise ValueError(f"still_q_scale must be within (0, 1], got {self.still_q_scale}")
-        if self.predict_ahead_ms < 0 or self.max_extrapolation_ms < 0:
-            raise ValueError("predict_ahead_ms and max_extrapolation_ms must be >= 0")
+        if self.max_extrapolation_ms < 0:
+            raise ValueError("max_extrapolation_ms must be >= 0")
         if self.reset_after_rejects < 1 or self.robot_history < 2:
             raise ValueError("reset_after_rejects must be >= 1 and robot_history >= 2")

@@ -10,7 +10,8 @@ whose Mahalanobis distance is beyond the gate is rejected and reported, and afte
 position of G, placed from the visible sources and the predicted orientation.
 
 On every robot state (one per ALTER cycle), and again after every accepted measurement,
-the state predicted to ``stamp + predict_ahead_ms`` of the latest robot state is published
+the state predicted one link cycle past the latest robot state's stamp (the cycle the state
+carries, ``RobotState.cycle_period_ns``) is published
 as ``pose_filter/tob_state`` for that cycle (the controller re-commands the cycle with it).
 """
 
@@ -26,6 +27,7 @@ from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.kalman import PoseIMM, PoseKalman
 from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
+from humanpt.runtime import cycle as cell_cycle
 from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.runtime.limiter import EventLimiter, suffix
 from humanpt.schemas import humanpt_pb2 as pb
@@ -53,6 +55,9 @@ class PoseFilterCore(Core):
     def __init__(self, config: PoseFilterConfig, rig: Rig | None = None):
         super().__init__(config, Rig() if rig is None else rig)
         self.robot = RobotPoseBuffer(config.robot_history)
+        # The prediction horizon (ns): the link's cycle, from the latest robot state that
+        # carries it (runtime/cycle.py); until then, or from states carrying none, the fallback.
+        self.horizon_ns = cell_cycle.FALLBACK_NS
         self._backwards = 0  # robot states in a row stamped before the latest one
         self._rejected_states: dict[str, int] = {}
         self._build(config)
@@ -162,6 +167,9 @@ class PoseFilterCore(Core):
             return self._reject_robot_state(t_ns, "stamp_skew", (
                 f"robot state of cycle {msg.cycle} stamped {skew_ns / 1e9:+.3f} s from this clock "
                 f"(more than max_stamp_skew_ms = {self.config.max_stamp_skew_ms:g}): dropped"))
+        period_ns = cell_cycle.from_state(msg.cycle_period_ns)
+        if period_ns is not None:
+            self.horizon_ns = period_ns
         if not self.robot.add(stamp_ns, world_T_flange):
             # Backwards or repeated. A few in a row, each near this clock, is the robot's
             # clock stepping back (a restart, an NTP step): start the buffer again on them.
@@ -196,6 +204,11 @@ class PoseFilterCore(Core):
         self._limiter.shift(step)
         return []
 
+    def use_cycle(self, cycle_period_ns: int) -> None:
+        """Predict this far (ns) past a robot state: a state's cycle, or what an old
+        recording's config said (its robot states carry none; runtime.replay)."""
+        self.horizon_ns = int(cycle_period_ns)
+
     # -- measurements waiting for the robot pose at their stamp ------------------------
     def _release_pending(self, t_ns: int, keep: int | None = None) -> list[Output]:
         """Use the held measurements that the robot states now bracket (interpolation), or
@@ -222,7 +235,7 @@ class PoseFilterCore(Core):
 
     def _state(self, t_ns: int, robot_stamp_ns: int, cycle: int) -> Output:
         c = self.config
-        target_ns = robot_stamp_ns + int(c.predict_ahead_ms * 1e6)
+        target_ns = robot_stamp_ns + self.horizon_ns
         lost = (self.last_measurement_ns is None
                 or robot_stamp_ns - self.last_measurement_ns > c.lost_after_ms * 1e6)
         if lost and self._tracking:

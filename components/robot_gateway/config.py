@@ -27,7 +27,9 @@ class GatewayConfig:
     (Z-Y-X); identity by default, as in the paper (world frame at the robot base).
     """
 
-    # The link's cycle: what the robot sends every cycle and expects an answer to.
+    # The link's cycle: what the robot sends every cycle and expects an answer to. It is the
+    # cell's only cycle: every RobotState carries it (cycle_period_ns) to the controller, the
+    # pose filter and viz; the launcher gives it to the simulated robot (runtime/cycle.py).
     cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
     # Gateway timer: link timers, reply deadline, silence watchdog are checked this often.
     tick_ms: Annotated[float, Range(0.1, 1000, "ms")] = 2.0

@@ -687,6 +687,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             ),
             cycle=status.cycle,
             missed_cycles=self._missed,
+            cycle_period_ns=self.config.cycle_period_ns,  # the cell's one cycle (runtime/cycle.py)
         )
 
     def _must_hold(self, status: CycleState) -> str | None:

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
+from humanpt.runtime import cycle
 from humanpt.runtime.config_types import (  # noqa: F401 (re-exported: the old import path)
     ConfigError,
     Deg,
@@ -422,6 +423,12 @@ class ConfigFile:
     sections: dict[str, dict[str, Any]]
     profiles: dict[str, tuple[str, ...]]
     record: RecordConfig = RecordConfig()
+    # Deprecation notes (a retired cycle key equal to the link's: runtime/cycle.py), for the
+    # tools to print; an error stops the load instead.
+    notes: tuple[str, ...] = ()
+    # The cell's one cycle, ns: its robot link's (runtime/cycle.py), and that link's name.
+    cycle_period_ns: int = cycle.FALLBACK_NS
+    cycle_link: str = "alter"
 
     def rig_path(self) -> Path | None:
         """The rig file ``[runtime] rig`` names (relative to the config file), or None."""
@@ -446,12 +453,21 @@ class ConfigFile:
         """The validated config of component ``name`` (defaults when its section is absent).
         A config class with a ``cell_defaults(sections)`` class method takes values its own
         section does not set from the cell's other sections (the controller's workspace
-        envelope is the robot gateway's)."""
+        envelope is the robot gateway's; the simulated robot's cycle is the link's).  A config
+        with a ``check_cycle(cycle_period_ns)`` method is checked at the cell's one cycle
+        (ValueError -> ConfigError naming the section)."""
         table = dict(self.sections.get(name, {}))
         cell_defaults = getattr(cls, "cell_defaults", None)
         if cell_defaults is not None:
             table = {**cell_defaults(self.sections, self.source), **table}
-        return build(cls, table, source=self.source, section=name)
+        built = build(cls, table, source=self.source, section=name)
+        check_cycle = getattr(built, "check_cycle", None)
+        if check_cycle is not None:  # what must hold at the cell's cycle (the controller's gains)
+            try:
+                check_cycle(self.cycle_period_ns)
+            except ValueError as e:
+                raise ConfigError(f"{self.source}: [{name}] {e}") from e
+        return built
 
 
 def read_toml(path: str | Path, kind: str = "config", hint: str = "") -> dict[str, Any]:
@@ -482,20 +498,6 @@ def load(path: str | Path | None, known_sections: Mapping[str, type] | None = No
     return from_dict(data, source, known_sections)
 
 
-# Keys that name one quantity of the cell: every component that has one must agree (the
-# controller, the gateway and the robot run one cycle).
-SHARED_KEYS = ("cycle_period_ms",)
-
-
-def _check_shared(built: Mapping[str, Any], source: str) -> None:
-    for key in SHARED_KEYS:
-        values = {name: getattr(cfg, key) for name, cfg in built.items() if hasattr(cfg, key)}
-        if len(set(values.values())) > 1:
-            listed = ", ".join(f"[{n}] {key} = {v:g}" for n, v in sorted(values.items()))
-            raise ConfigError(f"{source}: {key} differs between components ({listed}); "
-                              f"they run one cycle and must agree")
-
-
 def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str, type] | None = None) -> ConfigFile:
     """Validate an already parsed TOML document (see :func:`load`)."""
     for name, table in data.items():
@@ -524,7 +526,13 @@ def from_dict(data: Mapping[str, Any], source: str, known_sections: Mapping[str,
             if name not in known_sections:
                 raise ConfigError(f"{source}: unknown section [{name}]; known: runtime, profiles, record, "
                                   f"{', '.join(sorted(known_sections))}")
-        built = {name: build(cls, sections.get(name, {}), source=source, section=name)
-                 for name, cls in known_sections.items()}
-        _check_shared(built, source)
-    return ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles, record=record)
+    # The cell's one cycle is its link's (runtime/cycle.py): the keys that once copied it
+    # are dropped here (a note when equal to the link's, an error when not).
+    link = cycle.link_config(sections, source, (known_sections or {}).get(cycle.OWNER))
+    notes = tuple(cycle.retire(sections, source, link))
+    cf = ConfigFile(source=source, runtime=runtime, sections=sections, profiles=profiles, record=record,
+                    notes=notes, cycle_period_ns=link.cycle_period_ns, cycle_link=link.link)
+    if known_sections is not None:
+        for name, cls in known_sections.items():
+            cf.component(name, cls)
+    return cf

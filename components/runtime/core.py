@@ -368,6 +368,10 @@ class Core:
         treats many topics alike and must know which one came (viz) binds one per topic."""
         return getattr(self, port.handler)
 
+    def check_config(self, config: Any) -> None:
+        """Refuse (ValueError) a parameter change that the config alone cannot judge, given
+        what the core knows (the controller's gains at the link's cycle); default: none."""
+
     def on_config_changed(self, old: Any, new: Any) -> None:
         """Called after a live parameter changed ``self.config`` from ``old`` to ``new``."""
 
@@ -388,7 +392,8 @@ class Core:
         old = self.config
         try:
             new = replace_live(old, msg.key, msg.value_json, hard=self.start_config)
-        except ConfigError as e:
+            self.check_config(new)
+        except (ConfigError, ValueError) as e:
             return [self.event(t_ns, pb.SEVERITY_WARNING, "param_rejected", f"{self.name}: {e}")]
         self.config = new
         self.on_config_changed(old, new)

@@ -22,9 +22,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from google.protobuf import text_format
-from google.protobuf.message import Message
+from google.protobuf import descriptor_pb2, text_format
+from google.protobuf.message import DecodeError, Message
+from mcap.reader import make_reader
+from mcap.records import Schema
 
+from humanpt.runtime import cycle
 from humanpt.runtime.config import build
 from humanpt.runtime.core import Core
 from humanpt.runtime.recording import (
@@ -32,15 +35,17 @@ from humanpt.runtime.recording import (
     IN,
     OUT,
     Recording,
+    RecordingDamage,
     RecordingError,
     SnapshotEntry,
+    iter_records,
     read,
     resolve_images,
     strip_image,
 )
 from humanpt.runtime.registry import COMPONENTS, class_path, core_class
 from humanpt.runtime.snapshot import SnapshotError, parse_snapshot
-from humanpt.schemas import topics
+from humanpt.schemas import humanpt_pb2, topics
 
 
 def build_core(rec: Recording) -> Core:
@@ -77,12 +82,18 @@ def recorded_rig(rec: Recording):
 
 def _rebuild(cls: type[Core], rec: Recording) -> Core:
     """A fresh core of ``cls`` from the recording's config and rig."""
-    cfg = build(cls.config_type, rec.config(), source=f"{rec.path} (recorded config)", section=rec.component)
+    # A recording made before the cell had one cycle (runtime/cycle.py) names the cycle its
+    # core ran with in its config: mapped on reading (its robot states carry none).
+    table, old_cycle_ns = cycle.recorded(rec.component, rec.config())
+    cfg = build(cls.config_type, table, source=f"{rec.path} (recorded config)", section=rec.component)
     rig = recorded_rig(rec)
     if cls.uses_rig and rig is None:
         raise RecordingError(f"{rec.path}: recorded without a rig (an older humanpt kept the calibration "
                              f"in the components' configs); record it again with this version")
-    return cls.create(cfg, rig)
+    core = cls.create(cfg, rig)
+    if old_cycle_ns is not None and hasattr(core, "use_cycle"):
+        core.use_cycle(old_cycle_ns)
+    return core
 
 
 def factory_with(*classes: type[Core]) -> Callable[[Recording], Core]:
@@ -324,6 +335,54 @@ def thaw_snapshot(rec: Recording, snap: SnapshotEntry, core: Core) -> int:
     return n_in
 
 
+def _schemas(path: Path) -> list[Schema]:
+    """The schema records of a recording: from its summary when it was closed, else read
+    through (a damaged file: those before the damage; the replay itself reports it)."""
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+        if summary is not None and summary.schemas:
+            return list(summary.schemas.values())
+    except Exception:  # noqa: BLE001 - no usable summary: read through below
+        pass
+    out: list[Schema] = []
+    try:
+        for r in iter_records(path, []):
+            if isinstance(r, Schema):
+                out.append(r)
+    except (RecordingError, RecordingDamage, OSError):
+        pass
+    return out
+
+
+def fields_newer_than(rec: Recording) -> dict[str, tuple[str, ...]]:
+    """Message type -> the fields this build's schema has and the recording's does not (a
+    field added since, e.g. ``RobotState.cycle_period_ns``): a replay leaves them out of its
+    outputs before comparing, as the recording could not hold them.  Empty for a recording
+    made with this schema."""
+    recorded: dict[str, frozenset[str]] = {}
+    for r in _schemas(Path(rec.path)):
+        if r.encoding == "protobuf" and r.name not in recorded:
+            try:
+                fds = descriptor_pb2.FileDescriptorSet.FromString(r.data)
+            except DecodeError:
+                continue
+            for f in fds.file:
+                for m in f.message_type:
+                    recorded.setdefault(f"{f.package}.{m.name}" if f.package else m.name,
+                                        frozenset(fd.name for fd in m.field))
+    out = {}
+    for name, fields in recorded.items():
+        try:
+            desc = humanpt_pb2.DESCRIPTOR.pool.FindMessageTypeByName(name)
+        except KeyError:
+            continue
+        newer = tuple(fd.name for fd in desc.fields if fd.name not in fields)
+        if newer:
+            out[name] = newer
+    return out
+
+
 def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] = build_core,
                      snapshot: SnapshotEntry | None = None) -> tuple[Stream, Stream]:
     """(recorded outputs, replayed outputs) of a recording: a fresh core fed every recorded
@@ -337,6 +396,7 @@ def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] =
     missing_inputs(rec)
     core = core_factory(rec)
     entries = rec.entries
+    newer = fields_newer_than(rec)
     if snapshot is not None:
         thaw_snapshot(rec, snapshot, core)
         entries = entries[snapshot.at:]
@@ -345,6 +405,10 @@ def replay_recording(rec: Recording, core_factory: Callable[[Recording], Core] =
         if e.direction != IN:
             continue
         for topic, msg in core.step(e.t_ns, e.topic, e.decode()):
+            unknown = newer.get(msg.DESCRIPTOR.full_name)
+            if unknown:  # fields added since the recording: not demanded of it
+                for name in unknown:
+                    msg.ClearField(name)
             replayed.append((e.t_ns, topic, msg.SerializeToString()))
     outputs = [e for e in entries if e.direction == OUT]
     recorded: Stream = [(e.t_ns, e.topic, e.data) for e in outputs]

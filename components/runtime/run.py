@@ -40,6 +40,8 @@ def load_config(path: str | Path | None, *, cell: str | None = None, connect: Se
     from humanpt.runtime.registry import config_types
 
     cfg = cfgmod.load(path, config_types())
+    for note in cfg.notes:  # a retired key kept equal to what replaced it (runtime/cycle.py)
+        _stderr(f"note: {note}")
     changes: dict[str, object] = {}
     if cell:
         changes["cell"] = cell

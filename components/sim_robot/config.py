@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 
@@ -16,7 +17,8 @@ from humanpt.geometry.puma import (
     UnreachableError,
     perturbed_geometry,
 )
-from humanpt.runtime.config import Deg, Mm, Range
+from humanpt.runtime import cycle as cell_cycle
+from humanpt.runtime.config import ConfigError, Deg, Mm, Range
 
 # Flange straight down in front of the robot, elbow up (humanpt.geometry.puma).
 DEFAULT_START_JOINTS_DEG = HOME_JOINTS_DEG
@@ -33,7 +35,9 @@ class SimRobotConfig:
     """
 
     model: Literal["puma762", "puma560"] = "puma762"
-    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
+    # The robot runs the link's cycle: the launcher gives it from [robot_gateway]
+    # (cell_defaults, humanpt.runtime.cycle); a [sim_robot] section does not set it.
+    cycle_period_ns: Annotated[int, Range(1_000_000, 1_000_000_000, "ns")] = cell_cycle.FALLBACK_NS
     # world: a correction moves the flange in the base frame, rotating about the flange
     # origin; tool: the step is expressed in the flange frame.
     alter_mode: Literal["world", "tool"] = "world"
@@ -56,7 +60,7 @@ class SimRobotConfig:
     link_length_errors_mm: tuple[Annotated[float, Range(-50, 50, "mm")], ...] = (0.0,) * 5
     lag_time_constant_ms: Annotated[float, Range(0, 10000, "ms")] = 0.0
     # The link to the gateway: "alter" (the Puma's serial line, this core) or "rsi" (a KUKA
-    # RSI-style controller over UDP: humanpt.sim_robot.rsi; cycle_period_ms 4 or 12;
+    # RSI-style controller over UDP: humanpt.sim_robot.rsi; the link's cycle 4 or 12 ms;
     # alter_mode world = RKorr in the base frame, tool = in the flange frame).
     protocol: Literal["alter", "rsi"] = "alter"
     # RSI: where the gateway listens (the robot's IP_NUMBER:PORT for its <Rob> datagrams).
@@ -71,11 +75,22 @@ class SimRobotConfig:
     rsi_max_correction_mm: Annotated[float, Range(0.001, 100, "mm")] = 5.0
     rsi_max_correction_deg: Annotated[float, Range(0.001, 45, "deg")] = 2.0
 
+    @classmethod
+    def cell_defaults(cls, sections: Mapping[str, Mapping[str, Any]], source: str = "config") -> dict[str, Any]:
+        """The robot's cycle: the cell's link's ([robot_gateway]; ConfigFile.component calls
+        this). A [sim_robot] table may repeat it (a written config's round trip) but not
+        change it: the cell has one cycle."""
+        link_ns = cell_cycle.cell_cycle_ns(sections, source)
+        own = sections.get("sim_robot", {}).get("cycle_period_ns", link_ns)
+        if own != link_ns:
+            raise ConfigError(f"{source}: [sim_robot] cycle_period_ns = {own!r}: the simulated robot runs the link's "
+                              f"cycle, {cell_cycle.ms(link_ns):g} ms; set the cycle as [{cell_cycle.OWNER}] "
+                              f"{cell_cycle.KEY} and leave it out here")
+        return {"cycle_period_ns": link_ns}
+
     def __post_init__(self) -> None:
-        if not 1.0 <= self.cycle_period_ms <= 1000.0:
-            raise ValueError(
-                f"cycle_period_ms must be within 1 and 1000, got {self.cycle_period_ms}"
-            )
+        if not cell_cycle.MIN_NS <= self.cycle_period_ns <= cell_cycle.MAX_NS:
+            raise ValueError(f"cycle_period_ns must be within 1 and 1000 ms, got {self.cycle_period_ns} ns")
         if not 0 <= self.max_correction_age_cycles <= 100:
             raise ValueError(
                 f"max_correction_age_cycles must be within 0 and 100, got {self.max_correction_age_cycles}"
@@ -98,8 +113,8 @@ class SimRobotConfig:
                 raise ValueError(f"{name} needs {n} finite values within +-{bound:g}, got {value!r}")
         if not (np.isfinite(self.lag_time_constant_ms) and 0.0 <= self.lag_time_constant_ms <= 10000.0):
             raise ValueError(f"lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}")
-        if self.protocol == "rsi" and self.cycle_period_ms not in (4.0, 12.0):
-            raise ValueError(f"cycle_period_ms must be 4 or 12 over RSI, got {self.cycle_period_ms}")
+        if self.protocol == "rsi" and self.cycle_ms not in (4.0, 12.0):
+            raise ValueError(f"the link's cycle must be 4 or 12 ms over RSI, got {self.cycle_ms:g} ms")
         if not self.rsi_late_limit >= 1:
             raise ValueError(f"rsi_late_limit must be >= 1, got {self.rsi_late_limit}")
         for name in ("rsi_max_correction_mm", "rsi_max_correction_deg"):
@@ -108,8 +123,9 @@ class SimRobotConfig:
         self.start_joints_rad()  # raises ValueError when the start is not reachable
 
     @property
-    def cycle_period_ns(self) -> int:
-        return round(self.cycle_period_ms * 1e6)
+    def cycle_ms(self) -> float:
+        """The link's cycle in ms (exact for whole ms)."""
+        return cell_cycle.ms(self.cycle_period_ns)
 
     def kinematics(self) -> PumaKinematics:
         return PumaKinematics(RobotModelConfig(model=self.model))

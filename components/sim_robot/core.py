@@ -1,6 +1,6 @@
 """sim_robot core (pure): a simulated Puma controller at the far end of the ALTER link.
 
-Its own cycle (``tick`` every ``cycle_period_ms``, 28 ms as on the Puma). At each cycle
+Its own cycle (``tick`` every cycle of the link, 28 ms as on the Puma over ALTER). At each cycle
 boundary, in this order:
 
 1. apply the most recent valid correction received during the cycle (the controller end
@@ -137,7 +137,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         self.true_arm = None if config.ideal_arm else config.true_arm()
         # First-order lag: per cycle the joints cover this fraction of the way to the setpoint.
         tau_ms = config.lag_time_constant_ms
-        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_period_ms / tau_ms)
+        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_ms / tau_ms)
         self._fk: tuple[bytes, np.ndarray] | None = None  # (q_rad bytes, base_T_flange)
         self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         cycle_ns = config.cycle_period_ns
@@ -362,7 +362,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         # The correction moves the setpoint (ALTER accumulates onto the commanded path),
         # in the controller's nominal kinematics.
         T = self._base_T_flange() if self.lag_gain == 1.0 else self.kin.forward(self.q_setpoint_rad)
-        max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_period_ms / 1000.0
+        max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_ms / 1000.0
         try:
             q = corrected_joints(self.kin, T, c.delta_T_mm(), self.config.alter_mode,
                                  self.q_setpoint_rad, max_step_deg)

@@ -1,7 +1,7 @@
 """A simulated KUKA RSI-style controller: sim_robot's arm behind an RSI link (UDP/XML).
 
 :class:`RsiRobot` is the controller (pure: times are given). Every RSI cycle (4 or 12 ms,
-``cycle_period_ms``) :meth:`RsiRobot.cycle`:
+the link's cycle, ``cycle_period_ns``) :meth:`RsiRobot.cycle`:
 
 0. until the client's first datagram arrives, sends ``<Rob>`` without judging (``waiting``
    cycles: RSI_ON comes once the sensor side is up, so a gateway that takes a while to
@@ -86,7 +86,7 @@ class RsiRobot:
 
     def __init__(self, config: SimRobotConfig):
         self.config = config
-        self.cycle_ms = int(config.cycle_period_ms)
+        self.cycle_ms = int(config.cycle_ms)
         self.kin = config.kinematics()
         self.q_rad = config.start_joints_rad()
         self.ipoc: int | None = None  # IPOC of the last <Rob> sent
@@ -104,7 +104,7 @@ class RsiRobot:
              "after_stop", "applied"), 0)
         self.applied: deque[tuple[int, RsiCorrection]] = deque(maxlen=100_000)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
-        self.max_joint_step_deg = config.max_joint_speed_deg_s * config.cycle_period_ms / 1000.0
+        self.max_joint_step_deg = config.max_joint_speed_deg_s * config.cycle_ms / 1000.0
 
     # -- state ------------------------------------------------------------------------------
     @property
@@ -315,7 +315,7 @@ _SEVERITY = {"info": pb.SEVERITY_INFO, "warning": pb.SEVERITY_WARNING, "error": 
 
 class RsiSimRobotCore(Core):
     """sim_robot over RSI (pure): :class:`RsiRobot` on the component's ``tick`` (every
-    ``cycle_period_ms``, 4 or 12). Inputs ``tick``, ``udp_rx`` (the gateway's ``<Sen>``,
+    cycle of the link, 4 or 12 ms). Inputs ``tick``, ``udp_rx`` (the gateway's ``<Sen>``,
     humanpt.SerialChunk); outputs ``udp_tx`` (the ``<Rob>`` of each cycle; the live shell's
     UDP adapter sends it to ``rsi_gateway``), ``sim_robot/truth`` (world_T_flange, m, after
     each cycle, as over ALTER) and ``sim_robot/events`` (RsiRobot's events). Built by

@@ -26,6 +26,7 @@ from humanpt.perception.config import PerceptionConfig
 
 from . import evaluate
 from .run import SystemConfig, run, scenario_duration_s
+from .system import link_cycle_ms
 
 __all__ = ["EXPERIMENTS", "STATIC_VECTORS", "ExperimentResult", "run_experiment", "against_known_path",
            "ideal_path"]
@@ -81,7 +82,7 @@ def run_experiment(name: str, method: str, seed: int = 0, robot: str = "puma", r
     if name == "static":
         op = dataclasses.replace(op, start_delay_s=3.0)
         record_from_s = 3.0
-        duration = 3.0 + vectors * 10 * (rsi_cycle_ms or cfg.controller.cycle_period_ms) * 1e-3 + 0.2
+        duration = 3.0 + vectors * 10 * link_cycle_ms(rsi_cycle_ms) * 1e-3 + 0.2
     else:
         op = dataclasses.replace(op, speed_scale=speed_scale)
         record_from_s, duration = op.start_delay_s, op.start_delay_s + scenario_duration_s(op) / speed_scale

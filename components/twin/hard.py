@@ -40,6 +40,7 @@ from humanpt.schemas.convert import from_pose
 
 from . import evaluate
 from .run import SystemConfig, run, scenario_duration_s
+from .system import link_cycle_ms
 from .worlds import World
 
 HARD_SCENARIOS = ("scurve", "abrupt", "occluded", "partial")
@@ -93,7 +94,7 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
     end_ns = start_ns + round(moving_s * 1e9)
     points = [pb.PathPoint.FromString(o.data) for o in w.outputs("controller/path")]
     stamps = np.array([p.header.stamp_ns for p in points], dtype=np.int64)
-    interval_s = cfg.controller.recording_delay_cycles * (rsi_cycle_ms or cfg.controller.cycle_period_ms) * 1e-3
+    interval_s = cfg.controller.recording_delay_cycles * link_cycle_ms(rsi_cycle_ms) * 1e-3
     inside = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
     edges = np.concatenate([[start_ns], inside, [end_ns]]) if len(inside) else np.array([start_ns, end_ns])
     gap_frames = max(0.0, (float(np.diff(edges).max()) * 1e-9 - interval_s) / FRAME_S)

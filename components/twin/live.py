@@ -68,6 +68,14 @@ def write_toml(path: Path, sections: dict[str, dict]) -> None:
     path.write_text("# written by humanpt demo: the configuration of this run\n\n" + cfgmod.dumps_toml(sections))
 
 
+def robot_table(robot) -> dict:
+    """A simulated robot's ``[sim_robot]`` table: its config without the cycle, which the
+    launcher gives it from the link's (runtime/cycle.py)."""
+    table = to_table(robot)
+    table.pop("cycle_period_ns", None)
+    return table
+
+
 def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
     """The cycle period (ms) of ``link`` ("alter": 28; "rsi": ``cycle_ms``, 4 or 12, default
     12); ValueError, one line, for a cycle the link does not have."""
@@ -88,8 +96,9 @@ def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
 def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) -> None:
     """Put the robot link in the run's ``sections`` (in place), from this one place: ALTER
     (as written, 28 ms) or RSI (``cycle_ms`` 4 or 12, default 12) over UDP on loopback.
-    One cycle period goes to the gateway, the simulated controller, the controller, the
-    pose filter's prediction and viz; the gateway's safety fields (speeds, envelope,
+    The cycle period goes to the gateway's section only: the cell's one cycle, which the
+    launcher gives the simulated controller and the robot states carry to the controller,
+    the pose filter and viz (runtime/cycle.py); the gateway's safety fields (speeds, envelope,
     stale commands, world_T_base) carry over from the ALTER gateway's, the rest are RSI's
     defaults (humanpt.robot_gateway.links.rsi.config)."""
     cycle_ms = link_cycle_ms(link, cycle_ms)
@@ -104,10 +113,7 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
                               cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo",
                                            section="robot_gateway"), cycle_ms, udp)
-    sections["sim_robot"], sections["robot_gateway"] = to_table(robot), to_table(gateway)
-    sections["controller"]["cycle_period_ms"] = cycle_ms
-    sections.setdefault("pose_filter", {})["predict_ahead_ms"] = cycle_ms
-    sections.setdefault("viz", {})["cycle_period_ms"] = cycle_ms
+    sections["sim_robot"], sections["robot_gateway"] = robot_table(robot), to_table(gateway)
 
 
 def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
@@ -139,7 +145,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
         "runtime": {"cell": "demo", "connect": [f"tcp/127.0.0.1:{port}"], "listen": [f"tcp/127.0.0.1:{port}"],
                     "run_dir": str(run_dir), "connect_timeout_s": 30.0, "record_thread": True, "mode": "peer",
                     "rig": "rig.toml"},
-        "operator": to_table(op), "sim_robot": to_table(robot), "robot_gateway": to_table(gateway),
+        "operator": to_table(op), "sim_robot": robot_table(robot), "robot_gateway": to_table(gateway),
         "sim_camera": to_table(cam), "controller": to_table(ctl),
         # Foxglove's frames: the robot base where the gateway puts it.
         "scene": {"world_T_base_mm_deg": list(gateway.world_T_base_mm_deg), "dz_mm": ctl.dz_mm},

@@ -199,6 +199,7 @@ class StandInRobotCore(Core):
             cycle=self.cycle,
             missed_cycles=self.missed,
             status=pb.AlterStatus(alter_active=True, arm_power=True),
+            cycle_period_ns=self.tick_period_ns(),  # the stand-in link's cycle (runtime/cycle.py)
         )
         state.world_T_flange.CopyFrom(pose(world_T_flange_m))
         truth = pb.Truth(header=self.next_header("sim_robot/truth", t_ns, "world"))

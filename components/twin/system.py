@@ -76,7 +76,17 @@ def rsi_link(robot, gateway, cycle_ms: float, udp_bind: str = "127.0.0.1:49152")
     rsi_gateway = RsiConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
                             udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
                             correction_frame="tool" if robot.alter_mode == "tool" else "base")
-    return dataclasses.replace(robot, protocol="rsi", cycle_period_ms=cycle_ms, rsi_gateway=udp_bind), rsi_gateway
+    # The robot runs its link's cycle (runtime/cycle.py): from the gateway's config.
+    return (dataclasses.replace(robot, protocol="rsi", cycle_period_ns=rsi_gateway.cycle_period_ns,
+                                rsi_gateway=udp_bind), rsi_gateway)
+
+
+def link_cycle_ms(rsi_cycle_ms: float | None = None) -> float:
+    """The twin cell's one cycle (ms): its robot link's (runtime/cycle.py), RSI's
+    ``rsi_cycle_ms`` or else ALTER's (the paper's 28 ms, the gateway's default link)."""
+    from humanpt.robot_gateway.links import gateway_config
+
+    return float(rsi_cycle_ms) if rsi_cycle_ms else gateway_config("alter").cycle_period_ms
 
 
 def operator_config(scenario: str | OperatorConfig, seed: int = 0) -> OperatorConfig:
@@ -108,7 +118,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     ``puma`` (sim_robot + robot_gateway over a simulated 38 400 baud ALTER line).
     ``digest=False``: no output hash (faster; for runs nobody compares).  ``rsi_cycle_ms``
     (4 or 12; ``puma`` only): the Puma behind the RSI link instead (UDP paths with 0.1 ms
-    delivery), the controller and the pose filter's prediction at that cycle."""
+    delivery); the controller and the pose filter's prediction follow the link's cycle,
+    which every robot state carries (runtime/cycle.py)."""
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -137,9 +148,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
             rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")
             if rsi_cycle_ms is not None:
+                # The controller and the pose filter take the cycle from the robot states.
                 rcfg, gcfg = rsi_link(rcfg, gcfg, float(rsi_cycle_ms))
-                ctl = dataclasses.replace(ctl, cycle_period_ms=float(rsi_cycle_ms))
-                pose_filter = dataclasses.replace(pose_filter or PoseFilterConfig(), predict_ahead_ms=float(rsi_cycle_ms))
             robot_cores = [SimRobotCore.create(rcfg), GatewayCore.create(gcfg)]
             wire = True
         elif robot == "standin":

@@ -54,7 +54,8 @@ class VizConfig:
     # PSVS and the target come from the rig).  D's distance at start; the view follows the
     # controller's dz_mm changes (its events).
     dz_mm: Annotated[float, Range(10, 5000, "mm")] = DEFAULT_DZ_MM
-    cycle_period_ms: Annotated[float, Range(1, 1000, "ms")] = 28.0
+    # (The cycle, to draw per-cycle steps as speeds, is the robot link's, from the robot
+    # states: RobotState.cycle_period_ns, humanpt.runtime.cycle.)
     # The recorded path is drawn as line strips of at most this many points each (a new
     # strip starts when one is full, so a long path is not re-sent whole at every point).
     path_strip_points: Annotated[int, Range(2, 10000000, "points")] = 200
@@ -84,7 +85,7 @@ class VizConfig:
             or self.image_every < 1
         ):
             raise ValueError(f"viz.image_every must be an integer >= 1, got {self.image_every!r}")
-        for name in ("dz_mm", "cycle_period_ms"):
+        for name in ("dz_mm",):
             v = getattr(self, name)
             if (
                 isinstance(v, bool)

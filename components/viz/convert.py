@@ -30,7 +30,7 @@ __all__ = ["ConvertStats", "convert_run", "rig_for_run", "run_files", "viz_confi
 
 # Keys of the view's config taken from the run's own components (the rest of the geometry
 # is the run's recorded rig).
-_FROM_RUN = {"controller": ("dz_mm", "cycle_period_ms")}
+_FROM_RUN = {"controller": ("dz_mm",)}
 
 
 @dataclass
@@ -75,6 +75,27 @@ def viz_config_for_run(run_dir: str | Path, base: VizConfig | None = None) -> Vi
         return build(VizConfig, table, source=f"{run_dir} (recorded configs)", section="viz")
     except ConfigError:
         return base or VizConfig()  # a run of an older layout: draw with the defaults
+
+
+def recorded_cycle_ns(run_dir: str | Path) -> int | None:
+    """The cycle (ns) a run made before robot states carried it ran with: its recorded
+    controller config's retired cycle key (runtime.cycle.recorded); None for a newer run (its
+    robot states carry the cycle) or none recorded."""
+    import json
+
+    from humanpt.runtime import cycle
+
+    for f in run_files(run_dir):
+        try:
+            meta, _ = read_metadata(f)
+        except RecordingError:
+            continue
+        if meta.get("component") == "controller":
+            try:
+                return cycle.recorded("controller", json.loads(meta.get("config", "{}")))[1]
+            except (ValueError, TypeError, AttributeError):
+                return None
+    return None
 
 
 def rig_for_run(run_dir: str | Path) -> Rig:
@@ -147,6 +168,9 @@ def convert_run(
     cfg = dataclasses.replace(cfg, image_every=image_every)
     core = VizCore(cfg)
     logger = RerunLogger(rec, cfg, rig=rig or rig_for_run(run_dir), recorded_timeline=True)
+    old_cycle_ns = recorded_cycle_ns(run_dir)
+    if old_cycle_ns is not None:  # a run whose robot states carry no cycle: its controller's
+        logger.cycle_period_ns = old_cycle_ns
     rec.set_log_time_enabled(False)  # the conversion's wall clock means nothing here
     stats = ConvertStats(recordings=len(files))
     totals = [_expected_outputs(f) for f in files]

@@ -71,6 +71,7 @@ from scipy.spatial.transform import Rotation
 from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.units import to_m, to_mm
+from humanpt.runtime import cycle as cell_cycle
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, from_pose, image_stamp_ns
 from humanpt.viz.config import VizConfig
@@ -191,6 +192,8 @@ class RerunLogger:
             maxlen=256
         )  # (stamp ns, world_T_flange m)
         self._robot_stamps: deque[int] = deque(maxlen=256)
+        # The link's cycle (ns), from the latest robot state that carries it (runtime/cycle.py).
+        self.cycle_period_ns = cell_cycle.FALLBACK_NS
         self._state: pb.TobState | None = None
         self._last_measurement_ns = 0  # image capture stamp of the last command drawn
         self._shown_images: deque[int] = deque(maxlen=64)  # stamps of the images drawn
@@ -448,6 +451,9 @@ class RerunLogger:
             self._robot_stamps.clear()
         self._robot.append((stamp, T))
         self._robot_stamps.append(stamp)
+        period_ns = cell_cycle.from_state(msg.cycle_period_ns)
+        if period_ns is not None:
+            self.cycle_period_ns = period_ns
         self._time(stamp, t_ns)
         self.rec.log(ENTITIES["flange"], _transform(msg.world_T_flange))
         self.rec.log(ENTITIES["misses"], rr.Scalars(float(msg.missed_cycles)))
@@ -455,7 +461,7 @@ class RerunLogger:
     def _command(self, topic, msg: pb.FlangeCommand, t_ns) -> None:
         stamp = msg.header.stamp_ns
         self._time(stamp, t_ns)
-        per_s = 1e3 / self.config.cycle_period_ms
+        per_s = 1e3 / cell_cycle.ms(self.cycle_period_ns)
         d_t = np.array([msg.d_translation_m.x, msg.d_translation_m.y, msg.d_translation_m.z])
         d_r = np.array([msg.d_rotation_rad.x, msg.d_rotation_rad.y, msg.d_rotation_rad.z])
         self.rec.log(ENTITIES["cmd_v"], rr.Scalars(d_t * 1e3 * per_s))

@@ -302,8 +302,12 @@ def test_playback_follows_the_recorded_path():
 
 
 def test_config_rejects_unstable_gains():
+    # k dt < 0.5 at the link's cycle (the cell's config checks it: tests/runtime/test_one_cycle.py)
     with pytest.raises(ValueError, match="gain_translation_1_s"):
-        ControllerConfig(gain_translation_1_s=40.0)
+        ControllerConfig(gain_translation_1_s=40.0).check_cycle(28_000_000)  # 40 x 0.028 = 1.12
+    ControllerConfig(gain_translation_1_s=40.0).check_cycle(4_000_000)  # 40 x 0.004 = 0.16
+    with pytest.raises(ValueError, match="gain_rotation_1_s"):
+        ControllerConfig(gain_rotation_1_s=0.0)
 
 
 def test_a_filter_state_that_overtakes_its_robot_state_still_commands_the_next_cycle():
@@ -414,7 +418,7 @@ def _play(rig, core, max_cycles=2000, on_cycle=None):
 
 
 def test_timed_playback_keeps_the_timing_and_rate_scales_it():
-    dt = ControllerConfig().cycle_period_ms * 1e-3
+    dt = 28e-3  # the link's cycle: ALTER's (the robot states here carry none: the fallback)
     core = ControllerCore(ControllerConfig())
     rig, points, times = _timed_line(core)
     rig.command("playback", points=points, times_s=times)

@@ -119,8 +119,9 @@ def test_uses_the_robot_pose_at_the_capture_stamp():
 def test_static_target_converges_and_smooths_noise():
     # A calm process model (the target is still), the noise the world below adds, and no
     # prediction ahead: pure smoothing.
-    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0, predict_ahead_ms=0,
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, accel_sigma_mm_s2=5.0, ang_accel_sigma_deg_s2=3.0,
                                            sigma_position_mm=0.3, sigma_depth_mm=0.3, sigma_rotation_deg=0.8, sigma_spin_deg=0.8))
+    core.use_cycle(0)  # (the World's robot states carry no cycle: this horizon stays)
     truth = T_m(TARGET_X)
     w = World(core, moving_flange, lambda t: truth, np.random.default_rng(3), sigma_mm=0.3, sigma_deg=0.8)
     w.run(0, 6_000_000_000)
@@ -134,7 +135,8 @@ def test_static_target_converges_and_smooths_noise():
 
 
 def test_prediction_ahead_follows_a_constant_velocity():
-    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0, predict_ahead_ms=56.0))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0))
+    core.use_cycle(56_000_000)  # two ALTER cycles ahead (the World's states carry no cycle)
 
     def tob(t):
         return T_m((100 + 50 * t * 1e-9, 1200, 80, 5 * t * 1e-9, 0, 0))

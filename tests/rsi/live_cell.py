@@ -49,8 +49,7 @@ class LiveCell:
         cfg = write_config(self.tmp / "rsi.toml", self.port, extra=(
             f'[robot_gateway]\nlink = "rsi"\ncycle_period_ms = {CYCLE_MS}.0\n'
             f'udp_bind = "{self.udp[0]}:{self.udp[1]}"\n{keys}'
-            f'[sim_robot]\nprotocol = "rsi"\ncycle_period_ms = {CYCLE_MS}.0\n'
-            f'[controller]\ncycle_period_ms = {CYCLE_MS}.0\n[viz]\ncycle_period_ms = {CYCLE_MS}.0\n'))
+            '[sim_robot]\nprotocol = "rsi"\n'))  # (the cell's one cycle is the link's)
         self.gw = self.procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(self.tmp / "run"))
         return self.gw
 
@@ -75,7 +74,7 @@ class LiveCell:
                       s.declare_subscriber("humanpt/test/robot_gateway/events", on_event)]
 
     def start_robot(self, after_send=None, **robot) -> RsiRobot:
-        cfg = SimRobotConfig(**{"protocol": "rsi", "cycle_period_ms": float(CYCLE_MS), **robot})
+        cfg = SimRobotConfig(**{"protocol": "rsi", "cycle_period_ns": CYCLE_MS * 1_000_000, **robot})
         self.robot = RsiRobot(cfg)
         self.server = RsiRobotServer(self.robot, gateway=f"{self.udp[0]}:{self.udp[1]}",
                                      after_send=after_send).start()

@@ -27,7 +27,7 @@ def test_bad_gateway_settings_are_refused(kw, says):
 
 def test_an_rsi_sim_robot_is_not_silently_run_as_an_alter_one():
     with pytest.raises(ValueError, match="humanpt.sim_robot.rsi"):
-        SimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ms=4.0))
+        SimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ns=4_000_000))
     with pytest.raises(ValueError, match="4 or 12"):
         SimRobotConfig(protocol="rsi")  # 28 ms is no RSI cycle
 
@@ -72,8 +72,7 @@ def test_the_link_key_chooses_the_gateway_and_the_protocol_the_simulated_robot()
     from humanpt.sim_robot.rsi import RsiSimRobotCore
 
     sections = {"robot_gateway": {"link": "rsi", "cycle_period_ms": 12.0, "udp_bind": "127.0.0.1:0"},
-                "sim_robot": {"protocol": "rsi", "cycle_period_ms": 12.0},
-                "controller": {"cycle_period_ms": 12.0}, "viz": {"cycle_period_ms": 12.0}}
+                "sim_robot": {"protocol": "rsi"}}  # the robot runs the link's cycle
     cfg = from_dict(sections, "cell.toml", config_types())
     made = {}
     for name in ("robot_gateway", "sim_robot"):

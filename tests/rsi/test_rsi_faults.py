@@ -58,7 +58,7 @@ class Client:
 
 
 def _robot(**kw) -> RsiRobot:
-    kw = {"protocol": "rsi", "cycle_period_ms": 4.0, "rsi_late_limit": LIMIT, **kw}
+    kw = {"protocol": "rsi", "cycle_period_ns": 4_000_000, "rsi_late_limit": LIMIT, **kw}
     return RsiRobot(SimRobotConfig(**kw))
 
 

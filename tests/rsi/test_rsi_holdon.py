@@ -35,14 +35,14 @@ WIRE_MM = 0.00005  # RKorr is rounded to 4 decimals: half a wire unit per step a
 
 
 def test_the_twins_default_rsi_robot_is_holdon_off_with_a_low_late_limit():
-    cfg = SimRobotConfig(protocol="rsi", cycle_period_ms=12.0)
+    cfg = SimRobotConfig(protocol="rsi", cycle_period_ns=12_000_000)
     assert cfg.rsi_holdon is False and cfg.rsi_late_limit == 10
 
 
 @pytest.mark.parametrize("holdon, limit", [(False, 10), (True, 10), (True, 100)])
 def test_after_the_last_answer_the_robot_moves_by_its_holdon_repeats_only(holdon, limit):
     """Pure, given times: 5 answered cycles of 0.48 mm, then silence until RSI stops."""
-    robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ms=12.0, rsi_holdon=holdon, rsi_late_limit=limit))
+    robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ns=12_000_000, rsi_holdon=holdon, rsi_late_limit=limit))
     t = 0
     for _ in range(5):
         rob = robot.cycle(t)
@@ -118,7 +118,7 @@ def test_gateway_killed_mid_motion_the_default_robot_moves_at_most_the_answer_on
 @pytest.mark.timeout(120)
 def test_gateway_killed_near_the_envelope_with_holdon_on_the_repeats_stay_inside(router, procs, tmp_path):
     limit = 20
-    x0 = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ms=12.0)).base_T_flange_mm[0, 3]
+    x0 = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ns=12_000_000)).base_T_flange_mm[0, 3]
     wall = float(x0) + 15.0
     cell = LiveCell(procs, router[0], tmp_path, robot_late_limit=str(limit),
                     envelope_max_mm=f"[{wall}, 1600.0, 1600.0]")

@@ -27,7 +27,7 @@ pytestmark = pytest.mark.live  # real UDP sockets on loopback (humanpt.bench.rsi
 def test_round_trip_over_udp_on_loopback(cycle_ms, cycles):
     # A late limit no load reaches (the default 10 is 40 ms at 4 ms: a loaded 2-core machine's
     # stall); on-time figures are printed, not asserted (humanpt bench rsi measures them).
-    robot = SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms, rsi_late_limit=100_000)
+    robot = SimRobotConfig(protocol="rsi", cycle_period_ns=round(cycle_ms * 1e6), rsi_late_limit=100_000)
     run = run_rsi(cycle_ms, cycles, robot=robot, lose=lambda n: n == 50)
     print(f"RSI {cycle_ms:g} ms: {run.on_time} of {run.cycles} cycles answered in time, "
           f"{run.gateway['fresh']} fresh; {run.histogram}")
@@ -57,7 +57,7 @@ def test_the_gateway_in_a_live_shell_answers_the_robot_over_udp(router):
     worker.start()
     try:
         assert shell.ready.wait(10)
-        robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ms=12.0, rsi_gateway=bind))
+        robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ns=12_000_000, rsi_gateway=bind))
         q0 = robot.q_rad.copy()
         server = RsiRobotServer(robot, cycles=60).start()
         server.join(10)

@@ -19,7 +19,7 @@ SECONDS = 2
 
 
 def _run(run_dir):
-    sim = RsiSimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ms=4.0))
+    sim = RsiSimRobotCore(SimRobotConfig(protocol="rsi", cycle_period_ns=4_000_000))
     gw = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=4.0))
     # Steps within the 0.4 mm / 0.24 deg per cycle limits at 4 ms.
     ctl = ScriptedControllerCore(ScriptedControllerConfig(amplitude_mm=0.2, amplitude_deg=0.1))

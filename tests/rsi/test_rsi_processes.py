@@ -34,8 +34,7 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
     gw_addr = f"127.0.0.1:{free_udp_port()}"
     cfg = write_config(tmp_path / "rsi.toml", port, extra=(
         f'[robot_gateway]\nlink = "rsi"\ncycle_period_ms = 12.0\nudp_bind = "{gw_addr}"\n'
-        f'[sim_robot]\nprotocol = "rsi"\ncycle_period_ms = 12.0\nrsi_gateway = "{gw_addr}"\n'
-        '[controller]\ncycle_period_ms = 12.0\n[viz]\ncycle_period_ms = 12.0\n'))
+        f'[sim_robot]\nprotocol = "rsi"\nrsi_gateway = "{gw_addr}"\n'))  # (the link's cycle only)
     run = tmp_path / "run"
     gw = procs.start("robot_gateway", "--config", str(cfg), "--run-dir", str(run))
     states: list[pb.RobotState] = []

@@ -23,7 +23,7 @@ MS = 1_000_000
 
 def _run(cycle_ms: float):
     gw = GatewayCore(RsiConfig(udp_bind="127.0.0.1:0", cycle_period_ms=cycle_ms))
-    robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ms=cycle_ms))
+    robot = RsiRobot(SimRobotConfig(protocol="rsi", cycle_period_ns=round(cycle_ms * 1e6)))
     controller = CommandAhead(cycle_ms, circle_step(speed_mm_s=20.0, radius_mm=30.0))
     p0 = robot.base_T_flange_mm[:3, 3].copy()
     period = round(cycle_ms * MS)

@@ -92,7 +92,7 @@ HOLES = [
     ("[controller]\nmax_speed_mm_s = 1e9\n", "[controller] max_speed_mm_s"),
     ("[controller]\nmax_speed_mm_s = inf\n", "[controller] max_speed_mm_s"),
     ("[controller]\nlead_ms = nan\n", "[controller] lead_ms"),
-    ("[controller]\ncycle_period_ms = 12.0\n", "cycle_period_ms differs between components"),
+    ("[controller]\ncycle_period_ms = 12.0\n", "[controller] cycle_period_ms = 12 differs from the link's cycle"),
 ]
 
 
@@ -106,10 +106,11 @@ def test_config_holes_are_named_errors_before_start(tmp_path, text, needle):
     assert str(path) in r.stderr and needle in r.stderr, r.stderr
 
 
-def test_cycle_periods_that_agree_are_accepted():
+def test_old_cycle_keys_equal_to_the_links_are_accepted_with_a_note():
+    # (the cell's one cycle: tests/runtime/test_one_cycle.py)
     text = {"controller": {"cycle_period_ms": 12.0}, "robot_gateway": {"cycle_period_ms": 12.0},
             "sim_robot": {"cycle_period_ms": 12.0}, "viz": {"cycle_period_ms": 12.0}}
-    cfg.from_dict(text, "f.toml", config_types())
+    assert len(cfg.from_dict(text, "f.toml", config_types()).notes) == 3
 
 
 # -- hard limits at run time --------------------------------------------------------------

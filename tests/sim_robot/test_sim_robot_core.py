@@ -241,7 +241,7 @@ def test_garbage_and_unknown_console_verbs_never_raise():
         ({"start_joints_deg": [0, 0, 0, 0, 0, 400]}, "start_joints_deg[5]: 400.0 is outside its range"),
         ({"start_pose_mm_deg": [5000, 0, 0, 0, 0, 0]}, "not reachable"),
         ({"start_pose_mm_deg": [1, 2, 3]}, "six finite values"),
-        ({"cycle_period_ms": 0.1}, "cycle_period_ms"),
+        ({"cycle_period_ns": 100_000}, "cycle_period_ns"),
     ],
 )
 def test_config_rejects_bad_values(table, needle):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from humanpt.robot_gateway.links.rsi.protocol import decode_rob
+from humanpt.runtime import cycle
 from humanpt.runtime.recording import read, segments_of
 from humanpt.schemas import humanpt_pb2 as pb
 
@@ -44,7 +45,7 @@ def rsi_cycles(run_dir: str | Path) -> RsiCycles | None:
         cfg = rec.config()
         if cfg.get("protocol") != "rsi":
             return None
-        cycle_ms = int(cfg["cycle_period_ms"])
+        cycle_ms = int(cycle.recorded("sim_robot", cfg)[0]["cycle_period_ns"] // 1_000_000)  # (old runs: mapped)
         for e in rec.entries:  # in file order: an input, then what the core made of it
             if e.topic == "udp_rx":
                 answered = True
