@@ -47,8 +47,7 @@ def test_an_address_the_robot_cannot_send_to_is_refused(tmp_path):
 def test_the_cli_writes_them_through_the_links_kind(tmp_path, cli_main, capsys):
     assert link_kind("abb").write_robot_files is rf.write
     cfg = tmp_path / "cell.toml"
-    cells = "".join(f"[{s}]\ncycle_period_ms = 4.0\n" for s in ("controller", "viz", "sim_robot"))
-    cfg.write_text('[robot_gateway]\nlink = "abb"\nudp_bind = "0.0.0.0:6510"\ncycle_period_ms = 4.0\n' + cells)
+    cfg.write_text('[robot_gateway]\nlink = "abb"\nudp_bind = "0.0.0.0:6510"\n')
     out = tmp_path / "abb"
     assert cli_main(["robot-files", "-c", str(cfg), "--out", str(out), "--sensor-ip", "192.168.125.10"]) == 0
     assert sorted(p.name for p in out.iterdir()) == sorted([rf.SIO_FILE, rf.RAPID_FILE])

@@ -81,9 +81,7 @@ def test_the_shipped_copies_are_the_reference_configs_files():
 
 def test_the_cli_writes_the_files_and_keeps_existing_ones(tmp_path, cli_main, capsys):
     cfg = tmp_path / "cell.toml"
-    cells = "".join(f"[{s}]\ncycle_period_ms = 12.0\n" for s in ("controller", "viz"))
-    cfg.write_text('[robot_gateway]\nlink = "rsi"\nudp_bind = "0.0.0.0:49152"\ncycle_period_ms = 12.0\n'
-                   '[sim_robot]\nprotocol = "rsi"\ncycle_period_ms = 12.0\n' + cells)
+    cfg.write_text('[robot_gateway]\nlink = "rsi"\nudp_bind = "0.0.0.0:49152"\ncycle_period_ms = 12.0\n')
     out = tmp_path / "kuka"
     assert cli_main(["robot-files", "-c", str(cfg), "--out", str(out)]) == 2  # 0.0.0.0: the robot needs an address
     assert "--sensor-ip" in capsys.readouterr().err and not out.exists()
