@@ -30,7 +30,7 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.pathfile import smooth
-from humanpt.controller.playback import thin
+from humanpt.controller.playback import seam_command
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.geometry.units import to_mm
@@ -38,7 +38,6 @@ from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 from humanpt.seam.fit import Seam, fit_path, sample_segment
-from humanpt.seam.retime import RetimeConfig, retime
 
 from . import evaluate
 from .run import SystemConfig
@@ -196,9 +195,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
         fitted_mm = seam_distances_mm(np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments]), seam)
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
-            timed = retime(fitted, RetimeConfig(speed_mm_s=playback_speed_mm_s))
-            x, t = thin(timed.x, timed.t_s)  # as the console does: at most the controller's points
-            args = {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}
+            # as the console does: re-timed for the tool, at most the controller's points
+            args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x)
         else:
             args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
         w.lockstep.inject(w.now_ns, "controller", "console/command",
