@@ -34,9 +34,9 @@ from humanpt.geometry.units import to_mm
 from humanpt.runtime.recording import RecordingError, iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
-from humanpt.seam.fit import Seam, distance_to_seam, sample_segment
+from humanpt.seam.fit import FitConfig, Seam, Segment, distance_to_seam, sample_segment
 
-__all__ = ["Played", "Comparison", "played_tool_path", "compare", "compare_points", "seam_samples"]
+__all__ = ["Played", "Comparison", "played_tool_path", "compare", "compare_points", "seam_samples", "polyline_seam"]
 
 
 @dataclass(frozen=True)
@@ -119,6 +119,21 @@ def played_tool_path(run_dir: str | Path) -> Played:
     world_T_flange_mm = to_mm(np.array([T for (_, T), k in zip(states, keep, strict=True) if k]).reshape(-1, 4, 4))
     tool = (world_T_flange_mm @ flange_T_tool_mm)[:, :3, 3]
     return Played(t[keep], tool.reshape(-1, 3), window)
+
+
+def polyline_seam(points_mm: np.ndarray) -> Seam:
+    """A seam of straight lines through (K, 3) points in order (mm; repeated points
+    dropped): a seam known as a dense polyline (the twin's seam as designed) to compare
+    against."""
+    p = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    keep = np.r_[True, np.linalg.norm(np.diff(p, axis=0), axis=1) > 1e-9]
+    p = p[keep]
+    if len(p) < 2:
+        raise ValueError("a seam needs two distinct points")
+    ypr = (0.0, 0.0, 0.0)
+    segs = tuple(Segment("line", i, i + 1, tuple(map(float, a)), tuple(map(float, b)), ypr, ypr, 0.0, 0.0, 2)
+                 for i, (a, b) in enumerate(zip(p[:-1], p[1:], strict=True)))
+    return Seam(segs, (), (), (), 0.0, FitConfig(), len(p))
 
 
 def compare(seam: Seam, played: Played, cover_mm: float = 1.0, approach_mm: float = 0.25,
