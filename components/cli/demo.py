@@ -15,8 +15,6 @@ import sys
 import threading
 from pathlib import Path
 
-import numpy as np
-
 from humanpt.runtime import config as cfgmod
 from humanpt.runtime.progress import Bars
 
@@ -89,7 +87,7 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
         c = getattr(res, "compared", {}).get(key)  # humanpt.seam.compare.compare_points against the seam
         if c is None or not len(d):
             return f"  {name:44s} (no points)"
-        return (f"  {name:44s} RMS {c.rms_mm:6.3f} mm   mean {np.mean(d):6.3f}   max {c.max_mm:6.3f}   covered "
+        return (f"  {name:44s} RMS {c.rms_mm:6.3f} mm   mean {c.mean_mm:6.3f}   max {c.max_mm:6.3f}   covered "
                 f"{100 * c.covered:5.1f} %, largest gap {c.largest_gap_mm:5.1f} mm at {c.gap_from_mm:.0f}-"
                 f"{c.gap_to_mm:.0f} of {c.length_mm:.0f}   n = {c.n}")
 
@@ -103,6 +101,8 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
         lines.append(row(f"taught seam, fitted: {kinds.count('line')} lines, {kinds.count('arc')} arcs"
                          + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm, "fitted"))
     lines.append(row("played back (the torch's true path)", res.played_mm, "played"))
+    if "played_fitted" in getattr(res, "compared", {}):  # the playback alone
+        lines.append(row("  ... against the fitted seam it was given", res.played_mm, "played_fitted"))
     if res.taught_truth is not None:
         lines += ["", evaluate_format(res.taught_truth)]
     if res.warnings:

@@ -50,6 +50,7 @@ class Played:
 class Comparison:
     n: int  # points compared (after the approach)
     rms_mm: float
+    mean_mm: float
     p95_mm: float
     max_mm: float
     worst_mm: tuple[float, float, float]  # where the largest distance is (the point, world mm)
@@ -183,7 +184,8 @@ def compare_points(seam: Seam, points_mm: np.ndarray, cover_mm: float = 1.0, app
     covered_mm, gaps = _union(lo, hi, length)
     g = max(gaps, key=lambda ab: ab[1] - ab[0]) if gaps else (0.0, 0.0)
     worst = int(np.argmax(d))
-    return Comparison(len(d), float(np.sqrt(np.mean(d ** 2))), float(np.percentile(d, 95)), float(d[worst]),
+    return Comparison(len(d), float(np.sqrt(np.mean(d ** 2))), float(d.mean()), float(np.percentile(d, 95)),
+                      float(d[worst]),
                       tuple(float(v) for v in p[worst]), covered_mm / length if length > 0 else 0.0,
                       g[1] - g[0], g[0], g[1], length, cover_mm, gap_mm, window)
 

@@ -65,11 +65,13 @@ def test_points_beyond_the_cover_radius_leave_their_stretch_uncovered():
     # Every mm from 0 to 100, those at 50..70 mm 2 mm off the seam (beyond cover_mm = 1):
     # pairs of points both within 1 mm cover [0, 49] and [71, 100]: 78 mm, the largest
     # stretch left 49..71 (22 mm).  Distances: 21 points of 2 mm, 80 of 0: RMS
-    # sqrt(21 * 4 / 101) = 0.9119 mm, max 2 mm at the first of them, (50, 2, 0).
+    # sqrt(21 * 4 / 101) = 0.9119 mm, mean 42 / 101 = 0.4158 mm, max 2 mm at the first of
+    # them, (50, 2, 0).
     pts = along(0, 100)
     pts[50:71, 1] = 2.0
     c = compare_points(STRAIGHT, pts, cover_mm=1.0, approach_mm=None)
     assert c.rms_mm == pytest.approx(math.sqrt(84 / 101)) and c.max_mm == pytest.approx(2.0)
+    assert c.mean_mm == pytest.approx(42 / 101)
     assert c.worst_mm == pytest.approx((50.0, 2.0, 0.0))
     assert c.covered == pytest.approx(0.78, abs=1e-3)
     assert (c.largest_gap_mm, c.gap_from_mm, c.gap_to_mm) == pytest.approx((22.0, 49.0, 71.0), abs=0.1)
