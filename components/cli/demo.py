@@ -15,8 +15,6 @@ import sys
 import threading
 from pathlib import Path
 
-import numpy as np
-
 from humanpt.runtime import config as cfgmod
 from humanpt.runtime.progress import Bars
 
@@ -90,22 +88,26 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
             lines.append(f"  [{s.name}] SKIPPED: {s.error} (the rig keeps its previous {s.name} values)")
     lines.append(f"  the rig now: {res.rig.methods()}")
 
-    def row(name, d):
-        if not len(d):
+    def row(name, d, key):
+        c = getattr(res, "compared", {}).get(key)  # humanpt.seam.compare.compare_points against the seam
+        if c is None or not len(d):
             return f"  {name:44s} (no points)"
-        return (f"  {name:44s} RMS {np.sqrt(np.mean(d ** 2)):6.3f} mm   mean {d.mean():6.3f}   max {d.max():6.3f}"
-                f"   n = {len(d)}")
+        return (f"  {name:44s} RMS {c.rms_mm:6.3f} mm   mean {c.mean_mm:6.3f}   max {c.max_mm:6.3f}   covered "
+                f"{100 * c.covered:5.1f} %, largest gap {c.largest_gap_mm:5.1f} mm at {c.gap_from_mm:.0f}-"
+                f"{c.gap_to_mm:.0f} of {c.length_mm:.0f}   n = {c.n}")
 
-    lines += ["", "against the seam (distance to the intended seam; the paper's Table 3 MAE is "
-              f"{' / '.join(f'{v:g}' for v in paper_mae)} mm in x / y / z)",
-              row("taught path (the driver's tip)", res.taught_mm),
+    lines += ["", "against the seam (distance to the intended seam; coverage along it, its start and end included; "
+              f"the paper's Table 3 MAE is {' / '.join(f'{v:g}' for v in paper_mae)} mm in x / y / z)",
+              row("taught path (the driver's tip)", res.taught_mm, "taught"),
               row("taught path, RTS-smoothed" + (" (what is played)" if res.play == "smoothed" else ""),
-                  res.smoothed_mm)]
+                  res.smoothed_mm, "smoothed")]
     if res.fitted_mm is not None:
         kinds = [sg.kind for sg in res.fitted.segments]
         lines.append(row(f"taught seam, fitted: {kinds.count('line')} lines, {kinds.count('arc')} arcs"
-                         + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm))
-    lines.append(row("played back (the torch's true path)", res.played_mm))
+                         + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm, "fitted"))
+    lines.append(row("played back (the torch's true path)", res.played_mm, "played"))
+    if "played_fitted" in getattr(res, "compared", {}):  # the playback alone
+        lines.append(row("  ... against the fitted seam it was given", res.played_mm, "played_fitted"))
     if res.taught_truth is not None:
         lines += ["", evaluate_format(res.taught_truth)]
     if res.warnings:

@@ -491,11 +491,15 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     _add_common(q)
     q = psub.add_parser("compare", help="the tool's played path (from a run's recordings) against a seam",
                         description="Read the robot's reported path during the run's last playback (robot "
-                        "states times the controller's tool) and report its distance to the seam and how much "
-                        "of the seam it covered.")
+                        "states times the controller's tool) and report its distance to the seam, how much "
+                        "of the seam it covered and the largest stretch it left (the seam's start and end "
+                        "included).")
     q.add_argument("seam", help="a seam file (JSON)")
     q.add_argument("run", help="the run directory the playback was recorded in")
     q.add_argument("--cover-mm", type=float, default=1.0, help="coverage radius, mm (default 1)")
+    q.add_argument("--gap-mm", type=float, default=10.0,
+                   help="two successive states farther apart along the seam leave the stretch between them "
+                        "uncovered, mm (default 10)")
 
     from humanpt.cli import calibrate as calibrate_cli
 

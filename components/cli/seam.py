@@ -91,15 +91,19 @@ def path_play(args) -> int:
 
 
 def path_compare(args) -> int:
+    """The robot's reported tool path against a seam (:mod:`humanpt.seam.compare`)."""
     from humanpt.seam import seamfile
     from humanpt.seam.compare import compare, played_tool_path
 
     seam = seamfile.read(args.seam)
     played = played_tool_path(args.run)
-    c = compare(seam, played, cover_mm=args.cover_mm)
+    c = compare(seam, played, cover_mm=args.cover_mm, gap_mm=args.gap_mm)
     print(f"humanpt path compare: the tool's path as the robot reported it ({c.window}; {c.n} states) "
-          f"against {args.seam}")
-    print(tables.render(["", "mm"], [["RMS distance to the seam", f"{c.rms_mm:.3f}"],
-                                     ["95th percentile", f"{c.p95_mm:.3f}"], ["max", f"{c.max_mm:.3f}"],
-                                     [f"seam covered within {c.cover_mm:g} mm", f"{100 * c.covered:.1f} %"]]))
+          f"against {args.seam} ({c.length_mm:.1f} mm)")
+    print(tables.render(["", "mm"], [
+        ["RMS distance to the seam", f"{c.rms_mm:.3f}"], ["95th percentile", f"{c.p95_mm:.3f}"],
+        ["max", f"{c.max_mm:.3f} at ({', '.join(f'{v:.1f}' for v in c.worst_mm)})"],
+        [f"seam covered within {c.cover_mm:g} mm", f"{100 * c.covered:.1f} %"],
+        ["largest stretch not covered", f"{c.largest_gap_mm:.1f} ({c.gap_from_mm:.1f} to {c.gap_to_mm:.1f} along "
+                                        "the seam)"]]))
     return 0

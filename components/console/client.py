@@ -591,14 +591,16 @@ class Console:
 MAX_SEAM_SAMPLES = 200_000
 
 
-def seam_playback(seam_file: str, speed_mm_s: float | None) -> dict:
-    """The playback arguments of a seam file: re-timed at ``speed_mm_s`` (default 20) and
-    thinned to the controller's MAX_PLAYBACK_POINTS (humanpt.controller.playback.thin);
+def seam_playback(seam_file: str, speed_mm_s: float | None, flange_T_tool_x=None) -> dict:
+    """The playback arguments of a seam file: re-timed at ``speed_mm_s`` (default 20) for
+    the tool ``flange_T_tool_x`` (default the controller's default tool) and thinned to
+    the controller's MAX_PLAYBACK_POINTS (humanpt.controller.playback.seam_command);
     ConsoleError naming the file for a seam too long or too detailed for one playback,
     refused before the work that would grow with it."""
-    from humanpt.controller.playback import MAX_PLAYBACK_POINTS, thin
+    from humanpt.controller.config import ControllerConfig
+    from humanpt.controller.playback import MAX_PLAYBACK_POINTS, seam_command
     from humanpt.seam import seamfile
-    from humanpt.seam.retime import RetimeConfig, retime
+    from humanpt.seam.retime import RetimeConfig
 
     seam = seamfile.read(seam_file)
     cfg = RetimeConfig(speed_mm_s=speed_mm_s or 20.0)
@@ -614,13 +616,12 @@ def seam_playback(seam_file: str, speed_mm_s: float | None) -> dict:
                            f"more than {MAX_SEAM_SAMPLES} samples of {cfg.cycle_ms:g} ms: too long for one "
                            "playback; play the seam in parts")
     try:
-        timed = retime(seam, cfg)
-        x, t = thin(timed.x, timed.t_s)
+        return seam_command(seam, cfg.speed_mm_s, ControllerConfig().flange_T_tool_x if flange_T_tool_x is None
+                            else flange_T_tool_x)
     except (OverflowError, FloatingPointError) as e:
         raise ConsoleError(f"{seam_file}: cannot be re-timed ({e})") from None
     except ValueError as e:  # RetimeError, PlaybackError: what does not fit, and why
         raise ConsoleError(f"{seam_file}: {e}") from None
-    return {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}
 
 
 def path_playback(path_file: str, point: str) -> dict:

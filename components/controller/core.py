@@ -150,6 +150,7 @@ class ControllerCore(Core):
         self.camera_p_d_mm = np.array([0.0, 0.0, c.dz_mm])
         self.flange_T_desired = flange_T_desired_m(c, self.rig)
         self.flange_T_tool = to_m(transform_from_x(np.asarray(c.flange_T_tool_x)))
+        self.tool_T_flange = invert_transform(self.flange_T_tool)
         self.tob_T_tip = to_m(self.rig.tip.tob_T_tip_mm())
         self.dt = cell_cycle.ms(self.cycle_period_ns) * 1e-3
         self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
@@ -324,13 +325,18 @@ class ControllerCore(Core):
                                saturation=c.saturation, position_first_beyond_m=c.position_first_beyond_mm * 1e-3,
                                engaged=self._position_first)
 
-    def _goto(self, world_T_flange, world_T_target, v_ff=None):
-        """A saturated step towards a flange pose (no vision)."""
+    def _goto(self, world_T_flange, world_T_target, v_ff=None, w_ff=None, together: bool = False):
+        """A saturated step towards a flange pose (no vision).  ``v_ff`` (3,) m/s and
+        ``w_ff`` (3,) rad/s: the target's own motion (world frame, the flange origin's
+        velocity and the frame's angular velocity), fed forward so that a moving target is
+        followed without the lag v / K (w / K in orientation).  ``together``: at the
+        limits the translation and the rotation are scaled by the same factor (a played
+        tool stays on its path, only slower), else each by its own (law.saturate)."""
         c = self.config
         e_t, e_r = law.pose_error(world_T_flange, world_T_target)
         v = c.gain_translation_1_s * e_t + (v_ff if v_ff is not None else 0.0)
-        d_t, d_r, sat = law.saturate(v * self.dt, c.gain_rotation_1_s * e_r * self.dt, self.max_step_m,
-                                     self.max_step_rad)
+        w = c.gain_rotation_1_s * e_r + (w_ff if w_ff is not None else 0.0)
+        d_t, d_r, sat = law.saturate(v * self.dt, w * self.dt, self.max_step_m, self.max_step_rad, together=together)
         return law.Step(d_t, d_r, sat, float(np.linalg.norm(e_t)), float(np.linalg.norm(e_r))), world_T_target
 
     # -- recording ------------------------------------------------------------------------------
@@ -431,18 +437,33 @@ class ControllerCore(Core):
         moving = d > 1e-9
         return bool(np.any(moving & (d > 1.01 * self.config.max_speed_mm_s * np.maximum(dt, 0.0))))
 
-    def _carrot(self, s: float) -> tuple[np.ndarray, np.ndarray]:
-        """The flange pose at arc length s (m) along the path, and the path's tool velocity."""
+    def _carrot(self, s: float) -> np.ndarray:
+        """The flange pose (4, 4) m when the tool is at arc length s (m) along the path
+        (an untimed playback: the tool moves at a constant speed along its points)."""
         pb_ = self.playback
         S, tips = pb_["s"], pb_["tips"]
         if len(S) == 1 or s <= 0:
-            return pb_["flanges"][0], np.zeros(3)
+            return pb_["flanges"][0]
         i = int(np.clip(np.searchsorted(S, s) - 1, 0, len(S) - 2))
         L = S[i + 1] - S[i]
         a = 0.0 if L <= 0 else min(1.0, (s - S[i]) / L)
-        tip = interpolate_transform(tips[i], tips[i + 1], a)
-        v = (tips[i + 1, :3, 3] - tips[i, :3, 3]) / L * pb_["speed"] if L > 0 and s < S[-1] else np.zeros(3)
-        return tip @ invert_transform(self.flange_T_tool), v
+        return interpolate_transform(tips[i], tips[i + 1], a) @ self.tool_T_flange
+
+    def _carrot_at(self, tau: float) -> np.ndarray:
+        """The flange pose (4, 4) m when the tool is where a timed playback puts it at
+        ``tau`` (s from its start): linear in time between the points, position and
+        orientation alike (a turn on the spot, where the arc length stands still, turns
+        at the timing's rate; playback.thin keeps the points within its tolerance of that)."""
+        pb_ = self.playback
+        T, tips = pb_["times"], pb_["tips"]
+        if len(T) == 1 or tau <= T[0]:
+            return pb_["flanges"][0]
+        if tau >= T[-1]:
+            return pb_["flanges"][-1]
+        i = int(np.clip(np.searchsorted(T, tau, side="right") - 1, 0, len(T) - 2))
+        span = T[i + 1] - T[i]
+        a = 0.0 if span <= 0 else min(1.0, (tau - T[i]) / span)
+        return interpolate_transform(tips[i], tips[i + 1], a, assume_valid=True) @ self.tool_T_flange
 
     def _playback_step(self, world_T_flange):
         pb_ = self.playback
@@ -454,30 +475,35 @@ class ControllerCore(Core):
             if step.error_translation_m < 0.2e-3 and step.error_rotation_rad < np.radians(0.2):
                 pb_["approach"] = False
             return step, desired, False
-        if pb_["times"] is not None:  # timed: the carrot is where the timing says at tau
-            pb_["pos"] = float(np.interp(pb_["tau"], pb_["times"], pb_["s"]))
-        target, v = self._carrot(pb_["pos"])
-        if pb_["times"] is not None:
-            ahead = float(np.interp(pb_["tau"] + self.dt * pb_["rate"], pb_["times"], pb_["s"]))
-            v = (self._carrot(ahead)[0][:3, 3] - target[:3, 3]) / self.dt if ahead > pb_["pos"] else np.zeros(3)
+        timed = pb_["times"] is not None
+        # The carrot now and one commanded cycle on: its displacement over the cycle is fed
+        # forward, translation and rotation (playback.feed_forward).  On a link that moves
+        # the flange by each cycle's step this is the motion exact to the cycle, its
+        # acceleration included: a robot on the carrot stays on it, turning as it turns.
+        hop = self.dt * pb_["rate"]
+        if timed:
+            target, ahead = self._carrot_at(pb_["tau"]), self._carrot_at(pb_["tau"] + hop)
         else:
-            v = v * pb_["rate"]
+            target = self._carrot(pb_["pos"])
+            ahead = self._carrot(min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * hop))
         if pb_["paused"]:  # stand at the carrot: no feed-forward, no progress
             step, desired = self._goto(world_T_flange, target)
             return step, desired, False
-        step, desired = self._goto(world_T_flange, target, v_ff=v)
+        v, w = playback.feed_forward(target, ahead, self.dt)
+        step, desired = self._goto(world_T_flange, target, v_ff=v, w_ff=w, together=True)
         if step.error_translation_m < self.config.playback_max_lag_mm * 1e-3:
-            if pb_["times"] is not None:
-                pb_["tau"] = min(pb_["times"][-1], pb_["tau"] + self.dt * pb_["rate"])
+            if timed:
+                pb_["tau"] = min(pb_["times"][-1], pb_["tau"] + hop)
                 pb_["pos"] = float(np.interp(pb_["tau"], pb_["times"], pb_["s"]))
             else:
-                pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * pb_["rate"] * self.dt)
+                pb_["pos"] = min(pb_["s"][-1], pb_["pos"] + pb_["speed"] * hop)
         else:
             # The carrot waits for the lagging robot: then no feed-forward either, or the
             # robot would settle v / K past the waiting carrot (5 mm at 20 mm/s, K = 4/s),
             # beyond the lag that lets the carrot go on: playback would never end.
             step, desired = self._goto(world_T_flange, target)
-        done = pb_["pos"] >= pb_["s"][-1] and step.error_translation_m < 0.1e-3
+        at_end = pb_["tau"] >= pb_["times"][-1] if timed else pb_["pos"] >= pb_["s"][-1]
+        done = at_end and step.error_translation_m < 0.1e-3
         return step, desired, done
 
     def _recorded_points(self) -> np.ndarray:

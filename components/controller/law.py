@@ -57,16 +57,18 @@ class Step:
 
 
 def saturate(
-    d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: float
+    d_t: np.ndarray, d_r: np.ndarray, max_step_m: float, max_step_rad: float, together: bool = False
 ) -> tuple[np.ndarray, np.ndarray, bool]:
-    """Scale a step down to the per-cycle limits (by norm, keeping its direction)."""
-    sat = False
+    """Scale a step down to the per-cycle limits (by norm, keeping its direction): each
+    part by its own factor, or with ``together`` both by the smaller (the step's screw
+    kept: a point carried by the flange, e.g. a tool's tip, moves along the same line,
+    only less far)."""
     nt, nr = norm3(d_t), norm3(d_r)
-    if nt > max_step_m:
-        d_t, sat = d_t * (max_step_m / nt), True
-    if nr > max_step_rad:
-        d_r, sat = d_r * (max_step_rad / nr), True
-    return d_t, d_r, sat
+    kt = max_step_m / nt if nt > max_step_m else 1.0
+    kr = max_step_rad / nr if nr > max_step_rad else 1.0
+    if together:
+        kt = kr = min(kt, kr)
+    return d_t * kt if kt < 1.0 else d_t, d_r * kr if kr < 1.0 else d_r, kt < 1.0 or kr < 1.0
 
 
 def extrapolate(

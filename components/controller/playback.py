@@ -22,7 +22,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from humanpt.geometry.transforms import invert_transform, transform_from_x
+from humanpt.geometry.transforms import invert_transform, rotvec_from_matrix, transform_from_x
 from humanpt.runtime.config import ConfigError, Deg, Mm
 
 # The largest playback the controller takes: its handling (parse, check, prepare) of a
@@ -38,6 +38,10 @@ MAX_ARGS_CHARS = 400_000
 # How far a thinned playback may pass from a re-timed sample it leaves out (mm, and the
 # same figure in degrees for the orientation).
 THIN_TOLERANCE_MM = 0.05
+# The share of the robot's speed and rate limits a played seam's timing may use for the
+# flange's own motion (humanpt.seam.retime's limit_share); the rest is the servo's, for its
+# corrections: a plan at 100 % would saturate the step on every correction.
+PLAYBACK_LIMIT_SHARE = 0.9
 # The ranges of the command's numbers (runtime.config's Mm and Deg, symmetric; the times' own).
 POSE_LIMITS = (Mm.__metadata__[0].hi,) * 3 + (Deg.__metadata__[0].hi,) * 3
 POSE_UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
@@ -133,6 +137,16 @@ def check_times(times, n: int, where: str = "times_s", booleans: bool = True) ->
     return t
 
 
+def feed_forward(world_T_now: np.ndarray, world_T_next: np.ndarray, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity (3,) and angular velocity (3,) (world frame, per second; the
+    translation's unit) that carry a frame from ``world_T_now`` to ``world_T_next`` (4, 4)
+    in ``dt_s``, as a robot applies a step (``R' = exp(w dt) R``, ``t' = t + v dt``,
+    :func:`humanpt.geometry.transforms.apply_step`): what a playback feeds forward."""
+    v = (world_T_next[:3, 3] - world_T_now[:3, 3]) / dt_s
+    w = rotvec_from_matrix(world_T_next[:3, :3] @ world_T_now[:3, :3].T, assume_valid=True) / dt_s
+    return v, w
+
+
 def flange_positions_mm(points_mm_deg: np.ndarray, flange_T_tool_mm: np.ndarray) -> np.ndarray:
     """(N, 3) world positions of the flange (mm) when the tool is at each pose (N, 6)."""
     world_T_tool = transform_from_x(np.asarray(points_mm_deg, dtype=float).reshape(-1, 6))
@@ -198,3 +212,20 @@ def thin(points_mm_deg: np.ndarray, times_s: np.ndarray, max_points: int = MAX_P
             f"{k}th sample passes {err_mm:.3f} mm / {err_deg:.3f} deg from the others (tolerance "
             f"{tolerance:g}); play the seam in parts or faster")
     return x[keep], t[keep]
+
+
+def seam_command(seam, speed_mm_s: float, flange_T_tool_x, max_points: int = MAX_PLAYBACK_POINTS) -> dict:
+    """The ``playback`` command's arguments for a seam (:class:`humanpt.seam.fit.Seam`):
+    re-timed at ``speed_mm_s`` with the tool ``flange_T_tool_x`` (x, y, z mm, Z-Y-X deg) so
+    that the flange stays within :data:`PLAYBACK_LIMIT_SHARE` of the robot's limits (a
+    corner's turn on the spot at a rate the flange can swing), then thinned to
+    ``max_points`` (:func:`thin`): ``{"points": (N, 6) list, "times_s": (N,) list}`` from 0.
+    The one way a seam becomes a playback (``humanpt path play``, the console, the twin's
+    job).  RetimeError, PlaybackError: what cannot be played, and why."""
+    from humanpt.seam.retime import RetimeConfig, retime
+
+    cfg = RetimeConfig(speed_mm_s=speed_mm_s, flange_T_tool_x=tuple(float(v) for v in flange_T_tool_x),
+                       limit_share=PLAYBACK_LIMIT_SHARE)
+    timed = retime(seam, cfg)
+    x, t = thin(timed.x, timed.t_s, max_points)
+    return {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}

@@ -11,6 +11,17 @@ peaks at ``2 V/T`` and jerk at ``2 pi V/T^2``: ``T`` is the least that keeps bot
 ``accel_mm_s2`` and ``jerk_mm_s3``; a run too short for two ramps at ``V`` gets a lower
 ``V``.  The torch turns with the distance along each segment (slerp between the
 segment's end orientations).  Samples every ``cycle_ms`` (the controller's cycle).
+
+The robot's limits bind its flange, not the tool's tip: given the tool
+(``flange_T_tool_x``), the flange's own motion is planned within ``limit_share`` of
+them (the rest is the servo's, for its corrections).  A torch that turns swings the
+flange about the tip (``w x r``, r from the tip to the flange): along a run the feed is
+lowered until the flange's speed ``V |dp_flange/ds|`` (the largest over the run, sampled
+every millimetre and degree) stays within ``limit_share * max_speed_mm_s``, and the ramps'
+acceleration and jerk by the same factor; a turn on the spot at a corner turns no faster
+than the flange may swing (``limit_share * max_speed_mm_s / |w^ x r|``), its angular
+acceleration and jerk bounded likewise by ``accel_mm_s2`` and ``jerk_mm_s3`` over the
+lever.  Without a tool the flange is the tool's frame (no swing).
 """
 
 from __future__ import annotations
@@ -23,6 +34,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.runtime.files import atomic_open
 from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
@@ -51,6 +63,11 @@ class RetimeConfig:
     angular_jerk_deg_s3: float = 1200.0
     cycle_ms: float = 28.0  # the controller's cycle (the Puma's ALTER period)
     dwells: bool = True  # hold still for each dwell of the seam
+    # The tool on the flange (x, y, z mm, Z-Y-X deg: the controller's flange_T_tool_x); None:
+    # the flange is the tool's frame.  The flange's motion is planned within limit_share of
+    # max_speed_mm_s and max_angular_deg_s (see the module doc).
+    flange_T_tool_x: tuple[float, float, float, float, float, float] | None = None
+    limit_share: float = 1.0
 
     def __post_init__(self):
         for name in ("speed_mm_s", "accel_mm_s2", "jerk_mm_s3", "max_speed_mm_s", "max_angular_deg_s",
@@ -66,6 +83,16 @@ class RetimeConfig:
                 raise RetimeError(f"{name} must be at most {hi:g}, got {getattr(self, name):g}")
         if self.cycle_ms < 0.1:
             raise RetimeError(f"cycle_ms must be at least 0.1, got {self.cycle_ms:g}")
+        if not (isinstance(self.limit_share, (int, float)) and 0.1 <= self.limit_share <= 1.0):
+            raise RetimeError(f"limit_share must be within [0.1, 1], got {self.limit_share!r}")
+        if self.flange_T_tool_x is not None:
+            x = self.flange_T_tool_x
+            if (not isinstance(x, (tuple, list)) or len(x) != 6
+                    or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in x)):
+                raise RetimeError(f"flange_T_tool_x must be six finite numbers (x, y, z mm, Z-Y-X deg), got {x!r}")
+            if math.hypot(*x[:3]) > limits.MAX_TOOL_MM:
+                raise RetimeError(f"flange_T_tool_x: the tool is {math.hypot(*x[:3]):g} mm from the flange; "
+                                  f"at most {limits.MAX_TOOL_MM:g}")
         if self.speed_mm_s > self.max_speed_mm_s:
             raise RetimeError(f"speed_mm_s {self.speed_mm_s:g} is above max_speed_mm_s {self.max_speed_mm_s:g}")
 
@@ -89,6 +116,41 @@ def _turn_deg(seg: Segment) -> float:
     r0 = Rotation.from_euler("ZYX", seg.start_ypr_deg, degrees=True)
     r1 = Rotation.from_euler("ZYX", seg.end_ypr_deg, degrees=True)
     return math.degrees((r0.inv() * r1).magnitude())
+
+
+def _tool_p_flange_mm(cfg: RetimeConfig) -> np.ndarray | None:
+    """Where the flange's origin is in the tool's frame (3,) mm; None without a tool."""
+    if cfg.flange_T_tool_x is None:
+        return None
+    flange_T_tool = transform_from_x(np.asarray(cfg.flange_T_tool_x, dtype=float))
+    return invert_transform(flange_T_tool)[:3, 3]
+
+
+def _flange_gain(seg: Segment, tool_p_flange: np.ndarray | None) -> float:
+    """The largest |dp_flange / ds| along a segment (>= 0; 1 without a tool or a turn):
+    how much faster than the tool the flange moves, sampled every mm and every degree."""
+    if tool_p_flange is None or seg.length_mm <= 0:
+        return 1.0
+    n = max(2, int(math.ceil(max(seg.length_mm, _turn_deg(seg)))) + 1)
+    f = np.linspace(0.0, 1.0, n)
+    rots = Slerp([0.0, 1.0], Rotation.from_euler("ZYX", [seg.start_ypr_deg, seg.end_ypr_deg], degrees=True))(f)
+    flange = seg.points_at(f) + rots.apply(tool_p_flange)
+    ds = seg.length_mm / (n - 1)
+    return max(1.0, float(np.linalg.norm(np.diff(flange, axis=0), axis=1).max()) / ds)
+
+
+def _swing_lever_mm(r0: Rotation, r1: Rotation, tool_p_flange: np.ndarray | None) -> float:
+    """The flange's largest distance from the axis of a turn on the spot from ``r0`` to
+    ``r1`` (the tool's orientations; the axis through the tool's tip): the flange swings
+    at that many mm per radian; 0 without a tool."""
+    if tool_p_flange is None:
+        return 0.0
+    axis = (r1 * r0.inv()).as_rotvec()  # the world frame's axis (R(a) = exp(a axis) R0)
+    if np.linalg.norm(axis) < 1e-12:
+        return 0.0
+    axis = axis / np.linalg.norm(axis)
+    r = Slerp([0.0, 1.0], Rotation.concatenate([r0, r1]))(np.linspace(0.0, 1.0, 33)).apply(tool_p_flange)
+    return float(np.linalg.norm(np.cross(axis, r), axis=1).max())
 
 
 def _ramp_time(v: float, accel: float, jerk: float) -> float:
@@ -153,8 +215,13 @@ def _turn_on_spot(x_all: list, t_all: list, v_all: list, ypr_to: np.ndarray, cfg
     turn = math.degrees((r0.inv() * r1).magnitude())
     if turn < 1e-6:
         return
-    w, T, t = _on_cycles(turn, cfg.max_angular_deg_s, cfg.angular_accel_deg_s2, cfg.angular_jerk_deg_s3,
-                         cfg.cycle_ms * 1e-3)
+    w_max, alpha, jerk = cfg.limit_share * cfg.max_angular_deg_s, cfg.angular_accel_deg_s2, cfg.angular_jerk_deg_s3
+    lever = _swing_lever_mm(r0, r1, _tool_p_flange_mm(cfg))
+    if lever > 0:  # the flange swings at lever mm per radian: within its own limits
+        w_max = min(w_max, math.degrees(cfg.limit_share * cfg.max_speed_mm_s / lever))
+        alpha = min(alpha, math.degrees(cfg.accel_mm_s2 / lever))
+        jerk = min(jerk, math.degrees(cfg.jerk_mm_s3 / lever))
+    w, T, t = _on_cycles(turn, w_max, alpha, jerk, cfg.cycle_ms * 1e-3)
     t = t[1:]
     a, _ = _s_of_t(t, turn, w, T)
     ypr = Slerp([0.0, 1.0], Rotation.concatenate([r0, r1]))(a / turn).as_euler("ZYX", degrees=True)
@@ -167,6 +234,7 @@ def retime(seam: Seam, config: RetimeConfig | None = None) -> Timed:
     """Sample ``seam`` in time (see the module doc).  Raises :class:`RetimeError` for a
     seam without length."""
     cfg = config or RetimeConfig()
+    tool_p_flange = _tool_p_flange_mm(cfg)
     segs = seam.segments
     if not segs or sum(s.length_mm for s in segs) <= 0:
         raise RetimeError("the seam has no length to move along")
@@ -190,11 +258,14 @@ def retime(seam: Seam, config: RetimeConfig | None = None) -> Timed:
         lengths = np.array([segs[i].length_mm for i in run])
         total = float(lengths.sum())
         v_cap = min(cfg.speed_mm_s, cfg.max_speed_mm_s)
+        gain = max(_flange_gain(segs[i], tool_p_flange) for i in run)
+        if tool_p_flange is not None:  # the flange's speed within its share of the limit
+            v_cap = min(v_cap, cfg.limit_share * cfg.max_speed_mm_s / gain)
         for i, L in zip(run, lengths, strict=True):
             turn = _turn_deg(segs[i])
             if turn > 1e-9 and L > 0:
-                v_cap = min(v_cap, cfg.max_angular_deg_s * L / turn)
-        v, T, t = _on_cycles(total, v_cap, cfg.accel_mm_s2, cfg.jerk_mm_s3, dt)
+                v_cap = min(v_cap, cfg.limit_share * cfg.max_angular_deg_s * L / turn)
+        v, T, t = _on_cycles(total, v_cap, cfg.accel_mm_s2 / gain, cfg.jerk_mm_s3 / gain, dt)
         s, sp = _s_of_t(t, total, v, T)
         bounds = np.concatenate([[0.0], np.cumsum(lengths)])
         pos = np.zeros((len(t), 3))

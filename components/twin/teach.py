@@ -30,15 +30,15 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.pathfile import smooth
-from humanpt.controller.playback import thin
+from humanpt.controller.playback import seam_command
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.geometry.units import to_mm
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
-from humanpt.seam.fit import Seam, fit_path, sample_segment
-from humanpt.seam.retime import RetimeConfig, retime
+from humanpt.seam.compare import Comparison, compare_points, polyline_seam
+from humanpt.seam.fit import Seam, distance_to_seam, fit_path, sample_segment
 
 from . import evaluate
 from .run import SystemConfig
@@ -88,19 +88,23 @@ class TeachResult:
     fitted_mm: np.ndarray | None = None  # (K,) the fitted seam (lines and arcs, every 0.5 mm) to the seam
     fitted: Seam | None = None  # humanpt path fit of the taught path
     play: str = "seam"  # what was played back: "seam" (fitted, re-timed) or "smoothed"
+    # Each of "taught", "smoothed", "fitted", "played" against the seam as designed
+    # (humanpt.seam.compare.compare_points: RMS, max, coverage, the largest stretch left);
+    # the played torch from the end of its approach to the path's start.
+    compared: dict[str, Comparison] = field(default_factory=dict)
 
 
 def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
-    """Distance (N,) of each point (N, 3) to the polyline ``seam_mm`` (K, 3), mm."""
+    """Distance (N,) of each point (N, 3) to the polyline ``seam_mm`` (K, 3), mm
+    (humanpt.seam.fit.distance_to_seam of humanpt.seam.compare.polyline_seam)."""
+    return distance_to_seam(polyline_seam(seam_mm), np.asarray(points_mm, dtype=float).reshape(-1, 3))
+
+
+def _compare(seam: Seam, points_mm: np.ndarray, what: str) -> Comparison | None:
+    """``points_mm`` (N, 3), in order along their path, against the seam as designed
+    (humanpt.seam.compare.compare_points: distances, coverage), None without points."""
     p = np.asarray(points_mm, dtype=float).reshape(-1, 3)
-    a, b = seam_mm[:-1], seam_mm[1:]
-    ab = b - a
-    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
-    out = np.empty(len(p))
-    for i, q in enumerate(p):
-        s = np.clip(np.einsum("ij,ij->i", q - a, ab) / ab2, 0.0, 1.0)
-        out[i] = np.min(np.linalg.norm(a + s[:, None] * ab - q, axis=1))
-    return out
+    return compare_points(seam, p, approach_mm=None, window=what) if len(p) else None
 
 
 def _seam(op) -> np.ndarray:
@@ -155,6 +159,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     # around the flange pose half way between the two, over the middle of the seam.
     view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
     seam = _seam(cfg.operator)
+    design = polyline_seam(seam)  # the seam as designed, to compare against
     first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
     weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
     mount = view.copy()
@@ -181,7 +186,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         stamps, x_g, x_tip = evaluate.path_points(w)
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
-        taught_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in taught]), seam)
+        taught_p = transform_from_x(np.asarray(taught, dtype=float).reshape(-1, 6))[:, :3, 3]
+        taught_mm = distance_to_seam(design, taught_p) if len(taught_p) else np.zeros(0)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
         ctl = next(c for c in w.extra if isinstance(c, ControllerCore))
         tool_mm = to_mm(ctl.flange_T_tool)
@@ -190,15 +196,16 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so
         # that the hand's tremor is not played back.
         points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
-        smoothed_mm = seam_distances_mm(np.array([transform_from_x(x)[:3, 3] for x in points]), seam)
+        smoothed_p = transform_from_x(np.asarray(points, dtype=float).reshape(-1, 6))[:, :3, 3]
+        smoothed_mm = distance_to_seam(design, smoothed_p) if len(smoothed_p) else np.zeros(0)
         # ... and as lines and arcs (`humanpt path fit`): the seam the hand meant.
         fitted = fit_path(np.asarray(taught, dtype=float), stamps,
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
-        fitted_mm = seam_distances_mm(np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments]), seam)
+        fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
+        fitted_mm = distance_to_seam(design, fitted_p)
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
-            timed = retime(fitted, RetimeConfig(speed_mm_s=playback_speed_mm_s))
-            x, t = thin(timed.x, timed.t_s)  # as the console does: at most the controller's points
-            args = {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}
+            # as the console does: re-timed for the tool, at most the controller's points
+            args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x)
         else:
             args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
         w.lockstep.inject(w.now_ns, "controller", "console/command",
@@ -223,7 +230,14 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # the approach ends within 0.2 mm of the start (the controller's criterion): count from there
         near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 0.25)[0]
         tips = tips[near[0]:] if len(near) else tips[:0]
-        played_mm = seam_distances_mm(tips, seam) if len(tips) else np.zeros(0)
+        played_mm = distance_to_seam(design, tips) if len(tips) else np.zeros(0)
+        compared = {k: c for k, c in (("taught", _compare(design, taught_p, "taught points")),
+                                      ("smoothed", _compare(design, smoothed_p, "smoothed points")),
+                                      ("fitted", _compare(design, fitted_p, "fitted seam, every 0.5 mm")),
+                                      ("played", _compare(design, tips, "played torch, every cycle")))
+                    if c is not None}
+        if play == "seam" and len(tips):  # the playback alone: the torch against the seam it was given
+            compared["played_fitted"] = compare_points(fitted, tips, approach_mm=None, window="played torch")
         warnings = [f"{e.source}: {e.code}" for e in (pb.Event.FromString(o.data) for o in w.outputs()
                                                       if o.topic.endswith("/events")) if e.severity >= 3]
         if not done:
@@ -232,4 +246,5 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
-                       Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play)
+                       Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
+                       compared)

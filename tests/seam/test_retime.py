@@ -130,3 +130,51 @@ def test_export_takes_the_retimed_samples_and_feed(tmp_path):
     r = run_cli("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "bad.csv"), "-o",
                 str(tmp_path / "q.json"))
     assert r.returncode == 2 and "not a timed path" in r.stderr and not (tmp_path / "q.json").exists()
+
+
+TOOL_X = (0.0, 0.0, 200.0, 0.0, 0.0, 0.0)  # the controller's default torch: 200 mm along the flange's z
+
+
+def flange_speeds(tm, tool_x=TOOL_X):
+    """The flange's speed (mm/s) between samples, by finite differences of the flange
+    positions worked out with scipy: the tool's pose times the tool's offset inverted."""
+    R = Rotation.from_euler("ZYX", tm.x[:, 3:], degrees=True)
+    R_ft = Rotation.from_euler("ZYX", tool_x[3:], degrees=True)
+    tool_p_flange = -R_ft.inv().apply(tool_x[:3])  # the flange's origin in the tool's frame
+    flange = tm.x[:, :3] + R.apply(tool_p_flange)
+    return np.linalg.norm(np.diff(flange, axis=0), axis=1) / np.diff(tm.t_s)
+
+
+def test_a_turn_on_the_spot_swings_the_flange_no_faster_than_its_share_of_the_limit():
+    # At the corner the torch pitches from 15 to -45 deg about a horizontal axis through its
+    # tip: the flange, 200 mm up the torch, swings at 200 mm per radian, 209 mm/s at 60 deg/s.
+    s = seam_of([line((0, 0, 0), (50, 0, 0)), line((50, 0, 0), (50, 50, 0), (0, -45, 180), (0, -45, 180))],
+                corners=[Corner((50.0, 0.0, 0.0), 90.0, 0, 1)])
+    bare = retime(s, RetimeConfig())
+    assert flange_speeds(bare).max() > 150  # planned for the tip alone: beyond the robot's 100 mm/s
+    tm = retime(s, RetimeConfig(flange_T_tool_x=TOOL_X, limit_share=0.9))
+    v = flange_speeds(tm)
+    assert 85.0 < v.max() <= 90.0 * (1 + 1e-3)  # within 90 % of 100 mm/s, and using it
+    assert tm.duration_s > bare.duration_s + 1.0  # the corner was given the time it needs
+    np.testing.assert_allclose(tm.x[-1], [50, 50, 0, 0, -45, 180], atol=1e-6)
+
+
+def test_an_arc_whose_torch_swings_the_flange_is_fed_slower():
+    # A 60 mm arc at 60 mm/s with the torch pitched 45 deg and following the arc: the flange
+    # moves at the tip's 60 mm/s plus the swing 1 rad/s x 141 mm: over 100 mm/s at that feed.
+    r, sweep = 60.0, 90.0
+    a = Segment("arc", 0, 0, (r, 0.0, 0.0), (0.0, r, 0.0), (90.0, 45.0, 180.0), (180.0, 45.0, 180.0), 0.0, 0.0, 10,
+                centre_mm=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), radius_mm=r, sweep_deg=sweep)
+    bare = retime(seam_of([a]), RetimeConfig(speed_mm_s=60))
+    assert flange_speeds(bare).max() > 100
+    tm = retime(seam_of([a]), RetimeConfig(speed_mm_s=60, flange_T_tool_x=TOOL_X, limit_share=0.9))
+    assert flange_speeds(tm).max() <= 90.0 * (1 + 1e-3)
+    assert tm.feeds_mm_s[0] < 60 and np.linalg.norm(np.diff(tm.x[:, :3], axis=0), axis=1).max() / 0.028 < 60
+
+
+@pytest.mark.parametrize("kw, says", [({"limit_share": 0.0}, "limit_share"),
+                                      ({"flange_T_tool_x": (0, 0, math.inf, 0, 0, 0)}, "flange_T_tool_x"),
+                                      ({"flange_T_tool_x": (0, 0, 5000, 0, 0, 0)}, "2000")])
+def test_bad_tool_parameters_are_refused(kw, says):
+    with pytest.raises(RetimeError, match=says):
+        RetimeConfig(**kw)
