@@ -127,6 +127,12 @@ class Perception:
         checked = apply_policy(match, check, self.config.degraded_policy, self.model)
         return Result(blobs, checked, region, check, None if checked is match else match)
 
+    def track(self, gray: np.ndarray, uv_px: np.ndarray, size_px: np.ndarray) -> Result:
+        """Measure while tracking: only around the predicted blobs (``uv_px`` (k, 2) the
+        last FULL measurement's centres, ``size_px`` (k,) their sizes). The caller searches
+        the whole image (:meth:`measure`) when this is not FULL."""
+        return self.measure(gray, self.roi_around(uv_px, size_px))
+
     def roi_around(self, uv_px: np.ndarray, blob_size_px: np.ndarray) -> Region:
         """The region of interest around centres (k, 2): their bounding box grown by
         ``roi_margin_px`` plus the largest blob's size."""
