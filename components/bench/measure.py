@@ -256,35 +256,45 @@ def tracking_sequence(width: int = 640, height: int = 480, n: int = 32, seed: in
 
 
 def interleaved(cases: dict[str, Callable[[int], object]], n: int, rounds: int = 8,
-                warmup: int = 20) -> dict[str, np.ndarray]:
-    """Per case the ``n`` times (ns) of ``fn(k)``, k = 0 .. n-1, measured in ``rounds``
-    alternating blocks (case 1, case 2, ..., case 1, ...) so that a change of the machine's
-    load hits every case alike; ``warmup`` untimed calls of each first."""
+                warmup: int = 20) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per case the ``n`` (CPU, wall) times (ns) of ``fn(k)``, k = 0 .. n-1, measured in
+    ``rounds`` alternating blocks (case 1, case 2, ..., case 1, ...) so that a change of
+    the machine's load hits every case alike; ``warmup`` untimed calls of each first. CPU =
+    this thread's CPU time (``time.thread_time_ns``, less the clock's own cost): what the
+    work costs, without the time other processes took the core away (on a shared machine
+    that is most of the wall time of a millisecond call)."""
     for fn in cases.values():
         for k in range(min(warmup, n)):
             fn(k)
-    times = {name: np.empty(n) for name in cases}
+    cpu_clock, wall_clock = time.thread_time_ns, time.perf_counter_ns
+    own = np.median([-(cpu_clock() - cpu_clock()) for _ in range(200)])  # the clock's cost
+    times = {name: (np.empty(n), np.empty(n)) for name in cases}
     bounds = np.linspace(0, n, max(1, min(rounds, n)) + 1).astype(int)
-    clock = time.perf_counter_ns
     for a, b in zip(bounds[:-1], bounds[1:], strict=True):
         for name, fn in cases.items():
-            t = times[name]
+            cpu, wall = times[name]
             for k in range(a, b):
-                t0 = clock()
+                w0 = wall_clock()
+                c0 = cpu_clock()
                 fn(k)
-                t[k] = clock() - t0
+                cpu[k] = cpu_clock() - c0
+                wall[k] = wall_clock() - w0
+    for cpu, _ in times.values():
+        np.maximum(cpu - own, 1.0, out=cpu)
     return times
 
 
 @dataclass(frozen=True)
 class PerceptionRow:
-    """One case: images/s (n / total time), p50, p99 (ms) and ``ratio`` = its baseline's
-    median time / its median time (> 1: faster than the baseline; None for a baseline)."""
+    """One case: ``rate`` images/s = 1 / the median CPU time per image, ``cpu_ms`` that
+    median, wall time p50 and p99 (ms), and ``ratio`` = its baseline's median CPU time /
+    its own (> 1: faster than the baseline; None for a baseline)."""
 
     size: str
     method: str
     case: str
     rate: float
+    cpu_ms: float
     p50_ms: float
     p99_ms: float
     baseline: str | None = None
@@ -328,7 +338,8 @@ def measure_perception(n_images: int, sizes=PERCEPTION_SIZES, paper: bool = True
                        rounds: int = 8) -> list[PerceptionRow]:
     """humanpt's perception and its baselines (:func:`naive_blob_centres`,
     :func:`memory_floor`) on twin image sequences (:func:`tracking_sequence`) of each size,
-    ``n_images`` per case, every case of one size interleaved (:func:`interleaved`).
+    ``n_images`` per case, every case of one size interleaved (:func:`interleaved`), rates
+    and ratios from the median CPU time per image.
     Ratios: tracking to the whole-image search, every other humanpt case to the naive
     pipeline; the paper method's (640x480 only) to the same naive pipeline."""
     n = max(1, n_images)
@@ -339,15 +350,15 @@ def measure_perception(n_images: int, sizes=PERCEPTION_SIZES, paper: bool = True
         if paper and (width, height) == tuple(sizes[0]):
             cases.update({("paper", name): fn for name, fn in perception_cases(rig, images, "paper", False).items()})
         times = interleaved({f"{m}|{c}": fn for (m, c), fn in cases.items()}, n, rounds)
-        med = {key: float(np.median(t)) for key, t in times.items()}
-        for (method, case), t in zip(cases, times.values(), strict=True):
+        med = {key: float(np.median(cpu)) for key, (cpu, _) in times.items()}
+        for (method, case), (key, (_, wall)) in zip(cases, times.items(), strict=True):
             base = None if case in (NAIVE, FLOOR) else (
                 "search: whole image" if case.startswith("tracking") else NAIVE)
             base_key = f"{method}|{base}" if base != NAIVE else f"weighted|{NAIVE}"
             rows.append(PerceptionRow(
-                f"{width}x{height}", "-" if base is None else method, case, 1e9 * n / t.sum(),
-                float(np.percentile(t, 50)) / 1e6, float(np.percentile(t, 99)) / 1e6, base,
-                None if base is None else med[base_key] / med[f"{method}|{case}"]))
+                f"{width}x{height}", "-" if base is None else method, case, 1e9 / med[key], med[key] / 1e6,
+                float(np.percentile(wall, 50)) / 1e6, float(np.percentile(wall, 99)) / 1e6, base,
+                None if base is None else med[base_key] / med[key]))
     return rows
 
 

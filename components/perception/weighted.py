@@ -75,18 +75,30 @@ def detect_weighted(
     min_contrast_dn: float = 20.0,
     max_blobs: int = 24,
     keep: np.ndarray | None = None,
+    tiles: np.ndarray | None = None,
+    offset: np.ndarray | None = None,
 ) -> Blobs:
     """Detect and measure the blobs in ``region`` of ``gray`` ((H, W) uint8, sources
     bright, masked pixels 0; ``keep`` the mask, 255 = usable). ``max_radius_px``: the
     largest half-extent a source can have (nearest working depth); larger shapes are
     clutter. Returns :class:`Blobs` in whole-image pixels, at most ``max_blobs`` (the
-    largest). See the module docstring for the steps."""
+    largest), in descending raster order of each shape's first pixel (the whole image's
+    ``cv2.findContours`` order). See the module docstring for the steps.
+
+    ``tiles`` (t, 4), ``offset`` (t, 2): ``region`` is a :class:`~humanpt.perception.blobs
+    .Mosaic` of t windows (``keep`` 0 between them), left to right: each window's (x0, y0,
+    x1, y1) in the region and what takes its pixels to the image's; a shape touching its
+    window's border is rejected as one touching the region's. Default: one window, the
+    region."""
     u0, v0, u1, v1 = region
     sub = gray[v0:v1, u0:u1]
     if sub.size == 0:
         return EMPTY
     keep_sub = None if keep is None else keep[v0:v1, u0:u1]
     height, width = sub.shape
+    if tiles is None:
+        tiles = np.array([(0, 0, width, height)])
+        offset = np.array([(u0, v0)])
     background, sigma = background_and_noise(sub, keep_sub)
     level = max(float(threshold), background + noise_k * sigma)
     if level >= 255:
@@ -99,14 +111,16 @@ def detect_weighted(
     # arrays, without numpy's per-call overhead on a handful of shapes)
     x, y, w, h = shapes.x.tolist(), shapes.y.tolist(), shapes.w.tolist(), shapes.h.tolist()
     area = shapes.area.tolist()
+    tile_of = (np.searchsorted(tiles[:, 0], shapes.x, side="right") - 1).tolist()
+    tx0, ty0, tx1, ty1 = (tiles[tile_of, k].tolist() for k in range(4))
     cand = [
         i
         for i in range(len(shapes))
         if min_area_px <= area[i] <= max_area_px
-        and x[i] > 0
-        and y[i] > 0
-        and x[i] + w[i] < width
-        and y[i] + h[i] < height
+        and x[i] > tx0[i]
+        and y[i] > ty0[i]
+        and x[i] + w[i] < tx1[i]
+        and y[i] + h[i] < ty1[i]
         and max(w[i], h[i]) <= 2.0 * max_radius_px
     ]
     rejected = len(shapes) - len(cand)
@@ -202,7 +216,9 @@ def detect_weighted(
     aniso_sd = sigma * np.sqrt(np.pi / 12.0) * r_ap**3 / safe
     # Shape checks per blob, the array formulas' operations on plain floats.
     uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
+    firsts = []
     c0 = centroid.tolist()
+    shift = offset[tile_of].tolist()  # per shape: its window's mosaic -> image pixels
     for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
         zip(
             flux.tolist(),
@@ -231,7 +247,9 @@ def detect_weighted(
             and abs(u - c0[i][0]) <= r_ap_l[i]
             and abs(v - c0[i][1]) <= r_ap_l[i]
         ):
-            uv.append((u + u0, v + v0))
+            du, dv = shift[cand[i]]
+            uv.append((u + du, v + dv))
+            firsts.append(tuple(shapes.first[cand[i]] + shift[cand[i]]))
             areas.append(float(area[cand[i]]))
             sizes.append(size)
             elongations.append(elongation)
@@ -243,7 +261,7 @@ def detect_weighted(
             rejected += 1
     if not uv:
         return dataclasses.replace(EMPTY, rejected=rejected)
-    return Blobs(
+    blobs = Blobs(
         np.array(uv),
         np.array(areas),
         np.array(sizes),
@@ -254,3 +272,8 @@ def detect_weighted(
         np.array(moments).reshape(-1, 3),
         np.array(noise).reshape(-1, 2),
     )
+    if len(tiles) > 1:  # the whole image's order: descending (v, u) of the first pixel
+        order = sorted(range(len(firsts)), key=lambda i: (firsts[i][1], firsts[i][0]), reverse=True)
+        if order != list(range(len(firsts))):
+            blobs = blobs.take(np.array(order))
+    return blobs
