@@ -203,11 +203,12 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     # depth gate also drops the NaN and infinite z of pairs without disparity
     expected = s.params.a_u * s.model.source_diameter_mm / (z + s.params.baseline_mm / 2.0)
     lo, hi = s.size_ratio_range
-    ratio = blobs.size_px[np.stack([ii, jj])] / expected  # (2, k): right and left views
+    size = blobs.size_px
+    ratio_r, ratio_l = size[ii] / expected, size[jj] / expected  # right and left views
     log_area = np.log(blobs.area_px[ii] / blobs.area_px[jj])
     with np.errstate(invalid="ignore"):
         keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm) & (np.abs(res) <= s.epipolar_tol_px)
-        keep &= np.all((ratio >= lo) & (ratio <= hi), axis=0)
+        keep &= (ratio_r >= lo) & (ratio_r <= hi) & (ratio_l >= lo) & (ratio_l <= hi)
         keep &= np.abs(log_area) <= math.log(s.max_area_ratio)
     ii, jj, p, res, log_area = ii[keep], jj[keep], p[keep], res[keep], log_area[keep]
     peak = np.maximum(blobs.peak_dn, 1e-6)
@@ -260,7 +261,7 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
         combos = combos[ok]
         if len(combos):
             err = np.sort(triangle_sides_mm(p[combos]), axis=1) - model_sides  # (T, 3)
-            ok = np.max(np.abs(err), axis=1) <= tol
+            ok = np.abs(err).max(axis=1) <= tol
             combos, err = combos[ok], err[ok]
             if len(combos):
                 total = chi2[combos].sum(axis=1) + ((err / s.side_sigma_mm) ** 2).sum(axis=1)
@@ -314,7 +315,7 @@ def _finish(
             signed = res
         res = np.abs(res)
     chi2 = float(np.dot(res, res)) / s.epipolar_sigma_px**2
-    pairs = np.column_stack([right, left])
+    pairs = np.stack((right, left), axis=1)
     if len(p) == 3:
         try:
             lab = label_sources(s.model, p)

@@ -147,14 +147,12 @@ def detect_weighted(
     inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
     inside = inside and max(x0) + 2 * half < width
     if inside:  # no window reaches out of the region: no clipping, every pixel valid
-        win = np.lib.stride_tricks.sliding_window_view(sub, (size_w, size_w))[y0, x0]
-        win = win.astype(np.float64)  # (m, S, S)
-        rows = cols = None
+        rows, cols = ys[:, :, None], xs[:, None, :]
     else:
         ys_c = np.clip(ys, 0, height - 1)
         xs_c = np.clip(xs, 0, width - 1)
         rows, cols = ys_c[:, :, None], xs_c[:, None, :]
-        win = sub[rows, cols].astype(np.float64)  # (m, S, S)
+    win = sub[rows, cols].astype(np.float64)  # (m, S, S)
     # Pixels of other shapes (above the level and not this shape's) are left out.
     own = np.zeros(win.shape, bool)
     for i, k in enumerate(cand):
@@ -168,11 +166,7 @@ def detect_weighted(
     if not inside:
         valid &= (ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]
     if keep_sub is not None:
-        if inside:
-            kwin = np.lib.stride_tricks.sliding_window_view(keep_sub, (size_w, size_w))[y0, x0]
-        else:
-            kwin = keep_sub[rows, cols]
-        valid &= kwin > 0
+        valid &= keep_sub[rows, cols] > 0
     grid_x = xs.astype(np.float64)[:, None, :]
     grid_y = ys.astype(np.float64)[:, :, None]
     r2_ap = (r_ap**2)[:, None, None]
