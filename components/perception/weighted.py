@@ -28,6 +28,7 @@ photon and read noise only (a few thousandths of a pixel for the default twin).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 
@@ -111,8 +112,10 @@ def detect_weighted(
     # arrays, without numpy's per-call overhead on a handful of shapes)
     x, y, w, h = shapes.x.tolist(), shapes.y.tolist(), shapes.w.tolist(), shapes.h.tolist()
     area = shapes.area.tolist()
-    tile_of = (np.searchsorted(tiles[:, 0], shapes.x, side="right") - 1).tolist()
-    tx0, ty0, tx1, ty1 = (tiles[tile_of, k].tolist() for k in range(4))
+    windows = tiles.tolist()
+    starts = [t[0] for t in windows]
+    tile_of = [bisect.bisect_right(starts, u) - 1 for u in x]  # the window each shape lies in
+    tx0, ty0, tx1, ty1 = ([windows[t][k] for t in tile_of] for k in range(4))
     cand = [
         i
         for i in range(len(shapes))
@@ -212,7 +215,9 @@ def detect_weighted(
     uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
     firsts = []
     c0 = centroid.tolist()
-    shift = offset[tile_of].tolist()  # per shape: its window's mosaic -> image pixels
+    offset_l = offset.tolist()
+    first = shapes.first.tolist()
+    shift = [offset_l[t] for t in tile_of]  # per shape: its window's mosaic -> image pixels
     for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
         zip(
             flux.tolist(),
@@ -243,7 +248,8 @@ def detect_weighted(
         ):
             du, dv = shift[cand[i]]
             uv.append((u + du, v + dv))
-            firsts.append(tuple(shapes.first[cand[i]] + shift[cand[i]]))
+            fu, fv = first[cand[i]]
+            firsts.append((fu + du, fv + dv))
             areas.append(float(area[cand[i]]))
             sizes.append(size)
             elongations.append(elongation)
