@@ -197,12 +197,13 @@ def from_image(m: RawImage) -> np.ndarray:
     if m.width == 0 or m.height == 0:
         raise MessageError("empty image (width or height is 0)")
     row = m.width * channels * itemsize
-    if m.step < row or len(m.data) != m.step * m.height:
+    data = m.data  # (each read of a bytes field copies it out of the message: read it once)
+    if m.step < row or len(data) != m.step * m.height:
         raise MessageError(
-            f"image data is {len(m.data)} bytes; {m.width}x{m.height} {m.encoding} with step {m.step} "
+            f"image data is {len(data)} bytes; {m.width}x{m.height} {m.encoding} with step {m.step} "
             f"needs {m.step * m.height}"
         )
-    a = np.frombuffer(m.data, dtype=np.uint8).reshape(m.height, m.step)[:, :row]
+    a = np.frombuffer(data, dtype=np.uint8).reshape(m.height, m.step)[:, :row]
     a = a.view(dtype) if itemsize > 1 else a
     shape = (m.height, m.width) if channels == 1 else (m.height, m.width, channels)
     return a.reshape(shape)

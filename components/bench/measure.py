@@ -203,47 +203,162 @@ def pin_one_cpu() -> str:
     return ""
 
 
-def measure_perception(n_images: int) -> list[tuple[str, str, float, float, float]]:
-    """Each perception method on 640x480 twin images (random poses): rows of (method,
-    case, images/s, p50 ms, p99 ms), ``n_images`` per case."""
+# -- perception: humanpt against its baselines, measured interleaved ------------------------
 
-    from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
-    from humanpt.schemas.convert import image
+PERCEPTION_SIZES = ((640, 480), (1920, 1200))
+NAIVE = "naive OpenCV pipeline"
+FLOOR = "memory floor: one read"
+
+
+def naive_blob_centres(gray: np.ndarray, threshold: float = 60.0, count: int = 6) -> list[tuple[float, float]]:
+    """The baseline a user would write instead of humanpt's perception: threshold the whole
+    frame, ``cv2.connectedComponentsWithStats``, intensity-weighted centroids (u, v) of the
+    ``count`` largest blobs (no background, no checks, no pairing)."""
+    import cv2
+
+    _, binary = cv2.threshold(gray, threshold, 255, cv2.THRESH_BINARY)
+    _, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
+    out = []
+    for i in np.argsort(stats[1:, cv2.CC_STAT_AREA])[::-1][:count] + 1:
+        x, y, w, h = stats[i, :4]
+        win = gray[y : y + h, x : x + w].astype(np.float64) * (labels[y : y + h, x : x + w] == i)
+        total = win.sum()
+        ys, xs = np.mgrid[y : y + h, x : x + w]
+        out.append((float((win * xs).sum() / total), float((win * ys).sum() / total)))
+    return out
+
+
+def memory_floor(gray: np.ndarray) -> int:
+    """The least any per-image work can cost: one read of every pixel (``np.max``, SIMD)."""
+    return int(gray.max())
+
+
+def tracking_sequence(width: int = 640, height: int = 480, n: int = 32, seed: int = 1):
+    """(rig, images): ``n`` twin images of a slowly moving target (0.4 mm, 0.1 deg per image
+    from a random pose at 450-900 mm; default noise), played forward then backward by the
+    callers, so that a region of interest always holds. Another size than 640x480: the same
+    optics (a_u = 1000 px) on a larger sensor, principal point at its centre."""
+    import dataclasses
+
+    from humanpt.geometry import transform_from_x, x_from_transform
+    from humanpt.geometry.rig import Rig
     from humanpt.sim_camera import Renderer
     from humanpt.testing.perception_eval import random_cases
 
+    case = random_cases(1, seed=seed)[0]
+    psvs = dataclasses.replace(case.sim.psvs, image_width_px=width, image_height_px=height,
+                               u0=width / 2.0, v0=height / 2.0)
+    renderer = Renderer(dataclasses.replace(case.sim, psvs=psvs))
+    x0 = x_from_transform(case.camera_T_tob)
+    step = np.array([0.4, 0.3, 0.4, 0.1, 0.1, 0.1])
+    images = [renderer.render(transform_from_x(x0 + k * step), frame_index=k) for k in range(n)]
+    return Rig(psvs=psvs), images
+
+
+def interleaved(cases: dict[str, Callable[[int], object]], n: int, rounds: int = 8,
+                warmup: int = 20) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per case the ``n`` (CPU, wall) times (ns) of ``fn(k)``, k = 0 .. n-1, measured in
+    ``rounds`` alternating blocks (case 1, case 2, ..., case 1, ...) so that a change of
+    the machine's load hits every case alike; ``warmup`` untimed calls of each first. CPU =
+    this thread's CPU time (``time.thread_time_ns``, less the clock's own cost): what the
+    work costs, without the time other processes took the core away (on a shared machine
+    that is most of the wall time of a millisecond call)."""
+    for fn in cases.values():
+        for k in range(min(warmup, n)):
+            fn(k)
+    cpu_clock, wall_clock = time.thread_time_ns, time.perf_counter_ns
+    own = np.median([-(cpu_clock() - cpu_clock()) for _ in range(200)])  # the clock's cost
+    times = {name: (np.empty(n), np.empty(n)) for name in cases}
+    bounds = np.linspace(0, n, max(1, min(rounds, n)) + 1).astype(int)
+    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+        for name, fn in cases.items():
+            cpu, wall = times[name]
+            for k in range(a, b):
+                w0 = wall_clock()
+                c0 = cpu_clock()
+                fn(k)
+                cpu[k] = cpu_clock() - c0
+                wall[k] = wall_clock() - w0
+    for cpu, _ in times.values():
+        np.maximum(cpu - own, 1.0, out=cpu)
+    return times
+
+
+@dataclass(frozen=True)
+class PerceptionRow:
+    """One case: ``rate`` images/s = 1 / the median CPU time per image, ``cpu_ms`` that
+    median, wall time p50 and p99 (ms), and ``ratio`` = its baseline's median CPU time /
+    its own (> 1: faster than the baseline; None for a baseline)."""
+
+    size: str
+    method: str
+    case: str
+    rate: float
+    cpu_ms: float
+    p50_ms: float
+    p99_ms: float
+    baseline: str | None = None
+    ratio: float | None = None
+
+
+def perception_cases(rig, images, method: str = "weighted", baselines: bool = True) -> dict[str, Callable[[int], object]]:
+    """The timed cases on one image sequence (played forward, then backward): the
+    baselines, the whole-image search, tracking (the windows around the blobs predicted
+    from the previous image's measurement) and the core step (decode, checks, tracking or
+    search, message) on a sequence of messages."""
+    from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
+    from humanpt.perception.correspondence import FULL
+    from humanpt.schemas.convert import image
+
+    cfg = PerceptionConfig(method=method)
+    p = Perception(cfg, rig)
+    order = list(range(len(images))) + list(range(len(images) - 1, 0, -1))
+    seq = [images[i] for i in order]
+    m = len(seq)
+    anchors = []
+    for k in range(m):  # the previous image's FULL measurement predicts this one's blobs
+        r = p.measure(seq[k - 1])
+        if r.paired.status != FULL:
+            raise RuntimeError(f"bench image {order[k - 1]} is not measured FULL ({r.paired.status})")
+        used = r.paired.pairs.ravel()
+        anchors.append((r.blobs.uv_px[used], r.blobs.size_px[used]))
+    messages = [image(img, (k + 1) * 33_000_000) for k, img in enumerate(seq)]
+    core = PerceptionCore(cfg, rig)
+    cases: dict[str, Callable[[int], object]] = {}
+    if baselines:
+        cases[NAIVE] = lambda k: naive_blob_centres(seq[k % m], cfg.threshold)
+        cases[FLOOR] = lambda k: memory_floor(seq[k % m])
+    cases["search: whole image"] = lambda k: p.measure(seq[k % m])
+    cases["tracking: windows around the blobs"] = lambda k: p.track(seq[k % m], *anchors[k % m])
+    cases["core step (decode ... message)"] = lambda k: core.step(k, "camera/image", messages[k % m])
+    return cases
+
+
+def measure_perception(n_images: int, sizes=PERCEPTION_SIZES, paper: bool = True,
+                       rounds: int = 8) -> list[PerceptionRow]:
+    """humanpt's perception and its baselines (:func:`naive_blob_centres`,
+    :func:`memory_floor`) on twin image sequences (:func:`tracking_sequence`) of each size,
+    ``n_images`` per case, every case of one size interleaved (:func:`interleaved`), rates
+    and ratios from the median CPU time per image.
+    Ratios: tracking to the whole-image search, every other humanpt case to the naive
+    pipeline; the paper method's (640x480 only) to the same naive pipeline."""
     n = max(1, n_images)
-    cases = random_cases(16, seed=1)
-    renderer = Renderer(cases[0].sim)
-    images = [renderer.render(c.camera_T_tob, frame_index=c.frame_index) for c in cases]
-    messages = [image(img, (k + 1) * 33_000_000) for k, img in enumerate(images)]
-
-    def timed(fn) -> tuple[float, float, float]:
-        for k in range(min(20, n)):  # warm-up
-            fn(k)
-        t = np.empty(n)
-        for k in range(n):
-            t0 = time.perf_counter_ns()
-            fn(k)
-            t[k] = time.perf_counter_ns() - t0
-        return 1e9 * n / t.sum(), float(np.percentile(t, 50)) / 1e6, float(np.percentile(t, 99)) / 1e6
-
-    rows = []
-    m = len(images)
-    for method in ("weighted", "paper"):
-        p = Perception(PerceptionConfig(method=method))
-        rois = []
-        for img in images:
-            r = p.measure(img)
-            rois.append(p.roi_around(r.blobs.uv_px, r.blobs.size_px))
-        rows.append((method, "search: whole image", *timed(lambda k, p=p: p.measure(images[k % m]))))
-        rows.append((method, "tracking: region of interest",
-                     *timed(lambda k, p=p, rois=rois: p.measure(images[k % m], rois[k % m]))))
-        # the whole core step on a sequence (decode, checks, ROI tracking, message); each
-        # image repeated 4 times so that the tracking region holds
-        core = PerceptionCore(PerceptionConfig(method=method))
-        rows.append((method, "core step (decode ... message)",
-                     *timed(lambda k, core=core: core.step(k, "camera/image", messages[(k // 4) % m]))))
+    rows: list[PerceptionRow] = []
+    for width, height in sizes:
+        rig, images = tracking_sequence(width, height)
+        cases = {("weighted", name): fn for name, fn in perception_cases(rig, images).items()}
+        if paper and (width, height) == tuple(sizes[0]):
+            cases.update({("paper", name): fn for name, fn in perception_cases(rig, images, "paper", False).items()})
+        times = interleaved({f"{m}|{c}": fn for (m, c), fn in cases.items()}, n, rounds)
+        med = {key: float(np.median(cpu)) for key, (cpu, _) in times.items()}
+        for (method, case), (key, (_, wall)) in zip(cases, times.items(), strict=True):
+            base = None if case in (NAIVE, FLOOR) else (
+                "search: whole image" if case.startswith("tracking") else NAIVE)
+            base_key = f"{method}|{base}" if base != NAIVE else f"weighted|{NAIVE}"
+            rows.append(PerceptionRow(
+                f"{width}x{height}", "-" if base is None else method, case, 1e9 / med[key], med[key] / 1e6,
+                float(np.percentile(wall, 50)) / 1e6, float(np.percentile(wall, 99)) / 1e6, base,
+                None if base is None else med[base_key] / med[key]))
     return rows
 
 

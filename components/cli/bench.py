@@ -44,19 +44,35 @@ def bench_render(args) -> int:
 
 
 def bench_perception(args) -> int:
-    """Images per second of each perception method on 640x480 twin images, on one core; and
-    (unless ``--no-accuracy``) both methods' accuracy on twin images with ground truth."""
-    from humanpt.bench.measure import measure_perception, perception_accuracy, pin_one_cpu
+    """Images per second of each perception method and of its baselines (a naive OpenCV
+    pipeline, one read of the frame), measured interleaved in this process at 640x480 and
+    1920x1200, on one core; and (unless ``--no-accuracy``) both methods' accuracy on twin
+    images with ground truth."""
+    from humanpt.bench.measure import FLOOR, measure_perception, perception_accuracy, pin_one_cpu
     from humanpt.testing.perception_eval import format_table
 
     pinned = pin_one_cpu()
     n = max(1, args.images)
     rows = measure_perception(n)
-    print(f"humanpt bench perception: 640x480 twin images (random poses, 450-900 mm, default noise), "
-          f"{n} per case, cv2 threads 1{pinned}")
-    print("\n" + tables.render(["method", "case", "images/s", "p50 ms", "p99 ms"],
-                               [[m, case, f"{rate:.0f}", f"{p50:.3f}", f"{p99:.3f}"] for m, case, rate, p50, p99 in rows],
-                               align="llrrr"))
+    print(f"humanpt bench perception: twin image sequences (a target moving 0.4 mm, 0.1 deg per image "
+          f"at ~600 mm, default noise; 1920x1200: the same optics on a larger sensor), {n} images per case, "
+          f"cases interleaved in 8 rounds, cv2 threads 1{pinned}")
+    floor = {r.size: r for r in rows if r.case == FLOOR}
+    cells = []
+    for r in rows:
+        ratio = "" if r.ratio is None else f"{r.ratio:.2f}x {'whole image' if r.case.startswith('tracking') else 'naive'}"
+        of_floor = f"{100.0 * floor[r.size].cpu_ms / r.cpu_ms:.1f} %" if r.size in floor else ""
+        cells.append([r.size, r.method, r.case, f"{r.rate:.0f}", f"{r.cpu_ms:.3f}", f"{r.p50_ms:.3f}",
+                      f"{r.p99_ms:.3f}", ratio, of_floor])
+    print("\n" + tables.render(["size", "method", "case", "images/s", "CPU ms", "wall p50 ms", "wall p99 ms",
+                                "ratio", "floor / it"], cells, align="lllrrrrrr"))
+    track = {r.size: r for r in rows if r.method == "weighted" and r.case.startswith("tracking")}
+    if len(track) == 2:
+        small, large = track.values()
+        print(f"\ntracking {large.size} / {small.size}: {large.rate / small.rate:.2f} (images/s)")
+    print("images/s and CPU ms: the median CPU time of this thread per image (what the work costs; the wall "
+          "times also hold what other processes took); ratio = the baseline's median CPU time / the case's "
+          "(> 1: faster than the baseline); floor / it = the memory floor's / the case's.")
     if not args.no_accuracy:
         print(f"\naccuracy on twin images with ground truth ({args.accuracy_images} per set, seed {args.seed}; "
               "bound: geometry error model at the measured centre RMS):\n")

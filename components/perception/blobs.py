@@ -7,12 +7,14 @@ does not say which, so the correspondence step decides. Coordinates are observed
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
-__all__ = ["Blobs", "Region", "Shapes", "full_region", "clip_region", "find_shapes", "EMPTY"]
+__all__ = ["Blobs", "Region", "Shapes", "Mosaic", "full_region", "clip_region", "find_shapes",
+           "windows_around", "EMPTY"]
 
 Region = tuple[int, int, int, int]
 """``(u0, v0, u1, v1)``: the pixels ``u0 <= u < u1``, ``v0 <= v < v1`` of an image."""
@@ -82,8 +84,10 @@ EMPTY = Blobs(
 class Shapes:
     """The 8-connected shapes of a binary image (m shapes), struct of arrays in the binary
     image's pixels: bounding boxes ``x, y, w, h`` (int), ``area`` (pixel count, int),
-    ``centroid`` (m, 2), the mean of the shape's pixel locations (u, v), and ``masks``, per
-    shape a (h, w) bool array of its pixels within its box."""
+    ``centroid`` (m, 2), the mean of the shape's pixel locations (u, v), ``masks``, per
+    shape a (h, w) bool array of its pixels within its box, and ``first`` (m, 2) int the
+    shape's first pixel in raster order (u, v). The shapes come in descending raster order
+    of ``first`` (``cv2.findContours``'s order)."""
 
     x: np.ndarray
     y: np.ndarray
@@ -92,6 +96,7 @@ class Shapes:
     area: np.ndarray
     centroid: np.ndarray
     masks: tuple[np.ndarray, ...]
+    first: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -108,6 +113,7 @@ class Shapes:
             self.area[index],
             self.centroid[index],
             tuple(self.masks[i] for i in index),
+            None if self.first is None else self.first[index],
         )
 
 
@@ -118,19 +124,21 @@ def find_shapes(binary: np.ndarray, max_shapes: int = 256) -> Shapes:
     out). At most ``max_shapes``, the ones with the largest boxes."""
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
-        return Shapes(*(np.zeros(0, int) for _ in range(5)), np.zeros((0, 2)), ())
+        return Shapes(*(np.zeros(0, int) for _ in range(5)), np.zeros((0, 2)), (),
+                      np.zeros((0, 2), int))
     boxes = [cv2.boundingRect(c) for c in contours]
     if len(contours) > max_shapes:
         b = np.array(boxes, dtype=int).reshape(-1, 4)
         keep = np.sort(np.argsort(-(b[:, 2] * b[:, 3]), kind="stable")[:max_shapes])
         contours = [contours[i] for i in keep]
         boxes = [boxes[i] for i in keep]
-    area, centroid, masks = [], [], []
+    area, centroid, masks, first = [], [], [], []
     for c, (x, y, w, h) in zip(contours, boxes, strict=True):
         _, labels, stats, cents = cv2.connectedComponentsWithStats(
             binary[y : y + h, x : x + w], connectivity=8, ltype=cv2.CV_32S
         )
-        u, v = c[0, 0].tolist()
+        u, v = c[0, 0].tolist()  # the contour starts at the shape's first pixel
+        first.append((u, v))
         k = labels[v - y, u - x]  # the component of a contour pixel
         area.append(stats[k, cv2.CC_STAT_AREA])
         cu, cv = cents[k].tolist()
@@ -145,4 +153,61 @@ def find_shapes(binary: np.ndarray, max_shapes: int = 256) -> Shapes:
         np.array(area, dtype=int),
         np.array(centroid, dtype=float).reshape(-1, 2),
         tuple(masks),
+        np.array(first, dtype=int).reshape(-1, 2),
     )
+
+
+def windows_around(uv_px: np.ndarray, half_px: float, width: int, height: int) -> list[Region]:
+    """Square windows of half size ``half_px`` around centres (k, 2), clipped to the image,
+    overlapping ones merged into their bounding box until no two overlap (a shape is then
+    whole in at most one window)."""
+    boxes = []
+    for u, v in np.asarray(uv_px, dtype=float).reshape(-1, 2).tolist():
+        boxes.append(clip_region((math.floor(u - half_px), math.floor(v - half_px),
+                                  math.ceil(u + half_px) + 1, math.ceil(v + half_px) + 1), width, height))
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(boxes)):
+            for j in range(i + 1, len(boxes)):
+                a, b = boxes[i], boxes[j]
+                if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
+                    boxes[i] = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
+                    del boxes[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return [b for b in boxes if b[2] > b[0] and b[3] > b[1]]
+
+
+@dataclass(frozen=True)
+class Mosaic:
+    """Disjoint windows of an image packed side by side into one small image, so that a
+    detector measures them all in one call: ``gray`` (H, W) uint8, ``keep`` (H, W) uint8
+    (255 = an image pixel the detector may use, 0 = a gap or a masked pixel), ``tiles``
+    (t, 4) int each window's (x0, y0, x1, y1) in the mosaic, ``offset`` (t, 2) int what
+    takes a mosaic pixel of that window to the image's (u, v). The windows are ``gap_px``
+    apart: a blob's centroid window (the detector's) never reaches another window."""
+
+    gray: np.ndarray
+    keep: np.ndarray
+    tiles: np.ndarray
+    offset: np.ndarray
+
+    @staticmethod
+    def pack(gray: np.ndarray, keep: np.ndarray | None, windows: list[Region], gap_px: int) -> Mosaic:
+        height = max(v1 - v0 for _, v0, _, v1 in windows)
+        width = sum(u1 - u0 for u0, _, u1, _ in windows) + gap_px * (len(windows) - 1)
+        out = np.zeros((height, width), np.uint8)
+        use = np.zeros((height, width), np.uint8)
+        tiles, offset = [], []
+        x = 0
+        for u0, v0, u1, v1 in windows:
+            w, h = u1 - u0, v1 - v0
+            out[:h, x : x + w] = gray[v0:v1, u0:u1]
+            use[:h, x : x + w] = 255 if keep is None else keep[v0:v1, u0:u1]
+            tiles.append((x, 0, x + w, h))
+            offset.append((u0 - x, v0))
+            x += w + gap_px
+        return Mosaic(out, use, np.array(tiles, dtype=int), np.array(offset, dtype=int))

@@ -77,6 +77,7 @@ __all__ = ["SOURCE_NAMES", "POLICIES", "CheckSettings", "SourceCheck", "check_so
            "apply_policy", "rebuild_point"]
 
 SOURCE_NAMES = "ABC"
+_UU_VV_UV = [0, 3, 1]  # a flattened 2x2 second-moment matrix's (uu, vv, uv)
 
 
 @dataclass(frozen=True)
@@ -147,18 +148,19 @@ def check_sources(
         # the second moments left after the predicted disc's: what the optics add + damage
         m = blobs.moments_px2[idx]  # (3, 2, 3)
         disc = np.einsum("...ij,...kj->...ik", jac, jac) / 4.0  # (3, 2, 2, 2)
-        rest = m - np.stack([disc[..., 0, 0], disc[..., 1, 1], disc[..., 0, 1]], axis=-1)
+        rest = m - disc.reshape(3, 2, 4)[..., _UU_VV_UV]
         # what all six blobs share (the blur, blooming along the columns, motion blur) is
         # not damage: the median blob's rest is taken off
         six = np.sort(rest.reshape(6, 3), axis=0)
-        d_uu, d_vv, d_uv = np.moveaxis(rest - 0.5 * (six[2] + six[3]), -1, 0)  # (median of 6)
+        rest = rest - 0.5 * (six[2] + six[3])  # (the median of 6)
+        d_uu, d_vv, d_uv = rest[..., 0], rest[..., 1], rest[..., 2]
         aniso = np.hypot(0.5 * (d_uu - d_vv), d_uv) / (det / 4.0)
         anisotropy = aniso.max(axis=1)
         if blobs.noise is not None:
             # SDs from the background noise: of log q per blob, of log brightness (each view
             # against its median, the two views averaged) and of the anisotropy
             rel_var = (blobs.noise[idx, 0] / flux) ** 2  # (3, 2)
-            var = rel_var + rel_var.mean(axis=0)
+            var = rel_var + rel_var.sum(axis=0) / 2.0  # (the mean of the two views)
             brightness_sd = 0.5 * np.sqrt(var.sum(axis=1))
             view_sd = np.sqrt(var.sum(axis=1))
             aniso_sd = (blobs.noise[idx, 1] / (det / 4.0)).max(axis=1)

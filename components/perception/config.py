@@ -43,8 +43,8 @@ class PerceptionConfig:
     Run-time parameters: ``method`` (``"weighted"``, the default method, or ``"paper"``, the
     reference method of Section 4), ``threshold`` (T, DN), ``invert`` (the sources are darker
     than the background: work on 255 - I), ``mask`` (rectangles ``[u, v, width, height]``
-    in px whose pixels are ignored), ``track_roi`` (search a region around the last
-    measurement first).
+    in px whose pixels are ignored), ``track_roi`` (measure windows around the last FULL
+    measurement's blobs first, ``roi_margin_px`` beyond the largest blob).
 
     The PSVS and the target come from the rig (``[runtime] rig``,
     :class:`humanpt.geometry.rig.Rig`), not from here.  The working depth range

@@ -239,11 +239,14 @@ class PerceptionCore(Core):
         match = result.paired
         if match.status != FULL or not len(match.pairs):
             return []
-        params = self.perception.params
-        uv = ideal_pixels(params, result.blobs.uv_px)
-        right, left = match.pairs[:, 0], match.pairs[:, 1]
+        residual = match.eq4_residual_px  # (when the correspondence computed them)
+        if residual is None:
+            params = self.perception.params
+            uv = ideal_pixels(params, result.blobs.uv_px)
+            right, left = match.pairs[:, 0], match.pairs[:, 1]
+            residual = epipolar_residual_px(params, uv[right], uv[left])
         # epipolar_residual_px is v_R - v_L (scaled): the vertical disparity is its negative
-        self._drift.append(-float(np.mean(epipolar_residual_px(params, uv[right], uv[left]))))
+        self._drift.append(-float(np.mean(residual)))
         c = self.perception.config
         if len(self._drift) < min(c.drift_window, 10):
             return []
@@ -265,7 +268,7 @@ class PerceptionCore(Core):
     def _measure(self, gray: np.ndarray) -> Result:
         p = self.perception
         if p.config.track_roi and self._anchor is not None:
-            result = p.measure(gray, p.roi_around(*self._anchor))
+            result = p.track(gray, *self._anchor)
             if result.paired.status == FULL:
                 self.counters["roi_hits"] += 1
                 self._remember(result)

@@ -102,7 +102,9 @@ class Match:
     ``status`` is FULL; ``residual_px`` (k,): |epipolar residual|; ``camera_p_mm`` (k, 3):
     the triangulated points, camera frame, mm; ``camera_T_tob`` (4, 4), mm, when FULL;
     ``status`` FULL / POSITION_ONLY / LOST; ``quality`` in [0, 1]; ``side_error_mm``: largest
-    |measured - model| side (NaN when no side was measured).
+    |measured - model| side (NaN when no side was measured); ``eq4_residual_px`` (k,) the
+    signed epipolar residuals (:func:`epipolar_residual_px` at eq. (4)'s depth) when the
+    correspondence already computed them (None otherwise; the mirror drift watch uses them).
     """
 
     pairs: np.ndarray
@@ -112,6 +114,7 @@ class Match:
     status: str
     quality: float
     side_error_mm: float = math.nan
+    eq4_residual_px: np.ndarray | None = None
 
     @property
     def visible(self) -> int:
@@ -184,8 +187,8 @@ def _combinations(n: int, k: int) -> np.ndarray:
 
 
 def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
-    """Every (right i, left j) pair passing the gates: indices, |residual|, eq. (4) points,
-    and its chi-square terms (epipolar + area + brightness)."""
+    """Every (right i, left j) pair passing the gates: indices, signed epipolar residual,
+    eq. (4) points, and its chi-square terms (epipolar + area + brightness)."""
     n = len(blobs)
     ii, jj = _ordered_pairs(n)
     d_lo, d_hi = disparity_range_px(s.params, s.min_depth_mm, s.max_depth_mm)
@@ -200,11 +203,12 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     # depth gate also drops the NaN and infinite z of pairs without disparity
     expected = s.params.a_u * s.model.source_diameter_mm / (z + s.params.baseline_mm / 2.0)
     lo, hi = s.size_ratio_range
-    ratio = blobs.size_px[np.stack([ii, jj])] / expected  # (2, k): right and left views
+    size = blobs.size_px
+    ratio_r, ratio_l = size[ii] / expected, size[jj] / expected  # right and left views
     log_area = np.log(blobs.area_px[ii] / blobs.area_px[jj])
     with np.errstate(invalid="ignore"):
         keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm) & (np.abs(res) <= s.epipolar_tol_px)
-        keep &= np.all((ratio >= lo) & (ratio <= hi), axis=0)
+        keep &= (ratio_r >= lo) & (ratio_r <= hi) & (ratio_l >= lo) & (ratio_l <= hi)
         keep &= np.abs(log_area) <= math.log(s.max_area_ratio)
     ii, jj, p, res, log_area = ii[keep], jj[keep], p[keep], res[keep], log_area[keep]
     peak = np.maximum(blobs.peak_dn, 1e-6)
@@ -217,7 +221,7 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     if len(chi2) > _MAX_CANDIDATES:
         best = np.sort(np.argsort(chi2, kind="stable")[:_MAX_CANDIDATES])
         ii, jj, p, res, chi2 = ii[best], jj[best], p[best], res[best], chi2[best]
-    return ii, jj, np.abs(res), p, chi2
+    return ii, jj, res, p, chi2
 
 
 _PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
@@ -257,7 +261,7 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
         combos = combos[ok]
         if len(combos):
             err = np.sort(triangle_sides_mm(p[combos]), axis=1) - model_sides  # (T, 3)
-            ok = np.max(np.abs(err), axis=1) <= tol
+            ok = np.abs(err).max(axis=1) <= tol
             combos, err = combos[ok], err[ok]
             if len(combos):
                 total = chi2[combos].sum(axis=1) + ((err / s.side_sigma_mm) ** 2).sum(axis=1)
@@ -294,20 +298,24 @@ def _finish(
     """Triangulate the chosen pairs with the configured method, name A, B, C (three
     pairs), build the frame and the quality. None when the pairs cannot be triangulated
     or three pairs cannot be labelled. ``eq4_p_mm``, ``eq4_residual_px``: the pairs'
-    eq. (4) points and |epipolar residuals| when already known (the candidates'; they
+    eq. (4) points and signed epipolar residuals when already known (the candidates'; they
     passed the depth gate, so they are in front of the cameras)."""
     method = method or s.triangulation
     right, left = np.asarray(right), np.asarray(left)
+    signed = eq4_residual_px
     if method == "eq4" and eq4_p_mm is not None:
-        p, res = eq4_p_mm, eq4_residual_px
+        p, res = eq4_p_mm, np.abs(eq4_residual_px)
     else:
         try:
             p = triangulate(s.params, uv[right], uv[left], method=method, undistort=False)
         except GeometryError:
             return None
-        res = np.abs(epipolar_residual_px(s.params, uv[right], uv[left], p[:, 2]))
+        res = epipolar_residual_px(s.params, uv[right], uv[left], p[:, 2])
+        if method == "eq4":
+            signed = res
+        res = np.abs(res)
     chi2 = float(np.dot(res, res)) / s.epipolar_sigma_px**2
-    pairs = np.column_stack([right, left])
+    pairs = np.stack((right, left), axis=1)
     if len(p) == 3:
         try:
             lab = label_sources(s.model, p)
@@ -318,14 +326,15 @@ def _finish(
         e = (lab.sides_mm - s.model.sides_mm) / s.side_sigma_mm
         chi2 += float(np.dot(e, e))
         return Match(pairs[order], res[order], lab.camera_p_abc_mm, frame, FULL, _p_value(chi2, 6),
-                     lab.side_error_mm)
+                     lab.side_error_mm, None if signed is None else signed[order])
     side_error = math.nan
     n_terms = len(p)
     if len(p) == 2:
         side_error = float(np.min(np.abs(np.linalg.norm(p[0] - p[1]) - s.model.sides_mm)))
         chi2 += (side_error / s.side_sigma_mm) ** 2
         n_terms += 1
-    return Match(pairs, res, p, None, POSITION_ONLY, len(p) / 3.0 * _p_value(chi2, n_terms), side_error)
+    return Match(pairs, res, p, None, POSITION_ONLY, len(p) / 3.0 * _p_value(chi2, n_terms), side_error,
+                 signed)
 
 
 def match_scan_line(blobs: Blobs, s: MatchSettings, scan_line_tol_px: float) -> Match:

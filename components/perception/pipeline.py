@@ -10,13 +10,14 @@ the events. Benchmarks and tests use it directly.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from humanpt.geometry.rig import Rig
 
-from .blobs import Blobs, Region, clip_region, full_region
+from .blobs import Blobs, Mosaic, Region, clip_region, full_region, windows_around
 from .checks import CheckSettings, SourceCheck, apply_policy, check_sources
 from .config import PerceptionConfig
 from .correspondence import Match, MatchSettings, match_scan_line, match_scored
@@ -85,6 +86,9 @@ class Perception:
             / (config.min_depth_mm + self.params.baseline_mm / 2.0)
             + 2.0
         )
+        # the windows of a tracking mosaic lie further apart than a blob's centroid window
+        # (weighted.py: 2 ceil(radius + pad + ring + 1) + 1) reaches
+        self.gap_px = 2 * math.ceil(self.max_radius_px + config.aperture_pad_px + 3.0) + 2
 
     @property
     def full_region(self) -> Region:
@@ -95,6 +99,10 @@ class Perception:
         c = self.config
         if c.method == "paper":
             return detect_paper(gray, c.threshold, c.paper_cross_px, region)
+        return self._detect_weighted(gray, region, self.keep)
+
+    def _detect_weighted(self, gray, region, keep, tiles=None, offset=None) -> Blobs:
+        c = self.config
         return detect_weighted(
             gray,
             region,
@@ -107,7 +115,9 @@ class Perception:
             max_elongation=c.max_elongation,
             min_contrast_dn=c.min_contrast_dn,
             max_blobs=c.max_blobs,
-            keep=self.keep,
+            keep=keep,
+            tiles=tiles,
+            offset=offset,
         )
 
     def match(self, blobs: Blobs) -> Match:
@@ -119,13 +129,40 @@ class Perception:
         """Detect and match in ``region`` (default: the whole image) of a prepared image
         (see :func:`humanpt.perception.image.prepare`)."""
         region = self.full_region if region is None else clip_region(region, *self.size_px)
-        blobs = self.detect(gray, region)
+        return self._finish(self.detect(gray, region), region)
+
+    def _finish(self, blobs: Blobs, region: Region) -> Result:
+        """Correspondence, blob checks and their policy on detected blobs."""
         match = self.match(blobs)
         if not self.config.check_blobs:
             return Result(blobs, match, region)
         check = check_sources(blobs, match, self.params, self.model, self.check_settings)
         checked = apply_policy(match, check, self.config.degraded_policy, self.model)
         return Result(blobs, checked, region, check, None if checked is match else match)
+
+    def track(self, gray: np.ndarray, uv_px: np.ndarray, size_px: np.ndarray) -> Result:
+        """Measure while tracking: only the windows around the predicted blobs (``uv_px``
+        (k, 2) the last FULL measurement's centres, ``size_px`` (k,) their sizes), each
+        ``roi_margin_px`` plus the largest blob's size around its blob, overlapping ones
+        merged: the cost follows the blobs, not the image's size. The weighted method
+        measures them in one call on a :class:`~humanpt.perception.blobs.Mosaic` of the
+        windows (same blobs, order and centres as a search of the image finds there); the
+        paper method searches their bounding box (:meth:`roi_around`). The caller searches
+        the whole image (:meth:`measure`) when this is not FULL. ``Result.region``: the
+        windows' bounding box."""
+        if self.config.method == "paper":
+            return self.measure(gray, self.roi_around(uv_px, size_px))
+        pad = self.config.roi_margin_px + float(np.max(size_px, initial=0.0))
+        windows = windows_around(uv_px, pad, *self.size_px)
+        if not windows:
+            return self.measure(gray, (0, 0, 0, 0))
+        mosaic = Mosaic.pack(gray, self.keep, windows, self.gap_px)
+        height, width = mosaic.gray.shape
+        blobs = self._detect_weighted(mosaic.gray, (0, 0, width, height), mosaic.keep, mosaic.tiles,
+                                      mosaic.offset)
+        box = np.array(windows)
+        region = (int(box[:, 0].min()), int(box[:, 1].min()), int(box[:, 2].max()), int(box[:, 3].max()))
+        return self._finish(blobs, region)
 
     def roi_around(self, uv_px: np.ndarray, blob_size_px: np.ndarray) -> Region:
         """The region of interest around centres (k, 2): their bounding box grown by

@@ -28,6 +28,7 @@ photon and read noise only (a few thousandths of a pixel for the default twin).
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 
@@ -75,18 +76,30 @@ def detect_weighted(
     min_contrast_dn: float = 20.0,
     max_blobs: int = 24,
     keep: np.ndarray | None = None,
+    tiles: np.ndarray | None = None,
+    offset: np.ndarray | None = None,
 ) -> Blobs:
     """Detect and measure the blobs in ``region`` of ``gray`` ((H, W) uint8, sources
     bright, masked pixels 0; ``keep`` the mask, 255 = usable). ``max_radius_px``: the
     largest half-extent a source can have (nearest working depth); larger shapes are
     clutter. Returns :class:`Blobs` in whole-image pixels, at most ``max_blobs`` (the
-    largest). See the module docstring for the steps."""
+    largest), in descending raster order of each shape's first pixel (the whole image's
+    ``cv2.findContours`` order). See the module docstring for the steps.
+
+    ``tiles`` (t, 4), ``offset`` (t, 2): ``region`` is a :class:`~humanpt.perception.blobs
+    .Mosaic` of t windows (``keep`` 0 between them), left to right: each window's (x0, y0,
+    x1, y1) in the region and what takes its pixels to the image's; a shape touching its
+    window's border is rejected as one touching the region's. Default: one window, the
+    region."""
     u0, v0, u1, v1 = region
     sub = gray[v0:v1, u0:u1]
     if sub.size == 0:
         return EMPTY
     keep_sub = None if keep is None else keep[v0:v1, u0:u1]
     height, width = sub.shape
+    if tiles is None:
+        tiles = np.array([(0, 0, width, height)])
+        offset = np.array([(u0, v0)])
     background, sigma = background_and_noise(sub, keep_sub)
     level = max(float(threshold), background + noise_k * sigma)
     if level >= 255:
@@ -99,14 +112,18 @@ def detect_weighted(
     # arrays, without numpy's per-call overhead on a handful of shapes)
     x, y, w, h = shapes.x.tolist(), shapes.y.tolist(), shapes.w.tolist(), shapes.h.tolist()
     area = shapes.area.tolist()
+    windows = tiles.tolist()
+    starts = [t[0] for t in windows]
+    tile_of = [bisect.bisect_right(starts, u) - 1 for u in x]  # the window each shape lies in
+    tx0, ty0, tx1, ty1 = ([windows[t][k] for t in tile_of] for k in range(4))
     cand = [
         i
         for i in range(len(shapes))
         if min_area_px <= area[i] <= max_area_px
-        and x[i] > 0
-        and y[i] > 0
-        and x[i] + w[i] < width
-        and y[i] + h[i] < height
+        and x[i] > tx0[i]
+        and y[i] > ty0[i]
+        and x[i] + w[i] < tx1[i]
+        and y[i] + h[i] < ty1[i]
         and max(w[i], h[i]) <= 2.0 * max_radius_px
     ]
     rejected = len(shapes) - len(cand)
@@ -133,14 +150,12 @@ def detect_weighted(
     inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
     inside = inside and max(x0) + 2 * half < width
     if inside:  # no window reaches out of the region: no clipping, every pixel valid
-        win = np.lib.stride_tricks.sliding_window_view(sub, (size_w, size_w))[y0, x0]
-        win = win.astype(np.float64)  # (m, S, S)
-        rows = cols = None
+        rows, cols = ys[:, :, None], xs[:, None, :]
     else:
         ys_c = np.clip(ys, 0, height - 1)
         xs_c = np.clip(xs, 0, width - 1)
         rows, cols = ys_c[:, :, None], xs_c[:, None, :]
-        win = sub[rows, cols].astype(np.float64)  # (m, S, S)
+    win = sub[rows, cols].astype(np.float64)  # (m, S, S)
     # Pixels of other shapes (above the level and not this shape's) are left out.
     own = np.zeros(win.shape, bool)
     for i, k in enumerate(cand):
@@ -154,11 +169,7 @@ def detect_weighted(
     if not inside:
         valid &= (ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]
     if keep_sub is not None:
-        if inside:
-            kwin = np.lib.stride_tricks.sliding_window_view(keep_sub, (size_w, size_w))[y0, x0]
-        else:
-            kwin = keep_sub[rows, cols]
-        valid &= kwin > 0
+        valid &= keep_sub[rows, cols] > 0
     grid_x = xs.astype(np.float64)[:, None, :]
     grid_y = ys.astype(np.float64)[:, :, None]
     r2_ap = (r_ap**2)[:, None, None]
@@ -202,7 +213,11 @@ def detect_weighted(
     aniso_sd = sigma * np.sqrt(np.pi / 12.0) * r_ap**3 / safe
     # Shape checks per blob, the array formulas' operations on plain floats.
     uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
+    firsts = []
     c0 = centroid.tolist()
+    offset_l = offset.tolist()
+    first = shapes.first.tolist()
+    shift = [offset_l[t] for t in tile_of]  # per shape: its window's mosaic -> image pixels
     for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
         zip(
             flux.tolist(),
@@ -231,7 +246,10 @@ def detect_weighted(
             and abs(u - c0[i][0]) <= r_ap_l[i]
             and abs(v - c0[i][1]) <= r_ap_l[i]
         ):
-            uv.append((u + u0, v + v0))
+            du, dv = shift[cand[i]]
+            uv.append((u + du, v + dv))
+            fu, fv = first[cand[i]]
+            firsts.append((fu + du, fv + dv))
             areas.append(float(area[cand[i]]))
             sizes.append(size)
             elongations.append(elongation)
@@ -243,7 +261,7 @@ def detect_weighted(
             rejected += 1
     if not uv:
         return dataclasses.replace(EMPTY, rejected=rejected)
-    return Blobs(
+    blobs = Blobs(
         np.array(uv),
         np.array(areas),
         np.array(sizes),
@@ -254,3 +272,8 @@ def detect_weighted(
         np.array(moments).reshape(-1, 3),
         np.array(noise).reshape(-1, 2),
     )
+    if len(tiles) > 1:  # the whole image's order: descending (v, u) of the first pixel
+        order = sorted(range(len(firsts)), key=lambda i: (firsts[i][1], firsts[i][0]), reverse=True)
+        if order != list(range(len(firsts))):
+            blobs = blobs.take(np.array(order))
+    return blobs
