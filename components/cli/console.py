@@ -226,7 +226,7 @@ def _do(con, a) -> int:
     if v == "playback":
         args = getattr(a, "playback_args", None)
         if args is None:
-            args = _playback_args(a)
+            args = _playback_args(a, con.cfg)
         check_envelope(con, args, a.file or "playback")
         return con.command("playback", args)
     if v in ("pause", "resume"):
@@ -244,10 +244,14 @@ def _do(con, a) -> int:
     raise ConsoleError(f"unknown action {v!r}")
 
 
-def _playback_args(a) -> dict:
+def _playback_args(a, cfg=None) -> dict:
+    """The playback's arguments; a seam re-timed for the cell's tool (``[controller]
+    flange_T_tool_x`` of the config, the controller's default without one)."""
     from humanpt.console.client import playback_args
+    from humanpt.controller.config import ControllerConfig
 
-    return playback_args(a.file, a.speed, getattr(a, "point", "auto"))
+    tool = None if cfg is None else cfg.component("controller", ControllerConfig).flange_T_tool_x
+    return playback_args(a.file, a.speed, getattr(a, "point", "auto"), flange_T_tool_x=tool)
 
 
 def _interactive(con, stream=sys.stdin) -> int:
@@ -298,7 +302,7 @@ def run(args) -> int:
     prog = "path play" if getattr(args, "verb", None) == "path" else "console"
     try:
         if args.console_verb == "playback":  # the heavy part and its refusals before connecting
-            args.playback_args = _playback_args(args)
+            args.playback_args = _playback_args(args, cfg)
         con = Console(cfg, timeout_s=args.timeout)
     except ConsoleError as e:
         print(f"humanpt {prog}: {e}", file=sys.stderr)

@@ -640,16 +640,17 @@ def path_playback(path_file: str, point: str) -> dict:
     return {"points": pathfile.read(path_file).points(point).tolist()}
 
 
-def playback_args(file: str | None = None, speed_mm_s: float | None = None, point: str = "auto") -> dict:
+def playback_args(file: str | None = None, speed_mm_s: float | None = None, point: str = "auto",
+                  flange_T_tool_x=None) -> dict:
     """The ``playback`` command's arguments: a seam file (.json) re-timed at ``speed_mm_s``
-    and thinned, a path file's ``point`` (auto, G, tip), or none (the controller's recorded
+    for the tool ``flange_T_tool_x`` (default the controller's default tool) and thinned, a path file's ``point`` (auto, G, tip), or none (the controller's recorded
     path, at ``speed_mm_s``); checked as the controller checks them (a ConsoleError naming
     the first bad point) before anything is sent."""
     from humanpt.controller.playback import check_points, check_times
     from humanpt.runtime.config import ConfigError
 
     if file and file.endswith(".json"):
-        args = seam_playback(file, speed_mm_s)
+        args = seam_playback(file, speed_mm_s, flange_T_tool_x)
     elif file:
         args = path_playback(file, point)
     else:

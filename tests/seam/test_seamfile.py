@@ -268,3 +268,17 @@ def test_retime_bounds():
         retime(seam, RetimeConfig(speed_mm_s=1e-9, max_speed_mm_s=1e-9))
     timed = retime(seam)  # the seam itself: within the limits
     assert np.all(np.isfinite(timed.x)) and max(timed.feeds_mm_s) <= 20.0 + 1e-9
+
+
+def test_the_console_retimes_a_seam_for_the_cells_tool():
+    """`path play` / `console playback` of a seam re-time it for the tool the config names
+    (it used the controller's default tool whatever the cell's)."""
+    from humanpt.console.client import playback_args
+    from humanpt.controller.config import ControllerConfig
+    from humanpt.controller.playback import seam_command
+
+    long_tool = (0.0, 0.0, 600.0, 0.0, 30.0, 0.0)
+    got = playback_args(str(SEAM_FILE), 60.0, flange_T_tool_x=long_tool)
+    assert got == seam_command(seamfile.read(SEAM_FILE), 60.0, long_tool)
+    default = playback_args(str(SEAM_FILE), 60.0)
+    assert default == seam_command(seamfile.read(SEAM_FILE), 60.0, ControllerConfig().flange_T_tool_x)
