@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+from humanpt.robot_gateway.links import LINKS
 from tests.conftest import ROOT
 
 # The tool packages: never imported nor loaded by a product package (DESIGN.md: the twin and
@@ -69,7 +70,7 @@ def test_the_probe_sees_a_forbidden_import():
     assert {"humanpt.sim_camera", "humanpt.operator"} <= loaded
 
 
-@pytest.mark.parametrize("link", ["alter", "rsi"])
+@pytest.mark.parametrize("link", sorted(LINKS))
 def test_a_link_loads_only_the_gateway_and_the_shared_packages(link):
     # issue 22: RSI is a link of the one gateway (its safety core), not a simulator's
     modules, loaded = loaded_by(f"humanpt.robot_gateway.links.{link}")
