@@ -137,10 +137,11 @@ class JobReport:
     checks: list[Check] = field(default_factory=list)
     seam: list[SeamFigures] = field(default_factory=list)
     png: Path | None = None
+    notes: list[str] = field(default_factory=list)  # warnings that are no figure (a skipped stage, a doubt)
 
     @property
     def warnings(self) -> list[str]:
-        return [c.line() for c in self.checks if not c.met] + [
+        return [f"WARN {n}" for n in self.notes] + [c.line() for c in self.checks if not c.met] + [
             f"WARN seam: {f.name} RMS {f.rms_mm:.3f} mm (tolerance {f.tolerance_mm:g}), coverage "
             f"{100 * f.coverage:.1f} % (at least {100 * MIN_COVERAGE:g} %)" for f in self.seam if not f.met]
 
@@ -186,6 +187,7 @@ def job_report(res, png: Path | None = None) -> JobReport:
     written to ``png`` when given."""
     lines = ["accuracy report"]
     checks: list[Check] = []
+    notes: list[str] = []
     lines.append("  calibration (estimate, 1-sigma from the rig; checks against the twin's truth)")
     rig = res.rig
     parts = {"camera": rig.psvs_calibration, "psvs": rig.psvs_calibration, "hand-eye": rig.hand_eye.calibration,
@@ -193,7 +195,7 @@ def job_report(res, png: Path | None = None) -> JobReport:
     for s in res.stages:
         if not s.ok:
             lines.append(f"    {s.name:10s} SKIPPED: {s.error}")
-            checks.append(Check(s.name, "stage skipped (the rig keeps its values)", 1.0, 0.0, ""))
+            notes.append(f"{s.name}: stage skipped, the rig keeps its previous values ({s.error})")
             continue
         cal = parts.get(s.name)
         sigma = ", ".join(f"{k} {v:g}" for k, v in (cal.sigma if cal else {}).items()) or "-"
@@ -208,8 +210,10 @@ def job_report(res, png: Path | None = None) -> JobReport:
         lines.append(f"    {'timing':10s} camera-to-robot offset {t.camera_time_offset_ms:+.2f} ms; 1-sigma {sig:.2f} ms")
     extra = list(getattr(res, "checks", []))
     checks += extra
+    if extra:
+        lines += ["", "  the job's checks"]
     for c in extra:
-        lines.append(f"    {c.stage:10s} {c.what} {c.value:.4g} {c.unit} (limit {c.limit:g} {c.unit})")
+        lines.append(f"    {c.line()}")
     seam = getattr(res, "seam_mm", None)
     figs: list[SeamFigures] = []
     if seam is not None:
@@ -234,9 +238,8 @@ def job_report(res, png: Path | None = None) -> JobReport:
         else:
             png = None
     doubts = list(getattr(res.fitted, "doubts", []) if getattr(res, "fitted", None) is not None else [])
-    for d in doubts:
-        checks.append(Check("fit", f"doubted {d}", 1.0, 0.0, ""))
-    rep = JobReport(lines, checks, figs, png)
+    notes += [f"fit: {d}" for d in doubts]
+    rep = JobReport(lines, checks, figs, png, notes)
     warn = rep.warnings
     rep.lines += [""] + warn + [("PASS: every figure within its tolerance" if not warn else
                                  f"WARN: {len(warn)} figure{'s' if len(warn) > 1 else ''} beyond tolerance (above)")]
