@@ -125,8 +125,8 @@ def evaluate_format(stats) -> str:
 
 
 # The options the job (--calibrate, lock-step, ALTER's cycle) has no use for: refused when
-# given, never dropped.  (--set, --speed, --robot standin|puma, --law, --seed, --world, --rig,
-# --scenario and --run-dir it takes; --lockstep it is anyway.)
+# given, never dropped.  (--set and --speed (the teach-and-play run's), --robot standin,
+# --law, --seed, --world, --rig, --scenario and --run-dir it takes; --lockstep it is anyway.)
 _NOT_FOR_CALIBRATE = {"viewer": "the job runs lock-step, without a viewer process",
                       "port": "the job runs lock-step, without a router",
                       "secure": "the job runs lock-step, without a bus",
@@ -140,9 +140,11 @@ def refuse_for_calibrate(args) -> None:
     for name, why in _NOT_FOR_CALIBRATE.items():
         if getattr(args, name, None) not in (None, False):
             raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
-    if getattr(args, "link", "alter") != "alter" or getattr(args, "robot", None) in ("alter", "rsi"):
-        raise SystemExit("humanpt demo --calibrate: --link/--robot rsi or alter are not taken: the job teaches and "
-                         "plays on the lock-step stand-in or the simulated Puma (--robot standin|puma)")
+    if getattr(args, "link", "alter") != "alter" or getattr(args, "robot", None) in ("alter", "rsi", "puma"):
+        raise SystemExit("humanpt demo --calibrate: --robot puma/alter/rsi and --link are not taken: the job teaches "
+                         "and plays on the lock-step stand-in (--robot standin; on the simulated Puma the playback's "
+                         "straight line from watching to welding meets the wrist's singularity and is clamped); the "
+                         "report checks the Puma's own kinematic error along the seam instead")
 
 
 def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
@@ -188,8 +190,7 @@ def demo(args) -> int:
     calibrate = getattr(args, "calibrate", False)
     if calibrate:
         refuse_for_calibrate(args)
-    # --robot: the lock-step robot; the job (--calibrate) teaches and plays on the stand-in
-    # unless told (--robot puma).
+    # --robot: the lock-step robot; the job (--calibrate) teaches and plays on the stand-in.
     args.robot = getattr(args, "robot", None) or ("standin" if calibrate else "puma")
     if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
