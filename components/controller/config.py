@@ -63,8 +63,8 @@ class ControllerConfig:
     # A point also at the first measurement after record_start and whenever the point moved
     # this far: about this far apart at any speed (60 mm/s with a point every 10 cycles left
     # 17 mm between points, too sparse for `humanpt path fit`: an arc's chords; 1-2 mm apart a
-    # hand's tremor, correlated over millimetres, looks like shape to it: the realistic
-    # trapezium fitted as 24 pieces at 2 mm, 4 lines at 4 mm); 0: every
+    # hand's tremor, correlated over millimetres, looks like shape to it: a 1 mm recording of
+    # the realistic trapezium thinned to 2 mm fitted as 24 pieces, to 4 mm as 4 lines); 0: every
     # recording_delay_cycles only, as recordings before it.
     recording_spacing_mm: Annotated[float, Range(0, 1000, "mm")] = live(
         4.0, "a path point whenever the point moved this far (0: every recording_delay_cycles only)")
