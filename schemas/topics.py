@@ -151,8 +151,21 @@ RETIRED_CONFIG_KEYS: dict[tuple[str, str, str], tuple[str, ...]] = {
 }
 
 
+# Keys added to a component's config since older recordings, per (component, key): the value
+# that gives the behaviour those recordings had, taken when a recorded config lacks the key
+# (issue 32: the controller records a point every recording_spacing_mm as well; 0 = only
+# every recording_delay_cycles, as before).
+ADDED_CONFIG_KEYS: dict[tuple[str, str], object] = {
+    ("controller", "recording_spacing_mm"): 0.0,
+}
+
+
 def current_config(component: str, table: dict) -> dict:
-    """A recorded config of ``component`` as this version reads it (RETIRED_CONFIG_KEYS dropped)."""
+    """A recorded config of ``component`` as this version reads it (RETIRED_CONFIG_KEYS
+    dropped; ADDED_CONFIG_KEYS missing from it set to their old behaviour)."""
+    added = {k: v for (name, k), v in ADDED_CONFIG_KEYS.items() if name == component and k not in table}
+    if added and table:
+        table = {**table, **added}
     for (name, key, value), retired in RETIRED_CONFIG_KEYS.items():
         if name == component and table.get(key) == value and any(k in table for k in retired):
             table = {k: v for k, v in table.items() if k not in retired}

@@ -89,6 +89,9 @@ class HandEyeResult:
     closed_form_flange_T_camera_mm: np.ndarray
     cross_check: dict[str, np.ndarray] = field(default_factory=dict)
     cross_check_note: str = ""
+    # The camera-to-robot time offset (humanpt.calibration.timing.TimeOffset) measured from
+    # the same run's moves, when the caller measured it; written to the rig's [timing].
+    time_offset: object | None = None
 
     @property
     def n_poses(self) -> int:
@@ -396,7 +399,12 @@ def apply_to_rig(rig: Rig, result: HandEyeResult, date: str) -> Rig:
     note = (f"{result.n_poses} poses; residual RMS {_rms(result.residual_mm[u]):.4f} mm, "
             f"{_rms(result.residual_deg[u]):.4f} deg; 1-sigma {float(s[:3].max()):.4f} mm, {float(s[3:].max()):.4f} deg")
     cal = Calibration(method=METHOD, date=date, note=note, sigma={"flange_T_camera_x": round(float(s.max()), 6)})
-    return dataclasses.replace(rig, hand_eye=HandEye(flange_T_camera_x=x, calibration=cal))
+    rig = dataclasses.replace(rig, hand_eye=HandEye(flange_T_camera_x=x, calibration=cal))
+    if result.time_offset is not None:
+        from humanpt.calibration import timing
+
+        rig = timing.apply_to_rig(rig, result.time_offset, date)
+    return rig
 
 
 # --------------------------------------------------------------------------- planning the poses

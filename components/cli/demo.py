@@ -131,22 +131,53 @@ def evaluate_format(stats) -> str:
     return evaluate.format_stats("taught path against the truth at its stamps", stats)
 
 
-def run_calibrate(args, run_dir: Path) -> int:
+# The options the job (--calibrate, lock-step, ALTER's cycle) has no use for: refused when
+# given, never dropped.  (--set and --speed (the teach-and-play run's), --robot standin,
+# --law, --seed, --world, --rig, --scenario and --run-dir it takes; --lockstep it is anyway.)
+_NOT_FOR_CALIBRATE = {"viewer": "the job runs lock-step, without a viewer process",
+                      "port": "the job runs lock-step, without a router",
+                      "secure": "the job runs lock-step, without a bus",
+                      "duration": "the job teaches the whole scenario and plays it back to its end",
+                      "cycle_ms": "the job runs on ALTER's 28 ms cycle",
+                      }
+
+
+def refuse_for_calibrate(args) -> None:
+    """End the command, naming the option, when ``args`` give one the job does not take."""
+    for name, why in _NOT_FOR_CALIBRATE.items():
+        if getattr(args, name, None) not in (None, False):
+            raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
+    if getattr(args, "link", "alter") != "alter" or getattr(args, "robot", None) in ("alter", "rsi", "puma"):
+        raise SystemExit("humanpt demo --calibrate: --robot puma/alter/rsi and --link are not taken: the job teaches "
+                         "and plays on the lock-step stand-in (--robot standin; on the simulated Puma the playback's "
+                         "straight line from watching to welding meets the wrist's singularity and is clamped); the "
+                         "report checks the Puma's own kinematic error along the seam instead")
+
+
+def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
     from humanpt.runtime.rigfile import load_rig, write_rig
     from humanpt.twin.teach import calibrate_then_teach
     from humanpt.twin.worlds import World
 
     world = World.named(args.world)
     rig = load_rig(args.rig) if args.rig else None
-    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}; "
-          f"recording the teach-and-play run to {run_dir}/", flush=True)
+    told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
+    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
+          f"{args.robot}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
+          f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
-        res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar)
+        res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
+                                   robot=args.robot, overrides=overrides, law=args.law)
     finally:
         bar.close()
+    from humanpt.twin.report import job_report
+
     write_rig(run_dir / "rig.toml", res.rig, "the rig humanpt demo --calibrate ended with", overwrite=True)
     print(calibrate_report(res))
+    rep = job_report(res, run_dir / "accuracy.png")
+    (run_dir / "accuracy.txt").write_text(rep.text() + "\n")
+    print("\n" + rep.text())
     print(f"calibrated rig: {run_dir / 'rig.toml'}")
     if res.fitted is not None:
         from humanpt.seam import seamfile
@@ -163,19 +194,19 @@ def demo(args) -> int:
     from humanpt.twin.demo import demo_config, header_lines, scenario_label, write_world
     from humanpt.twin.run import SECTIONS, OverrideError
 
+    calibrate = getattr(args, "calibrate", False)
+    if calibrate:
+        refuse_for_calibrate(args)
+    # --robot: the lock-step robot; the job (--calibrate) teaches and plays on the stand-in.
+    args.robot = getattr(args, "robot", None) or ("standin" if calibrate else "puma")
     if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
             raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")
         args.link, args.robot = args.robot, "puma"
-    calibrate = getattr(args, "calibrate", False)
     # The job's defaults: the paper's Table 3 seam (the tip) in a realistic world; a plain
     # demo: the arc in the ideal world.
     args.scenario = args.scenario or ("trapezium" if calibrate else "arc")
     args.world = getattr(args, "world", None) or ("realistic" if calibrate else "ideal")
-    if calibrate:
-        run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-calibrate-teach"
-        run_dir.mkdir(parents=True, exist_ok=True)
-        return run_calibrate(args, run_dir)
     over = parse_overrides(getattr(args, "set", None))
     if getattr(args, "speed", None) is not None:  # --speed: the operator's, as --set operator.speed_mm_s
         over.setdefault("operator", {})["speed_mm_s"] = args.speed
@@ -187,6 +218,10 @@ def demo(args) -> int:
                           law=args.law)
     except (OverrideError, cfgmod.ConfigError) as e:
         raise SystemExit(f"humanpt: {e}") from None
+    if calibrate:
+        run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-calibrate-teach"
+        run_dir.mkdir(parents=True, exist_ok=True)
+        return run_calibrate(args, run_dir, over)
     run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-demo-{scenario_label(args.scenario)}"
     run_dir.mkdir(parents=True, exist_ok=True)
     for line in header_lines(cfg, args.scenario, run_dir, args.lockstep, getattr(args, "rig", None)):

@@ -48,6 +48,15 @@ def path_fit(args) -> int:
         plot_seam(seam, x[:, :3], png, title=f"{src.name}: {which}")
         print(f"plot: {png}")
     print(f"seam: {out}")
+    if seam.doubts:  # written, each doubted segment marked (its "doubt"); exit code 3 says so
+        import sys
+
+        for line in seam.doubts:
+            print(f"humanpt path fit: WARNING: {line}", file=sys.stderr)
+        print(f"humanpt path fit: WARNING: {len(seam.doubts)} of {len(seam.segments)} segments doubted (marked "
+              f"in {out}): record the path again (denser, steadier) or fit with a wider --tolerance",
+              file=sys.stderr)
+        return 3
     return 0
 
 

@@ -61,6 +61,14 @@ class ControllerConfig:
     lost_action: Literal["hold", "return"] = live("hold", "target lost: stop on current location, or return")
     start_mode: Literal["track", "hold"] = "track"
     recording_delay_cycles: Annotated[int, Range(1, 100000, "cycles")] = live(10, "a path point every N cycles (GUI: recording delay)")
+    # A point also at the first measurement after record_start and whenever the point moved
+    # this far: about this far apart at any speed (60 mm/s with a point every 10 cycles left
+    # 17 mm between points, too sparse for `humanpt path fit`: an arc's chords; 1-2 mm apart a
+    # hand's tremor, correlated over millimetres, looks like shape to it: a 1 mm recording of
+    # the realistic trapezium thinned to 2 mm fitted as 24 pieces, to 4 mm as 4 lines); 0: every
+    # recording_delay_cycles only, as recordings before it.
+    recording_spacing_mm: Annotated[float, Range(0, 1000, "mm")] = live(
+        4.0, "a path point whenever the point moved this far (0: every recording_delay_cycles only)")
     record_on_start: bool = False
     has_driver: bool = live(False, "record the driver tip P as well as G")
     calibration_samples: Annotated[int, Range(6, 100000, "samples")] = live(60, "N samples for the driver-tip calibration (GUI)")

@@ -20,8 +20,11 @@ Commands (``console/command``, verb and JSON args): track, hold, return, record_
 record_stop, save {"file", "overwrite"}, calibrate {"samples", "pivot_mm"}, playback {"points",
 "speed_mm_s"}, stop.  Every command's arguments are checked (:func:`check_command`: known
 names, types, physical ranges, a plain file name for save); a bad one gets a ``bad_command``
-event and changes nothing.  Recording: while on, every ``recording_delay_cycles`` cycles a ``controller/path``
-point (G and, with a driver, the tip P) is published, also with one or two sources (the
+event and changes nothing.  Recording: while on, a ``controller/path`` point (G and, with a
+driver, the tip P) is published at the first measurement after record_start, then at every
+measurement that is ``recording_spacing_mm`` from the last point and at least every
+``recording_delay_cycles`` cycles (``recording_spacing_mm = 0``: only every
+``recording_delay_cycles`` cycles, the first after as many), also with one or two sources (the
 orientation then flagged ``orientation_held``), with the filter's covariance; the shell
 appends it to the path file.  Each ``controller/status`` reports how much of the field of
 view was left (``fov_margin_px``) and G's offset in the image; at the speed limits the
@@ -278,17 +281,16 @@ class ControllerCore(Core):
         # measured, the orientation held (flagged); the covariance says how well each is known.
         if self.recording and valid and new_cycle:
             self.cycles_since_point = min(self.cycles_since_point + 1, c.recording_delay_cycles)
-            if self.cycles_since_point >= c.recording_delay_cycles:
-                # The filter's estimate at its last measurement: no prediction in the path.
-                if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns:
-                    at, T = st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)
-                else:
-                    at, T = st.header.stamp_ns, from_pose(st.world_T_tob)
-                # One point per measurement (no image since the last point: wait for one).
-                if self.path_last_stamp_ns is None or at > self.path_last_stamp_ns:
-                    self.cycles_since_point = 0
-                    outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
-                                                 _pose_covariance(st)))
+            # The filter's estimate at its last measurement: no prediction in the path.
+            if st.HasField("world_T_tob_at_measurement") and st.measurement_stamp_ns:
+                at, T = st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)
+            else:
+                at, T = st.header.stamp_ns, from_pose(st.world_T_tob)
+            # One point per measurement (no image since the last point: wait for one).
+            if (self.path_last_stamp_ns is None or at > self.path_last_stamp_ns) and self._point_due(T):
+                self.cycles_since_point = 0
+                outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
+                                             _pose_covariance(st)))
         fov = img = 0.0
         if valid:
             camera_T_tob_mm = to_mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
@@ -340,6 +342,21 @@ class ControllerCore(Core):
         return law.Step(d_t, d_r, sat, float(np.linalg.norm(e_t)), float(np.linalg.norm(e_r))), world_T_target
 
     # -- recording ------------------------------------------------------------------------------
+    def _point_due(self, world_T_tob: np.ndarray) -> bool:
+        """Is a path point due at this measurement?  Every ``recording_delay_cycles`` cycles;
+        with ``recording_spacing_mm`` > 0 also the first measurement after record_start and
+        every one whose point (the tip, else G) is that far from the last point, so the path
+        is as dense as the speed needs (the fit wants a point every few mm)."""
+        c = self.config
+        if self.cycles_since_point >= c.recording_delay_cycles:
+            return True
+        if c.recording_spacing_mm <= 0:
+            return False
+        if not self._path_x:
+            return True
+        world_T_point = world_T_tob @ self.tob_T_tip if c.has_driver else world_T_tob
+        return bool(np.linalg.norm(world_T_point[:3, 3] * 1e3 - self._path_x[-1][:3]) >= c.recording_spacing_mm)
+
     def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray, orientation_held: bool,
                     cov_pr: np.ndarray | None) -> Output:
         """A path point of G (and the tip) at ``stamp_ns``; ``cov_pr`` (6, 6): the filter's

@@ -40,6 +40,7 @@ __all__ = [
     "HandEye",
     "TargetGeometry",
     "Tip",
+    "Timing",
     "Rig",
     "DEFAULT_FLANGE_T_CAMERA_MM",
     "DEFAULT_DZ_MM",
@@ -166,11 +167,23 @@ class Tip:
 
 
 @dataclass(frozen=True)
+class Timing:
+    """``[timing]``: how the camera's image stamps sit on the robot's clock:
+    ``camera_time_offset_ms`` > 0 when an image was taken that long before its stamp (the
+    stamps are late), estimated from the robot's motion against the measured target
+    (:mod:`humanpt.calibration.timing`).  A rig without it (older files) reads as 0."""
+
+    camera_time_offset_ms: Annotated[float, Range(-1000, 1000, "ms")] = 0.0
+    calibration: Calibration = field(default_factory=Calibration)
+
+
+@dataclass(frozen=True)
 class Rig:
     """Everything the pipeline believes about the hardware (DESIGN.md, "Rig and world"):
     ``psvs`` (camera intrinsics, distortion, each virtual camera, baseline, m, l:
     :class:`humanpt.geometry.config.PsvsConfig`) with ``psvs_calibration``, ``hand_eye``,
-    ``target`` and ``tip``, each with how it was obtained and its uncertainty.
+    ``target``, ``tip`` and ``timing`` (the camera's stamps on the robot's clock), each
+    with how it was obtained and its uncertainty.
 
     Perception, the pose filter, the controller and viz read it; nothing else in the
     configuration holds these values. The twin's truth (its world) is separate and may
@@ -183,6 +196,7 @@ class Rig:
     hand_eye: HandEye = field(default_factory=HandEye)
     target: TargetGeometry = field(default_factory=TargetGeometry)
     tip: Tip = field(default_factory=Tip)
+    timing: Timing = field(default_factory=Timing)
 
     def __post_init__(self) -> None:
         if self.version != RIG_VERSION:
@@ -202,4 +216,7 @@ class Rig:
         for name, cal in (("psvs", self.psvs_calibration), ("hand_eye", self.hand_eye.calibration),
                           ("target", self.target.calibration), ("tip", self.tip.calibration)):
             parts.append(f"{name} {cal.method}" + (f" ({cal.date})" if cal.date else ""))
+        if self.timing.calibration.method != "nominal":  # (a rig before issue 32 had no timing)
+            cal = self.timing.calibration
+            parts.append(f"timing {cal.method}" + (f" ({cal.date})" if cal.date else ""))
         return ", ".join(parts)

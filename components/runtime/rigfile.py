@@ -17,6 +17,8 @@ Layout (every table optional; a missing table or key takes the nominal design va
     leg_mm = 40.0
     [tip]
     tob_t_tip_mm = [0.0, 0.0, 60.0]
+    [timing]                 # the camera's stamps on the robot's clock (issue 32; older rigs: 0)
+    camera_time_offset_ms = 0.0
 
 A missing file, bad TOML, an unknown key, a value outside its physical range or a
 physically impossible value (focal length or baseline <= 0, a hand-eye rotation that is not
@@ -37,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from humanpt.geometry.config import PsvsConfig
-from humanpt.geometry.rig import RIG_VERSION, Calibration, HandEye, Rig, TargetGeometry, Tip
+from humanpt.geometry.rig import RIG_VERSION, Calibration, HandEye, Rig, TargetGeometry, Timing, Tip
 from humanpt.geometry.transforms import x_from_transform
 from humanpt.runtime.config import ConfigError, build, dumps_toml, read_toml, to_table
 from humanpt.runtime.files import write_atomic
@@ -48,7 +50,8 @@ __all__ = ["load_rig", "rig_from_table", "rig_to_table", "rig_to_toml", "write_r
 RIG_METADATA = "rig"
 """The key of the rig (JSON) in a recording's ``humanpt.run`` metadata."""
 
-_PARTS: dict[str, type] = {"psvs": PsvsConfig, "hand_eye": HandEye, "target": TargetGeometry, "tip": Tip}
+_PARTS: dict[str, type] = {"psvs": PsvsConfig, "hand_eye": HandEye, "target": TargetGeometry, "tip": Tip,
+                           "timing": Timing}
 
 
 def _calibration(table: Mapping[str, Any], source: str, section: str) -> Calibration:

@@ -209,6 +209,7 @@ class Segment:
     normal: tuple[float, float, float] | None = None
     radius_mm: float | None = None
     sweep_deg: float | None = None
+    doubt: str = ""  # why the fit doubts this segment ("" when it met its tolerance)
 
     @property
     def length_mm(self) -> float:
@@ -273,6 +274,13 @@ class Seam:
     points: int
     meta: dict = field(default_factory=dict)  # source path/run, which point (G or tip), frame
     corner_cut: tuple[int, ...] = ()  # path points where the hand rounded a corner (in no fit)
+
+    @property
+    def doubts(self) -> list[str]:
+        """One line per segment the fit doubts (its residual beyond the tolerance, points too
+        far apart, a turn beside it not taken as a corner): empty when the seam is trusted."""
+        return [f"segment {i} ({s.kind}, points {s.first}-{s.last}): {s.doubt}"
+                for i, s in enumerate(self.segments) if s.doubt]
 
     @property
     def residual_rms_mm(self) -> float:
@@ -549,20 +557,55 @@ def _orientation_ends(ypr_deg: np.ndarray, s_mm: np.ndarray) -> tuple[np.ndarray
     return out[0], out[1]
 
 
-def _join(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float, spacing: float
-          ) -> tuple[list[np.ndarray], list[np.ndarray], list[Corner]]:
+def _doubt(q: np.ndarray, piece: _Piece, cfg: FitConfig, noise: float) -> str:
+    """Why the fit doubts ``piece`` ("" when it does not): its residual beyond what the
+    split accepts (a piece kept only because it was too short to split), or an arc's points
+    too far apart to tell it from its chords within the tolerance."""
+    limit_rms = math.sqrt(cfg.tolerance_mm ** 2 + noise ** 2)
+    limit_max = max(4 * cfg.tolerance_mm, 4 * noise)
+    why = []
+    if piece.rms > limit_rms:
+        why.append(f"residual RMS {piece.rms:.3f} mm beyond its limit {limit_rms:.3f} mm (tolerance "
+                   f"{cfg.tolerance_mm:g} mm, path noise {noise:.3f} mm)")
+    if piece.max > limit_max:
+        why.append(f"a point {piece.max:.3f} mm off the fit, beyond {limit_max:.3f} mm")
+    if piece.kind == "arc":  # a chord d deviates d^2 / 8r from its arc: points that far apart cannot show it
+        pts = q[piece.idx]
+        gap = float(np.linalg.norm(np.diff(pts, axis=0), axis=1).max())
+        sagitta = gap ** 2 / (8 * piece.fit.radius_mm)
+        if sagitta > cfg.tolerance_mm:
+            why.append(f"points up to {gap:.1f} mm apart on a radius of {piece.fit.radius_mm:.1f} mm: the arc "
+                       f"leaves their chord by {sagitta:.2f} mm, beyond the tolerance (record denser)")
+    return "; ".join(why)
+
+
+def _no_corner(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float) -> list[bool]:
+    """Per piece: may no corner be made beside it?  When it was kept beyond its tolerance
+    only because it had too few points to split (fewer than 2 min_points - 1): its
+    direction is a chord's, and two such chords of an arc meet in a corner the path never
+    had (issue 32: 41 deg, residual 1.18 mm against 0.2)."""
+    limit_rms = math.sqrt(cfg.tolerance_mm ** 2 + noise ** 2)
+    limit_max = max(4 * cfg.tolerance_mm, 4 * noise)
+    return [bool((pc.rms > limit_rms or pc.max > limit_max) and len(pc.idx) < 2 * cfg.min_points - 1)
+            for pc in pieces]
+
+
+def _join(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, noise: float, spacing: float,
+          doubted: list[bool] | None = None) -> tuple[list[np.ndarray], list[np.ndarray], list[Corner]]:
     """Each piece's start and end, and the corners: where the direction changes by more
     than corner_deg, the two pieces meet where their lines (tangents) do; else halfway
-    between their own ends."""
+    between their own ends.  Beside a ``doubted`` piece (:func:`_no_corner`) no corner is
+    made (its direction is not known well enough to say the path turned there)."""
     starts, ends = zip(*(_end_points(q, pc) for pc in pieces), strict=True)
     starts, ends = [s.copy() for s in starts], [e.copy() for e in ends]
     corners: list[Corner] = []
+    doubted = doubted or [False] * len(pieces)
     for i in range(len(pieces) - 1):
         _, d_out = _end_directions(pieces[i])
         d_in, _ = _end_directions(pieces[i + 1])
         angle = math.degrees(math.acos(float(np.clip(d_out @ d_in, -1.0, 1.0))))
         joint = None
-        if angle > cfg.corner_deg:
+        if angle > cfg.corner_deg and not (doubted[i] or doubted[i + 1]):
             joint = _closest_points(ends[i], d_out, starts[i + 1], d_in)
             # the shared point may lie up to about a point's spacing on either side of the corner
             slack = max(3 * max(cfg.tolerance_mm, noise), 1.5 * spacing)
@@ -620,7 +663,8 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
     pieces = cleaned
 
     spacing = float(np.median(np.linalg.norm(np.diff(q, axis=0), axis=1))) if len(q) > 1 else 0.0
-    starts, ends, corners = _join(q, pieces, cfg, noise, spacing)
+    doubts = [_doubt(q, pc, cfg, noise) for pc in pieces]
+    starts, ends, corners = _join(q, pieces, cfg, noise, spacing, _no_corner(q, pieces, cfg, noise))
     if corners:
         # The hand rounds a corner: the points within a spacing of it lie off both lines.
         # Fit each line without them, then join again.
@@ -636,7 +680,19 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
             if far.sum() >= cfg.min_points and not far.all():
                 corner_cut += [int(q_src[k]) for k in pc.idx[~far]]
                 pieces[i] = _refit(q, pc.idx[far], "line")
-        starts, ends, corners = _join(q, pieces, cfg, noise, spacing)
+        doubts = [_doubt(q, pc, cfg, noise) for pc in pieces]
+        starts, ends, corners = _join(q, pieces, cfg, noise, spacing, _no_corner(q, pieces, cfg, noise))
+    # A turn beside a piece kept beyond its tolerance was not taken as a corner: say so.
+    blocked = _no_corner(q, pieces, cfg, noise)
+    for i in range(len(pieces) - 1):
+        if blocked[i] or blocked[i + 1]:
+            _, d_out = _end_directions(pieces[i])
+            d_in, _ = _end_directions(pieces[i + 1])
+            angle = math.degrees(math.acos(float(np.clip(d_out @ d_in, -1.0, 1.0))))
+            if angle > cfg.corner_deg:
+                note = f"a turn of {angle:.0f} deg between segments {i} and {i + 1}, not taken as a corner"
+                for k in (i, i + 1):
+                    doubts[k] = f"{doubts[k]}; {note}" if doubts[k] else note
 
     segments = []
     for i, pc in enumerate(pieces):
@@ -653,7 +709,7 @@ def fit_path(x: np.ndarray, stamp_ns: np.ndarray | None = None, cov_mm2: np.ndar
         common = dict(first=int(src[0]), last=int(src[-1]), start_mm=tuple(map(float, starts[i])),
                       end_mm=tuple(map(float, ends[i])), start_ypr_deg=tuple(map(float, y0)),
                       end_ypr_deg=tuple(map(float, y1)), residual_rms_mm=pc.rms, residual_max_mm=pc.max,
-                      points=len(pc.idx), outliers=seg_outliers, sigma_mm=sigma)
+                      points=len(pc.idx), outliers=seg_outliers, sigma_mm=sigma, doubt=doubts[i])
         if pc.kind == "line":
             segments.append(Segment("line", **common))
         else:

@@ -182,6 +182,10 @@ def _segment(s: dict, w: str) -> Segment:
               residual_rms_mm=_real(s, "residual_rms_mm", w, 0.0, MAX_ABS_MM, "mm", default=math.nan),
               residual_max_mm=_real(s, "residual_max_mm", w, 0.0, MAX_ABS_MM, "mm", default=math.nan),
               points=_int(s, "points", w, default=0), outliers=_ints(s, "outliers", w), sigma_mm=sigma)
+    doubt = s.get("doubt", "")
+    if not isinstance(doubt, str) or len(doubt) > 2000:
+        raise SeamFileError(f"{w}: doubt must be a text of at most 2000 characters, got {_short(doubt)}")
+    kw["doubt"] = doubt
     if kind == "arc":
         r = _real(s, "radius_mm", w, MIN_ARC_RADIUS_MM, MAX_ABS_MM, "mm (an arc tighter than "
                   f"{MIN_ARC_RADIUS_MM:g} mm is a corner)")

@@ -13,6 +13,7 @@ only to report the error against it.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import time
 from collections.abc import Callable
@@ -29,12 +30,14 @@ from humanpt.calibration.handeye import (
     puma_move_check,
     solve_ax_yb,
 )
+from humanpt.calibration.timing import TimeOffsetError, estimate_time_offset
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
 
+from .report import Check, TruthLines
 from .run import SystemConfig
 from .system import build_system
 from .worlds import World
@@ -100,6 +103,7 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         cmd = collector.start(ls.now_ns)
         end_ns = ls.now_ns + round(max_twin_s * 1e9)
         finished = 0
+        motion = _Motion()  # measurements and robot states all along: the time offset's data
         while True:
             if cmd is not None:
                 ls.inject(ls.now_ns, "controller", "console/command",
@@ -112,6 +116,7 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
                 continue
             sys_.run_for(STEP_S)
             _feed(collector, ls.outputs)
+            motion.feed(ls.outputs)
             ls.outputs.clear()  # the images are not needed once measured
             cmd = collector.poll(ls.now_ns)
             if progress is not None and collector.progress()[0] != finished:
@@ -137,24 +142,77 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
         Path(pairs_out).write_text(json.dumps([{"world_T_flange": a.tolist(), "camera_T_target": b.tolist()}
                                                for a, b in zip(A, B, strict=True)], indent=1))
     result = solve_ax_yb(A, B)
+    # The camera-to-robot time offset, from the robot's moves between the poses while the
+    # camera watched the still target (its track must not move with the robot).
+    try:
+        offset = estimate_time_offset(*motion.arrays(), result.flange_T_camera_mm)
+        result = dataclasses.replace(result, time_offset=offset)
+    except TimeOffsetError as e:
+        plan_notes = [*plan_notes, f"time offset not estimated: {e}"]
+        notes = plan_notes + collector.notes
     report = [f"hand-eye on the twin (world {world.name}, seed {seed}): {len(samples)} of {len(poses)} poses "
               f"collected in {twin_s:.1f} s of twin time ({wall_s:.1f} s wall)"]
     report += [f"  {n}" for n in notes]
     report += ["  pose  measurements  spread mm (camera_T_target about its mean)"]
     report += [f"  {s.index:4d}  {s.measurements:12d}  {s.spread_mm:.4f}" for s in samples]
     report += result.summary_lines()
+    if result.time_offset is not None:
+        report += result.time_offset.summary_lines()
     truth = sys_.camera.config.flange_T_camera  # the world's truth: reported, never estimated from
-    return result, report, truth_lines(result, truth, rig)
+    return result, report, truth_lines(result, truth, rig, sys_.camera.config.stamp_offset_ms)
 
 
-def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig: Rig) -> list[str]:
-    """The estimate and the rig's value against the twin's true hand-eye."""
+# What the hand-eye estimate must meet (against the twin's truth) and the time offset (1 ms:
+# 0.1 mm at 100 mm/s, the budget's threshold).
+ACCEPT_MM, ACCEPT_DEG, ACCEPT_OFFSET_MS = 0.2, 0.05, 1.0
+
+
+def truth_lines(result: HandEyeResult, true_flange_T_camera_mm: np.ndarray, rig: Rig,
+                true_offset_ms: float | None = None) -> TruthLines:
+    """The estimate and the rig's value against the twin's true hand-eye (and time offset),
+    with the acceptance checks (:class:`humanpt.twin.report.Check`) as ``.checks``."""
     dt, da = pose_difference(result.flange_T_camera_mm, np.asarray(true_flange_T_camera_mm, dtype=float))
     dt0, da0 = pose_difference(rig.hand_eye.flange_T_camera_mm(), np.asarray(true_flange_T_camera_mm, dtype=float))
     x = x_from_transform(np.asarray(true_flange_T_camera_mm, dtype=float))
-    return [f"against the twin's truth: flange_T_camera true = [{', '.join(f'{v:.4f}' for v in x)}] (mm, deg)",
-            f"  estimate off by {dt:.4f} mm, {da:.4f} deg (acceptance: 0.2 mm, 0.05 deg); "
-            f"the rig before was off by {dt0:.4f} mm, {da0:.4f} deg"]
+    lines = TruthLines([f"against the twin's truth: flange_T_camera true = [{', '.join(f'{v:.4f}' for v in x)}] "
+                        "(mm, deg)",
+                        f"  estimate off by {dt:.4f} mm, {da:.4f} deg (acceptance: {ACCEPT_MM:g} mm, "
+                        f"{ACCEPT_DEG:g} deg); the rig before was off by {dt0:.4f} mm, {da0:.4f} deg"])
+    lines.checks += [Check("hand-eye", "position off the truth", dt, ACCEPT_MM, "mm"),
+                     Check("hand-eye", "rotation off the truth", da, ACCEPT_DEG, "deg")]
+    if result.time_offset is not None and true_offset_ms is not None:
+        off = abs(result.time_offset.offset_ms - true_offset_ms)
+        lines.append(f"  time offset true {true_offset_ms:+.2f} ms (sim_camera.stamp_offset_ms), estimate off by "
+                     f"{off:.2f} ms (acceptance: {ACCEPT_OFFSET_MS:g} ms)")
+        lines.checks.append(Check("time offset", "off the truth", off, ACCEPT_OFFSET_MS, "ms"))
+    return lines
+
+
+class _Motion:
+    """Every full measurement (its stamp, camera_T_tob mm) and robot state (stamp,
+    world_T_flange mm) of the run, for :func:`estimate_time_offset`."""
+
+    def __init__(self) -> None:
+        self.meas: list[tuple[int, np.ndarray]] = []
+        self.robot: list[tuple[int, np.ndarray]] = []
+
+    def feed(self, outputs) -> None:
+        for o in outputs:
+            if o.topic == "robot_gateway/robot_state":
+                msg = pb.RobotState.FromString(o.data)
+                self.robot.append((msg.header.stamp_ns, to_mm(from_pose(msg.world_T_flange))))
+            elif o.topic == "perception/tob":
+                msg = pb.TobMeasurement.FromString(o.data)
+                if msg.status == pb.TOB_STATUS_FULL:
+                    self.meas.append((msg.header.stamp_ns, to_mm(from_pose(msg.camera_T_tob))))
+
+    def arrays(self):
+        def split(rows):
+            if not rows:
+                return np.zeros(0, dtype=np.int64), np.zeros((0, 4, 4))
+            return np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows])
+        (ms, mT), (rs, rT) = split(self.meas), split(self.robot)
+        return ms, mT, rs, rT
 
 
 def _feed(collector: PoseCollector, outputs) -> None:

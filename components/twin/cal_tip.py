@@ -19,11 +19,16 @@ from humanpt.operator.scenario import NEEDLE_MM
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
+from .report import Check, TruthLines
 from .run import SystemConfig
 from .system import build_system
 from .worlds import World
 
 __all__ = ["pivot_scenario", "calibrate_tip_on_twin"]
+
+# The tip's acceptance: every taught point moves with its error, so at most the seam fit's
+# tolerance (0.2 mm, humanpt.seam.fit.FitConfig).
+ACCEPT_MM = 0.2
 
 def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0) -> str:
     """The scenario text of a pivot: the operator holds the needle's tip (``driver_mm``, TOB
@@ -96,6 +101,8 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
               f"(pivot fit, {res.samples} poses, residual RMS {res.residual_rms_mm:.3f} mm)"]
     true_tip = np.asarray(cfg.operator.build_scenario().driver_mm, dtype=float)
     err = np.asarray(res.tob_t_tip_mm) - true_tip
-    truth = [f"tip: true ({', '.join(f'{v:.3f}' for v in true_tip)}) mm; calibrated off by {np.linalg.norm(err):.3f} mm "
-             f"(the design value was off by {np.linalg.norm(np.asarray(driver_mm) - true_tip):.3f} mm)"]
+    truth = TruthLines([f"tip: true ({', '.join(f'{v:.3f}' for v in true_tip)}) mm; calibrated off by "
+                        f"{np.linalg.norm(err):.3f} mm (acceptance {ACCEPT_MM:g} mm; the design value was off by "
+                        f"{np.linalg.norm(np.asarray(driver_mm) - true_tip):.3f} mm)"])
+    truth.checks.append(Check("tip", "off the truth", float(np.linalg.norm(err)), ACCEPT_MM, "mm"))
     return res, report, truth

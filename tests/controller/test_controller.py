@@ -229,7 +229,8 @@ def test_hold_and_track_commands_and_bad_commands():
 
 
 def test_recording_every_n_cycles_with_the_tip():
-    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, has_driver=True))
+    # recording_spacing_mm = 0: every recording_delay_cycles only, the first after as many.
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, has_driver=True, recording_spacing_mm=0.0))
     rig = Rig(core, start_flange(TARGET_X), static(T_m(TARGET_X)))
     rig.step(5)
     rig.command("record_start")
@@ -243,6 +244,45 @@ def test_recording_every_n_cycles_with_the_tip():
     tip = from_pose(p.world_T_tip)
     np.testing.assert_allclose(tip[:3, 3], (T_m(TARGET_X) @ np.array([0, 0, 0.06, 1]))[:3], atol=1e-12)
     assert json.loads([m for m in rig.of("controller/events") if m.code == "record_stopped"][0].text) == {"points": 10}
+
+
+def straight(speed_mm_s):
+    """A target moving along world x at ``speed_mm_s`` from TARGET_X (its orientation fixed)."""
+    def f(t_ns):
+        T = T_m(TARGET_X)
+        v = np.array([speed_mm_s * 1e-3, 0.0, 0.0])
+        T[:3, 3] += v * t_ns * 1e-9
+        return T, v, np.zeros(3)
+    return f
+
+
+def test_recording_starts_at_the_first_measurement_then_keeps_its_delay_when_still():
+    """Issue 32.3: the first point at the first measurement after record_start (it came 10
+    cycles, 0.28 s, later); a still target still gets a point every recording_delay_cycles."""
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, has_driver=True))
+    rig = Rig(core, start_flange(TARGET_X), static(T_m(TARGET_X)))
+    rig.step(5)
+    rig.command("record_start")
+    rig.step(100)
+    pts = rig.of("controller/path")
+    assert [p.header.stamp_ns // DT_NS for p in pts] == list(range(5, 105, 10))
+
+
+@pytest.mark.parametrize("speed_mm_s, every", [(20.0, 2), (60.0, 1)])
+def test_recording_is_as_dense_as_the_speed_needs(speed_mm_s, every):
+    """Issue 32.3: at 60 mm/s a point every 10 cycles (28 ms) was 16.8 mm from the last; with
+    recording_spacing_mm = 1 a point comes whenever the target moved 1 mm: at 20 mm/s (0.56
+    mm a cycle) every 2nd measurement (1.12 mm apart), at 60 mm/s (1.68 mm a cycle) every one."""
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, recording_spacing_mm=1.0))
+    rig = Rig(core, start_flange(TARGET_X), straight(speed_mm_s))
+    rig.step(3)
+    rig.command("record_start")
+    rig.step(60)
+    pts = rig.of("controller/path")
+    cycles = [p.header.stamp_ns // DT_NS for p in pts]
+    assert cycles == list(range(3, 63, every))
+    x_mm = np.array([from_pose(p.world_T_tob)[0, 3] * 1e3 for p in pts])
+    np.testing.assert_allclose(np.diff(x_mm), speed_mm_s * 0.028 * every, atol=1e-6)
 
 
 def test_driver_calibration_recovers_the_tip():

@@ -164,3 +164,73 @@ def test_a_hands_slow_wander_is_one_line_but_a_10_degree_kink_is_two():
     kink = kink + rng.normal(0, 0.05, kink.shape)
     seam = fit_path(np.column_stack([kink, np.zeros((len(kink), 3))]), (np.arange(len(kink)) * 0.28e9).astype(np.int64))
     assert [g.kind for g in seam.segments] == ["line", "line"] and not seam.corners  # 10 deg: no corner (20)
+
+
+def two_arcs_recorded(step_mm, seed=0, noise_mm=0.05, sweep_deg=70.0, speed_mm_s=60.0):
+    """Issue 32.3's seam: a 60 mm straight, an 80 mm arc turning left by ``sweep_deg``, a 60 mm
+    straight, an 80 mm arc turning back right; sampled every ``step_mm`` along it (the old
+    recorder at 60 mm/s: a point every 280 ms, 16.8 mm; the new one: about one a measurement),
+    Gaussian noise, the torch at a constant 15 deg tilt.  -> (x (N, 6), stamp_ns (N,))."""
+    r, sw = 80.0, math.radians(sweep_deg)
+    a = np.linspace(-math.pi / 2, -math.pi / 2 + sw, 3000)
+    arc1 = np.array([0.0, r, 0.0]) + r * np.column_stack([np.cos(a), np.sin(a), 0 * a])
+    d = np.array([math.cos(sw), math.sin(sw), 0.0])
+    mid = arc1[-1] + np.outer(np.linspace(0, 60, 500), d)
+    c2 = mid[-1] - r * np.array([-d[1], d[0], 0.0])
+    a0 = math.atan2((mid[-1] - c2)[1], (mid[-1] - c2)[0])
+    b = np.linspace(a0, a0 - sw, 3000)
+    arc2 = c2 + r * np.column_stack([np.cos(b), np.sin(b), 0 * b])
+    P = np.vstack([np.outer(np.linspace(-60, 0, 500), [1.0, 0.0, 0.0]), arc1, mid, arc2])
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(P, axis=0), axis=1))])
+    q = np.arange(0.0, s[-1], step_mm)
+    p = np.column_stack([np.interp(q, s, P[:, k]) for k in range(3)])
+    p += np.random.default_rng(seed).normal(0, noise_mm, p.shape)
+    return np.column_stack([p, np.tile([0.0, 15.0, 180.0], (len(p), 1))]), (q / speed_mm_s * 1e9).astype(np.int64)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_a_sparse_recording_of_two_arcs_is_doubted_and_gets_no_invented_corner(seed):
+    """Issue 32.3: 16.8 mm apart the second arc has 6 points (an arc needs 7): it was fitted
+    as two chords meeting in an invented 41 deg corner, residual 1.7 mm against a 0.2 mm
+    tolerance, and nothing said so.  Now: no corner (the seam has none), each segment beyond
+    its tolerance marked with the reason."""
+    x, t = two_arcs_recorded(16.8, seed)
+    seam = fit_path(x, t)
+    assert seam.corners == ()
+    bad = [g for g in seam.segments if g.residual_rms_mm > math.hypot(0.2, seam.noise_mm)]
+    assert bad and all("residual RMS" in g.doubt for g in bad)
+    assert all(any(f"segment {seam.segments.index(g)} " in d for d in seam.doubts) for g in bad)
+    assert any("not taken as a corner" in g.doubt for g in seam.segments)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_same_seam_recorded_densely_is_two_arcs_and_trusted(seed):
+    """One point every 2 mm (60 mm/s at the camera's 30 Hz): line, arc, line, arc of radius
+    80 mm (by construction), no doubt, no corner."""
+    x, t = two_arcs_recorded(2.0, seed)
+    seam = fit_path(x, t)
+    assert [g.kind for g in seam.segments] == ["line", "arc", "line", "arc"]
+    assert [round(g.radius_mm) for g in seam.segments if g.kind == "arc"] == [80, 80]
+    assert seam.doubts == [] and seam.corners == ()
+
+
+def test_path_fit_marks_and_warns_of_a_doubted_seam(tmp_path):
+    """The CLI writes the seam with each doubted segment marked, warns on stderr and exits 3
+    (it exited 0 without a word)."""
+    from humanpt.controller.pathfile import Path6, write
+
+    x, t = two_arcs_recorded(16.8, 0)
+    src = tmp_path / "sparse.csv"
+    write(src, Path6(np.arange(len(x)), t, x))
+    r = run_cli("path", "fit", str(src), "--no-plot")
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "WARNING" in r.stderr and "residual RMS" in r.stderr and "segments doubted" in r.stderr
+    data = json.loads((tmp_path / "sparse.seam.json").read_text())
+    assert any("residual RMS" in s.get("doubt", "") for s in data["segments"])
+    seam = seamfile.read(tmp_path / "sparse.seam.json")  # the marks read back
+    assert seam.doubts and seam.corners == ()
+    dense = tmp_path / "dense.csv"
+    x, t = two_arcs_recorded(2.0, 0)
+    write(dense, Path6(np.arange(len(x)), t, x))
+    r = run_cli("path", "fit", str(dense), "--no-plot")
+    assert r.returncode == 0 and "WARNING" not in r.stderr, r.stdout + r.stderr
