@@ -83,50 +83,27 @@ class SeamFigures:
         return bool(self.n and self.rms_mm <= self.tolerance_mm and self.coverage >= MIN_COVERAGE)
 
 
-def _polyline_distance(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """(N,) distance of each point (N, 3) to the polyline ``line`` (K, 3), mm."""
-    p = np.asarray(points, dtype=float).reshape(-1, 3)
-    a, b = line[:-1], line[1:]
-    ab = b - a
-    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
-    out = np.empty(len(p))
-    for i, q in enumerate(p):
-        s = np.clip(np.einsum("ij,ij->i", q - a, ab) / ab2, 0.0, 1.0)
-        out[i] = np.min(np.linalg.norm(a + s[:, None] * ab - q, axis=1))
-    return out
+def _distances(points: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
+    """(N,) distance of each point (N, 3) to the seam polyline ``seam_mm`` (K, 3), mm
+    (:func:`humanpt.seam.compare.distance_to_seam`)."""
+    from humanpt.seam.compare import distance_to_seam, polyline_seam
 
-
-def _resample(line: np.ndarray, step_mm: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """The polyline every ``step_mm`` along it: (points (K, 3), arc length (K,))."""
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
-    q = np.linspace(0.0, s[-1], max(2, int(math.ceil(s[-1] / step_mm)) + 1))
-    return np.column_stack([np.interp(q, s, line[:, k]) for k in range(3)]), q
+    return distance_to_seam(polyline_seam(seam_mm), np.asarray(points, dtype=float).reshape(-1, 3))
 
 
 def seam_figures(name: str, path_mm: np.ndarray, seam_mm: np.ndarray, tolerance_mm: float,
                  cover_mm: float = COVER_MM) -> SeamFigures:
     """:class:`SeamFigures` of ``path_mm`` (N, 3) (a polyline: points in order) against the
-    seam ``seam_mm`` (K, 3) (its start and end included)."""
+    seam ``seam_mm`` (K, 3) (its start and end included): humanpt.seam.compare's
+    ``compare_points`` (every point counted; consecutive points within ``cover_mm`` of the
+    seam cover the stretch between them)."""
+    from humanpt.seam.compare import compare_points, polyline_seam
+
     path = np.asarray(path_mm, dtype=float).reshape(-1, 3)
     if len(path) == 0:
         return SeamFigures(name, math.nan, math.nan, 0, 0.0, math.nan, None, tolerance_mm)
-    d = _polyline_distance(path, seam_mm)
-    k = int(np.argmax(d))
-    samples, s = _resample(seam_mm)
-    if len(path) >= 2:
-        covered = _polyline_distance(samples, path) <= cover_mm
-    else:
-        covered = np.linalg.norm(samples - path[0], axis=1) <= cover_mm
-    gap = 0.0
-    start = None
-    for i, c in enumerate(np.r_[covered, True]):  # the longest run of uncovered samples
-        if not c and start is None:
-            start = i
-        elif c and start is not None:
-            gap = max(gap, float(s[min(i, len(s) - 1)] - s[max(start - 1, 0)]))
-            start = None
-    return SeamFigures(name, float(np.sqrt(np.mean(d ** 2))), float(d[k]), len(d), float(np.mean(covered)), gap,
-                       tuple(float(v) for v in path[k]), tolerance_mm)
+    c = compare_points(polyline_seam(seam_mm), path, cover_mm=cover_mm, approach_mm=None, window=name)
+    return SeamFigures(name, c.rms_mm, c.max_mm, c.n, c.covered, c.largest_gap_mm, c.worst_mm, tolerance_mm)
 
 
 @dataclass
@@ -238,7 +215,7 @@ def job_report(res, png: Path | None = None) -> JobReport:
                                          "(with the hand's tremor: the fitted seam is what is played)"))
         played = getattr(res, "played_path_mm", None)
         if png is not None and played is not None:
-            png = plot_seam_errors(png, seam, played, _polyline_distance(played, seam) if len(played) else
+            png = plot_seam_errors(png, seam, played, _distances(played, seam) if len(played) else
                                    np.zeros(0), SEAM_TOLERANCES_MM["played"])
             lines.append(f"    picture: {png}")
         else:

@@ -16,14 +16,14 @@ SEAM = np.array([[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]])
 
 
 def test_seam_figures_by_hand():
-    """A path 0.3 mm beside the first half of a 100 mm seam: RMS = max = 0.3 mm; covered
-    within 1 mm up to x = 50 + sqrt(1 - 0.3^2) = 50.954 mm: 51 %; the largest gap the rest,
-    49.05 mm (the seam sampled every 0.5 mm: within a sample)."""
+    """A path 0.3 mm beside the first half of a 100 mm seam, a point every mm: RMS = max =
+    0.3 mm; its points cover the seam from 0 to 50 mm (seam.compare: consecutive points within
+    1 mm of it cover the stretch between them): 50 %; the largest gap the rest, 50 mm."""
     path = np.column_stack([np.linspace(0, 50, 51), np.full(51, 0.3), np.zeros(51)])
     f = seam_figures("half", path, SEAM, 0.5)
     assert f.rms_mm == pytest.approx(0.3) and f.max_mm == pytest.approx(0.3) and f.n == 51
-    assert f.coverage == pytest.approx(0.50954, abs=0.005)
-    assert f.gap_mm == pytest.approx(100 - 50.954, abs=0.5)
+    assert f.coverage == pytest.approx(0.50, abs=0.002)
+    assert f.gap_mm == pytest.approx(50.0, abs=0.2)
     assert not f.met  # within its RMS tolerance but half the seam not covered
     full = np.column_stack([np.linspace(0, 100, 101), np.full(101, 0.3), np.zeros(101)])
     g = seam_figures("all", full, SEAM, 0.5)
