@@ -103,6 +103,10 @@ def tip_position_covariance(cov_pr: np.ndarray, world_p_tip_from_g: np.ndarray) 
     return J @ cov_pr @ J.T
 
 
+# Measurement stamps this far behind the last path point's are a clock step back, not a late
+# measurement (the filter delivers in order; late ones are milliseconds, not seconds).
+CLOCK_STEP_BACK_NS = 500_000_000
+
 class ControllerCore(Core):
     name = "controller"
     realtime = True  # on the robot link's cycle (a command per cycle): see runtime.tuning.tune_realtime
@@ -286,8 +290,16 @@ class ControllerCore(Core):
                 at, T = st.measurement_stamp_ns, from_pose(st.world_T_tob_at_measurement)
             else:
                 at, T = st.header.stamp_ns, from_pose(st.world_T_tob)
-            # One point per measurement (no image since the last point: wait for one).
-            if (self.path_last_stamp_ns is None or at > self.path_last_stamp_ns) and self._point_due(T):
+            # One point per measurement (no image since the last point: wait for one). A
+            # stamp far behind the last point's is a new time base (the camera's machine
+            # stepped its clock back), not an old measurement: the path goes on from it.
+            last = self.path_last_stamp_ns
+            stepped_back = last is not None and last - at > CLOCK_STEP_BACK_NS
+            if stepped_back:
+                outs.append(self.event(t_ns, pb.SEVERITY_WARNING, "stamps_back",
+                                       f"measurement stamps went back {(last - at) / 1e9:.3f} s (a clock step?): "
+                                       "the path goes on from the new stamps"))
+            if (last is None or at > last or stepped_back) and self._point_due(T):
                 self.cycles_since_point = 0
                 outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
                                              _pose_covariance(st)))

@@ -65,6 +65,7 @@ class Rig:
         self.answered: list[bool] = []
         self.at_cycle: dict[int, np.ndarray] = {}  # the robot's flange at the start of each cycle
         self.covariance: np.ndarray | None = None  # the filter states' covariance, if any
+        self.shift_cycles = 0  # the stamps' time base moved by this many cycles (a clock step)
 
     def command(self, verb, **args):
         msg = pb.Command(header=header(self.k * DT_NS), component="controller", verb=verb,
@@ -73,11 +74,11 @@ class Rig:
 
     def step(self, n=1):
         for _ in range(n):
-            t = self.k * DT_NS
+            t = (self.k + self.shift_cycles) * DT_NS
             self.at_cycle[self.k] = self.flange.copy()
             self.core.step(t, "robot_gateway/robot_state", pb.RobotState(
                 header=header(t, self.k, "world"), world_T_flange=pose(self.flange), cycle=self.k))
-            T, v, w = self.tob_fn(t)
+            T, v, w = self.tob_fn(self.k * DT_NS)  # the world in true time; the stamps in the clock's
             st = pb.TobState(header=header(t, self.k, "world"), world_T_tob=pose(T), status=self.status_fn(self.k),
                              linear_velocity_m_s=vector3(v), angular_velocity_rad_s=vector3(w), cycle=self.k,
                              # as the filter says right after a new measurement (one per cycle here)
@@ -283,6 +284,26 @@ def test_recording_is_as_dense_as_the_speed_needs(speed_mm_s, every):
     assert cycles == list(range(3, 63, every))
     x_mm = np.array([from_pose(p.world_T_tob)[0, 3] * 1e3 for p in pts])
     np.testing.assert_allclose(np.diff(x_mm), speed_mm_s * 0.028 * every, atol=1e-6)
+
+
+def test_recording_goes_on_across_a_clock_step_back():
+    """A -2 s step of the clock (NTP) moves every later stamp back: the path used to take no
+    point until the stamps passed the last one again (2 s of seam lost); now a stamp far
+    behind the last point's is a new time base, said once, and the recording goes on."""
+    core = ControllerCore(ControllerConfig(recording_delay_cycles=10, recording_spacing_mm=1.0))
+    rig = Rig(core, start_flange(TARGET_X), straight(60.0))
+    rig.shift_cycles = 200  # (stamps 5.6 s on: room for the step back)
+    rig.step(3)
+    rig.command("record_start")
+    rig.step(20)
+    before = len(rig.of("controller/path"))
+    rig.shift_cycles -= round(2e9 / DT_NS)  # -2 s
+    rig.step(20)
+    pts = rig.of("controller/path")
+    assert len(pts) - before == 20  # every measurement after the step, as before it (60 mm/s: each one)
+    assert [m.code for m in rig.of("controller/events")].count("stamps_back") == 1
+    stamps = [p.header.stamp_ns for p in pts[before:]]
+    assert stamps == sorted(stamps)
 
 
 def test_driver_calibration_recovers_the_tip():
