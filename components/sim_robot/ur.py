@@ -233,7 +233,7 @@ class UrRobot:
         # (timestamp s, base_T_flange_mm) of the last ``trace_cycles`` cycles: the truth, for tests
         self.trace: deque = deque(maxlen=trace_cycles)
         self.counters = dict.fromkeys(("cycles", "packages", "input_packages", "malformed", "watchdog_stops",
-                                       "refused_resumes", "moved"), 0)
+                                       "refused_resumes", "moved", "new_sequence"), 0)
 
     @property
     def base_T_flange_mm(self) -> np.ndarray:
@@ -271,6 +271,7 @@ class UrRobot:
         if seq != self._last_seq:
             self._last_seq = seq
             self._stale = 0
+            self.counters["new_sequence"] += 1  # (cycles answered in time: a new target this cycle)
             target = self._input_target()
             if self.stopped:
                 if self._near(target):

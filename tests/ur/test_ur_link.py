@@ -188,3 +188,26 @@ def test_a_cycle_that_does_not_advance_is_dropped():
     events = link.receive(first, 4 * MS)  # the same timestamp again (replayed)
     assert not any(isinstance(e, CycleReceived) for e in events)
     assert "not after the last" in events[0].text
+
+
+def test_corrections_are_off_when_the_program_stops_or_its_heartbeat_stalls():
+    link = UrLink.from_config(gateway_config("ur", heartbeat_cycles=3))
+    sim = UrRobot(SimRobotConfig())
+    session, _ = _session(link, sim)
+
+    def state(heartbeat=None, **over):
+        sim.cycles += 1
+        values = sim.outputs()
+        values.update(over)
+        if heartbeat is not None:
+            values["output_int_register_24"] = heartbeat
+        data = session.outputs.encode({n: values[n] for n in session.outputs.names})
+        return [e.state for e in link.receive(data, 0) if isinstance(e, CycleReceived)][0]
+
+    assert state(heartbeat=1).corrections_on
+    # the heartbeat stuck at 1: cycles 2 and 3 are within 3 cycles of its last change, 4 is not
+    assert [state(heartbeat=1).corrections_on for _ in range(3)] == [True, True, False]
+    assert state(heartbeat=2).corrections_on  # it advances again
+    assert not state(heartbeat=3, runtime_state=rtde.RUNTIME_STOPPED).corrections_on  # Stop pressed
+    st = state(heartbeat=4, safety_mode=rtde.SAFETY_MODE_PROTECTIVE_STOP, robot_mode=5)
+    assert st.fault and not st.arm_power

@@ -17,9 +17,12 @@ import numpy as np
 import pytest
 
 from humanpt.geometry.transforms import matrix_from_rotvec
+from humanpt.robot_gateway.links import gateway_config
 from humanpt.robot_gateway.links.ur import protocol as rtde
+from humanpt.robot_gateway.links.ur.link import UrLink
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.ur import RtdeServer, UrRobot
+from tests.ur.test_ur_link import _session
 
 pytest.importorskip("rtde_receive")
 
@@ -84,4 +87,37 @@ def test_ur_rtde_reads_the_simulated_urs_actual_tcp_pose_as_its_truth(moving_ur)
         assert heartbeat == k  # +1 every program cycle, from the first
         moved += not np.allclose(T, start)
     assert moved > 0  # the arm moved toward the target while ur-rtde read it
+    assert robot.counters["malformed"] == 0
+
+
+IO_CLIENT = r"""
+import rtde_io
+io = rtde_io.RTDEIOInterface("127.0.0.1")
+ok = [io.setInputIntRegister(20, 1234), io.setInputDoubleRegister(20, 0.25), io.setStandardDigitalOut(3, True)]
+io.disconnect()
+print(ok)
+"""
+
+
+def test_ur_rtdes_io_interface_writes_the_simulated_urs_inputs_beside_humanpts_session():
+    """ur-rtde's RTDEIOInterface sets up its input recipes (lower range registers 18..23, the
+    digital outputs) while humanpt's link holds its own (24..30): no IN_USE, and what it writes
+    is what the simulated controller has."""
+    robot = UrRobot(SimRobotConfig())
+    with_humanpt, _ = _session(UrLink.from_config(gateway_config("ur")), robot)
+    assert with_humanpt.started
+    try:
+        server = RtdeServer(robot, "127.0.0.1:30004")
+    except OSError as e:
+        pytest.fail(f"{e}: ur-rtde needs port 30004 (another simulated UR running?)")
+    server.start()
+    try:
+        p = subprocess.run([sys.executable, "-c", IO_CLIENT], capture_output=True, text=True, timeout=120)
+    finally:
+        server.close()
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip().splitlines()[-1] == "[True, True, True]"
+    assert robot.inputs["input_int_register_20"] == 1234 and robot.inputs["input_double_register_20"] == 0.25
+    # digital output 3: mask and value bit 3
+    assert robot.inputs["standard_digital_output_mask"] == 8 and robot.inputs["standard_digital_output"] == 8
     assert robot.counters["malformed"] == 0
