@@ -70,7 +70,3 @@ class UrConfig(GatewayConfig):
             v = getattr(self, name)
             if not (isinstance(v, int) and 1 <= v <= 1000):
                 raise ValueError(f"{name} must be within 1 and 1000, got {v!r}")
-
-    @property
-    def frequency_hz(self) -> float:
-        return 1000.0 / self.cycle_period_ms
