@@ -98,8 +98,49 @@ class AbbRobot:
         return [], [(self.cycle, decode_sensor(data))]
 
 
+class UrRigRobot:
+    """UR RTDE's robot side: the simulated controller's RTDE session (the set-up answered as
+    a controller does), a data package per cycle (timestamp = cycle x cycle, the fed-back
+    pose as actual_TCP_pose, a running program), each input package decoded."""
+
+    fields: dict = {}
+
+    def __init__(self, config):
+        from humanpt.sim_robot.config import SimRobotConfig
+        from humanpt.sim_robot.ur import UrRobot
+
+        self.sim = UrRobot(SimRobotConfig(), register_base=config.register_base)
+        self.sim.rate_hz = 1000.0 / config.cycle_period_ms  # (the rig's cycle, whatever it is)
+        self.session = self.sim.connect()
+        self.cycle_s = config.cycle_period_ms / 1000.0
+        self.cycle = 0
+
+    def begin(self, t_ns: int) -> list[bytes]:
+        return [b""]  # the adapter's mark of a new connection
+
+    def send(self, cycle: int, base_T_flange_mm: np.ndarray, bits, t_ns: int) -> list[bytes]:
+        from humanpt.robot_gateway.links.ur.protocol import ur_pose_from_transform
+
+        self.cycle = cycle
+        s = self.session
+        if not s.started:
+            return []
+        values = self.sim.outputs()
+        values.update(timestamp=cycle * self.cycle_s, actual_TCP_pose=ur_pose_from_transform(base_T_flange_mm))
+        values[f"output_int_register_{self.sim.b}"] = cycle  # the program's heartbeat
+        return [s.outputs.encode({n: values[n] for n in s.outputs.names})]
+
+    def take(self, data: bytes, t_ns: int) -> tuple[list[bytes], list]:
+        before = self.sim.counters["input_packages"]
+        back = self.session.feed(data, t_ns)
+        got = []
+        if self.sim.counters["input_packages"] > before:
+            got.append((self.cycle, dict(self.sim.inputs)))
+        return ([back] if back else []), got
+
+
 # link name -> its robot side (a test of a new link adds its own).
-ROBOTS: dict[str, type] = {"alter": AlterRobot, "rsi": RsiRobot, "abb": AbbRobot}
+ROBOTS: dict[str, type] = {"alter": AlterRobot, "rsi": RsiRobot, "abb": AbbRobot, "ur": UrRigRobot}
 
 
 class Rig:

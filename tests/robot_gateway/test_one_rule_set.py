@@ -20,9 +20,9 @@ COMMON = dict(cycle_period_ms=CYCLE_MS, reply_deadline_ms=2.0, tick_ms=2.0, stal
               envelope_max_mm=(float(START_X[0]) + 0.8, 1600.0, 1600.0))
 # robot_late_limit 0: a robot that applies zero when late (HOLDON off), as ALTER's does;
 # with HOLDON's repeats the envelope cuts earlier (tests/rsi/test_rsi_holdon.py).
-# ABB EGM: a target lead under one step (1.2 mm), so that no lead is added to the envelope's
+# ABB EGM and UR RTDE: a target lead under one step (1.2 mm), so that no lead is added to the envelope's
 # margin (links/abb/kind.py late_repeats).
-FIELDS = {"rsi": dict(robot_late_limit=0), "abb": dict(max_lead_mm=1.0)}
+FIELDS = {"rsi": dict(robot_late_limit=0), "abb": dict(max_lead_mm=1.0), "ur": dict(max_lead_mm=1.0)}
 
 
 def _sequence(rig) -> None:

@@ -28,6 +28,7 @@ LINKS: dict[str, str] = {
     "alter": "humanpt.robot_gateway.links.alter.kind:KIND",  # the Puma's ALTER serial line (DDCMP)
     "rsi": "humanpt.robot_gateway.links.rsi.kind:KIND",  # KUKA RSI-style UDP/XML, 4 or 12 ms
     "abb": "humanpt.robot_gateway.links.abb.kind:KIND",  # ABB EGM position guidance, UDP protobuf, 4 ms
+    "ur": "humanpt.robot_gateway.links.ur.kind:KIND",  # Universal Robots RTDE (TCP), 2 ms e-Series / 8 ms CB3
 }
 
 DEFAULT_LINK = "alter"

@@ -1,0 +1,1 @@
+"""Universal Robots (e-Series, CB3) over RTDE: see README.md."""

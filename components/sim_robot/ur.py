@@ -1,0 +1,467 @@
+"""A simulated Universal Robots controller: sim_robot's arm behind an RTDE server running
+humanpt's URScript program (``links/ur/robot_files.py``), for the twin and the tests.
+
+:class:`UrRobot` is the controller (pure: times are given). Each RTDE client is a
+:class:`RtdeSession` (its own output and input recipes, as on a real controller: the
+protocol version 'V', the controller's version 'v', 'O', 'I', 'S', 'P', 'U', 'M'). Every
+controller cycle (2 ms e-Series, 8 ms CB3) :meth:`UrRobot.cycle`:
+
+1. runs one cycle of humanpt's program on the input registers the clients wrote: a new
+   sequence number resets the watchdog (and, when stopped, resumes only if its target is
+   within the lead of the arm: no jump to an old target); ``watchdog_cycles`` cycles without
+   one stop the arm (``stopl``: an event; it stays); the heartbeat register +1; a running
+   program servoes toward the target: the fraction 1 - exp(-cycle / tau) of the way each
+   cycle, through the same kinematics and joint-speed limit as every simulated link
+   (:func:`humanpt.sim_robot.core.corrected_joints`); an unreachable target or a joint step
+   beyond the limit is a protective stop (safety mode 3, the program stopped);
+2. sends every started session its data package (at the session's frequency: every
+   ``round(rate / frequency)``-th cycle), ``timestamp`` = cycles x cycle (s).
+
+Outputs and inputs are those of UR's RTDE guide (:data:`OUTPUT_TYPES`, :data:`INPUT_TYPES`);
+a name it does not know is NOT_FOUND, an input another session holds is IN_USE (as on a
+real controller). What it does not simulate reads as 0. Humanpt's assumptions (no controller
+here to check them): the arm follows servoj's target with a first-order lag; stopl stops at
+once.
+
+:class:`RtdeServer` is the live shell: a TCP server on a configurable address (30004 on a
+real controller), a thread accepting clients and a thread running the cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import socket
+import threading
+import time
+from collections import deque
+
+import numpy as np
+
+from humanpt.geometry.puma import UnreachableError
+from humanpt.geometry.transforms import interpolate_transform, invert_transform, rotation_angle_rad
+from humanpt.robot_gateway.links.ur import protocol as rtde
+from humanpt.sim_robot.config import SimRobotConfig
+from humanpt.sim_robot.core import JointStepError, corrected_joints
+from humanpt.sim_robot.rsi import SimEvent
+
+_V6 = "VECTOR6D"
+_V3 = "VECTOR3D"
+# UR's RTDE guide: the outputs (controller -> client) and their types.
+OUTPUT_TYPES: dict[str, str] = {
+    "timestamp": "DOUBLE", "target_q": _V6, "target_qd": _V6, "target_qdd": _V6, "target_current": _V6,
+    "target_moment": _V6, "actual_q": _V6, "actual_qd": _V6, "actual_current": _V6,
+    "actual_current_window": _V6, "joint_control_output": _V6, "actual_TCP_pose": _V6, "actual_TCP_speed": _V6,
+    "actual_TCP_force": _V6, "target_TCP_pose": _V6, "target_TCP_speed": _V6,
+    "actual_digital_input_bits": "UINT64", "joint_temperatures": _V6, "actual_execution_time": "DOUBLE",
+    "robot_mode": "INT32", "joint_mode": "VECTOR6INT32", "safety_mode": "INT32", "safety_status": "INT32",
+    "actual_tool_accelerometer": _V3, "speed_scaling": "DOUBLE", "target_speed_fraction": "DOUBLE",
+    "actual_momentum": "DOUBLE", "actual_main_voltage": "DOUBLE", "actual_robot_voltage": "DOUBLE",
+    "actual_robot_current": "DOUBLE", "actual_joint_voltage": _V6, "actual_digital_output_bits": "UINT64",
+    "runtime_state": "UINT32", "elbow_position": _V3, "elbow_velocity": _V3, "robot_status_bits": "UINT32",
+    "safety_status_bits": "UINT32", "analog_io_types": "UINT32", "standard_analog_input0": "DOUBLE",
+    "standard_analog_input1": "DOUBLE", "standard_analog_output0": "DOUBLE", "standard_analog_output1": "DOUBLE",
+    "io_current": "DOUBLE", "euromap67_input_bits": "UINT32", "euromap67_output_bits": "UINT32",
+    "euromap67_24V_voltage": "DOUBLE", "euromap67_24V_current": "DOUBLE", "tool_mode": "UINT32",
+    "tool_analog_input_types": "UINT32", "tool_analog_input0": "DOUBLE", "tool_analog_input1": "DOUBLE",
+    "tool_output_voltage": "INT32", "tool_output_current": "DOUBLE", "tool_temperature": "DOUBLE",
+    "tcp_force_scalar": "DOUBLE", "output_bit_registers0_to_31": "UINT32", "output_bit_registers32_to_63": "UINT32",
+    "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
+    "tool_output_mode": "UINT8", "tool_digital_output0_mode": "UINT8", "tool_digital_output1_mode": "UINT8",
+    "payload": "DOUBLE", "payload_cog": _V3, "payload_inertia": _V6, "script_control_line": "UINT32",
+    "ft_raw_wrench": _V6, "joint_position_deviation_ratio": "DOUBLE", "collision_detection_ratio": "DOUBLE",
+    "time_scale_source": "UINT32", "actual_current_as_torque": _V6,
+}
+# The inputs (client -> controller).
+INPUT_TYPES: dict[str, str] = {
+    "speed_slider_mask": "UINT32", "speed_slider_fraction": "DOUBLE", "standard_digital_output_mask": "UINT8",
+    "standard_digital_output": "UINT8", "configurable_digital_output_mask": "UINT8",
+    "configurable_digital_output": "UINT8", "tool_digital_output_mask": "UINT8", "tool_digital_output": "UINT8",
+    "standard_analog_output_mask": "UINT8", "standard_analog_output_type": "UINT8",
+    "standard_analog_output_0": "DOUBLE", "standard_analog_output_1": "DOUBLE",
+    "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
+    "external_force_torque": _V6,
+}
+_REGISTER = re.compile(r"(input|output)_(bit|int|double)_register_(\d+)$")
+_REGISTER_TYPES = {"bit": "BOOL", "int": "INT32", "double": "DOUBLE"}
+_ZERO = {"BOOL": False, "UINT8": 0, "UINT32": 0, "UINT64": 0, "INT32": 0, "DOUBLE": 0.0, "VECTOR3D": (0.0,) * 3,
+         "VECTOR6D": (0.0,) * 6, "VECTOR6INT32": (0,) * 6, "VECTOR6UINT32": (0,) * 6}
+
+
+def variable_type(name: str, inputs: bool) -> str | None:
+    """RTDE's type of an output (``inputs`` False) or input variable; None: NOT_FOUND."""
+    m = _REGISTER.match(name)
+    if m:
+        direction, kind, n = m.group(1), m.group(2), int(m.group(3))
+        top = 127 if kind == "bit" else 47
+        lo = 64 if kind == "bit" else 0
+        if not (lo <= n <= top) or (inputs and direction != "input"):
+            return None
+        return _REGISTER_TYPES[kind]
+    table = INPUT_TYPES if inputs else OUTPUT_TYPES
+    return table.get(name)
+
+
+class RtdeSession:
+    """One client's RTDE session (pure): ``feed(bytes)`` -> the bytes to answer."""
+
+    def __init__(self, robot: UrRobot, sid: int):
+        self.robot = robot
+        self.sid = sid
+        self.framer = rtde.Framer()
+        self.version_ok = False
+        self.outputs: rtde.Recipe | None = None
+        self.every = 1  # a data package every this many cycles
+        self.inputs: dict[int, rtde.Recipe] = {}
+        self.started = False
+        self.closed: str | None = None  # why the controller drops the connection
+
+    def feed(self, data: bytes, t_ns: int) -> bytes:
+        out = bytearray()
+        packets = self.framer.feed(data)
+        if self.framer.errors:
+            self.closed = str(self.framer.errors[0])  # out of step: the controller drops the client
+            self.robot.counters["malformed"] += len(self.framer.errors)
+            self.robot.events.append(SimEvent(t_ns, "warning", "bad_rtde", f"client {self.sid}: {self.closed}"))
+            self.framer.errors.clear()
+            return bytes(out)
+        for p in packets:
+            try:
+                out += self._packet(p, t_ns)
+            except (rtde.RtdeProtocolError, ValueError, OverflowError) as e:
+                self.robot.counters["malformed"] += 1
+                self.robot.events.append(SimEvent(t_ns, "warning", "bad_rtde", f"client {self.sid}: {e}"))
+                out += rtde.encode_text(f"humanpt sim: {e}"[:200], "RTDE", 2)
+        return bytes(out)
+
+    def _packet(self, p: rtde.Packet, t_ns: int) -> bytes:
+        r = self.robot
+        if p.type == rtde.REQUEST_PROTOCOL_VERSION:
+            self.version_ok = rtde.decode_version_request(p.payload) == rtde.PROTOCOL_VERSION
+            return rtde.pack(p.type, rtde.encode_u8(int(self.version_ok)))
+        if p.type == rtde.GET_URCONTROL_VERSION:
+            return rtde.encode_controller_version(*r.controller_version)
+        if p.type == rtde.TEXT_MESSAGE:
+            rtde.decode_text(p.payload)
+            return b""
+        if p.type == rtde.START:
+            self.started = self.outputs is not None and self.version_ok
+            return rtde.pack(p.type, rtde.encode_u8(int(self.started)))
+        if p.type == rtde.PAUSE:
+            self.started = False
+            return rtde.pack(p.type, rtde.encode_u8(1))
+        if p.type == rtde.SETUP_OUTPUTS:
+            freq, names = rtde.decode_setup_outputs(p.payload)
+            if self.started or freq > r.rate_hz:
+                return rtde.encode_setup_reply(p.type, 0, ("NOT_FOUND",) * len(names))
+            types = tuple(variable_type(n, False) or "NOT_FOUND" for n in names)
+            if "NOT_FOUND" in types:
+                return rtde.encode_setup_reply(p.type, 0, types)
+            self.outputs = rtde.Recipe(1, names, types)
+            self.every = max(1, round(r.rate_hz / freq))
+            return rtde.encode_setup_reply(p.type, 1, types)
+        if p.type == rtde.SETUP_INPUTS:
+            names = rtde.decode_setup_inputs(p.payload)
+            types = []
+            for n in names:
+                t = variable_type(n, True)
+                holder = r.input_owner.get(n)
+                types.append("NOT_FOUND" if t is None else "IN_USE" if holder not in (None, self.sid) else t)
+            if self.started or any(t in ("NOT_FOUND", "IN_USE") for t in types):
+                return rtde.encode_setup_reply(p.type, 0, tuple(types))
+            rid = len(self.inputs) + 1
+            self.inputs[rid] = rtde.Recipe(rid, names, tuple(types))
+            for n in names:
+                r.input_owner[n] = self.sid
+            return rtde.encode_setup_reply(p.type, rid, tuple(types))
+        if p.type == rtde.DATA_PACKAGE:
+            if not p.payload or p.payload[0] not in self.inputs:
+                raise rtde.RtdeProtocolError(f"data package for recipe {p.payload[:1].hex() or '-'}: not set up")
+            values = self.inputs[p.payload[0]].decode(p.payload)
+            for n, v in values.items():
+                if isinstance(v, float) and not math.isfinite(v):
+                    raise rtde.RtdeProtocolError(f"{n} = {v}: not a number; package dropped")
+            r.inputs.update(values)
+            r.counters["input_packages"] += 1
+            return b""
+        raise rtde.RtdeProtocolError(f"a {p.letter!r} packet is not a client's")
+
+    def close(self) -> None:
+        for n, sid in list(self.robot.input_owner.items()):
+            if sid == self.sid:
+                del self.robot.input_owner[n]
+
+
+class UrRobot:
+    """The simulated UR controller with humanpt's program running (pure). ``events``,
+    ``counters``, ``targets`` (the sequences followed, with their targets) for tests."""
+
+    def __init__(self, config: SimRobotConfig, *, cycle_ms: float = 2.0, register_base: int = 24,
+                 watchdog_cycles: int = 25, max_lead_mm: float = 5.0, max_lead_deg: float = 2.0,
+                 time_constant_s: float = 0.02, controller_version: tuple[int, int, int, int] | None = None,
+                 trace_cycles: int = 0):
+        if cycle_ms not in (2.0, 8.0):
+            raise ValueError(f"a UR controller's cycle is 2 ms (e-Series) or 8 ms (CB3), got {cycle_ms}")
+        self.config = config
+        self.cycle_ms = cycle_ms
+        self.rate_hz = 1000.0 / cycle_ms
+        self.controller_version = controller_version or ((5, 11, 0, 0) if cycle_ms == 2.0 else (3, 15, 0, 0))
+        self.b = register_base
+        self.watchdog_cycles = watchdog_cycles
+        self.max_lead_mm = max_lead_mm
+        self.max_lead_rad = math.radians(max_lead_deg)
+        self.alpha = 1.0 - math.exp(-cycle_ms / 1000.0 / time_constant_s)
+        self.kin = config.kinematics()
+        self.q_rad = config.start_joints_rad()
+        self.max_joint_step_deg = config.max_joint_speed_deg_s * cycle_ms / 1000.0
+        self.cycles = 0
+        self.inputs: dict[str, object] = {}
+        self.input_owner: dict[str, int] = {}
+        self.sessions: dict[int, RtdeSession] = {}
+        self._sid = 0
+        # the program
+        self.program_running = True
+        self.safety_mode = rtde.SAFETY_MODE_NORMAL
+        self.heartbeat = 0
+        self.followed_seq = 0
+        self._last_seq = self._seq()
+        self._stale = 0
+        self.stopped = True  # until a new sequence near the arm
+        self.target: np.ndarray | None = None
+        self.events: list[SimEvent] = []
+        self.targets: list[tuple[int, np.ndarray]] = []
+        # (timestamp s, base_T_flange_mm) of the last ``trace_cycles`` cycles: the truth, for tests
+        self.trace: deque = deque(maxlen=trace_cycles)
+        self.counters = dict.fromkeys(("cycles", "packages", "input_packages", "malformed", "watchdog_stops",
+                                       "refused_resumes", "moved", "new_sequence"), 0)
+
+    @property
+    def base_T_flange_mm(self) -> np.ndarray:
+        return self.kin.forward(self.q_rad)
+
+    @property
+    def timestamp_s(self) -> float:
+        return self.cycles * self.cycle_ms / 1000.0
+
+    # -- clients ---------------------------------------------------------------------------------
+    def connect(self) -> RtdeSession:
+        self._sid += 1
+        s = self.sessions[self._sid] = RtdeSession(self, self._sid)
+        return s
+
+    def disconnect(self, session: RtdeSession) -> None:
+        session.close()
+        self.sessions.pop(session.sid, None)
+
+    # -- the program -----------------------------------------------------------------------------
+    def _seq(self) -> int:
+        return int(self.inputs.get(f"input_int_register_{self.b}", 0))
+
+    def _input_target(self) -> np.ndarray:
+        pose = [float(self.inputs.get(f"input_double_register_{self.b + i}", 0.0)) for i in range(6)]
+        return rtde.transform_from_ur_pose(pose)
+
+    def _near(self, target: np.ndarray) -> bool:
+        T = self.base_T_flange_mm
+        return (float(np.linalg.norm(target[:3, 3] - T[:3, 3])) <= self.max_lead_mm
+                and float(rotation_angle_rad(T[:3, :3].T @ target[:3, :3])) <= self.max_lead_rad)
+
+    def _program(self, t_ns: int) -> None:
+        seq = self._seq()
+        if seq != self._last_seq:
+            self._last_seq = seq
+            self._stale = 0
+            self.counters["new_sequence"] += 1  # (cycles answered in time: a new target this cycle)
+            target = self._input_target()
+            if self.stopped:
+                if self._near(target):
+                    self.stopped = False
+                    self.events.append(SimEvent(t_ns, "info", "following", f"following sequence {seq}"))
+                else:
+                    self.counters["refused_resumes"] += 1
+            if not self.stopped:
+                self.target = target
+                self.followed_seq = seq
+                self.targets.append((seq, target))
+        else:
+            self._stale += 1
+        if not self.stopped and self._stale >= self.watchdog_cycles:
+            self.stopped = True
+            self.target = None
+            self.counters["watchdog_stops"] += 1
+            self.events.append(SimEvent(t_ns, "error", "watchdog_stop",
+                                        f"no new target for {self.watchdog_cycles} cycles: stopl, the arm stays"))
+        self.heartbeat = self.heartbeat % 1_000_000_000 + 1
+        if not self.stopped and self.target is not None:
+            self._move(t_ns)
+
+    def _move(self, t_ns: int) -> None:
+        T = self.base_T_flange_mm
+        want = interpolate_transform(T, self.target, self.alpha)
+        delta = want @ invert_transform(T)
+        delta[:3, 3] = want[:3, 3] - T[:3, 3]  # (corrected_joints' base-frame step: about the flange origin)
+        if float(np.abs(delta[:3, 3]).max()) < 1e-9 and np.allclose(delta[:3, :3], np.eye(3), atol=1e-12):
+            return
+        try:
+            self.q_rad = corrected_joints(self.kin, T, delta, "world", self.q_rad, self.max_joint_step_deg)
+        except (UnreachableError, JointStepError) as e:
+            self.safety_mode = rtde.SAFETY_MODE_PROTECTIVE_STOP
+            self.program_running = False
+            self.stopped = True
+            self.events.append(SimEvent(t_ns, "error", "protective_stop", f"protective stop: the target {e}"))
+            return
+        self.counters["moved"] += 1
+
+    # -- the cycle ---------------------------------------------------------------------------------
+    def outputs(self) -> dict[str, object]:
+        v: dict[str, object] = {
+            "timestamp": self.timestamp_s,
+            "actual_TCP_pose": rtde.ur_pose_from_transform(self.base_T_flange_mm),
+            "target_TCP_pose": rtde.ur_pose_from_transform(self.target if self.target is not None
+                                                           else self.base_T_flange_mm),
+            "actual_q": tuple(float(q) for q in self.q_rad),
+            "target_q": tuple(float(q) for q in self.q_rad),
+            "robot_mode": rtde.ROBOT_MODE_RUNNING,
+            "safety_mode": self.safety_mode,
+            "safety_status": self.safety_mode,
+            "runtime_state": rtde.RUNTIME_PLAYING if self.program_running else rtde.RUNTIME_STOPPED,
+            "speed_scaling": 1.0,
+            "target_speed_fraction": 1.0,
+            f"output_int_register_{self.b}": self.heartbeat,
+            f"output_int_register_{self.b + 1}": self.followed_seq,
+        }
+        return v
+
+    def cycle(self, t_ns: int) -> dict[int, bytes]:
+        """A controller cycle at ``t_ns``: the program's cycle, then each started session's data
+        package (session id -> bytes)."""
+        self.cycles += 1
+        self.counters["cycles"] += 1
+        if self.program_running:
+            self._program(t_ns)
+        if self.trace.maxlen:
+            self.trace.append((self.timestamp_s, self.base_T_flange_mm))
+        out: dict[int, bytes] = {}
+        values = None
+        for sid, s in self.sessions.items():
+            if s.started and s.outputs is not None and self.cycles % s.every == 0:
+                if values is None:
+                    values = self.outputs()
+                vals = {n: values.get(n, _ZERO[t]) for n, t in zip(s.outputs.names, s.outputs.types, strict=True)}
+                out[sid] = s.outputs.encode(vals)
+                self.counters["packages"] += 1
+        return out
+
+    def stop_program(self, t_ns: int) -> None:
+        """The operator pressed Stop: runtime_state STOPPED, the arm stays."""
+        self.program_running = False
+        self.events.append(SimEvent(t_ns, "info", "program_stopped", "the program was stopped"))
+
+
+class RtdeServer:
+    """The simulated controller live: an RTDE server at ``bind`` ("host:port"; port 0: a free
+    one, :attr:`address`) and its cycle on a thread (``time.monotonic`` paced: each cycle at
+    start + k x cycle). Client packets are handled at once under the robot's lock."""
+
+    def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
+        from humanpt.robot_gateway.links.rsi.config import parse_address
+
+        self.robot = robot
+        host, port = parse_address(bind)
+        self._listen = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._listen.bind((host, port))
+        except OSError as e:
+            self._listen.close()
+            raise OSError(f"cannot bind TCP {bind}: {e.strerror or e}") from None
+        self._listen.listen(4)
+        self._listen.settimeout(0.2)
+        self.address: tuple[str, int] = self._listen.getsockname()
+        self.lock = threading.Lock()
+        self._stop = threading.Event()
+        self._conns: dict[int, socket.socket] = {}
+        self._threads: list[threading.Thread] = []
+
+    def start(self) -> RtdeServer:
+        for target, name in ((self._accept_loop, "rtde-accept"), (self._cycle_loop, "rtde-cycle")):
+            t = threading.Thread(target=target, name=name, daemon=True)
+            t.start()
+            self._threads.append(t)
+        return self
+
+    def _accept_loop(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._listen.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            with self.lock:
+                session = self.robot.connect()
+                self._conns[session.sid] = conn
+            t = threading.Thread(target=self._client_loop, args=(conn, session), name="rtde-client", daemon=True)
+            t.start()
+            self._threads.append(t)
+
+    def _client_loop(self, conn: socket.socket, session: RtdeSession) -> None:
+        conn.settimeout(0.2)
+        try:
+            while not self._stop.is_set():
+                try:
+                    data = conn.recv(65536)
+                except TimeoutError:
+                    continue
+                if not data:
+                    break
+                with self.lock:
+                    reply = session.feed(data, time.monotonic_ns())
+                    if reply:
+                        conn.sendall(reply)
+                if session.closed is not None:
+                    break
+        except OSError:
+            pass
+        finally:
+            with self.lock:
+                self.robot.disconnect(session)
+                self._conns.pop(session.sid, None)
+            conn.close()
+
+    def _cycle_loop(self) -> None:
+        period = self.robot.cycle_ms / 1000.0
+        t0 = time.monotonic()
+        k = 0
+        while not self._stop.is_set():
+            k += 1
+            delay = t0 + k * period - time.monotonic()
+            if delay > 0:
+                self._stop.wait(delay)
+            with self.lock:
+                out = self.robot.cycle(time.monotonic_ns())
+                for sid, data in out.items():
+                    conn = self._conns.get(sid)
+                    if conn is None:
+                        continue
+                    try:
+                        conn.sendall(data)
+                    except OSError:
+                        pass
+
+    def disconnect_all(self) -> None:
+        """Drop every client (a controller reboot's view from the network)."""
+        with self.lock:
+            for conn in self._conns.values():
+                try:
+                    conn.shutdown(socket.SHUT_RDWR)
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        self._stop.set()
+        self._listen.close()
+        self.disconnect_all()
+        for t in self._threads:
+            t.join(timeout=2.0)
