@@ -454,7 +454,7 @@ def robot_files(args) -> int:
     write = link_kind(gw.link).write_robot_files
     if write is None:
         raise ValueError(f"[robot_gateway] link = {gw.link!r}: humanpt writes no robot-side files for it "
-                         "(robot files are written for link = \"rsi\" (KUKA) and \"abb\" (ABB EGM))")
+                         "(robot files are written for link = \"rsi\" (KUKA), \"abb\" (ABB EGM) and \"ur\" (UR RTDE))")
     paths = write(gw, args.out, args.sensor_ip, args.overwrite)
     for p in paths:
         print(f"humanpt robot-files: {p}")
