@@ -12,7 +12,8 @@ def report(args) -> int:
 
     if args.list:
         for s in rp.SECTIONS.values():
-            print(f"{s.name:14s} {s.command}" + ("" if s.deterministic else "  (--benches; measured)"))
+            print(f"{s.name:14s} {s.command}" + ("" if s.deterministic else "  (--benches; measured)")
+                  + ("" if s.default or not s.deterministic else "  (--only; not by default: it takes long)"))
         return 0
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
     t0 = time.perf_counter()
