@@ -554,7 +554,8 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                        "markers, stamped with the commit, the machine and the date; the prose around them is "
                        "kept. --benches also measures humanpt bench on this machine. Takes tens of minutes on "
                        "a 2-core machine (--only for some sections).")
-    p.add_argument("--out", required=True, metavar="FILE", help="the page to rewrite in place (docs/results.md)")
+    p.add_argument("--out", metavar="FILE", help="the page to rewrite in place (docs/results.md); required but "
+                   "with --list")
     p.add_argument("--only", metavar="A,B", help="just these sections (--list names them)")
     p.add_argument("--benches", action="store_true", help="also the benches (measured on this machine)")
     p.add_argument("--list", action="store_true", help="list the sections and the commands they stand for")

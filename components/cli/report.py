@@ -15,6 +15,9 @@ def report(args) -> int:
             print(f"{s.name:14s} {s.command}" + ("" if s.deterministic else "  (--benches; measured)")
                   + ("" if s.default or not s.deterministic else "  (--only; not by default: it takes long)"))
         return 0
+    if not args.out:
+        print("humanpt report: --out FILE is required (the page to rewrite, e.g. docs/results.md)", file=sys.stderr)
+        return 2
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
     t0 = time.perf_counter()
 

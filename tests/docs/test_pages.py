@@ -134,8 +134,10 @@ def test_write_page_stamps_each_section_and_keeps_the_prose(tmp_path, monkeypatc
 
 def test_report_cli_lists_sections_and_names_a_bad_one(cli_main, capsys):
     main = cli_main
-    assert main(["report", "--out", str(RESULTS), "--list"]) == 0
+    assert main(["report", "--list"]) == 0
     listed = capsys.readouterr().out
     assert all(name in listed for name in rp.SECTIONS)
     assert main(["report", "--out", str(RESULTS), "--only", "nope"]) == 2
     assert "no section 'nope'" in capsys.readouterr().err
+    assert main(["report"]) == 2
+    assert "--out FILE is required" in capsys.readouterr().err
