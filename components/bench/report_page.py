@@ -169,15 +169,15 @@ def calibrate(say: Callable[[str], None]) -> str:
     with tempfile.TemporaryDirectory() as d:
         res = calibrate_then_teach("trapezium", World.named("realistic"), 0, run_dir=Path(d),
                                    progress=_once(progress))
-    rows = []
-    for s in res.stages:
+    lines = []
+    for s in res.stages:  # as `humanpt demo --calibrate` prints them, without the wall times
         if s.ok:
-            est = "; ".join(r.strip() for r in s.report if _summary_line(r))
-            rows.append([s.name, est, "; ".join(t.strip() for t in s.truth)])
+            lines += [f"[{s.name}]"] + [f"  {_untimed(r.strip())}" for r in s.report if _summary_line(r)] + \
+                     [f"  truth: {_untimed(t.strip())}" for t in s.truth]
         else:
-            rows.append([s.name, f"SKIPPED: {s.error}", ""])
-    out = ["Calibration (estimates; the twin's truth, which the tools never read):", "",
-           _md_table(["stage", "estimate", "the twin's truth"], [[_cell(c) for c in r] for r in rows]), ""]
+            lines.append(f"[{s.name}] SKIPPED: {s.error} (the rig keeps its previous {s.name} values)")
+    out = ["Calibration (estimates; against the twin's truth, which the tools never read):", "",
+           "```", *lines, "```", ""]
 
     def path_row(name: str, d: np.ndarray | None) -> list[str]:
         if d is None or not len(d):
@@ -216,6 +216,11 @@ def _summary_line(line: str) -> bool:
     prints it)."""
     s = line.strip()
     return bool(s) and not (s[0].isdigit() or s.startswith(("right-", "left-", "planned pose", "pose ", "view ")))
+
+
+def _untimed(line: str) -> str:
+    """A report line without what the machine's speed decides (wall seconds, ms per image)."""
+    return re.sub(r" \([\d.]+ s wall\)|, [\d.]+ ms/image", "", line)
 
 
 def _cell(text: str) -> str:
