@@ -15,8 +15,6 @@ import pytest
 
 from humanpt.bench import report_page as rp
 
-pytestmark = pytest.mark.twin
-
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results.md"
 NUMBER = re.compile(r"^-?\d+\.(\d+)$")
 
@@ -58,6 +56,7 @@ def test_drift_sees_a_changed_figure():
     assert drift(body, nudged) == []
 
 
+@pytest.mark.twin  # one lock-step run: 11.4 s of twin time, a few seconds of CPU
 def test_the_static_experiment_on_the_page_is_what_the_build_computes(tmp_path):
     page = RESULTS.read_text()
     copy = tmp_path / "results.md"
