@@ -552,6 +552,19 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    "udp_bind's host; required when that is 0.0.0.0 or loopback)")
     p.add_argument("--overwrite", action="store_true", help="replace files that exist")
 
+    p = sub.add_parser("report", help="regenerate the results page (docs/results.md): rerun its experiments",
+                       description="Rerun what the results page shows (the lock-step twin's experiments, demo "
+                       "--calibrate on seed 0, the hard cases, the error budget: deterministic) and write each "
+                       "table between its '<!-- BEGIN generated NAME -->' and '<!-- END generated NAME -->' "
+                       "markers, stamped with the commit, the machine and the date; the prose around them is "
+                       "kept. --benches also measures humanpt bench on this machine. Takes tens of minutes on "
+                       "a 2-core machine (--only for some sections).")
+    p.add_argument("--out", metavar="FILE", help="the page to rewrite in place (docs/results.md); required but "
+                   "with --list")
+    p.add_argument("--only", metavar="A,B", help="just these sections (--list names them)")
+    p.add_argument("--benches", action="store_true", help="also the benches (measured on this machine)")
+    p.add_argument("--list", action="store_true", help="list the sections and the commands they stand for")
+
     p = sub.add_parser("bench", help="benchmarks that print a table (not asserted)",
                        description="Without WHAT: one table of perception images/s, lock-step speed, "
                        "image-to-command latency and ALTER cycles on time in a live demo run, replay speed "
@@ -690,6 +703,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         from humanpt.cli.demo import demo
 
         return demo(args)
+    if args.verb == "report":
+        from humanpt.cli.report import report
+
+        return report(args)
     fn = {
         "router": commands.router, "up": commands.up, "topics": commands.topics_cmd, "echo": commands.echo,
         "param": commands.param, "replay": commands.replay, "config": commands.config,

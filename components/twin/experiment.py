@@ -28,12 +28,30 @@ from . import evaluate
 from .run import SystemConfig, run, scenario_duration_s
 from .system import link_cycle_ms
 
-__all__ = ["EXPERIMENTS", "STATIC_VECTORS", "ExperimentResult", "run_experiment", "against_known_path",
-           "ideal_path"]
+__all__ = ["EXPERIMENTS", "STATIC_VECTORS", "PAPER", "TABLE", "STATS", "KINDS", "ExperimentResult", "run_experiment",
+           "against_known_path", "ideal_path", "over_seeds"]
 
 EXPERIMENTS = ("static", "arc", "trapezium")
 # The static experiment records 106 vectors (paper, Section 6) at 10 cycles each.
 STATIC_VECTORS = 106
+
+# The paper's published Tables 1-3 (mm, deg); Table 2 and 3 have no SD row.
+PAPER = {
+    "static": {"ME": [1.13e-13, -4.3e-15, 2.44e-14, -6.1e-16, 1.0e-15, -8.8e-15],
+               "MAE": [0.0089, 0.0412, 0.0949, 0.0056, 0.0026, 0.0039],
+               "MaxE": [0.0369, 0.1403, 0.352, 0.2972, 0.1401, 0.2041],
+               "SD": [0.0116, 0.0508, 0.1170, 0.0290, 0.0137, 0.0199]},
+    "arc": {"ME": [0.0436, 0.1093, -0.294, 0.1795, -0.0472, -0.1662],
+            "MAE": [0.2466, 0.4843, 0.3048, 0.6212, 0.4581, 0.4313],
+            "MaxE": [1.1477, 1.7052, 1.0210, 1.8740, 1.7380, 0.8604]},
+    "trapezium": {"ME": [0.1376, -0.428, -4e-4, 0.0007, -7e-4, 0.0008],
+                  "MAE": [0.9949, 0.7873, 0.392, 0.822, 0.8333, 1.0736],
+                  "MaxE": [3.934, 3.8898, 1.344, 3.181, 2.588, 3.276]},
+}
+TABLE = {"static": 1, "arc": 2, "trapezium": 3}
+STATS = ("ME", "MAE", "MaxE", "SD")
+# Errors as the paper computed them ("paper") and against ground truth ("truth").
+KINDS = ("paper", "truth")
 
 
 def ideal_path(op: OperatorConfig, n: int = 4000) -> np.ndarray:
@@ -99,3 +117,18 @@ def run_experiment(name: str, method: str, seed: int = 0, robot: str = "puma", r
     else:
         err_paper = against_known_path(x, ideal_path(op))
     return ExperimentResult(x, err_paper, err_truth, which, res.wall_s, duration)
+
+
+def over_seeds(per_seed: list[ExperimentResult]) -> dict:
+    """One experiment's runs over seeds summarised as ``humanpt experiment --seeds N`` reports
+    them: {kind: {stat: (6,) median over the seeds}} for each of :data:`KINDS` and
+    :data:`STATS`, ``spread`` {kind: {stat: [min (6,), max (6,)]}}, ``n`` (vectors per seed),
+    ``which``, ``x`` (the first seed's path), ``wall_s``, ``twin_s`` (sums)."""
+    stats = {kind: [dict(evaluate.Stats.of(getattr(r, f"err_{kind}")).rows()) for r in per_seed] for kind in KINDS}
+    per = {kind: {stat: np.array([st[stat] for st in stats[kind]]) for stat in STATS} for kind in KINDS}
+    return {"x": per_seed[0].x, "which": per_seed[0].which,
+            "wall_s": sum(r.wall_s for r in per_seed), "twin_s": sum(r.twin_s for r in per_seed),
+            "n": [evaluate.Stats.of(r.err_paper).n for r in per_seed],
+            **{kind: {stat: np.median(a, axis=0) for stat, a in per[kind].items()} for kind in KINDS},
+            "spread": {kind: {stat: [a.min(axis=0).tolist(), a.max(axis=0).tolist()]
+                              for stat, a in per[kind].items()} for kind in KINDS}}
