@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -195,25 +196,35 @@ def _levels_kept(before: dict, after: dict) -> bool:
         lvl == logging.NOTSET for n, lvl in after.items() if n not in before)
 
 
-@pytest.fixture
-def cli_main(monkeypatch):
+@contextmanager
+def in_process_cli():
     """``humanpt.cli.main.main`` in this process, with the process left as it was: main
     sets the switch interval and configures logging for a CLI process; they are restored
-    afterwards, and the allocator tuning (which cannot be undone) is skipped."""
+    afterwards, and the allocator tuning (which cannot be undone) is skipped. For a fixture
+    of module scope (the autouse check below wraps each test, after such a fixture is set
+    up, so it cannot see what the fixture leaves changed)."""
     from humanpt.cli.main import main
     from humanpt.runtime import tuning
 
-    monkeypatch.setattr(tuning, "tune_allocator", lambda: False)
     root = logging.getLogger()
     interval, level, handlers = sys.getswitchinterval(), root.level, list(root.handlers)
-    try:
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(tuning, "tune_allocator", lambda: False)
+        try:
+            yield main
+        finally:
+            sys.setswitchinterval(interval)
+            root.setLevel(level)
+            for h in root.handlers:
+                if h not in handlers:
+                    root.removeHandler(h)
+
+
+@pytest.fixture
+def cli_main():
+    """:func:`in_process_cli` for one test."""
+    with in_process_cli() as main:
         yield main
-    finally:
-        sys.setswitchinterval(interval)
-        root.setLevel(level)
-        for h in root.handlers:
-            if h not in handlers:
-                root.removeHandler(h)
 
 
 # -- tiers -------------------------------------------------------------------------------------
