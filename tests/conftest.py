@@ -385,7 +385,8 @@ def pytest_terminal_summary(terminalreporter):
 # xdist's own reordering (most tests per file first) off, and the files are given longest
 # first (tests/durations.json: seconds per file, measured), so that the minute-long files do
 # not start last and keep one worker busy while the other waits. Files not listed keep their
-# order after the listed ones. ``--store-durations`` rewrites the file from the run.
+# order after the listed ones. ``--store-durations`` rewrites the file from the run (today's: the
+# last CI's figures for its slowest tests, the others from a run on this machine scaled to CI).
 DURATIONS = Path(__file__).with_name("durations.json")
 
 
