@@ -188,15 +188,13 @@ def test_the_robot_holds_through_partitions_and_the_loop_resumes_by_itself(tmp_p
             # few seconds, and a loaded machine starts later): a wait on the robot moving,
             # 20 of its states spanning more than 1 mm, bounded at 60 s.
             wait_for(lambda: _moved_mm(server_cfg) > 1.0, 60.0, "the robot moving before the cut", poll_s=0.1)
-            for seconds in (5.0, 15.0):
+            for seconds, recover_s in ((5.0, 8.0), (15.0, 14.0)):
                 cut = time.time_ns()
                 ip("-n", NS_S, "link", "set", VETH_S, "down")
                 time.sleep(seconds)  # the partition itself
                 ip("-n", NS_S, "link", "set", VETH_S, "up")
                 cuts.append((cut, time.time_ns()))
-                # Judged from the recordings afterwards; they need the resume in them: a wait on
-                # the robot moving again (bounded; how soon it resumed is asserted below).
-                wait_for(lambda: _moved_mm(server_cfg) > 1.0, 60.0, "the robot moving after the restore", poll_s=0.1)
+                time.sleep(recover_s)  # judged from the recordings afterwards
         finally:
             rc_c, rc_s = stop(client), stop(server)
     logs = f"server: {(tmp_path / 'server.log').read_text()[-3000:]}\nclient: {(tmp_path / 'client.log').read_text()[-3000:]}"
