@@ -10,6 +10,7 @@ import socket
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -195,25 +196,35 @@ def _levels_kept(before: dict, after: dict) -> bool:
         lvl == logging.NOTSET for n, lvl in after.items() if n not in before)
 
 
-@pytest.fixture
-def cli_main(monkeypatch):
+@contextmanager
+def in_process_cli():
     """``humanpt.cli.main.main`` in this process, with the process left as it was: main
     sets the switch interval and configures logging for a CLI process; they are restored
-    afterwards, and the allocator tuning (which cannot be undone) is skipped."""
+    afterwards, and the allocator tuning (which cannot be undone) is skipped. For a fixture
+    of module scope (the autouse check below wraps each test, after such a fixture is set
+    up, so it cannot see what the fixture leaves changed)."""
     from humanpt.cli.main import main
     from humanpt.runtime import tuning
 
-    monkeypatch.setattr(tuning, "tune_allocator", lambda: False)
     root = logging.getLogger()
     interval, level, handlers = sys.getswitchinterval(), root.level, list(root.handlers)
-    try:
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(tuning, "tune_allocator", lambda: False)
+        try:
+            yield main
+        finally:
+            sys.setswitchinterval(interval)
+            root.setLevel(level)
+            for h in root.handlers:
+                if h not in handlers:
+                    root.removeHandler(h)
+
+
+@pytest.fixture
+def cli_main():
+    """:func:`in_process_cli` for one test."""
+    with in_process_cli() as main:
         yield main
-    finally:
-        sys.setswitchinterval(interval)
-        root.setLevel(level)
-        for h in root.handlers:
-            if h not in handlers:
-                root.removeHandler(h)
 
 
 # -- tiers -------------------------------------------------------------------------------------
@@ -367,3 +378,53 @@ def pytest_terminal_summary(terminalreporter):
         terminalreporter.write_sep("-", "tests not marked live that started one (mark them: tests/conftest.py)")
         for nodeid, what in sorted(_UNMARKED_LIVE.items()):
             terminalreporter.write_line(f"{nodeid}: {', '.join(sorted(what))}")
+
+
+# -- the order files are handed to the test workers ----------------------------------------
+# With ``--dist loadfile`` a worker takes the next file when it runs short; pyproject turns
+# xdist's own reordering (most tests per file first) off, and the files are given longest
+# first (tests/durations.json: seconds per file, measured), so that the minute-long files do
+# not start last and keep one worker busy while the other waits. Files not listed keep their
+# order after the listed ones. ``--store-durations`` rewrites the file from the run (today's: the
+# last CI's figures for its slowest tests, the others from a run on this machine scaled to CI).
+DURATIONS = Path(__file__).with_name("durations.json")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--store-durations", action="store_true",
+                     help="write each test file's seconds (setup, call, teardown) to tests/durations.json")
+
+
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+class _LongestFilesFirst:
+    """A plugin of its own: this file's other modifyitems hook (the tiers) must run before
+    pytest's ``-m`` selection, this one after a plugin that shuffles (pytest-randomly): it
+    only moves whole files forward."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, items):
+        try:
+            seconds = json.loads(DURATIONS.read_text())
+        except (OSError, ValueError):
+            return
+        items.sort(key=lambda item: -seconds.get(_file_of(item.nodeid), 0.0))  # stable: a file's own order kept
+
+
+def pytest_configure(config):
+    config.pluginmanager.register(_LongestFilesFirst(), "humanpt-longest-files-first")
+
+
+_SECONDS: dict[str, float] = {}
+
+
+def pytest_runtest_logreport(report):
+    _SECONDS[_file_of(report.nodeid)] = _SECONDS.get(_file_of(report.nodeid), 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    if session.config.getoption("store_durations") and not hasattr(session.config, "workerinput") and _SECONDS:
+        DURATIONS.write_text(json.dumps({f: round(s, 1) for f, s in sorted(_SECONDS.items(), key=lambda kv: -kv[1])},
+                                        indent=0) + "\n")

@@ -10,7 +10,7 @@ from tests.conftest import run_cli
 
 
 def _results(out, *args):
-    r = run_cli("experiment", "static", "--method", "weighted", "--vectors", "12", "--no-plots",
+    r = run_cli("experiment", "static", "--method", "weighted", "--vectors", "4", "--no-plots",
                 "--out", str(out), *args, timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     return json.loads((out / "results.json").read_text())
@@ -18,7 +18,7 @@ def _results(out, *args):
 
 def test_seeds_report_the_median_of_single_seed_runs(tmp_path):
     both = _results(tmp_path / "both", "--seed", "3", "--seeds", "2")
-    assert both["seeds"] == [3, 4] and both["twin"]["weighted"]["n"] == [12, 12]
+    assert both["seeds"] == [3, 4] and both["twin"]["weighted"]["n"] == [4, 4]
     singles = [_results(tmp_path / f"s{s}", "--seed", str(s))["twin"]["weighted"] for s in (3, 4)]
     for key in ("paper_SD", "truth_MAE"):
         np.testing.assert_allclose(both["twin"]["weighted"][key],

@@ -9,12 +9,12 @@ import math
 import numpy as np
 import pytest
 
-from humanpt.cli.main import main
 from humanpt.controller.config import ControllerConfig
 from humanpt.geometry.psvs import virtual_rotation_from_mirror_tilt_deg
 from humanpt.geometry.rig import Rig
 from humanpt.twin.budget import CSV_COLUMNS, plan, run_world
 from humanpt.twin.worlds import ERROR_SOURCES, World
+from tests.conftest import in_process_cli
 
 pytestmark = pytest.mark.twin  # runs the lock-step twin for seconds
 
@@ -24,8 +24,9 @@ ONLY = ("focal", "mirror_tilt", "kinematics")
 @pytest.fixture(scope="module")
 def budget_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("budget")
-    rc = main(["experiment", "budget", "--scenario", "static", "--robot", "standin", "--only", ",".join(ONLY),
-               "--out", str(out)])
+    with in_process_cli() as main:  # the switch interval and logging left as they were
+        rc = main(["experiment", "budget", "--scenario", "static", "--robot", "standin", "--only", ",".join(ONLY),
+                   "--out", str(out)])
     assert rc == 0
     return out
 
@@ -104,8 +105,8 @@ def test_plan_keeps_the_sources_order_skips_other_robots_and_names_unknown_ones(
         plan("puma", ["focal", "nosuch"])
 
 
-def test_cli_refuses_an_unknown_source_before_running(tmp_path, capsys):
+def test_cli_refuses_an_unknown_source_before_running(tmp_path, capsys, cli_main):
     out = tmp_path / "b"
-    assert main(["experiment", "budget", "--only", "nosuch", "--out", str(out)]) != 0
+    assert cli_main(["experiment", "budget", "--only", "nosuch", "--out", str(out)]) != 0
     assert "nosuch" in capsys.readouterr().err
     assert not out.exists()
