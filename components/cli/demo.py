@@ -198,8 +198,8 @@ def demo(args) -> int:
         link_cycle_ms(args.link, args.cycle_ms)
     except ValueError as e:
         raise SystemExit(f"humanpt demo: {e}") from None
-    if args.lockstep and args.link == "rsi" and args.robot != "puma":
-        raise SystemExit("humanpt demo: --link rsi drives the simulated Puma (--robot puma)")
+    if args.lockstep and args.link in ("rsi", "abb") and args.robot != "puma":
+        raise SystemExit(f"humanpt demo: --link {args.link} drives the simulated Puma (--robot puma)")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

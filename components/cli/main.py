@@ -121,12 +121,14 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi"], default="puma",
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in; "
                    "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi)")
-    p.add_argument("--link", choices=["alter", "rsi"], default="alter",
-                   help="the robot link: the Puma's serial ALTER line at 28 ms (default) or a KUKA "
-                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md)")
+    p.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
+                   help="the robot link: the Puma's serial ALTER line at 28 ms (default), a KUKA "
+                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md) or ABB EGM "
+                   "over UDP (the simulated EGM controller, 4 ms; components/robot_gateway/links/abb/README.md)")
     p.add_argument("--cycle-ms", type=float, choices=[4.0, 12.0], metavar="4|12",
-                   help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); the gateway, the simulated "
-                   "controller, the controller and the pose filter's prediction all take it")
+                   help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); with --link abb: EGM's, 4 "
+                   "(default) or 12; the gateway, the simulated controller, the controller and the pose "
+                   "filter's prediction all take it")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
     p.add_argument("--secure", action="store_true",
