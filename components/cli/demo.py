@@ -163,7 +163,7 @@ def demo(args) -> int:
     from humanpt.twin.demo import demo_config, header_lines, scenario_label, write_world
     from humanpt.twin.run import SECTIONS, OverrideError
 
-    if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
+    if args.robot in ("alter", "rsi", "abb"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
             raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")
         args.link, args.robot = args.robot, "puma"

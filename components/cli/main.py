@@ -118,9 +118,9 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--duration", type=_duration, help="seconds of twin time (default: the scenario's length + 3.5 s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
     p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
-    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi"], default="puma",
+    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi", "abb"], default="puma",
                    help="lock-step robot: the simulated Puma behind the ALTER link (default) or a stand-in; "
-                   "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi)")
+                   "alter, rsi or abb: the simulated Puma over that link (--robot rsi = --link rsi)")
     p.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
                    help="the robot link: the Puma's serial ALTER line at 28 ms (default), a KUKA "
                    "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md) or ABB EGM "
