@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from humanpt.controller.config import ControllerConfig
+from humanpt.robot_gateway.links.abb.runstats import egm_cycles
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.egm import EgmSimRobotCore
 from humanpt.twin import evaluate
@@ -58,13 +59,21 @@ def test_the_arc_over_egm_is_recorded_as_accurately_as_over_alter():
     assert np.all(np.abs(radius - 246.0) < 1.0), radius
 
 
-def test_two_lockstep_runs_over_egm_are_identical():
+def test_two_lockstep_runs_over_egm_are_identical(tmp_path):
     digests = []
-    for _ in range(2):
-        w = build_system("arc", seed=1, robot="puma", abb_cycle_ms=4.0, controller=ControllerConfig(record_on_start=True))
+    for k in range(2):
+        w = build_system("arc", seed=1, robot="puma", abb_cycle_ms=4.0, controller=ControllerConfig(record_on_start=True),
+                         run_dir=tmp_path if k == 0 else None)
         w.run_for(3.0)
         digests.append(w.digest())
+        counters = dict(next(c for c in w.lockstep.cores if c.name == "sim_robot").counters)
         w.close()
+        if k == 0:  # the count `humanpt demo --link abb` prints, redone from the recording, is the robot's
+            stats = egm_cycles(tmp_path)
+            assert stats is not None and stats.cycle_ms == 4.0
+            assert (stats.cycles - stats.late, stats.late, stats.waiting) == \
+                (counters["on_time"], counters["late"], counters["waiting"])
+            assert stats.cycles >= 3000 / 4 - 2
     assert digests[0] == digests[1]
     # (a different seed gives another run: the digest sees the outputs)
     w = build_system("arc", seed=2, robot="puma", abb_cycle_ms=4.0, controller=ControllerConfig(record_on_start=True))
