@@ -250,6 +250,8 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
         def settled() -> bool:
             if rsi_stopped_since(ctx, t_kill) is not None or _events(ctx, t_kill, "sim_robot", ("fault",)):
                 return True
+            if ctx.link == "abb":  # EGM goes on to its last target until its communication timeout
+                return False
             tr = _truth_after(ctx, wall_kill)
             # still: the last half second of truth within 0.01 mm
             recent = [p for t, p in tr if t >= tr[-1][0] - 500_000_000] if tr else []

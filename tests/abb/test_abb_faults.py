@@ -21,6 +21,7 @@ def test_kill_and_junk_rows_over_abb(tmp_path):
     p = run_cli("bench", "faults", "--link", "abb", "--only", "kill,junk,inject", "--run-dir", str(run_dir),
                 timeout=560)
     rows = table(p.stdout)
+    assert len(rows) == 3, p.stdout + p.stderr
     kill = rows["gateway killed mid-motion (40 mm/s)"]
     junk = rows["junk UDP flood from another port (3 s)"]
     inject = rows["<Rob> injection from another UDP port (80)"]
