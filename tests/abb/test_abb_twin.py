@@ -5,11 +5,16 @@ UDP paths in virtual time. The arc is recorded as accurately as over ALTER (the 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from humanpt.controller.config import ControllerConfig
 from humanpt.robot_gateway.links.abb.runstats import egm_cycles
+from humanpt.runtime.recording import read
+from humanpt.runtime.replay import build_core, replay
+from humanpt.runtime.snapshot import dumps
 from humanpt.sim_robot.core import SimRobotCore
 from humanpt.sim_robot.egm import EgmSimRobotCore
 from humanpt.twin import evaluate
@@ -30,11 +35,11 @@ def _rms(a: np.ndarray) -> float:
 
 
 @pytest.mark.timeout(600)
-def test_the_arc_over_egm_is_recorded_as_accurately_as_over_alter():
+def test_the_arc_over_egm_is_recorded_as_accurately_as_over_alter(tmp_path):
     cfg = SystemConfig.for_scenario("arc", seed=0)
     start = cfg.operator.start_delay_s
     alter = run(cfg, record_from_s=start)
-    abb = run(cfg, record_from_s=start, abb_cycle_ms=4.0)
+    abb = run(cfg, record_from_s=start, abb_cycle_ms=4.0, run_dir=tmp_path)
     robot = next(c for c in abb.world.lockstep.cores if c.name == "sim_robot")
     assert isinstance(robot, EgmSimRobotCore)
     # It ran at EGM's cycle and every cycle was answered in time (virtual time: the gateway
@@ -57,6 +62,17 @@ def test_the_arc_over_egm_is_recorded_as_accurately_as_over_alter():
     _, xg, _ = abb.path_points()
     radius = np.linalg.norm(xg[:, :2] - [147.5, 1378.5], axis=1)
     assert np.all(np.abs(radius - 246.0) < 1.0), radius
+    # The EGM cores replay from their recordings, from the last snapshot (each thaws what it froze)
+    for name in ("sim_robot", "robot_gateway"):
+        f = tmp_path / f"{name}.mcap"
+        rec = read(f)
+        assert len(rec.snapshots) >= 1
+        res = replay(f, last_s=2.0)
+        assert res.match and res.compared > 400 and "from the snapshot" in res.report(), res.report()
+        core = build_core(rec)
+        frozen = json.loads(rec.snapshots[-1].data)["core"]
+        core.thaw(frozen)
+        assert dumps(core.freeze()) == dumps(frozen)
 
 
 def test_two_lockstep_runs_over_egm_are_identical(tmp_path):
