@@ -744,13 +744,14 @@ def operator_reset(ctx: Ctx) -> bool:
     :func:`restart_rsi`)."""
     ok = _console(ctx, "robot_gateway", "reset_fault", {"operator": OPERATOR},
                   ("fault_cleared", "no_fault", "bad_console_command")) is not None
-    if ctx.link == "rsi":
+    if ctx.link != "alter":  # (RSI, ABB EGM: a stopped one is restarted)
         return ok
     return _console(ctx, "sim_robot", "alter_on", {"operator": OPERATOR}, ("alter_on", "bad_console_command")) \
         is not None and ok
 
 
-RSI_STOPPED = ("rsi_stopped", "correction_limit", "fault")  # sim_robot's codes for an RSI that stopped
+# sim_robot's codes for an RSI (or an ABB EGM) that stopped
+RSI_STOPPED = ("rsi_stopped", "correction_limit", "fault", "egm_stopped")
 
 
 def rsi_stopped_since(ctx: Ctx, t0: float) -> pb.Event | None:
@@ -807,8 +808,8 @@ def recover(ctx: Ctx, t0: float) -> str:
     """Bring the loop back as the operator would (restart a stopped RSI, reset a latched
     fault), for the next row; what was done, for the liveness column."""
     done = []
-    if ctx.link == "rsi" and rsi_stopped_since(ctx, t0) is not None and restart_rsi(ctx):
-        done.append("RSI restarted at the robot")
+    if ctx.link != "alter" and rsi_stopped_since(ctx, t0) is not None and restart_rsi(ctx):
+        done.append(f"{'EGM' if ctx.link == 'abb' else 'RSI'} restarted at the robot")
     t_reset = time.monotonic()
     if operator_reset(ctx):
         done.append("the operator's reset_fault" + (" + ALTER on" if ctx.link == "alter" else ""))
@@ -878,8 +879,8 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     from humanpt.twin.live import LiveControl, run_live
     from humanpt.twin.run import SystemConfig
 
-    if link not in ("alter", "rsi"):
-        raise ValueError(f"unknown robot link {link!r}: alter or rsi")
+    if link not in ("alter", "rsi", "abb"):
+        raise ValueError(f"unknown robot link {link!r}: alter, rsi or abb")
     every = all_attacks()
     unknown = set(only or ()) - {a.key for a in every}
     if unknown:
@@ -988,6 +989,10 @@ def gateway_config(file_cfg, link: str):
         from humanpt.robot_gateway.links.rsi.config import RsiConfig
 
         return file_cfg.component("robot_gateway", RsiConfig)
+    if link == "abb":
+        from humanpt.robot_gateway.links.abb.config import AbbConfig
+
+        return file_cfg.component("robot_gateway", AbbConfig)
     from humanpt.robot_gateway.links.alter.config import AlterConfig
 
     return file_cfg.component("robot_gateway", AlterConfig)

@@ -3,17 +3,19 @@
 Each reproduces the attack as it was done, against the live twin (real processes, the real
 UDP link over loopback or the Puma's serial line behind a pty), and reports the figures:
 
-- ``kill`` (item 1; ALTER and RSI): the robot plays a straight line at 40 mm/s (the
+- ``kill`` (item 1; ALTER, RSI and ABB EGM): the robot plays a straight line at 40 mm/s (the
   controller's ``playback``, as ``humanpt path play`` sends it); the gateway is killed
   (SIGKILL) mid-motion; how far the flange moved after the kill, against the bound of
   :data:`KILL_BOUND_CYCLES` cycles at the gateway's per-cycle limit (the correction in flight
   and the one the robot had; a robot repeating its last correction with HOLDON moved
   50.1 mm in 99 cycles). The gateway is started again, RSI restarted at the robot if it
-  stopped.
+  stopped. Over ABB EGM the robot goes on to the last target (at most ``max_lead_mm`` ahead
+  of its fed-back pose: the bound is that more) and EGM stops after its communication
+  timeout (``egm_stopped``); EGM is restarted at the robot.
 - ``inject`` (item 5; RSI): 80 ``<Rob>`` with the robot's next IPOC from another UDP port of
   the robot's host, one a robot cycle: answers the attacker got (must be 0), and the robot's
   late replies meanwhile.
-- ``junk`` (item 6; RSI): 3 s of junk datagrams from another port, as fast as this process
+- ``junk`` (item 6; RSI and ABB EGM): 3 s of junk datagrams from another port, as fast as this process
   sends them: RSI must still run afterwards (no ``rsi_stopped``; robot states go on).
 - ``ipoc`` (item 7; RSI): one ``<Rob>`` with IPOC + 500 cycles (under the 1000-cycle jump
   limit) from another port: no fault latched. (Sent from another port: a datagram from the
@@ -231,6 +233,8 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
             "; ".join(e.text for e in _events(ctx, t0, "controller", ("bad_command",))) or "no answer")
         return
     bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm
+    if ctx.link == "abb":  # EGM goes on to the last target: at most the lead ahead of the fed-back pose
+        bound += ctx.gw.max_lead_mm
     try:
         # Killed at the playback's speed; on a loaded machine the robot may lag its carrot
         # and go slower: then killed while it moves, at the speed it has (in the note).
@@ -246,6 +250,8 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
         def settled() -> bool:
             if rsi_stopped_since(ctx, t_kill) is not None or _events(ctx, t_kill, "sim_robot", ("fault",)):
                 return True
+            if ctx.link == "abb":  # EGM goes on to its last target until its communication timeout
+                return False
             tr = _truth_after(ctx, wall_kill)
             # still: the last half second of truth within 0.01 mm
             recent = [p for t, p in tr if t >= tr[-1][0] - 500_000_000] if tr else []
@@ -258,18 +264,20 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
         row.max_step_mm, row.limit_mm = moved, bound
         row.held = moved <= bound
         row.expected = bool(row.held)
-        seen = _first(ctx, t_kill, ("late_reply", "rsi_stopped", "fault", "robot_missed", "link_down"))
+        seen = _first(ctx, t_kill, ("late_reply", "rsi_stopped", "egm_stopped", "fault", "robot_missed", "link_down"))
         row.reaction_ms = _ms(seen and seen[0], t_kill)
         cycles = (tr[-1][0] - wall_kill) / (1e6 * ctx.gw.cycle_period_ms) if tr else 0.0
+        lead = f" + the lead {ctx.gw.max_lead_mm:g} mm" if ctx.link == "abb" else ""
         row.note = (f"killed at {speed:.1f} mm/s; the robot moved {moved:.2f} mm after the kill (bound "
-                    f"{KILL_BOUND_CYCLES} cycles x {ctx.gw.max_step_mm:.2f} mm = {bound:.2f} mm) in {cycles:.0f} cycles"
+                    f"{KILL_BOUND_CYCLES} cycles x {ctx.gw.max_step_mm:.2f} mm{lead} = {bound:.2f} mm) in "
+                    f"{cycles:.0f} cycles"
                     + (f"; sim_robot: {stop.code}" if stop else ""))
     finally:
         _console(ctx, "controller", "stop", {}, ("command",))
         if ctx.control.pid("robot_gateway") is None:
             ctx.control.start("robot_gateway")
-        if ctx.link == "rsi" and rsi_stopped_since(ctx, t0) is not None:
-            restart_rsi(ctx)
+        if ctx.link != "alter" and rsi_stopped_since(ctx, t0) is not None:
+            restart_rsi(ctx)  # (RSI or EGM restarted at the robot)
         ctx.mon.wait_event(t0, ("link_up",), "robot_gateway", timeout_s=60.0)
         _console(ctx, "controller", "track", {}, ("command",))
 
@@ -319,7 +327,7 @@ def attack_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
     late = _late_replies(ctx, t0)
     downs = len(_events(ctx, t0, "robot_gateway", ("link_down",)))
     row.expected = stopped is None and going
-    row.note = (f"{n / (t1 - t0):.0f} datagrams/s for {t1 - t0:.1f} s; RSI "
+    row.note = (f"{n / (t1 - t0):.0f} datagrams/s for {t1 - t0:.1f} s; {'EGM' if ctx.link == 'abb' else 'RSI'} "
                 + ("still running" if row.expected else f"STOPPED ({stopped.code if stopped else 'no robot state'})")
                 + f"; the robot: {late} late replies; {att.answers} answers to the attacker")
     row.liveness = f"{downs} link_down" if downs else ""
@@ -391,10 +399,11 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
 
 
 LINK_ATTACKS: tuple[Attack, ...] = (
-    Attack("kill", "gateway killed mid-motion (40 mm/s)", attack_gateway_killed, keeps_loop=False),
+    Attack("kill", "gateway killed mid-motion (40 mm/s)", attack_gateway_killed, keeps_loop=False,
+           links=("alter", "rsi", "abb")),
     Attack("inject", "<Rob> injection from another UDP port (80)", attack_inject, keeps_loop=False, links=("rsi",)),
     Attack("junk", f"junk UDP flood from another port ({JUNK_S:g} s)", attack_junk, keeps_loop=False,
-           links=("rsi",)),
+           links=("rsi", "abb")),
     Attack("ipoc", f"spoofed <Rob>, IPOC +{IPOC_JUMP_CYCLES} cycles", attack_ipoc_jump, keeps_loop=False,
            links=("rsi",)),
     Attack("bigseam", f"path play of a {SEAM_POINTS}-point seam", attack_big_seam, keeps_loop=False),

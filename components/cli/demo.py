@@ -199,7 +199,7 @@ def demo(args) -> int:
         refuse_for_calibrate(args)
     # --robot: the lock-step robot; the job (--calibrate) teaches and plays on the stand-in.
     args.robot = getattr(args, "robot", None) or ("standin" if calibrate else "puma")
-    if args.robot in ("alter", "rsi"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
+    if args.robot in ("alter", "rsi", "abb"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
             raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")
         args.link, args.robot = args.robot, "puma"
@@ -233,8 +233,8 @@ def demo(args) -> int:
         link_cycle_ms(args.link, args.cycle_ms)
     except ValueError as e:
         raise SystemExit(f"humanpt demo: {e}") from None
-    if args.lockstep and args.link == "rsi" and args.robot != "puma":
-        raise SystemExit("humanpt demo: --link rsi drives the simulated Puma (--robot puma)")
+    if args.lockstep and args.link in ("rsi", "abb") and args.robot != "puma":
+        raise SystemExit(f"humanpt demo: --link {args.link} drives the simulated Puma (--robot puma)")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

@@ -118,16 +118,18 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--duration", type=_duration, help="seconds of twin time (default: the scenario's length + 3.5 s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
     p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
-    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi"],
+    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi", "abb"],
                    help="lock-step robot: the simulated Puma behind the ALTER link (default; with --calibrate "
                    "the stand-in) or a stand-in; "
-                   "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi)")
-    p.add_argument("--link", choices=["alter", "rsi"], default="alter",
-                   help="the robot link: the Puma's serial ALTER line at 28 ms (default) or a KUKA "
-                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md)")
+                   "alter, rsi or abb: the simulated Puma over that link (--robot rsi = --link rsi)")
+    p.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
+                   help="the robot link: the Puma's serial ALTER line at 28 ms (default), a KUKA "
+                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md) or ABB EGM "
+                   "over UDP (the simulated EGM controller, 4 ms; components/robot_gateway/links/abb/README.md)")
     p.add_argument("--cycle-ms", type=float, choices=[4.0, 12.0], metavar="4|12",
-                   help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); the gateway, the simulated "
-                   "controller, the controller and the pose filter's prediction all take it")
+                   help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); with --link abb: EGM's, 4 "
+                   "(default) or 12; the gateway, the simulated controller, the controller and the pose "
+                   "filter's prediction all take it")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
     p.add_argument("--secure", action="store_true",
@@ -629,8 +631,9 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
                    "console, reset; the robot link's (issue 29): kill, bigseam, and with --link rsi inject, junk, "
                    "ipoc; with --secure also unauthorised, uncertified, token, aclflood, partition; default all)")
-    q.add_argument("--link", choices=["alter", "rsi"], default="alter",
-                   help="the twin's robot link: the Puma's serial ALTER line (default) or RSI over UDP (12 ms); "
+    q.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
+                   help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms) or "
+                   "ABB EGM over UDP (4 ms: kill and junk); "
                    "the rows that do not apply to it are skipped, with the reason")
     q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
                    "cores of a small machine); with --secure also issue 19's but the floods and the partition")

@@ -62,7 +62,9 @@ class SimRobotConfig:
     # The link to the gateway: "alter" (the Puma's serial line, this core) or "rsi" (a KUKA
     # RSI-style controller over UDP: humanpt.sim_robot.rsi; the link's cycle 4 or 12 ms;
     # alter_mode world = RKorr in the base frame, tool = in the flange frame).
-    protocol: Literal["alter", "rsi"] = "alter"
+    # "egm": an ABB controller running EGM position guidance over UDP (humanpt.sim_robot.egm;
+    # the link's cycle 4 ms or a multiple; absolute targets in the base frame).
+    protocol: Literal["alter", "rsi", "egm"] = "alter"
     # RSI: where the gateway listens (the robot's IP_NUMBER:PORT for its <Rob> datagrams).
     rsi_gateway: str = "127.0.0.1:49152"
     # RSI: this many late (or missing, wrong-IPOC, malformed) answers in a row stop RSI (the
@@ -74,6 +76,13 @@ class SimRobotConfig:
     # RSI correction limits per cycle (the robot's RSI POSCORR limits): beyond -> RSI stops.
     rsi_max_correction_mm: Annotated[float, Range(0.001, 100, "mm")] = 5.0
     rsi_max_correction_deg: Annotated[float, Range(0.001, 45, "deg")] = 2.0
+    # EGM: where the gateway listens (the controller's UDPUC RemoteAddress:RemotePortNumber).
+    egm_gateway: str = "127.0.0.1:6510"
+    # EGM: no EgmSensor for this long stops EGM (EGMRunPose \CommTimeout), counted from the
+    # sensor's first answer (the RAPID program is started once humanpt is up).
+    egm_comm_timeout_s: Annotated[float, Range(0.004, 60, "s")] = 1.0
+    # EGM: the position controller's first-order time constant (humanpt's assumption).
+    egm_time_constant_ms: Annotated[float, Range(0.1, 1000, "ms")] = 20.0
 
     @classmethod
     def cell_defaults(cls, sections: Mapping[str, Mapping[str, Any]], source: str = "config") -> dict[str, Any]:
@@ -115,6 +124,11 @@ class SimRobotConfig:
             raise ValueError(f"lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}")
         if self.protocol == "rsi" and self.cycle_ms not in (4.0, 12.0):
             raise ValueError(f"the link's cycle must be 4 or 12 ms over RSI, got {self.cycle_ms:g} ms")
+        if self.protocol == "egm" and abs(self.cycle_ms / 4.0 - round(self.cycle_ms / 4.0)) > 1e-9:
+            raise ValueError(f"the link's cycle must be a multiple of 4 ms over EGM, got {self.cycle_ms:g} ms")
+        for name in ("egm_comm_timeout_s", "egm_time_constant_ms"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if not self.rsi_late_limit >= 1:
             raise ValueError(f"rsi_late_limit must be >= 1, got {self.rsi_late_limit}")
         for name in ("rsi_max_correction_mm", "rsi_max_correction_deg"):

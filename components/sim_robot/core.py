@@ -119,11 +119,16 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     @classmethod
     def create(cls, config: SimRobotConfig, rig=None) -> Core:
         """The simulated controller of ``config.protocol``: this core over ALTER,
-        ``humanpt.sim_robot.rsi.RsiSimRobotCore`` over RSI."""
+        ``humanpt.sim_robot.rsi.RsiSimRobotCore`` over RSI, ``humanpt.sim_robot.egm.EgmSimRobotCore``
+        over EGM."""
         if cls is SimRobotCore and config.protocol == "rsi":
             from humanpt.sim_robot.rsi import RsiSimRobotCore  # (rsi imports this module)
 
             return RsiSimRobotCore.create(config, rig)
+        if cls is SimRobotCore and config.protocol == "egm":
+            from humanpt.sim_robot.egm import EgmSimRobotCore  # (egm imports this module)
+
+            return EgmSimRobotCore.create(config, rig)
         return super().create(config, rig)
 
     def __init__(self, config: SimRobotConfig):

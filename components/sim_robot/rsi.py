@@ -336,10 +336,14 @@ class RsiSimRobotCore(Core):
 
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
-        self.robot = RsiRobot(config)
+        self.robot = self.make_robot(config)
         self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
         self.true_arm = None if config.ideal_arm else config.true_arm()
         self._events_sent = 0
+
+    def make_robot(self, config: SimRobotConfig) -> RsiRobot:
+        """The simulated controller this core runs (EgmSimRobotCore: the EGM one)."""
+        return RsiRobot(config)
 
     @property
     def counters(self) -> dict[str, int]:

@@ -128,9 +128,14 @@ class PtyAdapter:
 def adapters(config: SimRobotConfig) -> list:
     """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``; over
     RSI (``protocol = "rsi"``) a UDP socket on an ephemeral loopback port that sends each
-    ``<Rob>`` to ``rsi_gateway`` and takes answers only from there."""
+    ``<Rob>`` to ``rsi_gateway`` and takes answers only from there; over EGM the same to
+    ``egm_gateway``."""
     if config.protocol == "rsi":
         from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
         return [UdpAdapter("127.0.0.1:0", robot=config.rsi_gateway, peer=config.rsi_gateway)]
+    if config.protocol == "egm":  # the same socket, to and from the EGM gateway
+        from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
+
+        return [UdpAdapter("127.0.0.1:0", robot=config.egm_gateway, peer=config.egm_gateway)]
     return [PtyAdapter(config.pty_link)]

@@ -36,7 +36,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
 from .run import SystemConfig
-from .system import puma_cores, rsi_link
+from .system import abb_link, puma_cores, rsi_link
 from .world import start_flange_for
 
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
@@ -78,15 +78,24 @@ def robot_table(robot) -> dict:
 
 def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
     """The cycle period (ms) of ``link`` ("alter": 28; "rsi": ``cycle_ms``, 4 or 12, default
-    12); ValueError, one line, for a cycle the link does not have."""
+    12; "abb": ``cycle_ms``, 4 or a multiple, default 4); ValueError, one line, for a cycle
+    the link does not have."""
+    from humanpt.robot_gateway.links.abb.config import EGM_BASE_CYCLE_MS
     from humanpt.robot_gateway.links.rsi.config import RSI_CYCLES_MS
 
     if link == "alter":
         if cycle_ms not in (None, 28.0):
             raise ValueError(f"--cycle-ms {cycle_ms:g}: the ALTER link runs the Puma's 28 ms cycle (RSI: 4 or 12)")
         return 28.0
+    if link == "abb":
+        cycle_ms = EGM_BASE_CYCLE_MS if cycle_ms is None else float(cycle_ms)
+        n = cycle_ms / EGM_BASE_CYCLE_MS
+        if not (n >= 1 and abs(n - round(n)) < 1e-9 and cycle_ms <= 1000):
+            raise ValueError(f"--cycle-ms {cycle_ms:g}: ABB EGM runs at {EGM_BASE_CYCLE_MS:g} ms or a multiple "
+                             "(EGMActPose \\SampleRate)")
+        return cycle_ms
     if link != "rsi":
-        raise ValueError(f"no link {link!r} (alter, rsi)")
+        raise ValueError(f"no link {link!r} (alter, rsi, abb)")
     cycle_ms = 12.0 if cycle_ms is None else float(cycle_ms)
     if cycle_ms not in RSI_CYCLES_MS:
         raise ValueError(f"--cycle-ms {cycle_ms:g}: RSI runs at {' or '.join(f'{c:g}' for c in RSI_CYCLES_MS)} ms")
@@ -95,12 +104,13 @@ def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
 
 def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) -> None:
     """Put the robot link in the run's ``sections`` (in place), from this one place: ALTER
-    (as written, 28 ms) or RSI (``cycle_ms`` 4 or 12, default 12) over UDP on loopback.
+    (as written, 28 ms), RSI (``cycle_ms`` 4 or 12, default 12) or ABB EGM (``cycle_ms`` 4 or a
+    multiple, default 4) over UDP on loopback.
     The cycle period goes to the gateway's section only: the cell's one cycle, which the
     launcher gives the simulated controller and the robot states carry to the controller,
     the pose filter and viz (runtime/cycle.py); the gateway's safety fields (speeds, envelope,
     stale commands, world_T_base) carry over from the ALTER gateway's, the rest are RSI's
-    defaults (humanpt.robot_gateway.links.rsi.config)."""
+    defaults (humanpt.robot_gateway.links.rsi.config, .abb.config)."""
     cycle_ms = link_cycle_ms(link, cycle_ms)
     if link == "alter":
         return
@@ -110,9 +120,10 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
         udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
-    robot, gateway = rsi_link(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
-                              cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo",
-                                           section="robot_gateway"), cycle_ms, udp)
+    make = abb_link if link == "abb" else rsi_link
+    robot, gateway = make(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
+                          cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo",
+                                       section="robot_gateway"), cycle_ms, udp)
     sections["sim_robot"], sections["robot_gateway"] = robot_table(robot), to_table(gateway)
 
 

@@ -81,6 +81,19 @@ def rsi_link(robot, gateway, cycle_ms: float, udp_bind: str = "127.0.0.1:49152")
                                 rsi_gateway=udp_bind), rsi_gateway)
 
 
+def abb_link(robot, gateway, cycle_ms: float = 4.0, udp_bind: str = "127.0.0.1:6510"):
+    """(sim_robot config, AbbConfig) over ABB EGM at ``cycle_ms`` (4 or a multiple) from the
+    ALTER pair of :func:`puma_cores`, as :func:`rsi_link`: the gateway keeps ``SAFETY_KEYS``,
+    the rest EGM's defaults; the steps in the frame the robot applies corrections in."""
+    from humanpt.robot_gateway.links.abb.config import AbbConfig
+
+    abb_gateway = AbbConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
+                            udp_bind=udp_bind, udp_robot=udp_bind.rpartition(":")[0],
+                            correction_frame="tool" if robot.alter_mode == "tool" else "base")
+    return (dataclasses.replace(robot, protocol="egm", cycle_period_ns=abb_gateway.cycle_period_ns,
+                                egm_gateway=udp_bind), abb_gateway)
+
+
 def link_cycle_ms(rsi_cycle_ms: float | None = None) -> float:
     """The twin cell's one cycle (ms): its robot link's (runtime/cycle.py), RSI's
     ``rsi_cycle_ms`` or else ALTER's (the paper's 28 ms, the gateway's default link)."""
@@ -106,7 +119,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  digest: bool = True, rig: Rig | None = None,
                  robot_overrides: dict[str, dict] | None = None,
                  mount_world_T_flange_mm: np.ndarray | None = None,
-                 rsi_cycle_ms: float | None = None) -> TwinWorld:
+                 rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
@@ -119,7 +132,10 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     ``digest=False``: no output hash (faster; for runs nobody compares).  ``rsi_cycle_ms``
     (4 or 12; ``puma`` only): the Puma behind the RSI link instead (UDP paths with 0.1 ms
     delivery); the controller and the pose filter's prediction follow the link's cycle,
-    which every robot state carries (runtime/cycle.py)."""
+    which every robot state carries (runtime/cycle.py).  ``abb_cycle_ms`` (4 or a multiple;
+    ``puma`` only): the Puma behind the ABB EGM link, the same way."""
+    if rsi_cycle_ms is not None and abb_cycle_ms is not None:
+        raise ValueError("one robot link: rsi_cycle_ms or abb_cycle_ms, not both")
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -150,6 +166,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             if rsi_cycle_ms is not None:
                 # The controller and the pose filter take the cycle from the robot states.
                 rcfg, gcfg = rsi_link(rcfg, gcfg, float(rsi_cycle_ms))
+            elif abb_cycle_ms is not None:
+                rcfg, gcfg = abb_link(rcfg, gcfg, float(abb_cycle_ms))
             robot_cores = [SimRobotCore.create(rcfg), GatewayCore.create(gcfg)]
             wire = True
         elif robot == "standin":
@@ -164,7 +182,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
         robot_cores[1].config.world_T_base_mm_deg) if wire else (0.0,) * 6), rig))
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
-    if wire and rsi_cycle_ms is not None:
+    if wire and (rsi_cycle_ms is not None or abb_cycle_ms is not None):
         world.lockstep.connect_udp("sim_robot", "robot_gateway")
     elif wire:
         world.lockstep.connect_serial("robot_gateway", "sim_robot", baud=robot_cores[1].config.baud)
