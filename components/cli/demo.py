@@ -105,7 +105,12 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
         kinds = [sg.kind for sg in res.fitted.segments]
         lines.append(row(f"taught seam, fitted: {kinds.count('line')} lines, {kinds.count('arc')} arcs"
                          + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm, "fitted"))
+    if getattr(res, "refused", ""):
+        lines.append(f"  played back: REFUSED before any motion: {res.refused}")
     lines.append(row("played back (the torch's true path)", res.played_mm, "played"))
+    if getattr(res, "max_joint_step_deg", None) is not None:
+        lines.append(f"  {'  largest joint step of a cycle (the Puma)':44s} {res.max_joint_step_deg:.2f} deg "
+                     f"(limit {res.joint_step_limit_deg:.2f} deg per cycle)")
     if "played_fitted" in getattr(res, "compared", {}):  # the playback alone
         lines.append(row("  ... against the fitted seam it was given", res.played_mm, "played_fitted"))
     if res.taught_truth is not None:
@@ -131,6 +136,9 @@ def evaluate_format(stats) -> str:
     return evaluate.format_stats("taught path against the truth at its stamps", stats)
 
 
+ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in"}
+
+
 def run_calibrate(args, run_dir: Path) -> int:
     from humanpt.runtime.rigfile import load_rig, write_rig
     from humanpt.twin.teach import calibrate_then_teach
@@ -138,11 +146,13 @@ def run_calibrate(args, run_dir: Path) -> int:
 
     world = World.named(args.world)
     rig = load_rig(args.rig) if args.rig else None
-    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}; "
-          f"recording the teach-and-play run to {run_dir}/", flush=True)
+    robot = getattr(args, "robot", "puma")
+    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
+          f"{ROBOT_NAMES.get(robot, robot)}; recording the teach-and-play run to {run_dir}/", flush=True)
     bar = Bars("s")
     try:
-        res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar)
+        res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
+                                   robot=robot)
     finally:
         bar.close()
     write_rig(run_dir / "rig.toml", res.rig, "the rig humanpt demo --calibrate ended with", overwrite=True)
@@ -173,6 +183,10 @@ def demo(args) -> int:
     args.scenario = args.scenario or ("trapezium" if calibrate else "arc")
     args.world = getattr(args, "world", None) or ("realistic" if calibrate else "ideal")
     if calibrate:
+        # The job runs on the robot asked for (issue 33.2): the simulated Puma behind the
+        # gateway and its ALTER link (default), or the stand-in; never another one.
+        if args.link != "alter":
+            raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
         run_dir = Path(args.run_dir) if args.run_dir else Path("runs") / f"{run_stamp()}-calibrate-teach"
         run_dir.mkdir(parents=True, exist_ok=True)
         return run_calibrate(args, run_dir)

@@ -30,7 +30,7 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.pathfile import smooth
-from humanpt.controller.playback import seam_command
+from humanpt.controller.playback import PlaybackError, RobotArm, seam_command
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, transform_from_x
 from humanpt.geometry.units import to_mm
@@ -42,7 +42,7 @@ from humanpt.seam.fit import Seam, distance_to_seam, fit_path, sample_segment
 
 from . import evaluate
 from .run import SystemConfig
-from .system import build_system, nominal_rig, operator_config
+from .system import build_system, nominal_rig, operator_config, puma_mount_joints
 from .world import start_flange_for
 from .worlds import World
 
@@ -92,6 +92,13 @@ class TeachResult:
     # (humanpt.seam.compare.compare_points: RMS, max, coverage, the largest stretch left);
     # the played torch from the end of its approach to the path's start.
     compared: dict[str, Comparison] = field(default_factory=dict)
+    # On the Puma (issue 33): the largest joint step of one cycle while playing back (deg,
+    # from the robot states' joints), the gateway's per-cycle limit it must stay within (the
+    # sim_robot faults beyond max_joint_speed_deg_s x cycle), and why a seam was refused
+    # before anything moved ("" when it was played).
+    max_joint_step_deg: float | None = None
+    joint_step_limit_deg: float | None = None
+    refused: str = ""
 
 
 def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
@@ -112,6 +119,22 @@ def _seam(op) -> np.ndarray:
     traj = Trajectory(op.design_scenario())
     n = max(200, int(traj.duration_s * 40))
     return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
+
+
+def _arm(w) -> RobotArm | None:
+    """The simulated Puma of the twin ``w`` as a playback plans on it (its kinematics, its
+    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits),
+    None on the stand-in (no kinematics)."""
+    from humanpt.sim_robot.core import SimRobotCore
+
+    robot = next((c for c in w.lockstep.cores if isinstance(c, SimRobotCore)), None)
+    if robot is None:
+        return None
+    gw = next((c for c in w.lockstep.cores if c.name == "robot_gateway"), None)
+    limits = {} if gw is None else {"max_speed_mm_s": float(gw.config.max_speed_mm_s),
+                                    "max_angular_deg_s": float(gw.config.max_angular_speed_deg_s)}
+    return RobotArm(robot.kin, robot.world_T_base.copy(), np.asarray(robot.q_setpoint_rad, dtype=float).copy(),
+                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits)
 
 
 def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
@@ -165,10 +188,20 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     mount = view.copy()
     mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
         seam.mean(axis=0) - first[:3, 3])
+    mount_joints = None
+    if robot == "puma":
+        # ... in the joint pose there that keeps its wrist farthest from its singularity
+        # along both jobs: watching the seam (the view carried along it) and welding it.
+        traj = Trajectory(cfg.operator.design_scenario())
+        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
+        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+        watch = np.array([p @ invert_transform(first) @ view for p in along])
+        welds = np.array([p @ tool_T_flange for p in along])
+        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
-                     mount_world_T_flange_mm=mount if robot == "puma" else None)
+                     mount_world_T_flange_mm=mount if robot == "puma" else None, mount_joints_deg=mount_joints)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
@@ -203,18 +236,28 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
         fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
         fitted_mm = distance_to_seam(design, fitted_p)
+        arm = _arm(w)
+        refused = ""
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
-            # as the console does: re-timed for the tool, at most the controller's points
-            args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x)
+            # as the console does: re-timed for the tool, at most the controller's points;
+            # on the Puma planned on the arm (a joint-space approach, the seam slowed where a
+            # joint would be too fast), or refused before anything moves
+            try:
+                args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x, arm=arm)
+            except PlaybackError as e:
+                refused, args = str(e), None
         else:
             args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
-        w.lockstep.inject(w.now_ns, "controller", "console/command",
-                          pb.Command(header=header(w.now_ns), component="controller", verb="playback",
-                                     args_json=json.dumps(args)))
+        n_states = len(w.outputs("robot_gateway/robot_state"))
+        if args is not None:
+            w.lockstep.inject(w.now_ns, "controller", "console/command",
+                              pb.Command(header=header(w.now_ns), component="controller", verb="playback",
+                                         args_json=json.dumps(args)))
         length_mm = float(np.sum(np.linalg.norm(np.diff(seam, axis=0), axis=1)))
-        play_s = 15.0 + length_mm / playback_speed_mm_s
+        times = args.get("times_s") if args else None
+        play_s = 15.0 + (times[-1] if times else length_mm / playback_speed_mm_s)
         t_play0 = w.now_ns
-        done = False
+        done = args is None
         seen = len(w.lockstep.outputs)
         while not done and w.now_ns - t_play0 < play_s * 1e9:
             w.run_for(1.0)
@@ -240,11 +283,19 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
             compared["played_fitted"] = compare_points(fitted, tips, approach_mm=None, window="played torch")
         warnings = [f"{e.source}: {e.code}" for e in (pb.Event.FromString(o.data) for o in w.outputs()
                                                       if o.topic.endswith("/events")) if e.severity >= 3]
-        if not done:
+        if refused:
+            warnings.append(f"playback refused: {refused}")
+        elif not done:
             warnings.append(f"controller: playback not done after {play_s:.0f} s")
+        step_deg = limit_deg = None
+        if arm is not None:
+            joints = np.array([list(pb.RobotState.FromString(o.data).joints_rad)
+                               for o in w.outputs("robot_gateway/robot_state")[n_states:]]).reshape(-1, 6)
+            step_deg = float(np.degrees(np.abs(np.diff(joints, axis=0)).max())) if len(joints) > 1 else 0.0
+            limit_deg = arm.max_joint_speed_deg_s * arm.cycle_s
     finally:
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
-                       compared)
+                       compared, step_deg, limit_deg, refused)
