@@ -343,7 +343,8 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
 
     * the seam's first pose is reached on the in-limits branch whose wrist is on the same
       side of its singularity as now (q5 keeps its sign: the approach never crosses
-      q5 = 0), the closest in joint space; along the seam the arm's joints are those its
+      q5 = 0), in the same arm and elbow configuration when there is one, the closest in
+      joint space; along the seam the arm's joints are those its
       controller will take (the closest branch, cycle by cycle: ``geometry.puma.follow``);
     * the seam stays in Cartesian space; where a joint would turn faster than
       :data:`PLAYBACK_LIMIT_SHARE` of its limit, the timing is stretched there (gradually,
@@ -372,9 +373,14 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
     # The same side of the wrist singularity as now first (the approach then never crosses
     # it), each side the closest first.
 
-    def order(sol) -> tuple[bool, float]:
+    # The arm and elbow the arm is in now (a joint-space approach to another crosses the
+    # shoulder or elbow singularity on the way).
+    now_arm = next((s.config[:2] for s in kin.inverse_all(kin.forward(q_now), q_now)
+                    if s.within_limits and np.allclose(s.q_rad, q_now, atol=1e-6)), None)
+
+    def order(sol) -> tuple[bool, bool, float]:
         crosses = float(wrist_sin(sol.q_rad)) * s_now < 0 and abs(s_now) > WRIST_SINGULAR_SIN
-        return crosses, float(np.linalg.norm(sol.q_rad - q_now))
+        return crosses, sol.config[:2] != now_arm, float(np.linalg.norm(sol.q_rad - q_now))
 
     sols.sort(key=order)
     dt = np.diff(t)
@@ -412,6 +418,26 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
     raise PlaybackError("cannot be played on this arm at this mounting: " + "; ".join(reasons))
 
 
+# How far a thinned approach (planned in joint space, through free space) may pass from its
+# samples (mm, and deg): the controller's carrot goes straight between the kept ones.
+APPROACH_TOLERANCE_MM = 0.5
+
+
+def thin_within(points_mm_deg: np.ndarray, times_s: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The fewest samples :func:`thin` keeps within ``tolerance`` (every 2nd, 4th, ...
+    sample while it holds)."""
+    x, t = np.asarray(points_mm_deg, dtype=float).reshape(-1, 6), np.asarray(times_s, dtype=float).reshape(-1)
+    best = (x, t)
+    k = 2
+    while len(x) > 2 and (len(x) - 1) // k >= 1:
+        try:
+            best = thin(x, t, max(2, (len(x) - 1) // k + 1), tolerance)
+        except PlaybackError:
+            break
+        k *= 2
+    return best
+
+
 def seam_command(seam, speed_mm_s: float, flange_T_tool_x, max_points: int = MAX_PLAYBACK_POINTS,
                  arm: RobotArm | None = None) -> dict:
     """The ``playback`` command's arguments for a seam (:class:`humanpt.seam.fit.Seam`):
@@ -429,9 +455,14 @@ def seam_command(seam, speed_mm_s: float, flange_T_tool_x, max_points: int = MAX
     cfg = RetimeConfig(speed_mm_s=speed_mm_s, flange_T_tool_x=tuple(float(v) for v in flange_T_tool_x),
                        limit_share=PLAYBACK_LIMIT_SHARE)
     timed = retime(seam, cfg)
-    xs, ts = timed.x, timed.t_s
-    if arm is not None:
-        plan = plan_on_arm(xs, ts, transform_from_x(np.asarray(flange_T_tool_x, dtype=float)), arm)
-        xs, ts = plan.x, plan.t_s
-    x, t = thin(xs, ts, max_points)
+    if arm is None:
+        x, t = thin(timed.x, timed.t_s, max_points)
+    else:
+        plan = plan_on_arm(timed.x, timed.t_s, transform_from_x(np.asarray(flange_T_tool_x, dtype=float)), arm)
+        # The approach (free space, away from every singularity) within APPROACH_TOLERANCE_MM,
+        # the seam within THIN_TOLERANCE_MM in what is left of the points.
+        k = plan.approach
+        xa, ta = thin_within(plan.x[:k + 1], plan.t_s[:k + 1], APPROACH_TOLERANCE_MM)
+        xs, ts = thin(plan.x[k:], plan.t_s[k:], max_points - (len(xa) - 1))
+        x, t = np.vstack([xa[:-1], xs]), np.r_[ta[:-1], ts]
     return {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}

@@ -31,8 +31,9 @@ from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.pathfile import smooth
 from humanpt.controller.playback import PlaybackError, RobotArm, seam_command
+from humanpt.geometry.puma import follow
 from humanpt.geometry.rig import Rig
-from humanpt.geometry.transforms import invert_transform, transform_from_x
+from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
 from humanpt.geometry.units import to_mm
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
@@ -99,6 +100,10 @@ class TeachResult:
     max_joint_step_deg: float | None = None
     joint_step_limit_deg: float | None = None
     refused: str = ""
+    # The played torch's true poses (M, 6) mm/deg every cycle from the path's start, and the
+    # taught path's (N, 6) (the tip's, else G's): Figure 9b-d.
+    played_x: np.ndarray | None = None
+    taught_x: np.ndarray | None = None
 
 
 def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
@@ -248,7 +253,6 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                 refused, args = str(e), None
         else:
             args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
-        n_states = len(w.outputs("robot_gateway/robot_state"))
         if args is not None:
             w.lockstep.inject(w.now_ns, "controller", "console/command",
                               pb.Command(header=header(w.now_ns), component="controller", verb="playback",
@@ -267,12 +271,14 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
             done = any(o.topic == "controller/events" and pb.Event.FromString(o.data).code == "playback_done"
                        for o in new)
         truths = w.truths(truth_topic)[n_before:]
-        tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
+        tools = np.array([r["world_T_flange"] @ tool_mm for _, r in truths]).reshape(-1, 4, 4)
+        tips = tools[:, :3, 3]
         # from the first time the tool reaches the path's start (after the approach)
         first = np.array([fitted.segments[0].start_mm if play == "seam" else transform_from_x(taught[0])[:3, 3]])
         # the approach ends within 0.2 mm of the start (the controller's criterion): count from there
         near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 0.25)[0]
         tips = tips[near[0]:] if len(near) else tips[:0]
+        played_x = x_from_transform(tools[near[0]:]) if len(near) else np.zeros((0, 6))
         played_mm = distance_to_seam(design, tips) if len(tips) else np.zeros(0)
         compared = {k: c for k, c in (("taught", _compare(design, taught_p, "taught points")),
                                       ("smoothed", _compare(design, smoothed_p, "smoothed points")),
@@ -288,14 +294,17 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         elif not done:
             warnings.append(f"controller: playback not done after {play_s:.0f} s")
         step_deg = limit_deg = None
-        if arm is not None:
-            joints = np.array([list(pb.RobotState.FromString(o.data).joints_rad)
-                               for o in w.outputs("robot_gateway/robot_state")[n_states:]]).reshape(-1, 6)
-            step_deg = float(np.degrees(np.abs(np.diff(joints, axis=0)).max())) if len(joints) > 1 else 0.0
+        if arm is not None and len(truths) > 1:
+            # The arm's joints each cycle of the playback: the world's flange (sim_robot/truth,
+            # every cycle) through the robot's kinematics, the closest branch from its joints
+            # at the start (the robot publishes no joints).
+            flanges = np.array([r["world_T_flange"] for _, r in truths])
+            joints = follow(arm.kinematics, invert_transform(arm.world_T_base_mm) @ flanges, arm.joints_rad)
+            step_deg = float(np.degrees(np.abs(np.diff(joints, axis=0)).max()))
             limit_deg = arm.max_joint_speed_deg_s * arm.cycle_s
     finally:
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
-                       compared, step_deg, limit_deg, refused)
+                       compared, step_deg, limit_deg, refused, played_x, np.asarray(taught, dtype=float).reshape(-1, 6))

@@ -40,15 +40,16 @@ def _world_x(x, world_T_base):
 @pytest.mark.parametrize("world_T_base_x", [(0.0, 0, 0, 0, 0, 0), (1500.0, -300, 2000, 30, 0, 180)])
 def test_the_approach_is_in_joint_space_and_within_every_limit(world_T_base_x):
     """From the home pose (q5 = +25 deg) to a seam whose closest branch is on the other side
-    of the wrist singularity (q5 = -30 deg): the plan takes the branch on the same side
-    (q5 > 0 all the way), every joint step of a cycle within 6.3 deg, the flange within
+    of the wrist singularity (q4 = 100, q5 = -30 deg): the plan takes the flipped wrist on
+    the same side (q4 = -80, q5 = +30: q5 > 0 all the way), every joint step of a cycle within 6.3 deg, the flange within
     90 mm/s, and it ends on the seam's first pose; floor and ceiling mountings alike."""
     world_T_base = transform_from_x(np.array(world_T_base_x))
-    q_seam = HOME + np.radians([40.0, 10, -20, 60, -55, 30])  # q5 = 25 - 55 = -30 deg
+    q_seam = HOME + np.radians([20.0, 5, -10, 100, -55, 30])  # q5 = 25 - 55 = -30 deg; its flip +30
     x = _world_x(_between(q_seam, q_seam + np.radians([10.0, 0, 0, 0, 0, 0]), 100), world_T_base)
     plan = plan_on_arm(x, np.arange(100) * DT, TOOL, RobotArm(KIN, world_T_base, HOME))
     q = plan.joints_rad
     assert np.all(q[:, 4] > math.radians(2.0)), np.degrees(q[:, 4].min())  # never across q5 = 0
+    np.testing.assert_allclose(np.degrees(q[plan.approach, 3:5]), [-80.0, 30.0], atol=1e-6)
     assert plan.max_joint_speed_deg_s * DT <= STEP_LIMIT_DEG + 1e-9
     flange = np.array([world_T_base @ KIN.forward(qi) for qi in q])[:, :3, 3]
     v = np.linalg.norm(np.diff(flange, axis=0), axis=1) / np.diff(plan.t_s)
@@ -61,23 +62,28 @@ def test_the_approach_is_in_joint_space_and_within_every_limit(world_T_base_x):
 
 
 def test_a_seam_near_the_wrist_singularity_is_slowed_where_a_joint_would_be_too_fast():
-    """q5 from 20 deg down to 3 deg and back over 50 cycles: joint 4 would turn faster than
-    its share near q5 = 3 deg; the plan stretches the timing there (same poses, later) and
-    every joint step stays within 6.3 deg a cycle."""
-    qa = HOME.copy()
-    qb = HOME + np.radians([0.0, 0, 0, 0, -22, 0])
-    qb[3] += math.radians(0.0)
-    # a path that makes the wrist sweep about the singularity: rotate about the forearm near q5 = 3 deg
-    qc = qb + np.radians([0.0, 0, 0, 120, 0, -120])
-    x = np.vstack([_between(qa, qb, 40), _between(qb, qc, 30)[1:], _between(qc, qa, 40)[1:]])
-    t = np.arange(len(x)) * DT
-    base_T_flange = transform_from_x(x) @ np.linalg.inv(TOOL)
-    raw = follow(KIN, base_T_flange, HOME)
-    assert np.degrees(np.abs(np.diff(raw, axis=0)).max()) > STEP_LIMIT_DEG  # as timed, too fast
+    """Near the wrist singularity a small motion of the flange turns joints 4 and 6 a lot:
+    a seam (the poses of a joint path: q5 from 25 down to 4 deg and back, joints 4 and 6
+    turning 80 deg in 15 cycles at the bottom, up to 8 deg a cycle) timed one pose a
+    cycle is too fast for the 6.3 deg; the plan stretches the timing there (the same poses,
+    later) and every joint step stays within it."""
+    n = 100
+    s = np.linspace(0.0, 1.0, n)
+    u = np.clip((np.arange(n) - 40) / 15.0, 0.0, 1.0)
+    turn = 80.0 * (3 * u**2 - 2 * u**3)  # smoothstep: 1.5 x the mean rate at its middle (joint 6 to -260 deg, in limits)
+    q = np.tile(HOME, (n, 1))
+    q[:, 4] = np.radians(25.0 - 21.0 * np.sin(np.pi * s))
+    q[:, 3] += np.radians(turn)
+    q[:, 5] -= np.radians(turn)
+    x = np.array([_tool_x(qi) for qi in q])
+    t = np.arange(n) * DT
+    assert np.degrees(np.abs(np.diff(q, axis=0)).max()) > STEP_LIMIT_DEG  # as timed, too fast
     plan = plan_on_arm(x, t, TOOL, RobotArm(KIN, np.eye(4), HOME))
-    assert plan.slowdown > 1.0
+    assert plan.slowdown == pytest.approx(1.5 * 80.0 / 15 / STEP_LIMIT_DEG, rel=0.01)  # 8 deg a cycle over 6.3
     assert plan.max_joint_speed_deg_s * DT <= STEP_LIMIT_DEG * (1 + 1e-9)
     np.testing.assert_allclose(plan.x[plan.approach:], x)
+    np.testing.assert_allclose(plan.joints_rad[plan.approach:], q, atol=1e-6)  # the arm's joints as planned
+    assert plan.min_wrist_deg == pytest.approx(4.0, abs=0.05)
 
 
 def test_a_seam_through_the_wrist_singularity_is_refused_with_the_reason():
