@@ -160,22 +160,25 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
 
 
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
-                         stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
+                         stages: tuple[str, ...] | None = None, rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
                          robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
-    the nominal one). ``progress(stage, done, total)`` is called as each stage goes.
-    ``robot`` teaches and plays back: ``standin`` (default) or ``puma``. (The simulated
-    Puma's wrist meets its singularity on the way from watching the seam, 700 mm off, to
-    welding it at every mounting tried: playing back on it needs a joint-space approach,
-    not the controller's straight line.)"""
+    the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
+    done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
+    ``standin`` (default) or ``puma``: the simulated Puma behind the gateway and its ALTER
+    line, mounted in the joint pose that keeps its wrist farthest from its singularity
+    while it watches and welds the seam (:func:`humanpt.twin.system.puma_mount_joints`),
+    the seam planned on it (:func:`humanpt.controller.playback.plan_on_arm`: a joint-space
+    approach, the seam slowed where a joint would be too fast) or refused before any
+    motion (``TeachResult.refused``)."""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
-    for name in stages:
+    for name in tuple(STAGES) if stages is None else stages:
         rig, res = _run_stage(name, world, rig, seed,
                               (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot)
         results.append(res)
