@@ -37,7 +37,7 @@ from humanpt.geometry.transforms import invert_transform, transform_from_x, x_fr
 from humanpt.geometry.units import to_mm
 from humanpt.operator.scenario import Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import header
+from humanpt.schemas.convert import from_pose, header
 from humanpt.seam.compare import Comparison, compare_points, polyline_seam
 from humanpt.seam.fit import Seam, distance_to_seam, fit_path, sample_segment
 
@@ -234,6 +234,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         tool_mm = to_mm(ctl.flange_T_tool)
         truth_topic = "sim_robot/truth"  # the stand-in publishes its truth there too
         n_before = len(w.outputs(truth_topic))
+        n_states = len(w.outputs("robot_gateway/robot_state"))
         # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so
         # that the hand's tremor is not played back.
         points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
@@ -278,8 +279,15 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         tips = tools[:, :3, 3]
         # from the first time the tool reaches the path's start (after the approach)
         first = np.array([fitted.segments[0].start_mm if play == "seam" else transform_from_x(taught[0])[:3, 3]])
-        # the approach ends within 0.2 mm of the start (the controller's criterion): count from there
-        near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 0.25)[0]
+        # the approach ends within 0.2 mm of the start (the controller's criterion): count from
+        # there, as the robot reports its flange (an arm with kinematic errors puts the true
+        # torch ~1 mm away from where it believes it is: that is what is measured, after)
+        states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")[n_states:]]
+        believed = np.array([(to_mm(from_pose(st.world_T_flange)) @ tool_mm)[:3, 3] for st in states]).reshape(-1, 3)
+        at = np.nonzero(np.linalg.norm(believed - first, axis=1) < 0.25)[0]
+        stamps_t = np.array([st for st, _ in truths], dtype=np.int64)
+        near = (np.nonzero(stamps_t >= states[at[0]].header.stamp_ns)[0] if len(at)
+                else np.zeros(0, dtype=np.int64))
         tips = tips[near[0]:] if len(near) else tips[:0]
         played_x = x_from_transform(tools[near[0]:]) if len(near) else np.zeros((0, 6))
         played_mm = distance_to_seam(design, tips) if len(tips) else np.zeros(0)
