@@ -20,6 +20,8 @@ def _switch_interval():
     sys.setswitchinterval(before)
 
 
+@pytest.mark.twin  # (main runs the lock-step twin: the conftest cannot see it by name)
+@pytest.mark.timeout(900)  # bounds a hang only: ~100 s alone, several times that on a loaded machine
 def test_the_job_runs_on_the_puma_by_default(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(teach, "STAGES", {})  # no calibration stage: teach and play back only
     assert main(["demo", "--calibrate", "--world", "ideal", "--run-dir", str(tmp_path)]) == 0

@@ -85,6 +85,7 @@ def test_a_seam_with_arcs_is_played_back_as_accurately_as_it_was_taught():
     assert not [w for w in res.warnings if "playback not done" in w]
 
 
+@pytest.mark.timeout(900)  # bounds a hang only: ~100 s alone
 def test_the_trapezium_is_played_back_on_the_puma(tmp_path):
     """Issue 33.1: lock-step teach-and-play of the trapezium on the simulated Puma (sim_robot
     behind the gateway and its ALTER line): no controller fault (it used to end "needs a
