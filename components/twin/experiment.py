@@ -144,6 +144,11 @@ def run_playback(scenario: str = "trapezium", seed: int = 0, world: str = "ideal
                           res.seconds)
 
 
+def _unwrapped_deg(angles_deg: np.ndarray) -> np.ndarray:
+    """(N, 3) angles (deg) without the 360 deg jumps between samples."""
+    return np.degrees(np.unwrap(np.radians(np.asarray(angles_deg, dtype=float)), axis=0))
+
+
 def playback_report(r: PlaybackResult) -> str:
     """The run's statistics, one line each."""
     lines = [f"{r.scenario} taught on the twin and played back on {r.robot}: {len(r.taught_x)} taught points, "
@@ -158,9 +163,10 @@ def playback_report(r: PlaybackResult) -> str:
             lines.append(f"  {name:40s} RMS {c.rms_mm:.3f} mm, mean {c.mean_mm:.3f}, max {c.max_mm:.3f}, "
                          f"covered {100 * c.covered:.1f} %")
     if len(r.played_x):
-        sd = r.played_x[:, 3:].std(axis=0)
-        lines.append("  played torch angles: psi/theta/phi mean " + " / ".join(
-            f"{v:.2f}" for v in r.played_x[:, 3:].mean(axis=0)) + " deg, sd " + " / ".join(f"{v:.2f}" for v in sd))
+        angles = _unwrapped_deg(r.played_x[:, 3:])  # (phi near +-180 deg is one angle, not two)
+        mean = (angles.mean(axis=0) + 180.0) % 360.0 - 180.0
+        lines.append("  played torch angles: psi/theta/phi mean " + " / ".join(f"{v:.2f}" for v in mean)
+                     + " deg, sd " + " / ".join(f"{v:.2f}" for v in angles.std(axis=0)))
     if r.max_joint_step_deg is not None:
         lines.append(f"  largest joint step of a cycle {r.max_joint_step_deg:.2f} deg "
                      f"(limit {r.joint_step_limit_deg:.2f})")
@@ -192,7 +198,7 @@ def plot_playback(r: PlaybackResult, path: Path, title: str = "") -> Path:
             a.set_aspect("equal", adjustable="datalim")
     for k, name in enumerate(("psi", "theta", "phi")):
         if len(r.played_x):
-            ax[2].plot(np.degrees(np.unwrap(np.radians(r.played_x[:, 3 + k]))), lw=0.8, label=name)
+            ax[2].plot(_unwrapped_deg(r.played_x[:, 3:])[:, k], lw=0.8, label=name)
     ax[2].set_xlabel("sample (cycle)")
     ax[2].set_ylabel("deg")
     ax[2].set_title("(d) played torch's angles")

@@ -104,3 +104,24 @@ def test_the_trapezium_is_played_back_on_the_puma(tmp_path):
     assert played.rms_mm < 0.3 and played.max_mm < 1.0, (played.rms_mm, played.max_mm)
     assert played.covered >= res.compared["fitted"].covered - 0.005
     assert res.compared["played_fitted"].covered >= 0.99
+
+
+def test_the_playback_report_and_figure_9bcd(tmp_path):
+    """Issue 33.3: the report's angle statistics take phi near +-180 deg as one angle (by
+    hand: -179.9 and 179.9 alternating have mean 180 and sd 0.1 deg, not 0 and 179.9), and
+    the figure is written."""
+    from humanpt.seam.compare import compare_points, polyline_seam
+    from humanpt.twin.experiment import PlaybackResult, playback_report, plot_playback
+
+    seam = np.array([[0.0, 0, 0], [100, 0, 0]])
+    played = np.zeros((10, 6))
+    played[:, 0] = np.linspace(0, 100, 10)
+    played[:, 4] = 15.0
+    played[:, 5] = np.where(np.arange(10) % 2, 179.9, -179.9)
+    c = compare_points(polyline_seam(seam), played[:, :3], approach_mm=None)
+    r = PlaybackResult("line", "puma", seam, played, played, c, c, 0.2, 7.0, [], "", 1.0)
+    text = playback_report(r)
+    assert "mean 0.00 / 15.00 / 180.00 deg, sd 0.00 / 0.00 / 0.10" in text or \
+        "mean 0.00 / 15.00 / -180.00 deg, sd 0.00 / 0.00 / 0.10" in text, text
+    assert "largest joint step of a cycle 0.20 deg (limit 7.00)" in text
+    assert plot_playback(r, tmp_path / "f.png").stat().st_size > 10_000
