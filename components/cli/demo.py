@@ -105,7 +105,12 @@ def calibrate_report(res, paper_mae=(0.9949, 0.7873, 0.392)) -> str:
         kinds = [sg.kind for sg in res.fitted.segments]
         lines.append(row(f"taught seam, fitted: {kinds.count('line')} lines, {kinds.count('arc')} arcs"
                          + (" (what is played)" if res.play == "seam" else ""), res.fitted_mm, "fitted"))
+    if getattr(res, "refused", ""):
+        lines.append(f"  played back: REFUSED before any motion: {res.refused}")
     lines.append(row("played back (the torch's true path)", res.played_mm, "played"))
+    if getattr(res, "max_joint_step_deg", None) is not None:
+        lines.append(f"  {'  largest joint step of a cycle (the Puma)':44s} {res.max_joint_step_deg:.2f} deg "
+                     f"(limit {res.joint_step_limit_deg:.2f} deg per cycle)")
     if "played_fitted" in getattr(res, "compared", {}):  # the playback alone
         lines.append(row("  ... against the fitted seam it was given", res.played_mm, "played_fitted"))
     if res.taught_truth is not None:
@@ -147,11 +152,16 @@ def refuse_for_calibrate(args) -> None:
     for name, why in _NOT_FOR_CALIBRATE.items():
         if getattr(args, name, None) not in (None, False):
             raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
-    if getattr(args, "link", "alter") != "alter" or getattr(args, "robot", None) in ("alter", "rsi", "puma"):
-        raise SystemExit("humanpt demo --calibrate: --robot puma/alter/rsi and --link are not taken: the job teaches "
-                         "and plays on the lock-step stand-in (--robot standin; on the simulated Puma the playback's "
-                         "straight line from watching to welding meets the wrist's singularity and is clamped); the "
-                         "report checks the Puma's own kinematic error along the seam instead")
+    # The job runs on the robot asked for (issue 33.2): the simulated Puma behind the gateway
+    # and its ALTER link (default), or the stand-in; never another one.
+    if getattr(args, "link", "alter") != "alter":
+        raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
+    if getattr(args, "robot", None) not in (None, "puma", "standin"):
+        raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
+                         "Puma over ALTER (--robot puma, the default) or on the stand-in (--robot standin)")
+
+
+ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in"}
 
 
 def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
@@ -163,7 +173,7 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
     rig = load_rig(args.rig) if args.rig else None
     told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
     print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
-          f"{args.robot}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
+          f"{ROBOT_NAMES.get(args.robot, args.robot)}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
           f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
@@ -197,8 +207,8 @@ def demo(args) -> int:
     calibrate = getattr(args, "calibrate", False)
     if calibrate:
         refuse_for_calibrate(args)
-    # --robot: the lock-step robot; the job (--calibrate) teaches and plays on the stand-in.
-    args.robot = getattr(args, "robot", None) or ("standin" if calibrate else "puma")
+    # --robot: the lock-step robot (the job's too: issue 33.2): the simulated Puma by default.
+    args.robot = getattr(args, "robot", None) or "puma"
     if args.robot in ("alter", "rsi", "abb"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
         if args.link != "alter" and args.link != args.robot:
             raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")

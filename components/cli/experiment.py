@@ -168,7 +168,33 @@ def hard(args) -> int:
     return 0 if all(c.passes() for c in cases) else 1
 
 
+def playback(args) -> int:
+    """``humanpt experiment playback``: Figure 9b-d (issue 33.3): the seam (``--scenario``,
+    default the trapezium) taught on the twin and played back on the robot (default the
+    simulated Puma); its statistics on stdout and in ``playback.txt``, the three panels in
+    ``figure9bcd.png``."""
+    from humanpt.cli.commands import run_stamp
+    from humanpt.twin.experiment import playback_report, plot_playback, run_playback
+
+    scenario = args.scenario or "trapezium"
+    world = args.world or "ideal"
+    out = Path(args.out) if args.out else Path("runs") / f"{run_stamp()}-experiment-playback"
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"humanpt experiment playback: {scenario}, world {world}, seed {args.seed}, robot {args.robot}", flush=True)
+    r = run_playback(scenario, args.seed, world, args.robot, run_dir=out / "run" if args.record else None)
+    text = playback_report(r)
+    print(text)
+    (out / "playback.txt").write_text(text + "\n")
+    if not args.no_plots:
+        png = plot_playback(r, out / "figure9bcd.png", f"humanpt experiment playback: {scenario} on {args.robot}, "
+                            f"world {world}, seed {args.seed}")
+        print(f"figure: {png}")
+    return 1 if r.refused or any("fault" in w or "not done" in w for w in r.warnings) else 0
+
+
 def experiment(args) -> int:
+    if args.name == "playback":
+        return playback(args)
     if args.name == "budget":
         return budget(args)
     if args.name == "hard":

@@ -163,12 +163,15 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                        "theta, phi computed as the paper did and against ground truth, for the paper's perception "
                        "method and the default one, beside the published tables; saves a figure as PNG. budget: the error "
                        "budget of the twin's world (each error source alone, then all together).")
-    p.add_argument("name", choices=["static", "arc", "trapezium", "budget", "hard"],
+    p.add_argument("name", choices=["static", "arc", "trapezium", "budget", "hard", "playback"],
                    help="budget: the error budget (issue 16): --scenario once on the ideal world, once per "
                         "error source of the twin's world alone, then all together, the rig nominal; prints "
                         "each one's effect on the recorded path and saves budget.csv and budget.png. "
                         "hard: issue 18's abrupt, occluded and fast cases (scurve, abrupt, occluded, partial at "
-                        "20 and 60 mm/s, or --scenario/--speeds), judged against ground truth; saves hard.txt")
+                        "20 and 60 mm/s, or --scenario/--speeds), judged against ground truth; saves hard.txt. "
+                        "playback: Figure 9b-d, --scenario (default trapezium) taught and played back on "
+                        "--robot (default the simulated Puma); the torch against the seam and the taught path; "
+                        "saves playback.txt and figure9bcd.png")
     p.add_argument("--method", choices=["both", "paper", "weighted"], default="both",
                    help="perception method(s) (default both, side by side)")
     p.add_argument("--seed", type=int, default=0, help="the twin's seed (noise, operator tremor)")
@@ -191,11 +194,11 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--speed-scale", type=float, default=1.0,
                    help="arc/trapezium: pace of the operator (default 1; the paper's speeds)")
     p.add_argument("--scenario",
-                   help="budget: the scenario (a built-in name or a scenario file; default arc); hard: "
+                   help="budget, playback: the scenario (a built-in name or a scenario file; default arc, playback trapezium); hard: "
                         "comma-separated scenarios (default scurve,abrupt,occluded,partial)")
     p.add_argument("--speeds", metavar="V,V,...", help="hard: the operator's speeds, mm/s (default 20,60)")
     p.add_argument("--world", metavar="ideal|realistic|FILE",
-                   help="hard: the twin's world (default ideal, as issue 18's acceptance)")
+                   help="hard, playback: the twin's world (default ideal, as issue 18's acceptance)")
     p.add_argument("--only", metavar="A,B,...",
                    help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
     p.add_argument("--duration", type=_duration,

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -214,18 +216,253 @@ def thin(points_mm_deg: np.ndarray, times_s: np.ndarray, max_points: int = MAX_P
     return x[keep], t[keep]
 
 
-def seam_command(seam, speed_mm_s: float, flange_T_tool_x, max_points: int = MAX_PLAYBACK_POINTS) -> dict:
+# On an arm with kinematics (RobotArm): the most a seam's timing may be slowed down where a
+# joint would turn faster than its share of the joint speed limit; a seam that needs more
+# (it passes within a hair of the wrist singularity) is refused.
+MAX_SLOWDOWN = 8.0
+# |sin q5| below this (2 deg) counts as the wrist singularity when a plan is refused: the
+# reason names it (joints 4 and 6 coaxial).
+WRIST_SINGULAR_SIN = math.sin(math.radians(2.0))
+
+
+@dataclass(frozen=True)
+class RobotArm:
+    """What a playback needs of an arm with kinematics to plan on it (a Puma over ALTER):
+    its model (``kinematics``: :class:`humanpt.geometry.puma.PumaKinematics`), where it is
+    mounted (``world_T_base_mm`` (4, 4)), its joints now (``joints_rad`` (6,)), the joint
+    speed limit its controller faults beyond and its cycle; the flange's limits as the
+    gateway's (mm/s, deg/s)."""
+
+    kinematics: Any
+    world_T_base_mm: np.ndarray
+    joints_rad: np.ndarray
+    max_joint_speed_deg_s: float = 250.0
+    cycle_s: float = 0.028
+    max_speed_mm_s: float = 100.0
+    max_angular_deg_s: float = 60.0
+
+
+@dataclass(frozen=True)
+class ArmPlan:
+    """A playback planned on an arm: ``x`` (N, 6) tool poses mm/deg at ``t_s`` (N,), the
+    approach's first ``approach`` samples (from the arm's pose now, in joint space) then
+    the seam; ``joints_rad`` (N, 6) what the arm's joints do; ``slowdown`` the most the
+    seam's timing was stretched for a joint's rate (1: not at all); ``min_wrist_deg``
+    the least |q5| along the plan."""
+
+    x: np.ndarray
+    t_s: np.ndarray
+    joints_rad: np.ndarray
+    approach: int
+    slowdown: float
+    min_wrist_deg: float
+
+    @property
+    def max_joint_speed_deg_s(self) -> float:
+        dq = np.abs(np.diff(self.joints_rad, axis=0)).max(axis=1)
+        dt = np.diff(self.t_s)
+        ok = dt > 0
+        return float(np.degrees(dq[ok] / dt[ok]).max()) if ok.any() else 0.0
+
+
+def _smooth_stretch(f: np.ndarray, window: int) -> np.ndarray:
+    """A stretch factor per interval (>= 1) that is never below ``f`` and changes gradually
+    (a running maximum over ``window`` intervals, then a running mean over half of it)."""
+    from scipy.ndimage import maximum_filter1d, uniform_filter1d
+
+    if len(f) == 0:
+        return f
+    m = maximum_filter1d(np.maximum(f, 1.0), size=2 * window + 1, mode="nearest")
+    return np.maximum(uniform_filter1d(m, size=window + 1, mode="nearest"), np.maximum(f, 1.0))
+
+
+def _seam_on_arm(base_T_flange: np.ndarray, q0: np.ndarray, dt: np.ndarray, arm: RobotArm,
+                 pose_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray] | str:
+    """The joints (N, 6) along the seam from the branch ``q0`` and the stretch per interval
+    (N-1,) that keeps every joint within its share of the limit, or why not (one line)."""
+    from humanpt.geometry.puma import UnreachableError, follow, wrist_sin
+
+    try:
+        q = follow(arm.kinematics, base_T_flange, q0)
+    except UnreachableError as e:
+        i = int(str(e).split()[1]) if str(e).startswith("pose ") else 0
+        return f"point {i} (tool at {_fmt(pose_mm[i, :3])} mm) is out of the arm's reach at this mounting ({e})"
+    s5 = wrist_sin(q)
+    flip = np.nonzero(s5[1:] * s5[:-1] < 0)[0]
+    if len(flip) or (np.abs(s5) < WRIST_SINGULAR_SIN).any():
+        i = int(flip[0] + 1) if len(flip) else int(np.argmin(np.abs(s5)))
+        return (f"the seam passes through the wrist singularity at point {i} (tool at {_fmt(pose_mm[i, :3])} mm, "
+                f"q5 {np.degrees(q[i, 4]):.1f} deg: joints 4 and 6 coaxial)")
+    limit = PLAYBACK_LIMIT_SHARE * math.radians(arm.max_joint_speed_deg_s)
+    dq = np.abs(np.diff(q, axis=0)).max(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        f = np.where(dt > 0, dq / (limit * np.where(dt > 0, dt, 1.0)), np.where(dq > 1e-12, np.inf, 0.0))
+    if len(f) and f.max() > MAX_SLOWDOWN:
+        i = int(np.argmax(f)) + 1
+        j = int(np.argmax(np.abs(q[i] - q[i - 1])))
+        near = (f"within {np.degrees(abs(np.arcsin(s5[i]))):.1f} deg of the wrist singularity "
+                if abs(s5[i]) < 0.2 else "")
+        return (f"at point {i} (tool at {_fmt(pose_mm[i, :3])} mm) {near}joint {j + 1} would turn "
+                f"{f[i - 1]:.0f} times faster than {PLAYBACK_LIMIT_SHARE:.0%} of its "
+                f"{arm.max_joint_speed_deg_s:g} deg/s (the most a seam is slowed down is {MAX_SLOWDOWN:g} times)")
+    return q, f
+
+
+def _approach(arm: RobotArm, q_from: np.ndarray, q_to: np.ndarray, flange_T_tool_mm: np.ndarray,
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """An approach in joint space from ``q_from`` to ``q_to`` (6,) rad: every joint moves
+    on a straight line with a cosine profile (at rest at both ends), its duration the least
+    that keeps the joints, the flange's speed and its rotation within
+    :data:`PLAYBACK_LIMIT_SHARE` of the limits.  (tool poses (K, 6) mm/deg, times (K,),
+    joints (K, 6)), sampled every cycle, ending at ``q_to``."""
+    from humanpt.geometry.transforms import x_from_transform
+
+    kin = arm.kinematics
+    s = np.linspace(0.0, 1.0, 201)
+    q = q_from + s[:, None] * (q_to - q_from)
+    T = np.array([kin.forward(qi) for qi in q])
+    ds = s[1] - s[0]
+    dp = np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1).max() / ds
+    dr = max((float(np.linalg.norm(rotvec_from_matrix(T[i + 1, :3, :3] @ T[i, :3, :3].T, assume_valid=True)))
+              for i in range(len(T) - 1)), default=0.0) / ds
+    dq = float(np.abs(q_to - q_from).max())
+    peak = math.pi / 2  # the cosine profile's peak ds/dtau over its mean
+    share = PLAYBACK_LIMIT_SHARE
+    duration = peak * max(dp / (share * arm.max_speed_mm_s), dr / (share * math.radians(arm.max_angular_deg_s)),
+                          dq / (share * math.radians(arm.max_joint_speed_deg_s)), 4 * arm.cycle_s)
+    n = int(math.ceil(duration / arm.cycle_s))
+    t = np.arange(n + 1) * arm.cycle_s
+    sp = 0.5 - 0.5 * np.cos(math.pi * t / t[-1])
+    qs = q_from + sp[:, None] * (q_to - q_from)
+    world_T_tool = np.array([arm.world_T_base_mm @ kin.forward(qi) @ flange_T_tool_mm for qi in qs])
+    return x_from_transform(world_T_tool), t, qs
+
+
+def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndarray, arm: RobotArm) -> ArmPlan:
+    """A timed playback (tool poses (N, 6) mm/deg at ``t_s``) planned on ``arm`` (issue 33):
+
+    * the seam's first pose is reached on the in-limits branch whose wrist is on the same
+      side of its singularity as now (q5 keeps its sign: the approach never crosses
+      q5 = 0), in the same arm and elbow configuration when there is one, the closest in
+      joint space; along the seam the arm's joints are those its
+      controller will take (the closest branch, cycle by cycle: ``geometry.puma.follow``);
+    * the seam stays in Cartesian space; where a joint would turn faster than
+      :data:`PLAYBACK_LIMIT_SHARE` of its limit, the timing is stretched there (gradually,
+      only slower: the path is the same), by at most :data:`MAX_SLOWDOWN`;
+    * the approach, from the arm's joints now, is a straight line in joint space (so the
+      wrist stays on its side of the singularity), within the share of every limit;
+    * what cannot be played is refused with the reason (:class:`PlaybackError`): a point
+      out of reach at this mounting, a seam through the wrist singularity (q5 changing
+      sign, or |q5| under 2 deg) or one that would need a joint faster than the most
+      slow-down allows, on every branch.
+
+    Pure: no clock, no I/O."""
+    from humanpt.geometry.puma import UnreachableError, follow, wrist_sin
+
+    x = np.asarray(x_mm_deg, dtype=float).reshape(-1, 6)
+    t = np.asarray(t_s, dtype=float).reshape(-1)
+    base_T_world = invert_transform(np.asarray(arm.world_T_base_mm, dtype=float))
+    tool_T_flange = invert_transform(np.asarray(flange_T_tool_mm, dtype=float))
+    base_T_flange = base_T_world @ transform_from_x(x) @ tool_T_flange
+    kin, q_now = arm.kinematics, np.asarray(arm.joints_rad, dtype=float)
+    s_now = float(wrist_sin(q_now))
+    sols = [s for s in kin.inverse_all(base_T_flange[0], q_now) if s.within_limits]
+    if not sols:
+        raise PlaybackError(f"point 0 (tool at {_fmt(x[0, :3])} mm) is out of the arm's reach at this mounting "
+                            f"(no inverse-kinematics branch within the joint limits)")
+    # The same side of the wrist singularity as now first (the approach then never crosses
+    # it), each side the closest first.
+
+    # The arm and elbow the arm is in now (a joint-space approach to another crosses the
+    # shoulder or elbow singularity on the way).
+    now_arm = next((s.config[:2] for s in kin.inverse_all(kin.forward(q_now), q_now)
+                    if s.within_limits and np.allclose(s.q_rad, q_now, atol=1e-6)), None)
+
+    def order(sol) -> tuple[bool, bool, float]:
+        crosses = float(wrist_sin(sol.q_rad)) * s_now < 0 and abs(s_now) > WRIST_SINGULAR_SIN
+        return crosses, sol.config[:2] != now_arm, float(np.linalg.norm(sol.q_rad - q_now))
+
+    sols.sort(key=order)
+    dt = np.diff(t)
+    reasons = []
+    for sol in sols:
+        q0 = sol.q_rad
+        if abs(float(wrist_sin(q0))) < WRIST_SINGULAR_SIN:
+            reasons.append(f"{'/'.join(sol.config)}: the seam starts at the wrist singularity")
+            continue
+        if float(wrist_sin(q0)) * s_now < 0 and abs(s_now) > WRIST_SINGULAR_SIN:
+            reasons.append(f"{'/'.join(sol.config)}: the approach would cross the wrist singularity")
+            continue
+        got = _seam_on_arm(base_T_flange, q0, dt, arm, x)
+        if isinstance(got, str):
+            reasons.append(f"{'/'.join(sol.config)}: {got}")
+            continue
+        q_seam, f = got
+        xa, ta, qa = _approach(arm, q_now, q0, flange_T_tool_mm)
+        # The arm's controller takes the approach's poses to the same joints (closest branch).
+        try:
+            qf = follow(kin, base_T_world @ transform_from_x(xa) @ tool_T_flange, q_now)
+        except UnreachableError as e:
+            reasons.append(f"{'/'.join(sol.config)}: the approach leaves the reach ({e})")
+            continue
+        if np.abs(qf - qa).max() > math.radians(0.5):
+            reasons.append(f"{'/'.join(sol.config)}: the approach's joints are not the controller's")
+            continue
+        stretch = _smooth_stretch(f, max(1, int(round(0.5 / arm.cycle_s))))
+        t_seam = np.r_[0.0, np.cumsum(dt * stretch)] if len(dt) else np.zeros(1)
+        x_all = np.vstack([xa[:-1], x])
+        t_all = np.r_[ta[:-1], ta[-1] + t_seam]
+        q_all = np.vstack([qa[:-1], q_seam])
+        return ArmPlan(x_all, t_all, q_all, len(xa) - 1, float(stretch.max()) if len(stretch) else 1.0,
+                       float(np.degrees(np.abs(np.arcsin(np.clip(wrist_sin(q_all), -1, 1)))).min()))
+    raise PlaybackError("cannot be played on this arm at this mounting: " + "; ".join(reasons))
+
+
+# How far a thinned approach (planned in joint space, through free space) may pass from its
+# samples (mm, and deg): the controller's carrot goes straight between the kept ones.
+APPROACH_TOLERANCE_MM = 0.5
+
+
+def thin_within(points_mm_deg: np.ndarray, times_s: np.ndarray, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The fewest samples :func:`thin` keeps within ``tolerance`` (every 2nd, 4th, ...
+    sample while it holds)."""
+    x, t = np.asarray(points_mm_deg, dtype=float).reshape(-1, 6), np.asarray(times_s, dtype=float).reshape(-1)
+    best = (x, t)
+    k = 2
+    while len(x) > 2 and (len(x) - 1) // k >= 1:
+        try:
+            best = thin(x, t, max(2, (len(x) - 1) // k + 1), tolerance)
+        except PlaybackError:
+            break
+        k *= 2
+    return best
+
+
+def seam_command(seam, speed_mm_s: float, flange_T_tool_x, max_points: int = MAX_PLAYBACK_POINTS,
+                 arm: RobotArm | None = None) -> dict:
     """The ``playback`` command's arguments for a seam (:class:`humanpt.seam.fit.Seam`):
     re-timed at ``speed_mm_s`` with the tool ``flange_T_tool_x`` (x, y, z mm, Z-Y-X deg) so
     that the flange stays within :data:`PLAYBACK_LIMIT_SHARE` of the robot's limits (a
     corner's turn on the spot at a rate the flange can swing), then thinned to
     ``max_points`` (:func:`thin`): ``{"points": (N, 6) list, "times_s": (N,) list}`` from 0.
     The one way a seam becomes a playback (``humanpt path play``, the console, the twin's
-    job).  RetimeError, PlaybackError: what cannot be played, and why."""
+    job).  ``arm``: the arm it will play on (a Puma): planned on it (:func:`plan_on_arm`: a
+    joint-space approach from its joints now, the seam slowed where a joint would be too
+    fast, refused when the arm cannot play it).  RetimeError, PlaybackError: what cannot be
+    played, and why."""
     from humanpt.seam.retime import RetimeConfig, retime
 
     cfg = RetimeConfig(speed_mm_s=speed_mm_s, flange_T_tool_x=tuple(float(v) for v in flange_T_tool_x),
                        limit_share=PLAYBACK_LIMIT_SHARE)
     timed = retime(seam, cfg)
-    x, t = thin(timed.x, timed.t_s, max_points)
+    if arm is None:
+        x, t = thin(timed.x, timed.t_s, max_points)
+    else:
+        plan = plan_on_arm(timed.x, timed.t_s, transform_from_x(np.asarray(flange_T_tool_x, dtype=float)), arm)
+        # The approach (free space, away from every singularity) within APPROACH_TOLERANCE_MM,
+        # the seam within THIN_TOLERANCE_MM in what is left of the points.
+        k = plan.approach
+        xa, ta = thin_within(plan.x[:k + 1], plan.t_s[:k + 1], APPROACH_TOLERANCE_MM)
+        xs, ts = thin(plan.x[k:], plan.t_s[k:], max_points - (len(xa) - 1))
+        x, t = np.vstack([xa[:-1], xs]), np.r_[ta[:-1], ts]
     return {"points": np.round(x, 4).tolist(), "times_s": np.round(t - t[0], 6).tolist()}

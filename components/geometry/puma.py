@@ -537,3 +537,26 @@ class TrueArm:
         for link, theta in zip(self.dh, np.asarray(q_rad, dtype=float) + self.joint_offsets_rad, strict=True):
             T = T @ dh_transform(link, float(theta))
         return T
+
+
+def follow(kin: PumaKinematics, base_T_flange_mm: np.ndarray, q_start_rad: np.ndarray) -> np.ndarray:
+    """(N, 6) joints (rad) a controller reaches when it takes the flange through the poses
+    ``base_T_flange_mm`` (N, 4, 4) one after the other, each on the in-limits branch closest
+    to the joints before (as a Puma applies ALTER corrections), from ``q_start_rad`` (6,).
+    Raises UnreachableError naming the first pose out of reach (``pose i of N ...``)."""
+    T = np.asarray(base_T_flange_mm, dtype=float).reshape(-1, 4, 4)
+    out = np.zeros((len(T), 6))
+    q = np.asarray(q_start_rad, dtype=float)
+    for i, t in enumerate(T):
+        try:
+            q = kin.inverse(t, q)
+        except UnreachableError as e:
+            raise UnreachableError(f"pose {i} of {len(T)}: {e}") from None
+        out[i] = q
+    return out
+
+
+def wrist_sin(q_rad: np.ndarray) -> np.ndarray:
+    """sin q5 of joints (..., 6): 0 at the wrist singularity (joints 4 and 6 coaxial); its
+    sign says which of the two wrists (noflip/flip) the arm is on."""
+    return np.sin(np.asarray(q_rad, dtype=float)[..., 4])

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from humanpt.controller.config import ControllerConfig
-from humanpt.geometry.transforms import x_from_transform
+from humanpt.geometry.transforms import transform_from_x, x_from_transform
 from humanpt.operator import OperatorConfig
 from humanpt.perception.config import PerceptionConfig
 
@@ -29,7 +29,8 @@ from .run import SystemConfig, run, scenario_duration_s
 from .system import link_cycle_ms
 
 __all__ = ["EXPERIMENTS", "STATIC_VECTORS", "PAPER", "TABLE", "STATS", "KINDS", "ExperimentResult", "run_experiment",
-           "against_known_path", "ideal_path", "over_seeds"]
+           "against_known_path", "ideal_path", "over_seeds", "PlaybackResult", "run_playback", "playback_report",
+           "plot_playback"]
 
 EXPERIMENTS = ("static", "arc", "trapezium")
 # The static experiment records 106 vectors (paper, Section 6) at 10 cycles each.
@@ -132,3 +133,113 @@ def over_seeds(per_seed: list[ExperimentResult]) -> dict:
             **{kind: {stat: np.median(a, axis=0) for stat, a in per[kind].items()} for kind in KINDS},
             "spread": {kind: {stat: [a.min(axis=0).tolist(), a.max(axis=0).tolist()]
                               for stat, a in per[kind].items()} for kind in KINDS}}
+
+
+@dataclass
+class PlaybackResult:
+    """Figure 9b-d's run (issue 33.3): the seam taught on the twin, fitted and played back on
+    the simulated Puma (:func:`humanpt.twin.teach.calibrate_then_teach`)."""
+
+    scenario: str
+    robot: str
+    seam_mm: np.ndarray  # (K, 3) the seam as designed
+    taught_x: np.ndarray  # (N, 6) the taught path (mm, deg)
+    played_x: np.ndarray  # (M, 6) the torch's true poses every cycle from the path's start
+    against_seam: object  # seam.compare.Comparison of the played torch against the seam
+    against_taught: object  # ... against the taught path (a polyline through its points)
+    max_joint_step_deg: float | None
+    joint_step_limit_deg: float | None
+    warnings: list
+    refused: str
+    wall_s: float
+
+
+def run_playback(scenario: str = "trapezium", seed: int = 0, world: str = "ideal", robot: str = "puma",
+                 run_dir: str | Path | None = None) -> PlaybackResult:
+    """The paper's real-time implementation (Section 6, Figure 9b-d): teach ``scenario`` on
+    the twin, fit it (``humanpt path fit``) and play it back on ``robot`` (the simulated Puma
+    behind the gateway and ALTER); the played torch's true path against the seam and against
+    the taught path (:func:`humanpt.seam.compare.compare_points`)."""
+    from humanpt.seam.compare import compare_points, polyline_seam
+
+    from . import teach
+    from .worlds import World
+
+    res = teach.calibrate_then_teach(scenario, World.named(world), seed, stages=(), robot=robot, run_dir=run_dir)
+    op = SystemConfig.for_scenario(scenario, seed).operator
+    seam = teach._seam(op)
+    played = res.played_x if res.played_x is not None else np.zeros((0, 6))
+    taught = res.taught_x if res.taught_x is not None else np.zeros((0, 6))
+    taught_p = transform_from_x(taught)[:, :3, 3] if len(taught) else np.zeros((0, 3))
+    vs_taught = (compare_points(polyline_seam(taught_p), played[:, :3], approach_mm=None, window="played torch")
+                 if len(played) and len(taught_p) > 1 else None)
+    return PlaybackResult(scenario, robot, seam, taught, played, res.compared.get("played"), vs_taught,
+                          res.max_joint_step_deg, res.joint_step_limit_deg, list(res.warnings), res.refused,
+                          res.seconds)
+
+
+def _unwrapped_deg(angles_deg: np.ndarray) -> np.ndarray:
+    """(N, 3) angles (deg) without the 360 deg jumps between samples."""
+    return np.degrees(np.unwrap(np.radians(np.asarray(angles_deg, dtype=float)), axis=0))
+
+
+def playback_report(r: PlaybackResult) -> str:
+    """The run's statistics, one line each."""
+    lines = [f"{r.scenario} taught on the twin and played back on {r.robot}: {len(r.taught_x)} taught points, "
+             f"{len(r.played_x)} played torch poses (one per cycle)"]
+    if r.refused:
+        lines.append(f"  REFUSED before any motion: {r.refused}")
+    for name, c in (("played torch against the seam", r.against_seam),
+                    ("played torch against the taught path", r.against_taught)):
+        if c is None:
+            lines.append(f"  {name}: no points")
+        else:
+            lines.append(f"  {name:40s} RMS {c.rms_mm:.3f} mm, mean {c.mean_mm:.3f}, max {c.max_mm:.3f}, "
+                         f"covered {100 * c.covered:.1f} %")
+    if len(r.played_x):
+        angles = _unwrapped_deg(r.played_x[:, 3:])  # (phi near +-180 deg is one angle, not two)
+        mean = (angles.mean(axis=0) + 180.0) % 360.0 - 180.0
+        lines.append("  played torch angles: psi/theta/phi mean " + " / ".join(f"{v:.2f}" for v in mean)
+                     + " deg, sd " + " / ".join(f"{v:.2f}" for v in angles.std(axis=0)))
+    if r.max_joint_step_deg is not None:
+        lines.append(f"  largest joint step of a cycle {r.max_joint_step_deg:.2f} deg "
+                     f"(limit {r.joint_step_limit_deg:.2f})")
+    if r.warnings:
+        lines.append("  warnings: " + "; ".join(r.warnings))
+    return "\n".join(lines)
+
+
+def plot_playback(r: PlaybackResult, path: Path, title: str = "") -> Path:
+    """Figure 9b-d as the paper drew them: (b) y vs x, (c) z vs y of the seam, the taught
+    path and the played torch; (d) the played torch's angles per sample."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(15, 4.5))
+    for a, (i, j, name) in zip(ax[:2], ((0, 1, "(b) y vs x"), (1, 2, "(c) z vs y")), strict=True):
+        a.plot(r.seam_mm[:, i], r.seam_mm[:, j], "k-", lw=1, label="seam")
+        if len(r.taught_x):
+            a.plot(r.taught_x[:, i], r.taught_x[:, j], ".", ms=2, color="tab:blue", label="taught")
+        if len(r.played_x):
+            a.plot(r.played_x[:, i], r.played_x[:, j], "-", lw=0.8, color="tab:red", label="played (Puma)")
+        a.set_xlabel("xyz"[i] + " (mm)")
+        a.set_ylabel("xyz"[j] + " (mm)")
+        a.set_title(name)
+        a.legend(fontsize=8)
+        if i == 0:
+            a.set_aspect("equal", adjustable="datalim")
+    for k, name in enumerate(("psi", "theta", "phi")):
+        if len(r.played_x):
+            ax[2].plot(_unwrapped_deg(r.played_x[:, 3:])[:, k], lw=0.8, label=name)
+    ax[2].set_xlabel("sample (cycle)")
+    ax[2].set_ylabel("deg")
+    ax[2].set_title("(d) played torch's angles")
+    ax[2].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -26,32 +26,98 @@ from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "flange_T_desired_mm", "nominal_rig", "operator_config", "puma_placement", "puma_cores",
+__all__ = ["build_system", "flange_T_desired_mm", "nominal_rig", "operator_config", "puma_placement", "puma_mount_joints", "puma_cores",
            "tracking_errors", "path_points", "truth_at"]
 
 
-def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762") -> tuple[float, ...]:
+def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762",
+                   joints_deg: tuple[float, ...] | None = None) -> tuple[float, ...]:
     """Where the twin mounts the simulated Puma: ``world_T_base`` (X, mm/deg) such that the
     robot starts at ``world_T_flange_start_mm`` in its default, comfortable joint pose
-    (flange pointing along -z of the base, elbow up, far from singularities and limits).
-    A target seen from below (the paper's Table 1 angles) gives a ceiling-mounted robot."""
+    (flange pointing along -z of the base, elbow up, far from singularities and limits), or
+    in ``joints_deg`` (:func:`puma_mount_joints`).  A target seen from below (the paper's
+    Table 1 angles) gives a ceiling-mounted robot."""
     from humanpt.geometry.transforms import invert_transform
     from humanpt.sim_robot.config import SimRobotConfig
 
-    base_T_flange = SimRobotConfig(model=model).kinematics().forward(SimRobotConfig(model=model).start_joints_rad())
+    cfg = SimRobotConfig(model=model)
+    q = cfg.start_joints_rad() if joints_deg is None else np.radians(np.asarray(joints_deg, dtype=float))
+    base_T_flange = cfg.kinematics().forward(q)
     world_T_base = np.asarray(world_T_flange_start_mm, dtype=float) @ invert_transform(base_T_flange)
     return tuple(float(v) for v in x_from_transform(world_T_base))
 
 
-def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400):
+# The wrist poses puma_mount_joints tries at the mounting pose (deg): joint 4, joint 5 (both
+# sides of the wrist singularity) and joint 6 (the arm turned about the torch's axis).
+MOUNT_Q4_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
+MOUNT_Q5_DEG = (-60.0, -40.0, -25.0, 25.0, 40.0, 60.0)
+MOUNT_Q6_DEG = (-180.0, -90.0, 0.0, 90.0)
+
+
+def puma_mount_joints(world_T_flange_mount_mm: np.ndarray, paths_world_T_flange_mm: list[np.ndarray],
+                      model: str = "puma762") -> tuple[tuple[float, ...], float]:
+    """The Puma's joint pose at its mounting pose (deg, (6,)) that keeps the wrist farthest
+    from its singularity (and every joint from its limits) along every path of flange poses
+    the job needs (each (N, 4, 4) mm, world: watching the seam, welding it), each followed
+    as the robot's controller would (closest branch, from the branch nearest the mounting
+    pose); with the score: the least |q5| and joint-limit margin (deg) along them.
+
+    A general placement (issue 33.1): the default pose's wrist (q5 = 25 deg) is tried with
+    others (:data:`MOUNT_Q4_DEG` x :data:`MOUNT_Q5_DEG` x :data:`MOUNT_Q6_DEG`) and the best
+    taken (the default when nothing is better); no mounting is tuned by hand."""
+    from humanpt.geometry.puma import UnreachableError, follow
+    from humanpt.geometry.transforms import invert_transform
+    from humanpt.sim_robot.config import SimRobotConfig
+
+    cfg = SimRobotConfig(model=model)
+    kin = cfg.kinematics()
+    home = np.degrees(cfg.start_joints_rad())
+    lo, hi = kin.limits_rad[:, 0], kin.limits_rad[:, 1]
+    mount = np.asarray(world_T_flange_mount_mm, dtype=float)
+
+    def score(q_deg: np.ndarray) -> float:
+        q_mount = np.radians(q_deg)
+        if not kin.within_limits(q_mount):
+            return -np.inf
+        base_T_world = invert_transform(mount @ invert_transform(kin.forward(q_mount)))
+        worst = np.inf
+        for path in paths_world_T_flange_mm:
+            T = base_T_world @ np.asarray(path, dtype=float).reshape(-1, 4, 4)
+            try:
+                q0 = kin.inverse(T[0], q_mount)
+                q = follow(kin, T, q0)
+            except UnreachableError:
+                return -np.inf
+            if np.abs(np.diff(q, axis=0)).max(initial=0.0) > np.radians(20.0):
+                return -np.inf  # a branch jump between samples: the wrist flips on the way
+            wrist = np.degrees(np.abs(np.arcsin(np.clip(np.sin(q[:, 4]), -1, 1)))).min()
+            margin = np.degrees(np.minimum(q - lo, hi - q)).min()
+            worst = min(worst, wrist, margin)
+        return float(worst)
+
+    best, best_score = home, score(home)
+    for q4 in MOUNT_Q4_DEG:
+        for q5 in MOUNT_Q5_DEG:
+            for q6 in MOUNT_Q6_DEG:
+                q = np.r_[home[:3], q4, q5, q6]
+                sc = score(q)
+                if sc > best_score + 1e-9:
+                    best, best_score = q, sc
+    return tuple(float(v) for v in best), best_score
+
+
+def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400,
+               joints_deg: tuple[float, ...] | None = None):
     """(sim_robot config, robot_gateway config) for a Puma 762 twin starting at the given
-    flange pose, with a workspace envelope of +-``envelope_mm`` around it."""
+    flange pose (in ``joints_deg`` there, default its comfortable pose), with a workspace
+    envelope of +-``envelope_mm`` around it."""
     from humanpt.robot_gateway.links.alter.config import AlterConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
-    base = puma_placement(world_T_flange_start_mm)
+    base = puma_placement(world_T_flange_start_mm, joints_deg=joints_deg)
     p = np.asarray(world_T_flange_start_mm)[:3, 3]
-    robot = SimRobotConfig(world_T_base_mm_deg=base)
+    robot = SimRobotConfig(world_T_base_mm_deg=base) if joints_deg is None else SimRobotConfig(
+        world_T_base_mm_deg=base, start_joints_deg=tuple(float(v) for v in joints_deg))
     # A STATUS frame (41 bytes, 8N1) takes this long on the line: the robot state is about
     # the pose at the frame's start, not at its reception.
     status_delay_ms = 41 * 10 / baud * 1e3
@@ -119,7 +185,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  digest: bool = True, rig: Rig | None = None,
                  robot_overrides: dict[str, dict] | None = None,
                  mount_world_T_flange_mm: np.ndarray | None = None,
-                 rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None) -> TwinWorld:
+                 rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None,
+                 mount_joints_deg: tuple[float, ...] | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
@@ -159,7 +226,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             # around ``mount_world_T_flange_mm``, e.g. between viewing and welding the seam).
             mount = (start_flange_for(op, ctl.dz_mm, cam.flange_T_camera) if mount_world_T_flange_mm is None
                      else np.asarray(mount_world_T_flange_mm, dtype=float))
-            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(mount))))
+            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(mount))), joints_deg=mount_joints_deg)
             start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
             rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")

@@ -30,19 +30,20 @@ import numpy as np
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.controller.pathfile import smooth
-from humanpt.controller.playback import seam_command
+from humanpt.controller.playback import PlaybackError, RobotArm, seam_command
+from humanpt.geometry.puma import follow
 from humanpt.geometry.rig import Rig
-from humanpt.geometry.transforms import invert_transform, transform_from_x
+from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
 from humanpt.geometry.units import to_mm
 from humanpt.operator.scenario import DEFAULT_SPEED_MM_S, Trajectory
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import header
+from humanpt.schemas.convert import from_pose, header
 from humanpt.seam.compare import Comparison, compare_points, polyline_seam
 from humanpt.seam.fit import Seam, distance_to_seam, fit_path, sample_segment
 
 from . import evaluate
 from .run import SystemConfig
-from .system import build_system, nominal_rig, operator_config
+from .system import build_system, nominal_rig, operator_config, puma_mount_joints
 from .world import start_flange_for
 from .worlds import World
 
@@ -101,6 +102,17 @@ class TeachResult:
     fitted_path_mm: np.ndarray | None = None
     played_path_mm: np.ndarray | None = None
     checks: list = field(default_factory=list)
+    # On the Puma (issue 33): the largest joint step of one cycle while playing back (deg,
+    # from the robot states' joints), the gateway's per-cycle limit it must stay within (the
+    # sim_robot faults beyond max_joint_speed_deg_s x cycle), and why a seam was refused
+    # before anything moved ("" when it was played).
+    max_joint_step_deg: float | None = None
+    joint_step_limit_deg: float | None = None
+    refused: str = ""
+    # The played torch's true poses (M, 6) mm/deg every cycle from the path's start, and the
+    # taught path's (N, 6) (the tip's, else G's): Figure 9b-d.
+    played_x: np.ndarray | None = None
+    taught_x: np.ndarray | None = None
 
 
 def seam_distances_mm(points_mm: np.ndarray, seam_mm: np.ndarray) -> np.ndarray:
@@ -123,6 +135,22 @@ def _seam(op) -> np.ndarray:
     return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
 
 
+def _arm(w) -> RobotArm | None:
+    """The simulated Puma of the twin ``w`` as a playback plans on it (its kinematics, its
+    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits),
+    None on the stand-in (no kinematics)."""
+    from humanpt.sim_robot.core import SimRobotCore
+
+    robot = next((c for c in w.lockstep.cores if isinstance(c, SimRobotCore)), None)
+    if robot is None:
+        return None
+    gw = next((c for c in w.lockstep.cores if c.name == "robot_gateway"), None)
+    limits = {} if gw is None else {"max_speed_mm_s": float(gw.config.max_speed_mm_s),
+                                    "max_angular_deg_s": float(gw.config.max_angular_speed_deg_s)}
+    return RobotArm(robot.kin, robot.world_T_base.copy(), np.asarray(robot.q_setpoint_rad, dtype=float).copy(),
+                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits)
+
+
 def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
     t0 = time.perf_counter()
@@ -142,17 +170,20 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
 
 
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
-                         stages: tuple[str, ...] = tuple(STAGES), rig: Rig | None = None,
+                         stages: tuple[str, ...] | None = None, rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
                          robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None,
                          overrides: dict[str, dict] | None = None, law: str = "thetau") -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
-    the nominal one). ``progress(stage, done, total)`` is called as each stage goes.
-    ``robot`` teaches and plays back: ``standin`` (default) or ``puma``. (The simulated
-    Puma's wrist meets its singularity on the way from watching the seam, 700 mm off, to
-    welding it at every mounting tried: playing back on it needs a joint-space approach,
-    not the controller's straight line.)  ``overrides`` ({section: {key: value}}, as
+    the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
+    done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
+    ``standin`` (default) or ``puma``: the simulated Puma behind the gateway and its ALTER
+    line, mounted in the joint pose that keeps its wrist farthest from its singularity
+    while it watches and welds the seam (:func:`humanpt.twin.system.puma_mount_joints`),
+    the seam planned on it (:func:`humanpt.controller.playback.plan_on_arm`: a joint-space
+    approach, the seam slowed where a joint would be too fast) or refused before any
+    motion (``TeachResult.refused``).  ``overrides`` ({section: {key: value}}, as
     ``humanpt demo --set``) and the servo ``law`` configure the teach-and-play run (the
     operator's speed is ``operator.speed_mm_s``, the playback's
     ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``)."""
@@ -161,7 +192,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
-    for name in stages:
+    for name in tuple(STAGES) if stages is None else stages:
         rig, res = _run_stage(name, world, rig, seed,
                               (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot)
         results.append(res)
@@ -180,10 +211,20 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     mount = view.copy()
     mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
         seam.mean(axis=0) - first[:3, 3])
+    mount_joints = None
+    if robot == "puma":
+        # ... in the joint pose there that keeps its wrist farthest from its singularity
+        # along both jobs: watching the seam (the view carried along it) and welding it.
+        traj = Trajectory(cfg.operator.design_scenario())
+        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
+        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+        watch = np.array([p @ invert_transform(first) @ view for p in along])
+        welds = np.array([p @ tool_T_flange for p in along])
+        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
-                     mount_world_T_flange_mm=mount if robot == "puma" else None)
+                     mount_world_T_flange_mm=mount if robot == "puma" else None, mount_joints_deg=mount_joints)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
@@ -208,6 +249,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         tool_mm = to_mm(ctl.flange_T_tool)
         truth_topic = "sim_robot/truth"  # the stand-in publishes its truth there too
         n_before = len(w.outputs(truth_topic))
+        n_states = len(w.outputs("robot_gateway/robot_state"))
         # As a welder would (`humanpt path smooth`): the recorded path RTS-smoothed first, so
         # that the hand's tremor is not played back.
         points = smooth(np.asarray(taught, dtype=float), stamps) if smooth_path else np.asarray(taught, dtype=float)
@@ -218,18 +260,27 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
         fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
         fitted_mm = distance_to_seam(design, fitted_p)
+        arm = _arm(w)
+        refused = ""
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
-            # as the console does: re-timed for the tool, at most the controller's points
-            args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x)
+            # as the console does: re-timed for the tool, at most the controller's points;
+            # on the Puma planned on the arm (a joint-space approach, the seam slowed where a
+            # joint would be too fast), or refused before anything moves
+            try:
+                args = seam_command(fitted, playback_speed_mm_s, cfg.controller.flange_T_tool_x, arm=arm)
+            except PlaybackError as e:
+                refused, args = str(e), None
         else:
             args = {"speed_mm_s": playback_speed_mm_s, "points": points.round(4).tolist()}
-        w.lockstep.inject(w.now_ns, "controller", "console/command",
-                          pb.Command(header=header(w.now_ns), component="controller", verb="playback",
-                                     args_json=json.dumps(args)))
+        if args is not None:
+            w.lockstep.inject(w.now_ns, "controller", "console/command",
+                              pb.Command(header=header(w.now_ns), component="controller", verb="playback",
+                                         args_json=json.dumps(args)))
         length_mm = float(np.sum(np.linalg.norm(np.diff(seam, axis=0), axis=1)))
-        play_s = 15.0 + length_mm / playback_speed_mm_s
+        times = args.get("times_s") if args else None
+        play_s = 15.0 + (times[-1] if times else length_mm / playback_speed_mm_s)
         t_play0 = w.now_ns
-        done = False
+        done = args is None
         seen = len(w.lockstep.outputs)
         while not done and w.now_ns - t_play0 < play_s * 1e9:
             w.run_for(1.0)
@@ -239,12 +290,21 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
             done = any(o.topic == "controller/events" and pb.Event.FromString(o.data).code == "playback_done"
                        for o in new)
         truths = w.truths(truth_topic)[n_before:]
-        tips = np.array([(r["world_T_flange"] @ tool_mm)[:3, 3] for _, r in truths]).reshape(-1, 3)
+        tools = np.array([r["world_T_flange"] @ tool_mm for _, r in truths]).reshape(-1, 4, 4)
+        tips = tools[:, :3, 3]
         # from the first time the tool reaches the path's start (after the approach)
         first = np.array([fitted.segments[0].start_mm if play == "seam" else transform_from_x(taught[0])[:3, 3]])
-        # the approach ends within 0.2 mm of the start (the controller's criterion): count from there
-        near = np.nonzero(np.linalg.norm(tips - first, axis=1) < 0.25)[0]
+        # the approach ends within 0.2 mm of the start (the controller's criterion): count from
+        # there, as the robot reports its flange (an arm with kinematic errors puts the true
+        # torch ~1 mm away from where it believes it is: that is what is measured, after)
+        states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")[n_states:]]
+        believed = np.array([(to_mm(from_pose(st.world_T_flange)) @ tool_mm)[:3, 3] for st in states]).reshape(-1, 3)
+        at = np.nonzero(np.linalg.norm(believed - first, axis=1) < 0.25)[0]
+        stamps_t = np.array([st for st, _ in truths], dtype=np.int64)
+        near = (np.nonzero(stamps_t >= states[at[0]].header.stamp_ns)[0] if len(at)
+                else np.zeros(0, dtype=np.int64))
         tips = tips[near[0]:] if len(near) else tips[:0]
+        played_x = x_from_transform(tools[near[0]:]) if len(near) else np.zeros((0, 6))
         played_mm = distance_to_seam(design, tips) if len(tips) else np.zeros(0)
         compared = {k: c for k, c in (("taught", _compare(design, taught_p, "taught points")),
                                       ("smoothed", _compare(design, smoothed_p, "smoothed points")),
@@ -255,8 +315,19 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
             compared["played_fitted"] = compare_points(fitted, tips, approach_mm=None, window="played torch")
         warnings = [f"{e.source}: {e.code}" for e in (pb.Event.FromString(o.data) for o in w.outputs()
                                                       if o.topic.endswith("/events")) if e.severity >= 3]
-        if not done:
+        if refused:
+            warnings.append(f"playback refused: {refused}")
+        elif not done:
             warnings.append(f"controller: playback not done after {play_s:.0f} s")
+        step_deg = limit_deg = None
+        if arm is not None and len(truths) > 1:
+            # The arm's joints each cycle of the playback: the world's flange (sim_robot/truth,
+            # every cycle) through the robot's kinematics, the closest branch from its joints
+            # at the start (the robot publishes no joints).
+            flanges = np.array([r["world_T_flange"] for _, r in truths])
+            joints = follow(arm.kinematics, invert_transform(arm.world_T_base_mm) @ flanges, arm.joints_rad)
+            step_deg = float(np.degrees(np.abs(np.diff(joints, axis=0)).max()))
+            limit_deg = arm.max_joint_speed_deg_s * arm.cycle_s
     finally:
         w.close()
     stats = evaluate.Stats.of(err) if len(err) else None
@@ -266,7 +337,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
                        compared, seam_mm=seam, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
-                       checks=checks)
+                       checks=checks, max_joint_step_deg=step_deg, joint_step_limit_deg=limit_deg, refused=refused,
+                       played_x=played_x, taught_x=np.asarray(taught, dtype=float).reshape(-1, 6))
 
 
 # A source of error this large or larger is calibrated or warned of (issue 32.4).

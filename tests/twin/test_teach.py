@@ -83,3 +83,45 @@ def test_a_seam_with_arcs_is_played_back_as_accurately_as_it_was_taught():
     # first recorded point are issue 32.3's).
     assert played.covered >= fitted.covered - 0.005, (played.covered, fitted.covered)
     assert not [w for w in res.warnings if "playback not done" in w]
+
+
+@pytest.mark.timeout(900)  # bounds a hang only: ~100 s alone
+def test_the_trapezium_is_played_back_on_the_puma(tmp_path):
+    """Issue 33.1: lock-step teach-and-play of the trapezium on the simulated Puma (sim_robot
+    behind the gateway and its ALTER line): no controller fault (it used to end "needs a
+    joint step of 7.76 deg (> 7.00 deg per cycle; near a singularity?)"), every joint step
+    of a cycle within the sim_robot's limit (250 deg/s x 28 ms = 7 deg), the playback done,
+    the torch within 0.3 mm RMS of the seam (the stand-in's figure) covering what was taught
+    (ideal world, seed 0: 0.10 mm RMS, 0.24 mm max, 99.4 % covered)."""
+    res = teach.calibrate_then_teach("trapezium", World.ideal(), 0, stages=(), robot="puma", run_dir=tmp_path)
+    # the robot asked for is the robot that ran (issue 33.2): the gateway and the Puma recorded
+    assert (tmp_path / "robot_gateway.mcap").is_file() and (tmp_path / "sim_robot.mcap").is_file()
+    assert not (tmp_path / "standin_robot.mcap").exists()
+    assert res.refused == "" and res.warnings == [], res.warnings  # no fault, no refusal, playback done
+    assert res.joint_step_limit_deg == pytest.approx(250.0 * 0.028)
+    assert 0.0 < res.max_joint_step_deg <= 0.9 * res.joint_step_limit_deg, res.max_joint_step_deg
+    played = res.compared["played"]
+    assert played.rms_mm < 0.3 and played.max_mm < 1.0, (played.rms_mm, played.max_mm)
+    assert played.covered >= res.compared["fitted"].covered - 0.005
+    assert res.compared["played_fitted"].covered >= 0.99
+
+
+def test_the_playback_report_and_figure_9bcd(tmp_path):
+    """Issue 33.3: the report's angle statistics take phi near +-180 deg as one angle (by
+    hand: -179.9 and 179.9 alternating have mean 180 and sd 0.1 deg, not 0 and 179.9), and
+    the figure is written."""
+    from humanpt.seam.compare import compare_points, polyline_seam
+    from humanpt.twin.experiment import PlaybackResult, playback_report, plot_playback
+
+    seam = np.array([[0.0, 0, 0], [100, 0, 0]])
+    played = np.zeros((10, 6))
+    played[:, 0] = np.linspace(0, 100, 10)
+    played[:, 4] = 15.0
+    played[:, 5] = np.where(np.arange(10) % 2, 179.9, -179.9)
+    c = compare_points(polyline_seam(seam), played[:, :3], approach_mm=None)
+    r = PlaybackResult("line", "puma", seam, played, played, c, c, 0.2, 7.0, [], "", 1.0)
+    text = playback_report(r)
+    assert "mean 0.00 / 15.00 / 180.00 deg, sd 0.00 / 0.00 / 0.10" in text or \
+        "mean 0.00 / 15.00 / -180.00 deg, sd 0.00 / 0.00 / 0.10" in text, text
+    assert "largest joint step of a cycle 0.20 deg (limit 7.00)" in text
+    assert plot_playback(r, tmp_path / "f.png").stat().st_size > 10_000
