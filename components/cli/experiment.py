@@ -4,7 +4,8 @@ Each experiment (:func:`humanpt.twin.experiment.run_experiment`: the closed loop
 lock-step, the simulated Puma behind the ALTER link, the path recorded as the paper did)
 gives the paper's statistics: ME, MAE, MaxE and SD of x, y, z, psi, theta, phi, as the
 paper computed them and against ground truth, with the paper's perception method and the
-default one side by side, beside the paper's published tables.  Plots like Figures 7-9
+default one side by side, beside the paper's published tables; each also without the
+filter (the raw state vectors of step 10, as the paper stored them: like for like).  Plots like Figures 7-9
 are saved as PNG.
 
 ``humanpt experiment budget``: the error budget of the twin's world (issue 16,
@@ -37,7 +38,9 @@ PAPER = {
 }
 TABLE = {"static": 1, "arc": 2, "trapezium": 3}
 STATS = ("ME", "MAE", "MaxE", "SD")
-KINDS = ("paper", "truth")
+# Errors as the paper computed them and against ground truth, of the filtered path and of
+# the raw state vectors (step 10's X_WG before the filter: the paper's method as published).
+KINDS = ("paper", "truth", "paper_raw", "truth_raw")
 
 
 def rsi_cycle_ms(args) -> float | None:
@@ -229,6 +232,7 @@ def experiment(args) -> int:
         results[m] = {"x": per_seed[0].x, "which": per_seed[0].which,
                       "wall_s": sum(r.wall_s for r in per_seed), "twin_s": sum(r.twin_s for r in per_seed),
                       "n": [evaluate.Stats.of(r.err_paper).n for r in per_seed],
+                      "n_raw": [evaluate.Stats.of(r.err_paper_raw).n for r in per_seed],
                       **{kind: {stat: np.median(a, axis=0) for stat, a in per[kind].items()} for kind in KINDS},
                       "spread": {kind: {stat: [a.min(axis=0).tolist(), a.max(axis=0).tolist()]
                                         for stat, a in per[kind].items()} for kind in KINDS}}
@@ -247,13 +251,17 @@ def experiment(args) -> int:
             rows.append(_row(f"{stat}  twin, {names[m]}, {how}", results[m]["paper"][stat]))
         for m in methods:
             rows.append(_row(f"{stat}  twin, {names[m]}, vs ground truth", results[m]["truth"][stat]))
+        for m in methods:  # like for like with the paper: its raw state vectors, no filter
+            rows.append(_row(f"{stat}  twin, {names[m]}, no filter, {how}", results[m]["paper_raw"][stat]))
+        for m in methods:
+            rows.append(_row(f"{stat}  twin, {names[m]}, no filter, vs ground truth", results[m]["truth_raw"][stat]))
         rows.append(())
     lines = [title, "", tables.render(["", *evaluate.COORDS], rows[:-1])]
     text = "\n".join(lines)
     print(text)
     (out / "table.txt").write_text(text + "\n")
-    summary = {m: {"which": r["which"], "n": r["n"], "wall_s": r["wall_s"], "twin_s": r["twin_s"],
-                   **{f"{kind}_{stat}": np.asarray(r[kind][stat]).tolist() for kind in ("paper", "truth")
+    summary = {m: {"which": r["which"], "n": r["n"], "n_raw": r["n_raw"], "wall_s": r["wall_s"], "twin_s": r["twin_s"],
+                   **{f"{kind}_{stat}": np.asarray(r[kind][stat]).tolist() for kind in KINDS
                       for stat in ("ME", "MAE", "MaxE", "SD")},
                    "spread_min_max": r["spread"]} for m, r in results.items()}
     (out / "results.json").write_text(json.dumps({"experiment": args.name, "seed": args.seed, "seeds": seeds,

@@ -87,6 +87,10 @@ class ControllerConfig:
     recording_spacing_mm: Annotated[float, Range(0, 1000, "mm")] = live(
         4.0, "a path point whenever the point moved this far (0: every recording_delay_cycles only)")
     record_on_start: bool = False
+    # The paper stores the raw state vector of step 10; humanpt's path point is the filter's
+    # estimate.  With this on each point also carries the perception's own X_WG of the same
+    # image (PathPoint.world_T_tob_raw, and the tip through it), from the pose filter.
+    record_raw: bool = live(False, "store the unfiltered X_WG (the paper's raw state vector) in each path point too")
     has_driver: bool = live(False, "record the driver tip P as well as G")
     calibration_samples: Annotated[int, Range(6, 100000, "samples")] = live(60, "N samples for the driver-tip calibration (GUI)")
     calibration_min_spread_deg: Annotated[float, Range(0, 90, "deg")] = 1.5

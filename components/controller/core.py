@@ -302,8 +302,11 @@ class ControllerCore(Core):
                                        "the path goes on from the new stamps"))
             if (last is None or at > last or stepped_back) and self._point_due(T):
                 self.cycles_since_point = 0
+                raw = None
+                if c.record_raw and st.HasField("world_T_tob_measured") and at == st.measurement_stamp_ns:
+                    raw = from_pose(st.world_T_tob_measured)  # the same image's X_WG before the filter
                 outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
-                                             _pose_covariance(st)))
+                                             _pose_covariance(st), raw))
         fov = img = 0.0
         if valid:
             camera_T_tob_mm = to_mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
@@ -380,14 +383,19 @@ class ControllerCore(Core):
         return bool(np.linalg.norm(world_T_point[:3, 3] * 1e3 - self._path_x[-1][:3]) >= c.recording_spacing_mm)
 
     def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray, orientation_held: bool,
-                    cov_pr: np.ndarray | None) -> Output:
+                    cov_pr: np.ndarray | None, world_T_tob_raw: np.ndarray | None = None) -> Output:
         """A path point of G (and the tip) at ``stamp_ns``; ``cov_pr`` (6, 6): the filter's
-        covariance of [p (m), r (rad)] (world frame), None when the state carries none."""
+        covariance of [p (m), r (rad)] (world frame), None when the state carries none;
+        ``world_T_tob_raw``: the same measurement's pose before the filter (``record_raw``)."""
         pt = pb.PathPoint(header=self.next_header(T_PATH, stamp_ns, "world"), index=self.path_index,
                           world_T_tob=pose(world_T_tob), has_tip=self.config.has_driver,
                           orientation_held=orientation_held)
         if self.config.has_driver:
             pt.world_T_tip.CopyFrom(pose(world_T_tob @ self.tob_T_tip))
+        if world_T_tob_raw is not None:
+            pt.world_T_tob_raw.CopyFrom(pose(world_T_tob_raw))
+            if self.config.has_driver:
+                pt.world_T_tip_raw.CopyFrom(pose(world_T_tob_raw @ self.tob_T_tip))
         if cov_pr is not None:
             pt.position_covariance_m2.extend(cov_pr[:3, :3].ravel().tolist())
             pt.rotation_covariance_rad2.extend(cov_pr[3:, 3:].ravel().tolist())
