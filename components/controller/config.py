@@ -21,7 +21,10 @@ ENVELOPE_KEYS = ("envelope_min_mm", "envelope_max_mm")
 X6 = tuple[float, float, float, float, float, float]
 # The paper's K (Section 5, V_F = K E_F) as a 6x6 matrix: rows and columns (x, y, z, rx, ry,
 # rz) in the flange frame, the error as a translation (m) and a small rotation vector (rad).
-Matrix6 = tuple[X6, X6, X6, X6, X6, X6]
+# (1000: the scalar gains' bound; the loop check at the link's cycle is far tighter.)
+KEntry = Annotated[float, Range(-1000, 1000, "1/s; m/(rad s), rad/(m s) off the blocks")]
+KRow = tuple[KEntry, KEntry, KEntry, KEntry, KEntry, KEntry]
+Matrix6 = tuple[KRow, KRow, KRow, KRow, KRow, KRow]
 # With one cycle of delay in the loop the gains must keep |k dt| below this (the scalar
 # gains' check, and each eigenvalue of a gain matrix).
 GAIN_DT_LIMIT = 0.5
