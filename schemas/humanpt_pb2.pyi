@@ -204,7 +204,7 @@ class FlangeCommand(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., cycle: _Optional[int] = ..., d_translation_m: _Optional[_Union[Vector3, _Mapping]] = ..., d_rotation_rad: _Optional[_Union[Vector3, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., request_alter_off: _Optional[bool] = ..., measurement_stamp_ns: _Optional[int] = ...) -> None: ...
 
 class TobState(_message.Message):
-    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements", "world_T_tob_at_measurement", "after_measurement")
+    __slots__ = ("header", "world_T_tob", "linear_velocity_m_s", "angular_velocity_rad_s", "covariance", "covariance_dim", "status", "gated_outliers", "measurement_stamp_ns", "cycle", "measurements", "world_T_tob_at_measurement", "after_measurement", "world_T_tob_measured")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
     LINEAR_VELOCITY_M_S_FIELD_NUMBER: _ClassVar[int]
@@ -218,6 +218,7 @@ class TobState(_message.Message):
     MEASUREMENTS_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_AT_MEASUREMENT_FIELD_NUMBER: _ClassVar[int]
     AFTER_MEASUREMENT_FIELD_NUMBER: _ClassVar[int]
+    WORLD_T_TOB_MEASURED_FIELD_NUMBER: _ClassVar[int]
     header: Header
     world_T_tob: Pose
     linear_velocity_m_s: Vector3
@@ -231,7 +232,8 @@ class TobState(_message.Message):
     measurements: int
     world_T_tob_at_measurement: Pose
     after_measurement: bool
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ..., world_T_tob_at_measurement: _Optional[_Union[Pose, _Mapping]] = ..., after_measurement: _Optional[bool] = ...) -> None: ...
+    world_T_tob_measured: Pose
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., linear_velocity_m_s: _Optional[_Union[Vector3, _Mapping]] = ..., angular_velocity_rad_s: _Optional[_Union[Vector3, _Mapping]] = ..., covariance: _Optional[_Iterable[float]] = ..., covariance_dim: _Optional[int] = ..., status: _Optional[_Union[TobStatus, str]] = ..., gated_outliers: _Optional[int] = ..., measurement_stamp_ns: _Optional[int] = ..., cycle: _Optional[int] = ..., measurements: _Optional[int] = ..., world_T_tob_at_measurement: _Optional[_Union[Pose, _Mapping]] = ..., after_measurement: _Optional[bool] = ..., world_T_tob_measured: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
 
 class ControllerStatus(_message.Message):
     __slots__ = ("header", "mode", "visible", "error_translation_m", "error_rotation_rad", "cycle_misses", "recording", "path_points", "calibration_samples", "cycle", "saturated", "world_T_desired", "fov_margin_px", "image_error_px", "rotation_scale")
@@ -268,7 +270,7 @@ class ControllerStatus(_message.Message):
     def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., mode: _Optional[_Union[ControlMode, str]] = ..., visible: _Optional[int] = ..., error_translation_m: _Optional[float] = ..., error_rotation_rad: _Optional[float] = ..., cycle_misses: _Optional[int] = ..., recording: _Optional[bool] = ..., path_points: _Optional[int] = ..., calibration_samples: _Optional[int] = ..., cycle: _Optional[int] = ..., saturated: _Optional[bool] = ..., world_T_desired: _Optional[_Union[Pose, _Mapping]] = ..., fov_margin_px: _Optional[float] = ..., image_error_px: _Optional[float] = ..., rotation_scale: _Optional[float] = ...) -> None: ...
 
 class PathPoint(_message.Message):
-    __slots__ = ("header", "index", "world_T_tob", "has_tip", "world_T_tip", "orientation_held", "position_covariance_m2", "rotation_covariance_rad2", "tip_position_covariance_m2")
+    __slots__ = ("header", "index", "world_T_tob", "has_tip", "world_T_tip", "orientation_held", "position_covariance_m2", "rotation_covariance_rad2", "tip_position_covariance_m2", "world_T_tob_raw", "world_T_tip_raw")
     HEADER_FIELD_NUMBER: _ClassVar[int]
     INDEX_FIELD_NUMBER: _ClassVar[int]
     WORLD_T_TOB_FIELD_NUMBER: _ClassVar[int]
@@ -278,6 +280,8 @@ class PathPoint(_message.Message):
     POSITION_COVARIANCE_M2_FIELD_NUMBER: _ClassVar[int]
     ROTATION_COVARIANCE_RAD2_FIELD_NUMBER: _ClassVar[int]
     TIP_POSITION_COVARIANCE_M2_FIELD_NUMBER: _ClassVar[int]
+    WORLD_T_TOB_RAW_FIELD_NUMBER: _ClassVar[int]
+    WORLD_T_TIP_RAW_FIELD_NUMBER: _ClassVar[int]
     header: Header
     index: int
     world_T_tob: Pose
@@ -287,7 +291,9 @@ class PathPoint(_message.Message):
     position_covariance_m2: _containers.RepeatedScalarFieldContainer[float]
     rotation_covariance_rad2: _containers.RepeatedScalarFieldContainer[float]
     tip_position_covariance_m2: _containers.RepeatedScalarFieldContainer[float]
-    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., index: _Optional[int] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., orientation_held: _Optional[bool] = ..., position_covariance_m2: _Optional[_Iterable[float]] = ..., rotation_covariance_rad2: _Optional[_Iterable[float]] = ..., tip_position_covariance_m2: _Optional[_Iterable[float]] = ...) -> None: ...
+    world_T_tob_raw: Pose
+    world_T_tip_raw: Pose
+    def __init__(self, header: _Optional[_Union[Header, _Mapping]] = ..., index: _Optional[int] = ..., world_T_tob: _Optional[_Union[Pose, _Mapping]] = ..., has_tip: _Optional[bool] = ..., world_T_tip: _Optional[_Union[Pose, _Mapping]] = ..., orientation_held: _Optional[bool] = ..., position_covariance_m2: _Optional[_Iterable[float]] = ..., rotation_covariance_rad2: _Optional[_Iterable[float]] = ..., tip_position_covariance_m2: _Optional[_Iterable[float]] = ..., world_T_tob_raw: _Optional[_Union[Pose, _Mapping]] = ..., world_T_tip_raw: _Optional[_Union[Pose, _Mapping]] = ...) -> None: ...
 
 class Truth(_message.Message):
     __slots__ = ("header", "world_T_tob", "has_tip", "world_T_tip", "world_T_flange", "cover_fraction", "cover_angle_rad")

@@ -25,6 +25,12 @@ def add_parser(csub) -> None:
     add_rig_args(q)
     q.add_argument("--samples", type=int, help="distinct poses to fit (>= 6; default: 300 on the twin, the "
                    "controller's calibration_samples live)")
+    q.add_argument("--method", choices=("pivot", "paper"), default="pivot",
+                   help="pivot (default): the least-squares pivot fit; paper: Section 4.1 as written - P' measured "
+                   "first as the centre of a printed circle through the PSVS over --pattern-poses robot poses "
+                   "(eq. 10-11), then eq. 12-13 on the poses collected while the target pivots on P' (twin only)")
+    q.add_argument("--pattern-poses", type=int, default=10, metavar="N",
+                   help="--method paper: robot poses that measure P' (default 10)")
     q.add_argument("--twin", action="store_true", help="on the digital twin instead of a live cell")
     add_world_args(q)
     q.add_argument("--config", "-c", metavar="FILE", help="live: the cell's config file")
@@ -38,6 +44,11 @@ def _read_rig(path: Path) -> Rig:
 def run(args) -> int:
     if args.samples is not None and args.samples < 6:
         raise ValueError("--samples must be >= 6 (the pivot fit has 6 unknowns)")
+    if args.pattern_poses < 1:
+        raise ValueError(f"--pattern-poses must be >= 1, got {args.pattern_poses}")
+    if args.method == "paper" and not args.twin:
+        raise ValueError("--method paper runs on the twin (--twin): measuring P' live needs the printed pattern "
+                         "in the camera's view, which the live console does not drive yet")
     rig_path = Path(args.rig)
     rig = _read_rig(rig_path)  # a bad rig fails before anything moves
     if args.twin:
@@ -47,7 +58,8 @@ def run(args) -> int:
         try:
             result, report, truth = calibrate_tip_on_twin(
                 World.named(args.world), rig, args.seed, args.samples or 300,
-                progress=lambda now, end: print(f"\r  twin {now:4.0f} / {end:.0f} s", end="", file=sys.stderr))
+                progress=lambda now, end: print(f"\r  twin {now:4.0f} / {end:.0f} s", end="", file=sys.stderr),
+                method=args.method, pattern_poses=args.pattern_poses)
         except TipCalibrationError as e:
             print(file=sys.stderr)
             raise ValueError(str(e)) from None
@@ -68,7 +80,8 @@ def run(args) -> int:
         print("dry run: the rig is unchanged")
         return 0
     date = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
-    write_rig(rig_path, apply_to_rig(rig, result, date), "written by humanpt calibrate tip", overwrite=True)
+    write_rig(rig_path, apply_to_rig(rig, result, date, args.method), "written by humanpt calibrate tip",
+              overwrite=True)
     print(f"wrote the tip into {rig_path}" + (" (the old rig kept as .bak)" if rig_path.with_name(
         rig_path.name + ".bak").exists() else ""))
     return 0

@@ -4,7 +4,8 @@ Each experiment (:func:`humanpt.twin.experiment.run_experiment`: the closed loop
 lock-step, the simulated Puma behind the ALTER link, the path recorded as the paper did)
 gives the paper's statistics: ME, MAE, MaxE and SD of x, y, z, psi, theta, phi, as the
 paper computed them and against ground truth, with the paper's perception method and the
-default one side by side, beside the paper's published tables.  Plots like Figures 7-9
+default one side by side, beside the paper's published tables; each also without the
+filter (the raw state vectors of step 10, as the paper stored them: like for like).  Plots like Figures 7-9
 are saved as PNG.
 
 ``humanpt experiment budget``: the error budget of the twin's world (issue 16,
@@ -253,13 +254,17 @@ def experiment(args) -> int:
             rows.append(_row(f"{stat}  twin, {names[m]}, {how}", results[m]["paper"][stat]))
         for m in methods:
             rows.append(_row(f"{stat}  twin, {names[m]}, vs ground truth", results[m]["truth"][stat]))
+        for m in methods:  # like for like with the paper: its raw state vectors, no filter
+            rows.append(_row(f"{stat}  twin, {names[m]}, no filter, {how}", results[m]["paper_raw"][stat]))
+        for m in methods:
+            rows.append(_row(f"{stat}  twin, {names[m]}, no filter, vs ground truth", results[m]["truth_raw"][stat]))
         rows.append(())
     lines = [title, "", tables.render(["", *evaluate.COORDS], rows[:-1])]
     text = "\n".join(lines)
     print(text)
     (out / "table.txt").write_text(text + "\n")
-    summary = {m: {"which": r["which"], "n": r["n"], "wall_s": r["wall_s"], "twin_s": r["twin_s"],
-                   **{f"{kind}_{stat}": np.asarray(r[kind][stat]).tolist() for kind in ("paper", "truth")
+    summary = {m: {"which": r["which"], "n": r["n"], "n_raw": r["n_raw"], "wall_s": r["wall_s"], "twin_s": r["twin_s"],
+                   **{f"{kind}_{stat}": np.asarray(r[kind][stat]).tolist() for kind in KINDS
                       for stat in ("ME", "MAE", "MaxE", "SD")},
                    "spread_min_max": r["spread"]} for m, r in results.items()}
     (out / "results.json").write_text(json.dumps({"experiment": args.name, "seed": args.seed, "seeds": seeds,

@@ -71,6 +71,12 @@ OPTIONS: dict[str, tuple[str, str, str]] = {
         "lost_action",
         "target lost: true = stop on current location (hold), false = return to start",
     ),
+    "return-pose": (
+        "controller",
+        "return_flange_x",
+        "the prespecified pose 'return' goes to: x,y,z,psi,theta,phi of the flange (world, mm, deg); "
+        "'start' clears it (the first robot pose)",
+    ),
     "calib-samples": (
         "controller",
         "calibration_samples",
@@ -85,6 +91,8 @@ ALIASES = {
     "dz-offset": "dz",
     "dz-mm": "dz",
     "stop": "stop-on-current-location",
+    "return": "return-pose",
+    "home": "return-pose",
     "n": "calib-samples",
     "samples": "calib-samples",
     "calibration-samples": "calib-samples",
@@ -203,6 +211,19 @@ def parse_mask(text: str) -> list[list[int]]:
     return rects
 
 
+def parse_pose(text: str) -> list[float] | None:
+    """``x,y,z,psi,theta,phi`` (mm, deg) -> six numbers; ``start`` or ``none`` -> None."""
+    if text.strip().lower() in ("start", "none", ""):
+        return None
+    parts = [p for p in re.split(r"[,\s]+", text.strip()) if p]
+    if len(parts) != 6:
+        raise ValueError(f"{text!r}: give six numbers x,y,z,psi,theta,phi (mm, deg), or 'start'")
+    values = [float(p) for p in parts]
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{text!r}: the numbers must be finite")
+    return values
+
+
 def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
     """``NAME=VALUE`` (GUI names, or ``component.key`` for any live parameter) ->
     {component: {live key: value}}, values typed as the components expect."""
@@ -226,6 +247,8 @@ def parse_options(assignments: list[str]) -> dict[str, dict[str, object]]:
                     typed = value
                 elif key == "mask":
                     typed = parse_mask(value)
+                elif key == "return-pose":
+                    typed = parse_pose(value)
                 else:
                     typed = float(value)
             except ValueError as e:

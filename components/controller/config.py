@@ -6,6 +6,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal
 
+import numpy as np
+
 from humanpt.geometry.rig import DEFAULT_DZ_MM
 from humanpt.runtime import cell_limits
 from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
@@ -17,6 +19,15 @@ from humanpt.runtime.config import Deg, Mm, Range, RateDegS, SpeedMmS, live
 ENVELOPE_KEYS = ("envelope_min_mm", "envelope_max_mm")
 
 X6 = tuple[float, float, float, float, float, float]
+# The paper's K (Section 5, V_F = K E_F) as a 6x6 matrix: rows and columns (x, y, z, rx, ry,
+# rz) in the flange frame, the error as a translation (m) and a small rotation vector (rad).
+# (1000: the scalar gains' bound; the loop check at the link's cycle is far tighter.)
+KEntry = Annotated[float, Range(-1000, 1000, "1/s; m/(rad s), rad/(m s) off the blocks")]
+KRow = tuple[KEntry, KEntry, KEntry, KEntry, KEntry, KEntry]
+Matrix6 = tuple[KRow, KRow, KRow, KRow, KRow, KRow]
+# With one cycle of delay in the loop the gains must keep |k dt| below this (the scalar
+# gains' check, and each eigenvalue of a gain matrix).
+GAIN_DT_LIMIT = 0.5
 
 
 @dataclass(frozen=True)
@@ -28,6 +39,10 @@ class ControllerConfig:
     dz_mm: Annotated[float, Range(10, 5000, "mm")] = live(DEFAULT_DZ_MM, "distance of the desired point D from the camera (GUI: dz offset)")
     gain_translation_1_s: Annotated[float, Range(1e-3, 1000, "1/s")] = live(4.0, "K for translation")
     gain_rotation_1_s: Annotated[float, Range(1e-3, 1000, "1/s")] = live(4.0, "K for rotation")
+    # K as the paper's 6x6 weight matrix (None: diag(gain_translation_1_s x 3,
+    # gain_rotation_1_s x 3), the default); both laws take it in the flange frame.
+    gain_matrix_1_s: Matrix6 | None = live(
+        None, "K as a 6x6 matrix, flange frame, (x, y, z, rx, ry, rz) in m and rad (none: the two gains' diagonal)")
     feed_forward: bool = live(True, "add the target's filtered velocity (thetau law)")
     # The thetau law compares the flange and the target at the same instant: the robot
     # state's stamp plus this lead (the time until the command takes effect beyond one
@@ -59,6 +74,11 @@ class ControllerConfig:
     # waiting on three bus hops within its reply deadline.
     command_ahead: bool = live(True, "command each ALTER cycle one cycle ahead (no bus wait at the gateway)")
     lost_action: Literal["hold", "return"] = live("hold", "target lost: stop on current location, or return")
+    # The paper's "return to an initial prespecified state": the flange pose (world frame,
+    # mm and deg, X = (x, y, z, psi, theta, phi)) that "return" and the lost action
+    # "return" go to; None: the first robot pose the controller saw.  Inside the envelope.
+    return_flange_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] | None = live(
+        None, "flange pose (world, mm/deg) to return to (none: the first robot pose)")
     start_mode: Literal["track", "hold"] = "track"
     recording_delay_cycles: Annotated[int, Range(1, 100000, "cycles")] = live(10, "a path point every N cycles (GUI: recording delay)")
     # A point also at the first measurement after record_start and whenever the point moved
@@ -70,6 +90,10 @@ class ControllerConfig:
     recording_spacing_mm: Annotated[float, Range(0, 1000, "mm")] = live(
         4.0, "a path point whenever the point moved this far (0: every recording_delay_cycles only)")
     record_on_start: bool = False
+    # The paper stores the raw state vector of step 10; humanpt's path point is the filter's
+    # estimate.  With this on each point also carries the perception's own X_WG of the same
+    # image (PathPoint.world_T_tob_raw, and the tip through it), from the pose filter.
+    record_raw: bool = live(False, "store the unfiltered X_WG (the paper's raw state vector) in each path point too")
     has_driver: bool = live(False, "record the driver tip P as well as G")
     calibration_samples: Annotated[int, Range(6, 100000, "samples")] = live(60, "N samples for the driver-tip calibration (GUI)")
     calibration_min_spread_deg: Annotated[float, Range(0, 90, "deg")] = 1.5
@@ -107,6 +131,25 @@ class ControllerConfig:
                              f"{self.envelope_max_mm} on every axis")
         if self.calibration_samples < 6:
             raise ValueError("calibration_samples must be >= 6 (the pivot fit has 6 unknowns)")
+        if self.return_flange_x is not None:
+            p = np.asarray(self.return_flange_x[:3], dtype=float)
+            lo, hi = np.asarray(self.envelope_min_mm), np.asarray(self.envelope_max_mm)
+            for j, axis in enumerate("xyz"):
+                if not lo[j] <= p[j] <= hi[j]:
+                    side, limit = ("below", lo[j]) if p[j] < lo[j] else ("above", hi[j])
+                    raise ValueError(f"return_flange_x puts the flange at {axis} {p[j]:g} mm, {side} the workspace "
+                                     f"envelope's {'min' if side == 'below' else 'max'} {limit:g} mm")
+
+    def gain_matrix(self) -> np.ndarray | None:
+        """K (6, 6), flange frame, SI; None for the default diagonal of the two gains."""
+        return None if self.gain_matrix_1_s is None else np.asarray(self.gain_matrix_1_s, dtype=float)
+
+    def gain_eigenvalues(self) -> np.ndarray:
+        """The eigenvalues (1/s) of K: the two gains, or the matrix's."""
+        K = self.gain_matrix()
+        if K is None:
+            return np.array([self.gain_translation_1_s] * 3 + [self.gain_rotation_1_s] * 3, dtype=complex)
+        return np.linalg.eigvals(K)
 
     def check_cycle(self, cycle_period_ns: int) -> None:
         """The gains at the cell's cycle (the link's; ``ConfigFile.component`` calls this):
@@ -114,5 +157,34 @@ class ControllerConfig:
         dt_s = cycle_period_ns * 1e-9
         for name in ("gain_translation_1_s", "gain_rotation_1_s"):
             g = getattr(self, name)
-            if not g * dt_s < 0.5:
-                raise ValueError(f"{name} = {g} must be < {0.5 / dt_s:.1f} at the link's {dt_s * 1e3:g} ms cycle")
+            if not g * dt_s < GAIN_DT_LIMIT:
+                raise ValueError(f"{name} = {g} must be < {GAIN_DT_LIMIT / dt_s:.1f} at the link's {dt_s * 1e3:g} ms cycle")
+        if self.gain_matrix_1_s is not None:
+            why = gain_matrix_refusal(self.gain_matrix(), dt_s)
+            if why:
+                raise ValueError(f"gain_matrix_1_s {why} at the link's {dt_s * 1e3:g} ms cycle")
+
+
+def gain_matrix_refusal(K: np.ndarray, dt_s: float) -> str | None:
+    """Why the loop with gain matrix ``K`` (6, 6, 1/s) is not stable at the cycle ``dt_s``,
+    or None.  With one cycle of delay the error obeys e[k+1] = e[k] - dt K e[k-1]: for each
+    eigenvalue l of K the roots of z^2 - z + l dt must lie inside the unit circle, and, as
+    for the scalar gains, |l dt| < GAIN_DT_LIMIT (a diagonal K is refused exactly when a
+    scalar gain of its diagonal would be)."""
+    if not np.all(np.isfinite(K)):
+        return "has a value that is not finite"
+    for lam in np.linalg.eigvals(K):
+        a = complex(lam) * dt_s
+        roots = np.roots([1.0, -1.0, a])
+        if not abs(a) < GAIN_DT_LIMIT:
+            return (f"has an eigenvalue {_fmt_complex(lam)} 1/s: |l dt| = {abs(a):.3g} must be < {GAIN_DT_LIMIT:g} "
+                    f"(|l| < {GAIN_DT_LIMIT / dt_s:.1f} 1/s)")
+        if not np.max(np.abs(roots)) < 1.0:
+            return (f"has an eigenvalue {_fmt_complex(lam)} 1/s that makes the delayed loop unstable "
+                    f"(a root |z| = {np.max(np.abs(roots)):.4f} >= 1: its real part must be > 0)")
+    return None
+
+
+def _fmt_complex(lam: complex) -> str:
+    lam = complex(lam)
+    return f"{lam.real:g}" if abs(lam.imag) < 1e-12 else f"{lam.real:g}{lam.imag:+g}j"

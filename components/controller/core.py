@@ -162,6 +162,7 @@ class ControllerCore(Core):
         self.dt = cell_cycle.ms(self.cycle_period_ns) * 1e-3
         self.max_step_m = c.max_speed_mm_s * 1e-3 * self.dt
         self.max_step_rad = np.radians(c.max_rotation_deg_s) * self.dt
+        self.K = c.gain_matrix()  # the 6x6 gain matrix, or None: the two gains
 
     def on_config_changed(self, old, new) -> None:
         self._derive(new)
@@ -243,8 +244,8 @@ class ControllerCore(Core):
         if self.mode in (pb.CONTROL_MODE_TRACK, pb.CONTROL_MODE_CALIBRATE):
             if not valid:
                 mode = pb.CONTROL_MODE_LOST
-                if c.lost_action == "return" and self.start_world_T_flange is not None:
-                    step, desired = self._goto(world_T_flange, self.start_world_T_flange)
+                if c.lost_action == "return" and self.return_world_T_flange() is not None:
+                    step, desired = self._goto(world_T_flange, self.return_world_T_flange())
             else:
                 position_only = st.status == pb.TOB_STATUS_POSITION_ONLY
                 if position_only:
@@ -256,8 +257,8 @@ class ControllerCore(Core):
                     # The filter's pose at the image's instant: what was measured, with no
                     # prediction in it (a predicted pose lags or leads the pivoting target).
                     outs += self._calibration_sample(t_ns, from_pose(st.world_T_tob_at_measurement), world_T_flange)
-        elif self.mode == pb.CONTROL_MODE_RETURN and self.start_world_T_flange is not None:
-            step, desired = self._goto(world_T_flange, self.start_world_T_flange)
+        elif self.mode == pb.CONTROL_MODE_RETURN and self.return_world_T_flange() is not None:
+            step, desired = self._goto(world_T_flange, self.return_world_T_flange())
         elif self.mode == pb.CONTROL_MODE_PLAYBACK:
             step, desired, done = self._playback_step(world_T_flange)
             if done:
@@ -301,8 +302,11 @@ class ControllerCore(Core):
                                        "the path goes on from the new stamps"))
             if (last is None or at > last or stepped_back) and self._point_due(T):
                 self.cycles_since_point = 0
+                raw = None
+                if c.record_raw and st.HasField("world_T_tob_measured") and at == st.measurement_stamp_ns:
+                    raw = from_pose(st.world_T_tob_measured)  # the same image's X_WG before the filter
                 outs.append(self._path_point(at, T, st.status == pb.TOB_STATUS_POSITION_ONLY,
-                                             _pose_covariance(st)))
+                                             _pose_covariance(st), raw))
         fov = img = 0.0
         if valid:
             camera_T_tob_mm = to_mm(invert_transform(world_T_flange @ self.flange_T_camera) @ world_T_tob)
@@ -329,7 +333,7 @@ class ControllerCore(Core):
         if c.law == "paper":
             return law.paper_step(world_T_flange, world_T_tob, self.flange_T_desired, k_t=c.gain_translation_1_s,
                                   k_r=c.gain_rotation_1_s, dt_s=self.dt, max_step_m=self.max_step_m,
-                                  max_step_rad=self.max_step_rad, position_only=position_only)
+                                  max_step_rad=self.max_step_rad, position_only=position_only, K=self.K)
         return law.thetau_step(world_T_flange, world_T_tob, self.flange_T_desired, v_tob_m_s=v_tob,
                                w_tob_rad_s=w_tob, k_t=c.gain_translation_1_s, k_r=c.gain_rotation_1_s,
                                dt_s=self.dt, max_step_m=self.max_step_m, max_step_rad=self.max_step_rad,
@@ -337,7 +341,16 @@ class ControllerCore(Core):
                                deadband_m=c.deadband_mm * 1e-3, deadband_rad=np.radians(c.deadband_deg),
                                still_m_s=c.still_mm_s * 1e-3, still_rad_s=np.radians(c.still_deg_s),
                                saturation=c.saturation, position_first_beyond_m=c.position_first_beyond_mm * 1e-3,
-                               engaged=self._position_first)
+                               engaged=self._position_first, K=self.K)
+
+    def return_world_T_flange(self) -> np.ndarray | None:
+        """Where "return" (and the lost action "return") takes the flange (m): the
+        prespecified ``return_flange_x`` (checked inside the envelope by the config), else
+        the first robot pose seen (None before any)."""
+        x = self.config.return_flange_x
+        if x is None:
+            return self.start_world_T_flange
+        return to_m(transform_from_x(np.asarray(x, dtype=float)))
 
     def _goto(self, world_T_flange, world_T_target, v_ff=None, w_ff=None, together: bool = False):
         """A saturated step towards a flange pose (no vision).  ``v_ff`` (3,) m/s and
@@ -370,14 +383,19 @@ class ControllerCore(Core):
         return bool(np.linalg.norm(world_T_point[:3, 3] * 1e3 - self._path_x[-1][:3]) >= c.recording_spacing_mm)
 
     def _path_point(self, stamp_ns: int, world_T_tob: np.ndarray, orientation_held: bool,
-                    cov_pr: np.ndarray | None) -> Output:
+                    cov_pr: np.ndarray | None, world_T_tob_raw: np.ndarray | None = None) -> Output:
         """A path point of G (and the tip) at ``stamp_ns``; ``cov_pr`` (6, 6): the filter's
-        covariance of [p (m), r (rad)] (world frame), None when the state carries none."""
+        covariance of [p (m), r (rad)] (world frame), None when the state carries none;
+        ``world_T_tob_raw``: the same measurement's pose before the filter (``record_raw``)."""
         pt = pb.PathPoint(header=self.next_header(T_PATH, stamp_ns, "world"), index=self.path_index,
                           world_T_tob=pose(world_T_tob), has_tip=self.config.has_driver,
                           orientation_held=orientation_held)
         if self.config.has_driver:
             pt.world_T_tip.CopyFrom(pose(world_T_tob @ self.tob_T_tip))
+        if world_T_tob_raw is not None:
+            pt.world_T_tob_raw.CopyFrom(pose(world_T_tob_raw))
+            if self.config.has_driver:
+                pt.world_T_tip_raw.CopyFrom(pose(world_T_tob_raw @ self.tob_T_tip))
         if cov_pr is not None:
             pt.position_covariance_m2.extend(cov_pr[:3, :3].ravel().tolist())
             pt.rotation_covariance_rad2.extend(cov_pr[3:, 3:].ravel().tolist())
@@ -597,7 +615,9 @@ class ControllerCore(Core):
             return info("command", "hold (stop on current location)")
         if verb == "return":
             self.mode = pb.CONTROL_MODE_RETURN
-            return info("command", "return to the start pose")
+            x = self.config.return_flange_x
+            where = "the start pose" if x is None else "the return pose [" + ", ".join(f"{v:g}" for v in x) + "]"
+            return info("command", f"return to {where}")
         if verb == "record_start":
             self.recording, self.path, self.path_index, self.cycles_since_point = True, [], 0, 0
             self._path_x, self._path_held, self._path_stamps = [], [], []

@@ -16,6 +16,11 @@ limits.  The robot applies it as :func:`humanpt.geometry.transforms.apply_step` 
   rotation as theta-u (a rotation vector: no Euler singularity); feed-forward of the
   target's velocity removes the lag proportional to speed over gain.
 
+K: two scalar gains (``k_t`` 1/s on the translation, ``k_r`` on the rotation: the default
+diagonal), or the paper's 6x6 weight matrix ``K`` (flange frame: rows and columns (x, y, z,
+rx, ry, rz), the error a translation in m and a small rotation vector in rad), which both
+laws accept (:func:`gain`); with ``K`` given the scalars are not used.
+
 When the demanded flange motion exceeds the limits, ``saturation`` chooses what gives:
 ``scale`` shrinks the whole step (translation and rotation each by norm: the flange falls
 behind the target, G drifts out of the image), ``position_first`` (default) keeps the
@@ -54,6 +59,18 @@ class Step:
     # flange to D) actually commanded: < 1 when position_first let the orientation lag.
     rotation_scale: float = 1.0
     position_first: bool = False  # made by position_first (not by the scaled thetau law)
+
+
+def gain(k_t: float, k_r: float, K: np.ndarray | None, world_R_flange: np.ndarray,
+         e_t: np.ndarray, e_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(v (3,), w (3,)) = K (e_t, e_r): world-frame errors (m, rad) to world-frame velocities
+    (m/s, rad/s).  Without ``K`` the two scalar gains (bit for bit the old law); with it the
+    6x6 matrix in the flange frame: ``R K (R^T e_t, R^T e_r)``."""
+    if K is None:
+        return k_t * e_t, k_r * e_r
+    R = np.asarray(world_R_flange, dtype=float)
+    u = K @ np.concatenate([R.T @ e_t, R.T @ e_r])
+    return R @ u[:3], R @ u[3:]
 
 
 def saturate(
@@ -175,6 +192,7 @@ def thetau_step(
     saturation: str = "scale",
     position_first_beyond_m: float = 0.0,
     engaged: bool = False,
+    K: np.ndarray | None = None,
 ) -> Step:
     """Default law; with ``position_only`` only the translation of D towards G is servoed.
     ``saturation``: ``scale`` (the flange's pose servoed, the step shrunk by norm to the
@@ -182,12 +200,13 @@ def thetau_step(
     within ``position_first_beyond_m``; a step beyond the limits with G farther from D is
     replaced by D servoed onto G, the flange turning about D and the orientation lagging:
     :func:`position_first`). ``engaged``: the previous step was position_first's; it
-    stays so while the limits bind, whatever |G - D| (hysteresis: no chatter at the band)."""
+    stays so while the limits bind, whatever |G - D| (hysteresis: no chatter at the band).
+    ``K``: the 6x6 gain matrix (flange frame) instead of ``k_t``, ``k_r`` (:func:`gain`)."""
     if saturation not in SATURATIONS:
         raise ValueError(f"saturation must be one of {SATURATIONS}, got {saturation!r}")
     step = _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
                        max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
-                       still_rad_s)
+                       still_rad_s, K)
     if saturation == "position_first" and step.saturated and (engaged or step.error_translation_m
                                                               > position_first_beyond_m):
         # Within the limits both agree on where to go; beyond them, once G has fallen away
@@ -196,18 +215,18 @@ def thetau_step(
         # law now and then by the 0.7 m lever; letting it lag biases that perception.)
         return _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s,
                                     k_t, k_r, dt_s, max_step_m, max_step_rad, feed_forward, position_only,
-                                    deadband_m, deadband_rad, still_m_s, still_rad_s)
+                                    deadband_m, deadband_rad, still_m_s, still_rad_s, K)
     return step
 
 
 def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_rad_s, k_t, k_r, dt_s,
                 max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad, still_m_s,
-                still_rad_s) -> Step:
+                still_rad_s, K=None) -> Step:
     """The thetau law, its step scaled by norm to the limits (``saturation = "scale"``)."""
     world_T_fd = desired_flange(world_T_tob, flange_T_desired)
     e_t, e_r = pose_error(world_T_flange, world_T_fd)
-    v = k_t * e_t
-    w = k_r * e_r
+    R = world_T_flange[:3, :3]
+    v, w = gain(k_t, k_r, K, R, e_t, e_r)
     if feed_forward:
         # The desired flange pose moves rigidly with the target.
         v = v + v_tob_m_s + np.cross(w_tob_rad_s, world_T_fd[:3, 3] - world_T_tob[:3, 3])
@@ -215,7 +234,7 @@ def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_
     if position_only:
         # Keep the orientation; move so that D (not the flange origin) goes to G.
         world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
-        v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
+        v = gain(k_t, k_r, K, R, world_T_tob[:3, 3] - world_p_d, np.zeros(3))[0] + (v_tob_m_s if feed_forward else 0.0)
         w = np.zeros(3)
         e_r = np.zeros(3)
     # Report the error as the paper sees it: where D is with respect to G.
@@ -224,7 +243,7 @@ def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_
     # Deadbands: each part is left alone while its error is small and the target still.
     if norm3(e_r) < deadband_rad and norm3(w_tob_rad_s) < still_rad_s:
         w = np.zeros(3)
-        v = k_t * (world_T_tob[:3, 3] - world_p_d) + (v_tob_m_s if feed_forward else 0.0)
+        v = gain(k_t, k_r, K, R, world_T_tob[:3, 3] - world_p_d, np.zeros(3))[0] + (v_tob_m_s if feed_forward else 0.0)
     if e_gd < deadband_m and norm3(v_tob_m_s) < still_m_s and not np.any(w):
         v = np.zeros(3)
     d_t, d_r, sat = saturate(v * dt_s, w * dt_s, max_step_m, max_step_rad)
@@ -233,7 +252,7 @@ def _scale_step(world_T_flange, world_T_tob, flange_T_desired, v_tob_m_s, w_tob_
 
 def _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob, w_tob, k_t, k_r, dt_s,
                          max_step_m, max_step_rad, feed_forward, position_only, deadband_m, deadband_rad,
-                         still_m_s, still_rad_s) -> Step:
+                         still_m_s, still_rad_s, K=None) -> Step:
     """The thetau law with D, not the flange origin, servoed onto G: D's velocity
     ``k_t (G - D) + v_G`` and the rotation ``k_r theta-u + w_G`` (both feed-forwards),
     combined by :func:`position_first`: G held at the image centre while the orientation
@@ -242,8 +261,11 @@ def _position_first_step(world_T_flange, world_T_tob, flange_T_desired, v_tob, w
     _, e_r = pose_error(world_T_flange, world_T_fd)
     world_p_d = (world_T_flange @ flange_T_desired)[:3, 3]
     e_gd = world_T_tob[:3, 3] - world_p_d
-    v_d = k_t * e_gd + (v_tob if feed_forward else 0.0)
-    w = k_r * e_r + (w_tob if feed_forward else 0.0)
+    if position_only:
+        e_r = np.zeros(3)
+    v_d, w = gain(k_t, k_r, K, world_T_flange[:3, :3], e_gd, e_r)
+    v_d = v_d + (v_tob if feed_forward else 0.0)
+    w = w + (w_tob if feed_forward else 0.0)
     if position_only:
         w, e_r = np.zeros(3), np.zeros(3)
     # Deadbands (as ``scale``): each part is left alone while its error is small and the
@@ -304,8 +326,11 @@ def paper_step(
     max_step_m: float,
     max_step_rad: float,
     position_only: bool = False,
+    K: np.ndarray | None = None,
 ) -> Step:
-    """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame."""
+    """Section 5's law V_F = K E_F with E_F = X_FG - X_FD in the flange frame; K the two
+    scalar gains, or the 6x6 matrix ``K`` on (x, y, z in m; the angle errors as a small
+    rotation vector (rx, ry, rz) = (d phi, d theta, d psi) in rad)."""
     flange_T_tob = invert_transform(world_T_flange) @ world_T_tob
     x_fg = x_from_transform(to_mm(flange_T_tob))
     x_fd = x_from_transform(to_mm(flange_T_desired))
@@ -313,9 +338,13 @@ def paper_step(
     e[3:] = (e[3:] + 180.0) % 360.0 - 180.0  # wrap the angle errors
     if position_only:
         e[3:] = 0.0
-    v_flange_m_s = k_t * e[:3] * 1e-3
     # (d psi, d theta, d phi) about (z, y, x) as a small rotation vector (x, y, z) [43].
-    w_flange_rad_s = k_r * np.radians(e[[5, 4, 3]])
+    if K is None:
+        v_flange_m_s = k_t * e[:3] * 1e-3
+        w_flange_rad_s = k_r * np.radians(e[[5, 4, 3]])
+    else:
+        u = K @ np.concatenate([e[:3] * 1e-3, np.radians(e[[5, 4, 3]])])
+        v_flange_m_s, w_flange_rad_s = u[:3], u[3:]
     R = world_T_flange[:3, :3]
     d_t, d_r, sat = saturate(
         R @ v_flange_m_s * dt_s, R @ w_flange_rad_s * dt_s, max_step_m, max_step_rad

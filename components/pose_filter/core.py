@@ -89,6 +89,9 @@ class PoseFilterCore(Core):
         self._cycle: tuple[int, int] | None = None  # (stamp ns, cycle) of the latest robot state
         self._fresh = False
         self._pose_at_measurement: tuple[tuple[int, int], pb.Pose] | None = None
+        # The latest full measurement's own world pose, before the filter (the paper's raw
+        # state vector, step 10): (stamp ns, pose); published with the states for its stamp.
+        self._measured: tuple[int, pb.Pose] | None = None
         # While the target is still: the filter that averages it (zero-velocity updates,
         # calm process noise), started from the moving model, which runs on regardless.
         self.still_kf: PoseKalman | None = None
@@ -254,6 +257,8 @@ class PoseFilterCore(Core):
             out.measurement_stamp_ns = self.last_measurement_ns or 0
             if self.last_measurement_ns is not None:
                 out.world_T_tob_at_measurement.CopyFrom(self._pose_at(self.last_measurement_ns))
+                if self._measured is not None and self._measured[0] == self.last_measurement_ns:
+                    out.world_T_tob_measured.CopyFrom(self._measured[1])
         return TOPIC_STATE, out
 
     def _pose_at(self, stamp_ns: int) -> pb.Pose:
@@ -288,6 +293,7 @@ class PoseFilterCore(Core):
         try:
             if msg.status == pb.TOB_STATUS_FULL:
                 world_T_tob = world_T_camera @ from_pose(msg.camera_T_tob)
+                self._measured = (stamp, pose(world_T_tob))  # step 10's X_WG, unfiltered
                 # The paper's method's errors (to 3 deg, not white) look like manoeuvres.
                 calm_only = msg.method == pb.PERCEPTION_METHOD_PAPER and not self.config.paper_manoeuvres
                 return self._update_full(t_ns, stamp, world_T_tob, self._pose_noise(world_T_camera[:3, :3], msg.method),

@@ -10,10 +10,17 @@ from collections.abc import Callable
 
 import numpy as np
 
-from humanpt.calibration.tip import TipResult, tip_result_from_event
+from humanpt.calibration.tip import (
+    TipResult,
+    paper_result,
+    pattern_centre_px,
+    pivot_point_from_views,
+    tip_result_from_event,
+)
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
-from humanpt.geometry.rig import Rig
+from humanpt.geometry.rig import Rig, viewing_world_T_flange
+from humanpt.geometry.transforms import invert_transform, matrix_from_rotvec, transform_from_x
 from humanpt.operator import OperatorConfig
 from humanpt.operator.scenario import NEEDLE_MM
 from humanpt.schemas import humanpt_pb2 as pb
@@ -24,11 +31,74 @@ from .run import SystemConfig
 from .system import build_system
 from .worlds import World
 
-__all__ = ["pivot_scenario", "calibrate_tip_on_twin"]
+__all__ = ["pivot_scenario", "calibrate_tip_on_twin", "PrintedCircle", "measure_pivot_point_on_twin",
+           "PIVOT_X", "METHODS"]
+
+METHODS = ("pivot", "paper")
+# Where the pivot scenario holds the tip (world, mm/deg: the table at z = 0, the frame of the
+# target's start pose); the paper's P' is printed there.
+PIVOT_X = (236.0, 1249.0, 0.0, 0.0, 0.0, 180.0)
+
+
+class PrintedCircle:
+    """A black disc of ``radius_mm`` printed on white paper (the plane z = 0 of its frame,
+    centred on its origin), for :func:`humanpt.sim_camera.board.render_board` (reflectance
+    and a cell per region, the edge pixels supersampled)."""
+
+    def __init__(self, radius_mm: float = 5.0):
+        self.radius_mm = float(radius_mm)
+
+    def reflectance(self, x_mm, y_mm):
+        inside = np.hypot(np.asarray(x_mm), np.asarray(y_mm)) <= self.radius_mm
+        return np.where(inside, 0.05, 0.9)
+
+    def cell_id(self, x_mm, y_mm):
+        return (np.hypot(np.asarray(x_mm), np.asarray(y_mm)) <= self.radius_mm).astype(np.int64)
+
+
+def measure_pivot_point_on_twin(world: World, rig: Rig, seed: int = 0, n_poses: int = 10,
+                                pivot_x=PIVOT_X) -> tuple[np.ndarray, list[str], float]:
+    """Section 4.1, eq. (10)-(11), on the twin: a circle printed at P' (``pivot_x``) is
+    rendered by the world's camera (its true optics and hand-eye; one view at a time, the
+    other covered) from ``n_poses`` robot poses around the one that views it; its centre is
+    found in each view (:func:`pattern_centre_px`), triangulated with the rig's PSVS and
+    carried to the world with the rig's hand-eye. Returns (P' mm (3,), report lines, its
+    distance from the true point mm: the twin's truth, for the report only)."""
+    from humanpt.sim_camera.board import render_board
+
+    if n_poses < 1:
+        raise ValueError(f"the pattern needs at least one robot pose, got {n_poses}")
+    cfg = SystemConfig.for_scenario("static", seed=seed, rig=rig, world=world)
+    cam = cfg.sim_camera  # the world's camera: true optics, true hand-eye
+    params = cam.psvs.params()
+    true_f_T_c = cam.flange_T_camera
+    world_T_print = transform_from_x(np.asarray(pivot_x, dtype=float))
+    base = viewing_world_T_flange(world_T_print, flange_T_camera=rig.hand_eye.flange_T_camera_mm())
+    rng = np.random.default_rng([int(seed), 4101])
+    circle = PrintedCircle()
+    flanges, uv_r, uv_l = [], [], []
+    for _ in range(n_poses):
+        F = base.copy()
+        F[:3, :3] = matrix_from_rotvec(np.radians(rng.uniform(-3.0, 3.0, 3))) @ F[:3, :3]
+        F[:3, 3] += rng.uniform(-20.0, 20.0, 3)
+        camera_T_print = invert_transform(F @ true_f_T_c) @ world_T_print
+        uv = [pattern_centre_px(render_board(params, view, camera_T_print, circle, cam, rng))
+              for view in ("right", "left")]
+        flanges.append(F)
+        uv_r.append(uv[0])
+        uv_l.append(uv[1])
+    p, per = pivot_point_from_views(rig, np.array(flanges), np.array(uv_r), np.array(uv_l))
+    spread = float(np.max(np.linalg.norm(per - p, axis=1)))
+    lines = [f"P' = ({', '.join(f'{v:.3f}' for v in p)}) mm: the printed circle's centre through the PSVS "
+             f"over {n_poses} robot poses (eq. 10-11; the poses' points within {spread:.3f} mm of their mean)"]
+    return p, lines, float(np.linalg.norm(p - world_T_print[:3, 3]))
+
 
 # The tip's acceptance: every taught point moves with its error, so at most the seam fit's
 # tolerance (0.2 mm, humanpt.seam.fit.FitConfig).
 ACCEPT_MM = 0.2
+# The paper's procedure (P' measured, then eq. 12-13): issue 33.4's acceptance.
+ACCEPT_PAPER_MM = 0.3
 
 def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0) -> str:
     """The scenario text of a pivot: the operator holds the needle's tip (``driver_mm``, TOB
@@ -58,10 +128,22 @@ class TipCalibrationError(RuntimeError):
 
 def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 300,
                           progress: Callable[[float, float], None] | None = None,
-                          driver_mm=NEEDLE_MM) -> tuple[TipResult, list[str], list[str]]:
+                          driver_mm=NEEDLE_MM, method: str = "pivot",
+                          pattern_poses: int = 10) -> tuple[TipResult, list[str], list[str]]:
     """Pivot the twin's target (design driver ``driver_mm``, the world's true one may
-    differ) and fit its tip with the pipeline on ``rig``. Returns (result, report lines,
-    lines against the twin's truth). Raises TipCalibrationError when it does not finish."""
+    differ) and find its tip with the pipeline on ``rig``: ``method`` ``pivot`` (the
+    least-squares pivot fit) or ``paper`` (Section 4.1 as written: P' measured first as the
+    centre of a printed circle through the PSVS over ``pattern_poses`` robot poses, eq.
+    10-11, then eq. 12-13 on the poses collected while the target pivots on P'). Returns
+    (result, report lines, lines against the twin's truth). Raises TipCalibrationError
+    when it does not finish."""
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    report: list[str] = []
+    cal_args: dict = {"samples": samples}
+    if method == "paper":
+        pivot_mm, report, p_off = measure_pivot_point_on_twin(world, rig, seed, pattern_poses)
+        cal_args["pivot_mm"] = [round(float(v), 4) for v in pivot_mm]
     text = pivot_scenario(driver_mm)
     cfg = SystemConfig.for_scenario(OperatorConfig(scenario_text=text, start_delay_s=1.0), seed, rig=rig, world=world,
                                     controller=ControllerConfig(has_driver=False, calibration_samples=samples,
@@ -78,7 +160,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
         w.run_for(2.0)
         w.lockstep.inject(w.now_ns, "controller", "console/command",
                           pb.Command(header=header(w.now_ns), component="controller", verb="calibrate",
-                                     args_json=json.dumps({"samples": samples})))
+                                     args_json=json.dumps(cal_args)))
         done = failed = None
         while w.now_ns < limit_s * 1e9 and done is None and failed is None:
             w.run_for(1.0)
@@ -97,12 +179,22 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
         why = failed.text if failed is not None else f"not done after {limit_s:g} s (target lost, too few poses?)"
         raise TipCalibrationError(f"tip calibration failed: {why}")
     res = tip_result_from_event(done.text, ctl.rig.tip.calibration.sigma.get("tob_t_tip_mm"))
-    report = [f"tip: tob_t_tip = ({', '.join(f'{v:.3f}' for v in res.tob_t_tip_mm)}) mm +- {res.sigma_mm:.3f} mm "
-              f"(pivot fit, {res.samples} poses, residual RMS {res.residual_rms_mm:.3f} mm)"]
+    how = "pivot fit"
+    if method == "paper":
+        try:
+            res = paper_result(res)
+        except ValueError as e:
+            raise TipCalibrationError(f"tip calibration failed: {e}") from None
+        how = "eq. 12-13 on P'"
+    report = report + [f"tip: tob_t_tip = ({', '.join(f'{v:.3f}' for v in res.tob_t_tip_mm)}) mm +- "
+                       f"{res.sigma_mm:.3f} mm ({how}, {res.samples} poses, residual RMS {res.residual_rms_mm:.3f} mm)"]
     true_tip = np.asarray(cfg.operator.build_scenario().driver_mm, dtype=float)
     err = np.asarray(res.tob_t_tip_mm) - true_tip
     truth = TruthLines([f"tip: true ({', '.join(f'{v:.3f}' for v in true_tip)}) mm; calibrated off by "
-                        f"{np.linalg.norm(err):.3f} mm (acceptance {ACCEPT_MM:g} mm; the design value was off by "
+                        f"{np.linalg.norm(err):.3f} mm (acceptance {ACCEPT_PAPER_MM if method == 'paper' else ACCEPT_MM:g} mm; the design value was off by "
                         f"{np.linalg.norm(np.asarray(driver_mm) - true_tip):.3f} mm)"])
-    truth.checks.append(Check("tip", "off the truth", float(np.linalg.norm(err)), ACCEPT_MM, "mm"))
+    if method == "paper":
+        truth.append(f"P': {p_off:.3f} mm off the true pivot point")
+    truth.checks.append(Check("tip", "off the truth", float(np.linalg.norm(err)),
+                              ACCEPT_PAPER_MM if method == "paper" else ACCEPT_MM, "mm"))
     return res, report, truth

@@ -29,10 +29,55 @@ def test_bad_tip_requests_write_nothing(tmp_path):
     before = rig.read_bytes()
     for args, says in ((["--twin", "--samples", "3"], "--samples must be >= 6"),
                        ([], "give --config FILE (a live cell) or --twin"),
-                       (["--twin", "--world", "nosuch"], "not 'ideal', 'realistic'")):
+                       (["--twin", "--world", "nosuch"], "not 'ideal', 'realistic'"),
+                       (["--method", "paper", "--config", "c.toml"], "--method paper runs on the twin"),
+                       (["--twin", "--method", "paper", "--pattern-poses", "0"], "--pattern-poses must be >= 1")):
         r = run_cli("calibrate", "tip", "--rig", str(rig), *args)
         assert r.returncode == 2 and says in r.stderr, (args, r.stderr)
     (tmp_path / "bad.toml").write_text("version = 1\n[psvs]\na_u = -1\n")
     r = run_cli("calibrate", "tip", "--twin", "--rig", str(tmp_path / "bad.toml"))
     assert r.returncode == 2 and "a_u" in r.stderr
     assert rig.read_bytes() == before and not (tmp_path / "rig.toml.bak").exists()
+
+
+def test_the_papers_procedure_on_the_twin_writes_the_rig(tmp_path):
+    """Issue 33.4: --method paper (P' measured as a printed circle's centre through the PSVS,
+    eq. 10-11, then eq. 12-13 while pivoting on it) within 0.3 mm of the world's true tip."""
+    rig = tmp_path / "rig.toml"
+    write_rig(rig, Rig())
+    r = run_cli("calibrate", "tip", "--twin", "--world", "ideal+tip", "--method", "paper", "--pattern-poses", "6",
+                "--rig", str(rig), timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    tip = load_rig(rig).tip
+    assert tip.calibration.method == "paper" and "eq. (12)-(13)" in tip.calibration.note
+    assert np.linalg.norm(np.asarray(tip.tob_t_tip_mm) - TRUE_TIP) < 0.3, tip  # 0.035 mm, seed 0, 10 poses
+    assert "P' = (" in r.stdout and "eq. 12-13 on P'" in r.stdout
+
+
+def test_the_printed_circles_centre_is_found_where_it_was_drawn():
+    """A disc drawn here (area-sampled, 16 x 16 per pixel) at a known sub-pixel centre, on
+    noise: pattern_centre_px finds it to a few hundredths of a pixel."""
+    from humanpt.calibration.tip import pattern_centre_px
+
+    rng = np.random.default_rng(0)
+    h, w, n = 120, 160, 16
+    centre, radius = np.array([71.37, 52.81]), 7.5
+    s = (np.arange(n) + 0.5) / n - 0.5
+    v, u = np.mgrid[0:h, 0:w]
+    cover = np.zeros((h, w))
+    for dy in s:
+        for dx in s:
+            cover += np.hypot(u + dx - centre[0], v + dy - centre[1]) <= radius
+    image = np.clip(200 - 190 * cover / n**2 + rng.normal(0, 1.0, (h, w)), 0, 255)
+    np.testing.assert_allclose(pattern_centre_px(image), centre, atol=0.03)
+
+
+def test_the_pivot_point_is_measured_through_the_psvs():
+    """Eq. 10-11 on the twin's rendered circle: P' within 0.1 mm of where it is printed
+    (0.027 mm with 10 poses, seed 0)."""
+    from humanpt.twin.cal_tip import PIVOT_X, measure_pivot_point_on_twin
+    from humanpt.twin.worlds import World
+
+    p, lines, off = measure_pivot_point_on_twin(World.named("ideal+tip"), Rig(), 0, 10)
+    assert np.linalg.norm(p - np.asarray(PIVOT_X[:3])) < 0.1 and off < 0.1
+    assert "10 robot poses" in lines[0]

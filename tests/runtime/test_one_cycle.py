@@ -196,7 +196,11 @@ def test_an_old_recording_replays_with_the_cycle_its_config_named():
     run = ROOT / "recordings" / "arc_rsi"
     pf = read(run / "pose_filter.mcap")
     assert pf.config()["predict_ahead_ms"] == 12.0
-    assert fields_newer_than(read(run / "robot_gateway.mcap")) == {"humanpt.RobotState": ("cycle_period_ns",)}
+    newer = fields_newer_than(read(run / "robot_gateway.mcap"))
+    assert newer["humanpt.RobotState"] == ("cycle_period_ns",)
+    # (and the fields added since by issue 33.5: left out of a replay's outputs as this one)
+    assert newer["humanpt.TobState"] == ("world_T_tob_measured",)
+    assert newer["humanpt.PathPoint"] == ("world_T_tob_raw", "world_T_tip_raw")
     assert build_core(pf).horizon_ns == 12 * MS
     assert build_core(read(run / "controller.mcap")).dt == pytest.approx(0.012)
     assert build_core(read(run / "sim_robot.mcap")).config.cycle_period_ns == 12 * MS
