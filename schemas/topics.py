@@ -155,15 +155,19 @@ RETIRED_CONFIG_KEYS: dict[tuple[str, str, str], tuple[str, ...]] = {
 # that gives the behaviour those recordings had, taken when a recorded config lacks the key
 # (issue 32: the controller records a point every recording_spacing_mm as well; 0 = only
 # every recording_delay_cycles, as before).
-ADDED_CONFIG_KEYS: dict[tuple[str, str], object] = {
-    ("controller", "recording_spacing_mm"): 0.0,
+# (component, key) -> (the old behaviour's value, a key the component's own config has): a
+# recording of another core under that component's name (a test's scripted controller) has
+# no such key and gets nothing added.
+ADDED_CONFIG_KEYS: dict[tuple[str, str], tuple[object, str]] = {
+    ("controller", "recording_spacing_mm"): (0.0, "recording_delay_cycles"),
 }
 
 
 def current_config(component: str, table: dict) -> dict:
     """A recorded config of ``component`` as this version reads it (RETIRED_CONFIG_KEYS
     dropped; ADDED_CONFIG_KEYS missing from it set to their old behaviour)."""
-    added = {k: v for (name, k), v in ADDED_CONFIG_KEYS.items() if name == component and k not in table}
+    added = {k: v for (name, k), (v, sibling) in ADDED_CONFIG_KEYS.items()
+             if name == component and k not in table and sibling in table}
     if added and table:
         table = {**table, **added}
     for (name, key, value), retired in RETIRED_CONFIG_KEYS.items():

@@ -621,7 +621,9 @@ class ControllerCore(Core):
         if verb == "record_start":
             self.recording, self.path, self.path_index, self.cycles_since_point = True, [], 0, 0
             self._path_x, self._path_held, self._path_stamps = [], [], []
-            self.path_last_stamp_ns = None
+            # The first point is the first measurement taken after the start (its stamp past
+            # this command's), not one taken before it that arrives after.
+            self.path_last_stamp_ns = t_ns - 1
             return info("record_started", json.dumps({"has_tip": self.config.has_driver}))
         if verb == "record_stop":
             self.recording = False

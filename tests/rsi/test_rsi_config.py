@@ -87,8 +87,10 @@ def test_the_link_key_chooses_the_gateway_and_the_protocol_the_simulated_robot()
     # RSI keys without link = "rsi", and a link that does not exist: one line naming the key
     with pytest.raises(ConfigError, match=r"\[robot_gateway\] unknown key 'udp_bind'"):
         from_dict({"robot_gateway": {"udp_bind": "127.0.0.1:1"}}, "cell.toml", config_types())
+    from humanpt.robot_gateway.links import LINKS
+
     with pytest.raises(ConfigError, match=r"\[robot_gateway\]: link 'can' is not a robot link of this version; "
-                                          r"known links: abb, alter, rsi$"):
+                                          rf"known links: {', '.join(sorted(LINKS))}$"):
         from_dict({"robot_gateway": {"link": "can"}}, "cell.toml", config_types())
     with pytest.raises(ValueError, match="RsiConfig"):
         AlterConfig(link="rsi")
