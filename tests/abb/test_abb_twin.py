@@ -50,7 +50,7 @@ def test_the_arc_over_egm_is_recorded_as_accurately_as_over_alter(tmp_path):
     assert c["cycles"] >= round(duration_s * 1000 / 4.0) - 1
     assert c["on_time"] >= c["cycles"] - c["waiting"] - 1  # (the last cycle is not judged)
     e_abb, e_alter = _errors(abb), _errors(alter)
-    assert len(e_abb) > 100 and len(e_alter) > 50
+    assert len(e_abb) > 100 and len(e_alter) >= 40  # (11 s of the arc)
     # Within the ALTER run's: the position error (RMS and mean |e|, mm) of the recorded path
     # against ground truth. (Measured: 0.017 / 0.014 mm over EGM, 0.044 / 0.042 over ALTER.)
     pos_abb, pos_alter = e_abb[:, :3], e_alter[:, :3]
