@@ -76,8 +76,10 @@ def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, pr
     assert got["websocket_v1_only"] == "HTTP 400", got["websocket_v1_only"]
     assert got["server"]["protocol"] == "foxglove.sdk.v1" and got["server"]["name"] == "humanpt"
     assert {"clientPublish", "parameters", "services", "time"} <= set(got["server"]["capabilities"])
-    # Every bus topic is a channel (35 in the topic table), with its schema.
-    assert got["channels"] == 35
+    # Every bus topic is a channel (each in the topic table), with its schema.
+    from humanpt.schemas import topics
+
+    assert got["channels"] == len(topics.TOPICS)
     assert got["schemas"] == {"camera/image": "foxglove.RawImage", "robot_gateway/robot_state": "humanpt.RobotState",
                               "perception/events": "humanpt.Event", "scene/transforms": "foxglove.FrameTransforms"}
     # The image and a pose, decoded by protobufjs from the advertised schemas: the twin's
