@@ -80,7 +80,8 @@ def test_the_parameters_are_the_paper_gui_options_and_the_gateway_limits_read_on
     writable = {n for n, p in PARAMETERS.items() if p.writable}
     assert writable == {"perception.threshold", "perception.invert", "perception.mask", "perception.method",
                         "controller.recording_delay_cycles", "controller.dz_mm", "controller.lost_action",
-                        "controller.calibration_samples", "controller.playback_speed_mm_s"}
+                        "controller.calibration_samples", "controller.playback_speed_mm_s",
+                        "controller.return_flange_x"}  # (every console GUI option: the return pose too)
     assert {n for n in PARAMETERS if n not in writable} == {
         f"robot_gateway.{k}" for k in ("max_speed_mm_s", "max_angular_speed_deg_s", "envelope_min_mm",
                                        "envelope_max_mm", "stale_cycles", "fault_after_missed")}

@@ -15,7 +15,7 @@ from tests.conftest import run_cli
 @pytest.mark.parametrize("extra, names", [
     (["--viewer"], "--viewer"), (["--port", "7447"], "--port"), (["--secure"], "--secure"),
     (["--duration", "5"], "--duration"), (["--link", "rsi", "--cycle-ms", "12"], "--cycle-ms"),
-    (["--link", "rsi"], "--link"), (["--robot", "rsi"], "--robot"), (["--robot", "puma"], "--robot puma"),
+    (["--link", "rsi"], "--link"), (["--robot", "rsi"], "--robot"), (["--robot", "abb"], "--robot abb"),
     (["--set", "controller.nosuch=1"], "nosuch"), (["--set", "nosection.key=1"], "nosection"),
     (["--speed", "2000"], "speed_mm_s"),
 ])
