@@ -89,13 +89,6 @@ def test_topics_names_each_keys_publisher():
     assert publisher_of_key("not/a/key") == "?"
 
 
-def test_topics_help_promises_only_what_it_prints(capsys, cli_main):
-    with pytest.raises(SystemExit):
-        cli_main(["topics", "--help"])
-    text = re.sub(r"\s+", " ", capsys.readouterr().out)
-    assert "publisher" in text
-
-
 @pytest.mark.parametrize("kind", ["folder", "missing"])
 def test_a_camera_source_that_is_a_folder_or_missing_stops_at_start(kind, tmp_path, capsys, cli_main):
     # was: retried "cannot open video file" forever
