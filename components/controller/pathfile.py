@@ -24,8 +24,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from filterpy.common import Q_discrete_white_noise
-from filterpy.kalman import KalmanFilter, rts_smoother
 
 from humanpt.runtime.files import atomic_open
 
@@ -265,6 +263,11 @@ def smooth(x: np.ndarray, stamp_ns: np.ndarray, *, accel_sigma: float = 200.0, m
     """RTS-smoothed (N, 6) path: per coordinate a constant-velocity Kalman filter forward and
     filterpy's Rauch-Tung-Striebel smoother backward.  Angles are unwrapped first and
     wrapped back.  ``accel_sigma`` in units/s^2, ``meas_sigma`` in units."""
+    # filterpy (and the scipy.stats it pulls in: 0.7 s) only here: the controller's process
+    # start-up does not pay for an offline smoother.
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter, rts_smoother
+
     from humanpt.seam.limits import MAX_ABS_DEG, MAX_ABS_MM
 
     x = np.asarray(x, dtype=float)

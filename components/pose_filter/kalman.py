@@ -36,10 +36,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from filterpy.kalman import KalmanFilter
 from scipy.special import logsumexp
 
 from humanpt.geometry.transforms import matrix_from_rotvec, rotvec_from_matrix
+
+
+def _kalman_filter():
+    """filterpy's 12-state, 6-measurement KalmanFilter.  Imported here, not at the module's
+    top: filterpy pulls in scipy.stats (about 0.5 s), and every component's process reads
+    this module through its config type at start-up; only the pose filter builds one."""
+    from filterpy.kalman import KalmanFilter
+
+    return KalmanFilter(dim_x=12, dim_z=6)
 
 I3 = np.eye(3)
 H_POSE = np.hstack([np.eye(6), np.zeros((6, 6))])  # measures p and r
@@ -150,7 +158,7 @@ class PoseKalman(_PoseEstimate):
         self.ang_accel_sigma = ang_accel_sigma_rad_s2
         self.init_sd = np.repeat([init_sigma_m, init_sigma_rad, init_sigma_v, init_sigma_w], 3)
         self.q_scale = 1.0  # process noise x this (a still target: << 1)
-        self.kf = KalmanFilter(dim_x=12, dim_z=6)
+        self.kf = _kalman_filter()
         self.R_ref = np.eye(3)
         self.t_ns: int | None = None
         self.version = 0
@@ -273,7 +281,7 @@ class PoseIMM(_PoseEstimate):
         self.noises = tuple(noises)
         self.calm_mean_s, self.manoeuvre_mean_s = calm_mean_s, manoeuvre_mean_s
         self.init_sd = np.repeat([0.01, 0.05, 0.3, 1.0], 3) if init_sd is None else init_sd
-        self.kfs = [KalmanFilter(dim_x=12, dim_z=6) for _ in self.noises]
+        self.kfs = [_kalman_filter() for _ in self.noises]
         self.mu = np.tile(self._stationary(), (2, 1))
         self.R_ref = np.eye(3)
         self.t_ns: int | None = None
