@@ -1,4 +1,5 @@
-"""Shell side of the real camera: OpenCV VideoCapture from a device index or a video file.
+"""Shell side of the real camera: OpenCV VideoCapture from a device index or a video file,
+or a folder of images (:class:`ImageFolder`, replayed at ``camera.fps``).
 
 :class:`CaptureAdapter` is a live-shell adapter (``humanpt.runtime.live``): a thread grabs
 frames, stamps each with the wall clock when the grab returns, and hands it to the core as
@@ -9,6 +10,7 @@ grabbing as a plain generator, for offline use and tests.
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -22,7 +24,8 @@ from humanpt.schemas.convert import image
 
 from .config import CameraConfig
 
-__all__ = ["CaptureAdapter", "capture_adapters", "capture_message", "open_capture", "read_frames"]
+__all__ = ["IMAGE_SUFFIXES", "CaptureAdapter", "ImageFolder", "capture_adapters", "capture_message",
+           "open_capture", "read_frames"]
 
 log = logging.getLogger("humanpt.camera")
 
@@ -33,9 +36,73 @@ def capture_message(frame: np.ndarray, stamp_ns: int, frame_id: str = "camera"):
     return image(np.ascontiguousarray(frame), stamp_ns, frame_id, encoding)
 
 
-def open_capture(config: CameraConfig) -> cv2.VideoCapture:
-    """Open the configured source; raises OSError naming it when it does not open."""
+# What cv2.imread reads (lower-case suffixes; the match ignores case).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".pnm", ".webp")
+
+
+def _natural_key(path: Path) -> list:
+    """img2 before img10: digit runs compare as numbers."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name.lower())]
+
+
+class ImageFolder:
+    """A folder of images read as a video at ``fps`` frames/s, in natural name order
+    (``img2`` before ``img10``), with the subset of :class:`cv2.VideoCapture` the adapter uses
+    (``read``, ``get(CAP_PROP_FPS)``, ``set(CAP_PROP_POS_FRAMES, 0)``, ``release``). A file
+    that does not decode is skipped with an error naming it (``skipped`` lists them): a
+    damaged image loses only itself."""
+
+    def __init__(self, folder: str | Path, fps: float):
+        self.folder = Path(folder)
+        if not self.folder.is_dir():
+            raise OSError(f"image folder {str(folder)!r}: no such folder")
+        self.files = sorted((f for f in self.folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES
+                             and f.is_file()), key=_natural_key)
+        if not self.files:
+            raise OSError(f"image folder {str(folder)!r} holds no image ({', '.join(IMAGE_SUFFIXES)})")
+        self.fps = float(fps)
+        self.position = 0
+        self.skipped: list[Path] = []
+
+    def isOpened(self) -> bool:  # noqa: N802 (cv2.VideoCapture's name)
+        return True
+
+    def read(self) -> tuple[bool, np.ndarray | None]:
+        while self.position < len(self.files):
+            path = self.files[self.position]
+            self.position += 1
+            frame = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            if frame is not None and frame.dtype == np.uint8 and frame.ndim in (2, 3):
+                if frame.ndim == 3 and frame.shape[2] == 4:
+                    frame = cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
+                if frame.ndim == 2 or frame.shape[2] == 3:
+                    return True, frame
+            self.skipped.append(path)
+            log.error("image folder: %s is not an 8-bit grey or colour image: skipped", path)
+        return False, None
+
+    def get(self, prop: int) -> float:
+        return self.fps if prop == cv2.CAP_PROP_FPS else 0.0
+
+    def set(self, prop: int, value: float) -> bool:
+        if prop == cv2.CAP_PROP_POS_FRAMES:
+            self.position = int(value)
+            return True
+        return False
+
+    def release(self) -> None:
+        pass
+
+
+def open_capture(config: CameraConfig) -> cv2.VideoCapture | ImageFolder:
+    """Open the configured source (a device, a video file or an image folder); raises
+    OSError naming it when it does not open."""
     index = config.device_index
+    if index is None and Path(config.source).is_dir():
+        if not config.fps:
+            raise OSError(f"camera.source {config.source!r} is an image folder: set camera.fps "
+                          "(frames/s; a folder has no frame rate of its own)")
+        return ImageFolder(config.source, config.fps)
     cap = cv2.VideoCapture(index if index is not None else config.source)
     if not cap.isOpened():
         cap.release()
@@ -146,13 +213,13 @@ class CaptureAdapter:
 
 def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
     """The registry's adapter factory for the ``camera`` component. A source that is a path
-    must exist and not be a folder (OSError naming it: the component stops at start; a
-    device index that does not open is retried, a camera may be plugged in later)."""
+    must exist; a folder must hold images and come with ``camera.fps`` (OSError naming it:
+    the component stops at start; a device index that does not open is retried, a camera
+    may be plugged in later)."""
     if config.device_index is None:
         path = Path(config.source)
         if path.is_dir():
-            raise OSError(f"camera.source {config.source!r} is a folder: give a video file, a device path "
-                          "(/dev/video0) or an index (0); an image folder is not a camera source in this version")
-        if not path.exists():
-            raise OSError(f"camera.source {config.source!r}: no such video file or device")
+            open_capture(config)  # refuses an empty folder or a missing frame rate now
+        elif not path.exists():
+            raise OSError(f"camera.source {config.source!r}: no such video file, image folder or device")
     return [CaptureAdapter(config)]

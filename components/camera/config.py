@@ -13,9 +13,11 @@ from humanpt.runtime.config import Range
 class CameraConfig:
     """A real camera through OpenCV's VideoCapture.
 
-    ``source``: a device index (``"0"``) or a video file path. ``width_px``/``height_px``/
-    ``fps`` are requested from a device (0: its default). A file is played at its own frame
-    rate when ``pace`` (else as fast as it decodes) and from the start again when ``loop``.
+    ``source``: a device index (``"0"``), a video file path or a folder of images.
+    ``width_px``/``height_px``/``fps`` are requested from a device (0: its default). A file
+    is played at its own frame rate when ``pace`` (else as fast as it decodes) and from the
+    start again when ``loop``; a folder's images (natural name order) at ``fps``, which a
+    folder needs.
     A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
     to mono8 (the PSVS processing works on grey levels). Frames are stamped when the grab
     returns (the capture time, minus the driver's latency).
@@ -32,7 +34,7 @@ class CameraConfig:
 
     def __post_init__(self) -> None:
         if not self.source.strip():
-            raise ValueError("camera.source must be a device index or a video file path")
+            raise ValueError("camera.source must be a device index, a video file path or an image folder")
         for name in ("width_px", "height_px"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 20000:

@@ -126,3 +126,69 @@ def test_live_camera_component_publishes_records_and_replays(video, router, tmp_
     assert len(ins) == N_FRAMES and len(outs) == N_FRAMES
     res = replay(run_dir / "camera.mcap")
     assert res.match and res.compared >= N_FRAMES, res.report()
+
+
+# --- an image folder as the source (issue 35 item 2): real footage replayed at camera.fps ---
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    """Twelve frames as img1.png .. img12.png (natural order differs from the names' sort:
+    img10 sorts before img2 as text), one grey .pgm among them, and a damaged file and a
+    text file that are not images."""
+    path = tmp_path_factory.mktemp("images")
+    for i in range(N_FRAMES):
+        frame = _frame(i)
+        if i == 3:
+            cv2.imwrite(str(path / f"img{i + 1}.pgm"), cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+        else:
+            cv2.imwrite(str(path / f"img{i + 1}.png"), frame)
+    (path / "img12b.png").write_bytes(b"\x89PNG\r\n\x1a\n not really")  # damaged: skipped with an error
+    (path / "notes.txt").write_text("not an image")  # not an image suffix: not read
+    return path
+
+
+def test_an_image_folder_plays_in_natural_order_and_skips_a_damaged_file(folder):
+    got = list(read_frames(CameraConfig(source=str(folder), fps=25.0), clock=_clock()))
+    assert len(got) == N_FRAMES  # the damaged file lost only itself
+    # the bright square moves 5 px right per frame: frame i's square starts at column 5 + 5 i
+    for i, (_, frame) in enumerate(got):
+        grey = frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY)
+        cols = np.flatnonzero(grey[28] > 100)
+        assert cols[0] == 5 + 5 * i, (i, cols[:3])
+    assert got[3][1].ndim == 2 and got[0][1].ndim == 3  # the .pgm is grey, the .png colour
+    from humanpt.camera.capture import ImageFolder
+
+    reader = ImageFolder(folder, 25.0)
+    while reader.read()[0]:
+        pass
+    assert [p.name for p in reader.skipped] == ["img12b.png"]
+
+
+def test_an_image_folder_without_a_frame_rate_or_images_is_refused(folder, tmp_path):
+    from humanpt.camera.capture import capture_adapters
+
+    with pytest.raises(OSError, match="is an image folder: set camera.fps"):
+        capture_adapters(CameraConfig(source=str(folder)))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(OSError, match="holds no image"):
+        capture_adapters(CameraConfig(source=str(tmp_path / "empty"), fps=25.0))
+
+
+@pytest.mark.timeout(120)
+def test_live_camera_component_on_an_image_folder_records_and_replays(folder, router, tmp_path):
+    port, _ = router
+    cfg = write_config(tmp_path / "cam.toml", port, extra=f'[camera]\nsource = "{folder}"\nfps = 200.0\n')
+    run_dir = tmp_path / "run"
+    r = run_cli("camera", "--config", str(cfg), "--run-dir", str(run_dir), "--duration", "3")
+    assert r.returncode == 0, r.stderr
+    assert "img12b.png" in r.stderr  # the skipped file is named
+    rec = read(run_dir / "camera.mcap")
+    outs = [e for e in rec.outputs if e.topic == "camera/image"]
+    assert len(outs) == N_FRAMES
+    assert {e.decode().encoding for e in outs} == {"mono8"}
+    stamps = [image_stamp_ns(e.decode()) for e in outs]
+    # paced at 200 frames/s: 11 periods of 5 ms at least between the first and the last stamp
+    assert stamps[-1] - stamps[0] >= 11 * 5_000_000 * 0.99
+    res = replay(run_dir / "camera.mcap")
+    assert res.match and res.compared >= N_FRAMES, res.report()

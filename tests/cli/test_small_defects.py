@@ -8,6 +8,8 @@ import re
 import shutil
 from pathlib import Path
 
+import cv2
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 
@@ -89,18 +91,23 @@ def test_topics_names_each_keys_publisher():
     assert publisher_of_key("not/a/key") == "?"
 
 
-@pytest.mark.parametrize("kind", ["folder", "missing"])
-def test_a_camera_source_that_is_a_folder_or_missing_stops_at_start(kind, tmp_path, capsys, cli_main):
-    # was: retried "cannot open video file" forever
-    source = tmp_path / ("images" if kind == "folder" else "nothing.avi")
-    if kind == "folder":
+@pytest.mark.parametrize("kind", ["folder without fps", "empty folder", "missing"])
+def test_a_camera_source_that_cannot_play_stops_at_start(kind, tmp_path, capsys, cli_main):
+    # was: retried "cannot open video file" forever; an image folder plays at camera.fps (issue 35)
+    source = tmp_path / ("nothing.avi" if kind == "missing" else "images")
+    fps = "fps = 25\n" if kind == "empty folder" else ""
+    if kind != "missing":
         source.mkdir()
-        shutil.copy(RUN / "rig.toml", source / "a.png")  # (anything: the folder is refused as such)
+        shutil.copy(RUN / "rig.toml", source / "rig.toml")  # (not an image)
+    if kind == "folder without fps":
+        cv2.imwrite(str(source / "a.png"), np.zeros((8, 8), np.uint8))
     cfg = tmp_path / "humanpt.toml"
-    cfg.write_text(f'[runtime]\nconnect = ["tcp/127.0.0.1:9"]\nlisten = []\n[camera]\nsource = "{source}"\n')
+    cfg.write_text(f'[runtime]\nconnect = ["tcp/127.0.0.1:9"]\nlisten = []\n[camera]\nsource = "{source}"\n{fps}')
     assert cli_main(["camera", "-c", str(cfg)]) == 1
     err = capsys.readouterr().err
-    assert str(source) in err and ("is a folder" if kind == "folder" else "no such video file") in err
+    why = {"folder without fps": "is an image folder: set camera.fps", "empty folder": "holds no image",
+           "missing": "no such video file"}[kind]
+    assert str(source) in err and why in err, err
 
 
 def test_runs_merge_writes_a_foxglove_layout_on_the_runs_own_cell(tmp_path, cli_main):
