@@ -17,7 +17,8 @@ class CameraConfig:
     ``width_px``/``height_px``/``fps`` are requested from a device (0: its default). A file
     is played at its own frame rate when ``pace`` (else as fast as it decodes) and from the
     start again when ``loop``; a folder's images (natural name order) at ``fps``, which a
-    folder needs.
+    folder needs. No frame for ``stall_s`` (a camera unplugged, stalled, a file at its end)
+    gives a ``camera_stalled`` event; the next frame ``camera_resumed``.
     A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
     to mono8 (the PSVS processing works on grey levels). Frames are stamped when the grab
     returns (the capture time, minus the driver's latency).
@@ -31,6 +32,7 @@ class CameraConfig:
     loop: bool = False
     mono: bool = True
     reopen_s: Annotated[float, Range(0.01, 3600, "s")] = 2.0
+    stall_s: Annotated[float, Range(0.05, 60, "s")] = 0.5
 
     def __post_init__(self) -> None:
         if not self.source.strip():
@@ -39,7 +41,7 @@ class CameraConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 20000:
                 raise ValueError(f"camera.{name} must be an integer in [0, 20000], got {value!r}")
-        for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0)):
+        for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0), ("stall_s", 0.05, 60.0)):
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"camera.{name} must be within {lo} and {hi}, got {value}")

@@ -15,6 +15,7 @@ from humanpt.camera import CameraConfig, CameraCore, CaptureAdapter, capture_mes
 from humanpt.runtime.lockstep import Lockstep
 from humanpt.runtime.recording import read
 from humanpt.runtime.replay import replay
+from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_image, image_stamp_ns
 from tests.conftest import run_cli, write_config
 
@@ -126,6 +127,56 @@ def test_live_camera_component_publishes_records_and_replays(video, router, tmp_
     assert len(ins) == N_FRAMES and len(outs) == N_FRAMES
     res = replay(run_dir / "camera.mcap")
     assert res.match and res.compared >= N_FRAMES, res.report()
+    # the file ended (no loop) while the component ran on: a camera that stopped
+    stalls = [e for e in rec.outputs if e.topic == "camera/events" and e.decode().code == "camera_stalled"]
+    assert len(stalls) == 1 and stalls[0].t_ns > outs[-1].t_ns, [e.decode().text for e in stalls]
+
+
+
+def _codes(outputs) -> list[str]:
+    return [m.code for t, m in outputs if t == "camera/events"]
+
+
+def test_a_camera_that_stops_gives_camera_stalled_once_and_camera_resumed():
+    # stall_s 0.5 s: ticks every 0.1 s; frames at 0.0 .. 0.2 s, then none until 1.5 s
+    core = CameraCore(CameraConfig(source="unused.avi", stall_s=0.5))
+    assert core.tick_period_ns() == 100_000_000
+    frame = lambda t: capture_message(np.zeros((4, 6), np.uint8), t)  # noqa: E731
+    ms = 1_000_000
+    events = []
+    for t in range(0, 1500 * ms, 100 * ms):
+        if t <= 200 * ms:
+            events += core.step(t, "capture", frame(t + 1))
+        events += core.step(t + 1, "tick", pb.Tick())
+    # the last frame at 0.2 s: 0.7 s is the first tick more than 0.5 s later (0.5 s after
+    # 0.2 s is 0.7 s; 0.7 s + 1 ns > 0.5 s gap): one event, not one per tick after it
+    stalled = [m for t, m in events if t == "camera/events"]
+    assert [m.code for m in stalled] == ["camera_stalled"]
+    assert stalled[0].header.stamp_ns == 700 * ms + 1 and stalled[0].severity == pb.SEVERITY_ERROR
+    out = core.step(1500 * ms, "capture", frame(1500 * ms))
+    assert _codes(out) == ["camera_resumed"] and out[-1][0] == "camera/image"
+    assert _codes(core.step(1600 * ms + 1, "tick", pb.Tick())) == []
+
+
+def test_no_frame_at_all_is_a_stall_and_a_clock_step_is_not():
+    core = CameraCore(CameraConfig(source="unused.avi", stall_s=0.5))
+    ms = 1_000_000
+    assert _codes(core.step(0, "tick", pb.Tick())) == []
+    out = core.step(600 * ms, "tick", pb.Tick())
+    assert _codes(out) == ["camera_stalled"] and "no frame yet" in out[0][1].text
+    # a healthy camera whose clock is stepped 2 s forward (NTP): the watch moves with it
+    core = CameraCore(CameraConfig(source="unused.avi", stall_s=0.5))
+    core.step(0, "capture", capture_message(np.zeros((4, 6), np.uint8), 1))
+    core.step(1, "clock_step", pb.Event(text=str(2_000_000_000)))
+    assert _codes(core.step(2_100 * ms, "tick", pb.Tick())) == []
+
+
+def test_a_frame_of_another_size_is_dropped_with_an_event():
+    core = CameraCore(CameraConfig(source="unused.avi"))
+    assert core.step(1, "capture", capture_message(np.zeros((4, 6), np.uint8), 100))[0][0] == "camera/image"
+    ((topic, ev),) = core.step(2, "capture", capture_message(np.zeros((8, 6), np.uint8), 200))
+    assert ev.code == "frame_size_changed" and "6 x 8 px" in ev.text and "6 x 4 px" in ev.text
+    assert core.step(3, "capture", capture_message(np.zeros((4, 6), np.uint8), 300))[0][0] == "camera/image"
 
 
 # --- an image folder as the source (issue 35 item 2): real footage replayed at camera.fps ---
