@@ -33,6 +33,7 @@ full, and replay never calls it a match.
 
 from __future__ import annotations
 
+import dataclasses
 import errno
 import heapq
 import io
@@ -1215,13 +1216,25 @@ def resolve_images(rec: Recording) -> list[Entry]:
         omitted: set[tuple[int, str]] = set()
         policy = "?"
         for f in files:
+            producer_in: dict[str, Entry] = {}  # the producer's last input image per topic
             for pe in _readable_entries(f, notes):
-                if pe.direction != OUT or pe.topic != topic or pe.schema != RawImage.DESCRIPTOR.full_name:
+                if pe.schema != RawImage.DESCRIPTOR.full_name:
+                    continue
+                if pe.direction == IN:
+                    producer_in[pe.topic] = pe
+                    continue
+                if pe.topic != topic:
                     continue
                 msg = _parse_image(pe)
                 ident = image_identity(msg)
                 if ident not in idents:
                     continue
+                src = producer_in.get(pe.channel.get("ref_topic", "")) if pe.payload == SAME_AS_INPUT else None
+                if src is not None and src.payload == FULL:
+                    # the producer recorded this image as a copy of its own input (the camera
+                    # publishes what it captured): its pixels are that input's
+                    msg.data = _parse_image(src).data
+                    pe = dataclasses.replace(pe, data=msg.SerializeToString(), payload=FULL)
                 if pe.payload != FULL:
                     omitted.add(ident)
                     policy = pe.channel.get("policy", "?")
