@@ -428,3 +428,26 @@ def pytest_sessionfinish(session):
     if session.config.getoption("store_durations") and not hasattr(session.config, "workerinput") and _SECONDS:
         DURATIONS.write_text(json.dumps({f: round(s, 1) for f, s in sorted(_SECONDS.items(), key=lambda kv: -kv[1])},
                                         indent=0) + "\n")
+
+
+def run_cli_here(*args: str, cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+    """``humanpt ARGS`` run in this process (:func:`in_process_cli`), its exit status and
+    output as :func:`run_cli` gives them: for verbs whose process boundary is not what a test
+    checks (a file in, a file or an error out), without a Python start-up per call."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    try:
+        os.chdir(ROOT if cwd is None else cwd)  # (run_cli's default too)
+        with in_process_cli() as main, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(args))
+            except SystemExit as e:  # argparse's errors and --help
+                code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+                if not isinstance(e.code, int | None):
+                    print(e.code, file=sys.stderr)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["humanpt", *args], code or 0, out.getvalue(), err.getvalue())

@@ -17,7 +17,7 @@ from humanpt.schemas.convert import header, pose
 from humanpt.seam import seamfile
 from humanpt.seam.compare import compare_points, played_tool_path
 from humanpt.seam.fit import FitConfig, Seam, Segment
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 
 def seam_of(*segments: Segment) -> Seam:
@@ -139,7 +139,7 @@ def test_path_compare_cli_on_a_recorded_run(tmp_path):
     states = [(0.001 * k, 1.0, 0.5, 0.0, 0.0, 180.0) for k in range(81)]
     record_run(tmp_path / "run", states, started_ns=0, done_ns=80 * 28_000_000)
     seamfile.write(tmp_path / "s.json", seam_of(line((0, 1000.3, 300), (100, 1000.3, 300))))
-    out = run_cli("path", "compare", str(tmp_path / "s.json"), str(tmp_path / "run"))
+    out = run_cli_here("path", "compare", str(tmp_path / "s.json"), str(tmp_path / "run"))
     assert out.returncode == 0, out.stderr
     text = out.stdout
     assert "81 states" in text and "(100.0 mm)" in text
@@ -151,5 +151,5 @@ def test_path_compare_cli_on_a_recorded_run(tmp_path):
 
 def test_path_compare_cli_names_a_missing_run(tmp_path):
     seamfile.write(tmp_path / "s.json", STRAIGHT)
-    out = run_cli("path", "compare", str(tmp_path / "s.json"), str(tmp_path / "nothing"))
+    out = run_cli_here("path", "compare", str(tmp_path / "s.json"), str(tmp_path / "nothing"))
     assert out.returncode == 2 and "no controller.mcap" in out.stderr and "Traceback" not in out.stderr

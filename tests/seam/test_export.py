@@ -25,7 +25,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from humanpt.seam import seamfile
 from humanpt.seam.export import FORMATS, SUFFIXES, ExportOptions, export
 from humanpt.seam.fit import Corner, Dwell, FitConfig, Seam, Segment
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 DATA = Path(__file__).parent / "data"
 SEAM_FILE = DATA / "export-seam.json"
@@ -308,24 +308,24 @@ def test_tool_is_the_torch_on_the_flange(seam):
 
 def test_cli_writes_refuses_and_errs(tmp_path):
     out = tmp_path / "seam.src"
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "-o", str(out), "--name", "seam")
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "krl", "-o", str(out), "--name", "seam")
     assert r.returncode == 0, r.stderr
     assert out.read_text() == golden("krl").read_text()
     before = out.read_text()
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "rapid", "-o", str(out))
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "rapid", "-o", str(out))
     assert r.returncode != 0 and "exists" in r.stderr and out.read_text() == before
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "abb", "-o", str(tmp_path / "x"))
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "abb", "-o", str(tmp_path / "x"))
     assert r.returncode != 0 and "invalid choice" in r.stderr and not (tmp_path / "x").exists()
     empty = tmp_path / "empty.json"
     empty.write_text(json.dumps({"format": "humanpt.seam", "version": 1, "segments": []}))
-    r = run_cli("path", "export", str(empty), "--format", "json", "-o", str(tmp_path / "e.json"))
+    r = run_cli_here("path", "export", str(empty), "--format", "json", "-o", str(tmp_path / "e.json"))
     assert r.returncode != 0 and "no segments" in r.stderr and not (tmp_path / "e.json").exists()
     (tmp_path / "zero.json").write_text("")
-    r = run_cli("path", "export", str(tmp_path / "zero.json"), "--format", "krl", "-o", str(tmp_path / "z.src"))
+    r = run_cli_here("path", "export", str(tmp_path / "zero.json"), "--format", "krl", "-o", str(tmp_path / "z.src"))
     assert r.returncode != 0 and "not JSON" in r.stderr and not (tmp_path / "z.src").exists()
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "-o", str(SEAM_FILE), "--overwrite")
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "json", "-o", str(SEAM_FILE), "--overwrite")
     assert r.returncode != 0 and "is the input" in r.stderr
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "json", "--point", "G", "-o", str(tmp_path / "g"))
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "json", "--point", "G", "-o", str(tmp_path / "g"))
     assert r.returncode != 0 and "the seam is of tip" in r.stderr and not (tmp_path / "g").exists()
 
 
@@ -346,16 +346,16 @@ def test_cli_retimed_g_seam_and_tool(tmp_path):
                                                    {"t_s": 0.004, "x": [0.14, 0, 0, 0.01, 30, 179.99]}]}
     g = tmp_path / "g.seam.json"
     g.write_text(json.dumps(d))
-    r = run_cli("path", "export", str(g), "--format", "json")
+    r = run_cli_here("path", "export", str(g), "--format", "json")
     assert r.returncode == 0, r.stderr
     prog = json.loads((tmp_path / "g.json").read_text())
     assert prog["speed_mm_s"] == 35.0 and prog["point"] == "G"
     assert [x["t_s"] for x in prog["samples"]] == [0.0, 0.004]
     assert prog["samples"][1]["x_mm"] == [0.14, 0.0, 0.0]
     assert prog["tool"]["flange_T_tool"]["x_mm"] == [0.0, 0.0, 200.0]
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,-2,75,0,0,0", "-o",
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,-2,75,0,0,0", "-o",
                 str(tmp_path / "t.src"))
     assert r.returncode == 0, r.stderr
     assert "$TOOL = {X 1.000, Y -2.000, Z 75.000, A 0.0000, B 0.0000, C 0.0000}" in (tmp_path / "t.src").read_text()
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,2,3", "-o", str(tmp_path / "u.src"))
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", "krl", "--tool", "1,2,3", "-o", str(tmp_path / "u.src"))
     assert r.returncode == 2 and "six finite numbers" in r.stderr and not (tmp_path / "u.src").exists()

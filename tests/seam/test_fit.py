@@ -11,7 +11,7 @@ import pytest
 
 from humanpt.seam import seamfile
 from humanpt.seam.fit import FitConfig, FitError, distance_to_seam, fit_path
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli_here
 
 SPEED_MM_S, PERIOD_S = 20.0, 0.28  # the recorder's spacing at the paper's teaching speed
 
@@ -115,13 +115,13 @@ def test_path_fit_on_the_recorded_arc(tmp_path):
     # recordings/arc: the paper's rotating base, G on a radius of 246 mm (Section 6, Fig. 8)
     src = tmp_path / "path.csv"
     src.write_bytes((ROOT / "recordings" / "arc" / "paths" / "path-1.csv").read_bytes())
-    r = run_cli("path", "fit", str(src))
+    r = run_cli_here("path", "fit", str(src))
     assert r.returncode == 0, r.stdout + r.stderr
     seam = seamfile.read(tmp_path / "path.seam.json")
     arcs = [s for s in seam.segments if s.kind == "arc"]
     assert len(arcs) == 1 and abs(arcs[0].radius_mm - 246.0) < 0.005 * 246.0, seam.segments
     assert (tmp_path / "path.seam.png").stat().st_size > 10_000
-    again = run_cli("path", "fit", str(src))
+    again = run_cli_here("path", "fit", str(src))
     assert again.returncode == 2 and "exists" in again.stderr
 
 
@@ -129,7 +129,7 @@ def test_path_fit_of_a_bad_path_writes_nothing(tmp_path):
     src = tmp_path / "one.csv"
     lines = (ROOT / "recordings" / "arc" / "paths" / "path-1.csv").read_text().splitlines()
     src.write_text("\n".join(lines[:2]) + "\n")  # the header and one point
-    r = run_cli("path", "fit", str(src))
+    r = run_cli_here("path", "fit", str(src))
     assert r.returncode == 2 and "1 point" in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["one.csv"]
 
@@ -145,7 +145,7 @@ def test_path_fit_of_an_empty_or_nan_path_writes_nothing(tmp_path, rows, says):
         lines = lines[:1]  # the header alone
     src = tmp_path / "p.csv"
     src.write_text("\n".join(lines) + "\n")
-    r = run_cli("path", "fit", str(src))
+    r = run_cli_here("path", "fit", str(src))
     assert r.returncode == 2 and says in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["p.csv"]
 
@@ -222,7 +222,7 @@ def test_path_fit_marks_and_warns_of_a_doubted_seam(tmp_path):
     x, t = two_arcs_recorded(16.8, 0)
     src = tmp_path / "sparse.csv"
     write(src, Path6(np.arange(len(x)), t, x))
-    r = run_cli("path", "fit", str(src), "--no-plot")
+    r = run_cli_here("path", "fit", str(src), "--no-plot")
     assert r.returncode == 3, r.stdout + r.stderr
     assert "WARNING" in r.stderr and "residual RMS" in r.stderr and "segments doubted" in r.stderr
     data = json.loads((tmp_path / "sparse.seam.json").read_text())
@@ -232,5 +232,5 @@ def test_path_fit_marks_and_warns_of_a_doubted_seam(tmp_path):
     dense = tmp_path / "dense.csv"
     x, t = two_arcs_recorded(2.0, 0)
     write(dense, Path6(np.arange(len(x)), t, x))
-    r = run_cli("path", "fit", str(dense), "--no-plot")
+    r = run_cli_here("path", "fit", str(dense), "--no-plot")
     assert r.returncode == 0 and "WARNING" not in r.stderr, r.stdout + r.stderr

@@ -19,7 +19,7 @@ import pytest
 
 from humanpt.seam import sanitise
 from humanpt.seam.export import FORMATS, SUFFIXES
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 from tests.seam.test_export import SEAM_FILE
 
 # Per language: the comment leader, statements the robot would run, and how a line of
@@ -53,7 +53,7 @@ def test_a_crafted_seam_file_name_is_one_comment_line(tmp_path, fmt, brk):
     outs = {}
     for src in (crafted, benign):
         out = tmp_path / f"{'c' if src == crafted else 'b'}{SUFFIXES[fmt]}"
-        r = run_cli("path", "export", str(src), "--format", fmt, "-o", str(out), "--name", "seam")
+        r = run_cli_here("path", "export", str(src), "--format", fmt, "-o", str(out), "--name", "seam")
         assert r.returncode == 0, r.stderr
         assert len(r.stdout.splitlines()) == 1  # the report names the file on one line too
         outs[src] = out.read_text()
@@ -79,8 +79,8 @@ def test_a_crafted_program_name_is_an_identifier(tmp_path, fmt):
     name = "x\n" + "\n".join(stmts) + "\nEND"
     out = tmp_path / f"p{SUFFIXES[fmt]}"
     benign = tmp_path / f"b{SUFFIXES[fmt]}"
-    assert run_cli("path", "export", str(SEAM_FILE), "-f", fmt, "-o", str(out), "--name", name).returncode == 0
-    assert run_cli("path", "export", str(SEAM_FILE), "-f", fmt, "-o", str(benign), "--name", "seam").returncode == 0
+    assert run_cli_here("path", "export", str(SEAM_FILE), "-f", fmt, "-o", str(out), "--name", name).returncode == 0
+    assert run_cli_here("path", "export", str(SEAM_FILE), "-f", fmt, "-o", str(benign), "--name", "seam").returncode == 0
     got, want = out.read_text(), benign.read_text()
     assert len(got.splitlines()) == len(want.splitlines())
     first = got.splitlines()[0]
@@ -93,7 +93,7 @@ def test_json_program_carries_the_name_through_the_whitelist(tmp_path):
     crafted = tmp_path / "inj\n$OUT[1]=TRUE\n;.seam.json"
     shutil.copyfile(SEAM_FILE, crafted)
     out = tmp_path / "p.json"
-    assert run_cli("path", "export", str(crafted), "-f", "json", "-o", str(out), "--name", "a\nb").returncode == 0
+    assert run_cli_here("path", "export", str(crafted), "-f", "json", "-o", str(out), "--name", "a\nb").returncode == 0
     import json
 
     d = json.loads(out.read_text())

@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from humanpt.seam.fit import Corner, Dwell, FitConfig, Seam, Segment
 from humanpt.seam.retime import RetimeConfig, RetimeError, retime
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 
 def line(a, b, ypr0=(0, 15, 180), ypr1=(0, 15, 180)) -> Segment:
@@ -100,10 +100,10 @@ def test_cli_refuses_a_speed_above_the_limit_and_writes_nothing(tmp_path):
     from humanpt.seam import seamfile
 
     f = seamfile.write(tmp_path / "s.json", L_CORNER)
-    r = run_cli("path", "retime", str(f), "--speed", "150")
+    r = run_cli_here("path", "retime", str(f), "--speed", "150")
     assert r.returncode == 2 and "above max_speed" in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.json"]
-    ok = run_cli("path", "retime", str(f), "--speed", "40")
+    ok = run_cli_here("path", "retime", str(f), "--speed", "40")
     assert ok.returncode == 0, ok.stderr
     rows = (tmp_path / "s.timed.csv").read_text().splitlines()
     assert rows[0].startswith("index,t_s,x_mm") and len(rows) > 100
@@ -115,8 +115,8 @@ def test_export_takes_the_retimed_samples_and_feed(tmp_path):
     from humanpt.seam import seamfile
 
     f = seamfile.write(tmp_path / "s.json", L_CORNER)
-    assert run_cli("path", "retime", str(f), "--speed", "35", "-o", str(tmp_path / "t.csv")).returncode == 0
-    r = run_cli("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "t.csv"), "-o",
+    assert run_cli_here("path", "retime", str(f), "--speed", "35", "-o", str(tmp_path / "t.csv")).returncode == 0
+    r = run_cli_here("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "t.csv"), "-o",
                 str(tmp_path / "p.json"))
     assert r.returncode == 0, r.stderr
     import json
@@ -127,7 +127,7 @@ def test_export_takes_the_retimed_samples_and_feed(tmp_path):
     last = [float(v) for v in rows[-1].split(",")]
     assert prog["samples"][-1]["t_s"] == round(last[1], 6) and prog["samples"][-1]["x_mm"] == [100.0, 80.0, 0.0]
     (tmp_path / "bad.csv").write_text("a,b\n1,2\n")
-    r = run_cli("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "bad.csv"), "-o",
+    r = run_cli_here("path", "export", str(f), "--format", "json", "--timed", str(tmp_path / "bad.csv"), "-o",
                 str(tmp_path / "q.json"))
     assert r.returncode == 2 and "not a timed path" in r.stderr and not (tmp_path / "q.json").exists()
 

@@ -33,7 +33,7 @@ from humanpt.seam.export import (
 )
 from humanpt.seam.fit import FitConfig, Seam, Segment
 from humanpt.seam.retime import RetimeConfig, retime
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 from tests.seam.test_export import SEAM_FILE, options
 
 
@@ -117,7 +117,7 @@ def test_reader_names_the_field(tmp_path, what, field, value, says):
 def test_export_refuses_what_it_wrote_before(tmp_path, fmt, what, field, value, says):
     """The issue's four: $VEL.CP = 1e305, WAIT SEC inf, CIRC {X nan}, a 309-digit X."""
     f = _write(tmp_path, _set(_seam_dict(), field, value))
-    r = run_cli("path", "export", str(f), "--format", fmt, "--dwells", "-o", str(tmp_path / "out"))
+    r = run_cli_here("path", "export", str(f), "--format", fmt, "--dwells", "-o", str(tmp_path / "out"))
     _refused(r, says, tmp_path)
 
 
@@ -130,14 +130,14 @@ def test_export_refuses_what_it_wrote_before(tmp_path, fmt, what, field, value, 
 def test_broken_structure_is_one_line(tmp_path, doc, says, verb):
     f = _write(tmp_path, doc)
     args = ["--format", "krl", "-o", str(tmp_path / "o.src")] if verb == "export" else ["-o", str(tmp_path / "o.csv")]
-    _refused(run_cli("path", verb, str(f), *args), says, tmp_path)
+    _refused(run_cli_here("path", verb, str(f), *args), says, tmp_path)
 
 
 def test_retime_and_play_of_a_1e308_seam(tmp_path):
     """`path retime` and `path play`'s retiming (console.seam_playback) of a seam at
     1e308 mm: the reader's one line, not retime's OverflowError."""
     f = _write(tmp_path, _set(_seam_dict(), "segments.0.start_mm", [1e308, 0.0, 0.0]))
-    _refused(run_cli("path", "retime", str(f), "-o", str(tmp_path / "o.csv")), "segments[0]: start_mm", tmp_path)
+    _refused(run_cli_here("path", "retime", str(f), "-o", str(tmp_path / "o.csv")), "segments[0]: start_mm", tmp_path)
     from humanpt.console.client import seam_playback
 
     with pytest.raises(seamfile.SeamFileError, match=r"segments\[0\]: start_mm"):
@@ -173,11 +173,11 @@ def test_feed_above_the_limit_is_refused_unless_raised(tmp_path):
     """A seam feed of 150 mm/s (within what a file may hold) is above the 100 mm/s limit
     retime keeps: refused, naming the feed; with --max-speed 200 written as 0.15 m/s."""
     f = _write(tmp_path, _set(_seam_dict(), "feed_mm_s", 150.0))
-    _refused(run_cli("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src")),
+    _refused(run_cli_here("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src")),
              "the seam's feed 150 mm/s is above the limit 100 mm/s", tmp_path)
-    r = run_cli("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src"), "--speed", "1e308")
+    r = run_cli_here("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src"), "--speed", "1e308")
     _refused(r, "speed_mm_s must be a number in (0, 1000]", tmp_path)
-    r = run_cli("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src"), "--max-speed", "200")
+    r = run_cli_here("path", "export", str(f), "-f", "krl", "-o", str(tmp_path / "o.src"), "--max-speed", "200")
     assert r.returncode == 0, r.stderr
     assert "$VEL.CP = 0.150000" in (tmp_path / "o.src").read_text()
 
@@ -191,15 +191,15 @@ def test_a_seam_outside_the_workspace_is_refused(tmp_path):
             if k in s:
                 s[k] = [s[k][0] - 3000.0, *s[k][1:]]
     f = _write(tmp_path, d)
-    _refused(run_cli("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "o.mod")),
+    _refused(run_cli_here("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "o.mod")),
              "segments[0]: start_mm: (-3000, 0, 0) mm is outside the workspace (-1600, -1600, -1400)..(1600, "
              "1600, 1600) mm", tmp_path)
-    r = run_cli("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "o.mod"),
+    r = run_cli_here("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "o.mod"),
                 "--envelope=-4000,-1000,-1000,1000,1000,1000")
     assert r.returncode == 0, r.stderr
-    r = run_cli("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "p.mod"), "--envelope", "1,2,3")
+    r = run_cli_here("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "p.mod"), "--envelope", "1,2,3")
     assert r.returncode == 2 and "--envelope 1,2,3: give XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX" in r.stderr, r.stderr
-    r = run_cli("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "p.mod"), "--envelope", "0,0,0,0,0,0")
+    r = run_cli_here("path", "export", str(f), "-f", "rapid", "-o", str(tmp_path / "p.mod"), "--envelope", "0,0,0,0,0,0")
     assert r.returncode == 2 and "three finite lower bounds below three upper ones" in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.seam.json", "o.mod"]
 
@@ -239,7 +239,7 @@ def test_timed_samples_faster_than_the_limit_are_refused(tmp_path):
     """JSON export of a retimed seam whose samples jump 10 mm in 4 ms (2500 mm/s)."""
     f = _write(tmp_path, _set(_seam_dict(), "retime", {
         "samples": [{"t_s": 0.0, "x": [0, 0, 0, 0, 30, 180]}, {"t_s": 0.004, "x": [10, 0, 0, 0, 30, 180]}]}))
-    _refused(run_cli("path", "export", str(f), "-f", "json", "-o", str(tmp_path / "o.json")),
+    _refused(run_cli_here("path", "export", str(f), "-f", "json", "-o", str(tmp_path / "o.json")),
              "retime.samples[1]: 2500 mm/s from the sample before, above the limit max_speed_mm_s 100", tmp_path)
 
 
@@ -254,7 +254,7 @@ def test_options_out_of_bounds(field, value, says):
 
 
 def test_tool_out_of_bounds(tmp_path):
-    r = run_cli("path", "export", str(SEAM_FILE), "-f", "urscript", "-o", str(tmp_path / "o.script"), "--tool",
+    r = run_cli_here("path", "export", str(SEAM_FILE), "-f", "urscript", "-o", str(tmp_path / "o.script"), "--tool",
                 "1e308,0,0,0,0,0")
     assert r.returncode == 2 and "tool's offset" in r.stderr and "Warning" not in r.stderr
     assert not (tmp_path / "o.script").exists()
