@@ -15,13 +15,16 @@ detected centres, pairs and expected positions; plots of tracking error, command
 loop latency; events). By default a viewer is spawned; --save writes an .rrd file
 headless (open it later with `rerun FILE.rrd`); --serve keeps a gRPC server up for a
 viewer on another machine (`rerun --connect rerun+http://HOST:PORT/proxy`) until Ctrl-C;
---viewer URL sends to a viewer already running there. A progress line goes to stderr."""
+--viewer URL sends to a viewer already running there; --screenshot FILE.png saves a
+picture of the run's end as the viewer draws it (needs a display, or xvfb-run and a Vulkan
+driver: Debian's xvfb and mesa-vulkan-drivers). A progress line goes to stderr."""
 
 EXAMPLES = """\
 examples:
   humanpt view runs/20261121-101500-twin                  spawn a viewer
   humanpt view runs/20261121-101500-twin --save run.rrd   headless: write run.rrd
   humanpt view runs/20261121-101500-twin --serve --port 9877
+  humanpt view runs/20261121-101500-twin --screenshot run.png --size 1600x900
 """
 
 
@@ -51,6 +54,12 @@ def add_parser(sub) -> argparse.ArgumentParser:
         help="serve over gRPC until Ctrl-C (a viewer elsewhere connects)",
     )
     out.add_argument(
+        "--screenshot",
+        metavar="FILE.png",
+        help="save a picture of the run's end as the viewer draws it (no window: xvfb-run and a Vulkan "
+        "driver, Debian: apt install xvfb mesa-vulkan-drivers)",
+    )
+    out.add_argument(
         "--viewer",
         metavar="URL",
         help="send to a running viewer, e.g. rerun+http://HOST:9876/proxy",
@@ -61,6 +70,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
         default=9876,
         help="gRPC port of the spawned viewer or of --serve (default 9876)",
     )
+    p.add_argument("--size", default="1600x900", metavar="WxH",
+                   help="the picture's size in px for --screenshot (default 1600x900)")
     p.add_argument(
         "--image-every",
         type=int,
@@ -101,7 +112,13 @@ def run(args) -> int:
     run_files(run_dir)  # fail early, naming the problem
     if args.image_every < 1:
         raise ValueError("--image-every must be >= 1")
-    if args.save:
+    if args.screenshot:
+        from humanpt.viz.screenshot import parse_size
+
+        size_px = parse_size(args.size)  # (a bad size stops here, before the run is drawn)
+        if not args.screenshot.lower().endswith(".png"):
+            raise ValueError(f"--screenshot {args.screenshot!r}: the picture is a .png file")
+    if args.save or args.screenshot:
         mode = "save"
     elif args.serve:
         mode = "serve"
@@ -122,8 +139,15 @@ def run(args) -> int:
             raise FileNotFoundError(f"{f}: no such seam file")
     base = VizConfig(grpc_port=args.port, **({"connect_url": args.viewer} if args.viewer else {}))
     cfg = viz_config_for_run(run_dir, base)
+    if args.screenshot:
+        import tempfile
+
+        scratch = tempfile.TemporaryDirectory(prefix="humanpt-view-")
+        rrd = str(Path(scratch.name) / "run.rrd")
+    else:
+        rrd = args.save or ""
     try:
-        rec, where = open_stream(cfg, mode=mode, rrd_path=args.save or "", name=run_dir.name)
+        rec, where = open_stream(cfg, mode=mode, rrd_path=rrd, name=run_dir.name)
     except (RuntimeError, OSError, ValueError) as e:
         raise RecordingError(f"cannot open the rerun {mode} sink: {e}") from e
     from humanpt.runtime.progress import LineProgress
@@ -148,6 +172,16 @@ def run(args) -> int:
         print(f"humanpt view: warning: {note}", file=sys.stderr)
     bad = sum(stats.errors.values())
     rate = stats.messages / stats.seconds if stats.seconds > 0 else 0.0
+    if args.screenshot:
+        from humanpt.viz.screenshot import ScreenshotError, screenshot
+
+        try:
+            where = f"the picture {screenshot(rrd, args.screenshot, application_id=cfg.application_id, size_px=size_px)}"
+        except ScreenshotError as e:
+            print(f"humanpt view: {e}", file=sys.stderr)
+            return 1
+        finally:
+            scratch.cleanup()
     print(
         f"humanpt view: {stats.messages} messages from {stats.recordings} recordings ({stats.shown} shown"
         f"{f', {bad} not drawable' if bad else ''}) in {stats.seconds:.1f} s ({rate:.0f}/s) -> {where}",

@@ -16,7 +16,9 @@ import rerun.blueprint as rrb
 __all__ = ["blueprint"]
 
 
-def blueprint() -> rrb.Blueprint:
+def blueprint(*, picture: bool = False) -> rrb.Blueprint:
+    """The view's layout; ``picture``: for a screenshot of a whole run (the side and time
+    panels collapsed, the time cursor at the run's end)."""
     world = rrb.Spatial3DView(name="World (m)", origin="/world")
     image = rrb.Spatial2DView(name="Complex image", origin="/image")
     error = rrb.TimeSeriesView(name="Tracking error (mm, deg)", origin="/plots/error")
@@ -37,6 +39,7 @@ def blueprint() -> rrb.Blueprint:
             ),
             column_shares=[1, 1],
         ),
-        rrb.TimePanel(timeline="stamp"),
-        collapse_panels=False,
+        rrb.TimePanel(timeline="stamp", state="collapsed", play_state="following") if picture
+        else rrb.TimePanel(timeline="stamp"),
+        collapse_panels=picture,
     )
