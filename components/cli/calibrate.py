@@ -1,4 +1,4 @@
-"""``humanpt calibrate camera|psvs|mirrors|hand-eye|tip``: each tool has its own module
+"""``humanpt calibrate camera|stereo|psvs|mirrors|hand-eye|tip``: each tool has its own module
 (``calibrate_<tool>.py`` with ``add_parser(subparsers)`` and ``run(args)``); this one
 registers them and dispatches."""
 
@@ -9,6 +9,7 @@ import importlib
 # tool name -> module of humanpt.cli
 TOOLS = {
     "camera": "calibrate_camera",
+    "stereo": "calibrate_stereo",
     "tip": "calibrate_tip",
     "psvs": "calibrate_psvs",
     "mirrors": "calibrate_psvs",
@@ -32,7 +33,7 @@ def add_world_args(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="with --twin: the twin's seed (poses, noise; default 0)")
 
 
-HELP = "calibrate the cell: camera, psvs, mirrors, hand-eye, tip"
+HELP = "calibrate the cell: camera, stereo, psvs, mirrors, hand-eye, tip"
 
 
 def add_parsers(sub) -> None:

@@ -25,6 +25,26 @@ from humanpt.runtime.config import ConfigError
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 
 
+def add_board_and_check_args(p) -> None:
+    """The board's and the checks' options (``calibrate camera`` and ``calibrate stereo``)."""
+    b = p.add_argument_group("board")
+    b.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard")
+    b.add_argument("--cols", type=int, default=11, help="chessboard inner corners along a row (11, the twin's)")
+    b.add_argument("--rows", type=int, default=8, help="chessboard inner corners along a column (8)")
+    b.add_argument("--square-mm", type=float, default=20.0, help="square side, mm (20)")
+    b.add_argument("--squares-x", type=int, default=10, help="charuco squares along x (10)")
+    b.add_argument("--squares-y", type=int, default=7, help="charuco squares along y (7)")
+    b.add_argument("--marker-mm", type=float, default=18.0, help="charuco marker side, mm (18)")
+    b.add_argument("--dictionary", default="DICT_4X4_50", help="charuco ArUco dictionary (DICT_4X4_50)")
+    s = p.add_argument_group("checks")
+    s.add_argument("--dist-model", choices=("auto", *DIST_MODELS), default="auto",
+                   help="distortion coefficients: auto (k1, k2; k2 dropped when not significant), k1, k1k2, "
+                   "k1k2p (+ tangential), full (+ k3)")
+    s.add_argument("--min-views", type=int, default=6, help="fewer usable views are refused (6)")
+    s.add_argument("--max-blur-px", type=float, default=2.0, help="images with a larger edge blur are dropped (2 px)")
+    s.add_argument("--min-coverage", type=float, default=0.35, help="fraction of the image the boards must cover")
+
+
 def add_parser(csub) -> None:
     p = csub.add_parser(
         "camera", help="the camera's intrinsics and distortion (Zhang's method), one PSVS view at a time",
@@ -53,22 +73,7 @@ def add_parser(csub) -> None:
     p.add_argument("--detector", choices=("opencv", "paper", "both"), default="opencv",
                    help="corners by OpenCV (findChessboardCornersSB + cornerSubPix), by the paper's appendix "
                    "detector, or both compared on the same images (the rig gets OpenCV's)")
-    b = p.add_argument_group("board")
-    b.add_argument("--board", choices=("chessboard", "charuco"), default="chessboard")
-    b.add_argument("--cols", type=int, default=11, help="chessboard inner corners along a row (11, the twin's)")
-    b.add_argument("--rows", type=int, default=8, help="chessboard inner corners along a column (8)")
-    b.add_argument("--square-mm", type=float, default=20.0, help="square side, mm (20)")
-    b.add_argument("--squares-x", type=int, default=10, help="charuco squares along x (10)")
-    b.add_argument("--squares-y", type=int, default=7, help="charuco squares along y (7)")
-    b.add_argument("--marker-mm", type=float, default=18.0, help="charuco marker side, mm (18)")
-    b.add_argument("--dictionary", default="DICT_4X4_50", help="charuco ArUco dictionary (DICT_4X4_50)")
-    s = p.add_argument_group("checks")
-    s.add_argument("--dist-model", choices=("auto", *DIST_MODELS), default="auto",
-                   help="distortion coefficients: auto (k1, k2; k2 dropped when not significant), k1, k1k2, "
-                   "k1k2p (+ tangential), full (+ k3)")
-    s.add_argument("--min-views", type=int, default=6, help="fewer usable views are refused (6)")
-    s.add_argument("--max-blur-px", type=float, default=2.0, help="images with a larger edge blur are dropped (2 px)")
-    s.add_argument("--min-coverage", type=float, default=0.35, help="fraction of the image the boards must cover")
+    add_board_and_check_args(p)
     add_rig_args(p)
     lv = p.add_argument_group("live (--live)")
     lv.add_argument("--config", "-c", metavar="FILE", help="TOML config file ([runtime] cell and router)")
@@ -77,7 +82,12 @@ def add_parser(csub) -> None:
     lv.add_argument("--frame-timeout-s", type=float, default=5.0, help="wait this long for a frame after Enter (5 s)")
 
 
-def _board(args):
+def settings_of(args) -> CameraSettings:
+    return CameraSettings(min_views=args.min_views, max_blur_px=args.max_blur_px, min_coverage=args.min_coverage,
+                          dist_model=args.dist_model)
+
+
+def board_of(args):
     if args.board == "charuco":
         return CharucoSpec(args.squares_x, args.squares_y, args.square_mm, args.marker_mm, args.dictionary)
     return Chessboard(args.cols, args.rows, args.square_mm)
@@ -113,7 +123,7 @@ def read_images(folder: str | Path) -> list[tuple[str, object]]:
 
 
 def _from_images(args, rig, settings) -> tuple[CameraCalibration, list[str], list[str]]:
-    board = _board(args)
+    board = board_of(args)
     view = args.view or "right"
     folders = {}
     if args.images:
@@ -163,8 +173,7 @@ def run(args) -> int:
     try:
         rig_path = Path(args.rig)
         rig = load_rig(rig_path) if rig_path.exists() else Rig()
-        settings = CameraSettings(min_views=args.min_views, max_blur_px=args.max_blur_px,
-                                  min_coverage=args.min_coverage, dist_model=args.dist_model)
+        settings = settings_of(args)
         if sum(bool(x) for x in (args.twin, args.live, args.images or args.left_images)) > 1:
             raise CalibrationError("one source: --images, --live or --twin")
         if args.live:
@@ -172,7 +181,7 @@ def run(args) -> int:
             from humanpt.console.calibration import calibrate_camera_live
 
             result, lines, truth = calibrate_camera_live(
-                load_cfg(args), rig, settings, _board(args), view=args.view or "right", detector=args.detector,
+                load_cfg(args), rig, settings, board_of(args), view=args.view or "right", detector=args.detector,
                 frame_timeout_s=args.frame_timeout_s, save=args.save, lines=sys.stdin)
         elif args.twin:
             if args.images or args.left_images:
@@ -184,7 +193,7 @@ def run(args) -> int:
 
             result, lines, truth = calibrate_camera_on_twin(
                 World.named(args.world), rig, args.seed, _progress("twin images"), detector=args.detector,
-                view=args.view or "both", n_views=args.views, settings=settings, board=_board(args))
+                view=args.view or "both", n_views=args.views, settings=settings, board=board_of(args))
         else:
             result, lines, truth = _from_images(args, rig, settings)
         new_rig = apply_to_rig(rig, result, datetime.date.today().isoformat())

@@ -41,6 +41,9 @@ __all__ = [
     "TargetGeometry",
     "Tip",
     "Timing",
+    "StereoCamera",
+    "Stereo",
+    "RIG_KINDS",
     "Rig",
     "DEFAULT_FLANGE_T_CAMERA_MM",
     "DEFAULT_DZ_MM",
@@ -178,6 +181,63 @@ class Timing:
 
 
 @dataclass(frozen=True)
+class StereoCamera:
+    """One camera of an ordinary stereo pair (``[stereo.left]``, ``[stereo.right]``): its
+    focal lengths and principal point (px) and OpenCV's distortion (k1, k2, p1, p2, k3)."""
+
+    a_u: Annotated[float, Range(1, 1e6, "px")] = 1000.0
+    a_v: Annotated[float, Range(1, 1e6, "px")] = 1000.0
+    u0: Annotated[float, Range(-1e5, 1e5, "px")] = 320.0
+    v0: Annotated[float, Range(-1e5, 1e5, "px")] = 240.0
+    dist_coeffs: tuple[float, float, float, float, float] = (0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        dist = tuple(float(v) for v in self.dist_coeffs)
+        if len(dist) != 5 or not all(np.isfinite(dist)) or max(map(abs, dist), default=0.0) > 1e3:
+            raise ValueError(f"dist_coeffs must be 5 finite numbers (k1, k2, p1, p2, k3) within +-1000, "
+                             f"got {list(self.dist_coeffs)}")
+        object.__setattr__(self, "dist_coeffs", dist)
+
+    def camera_matrix(self) -> np.ndarray:
+        return np.array([[self.a_u, 0.0, self.u0], [0.0, self.a_v, self.v0], [0.0, 0.0, 1.0]])
+
+
+@dataclass(frozen=True)
+class Stereo:
+    """``[stereo]``: an ordinary stereo pair (the paper: "an ordinary stereovision system
+    with two parallel cameras could also replace PSVS"), read when ``kind = "stereo"``: the
+    image size both cameras give, each camera, and ``right_T_left_x`` the left camera's pose
+    in the right camera's frame (mm, deg: X of Section 4; OpenCV's stereoCalibrate R, T:
+    a point X_left is at R X_left + T in the right camera). Nominal: two parallel cameras
+    100 mm apart, the left one at -100 mm along the right one's x."""
+
+    image_width_px: Annotated[int, Range(16, 20000, "px")] = 640
+    image_height_px: Annotated[int, Range(16, 20000, "px")] = 480
+    left: StereoCamera = field(default_factory=StereoCamera)
+    right: StereoCamera = field(default_factory=StereoCamera)
+    right_T_left_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (-100.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    calibration: Calibration = field(default_factory=Calibration)
+
+    def __post_init__(self) -> None:
+        x = tuple(float(v) for v in self.right_T_left_x)
+        if len(x) != 6 or not all(np.isfinite(x)):
+            raise ValueError(f"right_T_left_x must be 6 finite numbers (mm, deg), got {list(self.right_T_left_x)}")
+        object.__setattr__(self, "right_T_left_x", x)
+        if not self.baseline_mm() > 1.0:
+            raise ValueError(f"right_T_left_x: the cameras are {self.baseline_mm():.3g} mm apart; a stereo pair "
+                             "needs a baseline (at least 1 mm)")
+
+    def right_T_left_mm(self) -> np.ndarray:
+        return transform_from_x(np.asarray(self.right_T_left_x))
+
+    def baseline_mm(self) -> float:
+        return float(np.linalg.norm(self.right_T_left_x[:3]))
+
+
+RIG_KINDS = ("psvs", "stereo")
+
+
+@dataclass(frozen=True)
 class Rig:
     """Everything the pipeline believes about the hardware (DESIGN.md, "Rig and world"):
     ``psvs`` (camera intrinsics, distortion, each virtual camera, baseline, m, l:
@@ -191,17 +251,21 @@ class Rig:
 
     version: int = RIG_VERSION
     name: str = "nominal"
+    kind: str = "psvs"
     psvs: PsvsConfig = field(default_factory=PsvsConfig)
     psvs_calibration: Calibration = field(default_factory=Calibration)
     hand_eye: HandEye = field(default_factory=HandEye)
     target: TargetGeometry = field(default_factory=TargetGeometry)
     tip: Tip = field(default_factory=Tip)
     timing: Timing = field(default_factory=Timing)
+    stereo: Stereo = field(default_factory=Stereo)
 
     def __post_init__(self) -> None:
         if self.version != RIG_VERSION:
             raise ValueError(f"version: this humanpt reads rig version {RIG_VERSION}, the file says "
                              f"{self.version!r}")
+        if self.kind not in RIG_KINDS:
+            raise ValueError(f"kind: {self.kind!r} is not a rig kind ({', '.join(RIG_KINDS)})")
 
     def params(self) -> PsvsParams:
         """The PSVS as the geometry library's :class:`PsvsParams`."""
@@ -219,4 +283,7 @@ class Rig:
         if self.timing.calibration.method != "nominal":  # (a rig before issue 32 had no timing)
             cal = self.timing.calibration
             parts.append(f"timing {cal.method}" + (f" ({cal.date})" if cal.date else ""))
+        if self.kind == "stereo" or self.stereo.calibration.method != "nominal":
+            cal = self.stereo.calibration
+            parts.append(f"stereo {cal.method}" + (f" ({cal.date})" if cal.date else ""))
         return ", ".join(parts)

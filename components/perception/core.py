@@ -113,6 +113,10 @@ class PerceptionCore(Core):
     uses_rig = True
 
     def __init__(self, config: PerceptionConfig, rig: Rig | None = None):
+        if rig is not None and rig.kind != "psvs":
+            raise ValueError(f"the rig is of kind {rig.kind!r}: this version's perception reads the PSVS's complex "
+                             "image only (an ordinary stereo pair is calibrated by `humanpt calibrate stereo`, not "
+                             "yet perceived); set the rig's kind = \"psvs\"")
         super().__init__(config, Rig() if rig is None else rig)
         self.perception = Perception(config, self.rig)
         self._anchor: tuple[np.ndarray, np.ndarray] | None = None  # last FULL centres, sizes

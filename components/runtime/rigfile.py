@@ -19,6 +19,9 @@ Layout (every table optional; a missing table or key takes the nominal design va
     tob_t_tip_mm = [0.0, 0.0, 60.0]
     [timing]                 # the camera's stamps on the robot's clock (issue 32; older rigs: 0)
     camera_time_offset_ms = 0.0
+    [stereo]                 # an ordinary stereo pair, used when kind = "stereo" (issue 35)
+    right_T_left_x = [-100.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    [stereo.left]            # each camera: a_u, a_v, u0, v0, dist_coeffs
 
 A missing file, bad TOML, an unknown key, a value outside its physical range or a
 physically impossible value (focal length or baseline <= 0, a hand-eye rotation that is not
@@ -39,7 +42,18 @@ from typing import Any
 import numpy as np
 
 from humanpt.geometry.config import PsvsConfig
-from humanpt.geometry.rig import RIG_VERSION, Calibration, HandEye, Rig, TargetGeometry, Timing, Tip
+from humanpt.geometry.rig import (
+    RIG_KINDS,
+    RIG_VERSION,
+    Calibration,
+    HandEye,
+    Rig,
+    Stereo,
+    StereoCamera,
+    TargetGeometry,
+    Timing,
+    Tip,
+)
 from humanpt.geometry.transforms import x_from_transform
 from humanpt.runtime.config import ConfigError, build, dumps_toml, read_toml, to_table
 from humanpt.runtime.files import write_atomic
@@ -51,7 +65,7 @@ RIG_METADATA = "rig"
 """The key of the rig (JSON) in a recording's ``humanpt.run`` metadata."""
 
 _PARTS: dict[str, type] = {"psvs": PsvsConfig, "hand_eye": HandEye, "target": TargetGeometry, "tip": Tip,
-                           "timing": Timing}
+                           "timing": Timing, "stereo": Stereo}
 
 
 def _calibration(table: Mapping[str, Any], source: str, section: str) -> Calibration:
@@ -92,7 +106,7 @@ def rig_from_table(data: Mapping[str, Any], source: str = "<rig>") -> Rig:
     """A parsed rig document (TOML or JSON tables) -> a validated :class:`Rig`."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"{source}: a rig is a table, got {type(data).__name__}")
-    known = {"version", "name", *_PARTS}
+    known = {"version", "name", "kind", *_PARTS}
     unknown = [k for k in data if k not in known]
     if unknown:
         raise ConfigError(f"{source}: unknown rig key {unknown[0]!r}; known: {', '.join(sorted(known))}")
@@ -105,7 +119,10 @@ def rig_from_table(data: Mapping[str, Any], source: str = "<rig>") -> Rig:
     name = data.get("name", "")
     if not isinstance(name, str):
         raise ConfigError(f"{source}: name: expected a string, got {name!r}")
-    kwargs: dict[str, Any] = {"name": name}
+    kind = data.get("kind", "psvs")
+    if kind not in RIG_KINDS:
+        raise ConfigError(f"{source}: kind: {kind!r} is not a rig kind ({', '.join(RIG_KINDS)})")
+    kwargs: dict[str, Any] = {"name": name, "kind": kind}
     for section, cls in _PARTS.items():
         table = data.get(section, {})
         if not isinstance(table, Mapping):
@@ -117,6 +134,13 @@ def rig_from_table(data: Mapping[str, Any], source: str = "<rig>") -> Rig:
         if section == "psvs":
             kwargs["psvs"] = build(PsvsConfig, table, source=source, section=section)
             kwargs["psvs_calibration"] = cal
+        elif section == "stereo":
+            for side in ("left", "right"):
+                cam = table.get(side, {})
+                if not isinstance(cam, Mapping):
+                    raise ConfigError(f"{source}: [stereo.{side}] must be a table, got {type(cam).__name__}")
+                table[side] = build(StereoCamera, dict(cam), source=source, section=f"stereo.{side}")
+            kwargs["stereo"] = build(Stereo, {**table, "calibration": cal}, source=source, section=section)
         else:
             kwargs[section] = build(cls, {**table, "calibration": cal}, source=source, section=section)
     try:
@@ -135,7 +159,8 @@ def rig_to_table(rig: Rig) -> dict[str, Any]:
     plain = to_table(rig)
     psvs = plain.pop("psvs")
     psvs["calibration"] = plain.pop("psvs_calibration")
-    out = {"version": plain.pop("version"), "name": plain.pop("name"), "psvs": psvs, **plain}
+    out = {"version": plain.pop("version"), "name": plain.pop("name"), "kind": plain.pop("kind"), "psvs": psvs,
+           **plain}
     return clean(out)
 
 
