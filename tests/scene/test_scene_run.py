@@ -17,7 +17,7 @@ from mcap_protobuf.decoder import DecoderFactory
 from scipy.spatial.transform import Rotation
 
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -57,9 +57,9 @@ class Run:
 def run(tmp_path_factory) -> Run:
     d = tmp_path_factory.mktemp("scene")
     run_dir, merged = d / "run", d / "merged.mcap"
-    r = run_cli("demo", "--lockstep", "--scenario", "arc", "--duration", "4", "--run-dir", str(run_dir))
+    r = run_cli_here("demo", "--lockstep", "--scenario", "arc", "--duration", "4", "--run-dir", str(run_dir))
     assert r.returncode == 0, r.stderr
-    r = run_cli("runs", "merge", str(run_dir), str(merged))
+    r = run_cli_here("runs", "merge", str(run_dir), str(merged))
     assert r.returncode == 0, r.stderr
     return Run(run_dir, merged)
 
