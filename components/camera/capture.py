@@ -25,7 +25,7 @@ from humanpt.schemas.convert import image
 from .config import CameraConfig
 
 __all__ = ["IMAGE_SUFFIXES", "CaptureAdapter", "ImageFolder", "capture_adapters", "capture_message",
-           "open_capture", "read_frames"]
+           "open_capture", "read_frames", "request_settings"]
 
 log = logging.getLogger("humanpt.camera")
 
@@ -106,17 +106,38 @@ def open_capture(config: CameraConfig) -> cv2.VideoCapture | ImageFolder:
     cap = cv2.VideoCapture(index if index is not None else config.source)
     if not cap.isOpened():
         cap.release()
-        what = f"camera device {index}" if index is not None else f"video file {config.source!r}"
+        what = f"camera device {config.source.strip()}" if config.is_device else f"video file {config.source!r}"
         raise OSError(f"cannot open {what}")
-    if index is not None:
-        for prop, value in (
-            (cv2.CAP_PROP_FRAME_WIDTH, config.width_px),
-            (cv2.CAP_PROP_FRAME_HEIGHT, config.height_px),
-            (cv2.CAP_PROP_FPS, config.fps),
-        ):
-            if value:
-                cap.set(prop, value)
+    if config.is_device:
+        for note in request_settings(cap, config):
+            log.warning("camera %s: %s", config.source.strip(), note)
     return cap
+
+
+_SETTINGS = (("width_px", "CAP_PROP_FRAME_WIDTH", 0.5), ("height_px", "CAP_PROP_FRAME_HEIGHT", 0.5),
+             ("fps", "CAP_PROP_FPS", 0.01), ("exposure", "CAP_PROP_EXPOSURE", 0.01), ("gain", "CAP_PROP_GAIN", 0.01))
+
+
+def request_settings(cap, config: CameraConfig) -> list[str]:
+    """Ask the device for each setting the config gives (not 0) and read it back: one
+    note per setting the driver did not take (it refused it, or gives another value), so
+    the user knows what the camera really does. (A manual exposure first turns V4L2's
+    auto exposure off: CAP_PROP_AUTO_EXPOSURE 1 is V4L2's manual mode.)"""
+    notes = []
+    for key, prop_name, tolerance in _SETTINGS:
+        wanted = getattr(config, key)
+        if not wanted:
+            continue
+        prop = getattr(cv2, prop_name)
+        if key == "exposure" and not cap.set(cv2.CAP_PROP_AUTO_EXPOSURE, 1):
+            notes.append("the driver did not turn auto exposure off")
+        accepted = cap.set(prop, wanted)
+        got = cap.get(prop)
+        if not accepted:
+            notes.append(f"{key} {wanted:g} refused by the driver (it gives {got:g})")
+        elif abs(got - wanted) > tolerance * max(1.0, abs(wanted)):
+            notes.append(f"{key} {wanted:g} asked, the driver gives {got:g}")
+    return notes
 
 
 def read_frames(
@@ -168,7 +189,7 @@ class CaptureAdapter:
 
     def _loop(self, put) -> None:
         cfg = self.config
-        is_file = cfg.device_index is None
+        is_file = not cfg.is_device
         cap = None
         next_due = 0.0
         while not self._stop.is_set():
@@ -216,7 +237,7 @@ def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
     must exist; a folder must hold images and come with ``camera.fps`` (OSError naming it:
     the component stops at start; a device index that does not open is retried, a camera
     may be plugged in later)."""
-    if config.device_index is None:
+    if not config.is_device:
         path = Path(config.source)
         if path.is_dir():
             open_capture(config)  # refuses an empty folder or a missing frame rate now

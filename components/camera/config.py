@@ -13,8 +13,10 @@ from humanpt.runtime.config import Range
 class CameraConfig:
     """A real camera through OpenCV's VideoCapture.
 
-    ``source``: a device index (``"0"``), a video file path or a folder of images.
-    ``width_px``/``height_px``/``fps`` are requested from a device (0: its default). A file
+    ``source``: a device index (``"0"``) or path (``/dev/video0``), a video file path or a
+    folder of images. ``width_px``/``height_px``/``fps``, ``exposure`` and ``gain`` (in the
+    driver's units: V4L2's exposure_time_absolute is in 100 us) are requested from a device
+    (0: its default; what the driver does not take is said at start). A file
     is played at its own frame rate when ``pace`` (else as fast as it decodes) and from the
     start again when ``loop``; a folder's images (natural name order) at ``fps``, which a
     folder needs. No frame for ``stall_s`` (a camera unplugged, stalled, a file at its end)
@@ -32,6 +34,8 @@ class CameraConfig:
     loop: bool = False
     mono: bool = True
     reopen_s: Annotated[float, Range(0.01, 3600, "s")] = 2.0
+    exposure: Annotated[float, Range(0, 1e6, "driver units")] = 0.0
+    gain: Annotated[float, Range(0, 1e6, "driver units")] = 0.0
     stall_s: Annotated[float, Range(0.05, 60, "s")] = 0.5
 
     def __post_init__(self) -> None:
@@ -41,10 +45,16 @@ class CameraConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 20000:
                 raise ValueError(f"camera.{name} must be an integer in [0, 20000], got {value!r}")
-        for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0), ("stall_s", 0.05, 60.0)):
+        for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0), ("stall_s", 0.05, 60.0),
+                             ("exposure", 0.0, 1e6), ("gain", 0.0, 1e6)):
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"camera.{name} must be within {lo} and {hi}, got {value}")
+
+    @property
+    def is_device(self) -> bool:
+        """A camera (an index or a /dev/ path), not a file or a folder."""
+        return self.device_index is not None or self.source.strip().startswith("/dev/")
 
     @property
     def device_index(self) -> int | None:

@@ -243,3 +243,48 @@ def test_live_camera_component_on_an_image_folder_records_and_replays(folder, ro
     assert stamps[-1] - stamps[0] >= 11 * 5_000_000 * 0.99
     res = replay(run_dir / "camera.mcap")
     assert res.match and res.compared >= N_FRAMES, res.report()
+
+
+# --- a device's settings (issue 35 item 2): asked, read back, what the driver did not take said ---
+
+
+class _Driver:
+    """A V4L2 driver as OpenCV sees it (a device cannot exist here): it takes what it can
+    and rounds the frame rate to its own modes; exposure needs manual mode first."""
+
+    def __init__(self):
+        self.values = {cv2.CAP_PROP_FRAME_WIDTH: 640.0, cv2.CAP_PROP_FRAME_HEIGHT: 480.0, cv2.CAP_PROP_FPS: 30.0,
+                       cv2.CAP_PROP_EXPOSURE: 156.0, cv2.CAP_PROP_GAIN: 0.0, cv2.CAP_PROP_AUTO_EXPOSURE: 3.0}
+        self.asked = []
+
+    def set(self, prop, value):
+        self.asked.append((prop, value))
+        if prop == cv2.CAP_PROP_GAIN:
+            return False  # no gain control on this camera
+        if prop == cv2.CAP_PROP_FPS:
+            value = 30.0 if value > 30 else 15.0  # its two modes
+        if prop == cv2.CAP_PROP_EXPOSURE and self.values[cv2.CAP_PROP_AUTO_EXPOSURE] != 1:
+            return False
+        self.values[prop] = float(value)
+        return True
+
+    def get(self, prop):
+        return self.values[prop]
+
+
+def test_a_devices_settings_are_asked_and_what_the_driver_did_not_take_is_said():
+    from humanpt.camera.capture import request_settings
+
+    driver = _Driver()
+    cfg = CameraConfig(source="/dev/video0", width_px=1280, height_px=720, fps=60, exposure=50, gain=4)
+    notes = request_settings(driver, cfg)
+    assert cfg.is_device and CameraConfig(source="2").is_device and not CameraConfig(source="a.avi").is_device
+    assert driver.values[cv2.CAP_PROP_FRAME_WIDTH] == 1280 and driver.values[cv2.CAP_PROP_EXPOSURE] == 50
+    # auto exposure off before the exposure is set
+    assert driver.asked.index((cv2.CAP_PROP_AUTO_EXPOSURE, 1)) < driver.asked.index((cv2.CAP_PROP_EXPOSURE, 50))
+    assert notes == ["fps 60 asked, the driver gives 30", "gain 4 refused by the driver (it gives 0)"]
+    # nothing asked that the config leaves at 0 (the driver's default)
+    driver = _Driver()
+    assert request_settings(driver, CameraConfig(source="0")) == [] and driver.asked == []
+    with pytest.raises(ValueError, match="camera.exposure"):
+        CameraConfig(exposure=-1.0)
