@@ -106,6 +106,10 @@ class PoseFilterCore(Core):
 
     def _build(self, c: PoseFilterConfig) -> None:
         self.flange_T_camera_m = self.rig.hand_eye.flange_T_camera_m()
+        # The rig's camera-to-robot time offset (calibration.timing; > 0: an image was taken
+        # that long before its stamp): each measurement is placed at its capture time on the
+        # robot's clock, where the robot's pose is looked up and the filter updated.
+        self.capture_shift_ns = int(round(self.rig.timing.camera_time_offset_ms * 1e6))
         self._accel = c.accel_sigma_mm_s2 * 1e-3
         self._ang_accel = np.radians(c.ang_accel_sigma_deg_s2)
         self._noises = ((self._accel, self._ang_accel),
@@ -138,7 +142,7 @@ class PoseFilterCore(Core):
         latest = self.robot.latest
         if (self.config.wait_for_robot_ms > 0 and latest is not None
                 and msg.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY)
-                and msg.header.stamp_ns > latest[0]):
+                and msg.header.stamp_ns - self.capture_shift_ns > latest[0]):
             # The robot state of the image's instant is still on its way (a serial line's
             # frame time, a bus hop): hold the measurement until it is in, so the robot pose
             # is interpolated, not extrapolated from the states before (which is off
@@ -222,7 +226,7 @@ class PoseFilterCore(Core):
         latest = self.robot.latest
         while self._pending:
             t_in, m = self._pending[0]
-            bracketed = latest is not None and latest[0] >= m.header.stamp_ns
+            bracketed = latest is not None and latest[0] >= m.header.stamp_ns - self.capture_shift_ns
             if not (bracketed or t_ns - t_in >= wait_ns or (keep is not None and len(self._pending) > keep)):
                 break
             self._pending.popleft()
@@ -274,7 +278,7 @@ class PoseFilterCore(Core):
         c = self.config
         if msg.status not in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
             return []
-        stamp = msg.header.stamp_ns
+        stamp = msg.header.stamp_ns - self.capture_shift_ns  # the capture, on the robot's clock
         world_T_flange = self.robot.at(stamp, int(c.max_extrapolation_ms * 1e6))
         if world_T_flange is None:
             if len(self.robot) == 0:
