@@ -1,0 +1,145 @@
+"""The target measured by an ordinary stereo pair (issue 35 item 3): the same blob method
+as the PSVS's (:func:`humanpt.perception.weighted.detect_weighted`) on each camera's image,
+then the correspondence across the two images and OpenCV's triangulation, in the right
+camera's frame (the rig's "camera" frame for a stereo rig: the hand-eye is the right
+camera's).
+
+Correspondence: every choice of three blobs in each image and every pairing of them (at
+most ``max_blobs``: C(n, 3)^2 x 6 candidates) is triangulated (``cv2.triangulatePoints``
+on undistorted, normalised coordinates: each camera's own intrinsics and distortion), and
+scored by its reprojection error (px, both images) and by its triangle's sides against the
+target model; the best candidate within ``epipolar_tol_px`` and the model's side tolerance,
+between ``min_depth_mm`` and ``max_depth_mm``, is named A, B, C (Section 4 steps 6-7:
+:func:`humanpt.geometry.target.estimate_camera_T_tob`, viewed from the right camera's
+centre). Pure: images in, a :class:`StereoMeasurement` out.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from humanpt.geometry.errors import GeometryError
+from humanpt.geometry.rig import Rig, StereoCamera
+from humanpt.geometry.target import estimate_camera_T_tob, triangle_sides_mm
+from humanpt.geometry.transforms import invert_transform
+
+from .blobs import full_region
+from .config import PerceptionConfig
+from .weighted import detect_weighted
+
+__all__ = ["StereoMeasurement", "StereoPerception"]
+
+
+@dataclass(frozen=True)
+class StereoMeasurement:
+    """``status``: "full" (the three sources paired and named) or "lost" (``why``);
+    ``camera_T_tob_mm`` (4, 4) in the right camera's frame; ``points_mm`` (3, 3) A, B, C;
+    ``uv_left_px``, ``uv_right_px`` (3, 2) their blob centres (A, B, C order);
+    ``reprojection_px`` the RMS reprojection error over both images; ``side_error_mm`` the
+    largest triangle side's difference from the model."""
+
+    status: str
+    why: str = ""
+    camera_T_tob_mm: np.ndarray | None = None
+    points_mm: np.ndarray | None = None
+    uv_left_px: np.ndarray | None = None
+    uv_right_px: np.ndarray | None = None
+    reprojection_px: float = math.nan
+    side_error_mm: float = math.nan
+
+
+def _normalised(cam: StereoCamera, uv_px: np.ndarray) -> np.ndarray:
+    import cv2
+
+    pts = np.asarray(uv_px, np.float64).reshape(-1, 1, 2)
+    return cv2.undistortPoints(pts, cam.camera_matrix(), np.asarray(cam.dist_coeffs, float)).reshape(-1, 2)
+
+
+def _project(cam: StereoCamera, cam_T_world: np.ndarray, p_mm: np.ndarray) -> np.ndarray:
+    import cv2
+
+    rvec = cv2.Rodrigues(cam_T_world[:3, :3])[0]
+    uv, _ = cv2.projectPoints(np.asarray(p_mm, np.float64).reshape(-1, 1, 3), rvec, cam_T_world[:3, 3],
+                              cam.camera_matrix(), np.asarray(cam.dist_coeffs, float))
+    return uv.reshape(-1, 2)
+
+
+class StereoPerception:
+    """Measures the target on (left, right) image pairs of the rig's ``[stereo]`` pair."""
+
+    def __init__(self, config: PerceptionConfig, rig: Rig):
+        self.config = config
+        self.rig = rig
+        self.stereo = rig.stereo
+        self.model = rig.target_model()
+        self.model_sides_mm = np.sort(triangle_sides_mm(self.model.source_positions_mm))
+        self.right_T_left = self.stereo.right_T_left_mm()
+        self.left_T_right = invert_transform(self.right_T_left)
+        s = self.stereo
+        self.size_px = (s.image_width_px, s.image_height_px)
+        a_u = max(s.left.a_u, s.right.a_u)
+        self.max_radius_px = 0.5 * config.size_ratio_range[1] * a_u * self.model.source_diameter_mm / \
+            config.min_depth_mm + 2.0
+
+    def detect(self, gray: np.ndarray):
+        c = self.config
+        if gray.shape[::-1] != self.size_px:
+            raise ValueError(f"image of {gray.shape[1]} x {gray.shape[0]} px; the rig's stereo cameras give "
+                             f"{self.size_px[0]} x {self.size_px[1]} px")
+        return detect_weighted(gray, full_region(*self.size_px), threshold=c.threshold, noise_k=c.noise_k,
+                               aperture_pad_px=c.aperture_pad_px, min_area_px=c.min_area_px,
+                               max_area_px=c.max_area_px, max_radius_px=self.max_radius_px,
+                               max_elongation=c.max_elongation, min_contrast_dn=c.min_contrast_dn,
+                               max_blobs=c.max_blobs)
+
+    def measure(self, left_gray: np.ndarray, right_gray: np.ndarray) -> StereoMeasurement:
+        """The target on one image pair (each (H, W) uint8, sources bright)."""
+        import cv2
+
+        left, right = self.detect(left_gray), self.detect(right_gray)
+        if len(left) < 3 or len(right) < 3:
+            return StereoMeasurement("lost", f"{len(left)} blobs in the left image, {len(right)} in the right: "
+                                             "three in each needed")
+        c, s = self.config, self.stereo
+        n_l, n_r = _normalised(s.left, left.uv_px), _normalised(s.right, right.uv_px)
+        p_right = np.hstack([np.eye(3), np.zeros((3, 1))])
+        p_left = self.left_T_right[:3, :]
+        best = None
+        for li in itertools.combinations(range(len(left)), 3):
+            for ri in itertools.permutations(range(len(right)), 3):
+                x = cv2.triangulatePoints(p_left, p_right, n_l[list(li)].T, n_r[list(ri)].T)
+                if np.any(np.abs(x[3]) < 1e-12):
+                    continue
+                p_mm = (x[:3] / x[3]).T  # right camera frame
+                z = p_mm[:, 2]
+                if np.any(z < c.min_depth_mm) or np.any(z > c.max_depth_mm):
+                    continue
+                err_r = _project(s.right, np.eye(4), p_mm) - right.uv_px[list(ri)]
+                err_l = _project(s.left, self.left_T_right, p_mm) - left.uv_px[list(li)]
+                worst = float(np.max(np.hypot(*np.vstack([err_r, err_l]).T)))
+                if worst > c.epipolar_tol_px:
+                    continue
+                sides = np.linalg.norm(p_mm - p_mm[[1, 2, 0]], axis=1)
+                side_err = float(np.max(np.abs(np.sort(sides) - self.model_sides_mm)))
+                if side_err > self.model.side_tolerance_mm:
+                    continue
+                rms = float(np.sqrt(np.mean(np.concatenate([err_r, err_l]) ** 2)))
+                score = rms / c.epipolar_sigma_px + side_err / c.side_sigma_mm
+                if best is None or score < best[0]:
+                    best = (score, li, ri, p_mm, rms)
+        if best is None:
+            return StereoMeasurement("lost", "no three blobs pair into the target's triangle at a working depth")
+        _, li, ri, p_mm, rms = best
+        try:
+            camera_T_tob, lab = estimate_camera_T_tob(self.model, p_mm)
+        except GeometryError as e:
+            return StereoMeasurement("lost", f"the paired sources are not the target: {e}")
+        order = list(lab.order)
+        return StereoMeasurement("full", camera_T_tob_mm=camera_T_tob, points_mm=lab.camera_p_abc_mm,
+                                 uv_left_px=left.uv_px[[li[k] for k in order]],
+                                 uv_right_px=right.uv_px[[ri[k] for k in order]], reprojection_px=rms,
+                                 side_error_mm=lab.side_error_mm)
