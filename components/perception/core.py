@@ -56,6 +56,7 @@ from .correspondence import (
 )
 from .image import BadImage, prepare
 from .pipeline import Perception, Result
+from .stereo import StereoPerception
 
 __all__ = ["PerceptionCore", "measurement_message"]
 
@@ -113,12 +114,10 @@ class PerceptionCore(Core):
     uses_rig = True
 
     def __init__(self, config: PerceptionConfig, rig: Rig | None = None):
-        if rig is not None and rig.kind != "psvs":
-            raise ValueError(f"the rig is of kind {rig.kind!r}: this version's perception reads the PSVS's complex "
-                             "image only (an ordinary stereo pair is calibrated by `humanpt calibrate stereo`, not "
-                             "yet perceived); set the rig's kind = \"psvs\"")
         super().__init__(config, Rig() if rig is None else rig)
         self.perception = Perception(config, self.rig)
+        # a rig of kind "stereo": camera/image is the pair side by side (perception/stereo.py)
+        self.stereo = StereoPerception(config, self.rig) if self.rig.kind == "stereo" else None
         self._anchor: tuple[np.ndarray, np.ndarray] | None = None  # last FULL centres, sizes
         self._bad_code: str | None = None
         self._bad_count = 0
@@ -137,6 +136,8 @@ class PerceptionCore(Core):
 
     def on_config_changed(self, old: PerceptionConfig, new: PerceptionConfig) -> None:
         self.perception = Perception(new, self.rig)
+        if self.stereo is not None:
+            self.stereo = StereoPerception(new, self.rig)
         if new.drift_window != old.drift_window:
             self._drift = deque(self._drift, maxlen=new.drift_window)
         self._anchor = None  # search the whole image with the new settings
@@ -151,13 +152,9 @@ class PerceptionCore(Core):
             # A stamp of 0 is a real capture time (a lock-step run starts at 0; the image of
             # that capture now arrives later): only a missing stamp falls back to arrival.
             stamp = image_stamp_ns(msg) if msg.HasField("timestamp") else t_ns
-            prepared = prepare(
-                msg,
-                self.perception.size_px,
-                c.invert,
-                self.perception.keep,
-                c.max_saturated_fraction,
-            )
+            size, keep = ((self.stereo.side_by_side_px, None) if self.stereo is not None
+                          else (self.perception.size_px, self.perception.keep))
+            prepared = prepare(msg, size, c.invert, keep, c.max_saturated_fraction)
         except Exception as e:  # noqa: BLE001 - the core never raises on input
             prepared = BadImage("bad_image", f"image could not be read: {type(e).__name__}: {e}")
         if isinstance(prepared, BadImage):
@@ -185,6 +182,15 @@ class PerceptionCore(Core):
                 )
             )
             self._bad_code, self._bad_count = None, 0
+        if self.stereo is not None:
+            try:
+                uv, match = self.stereo.measure_side_by_side(prepared.gray)
+            except Exception as e:  # noqa: BLE001 - the core never raises on input
+                self.counters["errors"] += 1
+                outputs.append(self.event(t_ns, pb.SEVERITY_ERROR, "perception_error",
+                                          f"perception: measuring the stereo pair failed: {type(e).__name__}: {e}"))
+                return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
+            return outputs + self._publish(t_ns, stamp, uv, match)
         try:
             result = self._measure(prepared.gray)
         except Exception as e:  # noqa: BLE001 - the core never raises on input

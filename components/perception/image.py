@@ -98,7 +98,7 @@ def prepare(
     if pixels.shape[1] != width or pixels.shape[0] != height:
         return BadImage(
             "wrong_size",
-            f"image is {pixels.shape[1]}x{pixels.shape[0]} px but the PSVS is calibrated for "
+            f"image is {pixels.shape[1]}x{pixels.shape[0]} px but the rig's camera is calibrated for "
             f"{width}x{height} px",
         )
     gray = to_mono8(pixels, msg.encoding)

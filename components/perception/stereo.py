@@ -29,9 +29,15 @@ from humanpt.geometry.transforms import invert_transform
 
 from .blobs import full_region
 from .config import PerceptionConfig
+from .correspondence import FULL, LOST, Match
+from .image import mask_array
 from .weighted import detect_weighted
 
 __all__ = ["StereoMeasurement", "StereoPerception"]
+
+# The live component takes a pair as ONE image, the left camera's pixels then the right's,
+# side by side (what a side-by-side stereo device gives, and what the camera component
+# makes of two devices' frames paired by stamp): (2 W) x H.
 
 
 @dataclass(frozen=True)
@@ -50,6 +56,8 @@ class StereoMeasurement:
     uv_right_px: np.ndarray | None = None
     reprojection_px: float = math.nan
     side_error_mm: float = math.nan
+    left_index: tuple[int, ...] = ()  # the blobs of each image named A, B, C
+    right_index: tuple[int, ...] = ()
 
 
 def _normalised(cam: StereoCamera, uv_px: np.ndarray) -> np.ndarray:
@@ -84,8 +92,33 @@ class StereoPerception:
         a_u = max(s.left.a_u, s.right.a_u)
         self.max_radius_px = 0.5 * config.size_ratio_range[1] * a_u * self.model.source_diameter_mm / \
             config.min_depth_mm + 2.0
+        self.side_by_side_px = (2 * s.image_width_px, s.image_height_px)
+        self.keep = mask_array(config.mask, self.side_by_side_px)  # the mask's rectangles: side-by-side pixels
+
+    def measure_side_by_side(self, gray: np.ndarray) -> tuple[np.ndarray, Match]:
+        """The target on a side-by-side pair ((H, 2 W): left then right): every blob centre
+        in the side-by-side image (the left's, then the right's shifted by W) and a
+        :class:`Match` whose pairs index them (right, left), as the PSVS's perception gives
+        (so the component publishes both alike)."""
+        w = self.stereo.image_width_px
+        keep = self.keep
+        left_gray, right_gray = gray[:, :w], gray[:, w:]
+        if keep is not None:
+            left_gray = np.where(keep[:, :w] > 0, left_gray, 0).astype(np.uint8)
+            right_gray = np.where(keep[:, w:] > 0, right_gray, 0).astype(np.uint8)
+        left, right = self.detect(left_gray), self.detect(right_gray)
+        uv = np.vstack([left.uv_px, right.uv_px + [w, 0.0]]).reshape(-1, 2)
+        m = self._measure_blobs(left, right)
+        if m.status != "full":
+            return uv, Match(np.zeros((0, 2), int), np.zeros(0), np.zeros((0, 3)), None, LOST, 0.0)
+        n_left = len(left)
+        pairs = np.array([[n_left + r, li] for li, r in zip(m.left_index, m.right_index, strict=True)], int)
+        quality = max(0.0, 1.0 - m.reprojection_px / self.config.epipolar_tol_px)
+        return uv, Match(pairs, np.full(3, m.reprojection_px), m.points_mm, m.camera_T_tob_mm, FULL, quality,
+                         m.side_error_mm)
 
     def detect(self, gray: np.ndarray):
+        """The weighted method's blobs on one camera's image."""
         c = self.config
         if gray.shape[::-1] != self.size_px:
             raise ValueError(f"image of {gray.shape[1]} x {gray.shape[0]} px; the rig's stereo cameras give "
@@ -98,9 +131,11 @@ class StereoPerception:
 
     def measure(self, left_gray: np.ndarray, right_gray: np.ndarray) -> StereoMeasurement:
         """The target on one image pair (each (H, W) uint8, sources bright)."""
+        return self._measure_blobs(self.detect(left_gray), self.detect(right_gray))
+
+    def _measure_blobs(self, left, right) -> StereoMeasurement:
         import cv2
 
-        left, right = self.detect(left_gray), self.detect(right_gray)
         if len(left) < 3 or len(right) < 3:
             return StereoMeasurement("lost", f"{len(left)} blobs in the left image, {len(right)} in the right: "
                                              "three in each needed")
@@ -139,7 +174,8 @@ class StereoPerception:
         except GeometryError as e:
             return StereoMeasurement("lost", f"the paired sources are not the target: {e}")
         order = list(lab.order)
+        left_index, right_index = tuple(li[k] for k in order), tuple(ri[k] for k in order)
         return StereoMeasurement("full", camera_T_tob_mm=camera_T_tob, points_mm=lab.camera_p_abc_mm,
-                                 uv_left_px=left.uv_px[[li[k] for k in order]],
-                                 uv_right_px=right.uv_px[[ri[k] for k in order]], reprojection_px=rms,
-                                 side_error_mm=lab.side_error_mm)
+                                 uv_left_px=left.uv_px[list(left_index)], uv_right_px=right.uv_px[list(right_index)],
+                                 reprojection_px=rms, side_error_mm=lab.side_error_mm, left_index=left_index,
+                                 right_index=right_index)

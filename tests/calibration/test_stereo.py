@@ -114,12 +114,3 @@ def test_the_cli_writes_the_rig_from_a_folder_of_pairs(pairs, tmp_path):
     before = rig_path.read_text()
     r = run_cli_here("calibrate", "stereo", "--images", str(tmp_path / "pairs"), "--rig", str(rig_path))
     assert r.returncode == 2 and "lonely.png" in r.stderr and rig_path.read_text() == before
-
-
-def test_perception_refuses_a_stereo_rig_until_it_perceives_pairs(result):
-    from humanpt.perception.config import PerceptionConfig
-    from humanpt.perception.core import PerceptionCore
-
-    rig = apply_stereo_to_rig(Rig(), result, "2026-11-27")
-    with pytest.raises(ValueError, match="kind 'stereo'.*PSVS's complex image only"):
-        PerceptionCore(PerceptionConfig(), rig)

@@ -70,3 +70,27 @@ def test_a_source_missing_in_one_image_is_lost_with_the_reason():
     assert m.status == "lost" and "0 in the right" in m.why
     with pytest.raises(ValueError, match="give 640 x 480 px"):
         StereoPerception(PerceptionConfig(), RIG).measure(left[:400], right)
+
+
+def test_the_component_measures_a_side_by_side_pair_and_publishes_it_as_the_psvss():
+    from humanpt.perception.core import PerceptionCore
+    from humanpt.schemas import humanpt_pb2 as pb
+    from humanpt.schemas.convert import from_pose, image
+
+    truth = make_transform(matrix_from_rotvec(np.radians((10, -5, 20))), np.array([-20.0, 10.0, 620.0]))
+    left, right = _pair(truth)
+    core = PerceptionCore(PerceptionConfig(), RIG)
+    outs = core.step(1, "camera/image", image(np.hstack([left, right]), 1000, "camera", "mono8"))
+    (m,) = [msg for topic, msg in outs if topic == "perception/tob"]
+    assert m.status == pb.TOB_STATUS_FULL and m.visible == 3 and m.header.stamp_ns == 1000
+    measured = from_pose(m.camera_T_tob)
+    measured[:3, 3] *= 1e3
+    assert np.linalg.norm(measured[:3, 3] - truth[:3, 3]) < 0.5
+    # the pairs index the centres: the right camera's are in the image's right half
+    for pair in m.pairs:
+        assert m.centers_px[pair.right].u >= STEREO.image_width_px > m.centers_px[pair.left].u
+    # a lone camera's image (not side by side) is refused by its size, the target lost
+    outs = core.step(2, "camera/image", image(left, 2000, "camera", "mono8"))
+    codes = [msg.code for topic, msg in outs if topic == "perception/events"]
+    (lost_m,) = [msg for topic, msg in outs if topic == "perception/tob"]
+    assert "wrong_size" in codes and lost_m.status == pb.TOB_STATUS_LOST
