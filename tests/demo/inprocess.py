@@ -6,6 +6,7 @@ stdout, stderr)``, a ``SystemExit`` message on stderr as the interpreter prints 
 from __future__ import annotations
 
 import io
+import signal
 import sys
 
 import pytest
@@ -21,6 +22,8 @@ class Cli:
 
     def __call__(self, *argv: str, stdin: str | None = None) -> tuple[int, str, str]:
         self.capsys.readouterr()  # what came before is not this command's
+        # (a command that handles SIGINT/SIGTERM, as `humanpt demo` does, leaves pytest's as they were)
+        handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
         with self.monkeypatch.context() as mp:
             if stdin is not None:
                 mp.setattr(sys, "stdin", io.StringIO(stdin))
@@ -30,6 +33,9 @@ class Cli:
                 code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
                 if not isinstance(e.code, int) and e.code is not None:
                     print(e.code, file=sys.stderr)
+            finally:
+                for sig, handler in handlers.items():
+                    signal.signal(sig, handler)
         got = self.capsys.readouterr()
         return code, got.out, got.err
 
