@@ -1,5 +1,7 @@
-"""``humanpt ARGV`` in the test's own process (no interpreter start-up, no imports again: about
-1.2 s of CPU less per command), for commands whose process boundary is not what a test checks.
+"""``humanpt ARGV`` in the test's own process (no interpreter start-up, no imports again:
+`humanpt --help` alone takes 1.17 s, issue 31), for commands whose process boundary is not what a
+test checks: not for one whose children write to its stdout (``humanpt up``: they inherit the fd,
+which capsys does not see).
 Use the ``cli`` fixture (``cli = inprocess.cli`` in a module): ``cli(*argv)`` is ``(exit status,
 stdout, stderr)``, a ``SystemExit`` message on stderr as the interpreter prints it."""
 
