@@ -254,9 +254,10 @@ def _playback_args(a, cfg=None) -> dict:
     return playback_args(a.file, a.speed, getattr(a, "point", "auto"), flange_T_tool_x=tool)
 
 
-def _interactive(con, stream=sys.stdin) -> int:
+def _interactive(con, stream=None) -> int:
     from humanpt.console.client import ConsoleError
 
+    stream = sys.stdin if stream is None else stream  # (the stdin of the call, not of the import)
     ap = argparse.ArgumentParser(prog="", add_help=False, exit_on_error=False)
     asub = ap.add_subparsers(dest="console_verb", metavar="ACTION")
     helps = _add_actions(asub)

@@ -402,13 +402,11 @@ class StatusBoard:
 class Console:
     """One Zenoh session (a client of the router) and the console's requests."""
 
-    def __init__(self, cfg, timeout_s: float = 5.0, out=sys.stdout):
-
-
+    def __init__(self, cfg, timeout_s: float = 5.0, out=None):
         self.cfg = cfg
         self.cell = cfg.runtime.cell
         self.timeout_s = timeout_s
-        self.out = out
+        self.out = sys.stdout if out is None else out  # (the stdout of the call, not of the import)
         self._seq = 0
         try:  # always a client of the router, never a peer of the running loop
             self.session = open_tool_session(cfg.runtime)

@@ -4,9 +4,11 @@ the controller, the status shows what is published."""
 
 from __future__ import annotations
 
+import itertools
 import json
 import threading
 import time
+import tomllib
 
 import numpy as np
 import pytest
@@ -15,17 +17,51 @@ from humanpt.console.client import ConsoleError, StatusBoard, gui_values, parse_
 from humanpt.runtime.recording import read
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
-from tests.conftest import run_cli, wait_for, zenoh_client
+from tests.conftest import (
+    Procs,
+    free_port,
+    wait_for,
+    wait_port,
+    write_config,
+    zenoh_client,
+)
+from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(150)
 
+_CELLS = itertools.count(1)
+cli = inprocess.cli  # the CLI in this process
 
-def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 60.0) -> None:
+
+@pytest.fixture(scope="module")
+def shared_router(tmp_path_factory):
+    """One real router for the module's tests (each test on a cell of its own: see ``router``)."""
+    ps = Procs()
+    port = free_port()
+    cfg = write_config(tmp_path_factory.mktemp("router") / "router.toml", port)
+    try:
+        wait_port(port, proc=ps.start("router", "--config", str(cfg)))
+        yield port
+    finally:
+        ps.stop_all()
+
+
+@pytest.fixture
+def router(shared_router, tmp_path):
+    """(port, config path): the module's router, and a config on a cell no other test uses."""
+    return shared_router, write_config(tmp_path / "humanpt.toml", shared_router, cell=f"console{next(_CELLS)}")
+
+
+def cell_of(cfg) -> str:
+    return tomllib.loads(cfg.read_text())["runtime"]["cell"]
+
+
+def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 60.0, cell: str = "test") -> None:
     """Wait until each component answers its params query: what the console needs."""
     with zenoh_client(port) as s:
 
         def answering() -> bool:
-            return all(any(r.ok is not None for r in s.get(f"humanpt/test/{name}/params", timeout=1.0))
+            return all(any(r.ok is not None for r in s.get(f"humanpt/{cell}/{name}/params", timeout=1.0))
                        for name in names)
 
         wait_for(answering, timeout, f"{names} to answer their params queries", poll_s=0.3)
@@ -114,69 +150,45 @@ def test_status_board_line_and_block():
     assert "controller  mode POSITION_ONLY" in b.block(["controller"])
 
 
-def test_console_sets_options_and_commands_live_components(router, procs, tmp_path):
+def test_console_sets_options_and_commands_live_components(router, procs, tmp_path, cli):
     port, cfg = router
     run_dir = tmp_path / "run"
     ctl = procs.start("controller", "--config", str(cfg), "--run-dir", str(run_dir))
     per = procs.start("perception", "--config", str(cfg), "--run-dir", str(run_dir))
-    _wait_alive(port, ("controller", "perception"))
+    _wait_alive(port, ("controller", "perception"), cell=cell_of(cfg))
 
-    r = run_cli(
-        "console",
-        "set",
-        "threshold=70",
-        "invert=true",
-        "delay=5",
-        "dz=650",
-        "stop-on-current-location=false",
-        "calib-samples=30",
-        "--config",
-        str(cfg),
-        "--timeout",
-        "20",
-    )
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert r.stdout.count("set: ") == 6 and "threshold = 70.0" in r.stdout
-    r = run_cli("console", "--config", str(cfg), "set", "threshold=300")  # the component refuses it
-    assert r.returncode == 1 and "REJECTED" in r.stdout
-    r = run_cli("console", "show", "--config", str(cfg))
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert (
-        "threshold" in r.stdout
-        and "70.0" in r.stdout
-        and "stop-on-current-location   false" in r.stdout
-    )
+    code, out, err = cli("console", "set", "threshold=70", "invert=true", "delay=5", "dz=650",
+                         "stop-on-current-location=false", "calib-samples=30", "--config", str(cfg), "--timeout", "20")
+    assert code == 0, out + err
+    assert out.count("set: ") == 6 and "threshold = 70.0" in out
+    code, out, err = cli("console", "--config", str(cfg), "set", "threshold=300")  # the component refuses it
+    assert code == 1 and "REJECTED" in out
+    code, out, err = cli("console", "show", "--config", str(cfg))
+    assert code == 0, out + err
+    assert "threshold" in out and "70.0" in out and "stop-on-current-location   false" in out
 
-    r = run_cli("console", "record", "start", "--config", str(cfg), "--timeout", "20")
-    assert r.returncode == 0 and "record_started" in r.stdout, r.stdout + r.stderr
-    r = run_cli(
-        "console", "playback", "--config", str(cfg), "--timeout", "20"
-    )  # nothing recorded yet
-    assert r.returncode == 1 and "REJECTED" in r.stdout, r.stdout + r.stderr
+    code, out, err = cli("console", "record", "start", "--config", str(cfg), "--timeout", "20")
+    assert code == 0 and "record_started" in out, out + err
+    code, out, err = cli("console", "playback", "--config", str(cfg), "--timeout", "20")  # nothing recorded yet
+    assert code == 1 and "REJECTED" in out, out + err
     # Interactive: verbs from stdin, one session.
-    r = run_cli(
-        "console", "--config", str(cfg), "--timeout", "20", input="record stop\nhold\nquit\n"
-    )
-    assert (
-        r.returncode == 0
-        and "record_stopped" in r.stdout
-        and "hold (stop on current location)" in r.stdout
-    ), r.stdout + r.stderr
+    code, out, err = cli("console", "--config", str(cfg), "--timeout", "20", stdin="record stop\nhold\nquit\n")
+    assert code == 0 and "record_stopped" in out and "hold (stop on current location)" in out, out + err
 
     # Save: a plain name in the run's paths/ directory, never over a file unless asked, never
     # anywhere else (the attack wrote any file the controller could write).
     save = ("console", "--config", str(cfg), "--timeout", "20", "save")
-    r = run_cli(*save, "seam")
-    assert r.returncode == 0 and "path_saved" in r.stdout, r.stdout + r.stderr
+    code, out, err = cli(*save, "seam")
+    assert code == 0 and "path_saved" in out, out + err
     assert (run_dir / "paths" / "seam.csv").is_file()
-    r = run_cli(*save, "seam")
-    assert r.returncode == 1 and "exists" in r.stdout, r.stdout + r.stderr
-    r = run_cli(*save, "seam", "--overwrite")
-    assert r.returncode == 0 and "path_saved" in r.stdout, r.stdout + r.stderr
+    code, out, err = cli(*save, "seam")
+    assert code == 1 and "exists" in out, out + err
+    code, out, err = cli(*save, "seam", "--overwrite")
+    assert code == 0 and "path_saved" in out, out + err
     victim = tmp_path / "victim.txt"
     victim.write_text("precious")
-    r = run_cli(*save, str(victim))
-    assert r.returncode == 1 and "plain file name" in r.stdout, r.stdout + r.stderr
+    code, out, err = cli(*save, str(victim))
+    assert code == 1 and "plain file name" in out, out + err
     assert victim.read_text() == "precious"
 
     # A seam (issue 21.4): path play sends it re-timed; the console pauses, slows, resumes it.
@@ -187,11 +199,12 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
     seam = seamfile.write(tmp_path / "l.seam.json", Seam(
         (seg((300.0, 1200.0, 0.0), (340.0, 1200.0, 0.0)), seg((340.0, 1200.0, 0.0), (340.0, 1230.0, 0.0))),
         (Corner((340.0, 1200.0, 0.0), 90.0, 0, 1),), (), (), 0.0, FitConfig(), 12))
-    r = run_cli("path", "play", str(seam), "--speed", "25", "--config", str(cfg), "--timeout", "20")
-    assert r.returncode == 0 and "playback_started" in r.stdout and "timed" in r.stdout, r.stdout + r.stderr
-    for verb, code in (("pause", "playback_paused"), ("rate", "playback_rate"), ("resume", "playback_resumed")):
-        r = run_cli("console", verb, *(["0.5"] if verb == "rate" else []), "--config", str(cfg), "--timeout", "20")
-        assert r.returncode == 0 and code in r.stdout, (verb, r.stdout + r.stderr)
+    code, out, err = cli("path", "play", str(seam), "--speed", "25", "--config", str(cfg), "--timeout", "20")
+    assert code == 0 and "playback_started" in out and "timed" in out, out + err
+    for verb, answer in (("pause", "playback_paused"), ("rate", "playback_rate"), ("resume", "playback_resumed")):
+        code, out, err = cli("console", verb, *(["0.5"] if verb == "rate" else []), "--config", str(cfg),
+                             "--timeout", "20")
+        assert code == 0 and answer in out, (verb, out + err)
 
     procs.stop(ctl)
     procs.stop(per)
@@ -210,14 +223,15 @@ def test_console_sets_options_and_commands_live_components(router, procs, tmp_pa
     assert sum(c == "param_changed" for c in codes) == 4
 
 
-def test_console_status_shows_what_is_published(router, tmp_path):
+def test_console_status_shows_what_is_published(router, cli):
     port, cfg = router
+    cell = cell_of(cfg)
     stop = threading.Event()
 
     def publish():
         with zenoh_client(port) as s:
-            st = s.declare_publisher("humanpt/test/controller/status")
-            rs = s.declare_publisher("humanpt/test/robot_gateway/robot_state")
+            st = s.declare_publisher(f"humanpt/{cell}/controller/status")
+            rs = s.declare_publisher(f"humanpt/{cell}/robot_gateway/robot_state")
             i = 0
             while not stop.is_set():
                 st.put(
@@ -242,45 +256,34 @@ def test_console_status_shows_what_is_published(router, tmp_path):
     th = threading.Thread(target=publish, daemon=True)
     th.start()
     try:
-        r = run_cli("console", "status", "--config", str(cfg), "--timeout", "20")
-        assert r.returncode == 0, r.stdout + r.stderr
-        assert "controller  mode TRACK, visible sources 3, error |G-D| 0.400 mm" in r.stdout
-        assert "robot       cycle" in r.stdout
-        r = run_cli(
-            "console",
-            "status",
-            "--follow",
-            "--duration",
-            "1.5",
-            "--interval",
-            "0.3",
-            "--config",
-            str(cfg),
-        )
-        assert r.returncode == 0 and "mode TRACK" in r.stdout and "misses 0" in r.stdout, (
-            r.stdout + r.stderr
-        )
+        code, out, err = cli("console", "status", "--config", str(cfg), "--timeout", "20")
+        assert code == 0, out + err
+        assert "controller  mode TRACK, visible sources 3, error |G-D| 0.400 mm" in out
+        assert "robot       cycle" in out
+        code, out, err = cli("console", "status", "--follow", "--duration", "1.5", "--interval", "0.3",
+                             "--config", str(cfg))
+        assert code == 0 and "mode TRACK" in out and "misses 0" in out, out + err
     finally:
         stop.set()
         th.join(5)
 
 
-def test_console_says_when_nobody_answers(router):
+def test_console_says_when_nobody_answers(router, cli):
     port, cfg = router
-    r = run_cli("console", "record", "start", "--config", str(cfg), "--timeout", "1")
-    assert r.returncode == 1 and "is the controller running?" in r.stderr
-    r = run_cli("console", "set", "dz=500", "--config", str(cfg), "--timeout", "1")
-    assert r.returncode == 1 and "controller did not answer" in r.stdout
-    r = run_cli("console", "status", "--config", str(cfg), "--timeout", "1")
-    assert r.returncode == 1 and "no status within 1 s" in r.stdout
+    code, out, err = cli("console", "record", "start", "--config", str(cfg), "--timeout", "1")
+    assert code == 1 and "is the controller running?" in err
+    code, out, err = cli("console", "set", "dz=500", "--config", str(cfg), "--timeout", "1")
+    assert code == 1 and "controller did not answer" in out
+    code, out, err = cli("console", "status", "--config", str(cfg), "--timeout", "1")
+    assert code == 1 and "no status within 1 s" in out
 
 
-def test_reset_fault_goes_to_the_gateway_with_the_operators_name(router, procs, tmp_path):
+def test_reset_fault_goes_to_the_gateway_with_the_operators_name(router, procs, tmp_path, cli):
     port, cfg = router
     conf = tmp_path / "gw.toml"
     conf.write_text(cfg.read_text() + f'\n[robot_gateway]\nport = "{tmp_path / "no-robot"}"\n')
     procs.start("robot_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
-    _wait_alive(port, ("robot_gateway",))
-    r = run_cli("console", "--config", str(conf), "--timeout", "20", "reset-fault")
-    assert r.returncode == 0 and "no_fault" in r.stdout, r.stdout + r.stderr
-    assert "reset_fault by " in r.stdout and "@" in r.stdout  # who asked, as user@host
+    _wait_alive(port, ("robot_gateway",), cell=cell_of(cfg))
+    code, out, err = cli("console", "--config", str(conf), "--timeout", "20", "reset-fault")
+    assert code == 0 and "no_fault" in out, out + err
+    assert "reset_fault by " in out and "@" in out  # who asked, as user@host

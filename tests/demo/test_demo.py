@@ -12,15 +12,17 @@ from humanpt.bench.summary import latency_and_cycles
 from humanpt.controller import pathfile
 from humanpt.runtime.replay import replay
 from tests.conftest import free_port, run_cli
+from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(600)
+cli = inprocess.cli  # the CLI in this process, where the process boundary is not what is checked
 
 
-def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path):
+def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path, cli):
     run = tmp_path / "run"
-    r = run_cli("demo", "--lockstep", "--scenario", "arc", "--duration", "6", "--run-dir", str(run), timeout=300)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert "recorded path of G against ground truth" in r.stdout
+    code, out, err = cli("demo", "--lockstep", "--scenario", "arc", "--duration", "6", "--run-dir", str(run))
+    assert code == 0, out + err
+    assert "recorded path of G against ground truth" in out
     assert {p.stem for p in run.glob("*.mcap")} >= {"operator", "sim_robot", "robot_gateway", "sim_camera",
                                                       "perception", "pose_filter", "controller"}
     path = pathfile.read(run / "paths" / "path-1.csv")
@@ -34,16 +36,18 @@ def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path):
         assert res.match and res.compared >= 150, res.report()
 
 
-def test_live_demo_runs_every_component_as_a_process(tmp_path):
+@pytest.mark.live
+def test_live_demo_runs_every_component_as_a_process(tmp_path, cli):
     run = tmp_path / "live"
     port = free_port()
-    r = run_cli("demo", "--scenario", "static", "--duration", "8", "--run-dir", str(run),
-                "--port", str(port), timeout=400)
-    assert r.returncode == 0, r.stdout + r.stderr + (run / "processes.log").read_text()[-3000:]
-    assert "humanpt demo (live)" in r.stdout and "recorded path of G against ground truth" in r.stdout
+    # (5 s of the running loop, counted from everything up: 170 ALTER cycles of 28 ms)
+    # (the demo's shell in this process: the components, and the router, are processes of their own)
+    code, out, err = cli("demo", "--scenario", "static", "--duration", "5", "--run-dir", str(run), "--port", str(port))
+    assert code == 0, out + err + (run / "processes.log").read_text()[-3000:]
+    assert "humanpt demo (live)" in out and "recorded path of G against ground truth" in out
     assert (run / "humanpt.toml").is_file() and list((run / "paths").glob("path-*.csv"))
     # Where a user's tools find it (issue 20.4): the router's endpoint and the cell.
-    assert f"router tcp/127.0.0.1:{port}, cell demo" in r.stdout and "humanpt topics --config" in r.stdout
+    assert f"router tcp/127.0.0.1:{port}, cell demo" in out and "humanpt topics --config" in out
     res = latency_and_cycles(run)
     assert res["cycles"] > 100 and len(res["latency_ms"]) > 50
     # Cycles answered on time are a bench figure (humanpt bench), not asserted here (issue 31:
@@ -51,11 +55,11 @@ def test_live_demo_runs_every_component_as_a_process(tmp_path):
     print(f"live demo: {res['on_time']}/{res['cycles']} cycles answered on time")
     assert res["on_time"] > 0  # the loop closed at all
     assert np.all(res["latency_ms"] > 0)
-    r = run_cli("replay", str(run), timeout=300)
-    assert r.returncode == 0, r.stdout[-3000:]
+    code, out, err = cli("replay", str(run))
+    assert code == 0, out[-3000:] + err
     # Foxglove's own types beside ours in the live run too (issue 20 item 1; tests/scene: content).
-    r = run_cli("runs", "merge", str(run), str(tmp_path / "merged.mcap"))
-    assert r.returncode == 0, r.stderr
+    code, out, err = cli("runs", "merge", str(run), str(tmp_path / "merged.mcap"))
+    assert code == 0, err
     with open(tmp_path / "merged.mcap", "rb") as fh:
         schemas = {c.topic: s.name for s, c, _ in make_reader(fh).iter_messages()}
     for topic, name in (("transforms", "FrameTransforms"), ("path", "PosesInFrame"), ("log", "Log"),
@@ -64,39 +68,51 @@ def test_live_demo_runs_every_component_as_a_process(tmp_path):
         assert schemas.get(f"humanpt/demo/scene/{topic}") == f"foxglove.{name}", topic
 
 
-def test_experiment_prints_the_papers_table_beside_the_twins(tmp_path):
+@pytest.mark.twin
+def test_experiment_prints_the_papers_table_beside_the_twins(tmp_path, cli):
     out = tmp_path / "exp"
-    r = run_cli("experiment", "static", "--vectors", "20", "--out", str(out), timeout=300)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert "SD  paper, Table 1 (published)" in r.stdout
-    assert "twin, default perception, vs ground truth" in r.stdout
+    # (10 vectors, 6 s of twin time: x/y/z SD against the truth 0.0001/0.0003/0.0013 mm for the
+    # default perception, 0.065/0.038/0.216 for the paper's, seed 0, measured on 82f73a1)
+    code, text, err = cli("experiment", "static", "--vectors", "10", "--out", str(out))
+    assert code == 0, text + err
+    assert "SD  paper, Table 1 (published)" in text
+    assert "twin, default perception, vs ground truth" in text
     res = json.loads((out / "results.json").read_text())
-    assert res["twin"]["weighted"]["n"] == [20]  # one seed
+    assert res["twin"]["weighted"]["n"] == [10]  # one seed
     # The default perception is far better than the paper's on the same images.
     assert np.mean(res["twin"]["weighted"]["truth_SD"][:3]) < np.mean(res["twin"]["paper"]["truth_SD"][:3])
     assert (out / "figure-static.png").stat().st_size > 10_000
 
 
-def test_demo_rejects_a_bad_scenario_file(tmp_path):
+def test_demo_rejects_a_bad_scenario_file(tmp_path, cli):
     bad = tmp_path / "bad.scn"
     bad.write_text("start 1 2 3 0 0 0\nline 1 2\n")
-    r = run_cli("demo", "--lockstep", "--scenario", str(bad), "--run-dir", str(tmp_path / "r"))
-    assert r.returncode == 2
-    assert "bad.scn:2" in r.stderr
+    code, out, err = cli("demo", "--lockstep", "--scenario", str(bad), "--run-dir", str(tmp_path / "r"))
+    assert code == 2
+    assert "bad.scn:2" in err
 
 
-def test_experiment_set_overrides_a_component_and_rejects_unknown_sections(tmp_path):
+@pytest.mark.twin
+def test_experiment_set_overrides_a_component(tmp_path, cli):
     def static_theta_sd(*extra):
         out = tmp_path / f"exp{len(extra)}"
-        r = run_cli("experiment", "static", "--method", "weighted", "--vectors", "30", "--no-plots",
-                    "--seeds", "3", "--out", str(out), *extra, timeout=300)
-        assert r.returncode == 0, r.stdout + r.stderr
+        code, text, err = cli("experiment", "static", "--method", "weighted", "--vectors", "20", "--no-plots",
+                              "--seeds", "3", "--out", str(out), *extra)
+        assert code == 0, text + err
         return json.loads((out / "results.json").read_text())["twin"]["weighted"]["paper_SD"][4]
 
     # The still-target averaging is what brings the static tilt noise below the paper's
     # (the median over three seeds: one seed's figure moves with any arithmetic change).
+    # 20 vectors each (8.8 s of twin time): theta SD 0.0016 deg against 0.0286 without, and
+    # the largest seed's 0.0020 against the smallest's 0.0257 (measured on 5efe7e1, seeds 0-2).
     assert static_theta_sd() * 3 < static_theta_sd("--set", "pose_filter.still_detect=false")
-    r = run_cli("experiment", "static", "--set", "nosuch.key=1", "--out", str(tmp_path / "x"))
+
+
+def test_experiment_rejects_unknown_sections_and_keys_before_running(tmp_path, cli):
+    # (as a process: the message and the status the user sees, nothing run, nothing written)
+    r = run_cli("experiment", "static", "--set", "nosuch.key=1", "--out", str(tmp_path / "x"), timeout=120)
     assert r.returncode == 2 and "no section nosuch" in r.stderr
-    r = run_cli("experiment", "static", "--set", "pose_filter.still_q_scale=3", "--out", str(tmp_path / "y"))
-    assert r.returncode != 0 and "still_q_scale" in r.stderr
+    assert not (tmp_path / "x").exists()
+    code, out, err = cli("experiment", "static", "--set", "pose_filter.still_q_scale=3", "--out", str(tmp_path / "y"))
+    assert code != 0 and "still_q_scale" in err
+    assert not (tmp_path / "y").exists()

@@ -16,9 +16,11 @@ import pytest
 
 from humanpt.foxglove_bridge.requests import SERVICES
 from humanpt.runtime.recording import read
-from tests.conftest import free_port, run_cli, wait_for, zenoh_client
+from tests.conftest import free_port, wait_for, zenoh_client
+from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(400)
+cli = inprocess.cli  # the console CLI in this process (its process boundary is not what is checked)
 
 CLIENT = Path(__file__).resolve().parent / "client"
 CELL = ("operator", "standin_robot", "sim_camera", "perception", "controller", "scene", "foxglove_bridge")
@@ -48,7 +50,7 @@ def _wait_alive(port: int, names: tuple[str, ...], timeout: float = 120.0) -> No
         wait_for(answering, timeout, f"{names} to answer their params queries", poll_s=0.3)
 
 
-def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, procs, tmp_path, node_client):
+def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, procs, tmp_path, node_client, cli):
     port, cfg = router
     ws_port = free_port()
     cfg.write_text(cfg.read_text() + f"\n[foxglove_bridge]\nport = {ws_port}\n")
@@ -61,8 +63,8 @@ def test_an_independent_foxglove_client_sees_and_drives_the_live_cell(router, pr
     try:
         line = client.stdout.readline()  # the client waits for a change made elsewhere
         if line.strip() == "READY":
-            r = run_cli("console", "set", "threshold=80", "--config", str(cfg), "--timeout", "20")
-            assert r.returncode == 0, r.stdout + r.stderr
+            code, out, err = cli("console", "set", "threshold=80", "--config", str(cfg), "--timeout", "20")
+            assert code == 0, out + err
         rest, err = client.communicate(timeout=300)
     finally:
         if client.poll() is None:
