@@ -107,6 +107,7 @@ LOCAL_TOPICS: dict[str, type[Message]] = {
     "udp_rx": pb.SerialChunk, "udp_tx": pb.SerialChunk,  # datagrams from / to a UDP link (RSI)
     "liveliness": pb.Liveliness,  # a watched component came or went (Core.watch)
     "capture": RawImage,  # a frame grabbed by the camera's capture adapter (stamp = capture)
+    "capture_right": RawImage,  # the second camera's frame, a stereo pair's right (camera.source_right)
     "path_file": pb.Event,  # what the controller's path writer did on save (path_saved, save_failed)
     "clock_step": pb.Event,  # the wall clock stepped (text: the step in ns): runtime/clock.py
 }

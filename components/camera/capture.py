@@ -164,9 +164,10 @@ class CaptureAdapter:
 
     topics_out: tuple[str, ...] = ()
 
-    def __init__(self, config: CameraConfig, clock: Callable[[], int] = CLOCK.now_ns):
+    def __init__(self, config: CameraConfig, clock: Callable[[], int] = CLOCK.now_ns, topic: str = "capture"):
         self.config = config
         self.clock = clock
+        self.topic = topic  # "capture", or "capture_right" for a stereo pair's right camera
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.frames = 0
@@ -224,7 +225,7 @@ class CaptureAdapter:
                 self._stop.wait(cfg.reopen_s)
                 continue
             self.frames += 1
-            put("capture", capture_message(frame, stamp))
+            put(self.topic, capture_message(frame, stamp))
             if is_file and cfg.pace and period:
                 next_due += period
                 self._stop.wait(max(0.0, next_due - time.monotonic()))
@@ -237,10 +238,14 @@ def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
     must exist; a folder must hold images and come with ``camera.fps`` (OSError naming it:
     the component stops at start; a device index that does not open is retried, a camera
     may be plugged in later)."""
-    if not config.is_device:
-        path = Path(config.source)
-        if path.is_dir():
-            open_capture(config)  # refuses an empty folder or a missing frame rate now
-        elif not path.exists():
-            raise OSError(f"camera.source {config.source!r}: no such video file, image folder or device")
-    return [CaptureAdapter(config)]
+    cameras = [(config, "capture", "source")]
+    if config.source_right.strip():  # a stereo pair: the right camera, same settings
+        cameras.append((config.right(), "capture_right", "source_right"))
+    for cam, _, key in cameras:
+        if not cam.is_device:
+            path = Path(cam.source)
+            if path.is_dir():
+                open_capture(cam)  # refuses an empty folder or a missing frame rate now
+            elif not path.exists():
+                raise OSError(f"camera.{key} {cam.source!r}: no such video file, image folder or device")
+    return [CaptureAdapter(cam, topic=topic) for cam, topic, _ in cameras]

@@ -21,6 +21,11 @@ class CameraConfig:
     start again when ``loop``; a folder's images (natural name order) at ``fps``, which a
     folder needs. No frame for ``stall_s`` (a camera unplugged, stalled, a file at its end)
     gives a ``camera_stalled`` event; the next frame ``camera_resumed``.
+
+    ``source_right``: a second camera (an ordinary stereo pair: ``source`` is its left
+    camera, this its right, same settings): the two cameras' frames are paired by stamp
+    (within ``pair_tolerance_ms``) and published side by side (left then right), what a
+    rig of kind "stereo" reads; a frame without its other half is dropped and counted.
     A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
     to mono8 (the PSVS processing works on grey levels). Frames are stamped when the grab
     returns (the capture time, minus the driver's latency).
@@ -37,6 +42,8 @@ class CameraConfig:
     exposure: Annotated[float, Range(0, 1e6, "driver units")] = 0.0
     gain: Annotated[float, Range(0, 1e6, "driver units")] = 0.0
     stall_s: Annotated[float, Range(0.05, 60, "s")] = 0.5
+    source_right: str = ""
+    pair_tolerance_ms: Annotated[float, Range(0.01, 1000, "ms")] = 5.0
 
     def __post_init__(self) -> None:
         if not self.source.strip():
@@ -46,10 +53,16 @@ class CameraConfig:
             if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 20000:
                 raise ValueError(f"camera.{name} must be an integer in [0, 20000], got {value!r}")
         for name, lo, hi in (("fps", 0.0, 10_000.0), ("reopen_s", 0.01, 3600.0), ("stall_s", 0.05, 60.0),
-                             ("exposure", 0.0, 1e6), ("gain", 0.0, 1e6)):
+                             ("exposure", 0.0, 1e6), ("gain", 0.0, 1e6), ("pair_tolerance_ms", 0.01, 1000.0)):
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"camera.{name} must be within {lo} and {hi}, got {value}")
+
+    def right(self) -> CameraConfig:
+        """The second camera's config: this one with ``source_right`` as its source."""
+        import dataclasses
+
+        return dataclasses.replace(self, source=self.source_right, source_right="")
 
     @property
     def is_device(self) -> bool:

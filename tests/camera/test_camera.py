@@ -288,3 +288,58 @@ def test_a_devices_settings_are_asked_and_what_the_driver_did_not_take_is_said()
     assert request_settings(driver, CameraConfig(source="0")) == [] and driver.asked == []
     with pytest.raises(ValueError, match="camera.exposure"):
         CameraConfig(exposure=-1.0)
+
+
+# --- two cameras, an ordinary stereo pair (issue 35 item 3): frames paired by stamp ---
+
+
+def test_two_cameras_frames_are_paired_by_stamp_and_the_unpaired_counted():
+    # 5 ms tolerance. Left at 0, 40, 80, 120 ms; right at 2, 43, 95 (drifted), 121 ms:
+    # pairs (0, 2), (40, 43), (120, 121); left 80 and right 95 are 15 ms apart: both dropped.
+    core = CameraCore(CameraConfig(source="0", source_right="1", pair_tolerance_ms=5.0))
+    ms = 1_000_000
+    left = lambda t: capture_message(np.full((4, 6), 10, np.uint8), t * ms)  # noqa: E731
+    right = lambda t: capture_message(np.full((4, 6), 200, np.uint8), t * ms)  # noqa: E731
+    out = []
+    for t, side in ((0, "L"), (2, "R"), (40, "L"), (43, "R"), (80, "L"), (95, "R"), (120, "L"), (121, "R")):
+        out += core.step(t * ms + 1, "capture" if side == "L" else "capture_right", left(t) if side == "L" else right(t))
+    images = [m for topic, m in out if topic == "camera/image"]
+    assert [image_stamp_ns(m) for m in images] == [1 * ms, 41 * ms + ms // 2, 120 * ms + ms // 2]
+    px = from_image(images[0])
+    assert px.shape == (4, 12) and (px[:, :6] == 10).all() and (px[:, 6:] == 200).all()  # left | right
+    unpaired = [m.text for topic, m in out if topic == "camera/events" and m.code == "unpaired_frame"]
+    assert len(unpaired) == 2 and "left camera's frame stamped 80000000" in unpaired[0]
+    assert "right camera's frame stamped 95000000" in unpaired[1] and core.unpaired == 2
+
+
+def test_one_dead_camera_of_a_pair_is_a_stall():
+    core = CameraCore(CameraConfig(source="0", source_right="1", stall_s=0.5))
+    ms = 1_000_000
+    events = []
+    for t in range(0, 1000 * ms, 40 * ms):  # the left camera runs, the right one is dead
+        events += core.step(t, "capture", capture_message(np.zeros((4, 6), np.uint8), t + 1))
+        events += core.step(t + 1, "tick", pb.Tick())
+    assert "camera_stalled" in _codes(events) and "no pair" in next(
+        m.text for t, m in events if t == "camera/events" and m.code == "camera_stalled")
+    assert not [m for t, m in events if t == "camera/image"]
+
+
+@pytest.mark.timeout(120)
+def test_live_camera_pairs_two_folders_and_replays(folder, router, tmp_path):
+    port, _ = router
+    cfg = write_config(tmp_path / "cam.toml", port,
+                       extra=f'[camera]\nsource = "{folder}"\nsource_right = "{folder}"\nfps = 100.0\n'
+                             "pair_tolerance_ms = 20.0\n")
+    run_dir = tmp_path / "run"
+    r = run_cli("camera", "--config", str(cfg), "--run-dir", str(run_dir), "--duration", "3")
+    assert r.returncode == 0, r.stderr
+    rec = read(run_dir / "camera.mcap")
+    assert {e.topic for e in rec.inputs} >= {"capture", "capture_right"}
+    outs = [e.decode() for e in rec.outputs if e.topic == "camera/image"]
+    # the two "cameras" play the same 12 frames at 100 frames/s from threads started together:
+    # each pair is one frame seen twice, side by side
+    assert len(outs) >= N_FRAMES - 2
+    for m in outs:
+        assert (m.width, m.height) == (2 * 96, 64)
+    res = replay(run_dir / "camera.mcap")
+    assert res.match and res.compared >= len(outs), res.report()
