@@ -36,7 +36,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import logsumexp
 
 from humanpt.geometry.transforms import matrix_from_rotvec, rotvec_from_matrix
 
@@ -57,6 +56,27 @@ H_VELOCITY = np.hstack([np.zeros((6, 6)), np.eye(6)])  # "measures" v and w (zer
 # measurement (p, r): the IMM mixes each on its own.
 BLOCKS = (np.array([0, 1, 2, 6, 7, 8]), np.array([3, 4, 5, 9, 10, 11]))
 MEAS_ROWS = (np.arange(0, 3), np.arange(3, 6))
+BLOCKS_IX = tuple(np.ix_(idx, idx) for idx in BLOCKS)  # (12, 12) -> each block's (6, 6)
+MEAS_ROWS_IX = tuple(np.ix_(rows, rows) for rows in MEAS_ROWS)
+
+
+def _logsumexp(a: np.ndarray) -> np.float64:
+    """``scipy.special.logsumexp(a)`` of a 1-D float array, the same operations in the same
+    order (the largest terms taken out of the sum, ``log1p(s) + log(m) + a_max``) without its
+    array-API dispatch, which cost more than the filter's update; scipy itself for what is
+    not finite (its edge cases)."""
+    a_max = np.max(a, keepdims=True)
+    mask = a == a_max
+    m = np.sum(mask.astype(a.dtype), keepdims=True, dtype=a.dtype)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.sum(np.exp(np.where(mask, -np.inf, a) - a_max), keepdims=True, dtype=a.dtype)
+        s = np.where(s == 0, s, s / m)
+        out = np.log1p(s) + np.log(m) + a_max
+    if not np.isfinite(out[0]):
+        from scipy.special import logsumexp
+
+        return logsumexp(a)
+    return out[0]
 
 
 def _block_indices(blocks) -> tuple[np.ndarray, np.ndarray]:
@@ -303,10 +323,10 @@ class PoseIMM(_PoseEstimate):
     @staticmethod
     def _mix_blocks(mu: np.ndarray, xs: list[np.ndarray], Ps: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         x, P = np.zeros(12), np.zeros((12, 12))
-        for b, idx in enumerate(BLOCKS):
-            xb, Pb = _combine(mu[b], [xj[idx] for xj in xs], [Pj[np.ix_(idx, idx)] for Pj in Ps])
+        for b, (idx, ix) in enumerate(zip(BLOCKS, BLOCKS_IX, strict=True)):
+            xb, Pb = _combine(mu[b], [xj[idx] for xj in xs], [Pj[ix] for Pj in Ps])
             x[idx] = xb
-            P[np.ix_(idx, idx)] = Pb
+            P[ix] = Pb
         return x, P
 
     @property
@@ -348,10 +368,9 @@ class PoseIMM(_PoseEstimate):
         M = switching_matrix(dt, self.calm_mean_s, self.manoeuvre_mean_s)
         xs = [kf.x.copy() for kf in self.kfs]
         Ps = [kf.P.copy() for kf in self.kfs]
-        for b, idx in enumerate(BLOCKS):
+        for b, (idx, ix) in enumerate(zip(BLOCKS, BLOCKS_IX, strict=True)):
             cbar = self.mu[b] @ M  # predicted mode probabilities
             omega = M * self.mu[b][:, None] / cbar[None, :]  # omega[i, j] = P(was i | is j)
-            ix = np.ix_(idx, idx)
             for j, kf in enumerate(self.kfs):
                 x0, P0 = _combine(omega[:, j], [xi[idx] for xi in xs], [Pi[ix] for Pi in Ps])
                 kf.x[idx] = x0
@@ -400,7 +419,7 @@ class PoseIMM(_PoseEstimate):
             S = H @ kf.P @ H.T + R
             for b in blocks:
                 rows = MEAS_ROWS[b]
-                Sb, yb = S[np.ix_(rows, rows)], y[rows]
+                Sb, yb = S[MEAS_ROWS_IX[b]], y[rows]
                 d2[b, j] = float(yb @ np.linalg.solve(Sb, yb))
                 sign, logdet = np.linalg.slogdet(2.0 * math.pi * Sb)
                 loglik[b, j] = -0.5 * (d2[b, j] + logdet) if sign > 0 else -math.inf
@@ -414,7 +433,7 @@ class PoseIMM(_PoseEstimate):
             if self.mu[b, 1] == 0.0:  # calm only (update_pose's calm_only)
                 continue
             logmu = np.log(np.maximum(self.mu[b], 1e-300)) + loglik[b]
-            self.mu[b] = np.exp(logmu - logsumexp(logmu))
+            self.mu[b] = np.exp(logmu - _logsumexp(logmu))
         self._recentre()
         return Gate(True, best)
 

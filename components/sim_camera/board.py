@@ -53,16 +53,46 @@ def board_corners_px(params: PsvsParams, view: str, camera_T_board_mm: np.ndarra
     return uv
 
 
-def _board_xy_of_pixels(params: PsvsParams, view: str, camera_T_board_mm: np.ndarray,
-                        uv_px: np.ndarray) -> np.ndarray:
-    """Observed pixels (..., 2) -> where their rays meet the board's plane, (..., 2) board
-    x, y in mm (NaN: the ray misses the plane or meets it behind the camera)."""
+def _rays(params: PsvsParams, view: str, uv_px: np.ndarray) -> np.ndarray:
+    """Observed pixels (..., 2) -> their rays' directions (..., 3) in the camera frame
+    (P = O + R d, O the view's centre)."""
     cam = _view(params, view)
     uv_ideal = undistort_pixels(uv_px, params.real_camera_matrix, params.dist_coeffs)
     y = (uv_ideal[..., 1] - cam.v0) / cam.a_v
     x = (uv_ideal[..., 0] - cam.u0 - cam.skew * y) / cam.a_u
     d_view = np.stack([x, y, np.ones_like(x)], -1)
-    d_cam = d_view @ cam.rotation.T  # P = O + R d: the ray in the camera frame
+    return d_view @ cam.rotation.T
+
+
+# The rays through every pixel corner of a view depend on its optics only, not on where the
+# board is: computed once per optics (undistorting the whole grid was half a render's time).
+_CORNER_RAYS: dict[tuple, np.ndarray] = {}
+
+
+def _corner_rays(params: PsvsParams, view: str) -> np.ndarray:
+    """(height + 1, width + 1, 3) :func:`_rays` of the pixel corners (u, v) = (j - 0.5,
+    i - 0.5), cached per optics (read-only)."""
+    cam = _view(params, view)
+    width, height = params.image_size_px
+    key = (view, width, height, np.asarray(params.real_camera_matrix, dtype=float).tobytes(),
+           np.asarray(params.dist_coeffs, dtype=float).tobytes(), float(cam.u0), float(cam.v0), float(cam.a_u),
+           float(cam.a_v), float(cam.skew), np.asarray(cam.rotation, dtype=float).tobytes())
+    rays = _CORNER_RAYS.get(key)
+    if rays is None:
+        gu, gv = np.meshgrid(np.arange(width + 1) - 0.5, np.arange(height + 1) - 0.5)
+        rays = _rays(params, view, np.stack([gu, gv], -1))
+        rays.flags.writeable = False
+        if len(_CORNER_RAYS) >= 4:  # a few optics at a time (a calibration's two views)
+            _CORNER_RAYS.pop(next(iter(_CORNER_RAYS)))
+        _CORNER_RAYS[key] = rays
+    return rays
+
+
+def _board_xy_of_rays(params: PsvsParams, view: str, camera_T_board_mm: np.ndarray,
+                      d_cam: np.ndarray) -> np.ndarray:
+    """Rays (..., 3) of the view (camera frame, :func:`_rays`) -> where they meet the
+    board's plane, (..., 2) board x, y in mm (NaN: misses it or meets it behind)."""
+    cam = _view(params, view)
     board_T_camera = invert_transform(camera_T_board_mm)
     o_b = board_T_camera[:3, :3] @ cam.centre + board_T_camera[:3, 3]
     d_b = d_cam @ board_T_camera[:3, :3].T
@@ -83,8 +113,7 @@ def render_board(params: PsvsParams, view: str, camera_T_board_mm: np.ndarray, b
     mm, seen through ``view`` ('right' or 'left') of the PSVS ``params`` (the world's
     truth), with ``cfg``'s ghost, blur and sensor (noise drawn from ``rng``)."""
     width, height = params.image_size_px
-    gu, gv = np.meshgrid(np.arange(width + 1) - 0.5, np.arange(height + 1) - 0.5)
-    corners_xy = _board_xy_of_pixels(params, view, camera_T_board_mm, np.stack([gu, gv], -1))
+    corners_xy = _board_xy_of_rays(params, view, camera_T_board_mm, _corner_rays(params, view))
     finite = np.isfinite(corners_xy).all(-1)
     cell = np.where(finite, board.cell_id(np.nan_to_num(corners_xy[..., 0]), np.nan_to_num(corners_xy[..., 1])), -1)
     # a pixel is one colour when its four corners fall in one cell of the board's grid

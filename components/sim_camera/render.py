@@ -55,8 +55,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import ndtr
-from scipy.stats import poisson
 
 from humanpt.geometry import PsvsParams, distort_pixels
 from humanpt.geometry.transforms import interpolate_transform
@@ -569,6 +567,9 @@ def background_table(
     """Inverse CDF (65536 entries, uint8) of a background pixel's grey level:
     ``clip(round(black + (min(Poisson(mean_e), full_well) + N(0, read)) / gain), 0, 255)``.
     Indexing it with uniform 16-bit numbers draws that distribution (to 2^-16)."""
+    from scipy.special import ndtr  # here: scipy.stats costs ~0.5 s at import, once per table
+    from scipy.stats import poisson
+
     lo = max(0, int(mean_e - 12 * math.sqrt(mean_e + 1) - 12))
     hi = int(mean_e + 12 * math.sqrt(mean_e + 1) + 12)
     n = np.arange(lo, hi + 1)

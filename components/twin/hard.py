@@ -41,6 +41,7 @@ from humanpt.schemas.convert import from_pose
 from . import evaluate
 from .run import SystemConfig, run, scenario_duration_s
 from .system import link_cycle_ms
+from .world import TwinWorld
 from .worlds import World
 
 HARD_SCENARIOS = ("scurve", "abrupt", "occluded", "partial")
@@ -82,6 +83,14 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
              overrides: dict[str, dict] | None = None, run_dir=None, rsi_cycle_ms: float | None = None) -> HardCase:
     """Run ``scenario`` at ``speed_mm_s`` on the lock-step twin and judge it (``rsi_cycle_ms``,
     4 or 12: the simulated Puma over the RSI link instead of ALTER)."""
+    return run_case_world(scenario, speed_mm_s, seed, world, robot, overrides, run_dir, rsi_cycle_ms)[0]
+
+
+def run_case_world(scenario: str, speed_mm_s: float, seed: int = 0, world: World | None = None, robot: str = "puma",
+                   overrides: dict[str, dict] | None = None, run_dir=None,
+                   rsi_cycle_ms: float | None = None) -> tuple[HardCase, TwinWorld]:
+    """:func:`run_case` and the (closed) lock-step world it judged, for more checks of the
+    same run (e.g. the pose filter's errors at each image)."""
     over = {**(overrides or {})}
     over["operator"] = {**over.get("operator", {}), "speed_mm_s": float(speed_mm_s)}
     cfg = SystemConfig.for_scenario(scenario, seed, over, world=world, controller=ControllerConfig())
@@ -117,7 +126,7 @@ def run_case(scenario: str, speed_mm_s: float, seed: int = 0, world: World | Non
         max_gap_frames=gap_frames, points=len(points), held_points=held, g_maxe_mm=g_mm, g_maxe_deg=g_deg,
         servo_max_mm=float(e_mm[moving].max()) if moving.any() else float("nan"),
         fov_margin_min_px=servo_summary(w, start_ns).min_fov_margin_px,
-        frames=len(w.outputs("camera/image")), wall_s=res.wall_s)
+        frames=len(w.outputs("camera/image")), wall_s=res.wall_s), w
 
 
 def run_cases(scenarios=HARD_SCENARIOS, speeds=HARD_SPEEDS_MM_S, seed: int = 0, world: World | None = None,
@@ -147,4 +156,4 @@ def format_cases(cases: list[HardCase]) -> str:
     return "\n".join(rows)
 
 
-__all__ = ["HARD_SCENARIOS", "HARD_SPEEDS_MM_S", "HardCase", "run_case", "run_cases", "format_cases"]
+__all__ = ["HARD_SCENARIOS", "HARD_SPEEDS_MM_S", "HardCase", "run_case", "run_case_world", "run_cases", "format_cases"]

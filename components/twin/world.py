@@ -62,6 +62,23 @@ class TwinWorld:
     def run_for(self, seconds: float) -> TwinWorld:
         return self.run_until(self.lockstep.now_ns + round(seconds * 1e9))
 
+    def run_until_event(self, code: str, max_seconds: float, step_s: float = 0.25) -> bool:
+        """Run in steps of ``step_s`` of twin time until a component has published an event
+        ``code`` (True; the world stops within ``step_s`` after it), or for ``max_seconds``
+        (False). Needs ``keep_outputs``."""
+        from humanpt.schemas import humanpt_pb2 as pb
+
+        if not self.lockstep.keep_outputs:
+            raise RuntimeError("run_until_event reads the outputs: build the world with keep_outputs")
+        end_ns = self.lockstep.now_ns + round(max_seconds * 1e9)
+        while self.lockstep.now_ns < end_ns:
+            seen = len(self.lockstep.outputs)
+            self.run_until(min(end_ns, self.lockstep.now_ns + round(step_s * 1e9)))
+            for o in self.lockstep.outputs[seen:]:
+                if o.topic.endswith("/events") and pb.Event.FromString(o.data).code == code:
+                    return True
+        return False
+
     def digest(self) -> str:
         return self.lockstep.digest()
 

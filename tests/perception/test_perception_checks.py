@@ -255,7 +255,7 @@ def test_closed_loop_the_partial_scenario_is_flagged_within_3_frames_and_left_un
     # issue 18's acceptance: source A 30 % covered from 1 s into the motion (the operator's
     # truth says which images: sim_camera renders its cover_fraction)
     w = build_system(OperatorConfig(scenario="partial", speed_mm_s=speed_mm_s), seed=1)
-    w.run_for(9.0)
+    w.run_for(7.5)  # the motion from 2 s, the cover from 3 s: 90 images before it, 135 under it
     covered = {}
     for out in w.outputs("sim_camera/truth"):
         truth = pb.Truth.FromString(out.data)
@@ -264,7 +264,7 @@ def test_closed_loop_the_partial_scenario_is_flagged_within_3_frames_and_left_un
             for m, err in _full_measurements(w)]
     rows = np.array(rows, dtype=float)
     cov = rows[:, 0] > 0
-    assert cov.sum() > 100 and (~cov).sum() > 30  # covered for the last 4 s and more
+    assert cov.sum() > 100 and (~cov).sum() > 30  # covered for the last 4.5 s
     assert not rows[~cov, 1].any()  # no flag before the cover
     first_covered = int(np.argmax(cov))
     flags = rows[first_covered:, 1]
@@ -306,7 +306,7 @@ cover C 0.1 from 1 to 2.5 angle 200
 cover B 0.2 from 3 to 4 angle 45
 """
     w = build_system(OperatorConfig(scenario_text=text), seed=2)
-    w.run_for(9.0)
+    w.run_for(7.5)  # the motion from 2 s: the covers from 3 to 4.5 s and 5 to 6 s
     cover = {}
     for out in w.outputs("sim_camera/truth"):
         truth = pb.Truth.FromString(out.data)

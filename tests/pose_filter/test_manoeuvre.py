@@ -1,7 +1,7 @@
 """pose_filter follows manoeuvres (issue 18): the interacting multiple model's maths, a real
 abrupt motion followed without a gated measurement, a burst of wrong poses gated without a
 restart, and the manoeuvre event's rate limit. Scripted inputs (tests/pose_filter's World);
-the closed loop on the twin's hard scenarios is tests/e2e/test_filter_manoeuvres.py."""
+the closed loop on the twin's hard scenarios is tests/e2e/test_hard_cases.py."""
 
 from __future__ import annotations
 
