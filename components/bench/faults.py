@@ -337,12 +337,14 @@ def attack_flood(ctx: Ctx, row: FaultRow, seconds: float = 2.0, marker: str | No
                     + ("; robot FAULT latched" if faulted else ""))
 
 
-def _console(ctx: Ctx, component: str, verb: str, args: dict, codes: tuple[str, ...]) -> float | None:
-    """Send one console command; the time (monotonic s) of the refusal, or None."""
+def _console(ctx: Ctx, component: str, verb: str, args: dict, codes: tuple[str, ...],
+             timeout_s: float = REACTION_TIMEOUT_S) -> float | None:
+    """Send one console command; the time (monotonic s) of the answer (one of ``codes``
+    from ``component``), or None after ``timeout_s``."""
     t0 = time.monotonic()
     ctx.put("console/command", pb.Command(header=header(time.time_ns()), component=component, verb=verb,
                                           args_json=json.dumps(args)))
-    hit = ctx.mon.wait_event(t0, codes, component)
+    hit = ctx.mon.wait_event(t0, codes, component, timeout_s=timeout_s)
     return hit and hit[0]
 
 
@@ -907,7 +909,7 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         try:
             result["live"] = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=3600.0,
                                       stop=stop, on_started=lambda _c: started.set(), secure=secure,
-                                      control=control, link=link)
+                                      control=control, link=link, screen=False)
         except BaseException as e:  # noqa: BLE001 -- reported by the caller
             result["error"] = e
         finally:
