@@ -37,7 +37,6 @@ import time
 import numpy as np
 
 from humanpt.bench.faults import (
-    REACTION_TIMEOUT_S,
     Attack,
     Ctx,
     FaultRow,
@@ -345,9 +344,10 @@ def attack_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
         t1 = time.monotonic()
         att.close()
     # RSI still running: a robot state stamped after the flood, and no rsi_stopped.
+    # (waited on: the state, or RSI stopped; the bound only ends a hang on a loaded machine)
     wall1 = time.time_ns()
-    going = _wait(lambda: (ctx.mon.latest("robot_gateway/robot_state") or (0, pb.RobotState()))[1].header.stamp_ns
-                  > wall1, REACTION_TIMEOUT_S, ctx)
+    _wait(lambda: _state_after(ctx, wall1) or rsi_stopped_since(ctx, t0) is not None, LINK_BACK_TIMEOUT_S, ctx)
+    going = _state_after(ctx, wall1)
     stopped = rsi_stopped_since(ctx, t0)
     late = _late_replies(ctx, t0)
     downs = len(_events(ctx, t0, "robot_gateway", ("link_down",)))
@@ -405,7 +405,7 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
             row.expected = not any(e.code == "fault" for e in late)
             row.note = f"refused before sending: {answer.text}" + (f"; {len(late)} late/fault events" if late else "")
             return
-        done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + 30.0)
+        done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + ANSWER_TIMEOUT_S)
         late = _events(ctx, t0, "robot_gateway", LATE_CODES)
         faults = _events(ctx, t0, "robot_gateway", ("fault",))
         flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))

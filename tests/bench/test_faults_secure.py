@@ -113,7 +113,7 @@ def test_secure_rows_are_skipped_without_mtls(tmp_path, cli_main, capsys):
     assert not (tmp_path / "run" / "humanpt.toml").exists()
 
 
-ROUTED_HANG_S = 240.0  # bounds a hang: a loaded machine's router drains the flood first, however long it takes
+ROUTED_HANG_S = 120.0  # bounds a hang (a stopped router): the put comes once the router has handled the flood
 
 
 @pytest.mark.timeout(360)  # bounds a hang
@@ -122,9 +122,9 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
     """Issue 14 item 6 under mTLS, the router alone: 2 s of puts at full rate on the command
     key from perception's certificate (refused at the router), a tool subscribed to every
     event; afterwards the router must still route an allowed put. A stopped router never
-    routes again; a loaded one routes it once it has drained the flood (it took over 15 s
-    at three test workers on 2 cores): the put is waited for, sent again every second (one
-    dropped on the way is not the router stopped), with a bound that only ends a hang."""
+    routes again: the put is waited for, sent again every second (one dropped on the way is
+    not the router stopped), with a bound that only ends a hang."""
+    import subprocess
     import time
 
     import zenoh
@@ -133,7 +133,7 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
     from humanpt.runtime.bus import zenoh_config
     from humanpt.runtime.config import load
     from humanpt.schemas import topics
-    from tests.conftest import free_port, wait_port, write_config
+    from tests.conftest import ROOT, free_port, humanpt_cmd, wait_port, write_config
     from tests.security.test_mtls import Inbox
 
     pki = tmp_path / "pki"
@@ -143,8 +143,19 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
     port = free_port()
     cfg = write_config(tmp_path / "cell.toml", port, extra=f'security = "mtls"\npki = "pki"\n'
                        f'report_denied = {str(report_denied).lower()}\n')
-    router = procs.start("router", "--config", str(cfg))
-    wait_port(port)
+    # The router's output to a file, read at the end. Through a pipe nobody read while it
+    # ran (procs.start's) the router stopped now and then ("routed nothing", 2026-11-27:
+    # its zenoh rx thread and a Python thread blocked in write(2, ...)): with report_denied
+    # on, zenoh's tracing writer says "Unable to write an event to the Writer ... (os error
+    # 11)" on stderr for each trace line the full non-blocking pipe drops, 32 k lines (4 MB)
+    # for this 2 s flood, and the unread pipe filled. (A router's stderr must be read: the
+    # twin's go to processes.log.)
+    log_path = tmp_path / "router.log"
+    with open(log_path, "w") as log:
+        router = subprocess.Popen(humanpt_cmd("router", "--config", str(cfg)), stdout=log,
+                                  stderr=subprocess.STDOUT, cwd=ROOT)
+    procs.procs.append(router)
+    wait_port(port, proc=router)
     rt = load(cfg).runtime
     tob = topics.TOPICS["perception/tob"].key("test")
     events, after = Inbox(), Inbox()
@@ -170,11 +181,14 @@ def test_a_flood_of_refused_puts_does_not_stop_the_router(tmp_path, procs, repor
         # The router ended first (its shutdown is not judged here): closing the rogue session,
         # its flood's backlog unsent, waited 10 s on a router still draining the flood
         # (report_denied on), then timed out.
+        exited = router.poll()
         router.kill()
         router.wait()
+        out = log_path.read_text(errors="replace")
         for x in sessions:
             try:
                 x.close()
             except zenoh.ZError:
                 pass
-    assert routed, "the router routed nothing after the flood"
+    assert routed, (f"the router routed nothing after the flood (the router "
+                    f"{'still ran' if exited is None else f'had exited with {exited}'}); its output ended:\n{out[-3000:]}")
