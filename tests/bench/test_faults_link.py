@@ -1,7 +1,8 @@
 """``humanpt bench faults`` rows of issue 29: the attacks on the robot link (the gateway
 killed mid-motion, <Rob> injection, a junk flood and a spoofed IPOC from another UDP port,
-a 1795-point seam played), over RSI and ALTER, against the live twin (router + seven
-processes, real UDP sockets / a real pty); and the bench's start (issue 29 item 15): it
+a 1795-point seam played), over RSI, against the live twin (router + seven processes, real
+UDP sockets), run once in this process for the file (over ALTER: tests/bench/test_faults.py,
+from the default run); and the bench's start (issue 29 item 15): it
 waits on the router the twin started, and says so with exit status 2 when it never comes.
 
 Asserted: the verdicts (held within the bound, refused, no fault latched, RSI still
