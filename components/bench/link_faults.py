@@ -37,7 +37,6 @@ import time
 import numpy as np
 
 from humanpt.bench.faults import (
-    REACTION_TIMEOUT_S,
     Attack,
     Ctx,
     FaultRow,
@@ -54,8 +53,11 @@ from humanpt.schemas.convert import from_pose
 KILL_SPEED_MM_S = 40.0        # the robot's speed when the gateway is killed (issue 29 item 1's)
 KILL_BOUND_CYCLES = 2         # after the kill: the correction in flight and the one the robot had
 KILL_LINE_MM = 150.0          # the line played (at 40 mm/s: 3.75 s)
-KILL_WAIT_S = 3.0             # for the robot to reach 40 mm/s (else killed while it moves, MOVING_MM_S at least)
-MOVING_MM_S = 5.0
+MOVING_MM_S = 5.0             # killed while it moves: at this speed at least
+LINK_BACK_TIMEOUT_S = 60.0    # the gateway started again (and RSI) publishing robot states: bounds a hang
+ANSWER_TIMEOUT_S = 60.0       # the controller's answer to a playback, stop or track: bounds a hang (the
+                              # time is the reaction reported, never a verdict: a loaded machine is slow)
+KILL_AT_MM = KILL_LINE_MM / 4  # killed here along the line if the robot has not reached 40 mm/s by then
 INJECT_ROBS = 80              # item 5: <Rob>s sent by the attacker
 JUNK_S = 3.0                  # item 6: the junk flood's length
 IPOC_JUMP_CYCLES = 500        # item 7: the spoofed IPOC's jump (under the gateway's 1000-cycle limit)
@@ -70,11 +72,12 @@ def _flange_mm(state) -> np.ndarray:
     return to_mm(from_pose(state.world_T_flange))
 
 
-def _truth_after(ctx: Ctx, wall_ns: int) -> list[tuple[int, np.ndarray]]:
+def _truth_after(ctx: Ctx, wall_ns: int, since_t: float = 0.0) -> list[tuple[int, np.ndarray]]:
     """(stamp ns, flange position mm) of sim_robot/truth stamped after ``wall_ns`` by the
-    robot process alive then (a restarted one starts again where it was mounted)."""
+    robot process alive then (a restarted one starts again where it was mounted); of
+    those the bench received since ``since_t`` (monotonic s: fewer to look through)."""
     out = []
-    for _, m in ctx.mon.since("sim_robot/truth", 0.0):
+    for _, m in ctx.mon.since("sim_robot/truth", since_t):
         if m.header.stamp_ns > wall_ns:
             if out and m.header.seq <= out[-1][2]:
                 break
@@ -85,6 +88,12 @@ def _truth_after(ctx: Ctx, wall_ns: int) -> list[tuple[int, np.ndarray]]:
 def _truth_at(ctx: Ctx, wall_ns: int) -> np.ndarray | None:
     before = [m for _, m in ctx.mon.since("sim_robot/truth", 0.0) if m.header.stamp_ns <= wall_ns]
     return None if not before else 1e3 * from_pose(before[-1].world_T_flange)[:3, 3]
+
+
+def _truth_now(ctx: Ctx) -> np.ndarray | None:
+    """The flange position (mm) in the latest sim_robot/truth, or None."""
+    last = ctx.mon.latest("sim_robot/truth")
+    return None if last is None else 1e3 * from_pose(last[1].world_T_flange)[:3, 3]
 
 
 def _speed_mm_s(ctx: Ctx, n: int = 6) -> float:
@@ -109,6 +118,12 @@ def _wait(pred, timeout_s: float, ctx: Ctx) -> bool:
             # (a message that came between pred() and here is seen within this bound)
             ctx.mon.changed.wait(min(left, 0.02))
     return True
+
+
+def _state_after(ctx: Ctx, wall_ns: int) -> bool:
+    """Whether a robot state stamped after ``wall_ns`` (the shared time base) has come."""
+    last = ctx.mon.latest("robot_gateway/robot_state")
+    return last is not None and last[1].header.stamp_ns > wall_ns
 
 
 def _tool_now_mm_deg(ctx: Ctx) -> tuple[np.ndarray, float] | None:
@@ -225,8 +240,9 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
     x0, sign = start
     t0 = time.monotonic()
     pts = _line(x0, sign, KILL_LINE_MM, 31, out_and_back=False)
+    p_start = _truth_now(ctx)
     got = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(), "speed_mm_s": KILL_SPEED_MM_S},
-                   ("playback_started", "bad_command"))
+                   ("playback_started", "bad_command"), timeout_s=ANSWER_TIMEOUT_S)
     started = [e for e in ctx.mon.events_since(t0) if e.source == "controller" and e.code == "playback_started"]
     if got is None or not started:
         row.note = "the controller did not start the playback: " + (
@@ -236,10 +252,15 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
     if ctx.link == "abb":  # EGM goes on to the last target: at most the lead ahead of the fed-back pose
         bound += ctx.gw.max_lead_mm
     try:
-        # Killed at the playback's speed; on a loaded machine the robot may lag its carrot
-        # and go slower: then killed while it moves, at the speed it has (in the note).
-        if not _wait(lambda: _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S, KILL_WAIT_S, ctx) \
-                and not _wait(lambda: _speed_mm_s(ctx) >= MOVING_MM_S, KILL_WAIT_S, ctx):
+        # Killed at the playback's speed; when the robot lags its carrot and goes slower (a
+        # loaded machine; the ALTER link's longer cycle), killed while it moves, a quarter
+        # of the way along the line, at the speed it has (in the note). Both are events of
+        # the robot's own motion, not times: a slow machine only takes longer to get there.
+        def fast_or_along() -> bool:
+            now = _truth_now(ctx)
+            along = p_start is not None and now is not None and float(np.linalg.norm(now - p_start)) >= KILL_AT_MM
+            return _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S or (along and _speed_mm_s(ctx) >= MOVING_MM_S)
+        if not _wait(fast_or_along, ANSWER_TIMEOUT_S, ctx):
             row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
             return
         speed = _speed_mm_s(ctx)
@@ -252,7 +273,7 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
                 return True
             if ctx.link == "abb":  # EGM goes on to its last target until its communication timeout
                 return False
-            tr = _truth_after(ctx, wall_kill)
+            tr = _truth_after(ctx, wall_kill, t_kill - 1.0)
             # still: the last half second of truth within 0.01 mm
             recent = [p for t, p in tr if t >= tr[-1][0] - 500_000_000] if tr else []
             return (len(tr) > 1 and tr[-1][0] - tr[0][0] > 500_000_000
@@ -273,13 +294,16 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
                     f"{cycles:.0f} cycles"
                     + (f"; sim_robot: {stop.code}" if stop else ""))
     finally:
-        _console(ctx, "controller", "stop", {}, ("command",))
+        _console(ctx, "controller", "stop", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+        wall_again = time.time_ns()
         if ctx.control.pid("robot_gateway") is None:
             ctx.control.start("robot_gateway")
         if ctx.link != "alter" and rsi_stopped_since(ctx, t0) is not None:
             restart_rsi(ctx)  # (RSI or EGM restarted at the robot)
-        ctx.mon.wait_event(t0, ("link_up",), "robot_gateway", timeout_s=60.0)
-        _console(ctx, "controller", "track", {}, ("command",))
+        # The link is back when the gateway started again publishes robot states (a fresh
+        # gateway has no link_up to tell: its link was never down to it).
+        _wait(lambda: _state_after(ctx, wall_again), LINK_BACK_TIMEOUT_S, ctx)
+        _console(ctx, "controller", "track", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
 
 
 def attack_inject(ctx: Ctx, row: FaultRow) -> None:
@@ -320,9 +344,10 @@ def attack_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
         t1 = time.monotonic()
         att.close()
     # RSI still running: a robot state stamped after the flood, and no rsi_stopped.
+    # (waited on: the state, or RSI stopped; the bound only ends a hang on a loaded machine)
     wall1 = time.time_ns()
-    going = _wait(lambda: (ctx.mon.latest("robot_gateway/robot_state") or (0, pb.RobotState()))[1].header.stamp_ns
-                  > wall1, REACTION_TIMEOUT_S, ctx)
+    _wait(lambda: _state_after(ctx, wall1) or rsi_stopped_since(ctx, t0) is not None, LINK_BACK_TIMEOUT_S, ctx)
+    going = _state_after(ctx, wall1)
     stopped = rsi_stopped_since(ctx, t0)
     late = _late_replies(ctx, t0)
     downs = len(_events(ctx, t0, "robot_gateway", ("link_down",)))
@@ -368,7 +393,7 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
     try:
         hit = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(),
                                                        "times_s": times.round(6).tolist()},
-                       ("playback_started", "bad_command"))
+                       ("playback_started", "bad_command"), timeout_s=ANSWER_TIMEOUT_S)
         answer = next((e for e in ctx.mon.events_since(t0) if e.source == "controller"
                        and e.code in ("playback_started", "bad_command")), None)
         row.reaction_ms = _ms(hit, t0)
@@ -380,7 +405,7 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
             row.expected = not any(e.code == "fault" for e in late)
             row.note = f"refused before sending: {answer.text}" + (f"; {len(late)} late/fault events" if late else "")
             return
-        done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + 30.0)
+        done = ctx.mon.wait_event(t0, ("playback_done",), "controller", timeout_s=float(times[-1]) + ANSWER_TIMEOUT_S)
         late = _events(ctx, t0, "robot_gateway", LATE_CODES)
         faults = _events(ctx, t0, "robot_gateway", ("fault",))
         flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
@@ -394,8 +419,8 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
                     + (f" ({', '.join(sorted({e.code for e in late}))})" if late else "")
                     + ("; FAULT latched" if faults or flagged else ""))
     finally:
-        _console(ctx, "controller", "stop", {}, ("command",))
-        _console(ctx, "controller", "track", {}, ("command",))
+        _console(ctx, "controller", "stop", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+        _console(ctx, "controller", "track", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
 
 
 LINK_ATTACKS: tuple[Attack, ...] = (

@@ -1,10 +1,14 @@
-"""``humanpt bench faults`` end to end (issue 14, acceptance): the attacks against a live twin
-(router + seven processes, a real pty), the printed table, and the twin ended cleanly, even on
-Ctrl-C."""
+"""``humanpt bench faults`` end to end (issue 14, acceptance; issue 29's rows over ALTER):
+the attacks against a live twin (router + seven processes, a real pty), the printed table,
+and the twin ended cleanly, even on Ctrl-C.
+
+The default run (every row: issue 14's, issue 29's over ALTER, the rows that need RSI or
+mTLS skipped with the reason) is run once, in this process, by :func:`alter_bench`, and
+its table and recordings are checked by several tests (one live twin for all of them);
+the verb itself (its process, its Ctrl-C) by :func:`test_ctrl_c_ends_the_twin`."""
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
@@ -14,9 +18,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from humanpt.bench.faults import ATTACKS, QUICK, SECURE_ATTACKS, all_attacks, format_table
 from humanpt.runtime.recording import read
 from humanpt.schemas.convert import from_pose
-from tests.conftest import ROOT, humanpt_cmd, run_cli
+from tests.bench.faults_rows import (
+    HELD,
+    LINK_ROWS,
+    Bench,
+    bench_run,
+    kill_within_bound,
+    leftovers,
+    seam_played_or_refused,
+)
+from tests.conftest import ROOT, humanpt_cmd
+
+# run_faults starts the twin's processes, a router and a pty; the timeout bounds a hang (the
+# first test to use the module's run waits for all of it)
+pytestmark = [pytest.mark.live, pytest.mark.timeout(600)]
 
 # The rows --quick must print, in order: the attack set of issue 14 without the bus flood.
 QUICK_FAULTS = [
@@ -28,46 +46,27 @@ QUICK_FAULTS = [
     "bad console commands",
     "reset_fault without operator",
 ]
-COLUMNS = ["fault", "verdict", "reaction", "robot held", "recovered", "data lost", "note"]
-HELD = re.compile(r"yes \(([\d.]+) / ([\d.]+) mm\)")
+@pytest.fixture(scope="module")
+def alter_bench(tmp_path_factory) -> Bench:
+    """``humanpt bench faults`` (every row: the default run, over ALTER), once for this file."""
+    return bench_run(tmp_path_factory.mktemp("faults") / "run", None)
 
 
-def table(stdout: str) -> dict[str, dict[str, str]]:
-    """{fault: {column: cell}} of the printed table (cells are separated by 2+ spaces)."""
-    lines = stdout.splitlines()
-    head = next(i for i, line in enumerate(lines) if line.startswith("fault "))
-    assert re.split(r"\s{2,}", lines[head].strip()) == COLUMNS, lines[head]
-    rows = {}
-    for line in lines[head + 1:]:
-        if not line.strip():
-            break
-        cells = re.split(r"\s{2,}", line.strip())
-        assert len(cells) == len(COLUMNS), line
-        rows[cells[0]] = dict(zip(COLUMNS, cells, strict=True))
-    return rows
+def test_the_default_run_has_every_row_and_ends_its_twin(alter_bench):
+    """Every attack's row in its order (the verb's table, exit status 0: no twin failure, no
+    verdict failed); those that need RSI or mTLS skipped, with the reason; no process left."""
+    assert alter_bench.failure == ""
+    # the rows run over ALTER in their order, then those skipped (RSI's, mTLS's) in theirs
+    ran = [a.fault for a in all_attacks() if "alter" in a.links and a not in SECURE_ATTACKS]
+    assert list(alter_bench.table) == ran + [a.fault for a in all_attacks() if a.fault not in ran]
+    assert all(r.ok for r in alter_bench.rows), format_table(alter_bench.rows)
+    assert alter_bench.leftovers == []
+    assert [a.fault for a in ATTACKS if a.key in QUICK] == QUICK_FAULTS  # what --quick runs
 
 
-def leftovers(run_dir: Path) -> list[str]:
-    """Command lines of live processes started for ``run_dir`` (each twin process names its
-    config or run directory there)."""
-    found = []
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-        except OSError:
-            continue
-        if str(run_dir) in cmd:
-            found.append(f"{pid}: {cmd}")
-    return found
-
-
-@pytest.mark.timeout(180)
-def test_quick_attacks_are_seen_held_and_recovered(tmp_path):
-    run_dir = tmp_path / "run"
-    p = run_cli("bench", "faults", "--quick", "--run-dir", str(run_dir), timeout=150)
-    assert p.returncode == 0, p.stdout + p.stderr
-    rows = table(p.stdout)
-    assert list(rows) == QUICK_FAULTS
+def test_quick_attacks_are_seen_held_and_recovered(alter_bench):
+    run_dir = alter_bench.run_dir
+    rows = {f: alter_bench.table[f] for f in QUICK_FAULTS}
     for fault, row in rows.items():
         # The verdicts: each attack answered as it should, the robot held. (Whether the loop
         # stayed up, "recovered", is liveness: reported, not asserted; issue 31.)
@@ -83,11 +82,12 @@ def test_quick_attacks_are_seen_held_and_recovered(tmp_path):
     assert "5/5 keys refused" in rows[QUICK_FAULTS[0]]["note"]
     assert "3/3 refused" in rows["bad console commands"]["note"]
     assert "link_down" in rows["forged STRT on the serial line"]["note"]
-    assert leftovers(run_dir) == []
-    # What the twin recorded says the same: the gateway refused the five keys, the controller
-    # the three commands.
+    # What the twin recorded says the same: the gateway refused the five keys (its first
+    # segment: the "gateway killed" row starts a second one), the controller the three
+    # commands (and the 1795-point seam, had it refused it before sending).
     assert codes(run_dir, "robot_gateway").count("param_rejected") == 5
-    assert codes(run_dir, "controller").count("bad_command") == 3
+    seam_refused = alter_bench.table["path play of a 1795-point seam"]["note"].startswith("refused before sending")
+    assert codes(run_dir, "controller").count("bad_command") == 3 + seam_refused
 
 
 def codes(run_dir: Path, component: str) -> list[str]:
@@ -120,8 +120,7 @@ def test_ctrl_c_ends_the_twin(tmp_path):
     assert leftovers(run_dir) == []
 
 
-@pytest.mark.timeout(150)
-def test_bus_flood_holds_the_robot(tmp_path):
+def test_bus_flood_holds_the_robot(alter_bench):
     """Issue 14 item 6 (and issue 31: this row accepted any exit status): 2 s of junk
     commands at full rate on the command key. The verdict is safety: the robot's largest
     flange step in the window within the gateway's per-cycle limit (100 mm/s x 28 ms,
@@ -129,10 +128,8 @@ def test_bus_flood_holds_the_robot(tmp_path):
     held). Whether the loop rides out a flood that takes both cores (the bench and the
     router) is liveness, machine-dependent: the row reports it (robot states' largest gap,
     late commands, link restarts) and the README gives the figures; it is not asserted."""
-    run_dir = tmp_path / "run"
-    p = run_cli("bench", "faults", "--only", "flood", "--run-dir", str(run_dir), timeout=130)
-    assert p.returncode == 0, p.stdout + p.stderr
-    row = table(p.stdout)["bus flood (2 s junk commands)"]
+    run_dir = alter_bench.run_dir
+    row = alter_bench.table["bus flood (2 s junk commands)"]
     assert row["verdict"] == "ok", row
     held = HELD.fullmatch(row["robot held"])
     assert held, row
@@ -140,11 +137,25 @@ def test_bus_flood_holds_the_robot(tmp_path):
     assert float(held[2]) == pytest.approx(limit)
     assert float(held[1]) <= 1.05 * limit, row
     assert re.search(r"\| loop: robot_state max gap \d+ ms", row["note"]), row
-    assert leftovers(run_dir) == []
-    # The robot's own truth: no step over the limit per cycle through the whole run.
+    # The robot's own truth: no step over the limit per cycle through the whole run (every
+    # row's, the flood's among them).
     truth = [e.decode() for e in read(run_dir / "sim_robot.mcap").outputs if e.topic == "sim_robot/truth"]
     assert len(truth) > 100
     xyz = np.array([from_pose(t.world_T_flange)[:3, 3] for t in truth])
     stamps = np.array([t.header.stamp_ns for t in truth])
     cycles = np.maximum(1, np.round(np.diff(stamps) / 28e6))
     assert (1e3 * np.linalg.norm(np.diff(xyz, axis=0), axis=1) / cycles).max() <= 1.05 * limit
+
+
+def test_link_rows_over_alter(alter_bench):
+    """Issue 29's rows over ALTER: the gateway killed mid-motion (the robot moved at most two
+    cycles at the gateway's limit after it), the 1795-point seam played (or refused) without
+    a fault latched; the RSI-only rows skipped, with the reason."""
+    rows = alter_bench.table
+    kill_within_bound(rows[LINK_ROWS["kill"]], 100.0 * 0.028)  # 100 mm/s x 28 ms
+    assert rows[LINK_ROWS["kill"]]["verdict"] == "ok"
+    for key, links in (("inject", "rsi"), ("junk", "rsi or abb"), ("ipoc", "rsi")):
+        assert rows[LINK_ROWS[key]]["verdict"] == "skipped"
+        assert rows[LINK_ROWS[key]]["note"] == f"skipped: not over ALTER (--link {links})", rows[LINK_ROWS[key]]
+    seam_played_or_refused(rows[LINK_ROWS["bigseam"]])
+    assert rows[LINK_ROWS["bigseam"]]["verdict"] == "ok"

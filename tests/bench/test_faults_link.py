@@ -1,7 +1,8 @@
 """``humanpt bench faults`` rows of issue 29: the attacks on the robot link (the gateway
 killed mid-motion, <Rob> injection, a junk flood and a spoofed IPOC from another UDP port,
-a 1795-point seam played), over RSI and ALTER, against the live twin (router + seven
-processes, real UDP sockets / a real pty); and the bench's start (issue 29 item 15): it
+a 1795-point seam played), over RSI, against the live twin (router + seven processes, real
+UDP sockets), run once in this process for the file (over ALTER: tests/bench/test_faults.py,
+from the default run); and the bench's start (issue 29 item 15): it
 waits on the router the twin started, and says so with exit status 2 when it never comes.
 
 Asserted: the verdicts (held within the bound, refused, no fault latched, RSI still
@@ -12,7 +13,6 @@ command)."""
 
 from __future__ import annotations
 
-import re
 import threading
 
 import pytest
@@ -20,52 +20,40 @@ import pytest
 from humanpt.bench.faults import open_router_session
 from humanpt.runtime.config import load
 from humanpt.twin.live import wait_listening
-from tests.bench.test_faults import HELD, leftovers, table
-from tests.conftest import free_port, run_cli, write_config
+from tests.bench.faults_rows import LINK_ROWS as ROWS
+from tests.bench.faults_rows import (
+    Bench,
+    bench_run,
+    kill_within_bound,
+    seam_played_or_refused,
+    table,
+)
+from tests.conftest import free_port, write_config
 
-ROWS = {
-    "kill": "gateway killed mid-motion (40 mm/s)",
-    "inject": "<Rob> injection from another UDP port (80)",
-    "junk": "junk UDP flood from another port (3 s)",
-    "ipoc": "spoofed <Rob>, IPOC +500 cycles",
-    "bigseam": "path play of a 1795-point seam",
-}
-
-
-def _kill_within_bound(row: dict[str, str], cycle_limit_mm: float) -> None:
-    # "robot held": the distance moved after the kill / the bound: 2 cycles at the limit.
-    held = HELD.fullmatch(row["robot held"])
-    assert held, row
-    assert float(held[2]) == pytest.approx(2 * cycle_limit_mm)
-    assert float(held[1]) <= float(held[2]), row
-    assert re.search(r"killed at [\d.]+ mm/s", row["note"]), row
+pytestmark = pytest.mark.live  # the bench's twin, routers, UDP sockets
 
 
-def _seam_played_or_refused(row: dict[str, str]) -> None:
-    note = row["note"]
-    assert note.startswith("refused before sending") or re.match(
-        r"played \(1795 points, [\d.]+ s\): done; \d+ late/stale-command events", note), row
-    assert "FAULT" not in note, row  # the issue: 2 of 3 tries latched the gateway's fault
+@pytest.fixture(scope="module")
+def rsi_bench(tmp_path_factory) -> Bench:
+    """``humanpt bench faults --link rsi --only kill,inject,junk,ipoc,bigseam``, in this process."""
+    return bench_run(tmp_path_factory.mktemp("faults-rsi") / "run", tuple(ROWS), link="rsi")
 
 
-@pytest.mark.timeout(420)
-def test_link_rows_over_rsi(tmp_path):
-    run_dir = tmp_path / "run"
-    p = run_cli("bench", "faults", "--link", "rsi", "--only", ",".join(ROWS), "--run-dir", str(run_dir),
-                timeout=400)
-    rows = table(p.stdout)
-    assert list(rows) == list(ROWS.values()), p.stdout + p.stderr
-    assert leftovers(run_dir) == []
+@pytest.mark.timeout(600)  # bounds a hang
+def test_link_rows_over_rsi(rsi_bench):
+    rows = rsi_bench.table
+    assert list(rows) == list(ROWS.values()), rows
+    assert rsi_bench.leftovers == []
     # Every row judged before any assertion fails: the message names each defect left.
     checks = {
-        "kill": lambda: _kill_within_bound(rows[ROWS["kill"]], 100.0 * 0.012),  # 100 mm/s x 12 ms
+        "kill": lambda: kill_within_bound(rows[ROWS["kill"]], 100.0 * 0.012),  # 100 mm/s x 12 ms
         # Item 5: no answer reaches the attacker (issue: 73 of 80).
         "inject": lambda: _assert(rows[ROWS["inject"]]["note"].startswith("0/80 answers to the attacker")),
         # Item 6: RSI still runs after 3 s of junk (issue: rsi_stopped in 2 of 2 runs).
         "junk": lambda: _assert("RSI still running" in rows[ROWS["junk"]]["note"]),
         # Item 7: one spoofed IPOC + 500 latches no fault (issue: "498 consecutive missed cycles").
         "ipoc": lambda: _assert(rows[ROWS["ipoc"]]["note"].startswith("no fault latched")),
-        "bigseam": lambda: _seam_played_or_refused(rows[ROWS["bigseam"]]),
+        "bigseam": lambda: seam_played_or_refused(rows[ROWS["bigseam"]]),
     }
     failed = []
     for key, check in checks.items():
@@ -75,21 +63,23 @@ def test_link_rows_over_rsi(tmp_path):
         except AssertionError:
             failed.append(f"{key}: {rows[ROWS[key]]}")
     assert not failed, "\n".join(failed)
-    assert p.returncode == 0, p.stdout + p.stderr
+    assert rsi_bench.failure == ""  # (the verb's exit status 0 with every verdict ok)
 
 
 def _assert(ok: bool) -> None:
     assert ok
 
 
-def test_rows_for_the_other_link_start_no_twin(tmp_path):
-    p = run_cli("bench", "faults", "--only", "inject,junk,ipoc", "--run-dir", str(tmp_path / "run"), timeout=30)
-    assert p.returncode == 0, p.stdout + p.stderr
-    rows = table(p.stdout)
+def test_rows_for_the_other_link_start_no_twin(tmp_path, cli_main, capsys):
+    """The verb (in this process: no twin, nothing to spawn) with only rows that need RSI:
+    each skipped, no twin started; an unknown row named, exit status 2, no traceback."""
+    assert cli_main(["bench", "faults", "--only", "inject,junk,ipoc", "--run-dir", str(tmp_path / "run")]) == 0
+    rows = table(capsys.readouterr().out)
     assert [r["verdict"] for r in rows.values()] == ["skipped"] * 3
     assert not (tmp_path / "run" / "humanpt.toml").exists()
-    p = run_cli("bench", "faults", "--only", "nosuch", timeout=30)
-    assert p.returncode == 2 and "unknown attack(s) nosuch" in p.stderr and "Traceback" not in p.stderr, p.stderr
+    assert cli_main(["bench", "faults", "--only", "nosuch"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown attack(s) nosuch" in err and "Traceback" not in err, err
 
 
 # -- the bench's start: it waits on the router the twin started (item 15) ------------------------
