@@ -208,7 +208,9 @@ class Stereo:
     with two parallel cameras could also replace PSVS"), read when ``kind = "stereo"``: the
     image size both cameras give, each camera, and ``right_T_left_x`` the left camera's pose
     in the right camera's frame (mm, deg: X of Section 4; OpenCV's stereoCalibrate R, T:
-    a point X_left is at R X_left + T in the right camera). Nominal: two parallel cameras
+    a point X_left is at R X_left + T in the right camera), ``camera_T_right_x`` the right
+    camera in the rig's camera frame (the hand-eye's; identity: the camera frame is the
+    right camera's, as a calibration of the pair gives). Nominal: two parallel cameras
     100 mm apart, the left one at -100 mm along the right one's x."""
 
     image_width_px: Annotated[int, Range(16, 20000, "px")] = 640
@@ -216,19 +218,45 @@ class Stereo:
     left: StereoCamera = field(default_factory=StereoCamera)
     right: StereoCamera = field(default_factory=StereoCamera)
     right_T_left_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (-100.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    camera_T_right_x: tuple[Mm, Mm, Mm, Deg, Deg, Deg] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     calibration: Calibration = field(default_factory=Calibration)
 
     def __post_init__(self) -> None:
-        x = tuple(float(v) for v in self.right_T_left_x)
-        if len(x) != 6 or not all(np.isfinite(x)):
-            raise ValueError(f"right_T_left_x must be 6 finite numbers (mm, deg), got {list(self.right_T_left_x)}")
-        object.__setattr__(self, "right_T_left_x", x)
+        for name in ("right_T_left_x", "camera_T_right_x"):
+            x = tuple(float(v) for v in getattr(self, name))
+            if len(x) != 6 or not all(np.isfinite(x)):
+                raise ValueError(f"{name} must be 6 finite numbers (mm, deg), got {list(getattr(self, name))}")
+            object.__setattr__(self, name, x)
         if not self.baseline_mm() > 1.0:
             raise ValueError(f"right_T_left_x: the cameras are {self.baseline_mm():.3g} mm apart; a stereo pair "
                              "needs a baseline (at least 1 mm)")
 
     def right_T_left_mm(self) -> np.ndarray:
         return transform_from_x(np.asarray(self.right_T_left_x))
+
+    def camera_T_right_mm(self) -> np.ndarray:
+        return transform_from_x(np.asarray(self.camera_T_right_x))
+
+    @classmethod
+    def of_psvs(cls, psvs: PsvsConfig) -> Stereo:
+        """The PSVS's two virtual cameras as an ordinary stereo pair (what the twin renders
+        with ``[sim_camera] stereo``): each camera's intrinsics, the lens's distortion (about
+        the real camera's principal point: exact when the views' principal points are the
+        real one's), the pair's pose from the virtual cameras' centres and rotations, the
+        camera frame the PSVS's."""
+        p = psvs.params()
+        width, height = p.image_size_px
+        poses = {}
+        cams = {}
+        for side, cam in (("right", p.right_camera), ("left", p.left_camera)):
+            poses[side] = make_transform(np.asarray(cam.camera_R_virtual, float), np.asarray(cam.centre_mm, float))
+            cams[side] = StereoCamera(a_u=cam.a_u, a_v=cam.a_v, u0=cam.u0, v0=cam.v0,
+                                      dist_coeffs=tuple(float(v) for v in psvs.dist_coeffs))
+        right_T_left = invert_transform(poses["right"]) @ poses["left"]
+        return cls(image_width_px=int(width), image_height_px=int(height), left=cams["left"], right=cams["right"],
+                   right_T_left_x=tuple(float(v) for v in x_from_transform(right_T_left)),
+                   camera_T_right_x=tuple(float(v) for v in x_from_transform(poses["right"])),
+                   calibration=Calibration(method="psvs-views", note="the PSVS's virtual cameras as a pair"))
 
     def baseline_mm(self) -> float:
         return float(np.linalg.norm(self.right_T_left_x[:3]))

@@ -1,8 +1,8 @@
 """The target measured by an ordinary stereo pair (issue 35 item 3): the same blob method
 as the PSVS's (:func:`humanpt.perception.weighted.detect_weighted`) on each camera's image,
 then the correspondence across the two images and OpenCV's triangulation, in the right
-camera's frame (the rig's "camera" frame for a stereo rig: the hand-eye is the right
-camera's).
+camera's frame, then put in the rig's camera frame (``[stereo] camera_T_right_x``;
+identity for a calibrated pair, whose camera frame is the right camera's).
 
 Correspondence: every choice of three blobs in each image and every pairing of them (at
 most ``max_blobs``: C(n, 3)^2 x 6 candidates) is triangulated (``cv2.triangulatePoints``
@@ -43,7 +43,7 @@ __all__ = ["StereoMeasurement", "StereoPerception"]
 @dataclass(frozen=True)
 class StereoMeasurement:
     """``status``: "full" (the three sources paired and named) or "lost" (``why``);
-    ``camera_T_tob_mm`` (4, 4) in the right camera's frame; ``points_mm`` (3, 3) A, B, C;
+    ``camera_T_tob_mm`` (4, 4) in the rig's camera frame; ``points_mm`` (3, 3) A, B, C;
     ``uv_left_px``, ``uv_right_px`` (3, 2) their blob centres (A, B, C order);
     ``reprojection_px`` the RMS reprojection error over both images; ``side_error_mm`` the
     largest triangle side's difference from the model."""
@@ -86,6 +86,7 @@ class StereoPerception:
         self.model = rig.target_model()
         self.model_sides_mm = np.sort(triangle_sides_mm(self.model.source_positions_mm))
         self.right_T_left = self.stereo.right_T_left_mm()
+        self.camera_T_right = self.stereo.camera_T_right_mm()
         self.left_T_right = invert_transform(self.right_T_left)
         s = self.stereo
         self.size_px = (s.image_width_px, s.image_height_px)
@@ -169,8 +170,10 @@ class StereoPerception:
         if best is None:
             return StereoMeasurement("lost", "no three blobs pair into the target's triangle at a working depth")
         _, li, ri, p_mm, rms = best
+        # into the rig's camera frame (the hand-eye's): the right camera's pose in it
+        p_mm = p_mm @ self.camera_T_right[:3, :3].T + self.camera_T_right[:3, 3]
         try:
-            camera_T_tob, lab = estimate_camera_T_tob(self.model, p_mm)
+            camera_T_tob, lab = estimate_camera_T_tob(self.model, p_mm, viewpoint_mm=self.camera_T_right[:3, 3])
         except GeometryError as e:
             return StereoMeasurement("lost", f"the paired sources are not the target: {e}")
         order = list(lab.order)

@@ -150,6 +150,9 @@ class SimCameraConfig:
     frame_drop_probability: Annotated[float, Range(0, 1, "")] = 0.0
     motion_blur: bool = False
     near_mm: Annotated[float, Range(1e-3, 10000, "mm")] = 10.0
+    # an ordinary stereo pair instead of the PSVS (issue 35): the two virtual cameras
+    # rendered apart, each at full brightness (no beam splitter), side by side (left, right)
+    stereo: bool = False
 
     def __post_init__(self) -> None:
         own = "sim_camera"

@@ -268,16 +268,19 @@ class SimCameraCore(Core):
         world_T_tob = self.tob.at(cap.t_ns)
         world_T_camera = world_T_flange @ self.flange_T_camera
         cover = self._cover_at(cap.t_ns)
-        renderer = cap.renderer if cover is None else cap.renderer.covered(*cover)
+        # an ordinary stereo pair: each camera's image, side by side (left, right)
+        renderers = cap.renderer.stereo_pair() if cap.renderer.config.stereo else (cap.renderer,)
+        if cover is not None:
+            renderers = tuple(r.covered(*cover) for r in renderers)
         if self.config.motion_blur:
             # The renderer integrates from the poses at the start of the exposure to those at
             # its end (linearly: an exposure is short against the truth's sample interval).
-            pixels = renderer.render(
-                *self._camera_poses(cap.t_ns - cap.half_exposure_ns), cap.frame_index,
-                *self._camera_poses(cap.t_ns + cap.half_exposure_ns))
+            start, end = (self._camera_poses(cap.t_ns + sign * cap.half_exposure_ns) for sign in (-1, 1))
+            images = [r.render(*start, cap.frame_index, *end) for r in renderers]
         else:
             camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
-            pixels = renderer.render(camera_T_tob, world_T_camera, cap.frame_index)
+            images = [r.render(camera_T_tob, world_T_camera, cap.frame_index) for r in renderers]
+        pixels = images[0] if len(images) == 1 else np.hstack(images)
         truth = pb.Truth(header=self.next_header("sim_camera/truth", cap.t_ns, "world"))
         truth.world_T_flange.CopyFrom(pose_from_mm(world_T_flange))
         if world_T_tob is not None:
