@@ -156,6 +156,9 @@ def refuse_for_calibrate(args) -> None:
     # and its ALTER link (default), or the stand-in; never another one.
     if getattr(args, "link", "alter") != "alter":
         raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
+    if getattr(args, "rig_kind", "psvs") != "psvs":
+        raise SystemExit("humanpt demo --calibrate: the job calibrates the PSVS; a stereo pair is calibrated by "
+                         "`humanpt calibrate stereo` (--rig-kind stereo runs the plain demo on the pair)")
     if getattr(args, "robot", None) not in (None, "puma", "standin"):
         raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
                          "Puma over ALTER (--robot puma, the default) or on the stand-in (--robot standin)")
@@ -225,7 +228,7 @@ def demo(args) -> int:
         raise SystemExit(f"humanpt demo: --set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
     try:  # a bad key or value, world or rig fails here, before the run starts
         cfg = demo_config(args.scenario, args.seed, over, world=args.world, rig_file=getattr(args, "rig", None),
-                          law=args.law)
+                          law=args.law, rig_kind=getattr(args, "rig_kind", "psvs"))
     except (OverrideError, cfgmod.ConfigError) as e:
         raise SystemExit(f"humanpt: {e}") from None
     if calibrate:

@@ -145,6 +145,10 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--rig", metavar="FILE",
                    help="what the pipeline believes about the hardware (a rig file, `humanpt rig init`); "
                    "default: the nominal design values")
+    p.add_argument("--rig-kind", choices=("psvs", "stereo"), default="psvs",
+                   help="psvs (default: one camera, four mirrors, the complex image) or stereo: an ordinary "
+                   "stereo pair, the PSVS's two virtual cameras rendered apart and side by side, the "
+                   "pipeline's rig the same pair (perception on pairs)")
     p.add_argument("--calibrate", action="store_true",
                    help="the welder's whole job, lock-step: calibrate the camera, the PSVS and mirrors, hand-eye "
                    "and the tip against the twin (its truth hidden), teach the seam, play the path back on the "

@@ -46,11 +46,15 @@ def scenario_label(scenario: str) -> str:
 
 
 def demo_config(scenario: str, seed: int = 0, overrides: dict[str, dict] | None = None, *,
-                world: str = "ideal", rig_file: str | Path | None = None, law: str = "thetau") -> SystemConfig:
+                world: str = "ideal", rig_file: str | Path | None = None, law: str = "thetau",
+                rig_kind: str = "psvs") -> SystemConfig:
     """The twin's system for ``scenario`` (a built-in name or a scenario file): ``world``
     (ideal, realistic, ideal+SOURCE..., a world file), the pipeline's rig ``rig_file``
     (default nominal), the servo ``law``, ``overrides`` {section: {key: value}} of the
-    twin's sections.  A bad key, value, world or rig fails here (ValueError, ConfigError)."""
+    twin's sections; ``rig_kind`` "stereo": an ordinary stereo pair (the world's camera
+    renders the PSVS's virtual cameras apart; the pipeline's rig is the same pair as its
+    rig's PSVS makes it, unless the rig file is of kind stereo already).  A bad key, value,
+    world or rig fails here (ValueError, ConfigError)."""
     from humanpt.controller.config import ControllerConfig
     from humanpt.runtime.rigfile import load_rig
 
@@ -61,8 +65,19 @@ def demo_config(scenario: str, seed: int = 0, overrides: dict[str, dict] | None 
     if unknown:
         raise ValueError(f"--set: no section {sorted(unknown)[0]!r} ({', '.join(SECTIONS)})")
     rig = load_rig(rig_file) if rig_file else None
-    return SystemConfig.for_scenario(scenario, seed, overrides or {}, rig=rig, world=World.named(world),
-                                     controller=ControllerConfig(law=law))
+    cfg = SystemConfig.for_scenario(scenario, seed, overrides or {}, rig=rig, world=World.named(world),
+                                    controller=ControllerConfig(law=law))
+    if rig_kind == "stereo":
+        import dataclasses
+
+        from humanpt.geometry.rig import Stereo
+
+        stereo = cfg.rig.stereo if cfg.rig.kind == "stereo" else Stereo.of_psvs(cfg.rig.psvs)
+        cfg = dataclasses.replace(cfg, sim_camera=dataclasses.replace(cfg.sim_camera, stereo=True),
+                                  rig=dataclasses.replace(cfg.rig, kind="stereo", stereo=stereo))
+    elif rig_kind != "psvs":
+        raise ValueError(f"rig kind {rig_kind!r}: psvs or stereo")
+    return cfg
 
 
 def write_world(run_dir: Path, cfg: SystemConfig, world: str) -> None:

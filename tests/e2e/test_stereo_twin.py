@@ -31,3 +31,14 @@ def test_the_arc_is_tracked_and_recorded_on_a_stereo_pair(tmp_path):
     assert len(xg) > 30 and abs(radius.mean() - 246.0) < 1.0 and np.ptp(radius) < 1.0, (radius.mean(), np.ptp(radius))
     res = replay(tmp_path / "perception.mcap")
     assert res.match and res.compared >= 300, res.report()
+
+
+def test_the_demo_runs_on_a_stereo_pair_and_the_job_refuses_it(tmp_path):
+    from tests.conftest import run_cli_here
+
+    r = run_cli_here("demo", "--lockstep", "--rig-kind", "stereo", "--duration", "6", "--run-dir", str(tmp_path / "run"))
+    assert r.returncode == 0, r.stderr
+    assert "stereo psvs-views" in r.stdout  # the pipeline's rig: the PSVS's virtual cameras as a pair
+    assert "recorded path of G against ground truth" in r.stdout
+    r = run_cli_here("demo", "--calibrate", "--rig-kind", "stereo", "--run-dir", str(tmp_path / "job"))
+    assert r.returncode != 0 and "humanpt calibrate stereo" in r.stderr
