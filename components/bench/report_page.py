@@ -98,6 +98,26 @@ def lockstep_arc(say: Callable[[str], None]) -> str:
                                                                                     rows))
 
 
+def rig_kinds(say: Callable[[str], None]) -> str:
+    """``humanpt demo --lockstep --scenario S --rig-kind K`` (seed 0, the ideal world) for the
+    PSVS and an ordinary stereo pair of the same cameras: the recorded path of G against
+    ground truth, MAE and MaxE."""
+    from humanpt.twin.demo import demo_config
+    from humanpt.twin.run import accuracy, run
+
+    rows: list[list[str]] = []
+    for scenario in ("static", "arc", "trapezium"):
+        for kind in ("psvs", "stereo"):
+            say(f"lock-step {scenario}, rig kind {kind}")
+            cfg = demo_config(scenario, 0, rig_kind=kind)
+            res = run(cfg, robot="puma", record_from_s=cfg.operator.start_delay_s)
+            acc = accuracy(res.world, cfg.controller, cfg.sim_camera.flange_T_camera)
+            rows += [r for r in _stats_rows(f"{scenario}, {kind} (n = {acc.path.n})", acc.path)
+                     if r[0].endswith(("MAE", "MaxE"))]
+    return ("`humanpt demo --lockstep --seed 0 --scenario S --rig-kind psvs|stereo` (recorded path of G against "
+            "ground truth, mm and deg):\n\n" + _md_table(["scenario, rig, statistic", *COORDS], rows))
+
+
 def static_short(say: Callable[[str], None] | None = None):
     """The drift test's run: the static experiment, default perception, seed 0, the first
     :data:`STATIC_SHORT_VECTORS` vectors; its :class:`humanpt.twin.evaluate.Stats` (paper's
@@ -261,6 +281,7 @@ def bench(say: Callable[[str], None], live_seconds: float = 60.0, lockstep_secon
 
 SECTIONS: dict[str, Section] = {s.name: s for s in (
     Section("lockstep-arc", "humanpt demo --lockstep [--world realistic]", lockstep_arc),
+    Section("rig-kinds", "humanpt demo --lockstep --scenario S --rig-kind psvs|stereo", rig_kinds),
     Section("calibrate", "humanpt demo --calibrate --seed 0", calibrate),
     Section("hard", "humanpt experiment hard", hard),
     Section("experiments", "humanpt experiment static --seeds 10; arc --seeds 5; trapezium --seeds 5", experiments),
