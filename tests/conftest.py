@@ -124,13 +124,31 @@ def procs():
     ps.stop_all()
 
 
-@pytest.fixture
-def router(tmp_path, procs):
-    """A real router (``humanpt router``) on a free port; yields (port, config path)."""
+@pytest.fixture(scope="module")
+def _module_router(tmp_path_factory):
+    """One real router (``humanpt router``) for a test module: (port, its process). A
+    router costs a Python start-up and Zenoh's (~1.6 s CPU, several seconds of wall time on
+    a loaded machine); a module's tests run one after the other on one worker (``--dist
+    loadfile``), each stopping its processes before the next starts, so they share it."""
+    ps = Procs()
     port = free_port()
-    cfg = write_config(tmp_path / "humanpt.toml", port)
-    wait_port(port, proc=procs.start("router", "--config", str(cfg)))
-    return port, cfg
+    cfg = write_config(tmp_path_factory.mktemp("router") / "humanpt.toml", port)
+    try:
+        proc = ps.start("router", "--config", str(cfg))
+        wait_port(port, proc=proc)
+        yield port, proc
+    finally:
+        ps.stop_all()
+
+
+@pytest.fixture
+def router(_module_router, tmp_path, procs):
+    """A real router on a free port, shared by the tests of a module (cell ``test``: a
+    test's processes are stopped, by ``procs``, before the next test starts); returns (port,
+    a config path in the test's own directory)."""
+    port, proc = _module_router
+    assert proc.poll() is None, f"the module's router exited ({proc.returncode}): an earlier test stopped it"
+    return port, write_config(tmp_path / "humanpt.toml", port)
 
 
 def zenoh_client(port: int):
@@ -208,11 +226,16 @@ def in_process_cli():
 
     root = logging.getLogger()
     interval, level, handlers = sys.getswitchinterval(), root.level, list(root.handlers)
+    # Verbs that run until Ctrl-C (echo, topics, ...) install SIGINT/SIGTERM handlers: put
+    # pytest's back, or a later Ctrl-C (or xdist's SIGTERM) would only set a stale Event.
+    signals = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(tuning, "tune_allocator", lambda: False)
         try:
             yield main
         finally:
+            for sig, handler in signals.items():
+                signal.signal(sig, handler)
             sys.setswitchinterval(interval)
             root.setLevel(level)
             for h in root.handlers:
@@ -237,7 +260,7 @@ def cli_main():
 # code and the module's helpers it calls refer to (``run_cli``, ``subprocess``, ``LiveShell``,
 # ...). A module whose tests do it some other way says so with ``pytestmark``.
 
-LIVE_FIXTURES = frozenset({"router", "procs"})
+LIVE_FIXTURES = frozenset({"router", "_module_router", "procs"})
 # Names that, referred to by a test or by a helper/fixture of its module it calls, start a
 # process, a Zenoh session (router or client), a pty or a UDP socket.
 LIVE_NAMES = frozenset({"run_cli", "run_measured", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
@@ -428,3 +451,26 @@ def pytest_sessionfinish(session):
     if session.config.getoption("store_durations") and not hasattr(session.config, "workerinput") and _SECONDS:
         DURATIONS.write_text(json.dumps({f: round(s, 1) for f, s in sorted(_SECONDS.items(), key=lambda kv: -kv[1])},
                                         indent=0) + "\n")
+
+
+def run_cli_here(*args: str, cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+    """``humanpt ARGS`` run in this process (:func:`in_process_cli`), its exit status and
+    output as :func:`run_cli` gives them: for verbs whose process boundary is not what a test
+    checks (a file in, a file or an error out), without a Python start-up per call."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    here = os.getcwd()
+    try:
+        os.chdir(ROOT if cwd is None else cwd)  # (run_cli's default too)
+        with in_process_cli() as main, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(list(args))
+            except SystemExit as e:  # argparse's errors and --help
+                code = e.code if isinstance(e.code, int) else (0 if e.code is None else 1)
+                if not isinstance(e.code, int | None):
+                    print(e.code, file=sys.stderr)
+    finally:
+        os.chdir(here)
+    return subprocess.CompletedProcess(["humanpt", *args], code or 0, out.getvalue(), err.getvalue())
