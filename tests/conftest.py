@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -124,21 +125,53 @@ def procs():
     ps.stop_all()
 
 
+class InProcessRouter:
+    """A real Zenoh router in this process: the product's ``run_router`` (what ``humanpt
+    router`` runs) on a thread, from a config file; ``stop()`` ends it. No process: no
+    Python start-up and imports (~1.6 s CPU, seconds of wall time on a loaded machine) for a
+    test whose subject is not the router's process. (Not for mTLS with denial reports: those
+    set Zenoh's logging for the whole process.)"""
+
+    def __init__(self, cfg_path: Path, timeout: float = 60.0):
+        from humanpt.runtime.run import load_config, run_router
+
+        cfg = load_config(cfg_path)
+        self.port = int(cfg.runtime.listen[0].rsplit(":", 1)[1])
+        self.said: list[str] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=run_router, args=(cfg,), daemon=True, name="test-router",
+                                        kwargs={"stop": self._stop, "say": self.said.append,
+                                                "complain": self.said.append})
+        self._thread.start()
+        deadline = time.monotonic() + timeout
+        while True:
+            if not self._thread.is_alive():
+                raise RuntimeError(f"the router did not start: {self.said}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
+                    return
+            except OSError:
+                assert time.monotonic() < deadline, f"nothing listens on port {self.port} after {timeout:g} s"
+                self._stop.wait(0.02)
+
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=15)
+
+
 @pytest.fixture(scope="module")
 def _module_router(tmp_path_factory):
-    """One real router (``humanpt router``) for a test module: (port, its process). A
-    router costs a Python start-up and Zenoh's (~1.6 s CPU, several seconds of wall time on
-    a loaded machine); a module's tests run one after the other on one worker (``--dist
-    loadfile``), each stopping its processes before the next starts, so they share it."""
-    ps = Procs()
-    port = free_port()
-    cfg = write_config(tmp_path_factory.mktemp("router") / "humanpt.toml", port)
+    """One real router for a test module (in this process: :class:`InProcessRouter`). A
+    module's tests run one after the other on one worker (``--dist loadfile``), each
+    stopping its processes before the next starts, so they share it (cell ``test``)."""
+    r = InProcessRouter(write_config(tmp_path_factory.mktemp("router") / "humanpt.toml", free_port()))
     try:
-        proc = ps.start("router", "--config", str(cfg))
-        wait_port(port, proc=proc)
-        yield port, proc
+        yield r
     finally:
-        ps.stop_all()
+        r.stop()
 
 
 @pytest.fixture
@@ -146,9 +179,8 @@ def router(_module_router, tmp_path, procs):
     """A real router on a free port, shared by the tests of a module (cell ``test``: a
     test's processes are stopped, by ``procs``, before the next test starts); returns (port,
     a config path in the test's own directory)."""
-    port, proc = _module_router
-    assert proc.poll() is None, f"the module's router exited ({proc.returncode}): an earlier test stopped it"
-    return port, write_config(tmp_path / "humanpt.toml", port)
+    assert _module_router.alive(), f"the module's router stopped: {_module_router.said}"
+    return _module_router.port, write_config(tmp_path / "humanpt.toml", _module_router.port)
 
 
 def zenoh_client(port: int):
@@ -159,6 +191,32 @@ def zenoh_client(port: int):
 
     rt = RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",))
     return zenoh.open(zenoh_config(rt))
+
+
+def wait_alive(port: int, *components: str, cell: str = "test", timeout: float = 60.0) -> None:
+    """Wait until each of ``components`` has its liveliness token up on the router at
+    ``port`` (a Zenoh subscription, no polling): a component declares it last, after its
+    subscribers and its params and rig queryables, so ``humanpt param`` reaches it from then
+    on. ``timeout`` only bounds a hang (a loaded machine starts a process in seconds)."""
+    import queue
+
+    from humanpt.runtime.bus import liveliness_key
+
+    want = {liveliness_key(cell, c): c for c in components}
+    seen: queue.Queue = queue.Queue()
+    with zenoh_client(port) as s:
+        sub = s.liveliness().declare_subscriber(f"humanpt/{cell}/*", lambda smp: seen.put(str(smp.key_expr)),
+                                                history=True)
+        deadline = time.monotonic() + timeout
+        try:
+            while want:
+                try:
+                    want.pop(seen.get(timeout=max(deadline - time.monotonic(), 0.0)), None)
+                except queue.Empty:
+                    raise AssertionError(f"no liveliness token of {', '.join(want.values())} after {timeout:g} s") \
+                        from None
+        finally:
+            sub.undeclare()
 
 
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
@@ -264,6 +322,7 @@ LIVE_FIXTURES = frozenset({"router", "_module_router", "procs"})
 # Names that, referred to by a test or by a helper/fixture of its module it calls, start a
 # process, a Zenoh session (router or client), a pty or a UDP socket.
 LIVE_NAMES = frozenset({"run_cli", "run_measured", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
+                        "InProcessRouter", "wait_alive",
                         "openpty", "pty", "PtyAdapter", "SerialAdapter", "UdpAdapter", "RsiRobotServer", "SOCK_DGRAM", "open_tool_session", "wait_port"})
 
 # Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs
