@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -83,9 +84,10 @@ def wait_for(pred, timeout: float, what: str, poll_s: float = 0.02) -> None:
         time.sleep(poll_s)
 
 
-def wait_matching(publisher, timeout: float = 15.0) -> None:
+def wait_matching(publisher, timeout: float = 60.0) -> None:
     """Wait until a subscriber somewhere matches a Zenoh ``publisher``'s key expression, so
-    that what it puts next is delivered (rather than sleeping until the peer is up)."""
+    that what it puts next is delivered (rather than sleeping until the peer is up).
+    ``timeout`` only bounds a hang: a loaded machine takes seconds to start a process."""
     wait_for(lambda: publisher.matching_status.matching, timeout,
              f"a subscriber to {publisher.key_expr}")
 
@@ -124,13 +126,62 @@ def procs():
     ps.stop_all()
 
 
+class InProcessRouter:
+    """A real Zenoh router in this process: the product's ``run_router`` (what ``humanpt
+    router`` runs) on a thread, from a config file; ``stop()`` ends it. No process: no
+    Python start-up and imports (~1.6 s CPU, seconds of wall time on a loaded machine) for a
+    test whose subject is not the router's process. (Not for mTLS with denial reports: those
+    set Zenoh's logging for the whole process.)"""
+
+    def __init__(self, cfg_path: Path, timeout: float = 60.0):
+        from humanpt.runtime.run import load_config, run_router
+
+        cfg = load_config(cfg_path)
+        self.port = int(cfg.runtime.listen[0].rsplit(":", 1)[1])
+        self.said: list[str] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=run_router, args=(cfg,), daemon=True, name="test-router",
+                                        kwargs={"stop": self._stop, "say": self.said.append,
+                                                "complain": self.said.append})
+        self._thread.start()
+        deadline = time.monotonic() + timeout
+        while True:
+            if not self._thread.is_alive():
+                raise RuntimeError(f"the router did not start: {self.said}")
+            try:
+                with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
+                    return
+            except OSError:
+                assert time.monotonic() < deadline, f"nothing listens on port {self.port} after {timeout:g} s"
+                self._stop.wait(0.02)
+
+    def alive(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=15)
+
+
+@pytest.fixture(scope="module")
+def _module_router(tmp_path_factory):
+    """One real router for a test module (in this process: :class:`InProcessRouter`). A
+    module's tests run one after the other on one worker (``--dist loadfile``), each
+    stopping its processes before the next starts, so they share it (cell ``test``)."""
+    r = InProcessRouter(write_config(tmp_path_factory.mktemp("router") / "humanpt.toml", free_port()))
+    try:
+        yield r
+    finally:
+        r.stop()
+
+
 @pytest.fixture
-def router(tmp_path, procs):
-    """A real router (``humanpt router``) on a free port; yields (port, config path)."""
-    port = free_port()
-    cfg = write_config(tmp_path / "humanpt.toml", port)
-    wait_port(port, proc=procs.start("router", "--config", str(cfg)))
-    return port, cfg
+def router(_module_router, tmp_path, procs):
+    """A real router on a free port, shared by the tests of a module (cell ``test``: a
+    test's processes are stopped, by ``procs``, before the next test starts); returns (port,
+    a config path in the test's own directory)."""
+    assert _module_router.alive(), f"the module's router stopped: {_module_router.said}"
+    return _module_router.port, write_config(tmp_path / "humanpt.toml", _module_router.port)
 
 
 def zenoh_client(port: int):
@@ -141,6 +192,32 @@ def zenoh_client(port: int):
 
     rt = RuntimeConfig(cell="test", connect=(f"tcp/127.0.0.1:{port}",))
     return zenoh.open(zenoh_config(rt))
+
+
+def wait_alive(port: int, *components: str, cell: str = "test", timeout: float = 60.0) -> None:
+    """Wait until each of ``components`` has its liveliness token up on the router at
+    ``port`` (a Zenoh subscription, no polling): a component declares it last, after its
+    subscribers and its params and rig queryables, so ``humanpt param`` reaches it from then
+    on. ``timeout`` only bounds a hang (a loaded machine starts a process in seconds)."""
+    import queue
+
+    from humanpt.runtime.bus import liveliness_key
+
+    want = {liveliness_key(cell, c): c for c in components}
+    seen: queue.Queue = queue.Queue()
+    with zenoh_client(port) as s:
+        sub = s.liveliness().declare_subscriber(f"humanpt/{cell}/*", lambda smp: seen.put(str(smp.key_expr)),
+                                                history=True)
+        deadline = time.monotonic() + timeout
+        try:
+            while want:
+                try:
+                    want.pop(seen.get(timeout=max(deadline - time.monotonic(), 0.0)), None)
+                except queue.Empty:
+                    raise AssertionError(f"no liveliness token of {', '.join(want.values())} after {timeout:g} s") \
+                        from None
+        finally:
+            sub.undeclare()
 
 
 os.environ.setdefault("PYTHONUNBUFFERED", "1")
@@ -208,11 +285,16 @@ def in_process_cli():
 
     root = logging.getLogger()
     interval, level, handlers = sys.getswitchinterval(), root.level, list(root.handlers)
+    # Verbs that run until Ctrl-C (echo, topics, ...) install SIGINT/SIGTERM handlers: put
+    # pytest's back, or a later Ctrl-C (or xdist's SIGTERM) would only set a stale Event.
+    signals = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(tuning, "tune_allocator", lambda: False)
         try:
             yield main
         finally:
+            for sig, handler in signals.items():
+                signal.signal(sig, handler)
             sys.setswitchinterval(interval)
             root.setLevel(level)
             for h in root.handlers:
@@ -237,10 +319,11 @@ def cli_main():
 # code and the module's helpers it calls refer to (``run_cli``, ``subprocess``, ``LiveShell``,
 # ...). A module whose tests do it some other way says so with ``pytestmark``.
 
-LIVE_FIXTURES = frozenset({"router", "procs"})
+LIVE_FIXTURES = frozenset({"router", "_module_router", "procs"})
 # Names that, referred to by a test or by a helper/fixture of its module it calls, start a
 # process, a Zenoh session (router or client), a pty or a UDP socket.
 LIVE_NAMES = frozenset({"run_cli", "run_measured", "humanpt_cmd", "Procs", "subprocess", "Popen", "zenoh_client", "LiveShell",
+                        "InProcessRouter", "wait_alive",
                         "openpty", "pty", "PtyAdapter", "SerialAdapter", "UdpAdapter", "RsiRobotServer", "SOCK_DGRAM", "open_tool_session", "wait_port"})
 
 # Names that run the lock-step twin: a world's clock run forward, or one of the twin's runs
@@ -430,17 +513,21 @@ def pytest_sessionfinish(session):
                                         indent=0) + "\n")
 
 
-def run_cli_here(*args: str, cwd: str | Path | None = None) -> subprocess.CompletedProcess:
+def run_cli_here(*args: str, cwd: str | Path | None = None, stdin: str | None = None) -> subprocess.CompletedProcess:
     """``humanpt ARGS`` run in this process (:func:`in_process_cli`), its exit status and
     output as :func:`run_cli` gives them: for verbs whose process boundary is not what a test
-    checks (a file in, a file or an error out), without a Python start-up per call."""
+    checks (a file in, a file or an error out), without a Python start-up per call. ``stdin``:
+    what the command reads (an interactive console). Not for a command whose children write to
+    its stdout (``humanpt up``: they inherit the file descriptor, which is not redirected)."""
     import contextlib
     import io
 
     out, err = io.StringIO(), io.StringIO()
-    here = os.getcwd()
+    here, stdin_was = os.getcwd(), sys.stdin
     try:
         os.chdir(ROOT if cwd is None else cwd)  # (run_cli's default too)
+        if stdin is not None:
+            sys.stdin = io.StringIO(stdin)
         with in_process_cli() as main, contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
             try:
                 code = main(list(args))
@@ -450,4 +537,14 @@ def run_cli_here(*args: str, cwd: str | Path | None = None) -> subprocess.Comple
                     print(e.code, file=sys.stderr)
     finally:
         os.chdir(here)
+        sys.stdin = stdin_was
     return subprocess.CompletedProcess(["humanpt", *args], code or 0, out.getvalue(), err.getvalue())
+
+
+@pytest.fixture
+def cli():
+    """:func:`run_cli_here` as ``cli(*argv, stdin=None) -> (exit status, stdout, stderr)``."""
+    def run(*argv: str, stdin: str | None = None) -> tuple[int, str, str]:
+        r = run_cli_here(*argv, stdin=stdin, cwd=os.getcwd())
+        return r.returncode, r.stdout, r.stderr
+    return run

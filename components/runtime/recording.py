@@ -1112,9 +1112,14 @@ def iter_entries(
     _check_file(p)
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str, int | str, dict[str, str]]] = {}
+    # The schema name of each channel as its humanpt.channels record says: a Channel record read
+    # from a later chunk may name a schema whose record was in a skipped chunk (the mcap writer
+    # ends a chunk after a large schema record, so the channel goes in the next one).
+    named_schemas: dict[int, str] = {}
     n = 0
     n_snapshots = 0
     unknown = 0
+    no_schema = 0
     expected: int | None = None
     skipped: list[str] = []
     n_skipped = 0
@@ -1133,6 +1138,7 @@ def iter_entries(
             elif isinstance(r, Metadata) and r.name == CHANNELS_METADATA:
                 for cid, ch in _channel_table(r.metadata).items():
                     channels.setdefault(cid, ch)
+                    named_schemas.setdefault(cid, str(ch[2]))
             elif isinstance(r, Metadata) and r.name == RUN_METADATA and metadata is not None:
                 metadata.update(r.metadata)
             elif isinstance(r, McapMessage):
@@ -1148,8 +1154,14 @@ def iter_entries(
                     if snapshots is not None:
                         snapshots.append(SnapshotEntry(n, r.log_time, r.data))
                     continue
-                yield Entry(n, direction, r.log_time, topic, r.data,
-                            sid if isinstance(sid, str) else schemas.get(sid, "raw"), meta.get("payload", FULL), meta)
+                schema = sid if isinstance(sid, str) else "raw" if sid == 0 else (
+                    schemas.get(sid) or named_schemas.get(r.channel_id))
+                if schema is None:  # its schema was in a skipped chunk, and named nowhere else
+                    no_schema += 1
+                    if gaps is not None and n not in gaps:
+                        gaps.append(n)
+                    continue
+                yield Entry(n, direction, r.log_time, topic, r.data, schema, meta.get("payload", FULL), meta)
                 n += 1
     except _DAMAGE as e:
         if notes is not None:
@@ -1161,6 +1173,9 @@ def iter_entries(
             if unknown:
                 notes.append(f"{p}: {unknown} messages left out: their channel was declared only in a "
                              f"skipped chunk")
+            if no_schema:
+                notes.append(f"{p}: {no_schema} messages left out: the schema of their channel was declared "
+                             f"only in a skipped chunk")
             if expected is not None and n + n_snapshots < expected:
                 notes.append(f"{p}: {n + n_snapshots} of the {expected} messages its summary counts were read")
 

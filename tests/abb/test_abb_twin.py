@@ -20,9 +20,6 @@ from humanpt.sim_robot.egm import EgmSimRobotCore
 from humanpt.twin import evaluate
 from humanpt.twin.run import SystemConfig, run
 from humanpt.twin.system import build_system
-from tests.demo import inprocess
-
-cli = inprocess.cli  # the CLI in this process (the lock-step demo is one process anyway)
 
 
 def _errors(res) -> np.ndarray:

@@ -6,11 +6,11 @@ from __future__ import annotations
 import json
 import tomllib
 
-from tests.conftest import wait_for
+from tests.conftest import wait_alive
 
 
 def test_dump_then_load_all_or_nothing(router, procs, tmp_path, cli_main, capsys):
-    _, cfg = router
+    port, cfg = router
     c = ["--config", str(cfg)]
 
     def call(*argv: str) -> tuple[int, str, str]:
@@ -24,7 +24,7 @@ def test_dump_then_load_all_or_nothing(router, procs, tmp_path, cli_main, capsys
         return json.loads(out[out.index("{"):])["params"]["period_ms"]
 
     procs.start("pinger", *c, "--run-dir", str(tmp_path / "run"))
-    wait_for(lambda: call("param", "pinger", *c, "--timeout", "1")[0] == 0, 30, "the pinger's parameters")
+    wait_alive(port, "pinger")  # its params queryable is up before its liveliness token
     dump = tmp_path / "pinger.toml"
     # options before, between and after the positionals
     rc, out, err = call("param", *c, "dump", "pinger", "--timeout", "5", str(dump))
@@ -61,7 +61,7 @@ def test_load_rolls_back_when_the_component_refuses_one(router, procs, tmp_path,
     """robot_gateway's safety limits may only become stricter at run time (the component
     checks against the values it started with): a file tightening one and loosening another
     leaves both as they were."""
-    _, cfg = router
+    port, cfg = router
     with open(cfg, "a") as f:
         f.write('\n[robot_gateway]\nport = "loop://"\n')  # pyserial's loopback: no robot needed
     c = ["--config", str(cfg)]
@@ -72,13 +72,7 @@ def test_load_rolls_back_when_the_component_refuses_one(router, procs, tmp_path,
         return json.loads(out[out.index("{"):])["params"]
 
     procs.start("robot_gateway", *c, "--run-dir", str(tmp_path / "run"))
-
-    def answering() -> bool:
-        ok = cli_main(["param", "robot_gateway", *c, "--timeout", "1"]) == 0
-        capsys.readouterr()
-        return ok
-
-    wait_for(answering, 30, "the gateway's parameters")
+    wait_alive(port, "robot_gateway")
     before = params()
     f = tmp_path / "limits.toml"
     f.write_text(f"[robot_gateway]\nstale_cycles = {before['stale_cycles'] - 1}\n"

@@ -5,8 +5,6 @@ knows nothing of humanpt but the shipped .proto files."""
 from __future__ import annotations
 
 import queue
-import subprocess
-import sys
 import threading
 from collections import Counter
 
@@ -16,7 +14,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from tests.conftest import ROOT, run_cli, wait_for
+from tests.conftest import ROOT, run_cli_here, wait_for
 
 SCHEMAS = ROOT / "schemas"
 
@@ -25,7 +23,7 @@ SCHEMAS = ROOT / "schemas"
 def run_dir(tmp_path_factory):
     """One 3 s lock-step demo run, recorded (about 2 s)."""
     d = tmp_path_factory.mktemp("play") / "run"
-    r = run_cli("demo", "--lockstep", "--duration", "3", "--run-dir", str(d), timeout=120)
+    r = run_cli_here("demo", "--lockstep", "--duration", "3", "--run-dir", str(d))  # (the twin, in this process)
     assert r.returncode == 0, r.stdout + r.stderr
     return d
 
@@ -36,8 +34,11 @@ def proto_pool(tmp_path_factory) -> descriptor_pool.DescriptorPool:
     plain protoc: what a client in another language would have."""
     out = tmp_path_factory.mktemp("protos") / "set.pb"
     protos = ["humanpt.proto"] + sorted(f"foxglove/{p.name}" for p in (SCHEMAS / "foxglove").glob("*.proto"))
-    subprocess.run([sys.executable, "-m", "grpc_tools.protoc", f"-I{SCHEMAS}", "--include_imports",
-                    f"--descriptor_set_out={out}", *protos], check=True, cwd=SCHEMAS)
+    from grpc_tools import protoc  # the plain protoc, in this process (as its entry point calls it)
+
+    wkt = protoc._get_resource_file_name("grpc_tools", "_proto")  # protobuf's well-known types
+    assert protoc.main(["protoc", f"-I{SCHEMAS}", "--include_imports", f"--descriptor_set_out={out}",
+                        *(str(SCHEMAS / p) for p in protos), f"-I{wkt}"]) == 0
     pool = descriptor_pool.DescriptorPool()
     for f in descriptor_pb2.FileDescriptorSet.FromString(out.read_bytes()).file:
         pool.Add(f)
@@ -89,9 +90,9 @@ def test_play_is_seen_by_echo_console_and_a_plain_zenoh_client(run_dir, router, 
 
         wait_for(have_all, 30, "status, images and the clock from runs play")
         # echo and console, while it plays (--loop)
-        r = run_cli("echo", "controller/status", "-n", "3", "--config", str(cfg), timeout=30)
+        r = run_cli_here("echo", "controller/status", "-n", "3", "--config", str(cfg), "--duration", "60")
         assert r.returncode == 0 and r.stdout.count("--- humanpt/test/controller/status (humanpt.ControllerStatus)") == 3, r.stdout + r.stderr
-        r = run_cli("console", "status", "--config", str(cfg), "--timeout", "10", timeout=30)
+        r = run_cli_here("console", "status", "--config", str(cfg), "--timeout", "10")
         assert r.returncode == 0 and "controller  mode" in r.stdout and "robot       cycle" in r.stdout, r.stdout + r.stderr
         sub.undeclare()
     out = procs.stop(play)  # SIGTERM: a clean stop
@@ -108,7 +109,7 @@ def test_play_is_seen_by_echo_console_and_a_plain_zenoh_client(run_dir, router, 
     assert not [k for k in seen if "serial" in k or k.endswith("/tick")]
 
 
-def test_play_at_rate_puts_every_recorded_output_once(run_dir, router, proto_pool):
+def test_play_at_rate_puts_every_recorded_output_once(run_dir, router, procs, proto_pool):
     port, cfg = router
     want = {t: n for t, n in recorded_outputs(run_dir).items() if "/" in t}
     counts: Counter = Counter()
@@ -120,7 +121,7 @@ def test_play_at_rate_puts_every_recorded_output_once(run_dir, router, proto_poo
 
     with plain_session(port) as s:
         sub = s.declare_subscriber("humanpt/test/**", cb)
-        r = run_cli("runs", "play", str(run_dir), "--config", str(cfg), "--rate", "4", timeout=60)
+        r = run_cli_here("runs", "play", str(run_dir), "--config", str(cfg), "--rate", "4")
         assert r.returncode == 0, r.stdout + r.stderr
         wait_for(lambda: sum(counts.values()) >= sum(want.values()), 10, "every message delivered")
         sub.undeclare()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import run_cli, zenoh_client
+from tests.conftest import run_cli_here, zenoh_client
 
 
 def test_topics_hz_reports_rate_and_bandwidth_of_a_known_publisher(router):
@@ -23,7 +23,7 @@ def test_topics_hz_reports_rate_and_bandwidth_of_a_known_publisher(router):
         th = threading.Thread(target=publish, args=(pub,), daemon=True)
         th.start()
         try:
-            r = run_cli("topics", "--hz", "--duration", "3.2", "--interval", "1", "--config", str(cfg), timeout=30)
+            r = run_cli_here("topics", "--hz", "--duration", "3.2", "--interval", "1", "--config", str(cfg))
         finally:
             stop.set()
             th.join(5)
@@ -57,7 +57,7 @@ def test_echo_decodes_a_key_outside_the_table_by_its_encoding(router):
         th = threading.Thread(target=publish, args=(s,), daemon=True)
         th.start()
         try:
-            r = run_cli("echo", "newcomer/*", "-n", "1", "--config", str(cfg), timeout=30)
+            r = run_cli_here("echo", "newcomer/*", "-n", "1", "--config", str(cfg), "--duration", "30")
         finally:
             stop.set()
             th.join(5)

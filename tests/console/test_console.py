@@ -25,12 +25,10 @@ from tests.conftest import (
     write_config,
     zenoh_client,
 )
-from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(150)
 
 _CELLS = itertools.count(1)
-cli = inprocess.cli  # the CLI in this process
 
 
 @pytest.fixture(scope="module")

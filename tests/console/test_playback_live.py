@@ -32,10 +32,9 @@ from tests.conftest import (
 )
 from tests.console import test_console
 from tests.console.test_console import _wait_alive, cell_of
-from tests.demo import inprocess
 
 # test_console's fixtures: one router for the module, a cell of its own per test; the CLI in-process
-shared_router, router, cli = test_console.shared_router, test_console.router, inprocess.cli
+shared_router, router = test_console.shared_router, test_console.router
 
 pytestmark = pytest.mark.timeout(240)
 

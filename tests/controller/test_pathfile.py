@@ -13,7 +13,7 @@ from humanpt.controller import pathfile
 from humanpt.controller.shell import PathWriter
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 
 def _path(n=50, tip=True, seed=0):
@@ -260,7 +260,7 @@ def test_absurd_values_are_refused_naming_line_and_column(tmp_path, verb, col, v
         args = ["--no-plot", "-o", str(tmp_path / "o.json")]
     else:
         args = [str(tmp_path / "o")]
-    r = run_cli("path", verb, str(f), *args)
+    r = run_cli_here("path", verb, str(f), *args)  # (in this process: a file in, an error out)
     assert r.returncode == 2 and "Traceback" not in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert says in r.stderr, r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv"]

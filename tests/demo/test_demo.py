@@ -12,10 +12,8 @@ from humanpt.bench.summary import latency_and_cycles
 from humanpt.controller import pathfile
 from humanpt.runtime.replay import replay
 from tests.conftest import free_port, run_cli
-from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(600)
-cli = inprocess.cli  # the CLI in this process, where the process boundary is not what is checked
 
 
 def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path, cli):

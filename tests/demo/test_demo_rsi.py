@@ -13,9 +13,6 @@ from humanpt.controller import pathfile
 from humanpt.robot_gateway.links.rsi.runstats import rsi_cycles
 from humanpt.runtime.recording import read
 from humanpt.runtime.replay import replay
-from tests.demo import inprocess
-
-cli = inprocess.cli  # the CLI in this process, where the process boundary is not what is checked
 
 
 @pytest.mark.timeout(300)

@@ -14,10 +14,8 @@ from humanpt.runtime.recording import IN
 from humanpt.runtime.registry import core_class
 from humanpt.runtime.runinfo import file_info
 from humanpt.twin.live import LIVE_COMPONENTS
-from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(300)
-cli = inprocess.cli  # the CLI in this process, where the process boundary is not what is checked
 
 
 @pytest.mark.live

@@ -17,10 +17,8 @@ import pytest
 from humanpt.foxglove_bridge.requests import SERVICES
 from humanpt.runtime.recording import read
 from tests.conftest import free_port, wait_for, zenoh_client
-from tests.demo import inprocess
 
 pytestmark = pytest.mark.timeout(400)
-cli = inprocess.cli  # the console CLI in this process (its process boundary is not what is checked)
 
 CLIENT = Path(__file__).resolve().parent / "client"
 CELL = ("operator", "standin_robot", "sim_camera", "perception", "controller", "scene", "foxglove_bridge")

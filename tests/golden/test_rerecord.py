@@ -14,7 +14,7 @@ from humanpt.cli.demo import parse_overrides
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.testing import golden
 from humanpt.twin import rerecord as rr
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli_here
 from tests.golden.perturb import fresh_run, perturbed_factory
 
 RECORDINGS = ROOT / "recordings"
@@ -160,11 +160,12 @@ def _args(root: Path, **kw) -> dict:
     return {**base, **kw}
 
 
-@pytest.fixture
-def fresh(tmp_path) -> Path:
+@pytest.fixture(scope="module")
+def fresh(tmp_path_factory) -> Path:
     """The static reference run re-recorded offline with this build (tmp/fresh/static): the
-    rerecord machinery is tested apart from whether this build matches recordings/."""
-    return fresh_run(RECORDINGS / "static", tmp_path / "fresh" / "static").parent
+    rerecord machinery is tested apart from whether this build matches recordings/. Once
+    per module: every test reads it only (``scratch`` is each test's copy)."""
+    return fresh_run(RECORDINGS / "static", tmp_path_factory.mktemp("fresh") / "static").parent
 
 
 @pytest.fixture
@@ -281,9 +282,18 @@ def test_unknown_run_is_named(scratch, fresh, capsys):
 
 
 # -- the verb, live (one short run, not replacing anything) -----------------------------------------
+@pytest.mark.live  # (the verb runs in this process and starts the live run's processes)
 @pytest.mark.timeout(400)
 def test_rerecord_static_live_dry_run(scratch, fresh, tmp_path):
-    r = run_cli(
+    # A live run of 1.5 s (the reference's 3.5 s: its length is not what is checked here; the
+    # verdict on this build comes from replaying the old run's inputs, whatever the new run's
+    # length). The verb in this process: it starts the live run's processes itself.
+    spec = scratch / rr.SPEC_FILE
+    text = spec.read_text()
+    assert "[runs.static]\n" in text and "duration_s = 3.5\n" in text
+    spec.write_text(text.replace("duration_s = 3.5\n", "duration_s = 1.5\n", 1))
+    assert {s.name: s.duration_s for s in rr.load_specs(spec)}["static"] == 1.5
+    r = run_cli_here(
         "runs",
         "rerecord",
         "--only",
@@ -293,7 +303,6 @@ def test_rerecord_static_live_dry_run(scratch, fresh, tmp_path):
         str(scratch),
         "--out",
         str(tmp_path / "new"),
-        timeout=360,
     )
     assert r.returncode == 0, r.stdout + r.stderr
     assert "this build changes component outputs in: none" in r.stdout

@@ -17,7 +17,7 @@ from humanpt.runtime.config import ConfigError, from_dict
 from humanpt.runtime.recording import IN, OUT, RUN_METADATA, Recorder, read
 from humanpt.runtime.registry import adapters_for, config_types, core_class
 from humanpt.runtime.replay import replay
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -48,7 +48,7 @@ def test_a_profile_and_the_registry_take_the_old_name():
 
 
 def test_the_old_command_runs_the_gateway():
-    p = run_cli("alter_gateway", "--help")
+    p = run_cli_here("alter_gateway", "--help")
     assert p.returncode == 0, p.stderr
     assert "Run the robot_gateway component alone" in p.stdout
 

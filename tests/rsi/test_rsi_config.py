@@ -11,7 +11,7 @@ from humanpt.robot_gateway.links.rsi.config import RsiConfig
 from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import SimRobotCore
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 
 @pytest.mark.parametrize("kw, says", [
@@ -44,7 +44,7 @@ def test_a_port_in_use_names_the_address():
 
 
 def test_bench_rsi_refuses_a_cycle_rsi_does_not_have():
-    r = run_cli("bench", "rsi", "--cycles", "5", timeout=30)
+    r = run_cli_here("bench", "rsi", "--cycles", "5")
     assert r.returncode == 2 and r.stdout == ""
     assert r.stderr.strip().count("\n") == 0 and "4 and/or 12" in r.stderr
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from tests.conftest import free_port, wait_for, write_config
+from tests.conftest import free_port, wait_alive, write_config
 
 RSI_CELL = """
 [alter_gateway]
@@ -48,7 +48,7 @@ def test_param_reads_and_tightens_a_running_rsi_gateway(router, procs, tmp_path,
     assert 'link = "rsi"' in out and "udp_bind" in out and "reply_deadline_ms" in out
 
     procs.start("alter_gateway", *c, "--run-dir", str(tmp_path / "run"))  # the old command
-    wait_for(lambda: call("param", "robot_gateway", *c, "--timeout", "1")[0] == 0, 30, "the gateway's parameters")
+    wait_alive(port, "robot_gateway")  # its params queryable is up before its liveliness token
     p = params("alter_gateway")  # the old name reaches it too
     assert p["max_speed_mm_s"] == 80.0 and p["fault_after_missed"] == 70  # the file's; RSI's default
 

@@ -17,7 +17,7 @@ import pytest
 from humanpt.runtime.bus import liveliness_key
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
-from tests.conftest import run_cli, wait_for, write_config, zenoh_client
+from tests.conftest import run_cli_here, wait_for, write_config, zenoh_client
 
 STEP_MM = 0.1
 
@@ -86,5 +86,5 @@ def test_gateway_and_sim_over_rsi_as_processes(router, procs, tmp_path):
     assert gw.returncode == 0 and "core errors 0" in out_gw, out_gw
     assert sim.returncode == 0 and "core errors 0" in out_sim, out_sim
     for component in ("robot_gateway", "sim_robot"):
-        res = run_cli("replay", str(run), "--component", component)
+        res = run_cli_here("replay", str(run), "--component", component)
         assert res.returncode == 0 and "MATCH" in res.stdout, res.stdout + res.stderr

@@ -37,7 +37,7 @@ from humanpt.runtime.clock import Clock
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, image
 from humanpt.testing.harness import ScriptedControllerConfig, scripted_command
-from tests.conftest import run_cli, wait_for, write_config, zenoh_client
+from tests.conftest import run_cli_here, wait_for, write_config, zenoh_client
 from tests.robot_gateway.rig import MS, Rig
 
 STEP_NS = 2_000_000_000
@@ -282,5 +282,5 @@ def test_a_step_of_the_gateways_wall_clock_keeps_the_live_link_up(router, procs,
     # the stamps followed the wall clock: +2 s at the first step, back at the second
     gaps = [b.header.stamp_ns - a.header.stamp_ns for a, b in zip(states, states[1:], strict=False)]
     assert max(gaps) > 1.9e9 and min(gaps) < -1.9e9, (max(gaps), min(gaps))
-    res = run_cli("replay", str(run), "--component", "robot_gateway", timeout=120)
+    res = run_cli_here("replay", str(run), "--component", "robot_gateway")
     assert res.returncode == 0 and "MATCH" in res.stdout, res.stdout + res.stderr

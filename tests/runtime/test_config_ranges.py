@@ -3,7 +3,7 @@ the gateway's safety limits are hard limits that may only become stricter at run
 
 Each hole is tried through the product's own entry points: `humanpt config --check` on a
 real file, the config builder, a gateway core given a ``param`` input, and `humanpt param`
-against a gateway process on a real router.
+against a gateway process on a real router (the verbs in this process: ``run_cli_here``).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from humanpt.robot_gateway.links.alter.config import AlterConfig
 from humanpt.runtime import config as cfg
 from humanpt.runtime.registry import config_types
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import run_cli, wait_port, write_config
+from tests.conftest import run_cli_here, wait_alive, write_config
 
 
 def _numeric(tp) -> bool:
@@ -100,7 +100,7 @@ HOLES = [
 def test_config_holes_are_named_errors_before_start(tmp_path, text, needle):
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    r = run_cli("config", "--config", str(path), "--check")
+    r = run_cli_here("config", "--config", str(path), "--check")
     assert r.returncode != 0, r.stdout
     assert "Traceback" not in r.stderr, r.stderr
     assert str(path) in r.stderr and needle in r.stderr, r.stderr
@@ -150,24 +150,18 @@ def test_gateway_limits_may_become_stricter_and_back_to_the_start_value():
 
 
 @pytest.mark.timeout(60)
-def test_param_over_the_bus_cannot_loosen_a_running_gateway(tmp_path, procs):
-    """The attack itself: `humanpt param robot_gateway ...` against a gateway process."""
-    from tests.conftest import free_port
-
-    port = free_port()
-    conf = write_config(tmp_path / "humanpt.toml", port,
+def test_param_over_the_bus_cannot_loosen_a_running_gateway(tmp_path, router, procs):
+    """The attack itself: `humanpt param robot_gateway ...` against a gateway process (the
+    tool in this process: its session is what reaches the gateway, not its process)."""
+    port, _ = router
+    conf = write_config(tmp_path / "gateway.toml", port,
                         extra=f'[robot_gateway]\nport = "{tmp_path / "no-robot-yet"}"\n')
-    procs.start("router", "--config", str(conf))
-    wait_port(port)
     procs.start("robot_gateway", "--config", str(conf), "--run-dir", str(tmp_path / "run"))
-    def param(*assignments):
-        return run_cli("param", "robot_gateway", *assignments, "--config", str(conf), "--timeout", "2")
+    wait_alive(port, "robot_gateway")  # its params queryable is up before its token
 
-    # The gateway's queryable comes up after its session: ask until it answers.
-    for _ in range(30):
-        r = param()
-        if "no component" not in r.stderr:
-            break
+    def param(*assignments):
+        return run_cli_here("param", "robot_gateway", *assignments, "--config", str(conf), "--timeout", "10")
+
     r = param("max_speed_mm_s=1000", "envelope_min_mm=[-1e6,-1e6,-1e6]")
     assert r.returncode == 1, r.stdout + r.stderr
     assert r.stdout.count("REJECTED") == 2, r.stdout
@@ -180,7 +174,7 @@ def test_param_over_the_bus_cannot_loosen_a_running_gateway(tmp_path, procs):
 
 
 def test_config_shows_each_range_and_hard_limit():
-    r = run_cli("config")
+    r = run_cli_here("config")
     assert r.returncode == 0, r.stderr
     assert ("max_speed_mm_s = 100.0  # range [0.001, 250] mm/s; live, may only go lower at run time"
             in r.stdout)

@@ -22,7 +22,7 @@ from humanpt.runtime.recording import Recorder
 from humanpt.runtime.rigfile import load_rig, write_rig
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli_here
 
 SEAM_FILE = ROOT / "tests" / "seam" / "data" / "export-seam.json"
 VICTIM = b"the victim's own content\n"
@@ -99,7 +99,7 @@ def test_path_export_never_writes_through_out_tmp(tmp_path, fmt):
     out = d / ("seam.src" if fmt == "krl" else "seam.program.json")
     victims = _victims(tmp_path, out.name + ".tmp")
     _plant(d, victims)
-    r = run_cli("path", "export", str(SEAM_FILE), "--format", fmt, "-o", str(out))
+    r = run_cli_here("path", "export", str(SEAM_FILE), "--format", fmt, "-o", str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     _untouched(victims)
     _regular(out)
@@ -145,7 +145,7 @@ def test_path_smooth_and_val_never_write_through_a_link_at_their_output(tmp_path
     for verb, name in (("smooth", "s.csv"), ("val", "s.v2")):
         target = tmp_path / f"not-yet-{name}"  # dangling: created only by writing through
         (d / name).symlink_to(target)
-        r = run_cli("path", verb, str(src), str(d / name))
+        r = run_cli_here("path", verb, str(src), str(d / name))
         assert r.returncode == 0, r.stdout + r.stderr
         assert not target.exists(), f"path {verb} wrote through the link"
         _regular(d / name)

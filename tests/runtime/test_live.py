@@ -1,4 +1,6 @@
-"""Live, on loopback, in separate processes: a real router and components over Zenoh."""
+"""Live, on loopback, in separate processes: a real router and components over Zenoh. The
+tools (param, topics, echo, replay, runs merge) run in this process (``run_cli_here``): their
+process boundary is not what is checked, the components' is."""
 
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
 from tests.conftest import (
     free_port,
-    run_cli,
+    run_cli_here,
     wait_for,
     wait_matching,
     wait_port,
@@ -107,11 +109,11 @@ def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(rou
     with zenoh_client(port) as s:
         q, sub = _pongs(s)
         assert len(_collect(q, 3)) == 3
-        r = run_cli("param", "ponger", "prefix=PONG", "--config", str(cfg))
+        r = run_cli_here("param", "ponger", "prefix=PONG", "--config", str(cfg))
         assert r.returncode == 0, r.stderr
         assert '"prefix": "PONG"' in r.stdout
         # (KEY=VALUE after an option too, as ros2 param takes it)
-        r = run_cli("param", "pinger", "--config", str(cfg), "period_ms=-5")
+        r = run_cli_here("param", "pinger", "--config", str(cfg), "period_ms=-5")
         assert r.returncode == 1 and "REJECTED" in r.stdout and "period_ms: -5.0 is outside its range" in r.stdout
         while not q.empty():
             q.get()
@@ -121,7 +123,7 @@ def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(rou
         sub.undeclare()
     procs.stop(ponger)
     procs.stop(pinger)
-    r = run_cli("replay", str(run_dir))
+    r = run_cli_here("replay", str(run_dir))
     assert r.returncode == 0, r.stdout + r.stderr
     assert r.stdout.count("MATCH: every output is identical") == 2
     from humanpt.runtime.recording import read
@@ -132,7 +134,7 @@ def test_live_run_replays_to_identical_outputs_and_params_change_at_run_time(rou
 
 def test_param_for_an_absent_component_says_so(router):
     port, cfg = router
-    r = run_cli("param", "ponger", "--config", str(cfg), "--timeout", "1")
+    r = run_cli_here("param", "ponger", "--config", str(cfg), "--timeout", "1")
     assert r.returncode == 1 and "no component 'ponger' answered" in r.stderr
 
 
@@ -153,7 +155,7 @@ def test_up_runs_a_profile_and_merge_and_topics_work(procs, tmp_path):
     assert f"recording to {run_dir}/" in out
     assert {p.name for p in run_dir.glob("*.mcap")} == {"pinger.mcap", "ponger.mcap"}
     out = tmp_path / "merged.mcap"
-    r = run_cli("runs", "merge", str(run_dir), str(out))
+    r = run_cli_here("runs", "merge", str(run_dir), str(out))
     assert r.returncode == 0, r.stderr
     from mcap.reader import make_reader
 
@@ -162,12 +164,13 @@ def test_up_runs_a_profile_and_merge_and_topics_work(procs, tmp_path):
     assert topics == {"humanpt/test/pinger/ping", "humanpt/test/ponger/pong"}
 
 
+@pytest.mark.live  # (up in this process starts its children)
 def test_up_exits_non_zero_when_a_child_dies(tmp_path):
     port = free_port()
     cfg = write_config(tmp_path / "h.toml", port, extra="")
     cfg.write_text(cfg.read_text().replace("connect_timeout_s = 5.0", "connect_timeout_s = 0.5"))
-    r = run_cli("up", "--profile", "selftest", "--no-router", "--config", str(cfg), "--duration", "20",
-                "--run-dir", str(tmp_path / "run"), timeout=90)
+    r = run_cli_here("up", "--profile", "selftest", "--no-router", "--config", str(cfg), "--duration", "20",
+                     "--run-dir", str(tmp_path / "run"))  # (its children are processes)
     assert r.returncode == 1
     assert "stopped because a child died" in r.stderr
 
@@ -180,17 +183,17 @@ def test_topics_and_echo_show_live_traffic(router, procs, tmp_path):
         sub = s.declare_subscriber("humanpt/test/pinger/ping", lambda smp: pings.put(1))
         assert _collect(pings, 1), "the pinger never published"
         sub.undeclare()
-    r = run_cli("topics", "--config", str(cfg), "--duration", "1.5")
+    r = run_cli_here("topics", "--config", str(cfg), "--duration", "1.5")
     assert r.returncode == 0, r.stderr
     assert "components up: pinger" in r.stdout
     assert "humanpt/test/pinger/ping" in r.stdout and "humanpt.Tick" in r.stdout
-    r = run_cli("echo", "pinger/ping", "--config", str(cfg), "--count", "2", "--duration", "10")
+    r = run_cli_here("echo", "pinger/ping", "--config", str(cfg), "--count", "2", "--duration", "10")
     assert r.returncode == 0, r.stderr
     assert r.stdout.count("--- humanpt/test/pinger/ping (humanpt.Tick)") == 2
     assert "period_ns: 100000000" in r.stdout
     # Fields as CSV (ros2 topic echo --field, --csv): the header row, then one row per
     # message with its stamp; consecutive ticks of the pinger's 100 ms period.
-    r = run_cli("echo", "pinger/ping", "--config", str(cfg), "--count", "3", "--duration", "10",
+    r = run_cli_here("echo", "pinger/ping", "--config", str(cfg), "--count", "3", "--duration", "10",
                 "--field", "period_ns", "--field", "header.seq", "--csv")
     assert r.returncode == 0, r.stderr
     rows = list(csv.reader(io.StringIO(r.stdout)))

@@ -11,7 +11,7 @@ from humanpt.runtime.selftest import PingerConfig, PingerCore
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 from humanpt.twin.run import SystemConfig, run
-from tests.conftest import run_cli
+from tests.conftest import run_cli, run_cli_here
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def _channels(path):
 
 def test_a_lockstep_run_merges_with_local_outputs_apart(lockstep_run, tmp_path):
     out = tmp_path / "merged.mcap"
-    r = run_cli("runs", "merge", str(lockstep_run), str(out))
+    r = run_cli_here("runs", "merge", str(lockstep_run), str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     ch = _channels(out)
     # Each end of the ALTER line keeps its own serial bytes; the bus topics are there once.
@@ -48,7 +48,7 @@ def test_an_empty_and_a_foreign_file_do_not_refuse_the_run(lockstep_run, tmp_pat
     (run_dir / "empty.mcap").write_bytes(b"")
     (run_dir / "notes.mcap").write_text("not an MCAP file")
     out = tmp_path / "merged.mcap"
-    r = run_cli("runs", "merge", str(run_dir), str(out))
+    r = run_cli_here("runs", "merge", str(run_dir), str(out))
     assert r.returncode == 0, r.stdout + r.stderr
     assert "empty.mcap" in r.stderr and "notes.mcap" in r.stderr and "left out" in r.stderr
     assert _channels(out)["humanpt/cell0/robot_gateway/robot_state"] > 20

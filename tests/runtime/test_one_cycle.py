@@ -27,7 +27,7 @@ from humanpt.runtime.replay import build_core, fields_newer_than
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header, pose
 from humanpt.sim_robot.config import SimRobotConfig
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli_here
 from tests.robot_gateway.rig import Rig
 
 MS = 1_000_000
@@ -53,7 +53,7 @@ def test_only_the_link_config_has_a_cycle_period_ms():
 def test_config_check_of_a_12_ms_rsi_cell_without_sim_robot_is_ok_and_shows_the_one_cycle(tmp_path):
     path = tmp_path / "cell.toml"
     path.write_text(_toml(RSI_12))  # no [sim_robot], no [controller], no [pose_filter]
-    r = run_cli("config", "--config", str(path), "--check")
+    r = run_cli_here("config", "--config", str(path), "--check")
     assert r.returncode == 0, r.stderr
     assert f"{path}: OK" in r.stdout and "Traceback" not in r.stderr
     assert "cycle: 12 ms, the robot link's ([robot_gateway] link = 'rsi'" in r.stdout, r.stdout
@@ -82,7 +82,7 @@ def test_the_resolved_cell_gives_the_simulated_robot_the_links_cycle():
 def test_an_old_cycle_key_that_differs_from_the_link_is_an_error_naming_it(tmp_path, section, key):
     path = tmp_path / "old.toml"
     path.write_text(_toml({**RSI_12, section: {key: 28.0}}))
-    r = run_cli("config", "--config", str(path), "--check")
+    r = run_cli_here("config", "--config", str(path), "--check")
     assert r.returncode != 0 and "Traceback" not in r.stderr, r.stderr
     assert len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert f"{path}: [{section}] {key} = 28 differs from the link's cycle" in r.stderr, r.stderr
@@ -92,7 +92,7 @@ def test_an_old_cycle_key_that_differs_from_the_link_is_an_error_naming_it(tmp_p
 def test_an_old_controller_cycle_equal_to_the_links_is_a_deprecation_note(tmp_path):
     path = tmp_path / "old.toml"
     path.write_text(_toml({**RSI_12, "controller": {"cycle_period_ms": 12.0}, "pose_filter": {"predict_ahead_ms": 12}}))
-    r = run_cli("config", "--config", str(path), "--check")
+    r = run_cli_here("config", "--config", str(path), "--check")
     assert r.returncode == 0, r.stderr
     assert f"note: {path}: [controller] cycle_period_ms = 12 is deprecated and ignored" in r.stderr, r.stderr
     assert f"note: {path}: [pose_filter] predict_ahead_ms = 12 is deprecated and ignored" in r.stderr, r.stderr

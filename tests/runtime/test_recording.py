@@ -16,7 +16,7 @@ from humanpt.runtime.recording import IN, OUT, Recorder, RecordingError, read, r
 from humanpt.runtime.selftest import PongerConfig, PongerCore
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
-from tests.conftest import ROOT, run_cli
+from tests.conftest import ROOT, run_cli_here
 
 
 def _write(path, n, chunk_size=4096, close=True):
@@ -131,16 +131,16 @@ def test_schema_version_mismatch_is_named(tmp_path):
 
 
 def test_cli_replay_errors_are_clear(tmp_path):
-    r = run_cli("replay", str(tmp_path / "missing"))
+    r = run_cli_here("replay", str(tmp_path / "missing"))
     assert r.returncode == 2 and "no such run directory or file" in r.stderr
     (tmp_path / "run").mkdir()
-    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    r = run_cli_here("replay", str(tmp_path / "run"), "--component", "ponger")
     assert r.returncode == 2 and "no recording of component 'ponger'" in r.stderr
     (tmp_path / "run" / "ponger.mcap").write_text("not mcap")
-    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    r = run_cli_here("replay", str(tmp_path / "run"), "--component", "ponger")
     assert r.returncode == 2 and "not an MCAP file" in r.stderr
     (tmp_path / "run" / "ponger.mcap").write_bytes(b"")
-    r = run_cli("replay", str(tmp_path / "run"), "--component", "ponger")
+    r = run_cli_here("replay", str(tmp_path / "run"), "--component", "ponger")
     assert r.returncode == 2 and "not an MCAP file" in r.stderr and "MATCH" not in r.stdout
 
 
@@ -152,12 +152,12 @@ def test_cli_replay_never_says_match_on_nothing(tmp_path):
         w = Writer(f)
         w.start()
         w.finish()
-    r = run_cli("replay", str(foreign))
+    r = run_cli_here("replay", str(foreign))
     assert r.returncode == 2 and "not a humanpt recording" in r.stderr and "MATCH" not in r.stdout
 
     empty = tmp_path / "empty" / "ponger.mcap"
     Recorder(empty, {"component": "ponger", "core": "humanpt.runtime.selftest:PongerCore"}).close()
-    r = run_cli("replay", str(empty))
+    r = run_cli_here("replay", str(empty))
     assert r.returncode == 3, (r.stdout, r.stderr)
     assert "NOTHING COMPARED: the recording holds no inputs" in r.stdout and "MATCH:" not in r.stdout
 
@@ -171,7 +171,7 @@ def test_cli_replay_never_says_match_on_nothing(tmp_path):
     unreadable.parent.mkdir()
     unreadable.write_bytes(data[: first_chunk + 40])
     assert read(unreadable).entries == [] and read_metadata(unreadable)[0]["component"] == "ponger"
-    r = run_cli("replay", str(unreadable))
+    r = run_cli_here("replay", str(unreadable))
     assert r.returncode == 2, (r.stdout, r.stderr)
     assert "no message could be read" in r.stderr and "MATCH" not in r.stdout
 
@@ -181,7 +181,7 @@ def test_cli_replay_never_says_match_on_nothing(tmp_path):
     cut.write_bytes(data[: len(data) // 2])
     n_out = len(read(cut).outputs)
     assert 0 < n_out < 400
-    r = run_cli("replay", str(cut))
+    r = run_cli_here("replay", str(cut))
     # Not read in full: never a match (issue 29), however identical the part read is.
     assert r.returncode == 4, (r.stdout, r.stderr)
     assert f"{n_out} compared" in r.stdout and "could not be read in full" in r.stdout and "MATCH" not in r.stdout
@@ -191,7 +191,7 @@ def test_cli_replay_never_says_match_on_nothing(tmp_path):
     (tmp_path / "mixed").mkdir()
     (tmp_path / "mixed" / "a.mcap").write_bytes(data)
     (tmp_path / "mixed" / "b.mcap").write_bytes(unreadable.read_bytes())
-    r = run_cli("replay", str(tmp_path / "mixed"))
+    r = run_cli_here("replay", str(tmp_path / "mixed"))
     assert r.returncode == 2 and "MATCH: every output is identical (400 compared)" in r.stdout
     assert "b.mcap" in r.stderr and "no message could be read" in r.stderr
 

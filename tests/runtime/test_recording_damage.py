@@ -23,7 +23,7 @@ from mcap.writer import Writer
 
 from humanpt.runtime.recording import MAX_CHUNK_BYTES, iter_entries, read
 from humanpt.runtime.replay import EXIT_INCOMPLETE, EXIT_MATCH, EXIT_NOTHING_COMPARED, replay
-from tests.conftest import ROOT, run_cli, run_measured
+from tests.conftest import ROOT, run_cli_here, run_measured
 
 REAL = ROOT / "recordings" / "arc_rsi" / "robot_gateway.mcap"
 FOOTER_TAIL = 1 + 8 + 20 + 8
@@ -146,10 +146,10 @@ def test_damage_in_the_first_chunk_hides_only_that_chunk(tmp_path):
     res = replay(path)
     assert not res.match and res.exit_code == EXIT_NOTHING_COMPARED, res.report()
     assert res.messages_read == 13035 - first_n
-    r = run_cli("replay", str(path))
+    r = run_cli_here("replay", str(path))
     assert r.returncode == EXIT_NOTHING_COMPARED and "MATCH" not in r.stdout.replace("not a match", "")
     assert f"{13035 - first_n} messages read" in r.stdout and "Traceback" not in r.stderr
-    r = run_cli("runs", "info", str(path.parent))
+    r = run_cli_here("runs", "info", str(path.parent))
     assert r.returncode == 1 and f"damaged chunk at offset {off}" in r.stdout
     assert "robot_gateway/robot_state" in r.stdout
 
@@ -198,12 +198,12 @@ def test_replay_of_deeply_nested_recorded_metadata_is_one_line(tmp_path, where):
     meta[where] = "[" * 200_000 + "]" * 200_000
     path = tmp_path / "controller.mcap"
     _rewrite(real, path, meta)
-    r = run_cli("replay", str(path))
+    r = run_cli_here("replay", str(path))
     assert r.returncode == 2, r.stdout + r.stderr
     assert "Traceback" not in r.stderr and "RecursionError" not in r.stderr
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and str(path) in lines[0] and "nested too deeply" in lines[0], r.stderr
-    r = run_cli("runs", "info", str(tmp_path))
+    r = run_cli_here("runs", "info", str(tmp_path))
     assert "Traceback" not in r.stderr, r.stderr
 
 

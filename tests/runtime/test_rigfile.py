@@ -24,9 +24,9 @@ from humanpt.runtime.rigfile import (
     rig_to_toml,
     write_rig,
 )
-from tests.conftest import procs as procs  # noqa: F401 - fixtures
+from tests.conftest import procs as procs
 from tests.conftest import router as router  # noqa: F401
-from tests.conftest import run_cli, wait_for, write_config
+from tests.conftest import run_cli, run_cli_here, wait_for, write_config  # noqa: F401 - fixtures
 
 # A rig that is not the nominal one in every part.
 CALIBRATED = Rig(
@@ -121,28 +121,28 @@ def test_config_check_fails_on_a_bad_rig_naming_the_field(tmp_path):
     write_rig(tmp_path / "rig.toml", Rig())
     cfg = tmp_path / "humanpt.toml"
     cfg.write_text('[runtime]\nrig = "rig.toml"\n')  # relative to the config file
-    r = run_cli("config", "--check", "--config", str(cfg), cwd="/")
+    r = run_cli_here("config", "--check", "--config", str(cfg), cwd="/")
     assert r.returncode == 0 and "rig" in r.stdout, r.stdout + r.stderr
     (tmp_path / "rig.toml").write_text((tmp_path / "rig.toml").read_text().replace("baseline_mm = 90.0",
                                                                                    "baseline_mm = -90.0"))
-    r = run_cli("config", "--check", "--config", str(cfg))
+    r = run_cli_here("config", "--check", "--config", str(cfg))
     assert r.returncode == 2 and "baseline_mm" in r.stderr and "rig.toml" in r.stderr, r.stdout + r.stderr
     cfg.write_text('[runtime]\nrig = "nowhere.toml"\n')
-    r = run_cli("config", "--check", "--config", str(cfg))
+    r = run_cli_here("config", "--check", "--config", str(cfg))
     assert r.returncode == 2 and "no such rig file" in r.stderr, r.stderr
 
 
 def test_rig_cli_init_check_diff(tmp_path):
     a, b = tmp_path / "a.toml", tmp_path / "b.toml"
-    assert run_cli("rig", "init", str(a)).returncode == 0
-    r = run_cli("rig", "init", str(a))
+    assert run_cli_here("rig", "init", str(a)).returncode == 0
+    r = run_cli_here("rig", "init", str(a))
     assert r.returncode == 2 and "exists" in r.stderr
     write_rig(b, CALIBRATED)
-    r = run_cli("rig", "check", str(b))
+    r = run_cli_here("rig", "check", str(b))
     assert r.returncode == 0 and "1003.5" in r.stdout and "ax=yb" in r.stdout, r.stdout
-    r = run_cli("rig", "diff", str(a), str(b))
+    r = run_cli_here("rig", "diff", str(a), str(b))
     assert r.returncode == 1 and "psvs.a_u: 1000.0 -> 1003.5" in r.stdout, r.stdout
-    assert run_cli("rig", "diff", str(a), str(a)).returncode == 0
+    assert run_cli_here("rig", "diff", str(a), str(a)).returncode == 0
 
 
 # -- one place ------------------------------------------------------------------------------
@@ -229,7 +229,7 @@ def test_live_components_serve_their_rig_and_rig_show_finds_a_mismatch(router, p
 
     def served():
         nonlocal r
-        r = run_cli("rig", "show", "--config", str(a), "--json")
+        r = run_cli_here("rig", "show", "--config", str(a), "--json")
         return r.returncode == 0
 
     wait_for(served, 30, "perception serving its rig")
@@ -240,7 +240,7 @@ def test_live_components_serve_their_rig_and_rig_show_finds_a_mismatch(router, p
 
     def mismatch():
         nonlocal r
-        r = run_cli("rig", "show", "--config", str(a))
+        r = run_cli_here("rig", "show", "--config", str(a))
         return "ANOTHER rig" in r.stdout
 
     wait_for(mismatch, 30, "rig show seeing two rigs")

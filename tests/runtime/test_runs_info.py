@@ -10,7 +10,7 @@ import queue
 
 from humanpt.runtime.runinfo import run_info
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import run_cli, wait_for, wait_matching, zenoh_client
+from tests.conftest import run_cli_here, wait_for, wait_matching, zenoh_client
 
 
 def test_runs_info_reports_the_messages_a_subscriber_missed(router, procs, tmp_path):
@@ -32,14 +32,14 @@ def test_runs_info_reports_the_messages_a_subscriber_missed(router, procs, tmp_p
     (info,) = run_info(run_dir)
     pings = info.topics[("in", "pinger/ping")]
     assert (pings.count, pings.missing, pings.gaps, pings.largest_gap, pings.restarts) == (25, 10, 1, 10, 1)
-    r = run_cli("runs", "info", str(run_dir))
+    r = run_cli_here("runs", "info", str(run_dir))
     assert r.returncode == 1, r.stdout + r.stderr
     assert "MISSED 10 in 1 gap(s), largest 10" in r.stdout and "publisher restarted 1x" in r.stdout
     assert "inputs missed: 10" in r.stdout
 
 
 def test_runs_info_of_a_complete_run_says_nothing_was_missed():
-    r = run_cli("runs", "info", "recordings/static")
+    r = run_cli_here("runs", "info", "recordings/static")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "inputs missed: 0" in r.stdout and "component pose_filter" in r.stdout
     assert "recordings with write losses: 0" in r.stdout
@@ -54,6 +54,6 @@ def test_runs_info_reports_write_losses(tmp_path):
     shutil.copytree("recordings/static", run_dir)
     (run_dir / "perception.losses.json").write_text(json.dumps(
         {"component": "perception", "lost": 7, "outages": [{"error": "[Errno 28] No space left on device"}]}))
-    r = run_cli("runs", "info", str(run_dir))
+    r = run_cli_here("runs", "info", str(run_dir))
     assert r.returncode == 1, r.stdout + r.stderr
     assert "RECORDING LOST 7 messages of perception in 1 write outage(s)" in r.stdout

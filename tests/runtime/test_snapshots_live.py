@@ -12,15 +12,14 @@ import pytest
 from humanpt.runtime.recording import IN, read
 from humanpt.runtime.replay import replay
 from humanpt.schemas import humanpt_pb2 as pb
-from tests.conftest import free_port, run_cli, wait_port, write_config, zenoh_client
+from tests.conftest import run_cli_here, write_config, zenoh_client
 
 pytestmark = pytest.mark.timeout(180)
 
 
-def test_live_shells_record_snapshots_and_replay_starts_from_one(procs, tmp_path):
-    port = free_port()
-    cfg = write_config(tmp_path / "humanpt.toml", port, extra="[record]\nsnapshot_period_s = 0.3\n")
-    wait_port(port, proc=procs.start("router", "--config", str(cfg)))
+def test_live_shells_record_snapshots_and_replay_starts_from_one(router, procs, tmp_path):
+    port, _ = router
+    cfg = write_config(tmp_path / "snap.toml", port, extra="[record]\nsnapshot_period_s = 0.3\n")
     run_dir = tmp_path / "run"
     pongs: queue.Queue = queue.Queue()
     with zenoh_client(port) as s:
@@ -46,6 +45,6 @@ def test_live_shells_record_snapshots_and_replay_starts_from_one(procs, tmp_path
         assert res.match and "from the snapshot at t_ns=" in res.report(), res.report()
         assert res.inputs < len(rec.inputs) / 2
     # The CLI too, on the whole run.
-    out = run_cli("replay", str(run_dir), "--last", "0.5")
+    out = run_cli_here("replay", str(run_dir), "--last", "0.5")
     assert out.returncode == 0, out.stdout + out.stderr
     assert out.stdout.count("from the snapshot at t_ns=") == 2 and out.stdout.count("MATCH") == 2

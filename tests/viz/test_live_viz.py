@@ -102,16 +102,14 @@ def _publish_some(session, n: int = 20) -> int:
     return 4 * n + 1
 
 
-def test_live_viz_saves_what_it_receives_and_replays(procs, tmp_path):
-    port = free_port()
+def test_live_viz_saves_what_it_receives_and_replays(router, procs, tmp_path):
+    port, _ = router
     rrd = tmp_path / "live.rrd"
     cfg = write_config(
         tmp_path / "humanpt.toml",
         port,
         extra=f'[viz]\nmode = "save"\nrrd_path = "{rrd}"\nimage_every = 2\n',
     )
-    procs.start("router", "--config", str(cfg))
-    wait_port(port)
     run_dir = tmp_path / "run"
     viz = procs.start("viz", "--config", str(cfg), "--run-dir", str(run_dir))
     with zenoh_client(port) as s:
@@ -135,15 +133,13 @@ def test_live_viz_saves_what_it_receives_and_replays(procs, tmp_path):
     assert res.match and res.recorded_outputs >= 45, res.report()
 
 
-def test_live_viz_serves_over_grpc_headless(procs, tmp_path):
-    port, grpc = free_port(), free_port()
+def test_live_viz_serves_over_grpc_headless(router, procs, tmp_path):
+    (port, _), grpc = router, free_port()
     cfg = write_config(
         tmp_path / "humanpt.toml",
         port,
         extra=f'[viz]\nmode = "serve"\ngrpc_port = {grpc}\nbind_ip = "127.0.0.1"\n',
     )
-    procs.start("router", "--config", str(cfg))
-    wait_port(port)
     viz = procs.start("viz", "--config", str(cfg), "--run-dir", str(tmp_path / "run"))
     # The rerun gRPC server listens for viewers: wait for what is needed, the port accepting.
     wait_port(grpc, timeout=40.0)
