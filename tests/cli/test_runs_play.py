@@ -14,7 +14,7 @@ from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
-from tests.conftest import ROOT, run_cli_here, wait_for
+from tests.conftest import ROOT, run_cli, run_cli_here, wait_for
 
 SCHEMAS = ROOT / "schemas"
 
@@ -92,7 +92,8 @@ def test_play_is_seen_by_echo_console_and_a_plain_zenoh_client(run_dir, router, 
         # echo and console, while it plays (--loop)
         r = run_cli_here("echo", "controller/status", "-n", "3", "--config", str(cfg), "--duration", "60")
         assert r.returncode == 0 and r.stdout.count("--- humanpt/test/controller/status (humanpt.ControllerStatus)") == 3, r.stdout + r.stderr
-        r = run_cli_here("console", "status", "--config", str(cfg), "--timeout", "10")
+        # (a process: the console prints through a stream bound when its module was imported)
+        r = run_cli("console", "status", "--config", str(cfg), "--timeout", "10", timeout=30)
         assert r.returncode == 0 and "controller  mode" in r.stdout and "robot       cycle" in r.stdout, r.stdout + r.stderr
         sub.undeclare()
     out = procs.stop(play)  # SIGTERM: a clean stop

@@ -33,7 +33,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
 from humanpt.seam import seamfile
 from humanpt.seam.fit import FitConfig, Seam, Segment
-from tests.conftest import run_cli_here, wait_for, write_config, zenoh_client
+from tests.conftest import run_cli, wait_for, write_config, zenoh_client
 
 LENGTH_MM = 40.0
 CROSS_MM, COVER_MM, END_MM, ANGLE_DEG = 0.5, 0.5, 0.2, 0.2
@@ -90,7 +90,8 @@ def test_a_saved_path_played_by_the_live_cell_is_followed_by_the_robot(router, p
         seamfile.write(seam_file, Seam((Segment("line", 0, 5, tuple(start), tuple(end), ypr, ypr, 0.0, 0.0, 6),),
                                        (), (), (), 0.0, FitConfig(), 6))
         t_play = len(truth)  # from here on the tool stands at the start, plays, stands at the end
-        r = run_cli_here("path", "play", str(seam_file), "--config", str(cfg), "--timeout", "30")
+        # (a process: the console prints through a stream bound when its module was imported)
+        r = run_cli("path", "play", str(seam_file), "--config", str(cfg), "--timeout", "30", timeout=90)
         assert r.returncode == 0 and "playback_started" in r.stdout, r.stdout + r.stderr
         wait_for(lambda: seen("playback_done"), 120.0, "the controller's playback_done")
         done_at = len(truth)
