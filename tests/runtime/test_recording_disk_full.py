@@ -228,4 +228,8 @@ def test_the_gateway_keeps_the_robot_link_on_a_full_disk(small_disk, router, pro
     assert gateway.returncode == 0 and "LOST" in out, out
     losses = json.loads((run / "robot_gateway.losses.json").read_text())
     assert losses["lost"] > 0 and losses["lost_by_topic"]["in"]["serial_rx"] > 0, losses
-    assert losses["segments"] == ["robot_gateway.mcap", "robot_gateway.1.mcap"], losses
+    # Resumed in a new segment; when the disk filled before the first segment's first chunk
+    # (a gateway slow to start on a loaded machine), that segment kept nothing and is gone, and
+    # the new one takes its name (seen in a full-suite run at two workers).
+    assert losses["outages"] and losses["segments"][-1] == losses["outages"][-1]["resumed_in"], losses
+    assert losses["segments"] in (["robot_gateway.mcap", "robot_gateway.1.mcap"], ["robot_gateway.mcap"]), losses
