@@ -751,17 +751,17 @@ class Renderer:
 
     def stereo_pair(self) -> tuple[Renderer, Renderer]:
         """An ordinary stereo pair's two renderers (left, right): the PSVS's virtual
-        cameras apart, each sees only its own view at full brightness (no beam splitter, so
-        no ghost), each its own sensor noise (seeds 2 seed + 1 and 2 seed + 2). Their images
-        side by side are what ``SimCameraConfig.stereo`` renders. Built once."""
+        cameras apart, each sees only its own view, as bright as in the PSVS (the same
+        exposure: at full brightness, twice the PSVS's, the sources saturate and their
+        centroids shift by hundredths of a pixel), no ghost (no beam splitter), each its own
+        sensor noise (seeds 2 seed + 1 and 2 seed + 2). Their images side by side are what
+        ``SimCameraConfig.stereo`` renders. Built once."""
         pair = getattr(self, "_pair", None)
         if pair is None:
             c = self.config
             pair = self._pair = (
-                Renderer(dataclasses.replace(c, view_gain_right=0.0, view_gain_left=1.0, ghost_gain=0.0,
-                                             seed=2 * c.seed + 1)),
-                Renderer(dataclasses.replace(c, view_gain_right=1.0, view_gain_left=0.0, ghost_gain=0.0,
-                                             seed=2 * c.seed + 2)))
+                Renderer(dataclasses.replace(c, view_gain_right=0.0, ghost_gain=0.0, seed=2 * c.seed + 1)),
+                Renderer(dataclasses.replace(c, view_gain_left=0.0, ghost_gain=0.0, seed=2 * c.seed + 2)))
         return pair
 
     def covered(self, fraction: Sequence[float], angle_rad: Sequence[float]) -> Renderer:
