@@ -93,14 +93,24 @@ def wait_matching(publisher, timeout: float = 60.0) -> None:
 
 
 class Procs:
-    """Child processes that are stopped (TERM, then KILL) at the end of a test."""
+    """Child processes that are stopped (TERM, then KILL) at the end of a test. A child's
+    output (stdout and stderr) goes to a file that :meth:`stop` returns: a pipe nobody reads
+    until the end blocks a chatty child once it holds 64 KiB (seen: a router writing a line per
+    refused put under a flood stopped routing). ``live=True``: a pipe, for a test that reads
+    ``p.stdout`` as the child runs."""
 
     def __init__(self):
         self.procs: list[subprocess.Popen] = []
+        self._out: dict[int, object] = {}
 
-    def start(self, *args: str, **kw) -> subprocess.Popen:
-        p = subprocess.Popen(humanpt_cmd(*args), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    def start(self, *args: str, live: bool = False, **kw) -> subprocess.Popen:
+        import tempfile
+
+        out = subprocess.PIPE if live else tempfile.TemporaryFile("w+", encoding="utf-8", errors="replace")
+        p = subprocess.Popen(humanpt_cmd(*args), stdout=out, stderr=subprocess.STDOUT, text=True,
                              cwd=kw.pop("cwd", ROOT), **kw)
+        if not live:
+            self._out[p.pid] = out
         self.procs.append(p)
         return p
 
@@ -112,6 +122,11 @@ class Procs:
         except subprocess.TimeoutExpired:
             p.kill()
             out, _ = p.communicate()
+        f = self._out.pop(p.pid, None)
+        if f is not None:
+            f.seek(0)
+            out = f.read()
+            f.close()
         return out or ""
 
     def stop_all(self):

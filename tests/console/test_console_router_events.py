@@ -40,7 +40,7 @@ def secure_cell(tmp_path, procs):
 def test_console_events_shows_the_routers_refusals(secure_cell, procs):
     cfg, router = secure_cell
     rt = load(cfg).runtime
-    con = procs.start("console", "--config", str(cfg), "--as", "tool", "events", "--duration", "30")
+    con = procs.start("console", "--config", str(cfg), "--as", "tool", "events", "--duration", "30", live=True)
     command = topics.TOPICS["controller/command"].key("test")
     with zenoh.open(zenoh_config(rt, identity="perception")) as rogue, \
             zenoh.open(zenoh_config(rt, identity="robot_gateway")) as gw:
