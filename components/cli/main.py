@@ -522,8 +522,9 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                        description="The rig is everything perception, the pose filter, the controller and viz "
                        "believe about the hardware: camera intrinsics and distortion, the PSVS (each virtual "
                        "camera's principal point and rotation, baseline, m, l), the hand-eye transform "
-                       "flange_T_camera, the target's triangle and the driver tip, each with how it was obtained "
-                       "(method, date, 1-sigma). One versioned TOML file named by [runtime] rig; the nominal "
+                       "flange_T_camera, the target's triangle, the driver tip, the camera-to-robot time offset "
+                       "and, for kind = \"stereo\", an ordinary stereo pair ([stereo]: each camera and their "
+                       "pose), each with how it was obtained (method, date, 1-sigma). One versioned TOML file named by [runtime] rig; the nominal "
                        "design values when none is named. Every recording keeps the rig it ran with.")
     rsub = p.add_subparsers(dest="rig_verb", metavar="ACTION")
     q = rsub.add_parser("init", help="write the nominal rig (design values) to FILE")
