@@ -4,11 +4,12 @@ then the correspondence across the two images and OpenCV's triangulation, in the
 camera's frame, then put in the rig's camera frame (``[stereo] camera_T_right_x``;
 identity for a calibrated pair, whose camera frame is the right camera's).
 
-Correspondence: every choice of three blobs in each image and every pairing of them (at
-most ``max_blobs``: C(n, 3)^2 x 6 candidates) is triangulated (``cv2.triangulatePoints``
-on undistorted, normalised coordinates: each camera's own intrinsics and distortion), and
-scored by its reprojection error (px, both images) and by its triangle's sides against the
-target model; the best candidate within ``epipolar_tol_px`` and the model's side tolerance,
+Correspondence: every (left, right) pair of blobs is triangulated at once
+(``cv2.triangulatePoints`` on undistorted, normalised coordinates: each camera's own
+intrinsics and distortion); the pairs that reproject within ``epipolar_tol_px`` in both
+images at a working depth (the best ``MAX_PAIRS``) form trios of disjoint pairs, scored by
+their reprojection error and their triangle's sides against the target model; the best
+candidate within the model's side tolerance,
 between ``min_depth_mm`` and ``max_depth_mm``, is named A, B, C (Section 4 steps 6-7:
 :func:`humanpt.geometry.target.estimate_camera_T_tob`, viewed from the right camera's
 centre). Pure: images in, a :class:`StereoMeasurement` out.
@@ -34,6 +35,8 @@ from .image import mask_array
 from .weighted import detect_weighted
 
 __all__ = ["StereoMeasurement", "StereoPerception"]
+
+MAX_PAIRS = 12  # the best-reprojecting blob pairs whose trios are tried (C(12, 3) = 220 at most)
 
 # The live component takes a pair as ONE image, the left camera's pixels then the right's,
 # side by side (what a side-by-side stereo device gives, and what the camera component
@@ -141,32 +144,35 @@ class StereoPerception:
             return StereoMeasurement("lost", f"{len(left)} blobs in the left image, {len(right)} in the right: "
                                              "three in each needed")
         c, s = self.config, self.stereo
+        # Every (left, right) blob pair triangulated at once; only the pairs that reproject
+        # within the tolerance at a working depth go on (a few per source: the cost follows
+        # them, not C(n, 3)^2 choices of blobs in a cluttered image).
+        li_all, ri_all = (a.ravel() for a in np.meshgrid(np.arange(len(left)), np.arange(len(right)), indexing="ij"))
         n_l, n_r = _normalised(s.left, left.uv_px), _normalised(s.right, right.uv_px)
-        p_right = np.hstack([np.eye(3), np.zeros((3, 1))])
-        p_left = self.left_T_right[:3, :]
+        x = cv2.triangulatePoints(self.left_T_right[:3, :], np.hstack([np.eye(3), np.zeros((3, 1))]),
+                                  n_l[li_all].T, n_r[ri_all].T)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            p_all = (x[:3] / x[3]).T  # right camera frame, mm
+        ok = np.all(np.isfinite(p_all), axis=1) & (p_all[:, 2] >= c.min_depth_mm) & (p_all[:, 2] <= c.max_depth_mm)
+        li_all, ri_all, p_all = li_all[ok], ri_all[ok], p_all[ok]
+        err = np.hypot(*(_project(s.right, np.eye(4), p_all) - right.uv_px[ri_all]).T) if len(p_all) else np.zeros(0)
+        err_l = np.hypot(*(_project(s.left, self.left_T_right, p_all) - left.uv_px[li_all]).T) if len(p_all) else err
+        keep = np.flatnonzero(np.maximum(err, err_l) <= c.epipolar_tol_px)
+        keep = keep[np.argsort(err[keep] ** 2 + err_l[keep] ** 2, kind="stable")][:MAX_PAIRS]
         best = None
-        for li in itertools.combinations(range(len(left)), 3):
-            for ri in itertools.permutations(range(len(right)), 3):
-                x = cv2.triangulatePoints(p_left, p_right, n_l[list(li)].T, n_r[list(ri)].T)
-                if np.any(np.abs(x[3]) < 1e-12):
-                    continue
-                p_mm = (x[:3] / x[3]).T  # right camera frame
-                z = p_mm[:, 2]
-                if np.any(z < c.min_depth_mm) or np.any(z > c.max_depth_mm):
-                    continue
-                err_r = _project(s.right, np.eye(4), p_mm) - right.uv_px[list(ri)]
-                err_l = _project(s.left, self.left_T_right, p_mm) - left.uv_px[list(li)]
-                worst = float(np.max(np.hypot(*np.vstack([err_r, err_l]).T)))
-                if worst > c.epipolar_tol_px:
-                    continue
-                sides = np.linalg.norm(p_mm - p_mm[[1, 2, 0]], axis=1)
-                side_err = float(np.max(np.abs(np.sort(sides) - self.model_sides_mm)))
-                if side_err > self.model.side_tolerance_mm:
-                    continue
-                rms = float(np.sqrt(np.mean(np.concatenate([err_r, err_l]) ** 2)))
-                score = rms / c.epipolar_sigma_px + side_err / c.side_sigma_mm
-                if best is None or score < best[0]:
-                    best = (score, li, ri, p_mm, rms)
+        for trio in itertools.combinations(keep, 3):
+            li, ri = tuple(int(li_all[k]) for k in trio), tuple(int(ri_all[k]) for k in trio)
+            if len(set(li)) < 3 or len(set(ri)) < 3:  # a blob in two pairs
+                continue
+            p_mm = p_all[list(trio)]
+            sides = np.linalg.norm(p_mm - p_mm[[1, 2, 0]], axis=1)
+            side_err = float(np.max(np.abs(np.sort(sides) - self.model_sides_mm)))
+            if side_err > self.model.side_tolerance_mm:
+                continue
+            rms = float(np.sqrt(np.mean(np.concatenate([err[list(trio)], err_l[list(trio)]]) ** 2 / 2.0)))
+            score = rms / c.epipolar_sigma_px + side_err / c.side_sigma_mm
+            if best is None or score < best[0]:
+                best = (score, li, ri, p_mm, rms)
         if best is None:
             return StereoMeasurement("lost", "no three blobs pair into the target's triangle at a working depth")
         _, li, ri, p_mm, rms = best

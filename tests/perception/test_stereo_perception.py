@@ -94,3 +94,19 @@ def test_the_component_measures_a_side_by_side_pair_and_publishes_it_as_the_psvs
     codes = [msg.code for topic, msg in outs if topic == "perception/events"]
     (lost_m,) = [msg for topic, msg in outs if topic == "perception/tob"]
     assert "wrong_size" in codes and lost_m.status == pb.TOB_STATUS_LOST
+
+
+def test_clutter_does_not_blow_up_the_correspondence():
+    # 15 extra bright spots in each image (24 blobs would once mean 2024 x 12144 trios): the
+    # target is still found, and the pairs tried are bounded (MAX_PAIRS)
+    truth = make_transform(np.eye(3), np.array([10.0, -5.0, 600.0]))
+    left, right = _pair(truth)
+    rng = np.random.default_rng(3)
+    v, u = np.mgrid[0:480, 0:640]
+    for img in (left, right):
+        for uc, vc in zip(rng.uniform(20, 620, 15), rng.uniform(20, 120, 15), strict=True):  # above the target
+            img[:] = np.maximum(img, np.clip(180 * np.exp(-((u - uc) ** 2 + (v - vc) ** 2) / 8.0), 0, 255)
+                                .astype(np.uint8))
+    m = StereoPerception(PerceptionConfig(), RIG).measure(left, right)
+    assert m.status == "full", m.why
+    assert np.linalg.norm(m.camera_T_tob_mm[:3, 3] - truth[:3, 3]) < 0.5
