@@ -45,21 +45,17 @@ from typing import Literal
 
 import numpy as np
 
-TWO_PI = 2.0 * np.pi
+from humanpt.geometry.arm import TWO_PI, ArmKinematics, DhLink, UnreachableError, dh_transform
+from humanpt.geometry.arm import wrap as _wrap
+
+__all__ = ["DhLink", "GEOMETRY", "HOME_JOINTS_DEG", "IkSolution", "PUMA_JOINT_LIMITS_DEG", "PumaGeometry",
+           "PumaKinematics", "PumaModel", "RobotModelConfig", "TWO_PI", "TrueArm", "UnreachableError",
+           "dh_transform", "follow", "perturbed_geometry", "wrist_sin"]
 
 
 class PumaModel(StrEnum):
     PUMA_762 = "puma762"  # the 761/762 family (the paper's Puma 761)
     PUMA_560 = "puma560"
-
-
-@dataclass(frozen=True)
-class DhLink:
-    """One row of a standard DH table (mm, rad)."""
-
-    alpha_rad: float
-    a_mm: float
-    d_mm: float
 
 
 @dataclass(frozen=True)
@@ -107,10 +103,6 @@ PUMA_JOINT_LIMITS_DEG: tuple[tuple[float, float], ...] = (
     (-100.0, 100.0),
     (-266.0, 266.0),
 )
-
-
-class UnreachableError(ValueError):
-    """No inverse-kinematics solution (out of reach, or none within the joint limits)."""
 
 
 @dataclass(frozen=True)
@@ -163,28 +155,8 @@ class IkSolution:
         return (self.arm, self.elbow, self.wrist)
 
 
-def dh_transform(link: DhLink, theta_rad: float) -> np.ndarray:
-    """(4, 4) A_i = Rz(theta) Tz(d) Tx(a) Rx(alpha)."""
-    ct, st = np.cos(theta_rad), np.sin(theta_rad)
-    ca, sa = np.cos(link.alpha_rad), np.sin(link.alpha_rad)
-    return np.array(
-        [
-            [ct, -st * ca, st * sa, link.a_mm * ct],
-            [st, ct * ca, -ct * sa, link.a_mm * st],
-            [0.0, sa, ca, link.d_mm],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    )
-
-
 _EYE3 = np.eye(3)
 _EYE3.flags.writeable = False
-
-
-def _wrap(angle: float) -> float:
-    """Angle in (-pi, pi]."""
-    a = (angle + np.pi) % TWO_PI - np.pi
-    return np.pi if a == -np.pi else a
 
 
 def _sum_sq(q: list[float], ref: list[float], start: float) -> float:
@@ -211,8 +183,11 @@ def _near(sq: float) -> float:
 # for bit against the plain per-branch numpy formulation.
 
 
-class PumaKinematics:
-    """Forward and inverse kinematics of one Puma model."""
+class PumaKinematics(ArmKinematics):
+    """Forward and inverse kinematics of one Puma model: the arm core's forward, Jacobian,
+    limits and singularity measure (:class:`humanpt.geometry.arm.ArmKinematics`) with the
+    Puma's own analytic inverse (its branches named as VAL names them, its arithmetic kept
+    bit for bit: the golden recordings depend on it)."""
 
     # Below this |sin q5| the wrist is singular: only q4 + q6 (or q6 - q4) is defined.
     WRIST_SINGULAR_SIN = 1e-10
@@ -222,98 +197,20 @@ class PumaKinematics:
     def __init__(self, config: RobotModelConfig | None = None) -> None:
         self.config = config or RobotModelConfig()
         self.geometry = self.config.geometry
-        self.dh = self.geometry.dh()
-        self.limits_rad = self.config.joint_limits_rad
+        super().__init__(self.geometry.dh(), self.config.joint_limits_rad)
         # Per-model constants of the hot paths (each the value the formula would compute).
         g = self.geometry
-        self._limits = tuple((float(lo), float(hi)) for lo, hi in self.limits_rad)
-        self._links = tuple(
-            (float(np.cos(link.alpha_rad)), float(np.sin(link.alpha_rad)), link.a_mm, link.d_mm)
-            for link in self.dh
-        )
         L3 = np.hypot(g.a3_mm, g.d4_mm)
         self._L3 = float(L3)  # elbow -> wrist centre
         self._phi = float(np.arctan2(g.d4_mm, g.a3_mm))
         self._a2_sq, self._L3_sq = g.a2_mm**2, float(L3**2)
         self._cos_den = float(2.0 * g.a2_mm * L3)  # law of cosines at the elbow
 
-    # --- forward -------------------------------------------------------------------------
-
-    def _link_matrices(self, q: list[float]) -> list[list[list[float]]]:
-        """dh_transform of links 1..6 at q (floats), as nested lists."""
-        mats = []
-        for (ca, sa, a, d), theta in zip(self._links, q, strict=True):
-            ct, st = math.cos(theta), math.sin(theta)
-            mats.append(
-                [
-                    [ct, -st * ca, st * sa, a * ct],
-                    [st, ct * ca, -ct * sa, a * st],
-                    [0.0, sa, ca, d],
-                    [0.0, 0.0, 0.0, 1.0],
-                ]
-            )
-        return mats
-
     def _rotation(self, i: int, theta: float) -> list[list[float]]:
         """The rotation part of link i's dh_transform at theta."""
         ca, sa, _, _ = self._links[i]
         ct, st = math.cos(theta), math.sin(theta)
         return [[ct, -st * ca, st * sa], [st, ct * ca, -ct * sa], [0.0, sa, ca]]
-
-    def link_transforms(self, q_rad: np.ndarray) -> np.ndarray:
-        """(7, 4, 4) base_T_link_i for i = 0..6 (i = 0 is the identity, 6 the flange)."""
-        A = np.array(self._link_matrices(self._check_q(q_rad).tolist()))
-        out = np.empty((7, 4, 4))
-        out[0] = np.eye(4)
-        for i in range(6):
-            out[i + 1] = out[i] @ A[i]
-        return out
-
-    def forward(self, q_rad: np.ndarray) -> np.ndarray:
-        """(4, 4) base_T_flange for joint angles q_rad (6,), translation in mm."""
-        T = np.eye(4)
-        for A in np.array(self._link_matrices(self._check_q(q_rad).tolist())):
-            T = T @ A
-        return T
-
-    def jacobian(self, q_rad: np.ndarray) -> np.ndarray:
-        """(6, 6) geometric Jacobian in the base frame: rows vx, vy, vz [mm/rad] of the
-        flange origin, then wx, wy, wz [rad/rad]; column j is joint j."""
-        T = self.link_transforms(q_rad)
-        p_e = T[6, :3, 3]
-        J = np.empty((6, 6))
-        for j in range(6):
-            z = T[j, :3, 2]
-            J[:3, j] = np.cross(z, p_e - T[j, :3, 3])
-            J[3:, j] = z
-        return J
-
-    # --- limits --------------------------------------------------------------------------
-
-    def within_limits(self, q_rad: np.ndarray, tol_rad: float = 1e-9) -> bool:
-        q = self._check_q(q_rad)
-        lo, hi = self.limits_rad[:, 0], self.limits_rad[:, 1]
-        return bool(np.all(q >= lo - tol_rad) and np.all(q <= hi + tol_rad))
-
-    def _fit_limits(
-        self, q: list[float], q_ref: list[float], first: int = 0, tol_rad: float = 1e-9
-    ) -> list[float] | None:
-        """Per joint (joints first, first + 1, ... of q's length), the 2*pi-equivalent of
-        q within the limits closest to q_ref (the first of equally close ones; None if
-        some joint has none). Why: joints 4 and 6 turn more than a full circle."""
-        out = []
-        for (lo, hi), v, ref in zip(self._limits[first:], q, q_ref[first:], strict=False):
-            k_lo = math.ceil((lo - tol_rad - v) / TWO_PI)
-            k_hi = math.floor((hi + tol_rad - v) / TWO_PI)
-            if k_lo > k_hi:
-                return None
-            best = v + TWO_PI * k_lo
-            for k in range(k_lo + 1, k_hi + 1):
-                candidate = v + TWO_PI * k
-                if abs(candidate - ref) < abs(best - ref):
-                    best = candidate
-            out.append(best)
-        return out
 
     # --- inverse -------------------------------------------------------------------------
 
@@ -492,21 +389,6 @@ class PumaKinematics:
         side = 1.0 if x2 >= 0 else -1.0
         return "above" if cross * side > 0 else "below"
 
-    @staticmethod
-    def _check_q(q_rad: np.ndarray) -> np.ndarray:
-        q = np.asarray(q_rad, dtype=float)
-        if q.shape != (6,) or not np.isfinite(q).all():
-            raise ValueError(f"joint angles must be a finite (6,) array, got {q_rad!r}")
-        return q
-
-    @staticmethod
-    def _check_T(base_T_flange: np.ndarray) -> np.ndarray:
-        T = np.asarray(base_T_flange, dtype=float)
-        if T.shape != (4, 4) or not np.isfinite(T).all():
-            raise ValueError(f"base_T_flange must be a finite 4x4 array, got shape {T.shape}")
-        return T
-
-
 # --------------------------------------------------------------------------- the true arm
 
 
@@ -522,14 +404,18 @@ def perturbed_geometry(geometry: PumaGeometry, length_errors_mm) -> PumaGeometry
 
 
 class TrueArm:
-    """Forward kinematics of the physical arm that a nominal :class:`PumaKinematics` only
-    approximates: DH lengths ``geometry`` (mm) and a zero offset per joint
-    (``joint_offsets_rad`` (6,): the true DH angle is the encoder's angle plus the offset).
+    """Forward kinematics of the physical arm that a nominal model (:class:`PumaKinematics`,
+    any :class:`~humanpt.geometry.arm.ArmKinematics`) only approximates: DH lengths
+    ``geometry`` (mm: a :class:`PumaGeometry`, or any arm's six :class:`DhLink` rows) and a
+    zero offset per joint (``joint_offsets_rad`` (6,): the true DH angle is the encoder's
+    angle plus the offset, plus the table's own ``theta_offsets_rad`` where it has them).
     ``forward(q)`` is where the flange really is when the encoders read ``q``."""
 
-    def __init__(self, geometry: PumaGeometry, joint_offsets_rad) -> None:
-        self.dh = geometry.dh()
+    def __init__(self, geometry, joint_offsets_rad, theta_offsets_rad=None) -> None:
+        self.dh = geometry.dh() if hasattr(geometry, "dh") else tuple(geometry)
         self.joint_offsets_rad = np.asarray(joint_offsets_rad, dtype=float).reshape(6)
+        if theta_offsets_rad is not None:
+            self.joint_offsets_rad = self.joint_offsets_rad + np.asarray(theta_offsets_rad, dtype=float).reshape(6)
 
     def forward(self, q_rad: np.ndarray) -> np.ndarray:
         """(4, 4) the true base_T_flange (mm) at encoder angles ``q_rad`` (6,)."""
@@ -539,10 +425,10 @@ class TrueArm:
         return T
 
 
-def follow(kin: PumaKinematics, base_T_flange_mm: np.ndarray, q_start_rad: np.ndarray) -> np.ndarray:
+def follow(kin: ArmKinematics, base_T_flange_mm: np.ndarray, q_start_rad: np.ndarray) -> np.ndarray:
     """(N, 6) joints (rad) a controller reaches when it takes the flange through the poses
     ``base_T_flange_mm`` (N, 4, 4) one after the other, each on the in-limits branch closest
-    to the joints before (as a Puma applies ALTER corrections), from ``q_start_rad`` (6,).
+    to the joints before (as a Puma applies ALTER corrections; any arm's kinematics), from ``q_start_rad`` (6,).
     Raises UnreachableError naming the first pose out of reach (``pose i of N ...``)."""
     T = np.asarray(base_T_flange_mm, dtype=float).reshape(-1, 4, 4)
     out = np.zeros((len(T), 6))
