@@ -212,7 +212,9 @@ def demo(args) -> int:
         refuse_for_calibrate(args)
     # --robot: the lock-step robot (the job's too: issue 33.2): the simulated Puma by default.
     args.robot = getattr(args, "robot", None) or "puma"
-    if args.robot in ("alter", "rsi", "abb"):  # --robot LINK (issue 22's spelling): the simulated Puma over it
+    # --robot LINK (issue 22's spelling): the link's simulated robot over it (the Puma over alter and
+    # rsi, the IRB 1600 over abb, the UR5e over ur)
+    if args.robot in ("alter", "rsi", "abb", "ur"):
         if args.link != "alter" and args.link != args.robot:
             raise SystemExit(f"humanpt demo: --robot {args.robot} and --link {args.link} disagree")
         args.link, args.robot = args.robot, "puma"
@@ -246,8 +248,11 @@ def demo(args) -> int:
         link_cycle_ms(args.link, args.cycle_ms)
     except ValueError as e:
         raise SystemExit(f"humanpt demo: {e}") from None
-    if args.lockstep and args.link in ("rsi", "abb") and args.robot != "puma":
-        raise SystemExit(f"humanpt demo: --link {args.link} drives the simulated Puma (--robot puma)")
+    if args.lockstep and args.link in ("rsi", "abb", "ur") and args.robot != "puma":
+        raise SystemExit(f"humanpt demo: --link {args.link} drives the link's simulated robot, not the stand-in")
+    if args.link == "ur" and not args.lockstep:
+        raise SystemExit("humanpt demo: --robot ur runs in lock-step (--lockstep); live, the UR's RTDE server is "
+                         "humanpt.sim_robot.ur.RtdeServer (tests/ur)")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

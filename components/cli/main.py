@@ -118,18 +118,20 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--duration", type=_duration, help="seconds of twin time (default: the scenario's length + 3.5 s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the camera noise and the freehand shape (default 0)")
     p.add_argument("--law", choices=["thetau", "paper"], default="thetau", help="servo law (default thetau)")
-    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi", "abb"],
+    p.add_argument("--robot", choices=["puma", "standin", "alter", "rsi", "abb", "ur"],
                    help="lock-step robot: the simulated Puma behind the ALTER link (default; with --calibrate "
                    "the stand-in) or a stand-in; "
-                   "alter, rsi or abb: the simulated Puma over that link (--robot rsi = --link rsi)")
-    p.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
+                   "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi); abb: the "
+                   "simulated ABB IRB 1600 over EGM; ur: the simulated UR5e over RTDE (lock-step)")
+    p.add_argument("--link", choices=["alter", "rsi", "abb", "ur"], default="alter",
                    help="the robot link: the Puma's serial ALTER line at 28 ms (default), a KUKA "
-                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md) or ABB EGM "
-                   "over UDP (the simulated EGM controller, 4 ms; components/robot_gateway/links/abb/README.md)")
-    p.add_argument("--cycle-ms", type=float, choices=[4.0, 12.0], metavar="4|12",
+                   "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md), ABB EGM "
+                   "over UDP (the simulated EGM controller, 4 ms; components/robot_gateway/links/abb/README.md) "
+                   "or UR RTDE (the simulated UR controller, 2 ms; lock-step only)")
+    p.add_argument("--cycle-ms", type=float, choices=[2.0, 4.0, 8.0, 12.0], metavar="2|4|8|12",
                    help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); with --link abb: EGM's, 4 "
-                   "(default) or 12; the gateway, the simulated controller, the controller and the pose "
-                   "filter's prediction all take it")
+                   "(default) or 12; with --link ur: RTDE's, 2 (e-Series, default) or 8 (CB3); the gateway, "
+                   "the simulated controller, the controller and the pose filter's prediction all take it")
     p.add_argument("--run-dir", help="record here (default runs/<time>-demo-<scenario>)")
     p.add_argument("--port", type=int, help="router port for the live demo (default: a free one)")
     p.add_argument("--secure", action="store_true",

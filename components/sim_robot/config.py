@@ -9,10 +9,10 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 
+from humanpt.geometry.arm import ArmKinematics
+from humanpt.geometry.arms import ARM_NAMES, arm_model
 from humanpt.geometry.puma import (
     HOME_JOINTS_DEG,
-    PumaKinematics,
-    RobotModelConfig,
     TrueArm,
     UnreachableError,
     perturbed_geometry,
@@ -20,28 +20,35 @@ from humanpt.geometry.puma import (
 from humanpt.runtime import cycle as cell_cycle
 from humanpt.runtime.config import ConfigError, Deg, Mm, Range
 
-# Flange straight down in front of the robot, elbow up (humanpt.geometry.puma).
+# Flange straight down in front of the robot, elbow up (humanpt.geometry.puma): the Puma's.
 DEFAULT_START_JOINTS_DEG = HOME_JOINTS_DEG
-
+# The arm each link's simulated controller moves unless ``model`` says otherwise.
+PROTOCOL_ARMS = {"alter": "puma762", "rsi": "puma762", "egm": "irb1600", "rtde": "ur5e"}
 
 
 @dataclass(frozen=True)
 class SimRobotConfig:
-    """A simulated Puma controller at the far end of the ALTER link.
+    """A simulated robot controller at the far end of the robot link (ALTER, RSI, EGM, RTDE),
+    with the arm ``model`` (default: the link's, :data:`PROTOCOL_ARMS`: the Puma over ALTER
+    and RSI, the IRB 1600 over EGM, the UR5e over RTDE) starting at ``start_joints_deg``
+    (default: the arm's comfortable pose, :mod:`humanpt.geometry.arms`). The set-up every
+    simulated controller shares: :class:`humanpt.sim_robot.arm.SimArm`.
 
     The world frame is the robot base (as in the paper) unless ``world_T_base_mm_deg``
     (x, y, z mm, yaw, pitch, roll deg, Z-Y-X) places the base elsewhere; ALTER's "world"
     mode means the base frame, as on the real controller.
     """
 
-    model: Literal["puma762", "puma560"] = "puma762"
+    # The arm (humanpt.geometry.arms); "": the link's (PROTOCOL_ARMS), filled in when built.
+    model: Literal["", "puma762", "puma560", "ur5e", "irb1600"] = ""
     # The robot runs the link's cycle: the launcher gives it from [robot_gateway]
     # (cell_defaults, humanpt.runtime.cycle); a [sim_robot] section does not set it.
     cycle_period_ns: Annotated[int, Range(1_000_000, 1_000_000_000, "ns")] = cell_cycle.FALLBACK_NS
     # world: a correction moves the flange in the base frame, rotating about the flange
     # origin; tool: the step is expressed in the flange frame.
     alter_mode: Literal["world", "tool"] = "world"
-    start_joints_deg: tuple[Deg, Deg, Deg, Deg, Deg, Deg] = DEFAULT_START_JOINTS_DEG
+    # Empty: the arm's comfortable pose (ArmModel.home_joints_deg), filled in when built.
+    start_joints_deg: tuple[Deg, ...] = ()
     # If given (six values), overrides start_joints_deg: base_T_flange as x, y, z mm, yaw,
     # pitch, roll deg, solved by IK on the branch closest to start_joints_deg. Empty: unset.
     start_pose_mm_deg: tuple[Annotated[float, Range(-5000, 5000, "mm or deg")], ...] = ()
@@ -64,7 +71,9 @@ class SimRobotConfig:
     # alter_mode world = RKorr in the base frame, tool = in the flange frame).
     # "egm": an ABB controller running EGM position guidance over UDP (humanpt.sim_robot.egm;
     # the link's cycle 4 ms or a multiple; absolute targets in the base frame).
-    protocol: Literal["alter", "rsi", "egm"] = "alter"
+    # "rtde": a Universal Robots controller running humanpt's URScript program behind RTDE
+    # (humanpt.sim_robot.ur; the link's cycle 2 ms e-Series or 8 ms CB3; absolute targets).
+    protocol: Literal["alter", "rsi", "egm", "rtde"] = "alter"
     # RSI: where the gateway listens (the robot's IP_NUMBER:PORT for its <Rob> datagrams).
     rsi_gateway: str = "127.0.0.1:49152"
     # RSI: this many late (or missing, wrong-IPOC, malformed) answers in a row stop RSI (the
@@ -98,6 +107,18 @@ class SimRobotConfig:
         return {"cycle_period_ns": link_ns}
 
     def __post_init__(self) -> None:
+        if self.protocol not in PROTOCOL_ARMS:
+            raise ValueError(f"protocol must be one of {', '.join(PROTOCOL_ARMS)}, got {self.protocol!r}")
+        if not self.model:
+            object.__setattr__(self, "model", PROTOCOL_ARMS[self.protocol])
+        if self.model not in ARM_NAMES:
+            raise ValueError(f"unknown arm model {self.model!r}; choose one of {', '.join(ARM_NAMES)}")
+        if not self.start_joints_deg:
+            object.__setattr__(self, "start_joints_deg", tuple(arm_model(self.model).home_joints_deg))
+        object.__setattr__(self, "start_joints_deg", tuple(float(v) for v in self.start_joints_deg))
+        if not self.model.startswith("puma") and any(self.link_length_errors_mm):
+            raise ValueError(f"link_length_errors_mm (d2, a2, a3, d4, d6) are the Puma's lengths; the {self.model} "
+                             "takes joint_offsets_deg only")
         if not cell_cycle.MIN_NS <= self.cycle_period_ns <= cell_cycle.MAX_NS:
             raise ValueError(f"cycle_period_ns must be within 1 and 1000 ms, got {self.cycle_period_ns} ns")
         if not 0 <= self.max_correction_age_cycles <= 100:
@@ -124,6 +145,8 @@ class SimRobotConfig:
             raise ValueError(f"lag_time_constant_ms must be within 0 and 10000, got {self.lag_time_constant_ms}")
         if self.protocol == "rsi" and self.cycle_ms not in (4.0, 12.0):
             raise ValueError(f"the link's cycle must be 4 or 12 ms over RSI, got {self.cycle_ms:g} ms")
+        if self.protocol == "rtde" and self.cycle_ms not in (2.0, 8.0):
+            raise ValueError(f"the link's cycle must be 2 ms (e-Series) or 8 ms (CB3) over RTDE, got {self.cycle_ms:g} ms")
         if self.protocol == "egm" and abs(self.cycle_ms / 4.0 - round(self.cycle_ms / 4.0)) > 1e-9:
             raise ValueError(f"the link's cycle must be a multiple of 4 ms over EGM, got {self.cycle_ms:g} ms")
         for name in ("egm_comm_timeout_s", "egm_time_constant_ms"):
@@ -141,8 +164,9 @@ class SimRobotConfig:
         """The link's cycle in ms (exact for whole ms)."""
         return cell_cycle.ms(self.cycle_period_ns)
 
-    def kinematics(self) -> PumaKinematics:
-        return PumaKinematics(RobotModelConfig(model=self.model))
+    def kinematics(self) -> ArmKinematics:
+        """The arm's nominal kinematics (what the controller believes)."""
+        return arm_model(self.model).kinematics()
 
     @property
     def ideal_arm(self) -> bool:
@@ -151,8 +175,11 @@ class SimRobotConfig:
 
     def true_arm(self) -> TrueArm:
         """The world's physical arm (forward kinematics of the truth)."""
-        geometry = perturbed_geometry(self.kinematics().geometry, self.link_length_errors_mm)
-        return TrueArm(geometry, np.radians(np.asarray(self.joint_offsets_deg, dtype=float)))
+        offsets = np.radians(np.asarray(self.joint_offsets_deg, dtype=float))
+        model = arm_model(self.model)
+        if model.solver == "puma":
+            return TrueArm(perturbed_geometry(self.kinematics().geometry, self.link_length_errors_mm), offsets)
+        return TrueArm(model.dh, offsets, np.radians(model.theta_offsets_deg))
 
     def start_joints_rad(self) -> np.ndarray:
         """(6,) the start joints (rad): start_joints_deg, or IK of start_pose_mm_deg."""

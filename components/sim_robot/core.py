@@ -27,13 +27,11 @@ an operator would restart it at the controller; ``alter_off`` stops it.
 
 from __future__ import annotations
 
-import math
 from collections import deque
 
 import numpy as np
 
-from humanpt.geometry.puma import UnreachableError
-from humanpt.geometry.transforms import transform_from_x
+from humanpt.geometry.arm import UnreachableError
 from humanpt.robot_gateway.links.alter import (
     ControllerConfig,
     ControllerEndpoint,
@@ -53,7 +51,10 @@ from humanpt.runtime.core import Core, Output, Port, command_operator
 from humanpt.runtime.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
+from humanpt.sim_robot.arm import JointStepError, SimArm, corrected_joints, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
+
+__all__ = ["TRUTH", "JointStepError", "SimRobotCore", "corrected_joints"]
 
 TRUTH = "sim_robot/truth"
 # Status bits as plain ints (IntFlag arithmetic is slow on this hot path).
@@ -68,38 +69,6 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
         StatusBits.CORRECTION_MISSED,
     )
 )
-
-
-class JointStepError(ValueError):
-    """A correction that needs a joint step beyond the joint speed limit."""
-
-
-def corrected_joints(kin, base_T_flange_mm: np.ndarray, delta_T_mm: np.ndarray, mode: str,
-                     q_ref_rad: np.ndarray, max_step_deg: float) -> np.ndarray:
-    """The joints (rad, (6,)) that put the flange at ``base_T_flange_mm`` (4, 4) moved by one
-    relative correction ``delta_T_mm`` (4, 4): ``mode`` "tool" = in the flange frame
-    (T @ delta), else in the base frame about the flange origin ([dR R, p + dp]); inverse
-    kinematics on the branch closest to ``q_ref_rad``. Shared by every simulated link
-    (ALTER, RSI): one robot model. Raises UnreachableError ("is unreachable: ...") or
-    JointStepError ("needs a joint step of ...") if the step is beyond
-    ``max_step_deg`` per cycle on any joint."""
-    T = base_T_flange_mm
-    if mode == "tool":
-        target = T @ delta_T_mm
-    else:
-        target = np.eye(4)
-        target[:3, :3] = delta_T_mm[:3, :3] @ T[:3, :3]
-        target[:3, 3] = T[:3, 3] + delta_T_mm[:3, 3]
-    try:
-        q = kin.inverse(target, q_ref_rad)
-    except UnreachableError as e:
-        raise UnreachableError(f"is unreachable: {e}") from None
-    steps = [abs(a - b) for a, b in zip(q.tolist(), q_ref_rad.tolist(), strict=True)]
-    step_deg = math.degrees(max(steps))
-    if step_deg > max_step_deg:
-        raise JointStepError(f"needs a joint step of {step_deg:.2f} deg "
-                             f"(> {max_step_deg:.2f} deg per cycle; near a singularity?)")
-    return q
 
 
 class SimRobotCore(SerialLinkCoreMixin, Core):
@@ -120,11 +89,15 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def create(cls, config: SimRobotConfig, rig=None) -> Core:
         """The simulated controller of ``config.protocol``: this core over ALTER,
         ``humanpt.sim_robot.rsi.RsiSimRobotCore`` over RSI, ``humanpt.sim_robot.egm.EgmSimRobotCore``
-        over EGM."""
+        over EGM, ``humanpt.sim_robot.ur.UrSimRobotCore`` over RTDE."""
         if cls is SimRobotCore and config.protocol == "rsi":
             from humanpt.sim_robot.rsi import RsiSimRobotCore  # (rsi imports this module)
 
             return RsiSimRobotCore.create(config, rig)
+        if cls is SimRobotCore and config.protocol == "rtde":
+            from humanpt.sim_robot.ur import UrSimRobotCore  # (ur imports this module)
+
+            return UrSimRobotCore.create(config, rig)
         if cls is SimRobotCore and config.protocol == "egm":
             from humanpt.sim_robot.egm import EgmSimRobotCore  # (egm imports this module)
 
@@ -136,15 +109,10 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
             raise ValueError(f"sim_robot: protocol {config.protocol!r} is not this core's (ALTER); "
                              "SimRobotCore.create builds the RSI one (humanpt.sim_robot.rsi.RsiSimRobotCore)")
         super().__init__(config)
-        self.kin = config.kinematics()
-        self.q_rad = config.start_joints_rad()  # the joints (encoders)
-        self.q_setpoint_rad = self.q_rad.copy()  # where the corrections put them
-        self.true_arm = None if config.ideal_arm else config.true_arm()
+        self.arm = SimArm(config)  # the arm, its joints (encoders) and where it is mounted
+        self.q_setpoint_rad = self.arm.q_rad.copy()  # where the corrections put them
         # First-order lag: per cycle the joints cover this fraction of the way to the setpoint.
-        tau_ms = config.lag_time_constant_ms
-        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_ms / tau_ms)
-        self._fk: tuple[bytes, np.ndarray] | None = None  # (q_rad bytes, base_T_flange)
-        self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
+        self.lag_gain = lag_gain(config.cycle_ms, config.lag_time_constant_ms)
         cycle_ns = config.cycle_period_ns
         self._ctrl = ControllerEndpoint(
             ControllerConfig(
@@ -182,31 +150,46 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def tick_period_ns(self) -> int | None:
         return self.config.cycle_period_ns
 
-    # -- state ----------------------------------------------------------------------------
+    # -- state (the arm's: humanpt.sim_robot.arm.SimArm) ------------------------------------
+    @property
+    def kin(self):
+        return self.arm.kin
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        """(6,) the joints (encoders), rad."""
+        return self.arm.q_rad
+
+    @q_rad.setter
+    def q_rad(self, value: np.ndarray) -> None:
+        self.arm.q_rad = value
+
+    @property
+    def world_T_base(self) -> np.ndarray:
+        return self.arm.world_T_base
+
+    @property
+    def true_arm(self):
+        return self.arm.true_arm
+
     @property
     def base_T_flange_mm(self) -> np.ndarray:
         """(4, 4) the flange in the robot base frame, mm (forward kinematics of q)."""
-        return self._base_T_flange().copy()
+        return self.arm.base_T_flange_mm
 
     @property
     def world_T_flange_mm(self) -> np.ndarray:
         """(4, 4) the flange in the world as the controller believes it (nominal), mm."""
-        return self.world_T_base @ self._base_T_flange()
+        return self.arm.world_T_flange_mm
 
     @property
     def true_world_T_flange_mm(self) -> np.ndarray:
         """(4, 4) where the flange really is (the world's arm), mm."""
-        if self.true_arm is None:
-            return self.world_T_flange_mm
-        return self.world_T_base @ self.true_arm.forward(self.q_rad)
+        return self.arm.true_world_T_flange_mm
 
     def _base_T_flange(self) -> np.ndarray:
-        """Forward kinematics of q, computed once per joint position (a cycle needs it up
-        to three times). Shared: do not modify."""
-        key = self.q_rad.tobytes()
-        if self._fk is None or self._fk[0] != key:
-            self._fk = (key, self.kin.forward(self.q_rad))
-        return self._fk[1]
+        """Forward kinematics of q, once per joint position. Shared: do not modify."""
+        return self.arm.forward()
 
     @property
     def link_running(self) -> bool:
@@ -308,17 +291,8 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         self._link(events, t_ns, outs)
         if self.link_running:
             self._sent_status = True
-        world_T_flange = self.true_world_T_flange_mm
-        world_T_flange[:3, 3] /= 1000.0
-        outs.append(
-            (
-                TRUTH,
-                pb.Truth(
-                    header=self.next_header(TRUTH, t_ns, "world"),
-                    world_T_flange=pose(world_T_flange),
-                ),
-            )
-        )
+        outs.append((TRUTH, pb.Truth(header=self.next_header(TRUTH, t_ns, "world"),
+                                     world_T_flange=pose(self.arm.true_world_T_flange_m()))))
 
     def _apply_pending(self, t_ns: int, outs: list[Output]) -> None:
         pending, self._pending = self._pending, None
@@ -367,10 +341,8 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
         # The correction moves the setpoint (ALTER accumulates onto the commanded path),
         # in the controller's nominal kinematics.
         T = self._base_T_flange() if self.lag_gain == 1.0 else self.kin.forward(self.q_setpoint_rad)
-        max_step_deg = self.config.max_joint_speed_deg_s * self.config.cycle_ms / 1000.0
         try:
-            q = corrected_joints(self.kin, T, c.delta_T_mm(), self.config.alter_mode,
-                                 self.q_setpoint_rad, max_step_deg)
+            q = self.arm.corrected(T, c.delta_T_mm(), self.config.alter_mode, self.q_setpoint_rad)
         except (UnreachableError, JointStepError) as e:
             self._fault(t_ns, f"correction for cycle {c.echo_cycle} {e}", outs)
             return

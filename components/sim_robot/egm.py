@@ -28,13 +28,11 @@ benches: a cycle is answered in time when an ``EgmSensor`` arrived before its en
 
 from __future__ import annotations
 
-import math
 from collections import deque
 
 import numpy as np
 
-from humanpt.geometry.puma import UnreachableError
-from humanpt.geometry.transforms import interpolate_transform, invert_transform
+from humanpt.geometry.arm import UnreachableError
 from humanpt.robot_gateway.links.abb.protocol import (
     EgmProtocolError,
     EgmState,
@@ -42,8 +40,8 @@ from humanpt.robot_gateway.links.abb.protocol import (
     encode_robot,
     pos_quat,
 )
+from humanpt.sim_robot.arm import JointStepError, SimArm, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
-from humanpt.sim_robot.core import JointStepError, corrected_joints
 from humanpt.sim_robot.rsi import RsiSimRobotCore, SimEvent, latency_histogram
 
 
@@ -62,10 +60,8 @@ class EgmRobot:
         self.config = config
         self.cycle_ms = cycle_ms
         self.comm_timeout_ns = round(comm_timeout_s * 1e9)
-        self.alpha = 1.0 - math.exp(-cycle_ms / 1000.0 / time_constant_s)
-        self.kin = config.kinematics()
-        self.q_rad = config.start_joints_rad()
-        self.max_joint_step_deg = config.max_joint_speed_deg_s * cycle_ms / 1000.0
+        self.alpha = lag_gain(cycle_ms, time_constant_s * 1000.0)
+        self.arm = SimArm(config, cycle_ms)  # the arm (the set-up every simulated controller shares)
         self.wait_for_sensor = wait_for_sensor
         self.seqno = 0
         self.target: np.ndarray | None = None
@@ -88,8 +84,16 @@ class EgmRobot:
                    time_constant_s=config.egm_time_constant_ms / 1000.0, wait_for_sensor=True)
 
     @property
+    def kin(self):
+        return self.arm.kin
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        return self.arm.q_rad
+
+    @property
     def base_T_flange_mm(self) -> np.ndarray:
-        return self.kin.forward(self.q_rad)
+        return self.arm.base_T_flange_mm
 
     def _stop(self, t_ns: int, code: str, text: str) -> None:
         self.stopped = text
@@ -133,18 +137,13 @@ class EgmRobot:
         self._answered = False
 
     def _move(self, t_ns: int) -> None:
-        T = self.base_T_flange_mm
-        want = interpolate_transform(T, self.target, self.alpha)
-        delta = want @ invert_transform(T)  # in the base frame: [dR, p' - dR p]
-        delta[:3, 3] = want[:3, 3] - T[:3, 3]  # (corrected_joints' base-frame step: about the flange origin)
-        if float(np.abs(delta[:3, 3]).max()) < 1e-9 and np.allclose(delta[:3, :3], np.eye(3), atol=1e-12):
-            return
         try:
-            self.q_rad = corrected_joints(self.kin, T, delta, "world", self.q_rad, self.max_joint_step_deg)
+            moved = self.arm.servo(self.target, self.alpha)
         except (UnreachableError, JointStepError) as e:
             self._stop(t_ns, "fault", f"EGM stopped: the target {e}")
             return
-        self.counters["moved"] += 1
+        if moved:
+            self.counters["moved"] += 1
 
     def receive(self, data: bytes, t_ns: int, arrived_ns: int | None = None) -> None:
         """An EgmSensor from the sensor, handled at ``t_ns``, arrived at ``arrived_ns``

@@ -36,8 +36,8 @@ from typing import Any
 
 import numpy as np
 
-from humanpt.geometry.puma import UnreachableError
-from humanpt.geometry.transforms import transform_from_x, x_from_transform
+from humanpt.geometry.arm import UnreachableError
+from humanpt.geometry.transforms import x_from_transform
 from humanpt.robot_gateway.links.rsi.config import parse_address
 from humanpt.robot_gateway.links.rsi.protocol import (
     RobState,
@@ -49,8 +49,9 @@ from humanpt.robot_gateway.links.rsi.protocol import (
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
+from humanpt.sim_robot.arm import JointStepError, SimArm
 from humanpt.sim_robot.config import SimRobotConfig
-from humanpt.sim_robot.core import TRUTH, JointStepError, corrected_joints
+from humanpt.sim_robot.core import TRUTH
 
 FIRST_IPOC = 1_000_000  # the IPOC of the first <Rob> (ms)
 # Reply latency histogram (send of <Rob> -> valid <Sen>) bucket upper edges, ms; the last
@@ -87,8 +88,7 @@ class RsiRobot:
     def __init__(self, config: SimRobotConfig):
         self.config = config
         self.cycle_ms = int(config.cycle_ms)
-        self.kin = config.kinematics()
-        self.q_rad = config.start_joints_rad()
+        self.arm = SimArm(config)  # the arm (the set-up every simulated controller shares)
         self.ipoc: int | None = None  # IPOC of the last <Rob> sent
         self._sent_ns = 0
         self._answer: RsiCorrection | None = None  # the in-time answer to self.ipoc
@@ -104,13 +104,20 @@ class RsiRobot:
              "after_stop", "applied"), 0)
         self.applied: deque[tuple[int, RsiCorrection]] = deque(maxlen=100_000)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
-        self.max_joint_step_deg = config.max_joint_speed_deg_s * config.cycle_ms / 1000.0
 
-    # -- state ------------------------------------------------------------------------------
+    # -- state (the arm's) --------------------------------------------------------------------
+    @property
+    def kin(self):
+        return self.arm.kin
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        return self.arm.q_rad
+
     @property
     def base_T_flange_mm(self) -> np.ndarray:
         """(4, 4) the flange in the base frame (nominal forward kinematics), mm."""
-        return self.kin.forward(self.q_rad)
+        return self.arm.base_T_flange_mm
 
     def _event(self, t_ns: int, severity: str, code: str, text: str) -> None:
         self.events.append(SimEvent(t_ns, severity, code, text))
@@ -177,12 +184,10 @@ class RsiRobot:
         if not any(c.rkorr):
             return
         try:
-            q = corrected_joints(self.kin, self.base_T_flange_mm, c.delta_T_mm(), self.config.alter_mode,
-                                 self.q_rad, self.max_joint_step_deg)
+            self.arm.step(c.delta_T_mm(), self.config.alter_mode)
         except (UnreachableError, JointStepError) as e:
             self._stop(t_ns, "fault", f"RSI stopped: correction for IPOC {c.ipoc} {e}")
             return
-        self.q_rad = q
         self.counters["applied"] += 1
         self.applied.append((self.ipoc, c))
 
@@ -337,8 +342,6 @@ class RsiSimRobotCore(Core):
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
         self.robot = self.make_robot(config)
-        self.world_T_base = transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))
-        self.true_arm = None if config.ideal_arm else config.true_arm()
         self._events_sent = 0
 
     def make_robot(self, config: SimRobotConfig) -> RsiRobot:
@@ -377,9 +380,6 @@ class RsiSimRobotCore(Core):
         self._flush_events(outs)
         if data is not None:
             outs.append(("udp_tx", pb.SerialChunk(header=self.next_header("udp_tx", t_ns), data=data)))
-        arm = self.robot.kin if self.true_arm is None else self.true_arm
-        world_T_flange = self.world_T_base @ arm.forward(self.robot.q_rad)
-        world_T_flange[:3, 3] /= 1000.0
         outs.append((TRUTH, pb.Truth(header=self.next_header(TRUTH, t_ns, "world"),
-                                     world_T_flange=pose(world_T_flange))))
+                                     world_T_flange=pose(self.robot.arm.true_world_T_flange_m()))))
         return outs

@@ -38,12 +38,16 @@ from collections import deque
 
 import numpy as np
 
-from humanpt.geometry.puma import UnreachableError
-from humanpt.geometry.transforms import interpolate_transform, invert_transform, rotation_angle_rad
+from humanpt.geometry.arm import UnreachableError
+from humanpt.geometry.transforms import rotation_angle_rad
 from humanpt.robot_gateway.links.ur import protocol as rtde
+from humanpt.runtime.core import Output, Port
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import pose
+from humanpt.sim_robot.arm import JointStepError, SimArm, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
-from humanpt.sim_robot.core import JointStepError, corrected_joints
-from humanpt.sim_robot.rsi import SimEvent
+from humanpt.sim_robot.core import TRUTH
+from humanpt.sim_robot.rsi import RsiSimRobotCore, SimEvent
 
 _V6 = "VECTOR6D"
 _V3 = "VECTOR3D"
@@ -210,10 +214,8 @@ class UrRobot:
         self.watchdog_cycles = watchdog_cycles
         self.max_lead_mm = max_lead_mm
         self.max_lead_rad = math.radians(max_lead_deg)
-        self.alpha = 1.0 - math.exp(-cycle_ms / 1000.0 / time_constant_s)
-        self.kin = config.kinematics()
-        self.q_rad = config.start_joints_rad()
-        self.max_joint_step_deg = config.max_joint_speed_deg_s * cycle_ms / 1000.0
+        self.alpha = lag_gain(cycle_ms, time_constant_s * 1000.0)
+        self.arm = SimArm(config, cycle_ms)  # the arm (the set-up every simulated controller shares)
         self.cycles = 0
         self.inputs: dict[str, object] = {}
         self.input_owner: dict[str, int] = {}
@@ -235,9 +237,24 @@ class UrRobot:
         self.counters = dict.fromkeys(("cycles", "packages", "input_packages", "malformed", "watchdog_stops",
                                        "refused_resumes", "moved", "new_sequence"), 0)
 
+    @classmethod
+    def from_config(cls, config: SimRobotConfig) -> UrRobot:
+        """The controller as ``[sim_robot]`` (``protocol = "rtde"``) sets it up: the link's
+        cycle (2 ms e-Series, 8 ms CB3), the program's defaults (registers from 24, the
+        watchdog 25 cycles: ``[robot_gateway]``'s UR defaults)."""
+        return cls(config, cycle_ms=config.cycle_ms)
+
+    @property
+    def kin(self):
+        return self.arm.kin
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        return self.arm.q_rad
+
     @property
     def base_T_flange_mm(self) -> np.ndarray:
-        return self.kin.forward(self.q_rad)
+        return self.arm.base_T_flange_mm
 
     @property
     def timestamp_s(self) -> float:
@@ -296,21 +313,16 @@ class UrRobot:
             self._move(t_ns)
 
     def _move(self, t_ns: int) -> None:
-        T = self.base_T_flange_mm
-        want = interpolate_transform(T, self.target, self.alpha)
-        delta = want @ invert_transform(T)
-        delta[:3, 3] = want[:3, 3] - T[:3, 3]  # (corrected_joints' base-frame step: about the flange origin)
-        if float(np.abs(delta[:3, 3]).max()) < 1e-9 and np.allclose(delta[:3, :3], np.eye(3), atol=1e-12):
-            return
         try:
-            self.q_rad = corrected_joints(self.kin, T, delta, "world", self.q_rad, self.max_joint_step_deg)
+            moved = self.arm.servo(self.target, self.alpha)
         except (UnreachableError, JointStepError) as e:
             self.safety_mode = rtde.SAFETY_MODE_PROTECTIVE_STOP
             self.program_running = False
             self.stopped = True
             self.events.append(SimEvent(t_ns, "error", "protective_stop", f"protective stop: the target {e}"))
             return
-        self.counters["moved"] += 1
+        if moved:
+            self.counters["moved"] += 1
 
     # -- the cycle ---------------------------------------------------------------------------------
     def outputs(self) -> dict[str, object]:
@@ -356,6 +368,50 @@ class UrRobot:
         """The operator pressed Stop: runtime_state STOPPED, the arm stays."""
         self.program_running = False
         self.events.append(SimEvent(t_ns, "info", "program_stopped", "the program was stopped"))
+
+
+class UrSimRobotCore(RsiSimRobotCore):
+    """sim_robot over RTDE (pure): :class:`UrRobot` (:meth:`UrRobot.from_config`) with one
+    client session, the gateway's, on the component's ``tick`` (every cycle of the link,
+    2 or 8 ms). Inputs ``tick``, ``serial_rx`` (the gateway's RTDE bytes, a TCP stream as a
+    byte stream); outputs ``serial_tx`` (the session's answers and each cycle's data
+    package), ``sim_robot/truth`` and ``sim_robot/events``, as over RSI and EGM. Built by
+    ``SimRobotCore.create`` for ``protocol = "rtde"``; the lock-step twin wires it to the
+    gateway as a fast serial line (:meth:`humanpt.runtime.lockstep.LockStep.connect_serial`),
+    live :class:`RtdeServer` serves the robot instead."""
+
+    ports = (
+        Port("tick", pb.Tick, "_on_cycle"),
+        Port("serial_rx", pb.SerialChunk, "_on_rtde"),
+    )
+    # Snapshots: the targets taken and the trace are kept for tests only.
+    not_frozen = frozenset({"robot.targets", "robot.trace"})
+    state_types = (SimEvent, rtde.Recipe)
+
+    def __init__(self, config: SimRobotConfig):
+        super().__init__(config)
+        self.session = self.robot.connect()
+
+    def make_robot(self, config: SimRobotConfig) -> UrRobot:
+        return UrRobot.from_config(config)
+
+    def _send(self, t_ns: int, data: bytes, outs: list[Output]) -> None:
+        if data:
+            outs.append(("serial_tx", pb.SerialChunk(header=self.next_header("serial_tx", t_ns), data=data)))
+
+    def _on_rtde(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
+        outs: list[Output] = []
+        self._send(t_ns, self.session.feed(bytes(msg.data), t_ns), outs)
+        self._flush_events(outs)
+        return outs
+
+    def _on_cycle(self, t_ns: int, msg: pb.Tick) -> list[Output]:
+        outs: list[Output] = []
+        self._send(t_ns, self.robot.cycle(t_ns).get(self.session.sid, b""), outs)
+        self._flush_events(outs)
+        outs.append((TRUTH, pb.Truth(header=self.next_header(TRUTH, t_ns, "world"),
+                                     world_T_flange=pose(self.robot.arm.true_world_T_flange_m()))))
+        return outs
 
 
 class RtdeServer:

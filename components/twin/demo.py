@@ -151,8 +151,9 @@ def run_lockstep_demo(cfg: SystemConfig, run_dir: Path, *, robot: str = "puma", 
     write_rig(run_dir / "rig.toml", cfg.rig, "what the twin's pipeline believed in this run", overwrite=True)
     rsi_ms = link_cycle_ms("rsi", cycle_ms) if link == "rsi" else None
     abb_ms = link_cycle_ms("abb", cycle_ms) if link == "abb" else None
+    ur_ms = link_cycle_ms("ur", cycle_ms) if link == "ur" else None
     res = run(cfg, robot=robot, duration_s=duration_s or None, record_from_s=cfg.operator.start_delay_s,
-              run_dir=run_dir, progress=progress, rsi_cycle_ms=rsi_ms, abb_cycle_ms=abb_ms)
+              run_dir=run_dir, progress=progress, rsi_cycle_ms=rsi_ms, abb_cycle_ms=abb_ms, ur_cycle_ms=ur_ms)
     res.write_path(run_dir / "paths" / "path-1.csv")
     return report(res.world, cfg, run_dir, res.wall_s, res.twin_s, "lock-step")
 

@@ -88,6 +88,11 @@ def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
         if cycle_ms not in (None, 28.0):
             raise ValueError(f"--cycle-ms {cycle_ms:g}: the ALTER link runs the Puma's 28 ms cycle (RSI: 4 or 12)")
         return 28.0
+    if link == "ur":
+        cycle_ms = 2.0 if cycle_ms is None else float(cycle_ms)
+        if cycle_ms not in (2.0, 8.0):
+            raise ValueError(f"--cycle-ms {cycle_ms:g}: UR RTDE runs at 2 ms (e-Series, 500 Hz) or 8 ms (CB3, 125 Hz)")
+        return cycle_ms
     if link == "abb":
         cycle_ms = EGM_BASE_CYCLE_MS if cycle_ms is None else float(cycle_ms)
         n = cycle_ms / EGM_BASE_CYCLE_MS
@@ -96,7 +101,7 @@ def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
                              "(EGMActPose \\SampleRate)")
         return cycle_ms
     if link != "rsi":
-        raise ValueError(f"no link {link!r} (alter, rsi, abb)")
+        raise ValueError(f"no link {link!r} (alter, rsi, abb, ur)")
     cycle_ms = 12.0 if cycle_ms is None else float(cycle_ms)
     if cycle_ms not in RSI_CYCLES_MS:
         raise ValueError(f"--cycle-ms {cycle_ms:g}: RSI runs at {' or '.join(f'{c:g}' for c in RSI_CYCLES_MS)} ms")

@@ -34,6 +34,7 @@ from humanpt.runtime.config import Deg, Mm, Range
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_vector3, pose
+from humanpt.sim_robot.arm import lag_gain
 
 __all__ = [
     "StandInRobotConfig",
@@ -126,8 +127,8 @@ class StandInRobotCore(Core):
         super().__init__(config)
         self.world_T_flange = config.start_world_T_flange  # mm, the true (and reported) flange
         self.setpoint = self.world_T_flange  # mm, where the commands put it
-        tau_ms = config.lag_time_constant_ms
-        self.lag_gain = 1.0 if tau_ms <= 0 else -math.expm1(-config.cycle_ms / tau_ms)
+        # the first-order lag every simulated robot shares (humanpt.sim_robot.arm)
+        self.lag_gain = lag_gain(config.cycle_ms, config.lag_time_constant_ms)
         self.cycle = 0
         self.pending: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.missed = 0

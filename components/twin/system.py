@@ -19,6 +19,8 @@ from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.core import PoseFilterCore
 from humanpt.scene.config import SceneConfig
 from humanpt.scene.core import SceneCore
+from humanpt.schemas import humanpt_pb2 as pb
+from humanpt.schemas.convert import header
 from humanpt.sim_camera import SimCameraConfig
 
 from . import evaluate
@@ -26,17 +28,24 @@ from .evaluate import path_points, truth_at
 from .standin import StandInRobotConfig
 from .world import TwinWorld, build_world, start_flange_for
 
-__all__ = ["build_system", "flange_T_desired_mm", "nominal_rig", "operator_config", "puma_placement", "puma_mount_joints", "puma_cores",
-           "tracking_errors", "path_points", "truth_at"]
+__all__ = ["arm_cores", "arm_mount_joints", "arm_placement", "build_system", "flange_T_desired_mm", "nominal_rig",
+           "operator_config", "puma_placement", "puma_mount_joints", "puma_cores", "tracking_errors", "path_points",
+           "truth_at", "ur_link"]
+
+# The lock-step twin carries RTDE's TCP stream between the gateway and the simulated UR as a
+# byte stream this fast (bits/s, 10 bits a byte): 1 us for a 10-byte request, ~25 us for a
+# data package; loopback or a switched LAN.
+RTDE_STREAM_BAUD = 100_000_000
 
 
-def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762",
-                   joints_deg: tuple[float, ...] | None = None) -> tuple[float, ...]:
-    """Where the twin mounts the simulated Puma: ``world_T_base`` (X, mm/deg) such that the
-    robot starts at ``world_T_flange_start_mm`` in its default, comfortable joint pose
-    (flange pointing along -z of the base, elbow up, far from singularities and limits), or
-    in ``joints_deg`` (:func:`puma_mount_joints`).  A target seen from below (the paper's
-    Table 1 angles) gives a ceiling-mounted robot."""
+def arm_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762",
+                  joints_deg: tuple[float, ...] | None = None) -> tuple[float, ...]:
+    """Where the twin mounts the simulated arm ``model`` (humanpt.geometry.arms):
+    ``world_T_base`` (X, mm/deg) such that the robot starts at ``world_T_flange_start_mm`` in
+    its default, comfortable joint pose (the arm's ``home_joints_deg``: flange pointing along
+    -z of the base, far from singularities and limits), or in ``joints_deg``
+    (:func:`arm_mount_joints`).  A target seen from below (the paper's Table 1 angles) gives
+    a ceiling-mounted robot."""
     from humanpt.geometry.transforms import invert_transform
     from humanpt.sim_robot.config import SimRobotConfig
 
@@ -47,24 +56,32 @@ def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762",
     return tuple(float(v) for v in x_from_transform(world_T_base))
 
 
-# The wrist poses puma_mount_joints tries at the mounting pose (deg): joint 4, joint 5 (both
+def puma_placement(world_T_flange_start_mm: np.ndarray, model: str = "puma762",
+                   joints_deg: tuple[float, ...] | None = None) -> tuple[float, ...]:
+    """:func:`arm_placement` of a Puma (the name the calibration and teach code know)."""
+    return arm_placement(world_T_flange_start_mm, model, joints_deg)
+
+
+# The wrist poses arm_mount_joints tries at the mounting pose (deg): joint 4, joint 5 (both
 # sides of the wrist singularity) and joint 6 (the arm turned about the torch's axis).
 MOUNT_Q4_DEG = (-60.0, -30.0, 0.0, 30.0, 60.0)
 MOUNT_Q5_DEG = (-60.0, -40.0, -25.0, 25.0, 40.0, 60.0)
 MOUNT_Q6_DEG = (-180.0, -90.0, 0.0, 90.0)
 
 
-def puma_mount_joints(world_T_flange_mount_mm: np.ndarray, paths_world_T_flange_mm: list[np.ndarray],
-                      model: str = "puma762") -> tuple[tuple[float, ...], float]:
-    """The Puma's joint pose at its mounting pose (deg, (6,)) that keeps the wrist farthest
+def arm_mount_joints(world_T_flange_mount_mm: np.ndarray, paths_world_T_flange_mm: list[np.ndarray],
+                     model: str = "puma762") -> tuple[tuple[float, ...], float]:
+    """The arm's joint pose at its mounting pose (deg, (6,)) that keeps the wrist farthest
     from its singularity (and every joint from its limits) along every path of flange poses
     the job needs (each (N, 4, 4) mm, world: watching the seam, welding it), each followed
-    as the robot's controller would (closest branch, from the branch nearest the mounting
-    pose); with the score: the least |q5| and joint-limit margin (deg) along them.
+    as the robot's controller would (closest solution, from the one nearest the mounting
+    pose); with the score: the least |asin(sin q5)| and joint-limit margin (deg) along them.
+    Any arm of humanpt.geometry.arms (``model``): each has its wrist singularity at
+    sin q5 = 0 (the Puma's and the IRB's joints 4 and 6 coaxial, the UR's wrist 1 and 3).
 
-    A general placement (issue 33.1): the default pose's wrist (q5 = 25 deg) is tried with
-    others (:data:`MOUNT_Q4_DEG` x :data:`MOUNT_Q5_DEG` x :data:`MOUNT_Q6_DEG`) and the best
-    taken (the default when nothing is better); no mounting is tuned by hand."""
+    A general placement (issue 33.1): the arm's default pose's wrist is tried with others
+    (its joints 1-3 with :data:`MOUNT_Q4_DEG` x :data:`MOUNT_Q5_DEG` x :data:`MOUNT_Q6_DEG`)
+    and the best taken (the default when nothing is better); no mounting is tuned by hand."""
     from humanpt.geometry.puma import UnreachableError, follow
     from humanpt.geometry.transforms import invert_transform
     from humanpt.sim_robot.config import SimRobotConfig
@@ -106,18 +123,25 @@ def puma_mount_joints(world_T_flange_mount_mm: np.ndarray, paths_world_T_flange_
     return tuple(float(v) for v in best), best_score
 
 
-def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400,
-               joints_deg: tuple[float, ...] | None = None):
-    """(sim_robot config, robot_gateway config) for a Puma 762 twin starting at the given
-    flange pose (in ``joints_deg`` there, default its comfortable pose), with a workspace
-    envelope of +-``envelope_mm`` around it."""
+def puma_mount_joints(world_T_flange_mount_mm: np.ndarray, paths_world_T_flange_mm: list[np.ndarray],
+                      model: str = "puma762") -> tuple[tuple[float, ...], float]:
+    """:func:`arm_mount_joints` of a Puma (the teach-and-play job's name)."""
+    return arm_mount_joints(world_T_flange_mount_mm, paths_world_T_flange_mm, model)
+
+
+def arm_cores(world_T_flange_start_mm: np.ndarray, *, model: str = "puma762", envelope_mm: float = 900.0,
+              baud: int = 38_400, joints_deg: tuple[float, ...] | None = None):
+    """(sim_robot config, robot_gateway config over ALTER) for the arm ``model`` on the twin
+    starting at the given flange pose (in ``joints_deg`` there, default its comfortable
+    pose), with a workspace envelope of +-``envelope_mm`` around it. The other links take
+    the pair from here (:func:`rsi_link`, :func:`abb_link`, :func:`ur_link`)."""
     from humanpt.robot_gateway.links.alter.config import AlterConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
-    base = puma_placement(world_T_flange_start_mm, joints_deg=joints_deg)
+    base = arm_placement(world_T_flange_start_mm, model, joints_deg=joints_deg)
     p = np.asarray(world_T_flange_start_mm)[:3, 3]
-    robot = SimRobotConfig(world_T_base_mm_deg=base) if joints_deg is None else SimRobotConfig(
-        world_T_base_mm_deg=base, start_joints_deg=tuple(float(v) for v in joints_deg))
+    robot = SimRobotConfig(model=model, world_T_base_mm_deg=base) if joints_deg is None else SimRobotConfig(
+        model=model, world_T_base_mm_deg=base, start_joints_deg=tuple(float(v) for v in joints_deg))
     # A STATUS frame (41 bytes, 8N1) takes this long on the line: the robot state is about
     # the pose at the frame's start, not at its reception.
     status_delay_ms = 41 * 10 / baud * 1e3
@@ -125,6 +149,13 @@ def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.
                           envelope_min_mm=tuple(float(v) for v in p - envelope_mm),
                           envelope_max_mm=tuple(float(v) for v in p + envelope_mm))
     return robot, gateway
+
+
+def puma_cores(world_T_flange_start_mm: np.ndarray, *, envelope_mm: float = 900.0, baud: int = 38_400,
+               joints_deg: tuple[float, ...] | None = None):
+    """(sim_robot config, robot_gateway config) for a Puma 762 twin (:func:`arm_cores`)."""
+    return arm_cores(world_T_flange_start_mm, model="puma762", envelope_mm=envelope_mm, baud=baud,
+                     joints_deg=joints_deg)
 
 
 # The gateway's safety values that stay when the link changes (the rest are the link's).
@@ -160,6 +191,18 @@ def abb_link(robot, gateway, cycle_ms: float = 4.0, udp_bind: str = "127.0.0.1:6
                                 egm_gateway=udp_bind), abb_gateway)
 
 
+def ur_link(robot, gateway, cycle_ms: float = 2.0, rtde_address: str = "127.0.0.1:30004"):
+    """(sim_robot config, UrConfig) over UR RTDE at ``cycle_ms`` (2: e-Series, 8: CB3) from
+    the ALTER pair of :func:`arm_cores`, as :func:`rsi_link`: the gateway keeps
+    ``SAFETY_KEYS``, the rest RTDE's defaults; the steps in the frame the robot applies
+    corrections in; the controller's RTDE server at ``rtde_address``."""
+    from humanpt.robot_gateway.links.ur.config import UrConfig
+
+    ur_gateway = UrConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
+                          rtde_address=rtde_address, correction_frame="tool" if robot.alter_mode == "tool" else "base")
+    return dataclasses.replace(robot, protocol="rtde", cycle_period_ns=ur_gateway.cycle_period_ns), ur_gateway
+
+
 def link_cycle_ms(rsi_cycle_ms: float | None = None) -> float:
     """The twin cell's one cycle (ms): its robot link's (runtime/cycle.py), RSI's
     ``rsi_cycle_ms`` or else ALTER's (the paper's 28 ms, the gateway's default link)."""
@@ -186,7 +229,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  robot_overrides: dict[str, dict] | None = None,
                  mount_world_T_flange_mm: np.ndarray | None = None,
                  rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None,
-                 mount_joints_deg: tuple[float, ...] | None = None) -> TwinWorld:
+                 mount_joints_deg: tuple[float, ...] | None = None, ur_cycle_ms: float | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
@@ -200,9 +243,12 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     (4 or 12; ``puma`` only): the Puma behind the RSI link instead (UDP paths with 0.1 ms
     delivery); the controller and the pose filter's prediction follow the link's cycle,
     which every robot state carries (runtime/cycle.py).  ``abb_cycle_ms`` (4 or a multiple;
-    ``puma`` only): the Puma behind the ABB EGM link, the same way."""
-    if rsi_cycle_ms is not None and abb_cycle_ms is not None:
-        raise ValueError("one robot link: rsi_cycle_ms or abb_cycle_ms, not both")
+    ``puma`` only): the simulated ABB IRB 1600 behind the EGM link instead, the same way;
+    ``ur_cycle_ms`` (2 or 8): the simulated UR5e behind the RTDE link (its TCP stream as a
+    fast byte stream, :data:`RTDE_STREAM_BAUD`). Each arm is mounted by the same rule
+    (:func:`arm_cores`)."""
+    if sum(c is not None for c in (rsi_cycle_ms, abb_cycle_ms, ur_cycle_ms)) > 1:
+        raise ValueError("one robot link: rsi_cycle_ms, abb_cycle_ms or ur_cycle_ms, not more")
     op = operator_config(scenario, seed)
     cam = sim_camera or SimCameraConfig()
     ctl = controller or ControllerConfig()
@@ -226,7 +272,9 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
             # around ``mount_world_T_flange_mm``, e.g. between viewing and welding the seam).
             mount = (start_flange_for(op, ctl.dz_mm, cam.flange_T_camera) if mount_world_T_flange_mm is None
                      else np.asarray(mount_world_T_flange_mm, dtype=float))
-            rcfg, gcfg = puma_cores(transform_from_x(np.asarray(x_from_transform(mount))), joints_deg=mount_joints_deg)
+            model = "irb1600" if abb_cycle_ms is not None else "ur5e" if ur_cycle_ms is not None else "puma762"
+            rcfg, gcfg = arm_cores(transform_from_x(np.asarray(x_from_transform(mount))), model=model,
+                                   joints_deg=mount_joints_deg)
             start_in_base = np.linalg.inv(transform_from_x(np.asarray(rcfg.world_T_base_mm_deg))) @ start
             rcfg = dataclasses.replace(rcfg, start_pose_mm_deg=tuple(float(v) for v in x_from_transform(start_in_base)))
             rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")
@@ -235,6 +283,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                 rcfg, gcfg = rsi_link(rcfg, gcfg, float(rsi_cycle_ms))
             elif abb_cycle_ms is not None:
                 rcfg, gcfg = abb_link(rcfg, gcfg, float(abb_cycle_ms))
+            elif ur_cycle_ms is not None:
+                rcfg, gcfg = ur_link(rcfg, gcfg, float(ur_cycle_ms))
             robot_cores = [SimRobotCore.create(rcfg), GatewayCore.create(gcfg)]
             wire = True
         elif robot == "standin":
@@ -251,6 +301,11 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                         dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
     if wire and (rsi_cycle_ms is not None or abb_cycle_ms is not None):
         world.lockstep.connect_udp("sim_robot", "robot_gateway")
+    elif wire and ur_cycle_ms is not None:
+        # RTDE: a TCP stream; the gateway's adapter marks the connection with an empty chunk.
+        world.lockstep.connect_serial("robot_gateway", "sim_robot", baud=RTDE_STREAM_BAUD)
+        world.lockstep.inject(world.lockstep.now_ns, "robot_gateway", "serial_rx",
+                              pb.SerialChunk(header=header(world.lockstep.now_ns, frame_id="sim_robot"), data=b""))
     elif wire:
         world.lockstep.connect_serial("robot_gateway", "sim_robot", baud=robot_cores[1].config.baud)
     return world

@@ -105,7 +105,7 @@ def _loop(gw: GatewayCore, robot: EgmRobot, n: int, step_mm=(0.2, 0.0, 0.0), com
 def test_the_arm_goes_where_the_steps_add_up_and_a_silent_gateway_leaves_it_within_the_lead():
     cfg = gateway_config("abb", udp_bind="127.0.0.1:0", max_lead_mm=3.0)
     gw = GatewayCore(cfg)
-    robot = EgmRobot(SimRobotConfig(), time_constant_s=0.02)
+    robot = EgmRobot(SimRobotConfig(model="irb1600"), time_constant_s=0.02)
     p0 = robot.base_T_flange_mm[:3, 3].copy()
     t = _loop(gw, robot, 200)  # 200 x 0.2 mm commanded, in the base frame's +x
     sent = [s for s in gw.sent if s.source == "fresh"]

@@ -26,7 +26,7 @@ pytestmark = pytest.mark.live
 
 
 def test_abbs_egm_client_reads_the_simulated_robot_and_guides_it():
-    robot = EgmRobot(SimRobotConfig(), comm_timeout_s=2.0)
+    robot = EgmRobot(SimRobotConfig(model="irb1600"), comm_timeout_s=2.0)
     start = robot.base_T_flange_mm
     egm = EGM(port=0)
     port = egm.socket.getsockname()[1]
@@ -76,7 +76,7 @@ def test_the_gateway_in_a_live_shell_holds_the_robot_and_abbs_definition_reads_i
     ads[0].write = lambda topic, msg: (seen.append(msg.data), write(topic, msg))[1]
     worker = threading.Thread(target=shell.run, daemon=True)
     worker.start()
-    robot = EgmRobot(SimRobotConfig(), comm_timeout_s=5.0)
+    robot = EgmRobot(SimRobotConfig(model="irb1600"), comm_timeout_s=5.0)
     start = robot.base_T_flange_mm
     try:
         assert shell.ready.wait(30)
@@ -109,7 +109,7 @@ def test_another_senders_egm_messages_get_no_answer():
         for s in (robot_sock, other):
             s.bind(("127.0.0.1", 0))
         robot_port = robot_sock.getsockname()[1]
-        r = EgmRobot(SimRobotConfig())
+        r = EgmRobot(SimRobotConfig(model="irb1600"))
         other.sendto(b"\x08\x01junk", a.address)  # not an EgmRobot: never locks
         robot_sock.sendto(r.cycle(0), a.address)
         wait_for(lambda: len(got) >= 1, 10.0, "the robot's message taken")

@@ -18,7 +18,7 @@ from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.ur import RtdeServer, UrRobot
 
 cycle_ms, seconds, port = float(sys.argv[1]), float(sys.argv[2]), int(sys.argv[3])
-robot = UrRobot(SimRobotConfig(), cycle_ms=cycle_ms)
+robot = UrRobot(SimRobotConfig(model="ur5e"), cycle_ms=cycle_ms)
 server = RtdeServer(robot, "127.0.0.1:0").start()
 cfg = gateway_config("ur", rtde_address="{}:{}".format(*server.address), cycle_period_ms=cycle_ms)
 core = GatewayCore(cfg)

@@ -43,7 +43,7 @@ class SimUr:
     fields: dict = {}
 
     def __init__(self, config):
-        self.sim = UrRobot(SimRobotConfig(), cycle_ms=config.cycle_period_ms, trace_cycles=1000)
+        self.sim = UrRobot(SimRobotConfig(model="ur5e"), cycle_ms=config.cycle_period_ms, trace_cycles=1000)
         self.session = self.sim.connect()
         self.t_ns = 0
 
@@ -124,7 +124,7 @@ def _session(link: UrLink, sim: UrRobot):
 
 def test_the_link_sets_up_outputs_and_inputs_and_reads_the_state():
     link = UrLink.from_config(gateway_config("ur"))
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     session, _ = _session(link, sim)
     assert session.started and session.outputs.names == link.outputs and session.every == 1
     assert sim.input_owner == dict.fromkeys(link.inputs, session.sid)
@@ -136,7 +136,7 @@ def test_the_link_sets_up_outputs_and_inputs_and_reads_the_state():
 
 
 def test_registers_another_client_holds_refuse_the_session():
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     _session(UrLink.from_config(gateway_config("ur")), sim)
     second = UrLink.from_config(gateway_config("ur"))
     session, events = _session(second, sim)
@@ -146,7 +146,7 @@ def test_registers_another_client_holds_refuse_the_session():
 
 
 def test_a_cb3_is_refused_a_500_hz_cycle():
-    sim = UrRobot(SimRobotConfig(), cycle_ms=8.0)
+    sim = UrRobot(SimRobotConfig(model="ur5e"), cycle_ms=8.0)
     link = UrLink.from_config(gateway_config("ur", cycle_period_ms=2.0))
     _, events = _session(link, sim)
     (err,) = [e for e in events if isinstance(e, LinkError)]
@@ -159,7 +159,7 @@ def test_a_cb3_is_refused_a_500_hz_cycle():
 ])
 def test_foreign_bytes_are_refused_and_the_stream_continues(junk, what):
     link = UrLink.from_config(gateway_config("ur"))
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     session, _ = _session(link, sim)
     link.receive(sim.cycle(2 * MS)[session.sid], 2 * MS)
     events = link.receive(junk + sim.cycle(4 * MS)[session.sid], 4 * MS)
@@ -170,7 +170,7 @@ def test_foreign_bytes_are_refused_and_the_stream_continues(junk, what):
 
 def test_a_data_package_with_a_pose_that_is_not_a_number_is_dropped():
     link = UrLink.from_config(gateway_config("ur"))
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     session, _ = _session(link, sim)
     values = sim.outputs()
     values["actual_TCP_pose"] = (float("nan"),) * 6
@@ -181,7 +181,7 @@ def test_a_data_package_with_a_pose_that_is_not_a_number_is_dropped():
 
 def test_a_cycle_that_does_not_advance_is_dropped():
     link = UrLink.from_config(gateway_config("ur"))
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     session, _ = _session(link, sim)
     first = sim.cycle(2 * MS)[session.sid]
     link.receive(first, 2 * MS)
@@ -192,7 +192,7 @@ def test_a_cycle_that_does_not_advance_is_dropped():
 
 def test_corrections_are_off_when_the_program_stops_or_its_heartbeat_stalls():
     link = UrLink.from_config(gateway_config("ur", heartbeat_cycles=3))
-    sim = UrRobot(SimRobotConfig())
+    sim = UrRobot(SimRobotConfig(model="ur5e"))
     session, _ = _session(link, sim)
 
     def state(heartbeat=None, **over):

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.live
 
 def test_the_gateway_holds_the_simulated_ur_over_tcp_and_sets_up_again_after_a_drop(router):
     port, _ = router
-    robot = UrRobot(SimRobotConfig(), cycle_ms=8.0)  # a CB3 at 125 Hz (the gentler rate on a loaded machine)
+    robot = UrRobot(SimRobotConfig(model="ur5e"), cycle_ms=8.0)  # a CB3 at 125 Hz (the gentler rate on a loaded machine)
     server = RtdeServer(robot, "127.0.0.1:0").start()
     start = robot.base_T_flange_mm
     host, rport = server.address

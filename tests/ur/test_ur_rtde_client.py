@@ -16,6 +16,7 @@ import sys
 import numpy as np
 import pytest
 
+from humanpt.geometry.arms import arm_kinematics
 from humanpt.geometry.transforms import matrix_from_rotvec
 from humanpt.robot_gateway.links import gateway_config
 from humanpt.robot_gateway.links.ur import protocol as rtde
@@ -45,12 +46,14 @@ r.disconnect()
 print(json.dumps(out))
 """
 
+UR5E_FK = arm_kinematics("ur5e").forward
+
 
 @pytest.fixture
 def moving_ur():
-    """The simulated e-Series at 127.0.0.1:30004 following a target 3 mm away (as if the
-    gateway had written it), so that the pose changes while ur-rtde reads it."""
-    robot = UrRobot(SimRobotConfig(start_pose_mm_deg=(700.0, 150.0, -250.0, 10.0, 5.0, 170.0)),
+    """The simulated e-Series (a UR5e) at 127.0.0.1:30004 following a target 3 mm away (as if
+    the gateway had written it), so that the pose changes while ur-rtde reads it."""
+    robot = UrRobot(SimRobotConfig(model="ur5e", start_pose_mm_deg=(500.0, -150.0, 300.0, 10.0, 5.0, 170.0)),
                     register_base=REGISTER_BASE, trace_cycles=100_000)
     start = robot.base_T_flange_mm
     target = start.copy()
@@ -83,6 +86,8 @@ def test_ur_rtde_reads_the_simulated_urs_actual_tcp_pose_as_its_truth(moving_ur)
         # the rotation vector ur-rtde read is the truth's rotation
         np.testing.assert_allclose(matrix_from_rotvec(np.asarray(pose[3:])), T[:3, :3], atol=1e-12)
         np.testing.assert_allclose(q, robot.kin.inverse(T, np.asarray(q)), atol=1e-6)
+        # the arm is the UR5e: the pose ur-rtde read is UR's published DH table at the joints it read
+        np.testing.assert_allclose(pose[:3], UR5E_FK(np.asarray(q))[:3, 3] / 1000.0, atol=1e-9)
         assert (robot_mode, safety_mode, runtime_state) == (7, 1, 2)  # RUNNING, NORMAL, PLAYING
         assert heartbeat == k  # +1 every program cycle, from the first
         moved += not np.allclose(T, start)
@@ -103,7 +108,7 @@ def test_ur_rtdes_io_interface_writes_the_simulated_urs_inputs_beside_humanpts_s
     """ur-rtde's RTDEIOInterface sets up its input recipes (lower range registers 18..23, the
     digital outputs) while humanpt's link holds its own (24..30): no IN_USE, and what it writes
     is what the simulated controller has."""
-    robot = UrRobot(SimRobotConfig())
+    robot = UrRobot(SimRobotConfig(model="ur5e"))
     with_humanpt, _ = _session(UrLink.from_config(gateway_config("ur")), robot)
     assert with_humanpt.started
     try:

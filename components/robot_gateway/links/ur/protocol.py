@@ -261,12 +261,13 @@ class Recipe:
         bad = [f"{n}={t}" for n, t in zip(self.names, self.types, strict=True) if t not in TYPES]
         if bad:
             raise RtdeProtocolError(f"RTDE recipe {self.recipe_id}: not available: {', '.join(bad)}")
-        fmt = ">" + "".join(TYPES[t][0] for t in self.types)
-        object.__setattr__(self, "_struct", struct.Struct(fmt))
+        # the struct format (a string, not a struct.Struct: a recipe is plain data, as snapshots
+        # need it; the struct module caches the compiled format)
+        object.__setattr__(self, "_fmt", ">" + "".join(TYPES[t][0] for t in self.types))
 
     @property
     def size(self) -> int:
-        return self._struct.size
+        return struct.calcsize(self._fmt)
 
     def encode(self, values: dict[str, object]) -> bytes:
         """A data package ('U') with ``values`` by name (each a number or a sequence)."""
@@ -280,14 +281,14 @@ class Recipe:
                 if len(v) != TYPES[t][1]:
                     raise ValueError(f"{n}: {len(v)} values for {t}")
                 flat.extend(v)
-        return pack(DATA_PACKAGE, encode_u8(self.recipe_id) + self._struct.pack(*flat))
+        return pack(DATA_PACKAGE, encode_u8(self.recipe_id) + struct.pack(self._fmt, *flat))
 
     def decode(self, payload: bytes) -> dict[str, object]:
         """The values of a data package's payload (its recipe id first)."""
         _need(payload, 1 + self.size, f"data package of recipe {self.recipe_id}")
         if payload[0] != self.recipe_id:
             raise RtdeProtocolError(f"RTDE data package of recipe {payload[0]}, expected {self.recipe_id}")
-        flat = self._struct.unpack_from(payload, 1)
+        flat = struct.unpack_from(self._fmt, payload, 1)
         out: dict[str, object] = {}
         i = 0
         for n, t in zip(self.names, self.types, strict=True):
