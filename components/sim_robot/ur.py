@@ -325,12 +325,11 @@ class UrRobot:
             self.counters["moved"] += 1
 
     # -- the cycle ---------------------------------------------------------------------------------
-    def outputs(self) -> dict[str, object]:
+    def outputs(self, names=None) -> dict[str, object]:
+        """The outputs this controller simulates (the poses only when ``names``, a set, asks
+        for them or is None: a rotation vector costs what the rest does)."""
         v: dict[str, object] = {
             "timestamp": self.timestamp_s,
-            "actual_TCP_pose": rtde.ur_pose_from_transform(self.base_T_flange_mm),
-            "target_TCP_pose": rtde.ur_pose_from_transform(self.target if self.target is not None
-                                                           else self.base_T_flange_mm),
             "actual_q": tuple(float(q) for q in self.q_rad),
             "target_q": tuple(float(q) for q in self.q_rad),
             "robot_mode": rtde.ROBOT_MODE_RUNNING,
@@ -342,6 +341,11 @@ class UrRobot:
             f"output_int_register_{self.b}": self.heartbeat,
             f"output_int_register_{self.b + 1}": self.followed_seq,
         }
+        if names is None or "actual_TCP_pose" in names:
+            v["actual_TCP_pose"] = rtde.ur_pose_from_transform(self.arm.forward())
+        if names is None or "target_TCP_pose" in names:
+            v["target_TCP_pose"] = rtde.ur_pose_from_transform(self.target if self.target is not None
+                                                               else self.arm.forward())
         return v
 
     def cycle(self, t_ns: int) -> dict[int, bytes]:
@@ -355,13 +359,15 @@ class UrRobot:
             self.trace.append((self.timestamp_s, self.base_T_flange_mm))
         out: dict[int, bytes] = {}
         values = None
-        for sid, s in self.sessions.items():
-            if s.started and s.outputs is not None and self.cycles % s.every == 0:
-                if values is None:
-                    values = self.outputs()
-                vals = {n: values.get(n, _ZERO[t]) for n, t in zip(s.outputs.names, s.outputs.types, strict=True)}
-                out[sid] = s.outputs.encode(vals)
-                self.counters["packages"] += 1
+        due = [s for s in self.sessions.values()
+               if s.started and s.outputs is not None and self.cycles % s.every == 0]
+        for s in due:
+            sid = s.sid
+            if values is None:
+                values = self.outputs({n for d in due for n in d.outputs.names})
+            vals = {n: values.get(n, _ZERO[t]) for n, t in zip(s.outputs.names, s.outputs.types, strict=True)}
+            out[sid] = s.outputs.encode(vals)
+            self.counters["packages"] += 1
         return out
 
     def stop_program(self, t_ns: int) -> None:

@@ -36,7 +36,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
 from .run import SystemConfig
-from .system import abb_link, puma_cores, rsi_link
+from .system import abb_link, arm_cores, rsi_link
 from .world import start_flange_for
 
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
@@ -138,7 +138,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
                   secure: bool = False, link: str = "alter",
                   cycle_ms: float | None = None) -> tuple[SystemConfig, dict[str, dict]]:
     """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
-    simulated Puma is mounted so that it starts where the camera sees the target, behind a
+    simulated robot (the Puma; the IRB 1600 over ``link`` abb) is mounted so that it starts where the camera sees the target, behind a
     pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
     get only the ``overrides`` keys (so the defaults stay theirs).  What the pipeline
     believes is ``cfg.rig``, written by :func:`run_live` as ``rig.toml`` beside the config.
@@ -147,7 +147,9 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     over = overrides or {}
     op, ctl, cam = cfg.operator, cfg.controller, cfg.sim_camera
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
-    robot, gateway = puma_cores(start)
+    # The link's arm (the Puma over ALTER and RSI, the IRB 1600 over ABB EGM), mounted by the
+    # one rule (humanpt.twin.system.arm_cores).
+    robot, gateway = arm_cores(start, model="irb1600" if link == "abb" else "puma762")
     pty = str(run_dir / "alter.pty")
     start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
     robot = cfg.robot_config("sim_robot", dataclasses.replace(
