@@ -250,9 +250,6 @@ def demo(args) -> int:
         raise SystemExit(f"humanpt demo: {e}") from None
     if args.lockstep and args.link in ("rsi", "abb", "ur") and args.robot != "puma":
         raise SystemExit(f"humanpt demo: --link {args.link} drives the link's simulated robot, not the stand-in")
-    if args.link == "ur" and not args.lockstep:
-        raise SystemExit("humanpt demo: --robot ur runs in lock-step (--lockstep); live, the UR's RTDE server is "
-                         "humanpt.sim_robot.ur.RtdeServer (tests/ur)")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

@@ -122,12 +122,12 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    help="lock-step robot: the simulated Puma behind the ALTER link (default; with --calibrate "
                    "the stand-in) or a stand-in; "
                    "alter or rsi: the simulated Puma over that link (--robot rsi = --link rsi); abb: the "
-                   "simulated ABB IRB 1600 over EGM; ur: the simulated UR5e over RTDE (lock-step)")
+                   "simulated ABB IRB 1600 over EGM; ur: the simulated UR5e over RTDE")
     p.add_argument("--link", choices=["alter", "rsi", "abb", "ur"], default="alter",
                    help="the robot link: the Puma's serial ALTER line at 28 ms (default), a KUKA "
                    "RSI-style UDP link (the simulated RSI controller; see components/rsi/README.md), ABB EGM "
                    "over UDP (the simulated EGM controller, 4 ms; components/robot_gateway/links/abb/README.md) "
-                   "or UR RTDE (the simulated UR controller, 2 ms; lock-step only)")
+                   "or UR RTDE over TCP (the simulated UR controller, 2 ms; components/robot_gateway/links/ur/README.md)")
     p.add_argument("--cycle-ms", type=float, choices=[2.0, 4.0, 8.0, 12.0], metavar="2|4|8|12",
                    help="with --link rsi: RSI's cycle, 4 or 12 ms (default 12); with --link abb: EGM's, 4 "
                    "(default) or 12; with --link ur: RTDE's, 2 (e-Series, default) or 8 (CB3); the gateway, "

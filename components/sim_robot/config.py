@@ -85,6 +85,9 @@ class SimRobotConfig:
     # RSI correction limits per cycle (the robot's RSI POSCORR limits): beyond -> RSI stops.
     rsi_max_correction_mm: Annotated[float, Range(0.001, 100, "mm")] = 5.0
     rsi_max_correction_deg: Annotated[float, Range(0.001, 45, "deg")] = 2.0
+    # RTDE: where the simulated UR's RTDE server listens (a real controller: port 30004); the
+    # gateway's rtde_address (live; the lock-step twin wires the stream itself).
+    rtde_bind: str = "127.0.0.1:30004"
     # EGM: where the gateway listens (the controller's UDPUC RemoteAddress:RemotePortNumber).
     egm_gateway: str = "127.0.0.1:6510"
     # EGM: no EgmSensor for this long stops EGM (EGMRunPose \CommTimeout), counted from the
@@ -152,6 +155,9 @@ class SimRobotConfig:
         for name in ("egm_comm_timeout_s", "egm_time_constant_ms"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        from humanpt.robot_gateway.links.rsi.config import parse_address
+
+        parse_address(self.rtde_bind)  # (ValueError naming it)
         if not self.rsi_late_limit >= 1:
             raise ValueError(f"rsi_late_limit must be >= 1, got {self.rsi_late_limit}")
         for name in ("rsi_max_correction_mm", "rsi_max_correction_deg"):

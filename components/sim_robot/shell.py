@@ -125,11 +125,107 @@ class PtyAdapter:
                 pass
 
 
+class TcpServerAdapter:
+    """The simulated UR's RTDE server: listens at ``bind`` ("host:port") and serves one
+    client at a time (the gateway; the next is accepted once it has gone: the gateway
+    reconnects after closing). Each accepted connection is first marked by an EMPTY ``serial_rx``
+    chunk (the core starts a fresh RTDE session: TCP never delivers an empty read as data),
+    then every read is a ``serial_rx`` chunk; ``serial_tx`` goes to the client (lost while
+    there is none)."""
+
+    topics_out = ("serial_tx",)
+
+    def __init__(self, bind: str, *, poll_s: float = 0.2):
+        import socket
+
+        from humanpt.robot_gateway.links.rsi.config import parse_address
+
+        self.address = parse_address(bind)
+        self.poll_s = poll_s
+        self._listen = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            self._listen.bind(self.address)
+        except OSError as e:
+            self._listen.close()
+            raise OSError(f"sim_robot: cannot listen for RTDE at {bind}: {e.strerror or e}") from None
+        self._listen.listen(2)
+        self._listen.settimeout(poll_s)
+        self.address = self._listen.getsockname()[:2]  # (port 0: the one the system chose)
+        self._conn = None
+        self._wlock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.connections = 0
+        self.bytes_in = 0
+        self.bytes_out = 0
+        self.bytes_dropped = 0
+        log.info("sim_robot: RTDE server at %s:%d", *self.address)
+
+    def start(self, put: Callable[[str, object], None]) -> None:
+        self._thread = threading.Thread(target=self._loop, args=(put,), name="rtde-server", daemon=True)
+        self._thread.start()
+
+    def _loop(self, put) -> None:
+        import socket
+
+        while not self._stop.is_set():
+            try:
+                conn, peer = self._listen.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.settimeout(self.poll_s)
+            self.connections += 1
+            frame_id = "{}:{}".format(*peer[:2])
+            log.info("sim_robot: RTDE client %s (connection %d)", frame_id, self.connections)
+            with self._wlock:
+                self._conn = conn
+            put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=b""))
+            try:
+                while not self._stop.is_set():
+                    try:
+                        data = conn.recv(65536)
+                    except TimeoutError:
+                        continue
+                    if not data:
+                        break
+                    self.bytes_in += len(data)
+                    put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=data))
+            except OSError as e:
+                log.warning("sim_robot: RTDE client %s: %s", frame_id, e)
+            finally:
+                with self._wlock:
+                    if self._conn is conn:
+                        self._conn = None
+                conn.close()
+
+    def write(self, topic: str, msg: pb.SerialChunk) -> None:
+        with self._wlock:
+            conn = self._conn
+            if conn is None:
+                self.bytes_dropped += len(msg.data)
+                return
+            try:
+                conn.sendall(msg.data)
+                self.bytes_out += len(msg.data)
+            except OSError:
+                self.bytes_dropped += len(msg.data)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._listen.close()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+
+
 def adapters(config: SimRobotConfig) -> list:
     """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``; over
     RSI (``protocol = "rsi"``) a UDP socket on an ephemeral loopback port that sends each
     ``<Rob>`` to ``rsi_gateway`` and takes answers only from there; over EGM the same to
-    ``egm_gateway``."""
+    ``egm_gateway``; over RTDE a TCP server at ``rtde_bind`` (:class:`TcpServerAdapter`)."""
     if config.protocol == "rsi":
         from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
@@ -138,4 +234,6 @@ def adapters(config: SimRobotConfig) -> list:
         from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
         return [UdpAdapter("127.0.0.1:0", robot=config.egm_gateway, peer=config.egm_gateway)]
+    if config.protocol == "rtde":  # the UR's RTDE server; the gateway connects to it
+        return [TcpServerAdapter(config.rtde_bind)]
     return [PtyAdapter(config.pty_link)]

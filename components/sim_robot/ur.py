@@ -383,8 +383,10 @@ class UrSimRobotCore(RsiSimRobotCore):
     byte stream); outputs ``serial_tx`` (the session's answers and each cycle's data
     package), ``sim_robot/truth`` and ``sim_robot/events``, as over RSI and EGM. Built by
     ``SimRobotCore.create`` for ``protocol = "rtde"``; the lock-step twin wires it to the
-    gateway as a fast serial line (:meth:`humanpt.runtime.lockstep.LockStep.connect_serial`),
-    live :class:`RtdeServer` serves the robot instead."""
+    gateway as a fast serial line (:meth:`humanpt.runtime.lockstep.LockStep.connect_serial`);
+    live, the shell's TCP server (``humanpt.sim_robot.shell.TcpServerAdapter`` at
+    ``rtde_bind``) carries it and marks each new connection with an empty chunk: the
+    session starts afresh."""
 
     ports = (
         Port("tick", pb.Tick, "_on_cycle"),
@@ -407,6 +409,10 @@ class UrSimRobotCore(RsiSimRobotCore):
 
     def _on_rtde(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
         outs: list[Output] = []
+        if not msg.data:  # the live server's mark of a new connection: a fresh session
+            self.robot.disconnect(self.session)
+            self.session = self.robot.connect()
+            return outs
         self._send(t_ns, self.session.feed(bytes(msg.data), t_ns), outs)
         self._flush_events(outs)
         return outs

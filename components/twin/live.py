@@ -36,7 +36,7 @@ from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
 from .run import SystemConfig
-from .system import abb_link, arm_cores, rsi_link
+from .system import abb_link, arm_cores, rsi_link, ur_link
 from .world import start_flange_for
 
 __all__ = ["LIVE_COMPONENTS", "OPERATOR_IDENTITY", "LiveControl", "LiveResult", "live_sections", "make_pki",
@@ -79,7 +79,7 @@ def robot_table(robot) -> dict:
 
 def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
     """The cycle period (ms) of ``link`` ("alter": 28; "rsi": ``cycle_ms``, 4 or 12, default
-    12; "abb": ``cycle_ms``, 4 or a multiple, default 4); ValueError, one line, for a cycle
+    12; "abb": ``cycle_ms``, 4 or a multiple, default 4; "ur": 2 or 8, default 2); ValueError, one line, for a cycle
     the link does not have."""
     from humanpt.robot_gateway.links.abb.config import EGM_BASE_CYCLE_MS
     from humanpt.robot_gateway.links.rsi.config import RSI_CYCLES_MS
@@ -111,7 +111,8 @@ def link_cycle_ms(link: str, cycle_ms: float | None) -> float:
 def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) -> None:
     """Put the robot link in the run's ``sections`` (in place), from this one place: ALTER
     (as written, 28 ms), RSI (``cycle_ms`` 4 or 12, default 12) or ABB EGM (``cycle_ms`` 4 or a
-    multiple, default 4) over UDP on loopback.
+    multiple, default 4) over UDP on loopback, or UR RTDE (``cycle_ms`` 2 or 8, default 2)
+    over TCP on loopback (the simulated UR's server at a free port).
     The cycle period goes to the gateway's section only: the cell's one cycle, which the
     launcher gives the simulated controller and the robot states carry to the controller,
     the pose filter and viz (runtime/cycle.py); the gateway's safety fields (speeds, envelope,
@@ -123,13 +124,18 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     from humanpt.robot_gateway.config import GatewayConfig
     from humanpt.sim_robot.config import SimRobotConfig
 
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
-    make = abb_link if link == "abb" else rsi_link
-    robot, gateway = make(cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot"),
-                          cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo",
-                                       section="robot_gateway"), cycle_ms, udp)
+    robot = cfgmod.build(SimRobotConfig, sections["sim_robot"], source="demo", section="sim_robot")
+    gateway = cfgmod.build(GatewayConfig, sections["robot_gateway"], source="demo", section="robot_gateway")
+    if link == "ur":  # the simulated UR's RTDE server on a free loopback port; the gateway connects
+        rtde = f"127.0.0.1:{free_tcp_port()}"
+        robot, gateway = ur_link(robot, gateway, cycle_ms, rtde)
+        robot = dataclasses.replace(robot, rtde_bind=rtde)
+    else:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(("127.0.0.1", 0))
+            udp = f"127.0.0.1:{s.getsockname()[1]}"  # (free now; the gateway binds it at its start)
+        make = abb_link if link == "abb" else rsi_link
+        robot, gateway = make(robot, gateway, cycle_ms, udp)
     sections["sim_robot"], sections["robot_gateway"] = robot_table(robot), to_table(gateway)
 
 
@@ -138,7 +144,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
                   secure: bool = False, link: str = "alter",
                   cycle_ms: float | None = None) -> tuple[SystemConfig, dict[str, dict]]:
     """The live run's configs: (cfg as run live, {section: table} of its TOML file). The
-    simulated robot (the Puma; the IRB 1600 over ``link`` abb) is mounted so that it starts where the camera sees the target, behind a
+    simulated robot (the Puma; the IRB 1600 over ``link`` abb, the UR5e over ur) is mounted so that it starts where the camera sees the target, behind a
     pty in ``run_dir``; the operator holds its start pose 3 s. Perception and pose_filter
     get only the ``overrides`` keys (so the defaults stay theirs).  What the pipeline
     believes is ``cfg.rig``, written by :func:`run_live` as ``rig.toml`` beside the config.
@@ -149,7 +155,7 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
     start = start_flange_for(op, ctl.dz_mm, cam.flange_T_camera)
     # The link's arm (the Puma over ALTER and RSI, the IRB 1600 over ABB EGM), mounted by the
     # one rule (humanpt.twin.system.arm_cores).
-    robot, gateway = arm_cores(start, model="irb1600" if link == "abb" else "puma762")
+    robot, gateway = arm_cores(start, model={"abb": "irb1600", "ur": "ur5e"}.get(link, "puma762"))
     pty = str(run_dir / "alter.pty")
     start_in_base = invert_transform(transform_from_x(np.asarray(robot.world_T_base_mm_deg))) @ start
     robot = cfg.robot_config("sim_robot", dataclasses.replace(
