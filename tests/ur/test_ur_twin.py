@@ -75,3 +75,13 @@ def test_the_ur_cores_replay_from_their_recordings(runs, name):
     *_, d = runs
     res = replay(d / f"{name}.mcap")
     assert res.match and res.compared > 1000, res.report()
+
+
+def test_demo_robot_ur_cli_takes_rtdes_cycles_only(tmp_path, cli):
+    """`humanpt demo --robot ur` is the UR over RTDE: a cycle RTDE does not have fails before
+    anything starts, one line; the stand-in cannot be driven over the link."""
+    code, out, err = cli("demo", "--lockstep", "--robot", "ur", "--cycle-ms", "4", "--run-dir", str(tmp_path / "a"))
+    assert code != 0 and "--cycle-ms 4: UR RTDE runs at 2 ms (e-Series, 500 Hz) or 8 ms (CB3, 125 Hz)" in err
+    assert "Traceback" not in err
+    code, out, err = cli("demo", "--lockstep", "--link", "ur", "--robot", "standin", "--run-dir", str(tmp_path / "b"))
+    assert code != 0 and "--link ur drives the link's simulated robot, not the stand-in" in err
