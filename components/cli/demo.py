@@ -249,7 +249,9 @@ def demo(args) -> int:
     except ValueError as e:
         raise SystemExit(f"humanpt demo: {e}") from None
     if args.lockstep and args.link in ("rsi", "abb", "ur") and args.robot != "puma":
-        raise SystemExit(f"humanpt demo: --link {args.link} drives the link's simulated robot, not the stand-in")
+        arm = {"rsi": "Puma", "abb": "ABB IRB 1600", "ur": "UR5e"}[args.link]
+        raise SystemExit(f"humanpt demo: --link {args.link} drives the simulated {arm} (--robot puma or "
+                         f"--robot {args.link}), not the stand-in")
     if args.lockstep:
         if getattr(args, "secure", False):
             raise SystemExit("humanpt demo: --secure is for the live demo (lock-step runs in one process, "

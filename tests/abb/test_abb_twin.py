@@ -120,4 +120,4 @@ def test_demo_link_abb_cli(tmp_path, cli):
         paths.append((tmp_path / f"r{k}" / "paths" / "path-1.csv").read_text())
     assert paths[0] == paths[1] and len(paths[0].splitlines()) > 3
     code, out, err = cli("demo", "--link", "abb", "--lockstep", "--robot", "standin", "--run-dir", str(tmp_path / "r3"))
-    assert code != 0 and "--link abb drives the link's simulated robot" in err
+    assert code != 0 and "--link abb drives the simulated ABB IRB 1600" in err

@@ -84,4 +84,4 @@ def test_demo_robot_ur_cli_takes_rtdes_cycles_only(tmp_path, cli):
     assert code != 0 and "--cycle-ms 4: UR RTDE runs at 2 ms (e-Series, 500 Hz) or 8 ms (CB3, 125 Hz)" in err
     assert "Traceback" not in err
     code, out, err = cli("demo", "--lockstep", "--link", "ur", "--robot", "standin", "--run-dir", str(tmp_path / "b"))
-    assert code != 0 and "--link ur drives the link's simulated robot, not the stand-in" in err
+    assert code != 0 and "--link ur drives the simulated UR5e (--robot puma or --robot ur), not the stand-in" in err
