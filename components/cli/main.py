@@ -207,6 +207,9 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
     p.add_argument("--duration", type=_duration,
                    help="budget: seconds of twin time per run (default: the scenario's, as the demo)")
+    p.add_argument("--rig-kind", choices=("psvs", "stereo"), default="psvs",
+                   help="budget: the camera, the PSVS (default) or an ordinary stereo pair (the world's PSVS's "
+                        "virtual cameras apart, as demo --rig-kind stereo)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
