@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from humanpt.bench.summary import latency_and_cycles
+from humanpt.bench.summary import CHAIN, latency_and_cycles, latency_chain
 from humanpt.controller import pathfile
 from humanpt.runtime.replay import replay
 from tests.conftest import free_port, run_cli
@@ -53,6 +53,17 @@ def test_live_demo_runs_every_component_as_a_process(tmp_path, cli):
     print(f"live demo: {res['on_time']}/{res['cycles']} cycles answered on time")
     assert res["on_time"] > 0  # the loop closed at all
     assert np.all(res["latency_ms"] > 0)
+    # Where the time goes (issue 37.3), hop by hop from four recordings: every hop of an image
+    # is a forward step in time, and its first four add up to the image-to-command latency
+    # measured directly from the controller's recording (same images, to the nanosecond).
+    chain = latency_chain(run)
+    hops = np.column_stack([chain[name] for name, _ in CHAIN])
+    assert len(hops) > 50 and np.all(hops >= 0)
+    direct = np.sort(res["latency_ms"])  # every image with a command; the chain's also reached the gateway
+    sums = hops[:, :4].sum(axis=1)
+    nearest = direct[np.clip(np.searchsorted(direct, sums), 0, len(direct) - 1)]
+    below = direct[np.clip(np.searchsorted(direct, sums) - 1, 0, len(direct) - 1)]
+    assert np.all(np.minimum(abs(nearest - sums), abs(below - sums)) < 1e-6)
     code, out, err = cli("replay", str(run))
     assert code == 0, out[-3000:] + err
     # Foxglove's own types beside ours in the live run too (issue 20 item 1; tests/scene: content).
