@@ -128,6 +128,33 @@ def test_a_full_install_verb_on_the_server_says_what_it_needs(refusing_env, tmp_
         "requirements/server.txt); run it on the client, or `pip install -e .`"]
 
 
+# Every module of the server's packages imports without them, but the two that render the
+# demo's and the benches' tables and progress bars (rich).
+WALK = """
+import importlib, pkgutil, humanpt.robot_gateway, humanpt.runtime
+names = [m.name for pkg in (humanpt.robot_gateway, humanpt.runtime)
+         for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")]
+bad = []
+for name in names:
+    try:
+        importlib.import_module(name)
+    except ImportError as e:
+        bad.append(f"{name}: {e}")
+print(len(names))
+print(*bad, sep="\\n")
+"""
+
+
+def test_every_gateway_and_runtime_module_imports_on_the_server(refusing_env, tmp_path):
+    r = subprocess.run([sys.executable, "-c", WALK], env=refusing_env, capture_output=True, text=True,
+                       cwd=tmp_path, timeout=120)
+    assert r.returncode == 0, r.stderr
+    count, *bad = r.stdout.strip().splitlines()
+    assert int(count) > 40  # (the walk found the packages)
+    assert bad == ["humanpt.runtime.progress: No module named 'rich' (refused: the server's install)",
+                   "humanpt.runtime.tables: No module named 'rich' (refused: the server's install)"]
+
+
 @pytest.mark.live
 @pytest.mark.timeout(300)
 def test_server_profile_comes_up_without_the_full_install(refusing_env, tmp_path):
