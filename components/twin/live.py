@@ -206,6 +206,12 @@ def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], stall_s: float, 
             time.sleep(0.3)
 
 
+def _note(log, line: str) -> None:
+    """A line of the live twin's own in ``processes.log`` (beside its processes' output)."""
+    log.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} live twin: {line}\n")
+    log.flush()
+
+
 def _lower_priority(pid: int) -> None:
     """A lower scheduling priority for a child (POSIX; a no-op elsewhere)."""
     try:
@@ -318,6 +324,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
             if why:
                 failed.append(f"the router did not listen: {why}; see {run_dir / 'processes.log'}")
                 return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, time.time_ns(), failed)
+            _note(log, f"the router listened after {router_s:.1f} s; starting the components")
             for name in comps + ["operator"]:
                 p = ctl._spawn(name, launcher.argv(name, config=cfg_path, run_dir=run_dir))
                 if name == "operator":
@@ -326,8 +333,10 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
                     _lower_priority(p.pid)
             if on_started is not None:
                 on_started(comps)
+            t_comps = time.monotonic()
             why = _wait_alive(file_cfg, tuple(comps) + ("operator",),
                               max(START_STALL_S, START_STALL_ROUTERS * router_s), procs)
+            _note(log, why or f"all {len(comps) + 1} components up after {time.monotonic() - t_comps:.1f} s")
             if why:
                 failed.append(f"the components did not all come up: {why}")
             else:
