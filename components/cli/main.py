@@ -701,6 +701,14 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except ModuleNotFoundError as e:  # a verb of the full install on the server's (runtime/install.py)
+        from humanpt.runtime.install import needs_full_install
+
+        why = needs_full_install(e)
+        if why is None:
+            raise
+        print(f"humanpt {args.verb}: {why}", file=sys.stderr)
+        return 2
 
 
 def _dispatch(ap: argparse.ArgumentParser, args) -> int:
