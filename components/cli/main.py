@@ -464,6 +464,11 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    "flange_T_tool_x, 0,0,200,0,0,0)")
     q.add_argument("--dwells", action="store_true",
                    help="wait where the welder dwelt (the seam's dwells, at segment ends), as long as he did")
+    q.add_argument("--arc", metavar="OUTPUT|SIGNAL|arcware[:SEAM,WELD]", default="",
+                   help="switch the welding arc on at the seam's start and off at its end: krl $OUT[OUTPUT] "
+                   "(1..4096), urscript set_standard_digital_out(OUTPUT) (0..7), rapid SetDO SIGNAL (a digital "
+                   "output's name) or arcware (ArcLStart/ArcL/ArcC/ArcLEnd with the controller's seamdata and "
+                   "welddata, default seam1,weld1); json records it; val refuses (default: no arc switching)")
     q.add_argument("--timed", metavar="CSV",
                    help="the seam's timing from humanpt path retime: its feed is the default --speed, and the "
                    "JSON format carries its samples (t_s and pose every cycle)")
