@@ -13,9 +13,11 @@ lookup of any ``a_T_b`` at a stamp.
 * :class:`FrameGraph` is a tree of named frames (``world`` at the root; ``base``,
   ``flange``, ``camera``, ``tob``, ``tip``, ...) whose edges ``parent_T_child`` are static
   (a 4x4) or timed (a :class:`TimedPoses` with its :class:`Lookup`). ``lookup(a, b, stamp)``
-  composes ``a_T_b = inverse(root_T_a) @ root_T_b``, each chain from the root down, left to
-  right (so ``world_T_camera = world_T_flange @ flange_T_camera`` bit for bit as written
-  out by hand); None when a timed edge on the way has no pose at the stamp.
+  composes ``a_T_b = inverse(c_T_a) @ c_T_b`` through their nearest common ancestor ``c``,
+  each chain from ``c`` down, left to right (so ``world_T_camera = world_T_flange @
+  flange_T_camera`` and ``camera_T_tob = inverse(world_T_camera) @ world_T_tob`` bit for bit
+  as written out by hand; a parent-child lookup is the edge itself); None when a timed edge
+  on the way has no pose at the stamp.
 * :func:`smooth_poses_at` is the batch lookup of a smooth track through stamped poses
   (position a cubic spline, orientation scipy's ``Slerp``): the camera-to-robot timing
   estimate's arithmetic (:mod:`humanpt.calibration.timing`), kept as it was.
@@ -327,15 +329,20 @@ class FrameGraph:
             raise GeometryError(f"{self._parent[child]}_T_{child} moves: its lookup needs a stamp")
         return poses.at(stamp, lookup)
 
-    def _from_root(self, frame: str, stamp) -> np.ndarray | None:
-        """root_T_frame, composed from the root down (left to right); None when a timed edge
-        on the way has no pose at ``stamp``. May be a kept array: do not change it."""
-        chain = []
-        while frame != self.root:
-            chain.append(frame)
-            frame = self._parent[frame]
+    def path(self, frame: str) -> tuple[str, ...]:
+        """The frames from the root down to ``frame`` (both included)."""
+        self._check(frame)
+        chain = [frame]
+        while chain[-1] != self.root:
+            chain.append(self._parent[chain[-1]])
+        return tuple(reversed(chain))
+
+    def _chain(self, frames: tuple[str, ...], stamp) -> np.ndarray | None:
+        """frames[0]_T_frames[-1] down the tree, composed left to right; None when a timed
+        edge on the way has no pose at ``stamp``; None for no edge (the same frame). May be a
+        kept array: do not change it."""
         out = None
-        for child in reversed(chain):
+        for child in frames[1:]:
             T = self._edge(child, stamp)
             if T is None:
                 return None
@@ -343,19 +350,22 @@ class FrameGraph:
         return out
 
     def lookup(self, a: str, b: str, stamp=None) -> np.ndarray | None:
-        """``a_T_b`` (4, 4) at ``stamp`` (needed when a timed edge is on the way):
-        ``inverse(root_T_a) @ root_T_b``, or ``root_T_b`` when ``a`` is the root; None when a
-        timed edge on the way has no pose at ``stamp``. A new array."""
-        self._check(a)
-        self._check(b)
-        root_T_b = np.eye(4) if b == self.root else self._from_root(b, stamp)
-        if root_T_b is None:
+        """``a_T_b`` (4, 4) at ``stamp`` (needed when a timed edge is on the way), through the
+        nearest common ancestor ``c``: ``inverse(c_T_a) @ c_T_b``, or ``c_T_b`` when ``a`` is
+        ``c``, or ``inverse(c_T_a)`` when ``b`` is; None when a timed edge on the way has no
+        pose at ``stamp``. A new array."""
+        pa, pb = self.path(a), self.path(b)
+        k = 0  # pa[:k] == pb[:k]: the common ancestor is pa[k - 1]
+        while k < min(len(pa), len(pb)) and pa[k] == pb[k]:
+            k += 1
+        down_a, down_b = pa[k - 1:], pb[k - 1:]
+        c_T_b = self._chain(down_b, stamp) if len(down_b) > 1 else None
+        if len(down_b) > 1 and c_T_b is None:
             return None
-        if a == self.root:
-            return root_T_b.copy()
-        root_T_a = self._from_root(a, stamp)
-        if root_T_a is None:
+        if len(down_a) == 1:  # a is the common ancestor
+            return np.eye(4) if c_T_b is None else np.array(c_T_b)
+        c_T_a = self._chain(down_a, stamp)
+        if c_T_a is None:
             return None
-        if b == self.root:
-            return invert_transform(root_T_a)
-        return invert_transform(root_T_a) @ root_T_b
+        a_T_c = invert_transform(c_T_a)
+        return a_T_c if c_T_b is None else a_T_c @ c_T_b
