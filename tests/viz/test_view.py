@@ -330,3 +330,6 @@ def test_logger_sees_the_camera_from_the_robot_state_nearest_the_image():
     lg.log("robot_gateway/robot_state", pb.RobotState(header=header(500), world_T_flange=pose(b)), 2100)
     np.testing.assert_allclose(lg.frames.lookup("world", "camera", 1400), b @ F, atol=1e-12)
     assert len(lg._robot) == 1 and lg._robot.last_ns == 500
+    # the entities of the moving frames hang as the frames do
+    assert ENTITIES["flange"] == "/".join(lg.frames.path("flange"))
+    assert ENTITIES["camera"] == "/".join(lg.frames.path("camera"))
