@@ -37,6 +37,7 @@ pose filter (robot at an image)   refuse      refuse       reach     segment    
 simulated camera (truth)          replace     restart      hold      sample     refuse
 evaluation (truth, offline)       replace     restart      hold      sample     hold
 viewer (robot at an image)        keep        restart      hold      nearest    hold
+scene (latest robot state)        replace     restart      hold      nearest    hold
 hand-eye timing (batch)           -           -            hold      cubic      hold
 ================================  ==========  ===========  ========  =========  ==========
 """
