@@ -152,6 +152,52 @@ def chain_rows(chain: dict[str, np.ndarray]) -> list[list[str]]:
 
 
 @dataclass
+class BridgeCost:
+    """Image-to-command latencies (ms) of live runs without and with the Foxglove bridge
+    (:func:`bridge_cost`), each pooled over its rounds."""
+
+    without_ms: np.ndarray
+    with_ms: np.ndarray
+    rounds: int
+    seconds: float
+
+    def rows(self) -> list[list[str]]:
+        """Table rows: condition, images, p50, p99 (ms), each against the run without."""
+        base = (float(np.median(self.without_ms)), float(np.percentile(self.without_ms, 99)))
+        out = []
+        for name, v in (("without the bridge", self.without_ms), ("with the bridge", self.with_ms)):
+            p50, p99 = float(np.median(v)), float(np.percentile(v, 99))
+            out.append([name, str(len(v)), f"{p50:.2f}", f"{p50 / base[0]:.3f}", f"{p99:.2f}", f"{p99 / base[1]:.3f}"])
+        return out
+
+
+def bridge_cost(seconds: float = 20.0, rounds: int = 2, scenario: str = "arc",
+                say: Callable[[str], None] | None = None) -> BridgeCost:
+    """What the Foxglove bridge costs the live loop (issue 36): the demo's live run of
+    ``scenario`` (:func:`humanpt.twin.live.run_live`) for ``seconds``, without the bridge then
+    with it, ``rounds`` times alternated (so a change of the machine's load falls on both);
+    the image-to-command latencies of each condition pooled.  The bridge takes every bus
+    topic at its configured rates whether or not a browser is connected; a connected
+    browser's WebSocket sending is not in these runs.  RuntimeError when a run fails."""
+    from humanpt.twin.live import run_live
+    from humanpt.twin.run import SystemConfig
+
+    got: dict[bool, list[np.ndarray]] = {False: [], True: []}
+    for r in range(rounds):
+        for with_bridge in (False, True):
+            if say:
+                say(f"round {r + 1}/{rounds}: {seconds:g} s live, {'with' if with_bridge else 'without'} the bridge")
+            with tempfile.TemporaryDirectory() as d:
+                run_dir = Path(d)
+                live = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=seconds,
+                                bridge=with_bridge)
+                if live.failed:
+                    raise RuntimeError("; ".join(live.failed) + "\n" + (run_dir / "processes.log").read_text()[-2000:])
+                got[with_bridge].append(latency_and_cycles(run_dir)["latency_ms"])
+    return BridgeCost(np.concatenate(got[False]), np.concatenate(got[True]), rounds, seconds)
+
+
+@dataclass
 class Figure:
     """One figure of the table: its name, value and a note (a target, a sample size)."""
 

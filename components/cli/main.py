@@ -618,6 +618,13 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--cycles", default="12,4", help="RSI cycle times to run, ms: 4 and/or 12 (default 12,4)")
     q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
                    "process (sharing its GIL) instead of a process of its own")
+    q = bsub.add_parser("bridge", help="what the Foxglove bridge costs the live loop's latency",
+                        description="The live demo run (--scenario) without and with the Foxglove bridge, "
+                        "alternated --rounds times: image-to-command latency p50 and p99 of each, and their "
+                        "ratio (issue 36: the bridge must cost under 5 %). No browser is connected: the bridge "
+                        "takes every bus topic either way; a browser's WebSocket traffic is not measured.")
+    q.add_argument("--seconds", type=float, default=20.0, help="seconds of each live run (default 20)")
+    q.add_argument("--rounds", type=int, default=2, help="runs each way, alternated (default 2)")
     q = bsub.add_parser("render", help="frames per second of the simulated PSVS camera",
                         description="Render complex images of the static target (Table 1 pose, 600 mm "
                         "ahead) at the default sim_camera settings and print frames per second, with the "
@@ -794,6 +801,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "runtime":
             from humanpt.cli.bench import bench_runtime
             return bench_runtime(args)
+        if args.bench_verb == "bridge":
+            from humanpt.cli.bench import bench_bridge
+            return bench_bridge(args)
         if args.bench_verb == "alter":
             from humanpt.cli.bench import bench_alter
             return bench_alter(args)

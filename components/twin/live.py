@@ -281,7 +281,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
              stop: threading.Event | None = None, on_started: Callable[[list[str]], None] | None = None,
              progress: Callable[[float, float], None] | None = None, secure: bool = False,
              control: LiveControl | None = None, link: str = "alter",
-             cycle_ms: float | None = None, screen: bool = True) -> LiveResult:
+             cycle_ms: float | None = None, screen: bool = True, bridge: bool = True) -> LiveResult:
     """Run ``cfg`` live (:func:`live_sections`; ``port``: the router's, a free one by
     default; ``viewer``: viz too) for ``duration_s`` of scenario (default: start delay +
     scenario + 1.5 s) after everything is up, recording the path from a second after
@@ -290,13 +290,17 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     mTLS with a throwaway PKI in ``run_dir/pki`` (:func:`make_pki`).  ``control``: filled
     with the processes, to stop and start one on purpose (:class:`LiveControl`).  ``link``,
     ``cycle_ms``: the robot link and its cycle (:func:`link_sections`).  ``screen=False``:
-    without the operator's screen (scene, foxglove_bridge: nothing in the loop reads them)."""
+    without the operator's screen (scene, foxglove_bridge: nothing in the loop reads them);
+    ``bridge=False``: without the Foxglove bridge alone (what it costs the loop: ``humanpt bench
+    bridge``)."""
     run_dir = Path(run_dir)
     port = port or free_tcp_port()
     cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure, link=link, cycle_ms=cycle_ms)
     comps = list(LIVE_COMPONENTS) + ["foxglove_bridge"] + (["viz"] if viewer else [])  # the operator's screen
     if not screen:
         comps = [c for c in comps if c not in SCREEN_COMPONENTS]
+    if not bridge:
+        comps = [c for c in comps if c != "foxglove_bridge"]
     if secure:
         make_pki(run_dir, sections["runtime"]["cell"], comps + ["operator"])
     cfg_path = run_dir / "humanpt.toml"
