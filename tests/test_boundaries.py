@@ -29,28 +29,68 @@ SHARED = ("humanpt.runtime", "humanpt.geometry", "humanpt.schemas")
 PRODUCT = ("camera", "perception", "pose_filter", "controller", "robot_gateway", "viz", "calibration", "seam",
            "scene")
 
-# Import the package and every submodule, then list the humanpt packages that got loaded.
+# Import the package and every submodule, then list the humanpt packages that got loaded. One
+# interpreter for every probe (a module's fixture): it loads the third-party libraries the
+# components share once (no humanpt module), then forks a child per package, so each child
+# starts with no humanpt module loaded, as a component's process does, and pays only for
+# humanpt's own imports (21 fresh interpreters each importing numpy, scipy and OpenCV cost ~15 s).
 PROBE = """
-import importlib, json, pkgutil, sys
-pkg = importlib.import_module(sys.argv[1])
-names = [pkg.__name__] + [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")]
-for name in names:
-    importlib.import_module(name)
-loaded = sorted({".".join(n.split(".")[:2]) for n in sys.modules if n.startswith("humanpt.")})
-print(json.dumps({"modules": names, "loaded": loaded}))
+import importlib, json, os, pkgutil, sys
+for lib in ("numpy", "scipy.spatial.transform", "scipy.optimize", "scipy.linalg", "cv2",
+            "google.protobuf.message"):
+    importlib.import_module(lib)
+assert not [n for n in sys.modules if n == "humanpt" or n.startswith("humanpt.")]
+for package in sys.argv[1:]:
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(r)
+        try:
+            pkg = importlib.import_module(package)
+            names = [pkg.__name__] + [m.name for m in pkgutil.walk_packages(pkg.__path__, pkg.__name__ + ".")]
+            for name in names:
+                importlib.import_module(name)
+            loaded = sorted({".".join(n.split(".")[:2]) for n in sys.modules if n.startswith("humanpt.")})
+            out = {"modules": names, "loaded": loaded}
+        except BaseException as e:
+            out = {"error": f"{type(e).__name__}: {e}"}
+        os.write(w, json.dumps(out).encode())
+        os.close(w)
+        os._exit(0)
+    os.close(w)
+    with os.fdopen(r) as f:
+        data = f.read()
+    os.waitpid(pid, 0)
+    print(json.dumps({package: json.loads(data)}), flush=True)
 """
+PROBED = (*(f"humanpt.{n}" for n in PRODUCT), "humanpt.twin",
+          *(f"humanpt.robot_gateway.links.{link}" for link in sorted(LINKS)))
 
 
-def loaded_by(package: str) -> tuple[list[str], set[str]]:
-    r = subprocess.run([sys.executable, "-c", PROBE, package], capture_output=True, text=True, cwd=ROOT,
-                       timeout=120)
+@pytest.fixture(scope="module")
+def probes() -> dict[str, dict]:
+    r = subprocess.run([sys.executable, "-c", PROBE, *PROBED], capture_output=True, text=True, cwd=ROOT,
+                       timeout=300)
     assert r.returncode == 0, r.stderr
-    out = json.loads(r.stdout.strip().splitlines()[-1])
-    return out["modules"], set(out["loaded"])
+    out: dict[str, dict] = {}
+    for line in r.stdout.splitlines():
+        if line.startswith("{"):
+            out.update(json.loads(line))
+    assert set(out) == set(PROBED), (sorted(set(PROBED) - set(out)), r.stderr[-2000:])
+    return out
+
+
+@pytest.fixture(scope="module")
+def loaded_by(probes):
+    def loaded(package: str) -> tuple[list[str], set[str]]:
+        out = probes[package]
+        assert "error" not in out, f"{package}: {out.get('error')}"
+        return out["modules"], set(out["loaded"])
+    return loaded
 
 
 @pytest.mark.parametrize("name", PRODUCT)
-def test_a_product_package_loads_only_the_shared_packages(name):
+def test_a_product_package_loads_only_the_shared_packages(name, loaded_by):
     package = f"humanpt.{name}"
     modules, loaded = loaded_by(package)
     assert len(modules) > 1, f"{package}: no submodules found, the probe walked nothing"
@@ -58,12 +98,12 @@ def test_a_product_package_loads_only_the_shared_packages(name):
     assert loaded <= {package, *SHARED}, f"{package} loads {sorted(loaded - {package, *SHARED})}"
 
 
-def test_viz_does_not_load_perception():
+def test_viz_does_not_load_perception(loaded_by):
     _, loaded = loaded_by("humanpt.viz")
     assert "humanpt.perception" not in loaded
 
 
-def test_the_probe_sees_a_forbidden_import():
+def test_the_probe_sees_a_forbidden_import(loaded_by):
     # The twin loads the simulators: the probe must report them (else the checks above
     # would pass on a probe that never records anything).
     _, loaded = loaded_by("humanpt.twin")
@@ -71,7 +111,7 @@ def test_the_probe_sees_a_forbidden_import():
 
 
 @pytest.mark.parametrize("link", sorted(LINKS))
-def test_a_link_loads_only_the_gateway_and_the_shared_packages(link):
+def test_a_link_loads_only_the_gateway_and_the_shared_packages(link, loaded_by):
     # issue 22: RSI is a link of the one gateway (its safety core), not a simulator's
     modules, loaded = loaded_by(f"humanpt.robot_gateway.links.{link}")
     assert len(modules) > 1 and not loaded & set(FORBIDDEN), sorted(loaded & set(FORBIDDEN))

@@ -257,12 +257,21 @@ def hard(say: Callable[[str], None]) -> str:
     return "`humanpt experiment hard` (seed 0, world ideal):\n\n```\n" + hc.format_cases(cases) + "\n```"
 
 
-def budget(say: Callable[[str], None]) -> str:
-    """``humanpt experiment budget`` (arc, seed 0, the Puma): :func:`humanpt.twin.budget.format_table`."""
+def budget(say: Callable[[str], None], rig_kind: str = "psvs") -> str:
+    """``humanpt experiment budget`` (arc, seed 0, the Puma; ``rig_kind`` the camera):
+    :func:`humanpt.twin.budget.format_table`."""
     from humanpt.twin import budget as bud
 
-    rows = bud.run_budget("arc", 0, "puma", progress=lambda i, n, row: say(f"budget {i}/{n}: {row.source}"))
-    return "`humanpt experiment budget --seed 0`:\n\n```\n" + bud.format_table(rows, "arc", 0, "puma") + "\n```"
+    rows = bud.run_budget("arc", 0, "puma", progress=lambda i, n, row: say(f"budget {i}/{n}: {row.source}"),
+                          rig_kind=rig_kind)
+    flag = "" if rig_kind == "psvs" else f" --rig-kind {rig_kind}"
+    return (f"`humanpt experiment budget --seed 0{flag}`:\n\n```\n"
+            + bud.format_table(rows, "arc", 0, "puma", rig_kind) + "\n```")
+
+
+def budget_stereo(say: Callable[[str], None]) -> str:
+    """The error budget of an ordinary stereo pair (the PSVS's virtual cameras apart)."""
+    return budget(say, "stereo")
 
 
 def bench(say: Callable[[str], None], live_seconds: float = 60.0, lockstep_seconds: float = 10.0) -> str:
@@ -288,6 +297,7 @@ SECTIONS: dict[str, Section] = {s.name: s for s in (
     Section("static-seed0", f"humanpt experiment static --method weighted --vectors {STATIC_SHORT_VECTORS}",
             static_short_section),
     Section("budget", "humanpt experiment budget --seed 0", budget, default=False),
+    Section("budget-stereo", "humanpt experiment budget --seed 0 --rig-kind stereo", budget_stereo, default=False),
     Section("bench", "humanpt bench", bench, deterministic=False, default=False),
 )}
 DETERMINISTIC = tuple(n for n, s in SECTIONS.items() if s.deterministic)

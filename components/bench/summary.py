@@ -5,7 +5,8 @@ them as one table).
 * lock-step: the closed loop on virtual time, in x real time (with and without recording);
 * a live run of the whole system (:func:`humanpt.twin.live.run_live`, as ``humanpt demo``
   runs it: every component a process over Zenoh):
-  image-to-command latency (capture stamp to the controller's first command using it),
+  image-to-command latency (capture stamp to the controller's first command using it) and
+  where it goes, hop by hop (:func:`latency_chain`),
   ALTER cycles answered on time (a command of that cycle within the gateway's deadline);
 * replay of that run's recordings, in x real time;
 * MCAP write throughput with the default compression.
@@ -87,6 +88,115 @@ def latency_and_cycles(run_dir: Path, deadline_ms: float = 6.0) -> dict:
     return {"latency_ms": np.array(lat), "cycles": len(judged), "on_time": on_time}
 
 
+# Where an image's time goes on its way to a command (issue 37 item 3), hop by hop, from the
+# recordings: each process records an input at the time it took it off the bus, so the time
+# from one process's receipt to the next one's is the first one's work plus one bus hop.
+CHAIN = (
+    ("capture -> perception has the image", "the camera's read-out (twin: render), encode, one bus hop"),
+    ("perception -> pose filter has the measurement", "perception's work, one bus hop"),
+    ("pose filter -> controller has the estimate", "the wait for the robot's pose at the image (the next "
+     "robot state after it), the filter's work, one bus hop"),
+    ("controller -> its command out", "the wait for the robot cycle the command answers, the servo law"),
+    ("command out -> gateway has it", "one bus hop"),
+)
+
+
+def latency_chain(run_dir: Path) -> dict[str, np.ndarray]:
+    """Per image of a live run (its capture stamp S), the time in ms of each hop of
+    :data:`CHAIN`, from the recordings of perception, pose_filter, controller and
+    robot_gateway (one machine, one clock): S to perception's receipt of the image; to the
+    pose filter's receipt of its measurement; to the controller's receipt of the first
+    estimate made from it; to the first command built on it (``measurement_stamp_ns``); to
+    the gateway's receipt of that command.  Only the images that went all the way; the
+    hops of one image add up to its image-to-gateway time.  Empty arrays when none did."""
+    from humanpt.runtime.recording import iter_entries
+
+    def first_by(file: str, direction: str, topic: str, stamp) -> dict[int, int]:
+        out: dict[int, int] = {}
+        path = run_dir / file
+        if not path.exists():
+            return out
+        for e in iter_entries(path):
+            if e.direction == direction and e.topic == topic:
+                s = stamp(e.decode())
+                if s and s not in out:
+                    out[s] = e.t_ns
+        return out
+
+    seen = [
+        first_by("perception.mcap", "in", "camera/image", lambda m: m.timestamp.ToNanoseconds()),
+        first_by("pose_filter.mcap", "in", "perception/tob", lambda m: m.header.stamp_ns),
+        first_by("controller.mcap", "in", "pose_filter/tob_state", lambda m: m.measurement_stamp_ns),
+        first_by("controller.mcap", "out", "controller/command", lambda m: m.measurement_stamp_ns),
+        first_by("robot_gateway.mcap", "in", "controller/command", lambda m: m.measurement_stamp_ns),
+    ]
+    stamps = sorted(set.intersection(*(set(d) for d in seen))) if all(seen) else []
+    t = np.array([[s] + [d[s] for d in seen] for s in stamps], dtype=np.int64).reshape(-1, 1 + len(seen))
+    hops = np.diff(t, axis=1) / 1e6
+    return {name: hops[:, i] for i, (name, _) in enumerate(CHAIN)}
+
+
+def chain_rows(chain: dict[str, np.ndarray]) -> list[list[str]]:
+    """:func:`latency_chain` as table rows: hop, p50 ms, p99 ms, share of the p50 total,
+    what it is."""
+    total = sum(float(np.median(v)) for v in chain.values() if len(v)) or 1.0
+    rows = []
+    for name, what in CHAIN:
+        v = chain.get(name, np.array([]))
+        if not len(v):
+            rows.append([name, "-", "-", "-", what])
+            continue
+        p50 = float(np.median(v))
+        rows.append([name, f"{p50:.2f}", f"{np.percentile(v, 99):.2f}", f"{100 * p50 / total:.0f} %", what])
+    return rows
+
+
+@dataclass
+class BridgeCost:
+    """Image-to-command latencies (ms) of live runs without and with the Foxglove bridge
+    (:func:`bridge_cost`), each pooled over its rounds."""
+
+    without_ms: np.ndarray
+    with_ms: np.ndarray
+    rounds: int
+    seconds: float
+
+    def rows(self) -> list[list[str]]:
+        """Table rows: condition, images, p50, p99 (ms), each against the run without."""
+        base = (float(np.median(self.without_ms)), float(np.percentile(self.without_ms, 99)))
+        out = []
+        for name, v in (("without the bridge", self.without_ms), ("with the bridge", self.with_ms)):
+            p50, p99 = float(np.median(v)), float(np.percentile(v, 99))
+            out.append([name, str(len(v)), f"{p50:.2f}", f"{p50 / base[0]:.3f}", f"{p99:.2f}", f"{p99 / base[1]:.3f}"])
+        return out
+
+
+def bridge_cost(seconds: float = 20.0, rounds: int = 2, scenario: str = "arc",
+                say: Callable[[str], None] | None = None) -> BridgeCost:
+    """What the Foxglove bridge costs the live loop (issue 36): the demo's live run of
+    ``scenario`` (:func:`humanpt.twin.live.run_live`) for ``seconds``, without the bridge then
+    with it, ``rounds`` times alternated (so a change of the machine's load falls on both);
+    the image-to-command latencies of each condition pooled.  The bridge takes every bus
+    topic at its configured rates whether or not a browser is connected; a connected
+    browser's WebSocket sending is not in these runs.  RuntimeError when a run fails."""
+    from humanpt.twin.live import run_live
+    from humanpt.twin.run import SystemConfig
+
+    got: dict[bool, list[np.ndarray]] = {False: [], True: []}
+    for r in range(rounds):
+        for with_bridge in (False, True):
+            if say:
+                say(f"round {r + 1}/{rounds}: {seconds:g} s live, {'with' if with_bridge else 'without'} the bridge")
+            with tempfile.TemporaryDirectory() as d:
+                run_dir = Path(d)
+                live = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=seconds,
+                                bridge=with_bridge)
+                if live.failed:
+                    raise RuntimeError("; ".join(live.failed) + "\n" + (run_dir / "processes.log").read_text()[-2000:])
+                got[with_bridge].append(latency_and_cycles(run_dir)["latency_ms"])
+    return BridgeCost(np.concatenate(got[False]), np.concatenate(got[True]), rounds, seconds)
+
+
 @dataclass
 class Figure:
     """One figure of the table: its name, value and a note (a target, a sample size)."""
@@ -133,6 +243,9 @@ def measure_all(live_seconds: float, lockstep_seconds: float, scenario: str,
                      f"(n = {len(lat)})")
                 show("image-to-command latency through Zenoh, p99", f"{np.percentile(lat, 99):.2f} ms",
                      "target <= 10 ms")
+            chain = latency_chain(run_dir)
+            for name, p50, p99, share, _what in chain_rows(chain):
+                show(f"  {name}", f"{p50} ms" if p50 != "-" else p50, f"p99 {p99} ms, {share} of the median chain")
             show(f"ALTER cycles answered on time ({live_seconds:g} s live demo)",
                  f"{res['on_time']} / {res['cycles']}", "target: all")
             from humanpt.runtime.replay import replay

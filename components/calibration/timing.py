@@ -32,9 +32,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import make_interp_spline
 from scipy.optimize import least_squares
-from scipy.spatial.transform import Rotation, Slerp
+
+from humanpt.geometry.frames import smooth_poses_at
 
 __all__ = ["TimeOffset", "TimeOffsetError", "estimate_time_offset", "apply_to_rig"]
 
@@ -62,19 +62,11 @@ class TimeOffset:
                 f"{self.leak_mm_per_ms:.4f} mm RMS)"]
 
 
-def _flange_at(robot_t_s: np.ndarray, world_T_flange_mm: np.ndarray, t_s: np.ndarray) -> np.ndarray:
-    """(N, 4, 4) the flange at times ``t_s``: position by a cubic spline through the robot's
-    states, orientation by slerp (times outside the states are clamped to them)."""
-    t = np.clip(t_s, robot_t_s[0], robot_t_s[-1])
-    out = np.tile(np.eye(4), (len(t), 1, 1))
-    out[:, :3, 3] = make_interp_spline(robot_t_s, world_T_flange_mm[:, :3, 3], k=3)(t)
-    out[:, :3, :3] = Slerp(robot_t_s, Rotation.from_matrix(world_T_flange_mm[:, :3, :3]))(t).as_matrix()
-    return out
-
-
 def _track(robot_t_s, world_T_flange_mm, flange_T_camera_mm, s_s, camera_p_tob_mm, d_s) -> np.ndarray:
-    """(N, 3) the target's world positions with the offset ``d_s`` taken out of the stamps."""
-    F = _flange_at(robot_t_s, world_T_flange_mm, s_s - d_s) @ flange_T_camera_mm
+    """(N, 3) the target's world positions with the offset ``d_s`` taken out of the stamps;
+    the flange on the smooth track through the robot's states (geometry.frames: a cubic
+    spline in position, slerp in orientation, clamped to the states)."""
+    F = smooth_poses_at(robot_t_s, world_T_flange_mm, s_s - d_s) @ flange_T_camera_mm
     return np.einsum("nij,nj->ni", F[:, :3, :3], camera_p_tob_mm) + F[:, :3, 3]
 
 

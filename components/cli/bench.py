@@ -175,6 +175,21 @@ def bench_all(args) -> int:
     return 0
 
 
+def bench_bridge(args) -> int:
+    """What the Foxglove bridge costs the live loop: :func:`humanpt.bench.summary.bridge_cost`."""
+    from humanpt.bench.summary import bridge_cost
+
+    if not args.seconds > 0 or args.rounds < 1:
+        raise ValueError(f"--seconds must be > 0 and --rounds >= 1, got {args.seconds} and {args.rounds}")
+    cost = bridge_cost(args.seconds, args.rounds, args.scenario,
+                       say=lambda t: print(f"  {t}", file=sys.stderr, flush=True))
+    print(f"\nhumanpt bench bridge: image-to-command latency of the live {args.scenario}, {args.rounds} x "
+          f"{args.seconds:g} s each way, alternated (no browser connected)\n")
+    print(tables.render(["run", "images", "p50 ms", "p50 / without", "p99 ms", "p99 / without"], cost.rows(),
+                        align="lrrrrr"))
+    return 0
+
+
 def bench_faults(args) -> int:
     """The attacks of issues 14 and 29 against a live twin (:func:`humanpt.bench.faults.run_faults`);
     exit status 1 if one's verdict failed (not answered as it should, or the robot not held),

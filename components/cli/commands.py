@@ -435,8 +435,9 @@ def config(args) -> int:
     print(f"# rig: {rig_source} ({rig.methods()}); `humanpt rig show` prints it")
     print("\n".join(f"# {line}" for line in cell_cycle.report(cfg.cycle_period_ns, cfg.cycle_link)))
     sections = {"runtime": cfg.runtime, "record": cfg.record}
+    types = config_types()  # the config modules only: the server's install prints them too
     for name in sorted(COMPONENTS):
-        sections[name] = cfg.component(name, core_class(name).config_type)
+        sections[name] = cfg.component(name, types[name])
     for name, value in sections.items():
         print(f"\n[{name}]")
         notes = cfgmod.field_notes(type(value))  # the class read: the link's own for [robot_gateway]

@@ -113,15 +113,17 @@ def budget(args) -> int:
             + (f", warned: {', '.join(row.warnings)}" if row.warnings else ""))
         print(f"  [{i}/{n}] {row.source}: {what} ({row.wall_s:.1f} s)", file=sys.stderr, flush=True)
 
+    kind = getattr(args, "rig_kind", "psvs")
     rows = bud.run_budget(args.scenario, args.seed, args.robot, only, args.duration, progress,
-                          rsi_cycle_ms=rsi_cycle_ms(args))
-    text = bud.format_table(rows, args.scenario, args.seed, args.robot)
+                          rsi_cycle_ms=rsi_cycle_ms(args), rig_kind=kind)
+    text = bud.format_table(rows, args.scenario, args.seed, args.robot, kind)
     print(text)
     (out / "budget.txt").write_text(text + "\n")
     files = [bud.write_csv(rows, out / "budget.csv")]
     if not args.no_plots:
         files.append(bud.plot(rows, out / "budget.png", f"humanpt experiment budget: {args.scenario}, seed "
-                              f"{args.seed}, robot {args.robot} (recorded path against ground truth)"))
+                              f"{args.seed}, robot {args.robot}" + (", stereo pair" if kind == "stereo" else "")
+                              + " (recorded path against ground truth)"))
     print(f"results: {', '.join(str(f) for f in files)}")
     return 0
 
@@ -194,6 +196,9 @@ def playback(args) -> int:
 
 
 def experiment(args) -> int:
+    if args.name != "budget" and getattr(args, "rig_kind", "psvs") != "psvs":
+        raise SystemExit(f"humanpt: --rig-kind applies to experiment budget, not {args.name} "
+                         "(demo --rig-kind stereo runs a scenario on the pair)")
     if args.name == "playback":
         return playback(args)
     if args.name == "budget":

@@ -209,6 +209,9 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    help="budget: just these error sources (names as in humanpt.twin.worlds.ERROR_SOURCES)")
     p.add_argument("--duration", type=_duration,
                    help="budget: seconds of twin time per run (default: the scenario's, as the demo)")
+    p.add_argument("--rig-kind", choices=("psvs", "stereo"), default="psvs",
+                   help="budget: the camera, the PSVS (default) or an ordinary stereo pair (the world's PSVS's "
+                        "virtual cameras apart, as demo --rig-kind stereo)")
 
     p = sub.add_parser("router", help="run the Zenoh router (a Python session in router mode)",
                        description="Run the Zenoh router that joins the machines of an installation. "
@@ -463,6 +466,11 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    "flange_T_tool_x, 0,0,200,0,0,0)")
     q.add_argument("--dwells", action="store_true",
                    help="wait where the welder dwelt (the seam's dwells, at segment ends), as long as he did")
+    q.add_argument("--arc", metavar="OUTPUT|SIGNAL|arcware[:SEAM,WELD]", default="",
+                   help="switch the welding arc on at the seam's start and off at its end: krl $OUT[OUTPUT] "
+                   "(1..4096), urscript set_standard_digital_out(OUTPUT) (0..7), rapid SetDO SIGNAL (a digital "
+                   "output's name) or arcware (ArcLStart/ArcL/ArcC/ArcLEnd with the controller's seamdata and "
+                   "welddata, default seam1,weld1); json records it; val refuses (default: no arc switching)")
     q.add_argument("--timed", metavar="CSV",
                    help="the seam's timing from humanpt path retime: its feed is the default --speed, and the "
                    "JSON format carries its samples (t_s and pose every cycle)")
@@ -612,6 +620,13 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--cycles", default="12,4", help="RSI cycle times to run, ms: 4 and/or 12 (default 12,4)")
     q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
                    "process (sharing its GIL) instead of a process of its own")
+    q = bsub.add_parser("bridge", help="what the Foxglove bridge costs the live loop's latency",
+                        description="The live demo run (--scenario) without and with the Foxglove bridge, "
+                        "alternated --rounds times: image-to-command latency p50 and p99 of each, and their "
+                        "ratio (issue 36: the bridge must cost under 5 %). No browser is connected: the bridge "
+                        "takes every bus topic either way; a browser's WebSocket traffic is not measured.")
+    q.add_argument("--seconds", type=float, default=20.0, help="seconds of each live run (default 20)")
+    q.add_argument("--rounds", type=int, default=2, help="runs each way, alternated (default 2)")
     q = bsub.add_parser("render", help="frames per second of the simulated PSVS camera",
                         description="Render complex images of the static target (Table 1 pose, 600 mm "
                         "ahead) at the default sim_camera settings and print frames per second, with the "
@@ -700,6 +715,14 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     except KeyboardInterrupt:
         return 130
+    except ModuleNotFoundError as e:  # a verb of the full install on the server's (runtime/install.py)
+        from humanpt.runtime.install import needs_full_install
+
+        why = needs_full_install(e)
+        if why is None:
+            raise
+        print(f"humanpt {args.verb}: {why}", file=sys.stderr)
+        return 2
 
 
 def _dispatch(ap: argparse.ArgumentParser, args) -> int:
@@ -780,6 +803,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "runtime":
             from humanpt.cli.bench import bench_runtime
             return bench_runtime(args)
+        if args.bench_verb == "bridge":
+            from humanpt.cli.bench import bench_bridge
+            return bench_bridge(args)
         if args.bench_verb == "alter":
             from humanpt.cli.bench import bench_alter
             return bench_alter(args)

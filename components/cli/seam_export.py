@@ -72,6 +72,7 @@ def path_export(args) -> int:
         opts = ExportOptions(speed_mm_s=speed, zone_mm=args.zone, corner_zone_mm=args.corner_zone,
                              name=name, point=point,
                              flange_T_tool_mm=tuple(map(tuple, tool)), accel_mm_s2=args.accel, dwells=args.dwells,
+                             arc=getattr(args, "arc", "") or "",
                              source=src.name, max_speed_mm_s=max_speed, **box)
         timed = list(zip(timed_csv.t_s, timed_csv.x, strict=True)) if timed_csv is not None else sf.samples
         text = export(seam, args.format, opts, timed=timed if args.format == "json" else None)

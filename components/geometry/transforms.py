@@ -19,11 +19,15 @@ Every function accepts stacks: leading dimensions broadcast (``(..., 4, 4)``).
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from .errors import GeometryError
+
+try:  # the full install's OpenCV; the server's lean install has none (requirements/server.txt)
+    from cv2 import Rodrigues as _cv2_rodrigues
+except ImportError:
+    _cv2_rodrigues = None
 
 __all__ = [
     "make_transform",
@@ -169,13 +173,16 @@ def matrix_from_rotvec(rotvec_rad) -> np.ndarray:
     (..., 3, 3): Rodrigues' formula, ``Rotation.from_rotvec(rotvec_rad).as_matrix()`` to
     rounding. OpenCV's ``cv2.Rodrigues`` computes it: a tenth of scipy's per-call cost, and
     the filter, the controller and the twin turn one small step at a time. (Its inverse is
-    not used: near zero angle it loses digits; :func:`rotvec_from_matrix` is scipy's.)"""
+    not used: near zero angle it loses digits; :func:`rotvec_from_matrix` is scipy's.)
+    Without OpenCV (the server's install: only the gateway calls this there) scipy does."""
     v = np.asarray(rotvec_rad, dtype=float)
-    if v.shape == (3,):
-        return cv2.Rodrigues(v)[0]
     if v.shape[-1:] != (3,):
         raise ValueError(f"rotation vectors must have shape (..., 3), got {v.shape}")
-    flat = [cv2.Rodrigues(r)[0] for r in v.reshape(-1, 3)]
+    if _cv2_rodrigues is None:
+        return Rotation.from_rotvec(v.reshape(-1, 3)).as_matrix().reshape(v.shape[:-1] + (3, 3))
+    if v.shape == (3,):
+        return _cv2_rodrigues(v)[0]
+    flat = [_cv2_rodrigues(r)[0] for r in v.reshape(-1, 3)]
     return np.array(flat).reshape(v.shape[:-1] + (3, 3))
 
 

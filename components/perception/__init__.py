@@ -8,24 +8,54 @@ of a FULL measurement against the measured pose (``checks``: a partly covered or
 source is flagged "degraded" and rebuilt, excluded or kept). See ``README.md``.
 """
 
-from .blobs import Blobs, Region, find_shapes
-from .checks import CheckSettings, SourceCheck, apply_policy, check_sources, rebuild_point
-from .config import METHODS, PerceptionConfig
-from .core import PerceptionCore, measurement_message
-from .correspondence import (
-    FULL,
-    LOST,
-    POSITION_ONLY,
-    Match,
-    MatchSettings,
-    epipolar_residual_px,
-    match_scan_line,
-    match_scored,
-)
-from .image import BadImage, Prepared, prepare
-from .paper import cross_kernel, detect_paper, pair_by_scan_line, seed_mask
-from .pipeline import Perception, Result
-from .weighted import background_and_noise, detect_weighted
+import importlib
+
+# name -> the submodule that defines it, imported on first use (PEP 562): validating a
+# config file imports only ``.config``, so the server's install (no OpenCV) reads the
+# client's sections too (requirements/server.txt).
+_EXPORTS = {
+    "Blobs": "blobs",
+    "Region": "blobs",
+    "find_shapes": "blobs",
+    "CheckSettings": "checks",
+    "SourceCheck": "checks",
+    "apply_policy": "checks",
+    "check_sources": "checks",
+    "rebuild_point": "checks",
+    "METHODS": "config",
+    "PerceptionConfig": "config",
+    "PerceptionCore": "core",
+    "measurement_message": "core",
+    "FULL": "correspondence",
+    "LOST": "correspondence",
+    "POSITION_ONLY": "correspondence",
+    "Match": "correspondence",
+    "MatchSettings": "correspondence",
+    "epipolar_residual_px": "correspondence",
+    "match_scan_line": "correspondence",
+    "match_scored": "correspondence",
+    "BadImage": "image",
+    "Prepared": "image",
+    "prepare": "image",
+    "cross_kernel": "paper",
+    "detect_paper": "paper",
+    "pair_by_scan_line": "paper",
+    "seed_mask": "paper",
+    "Perception": "pipeline",
+    "Result": "pipeline",
+    "background_and_noise": "weighted",
+    "detect_weighted": "weighted",
+}
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = [
     "BadImage",

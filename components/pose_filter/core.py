@@ -22,11 +22,11 @@ from collections import deque
 
 import numpy as np
 
+from humanpt.geometry.frames import FrameGraph, TimedPoses, segment_reach
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import rotvec_from_matrix
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.kalman import PoseIMM, PoseKalman
-from humanpt.pose_filter.robot_buffer import RobotPoseBuffer
 from humanpt.runtime import cycle as cell_cycle
 from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.runtime.limiter import EventLimiter, suffix
@@ -54,7 +54,13 @@ class PoseFilterCore(Core):
 
     def __init__(self, config: PoseFilterConfig, rig: Rig | None = None):
         super().__init__(config, Rig() if rig is None else rig)
-        self.robot = RobotPoseBuffer(config.robot_history)
+        # The cell's frames (geometry.frames): world -> flange from the robot states (m), kept
+        # in stamp order (a repeated or earlier stamp is refused: _on_robot_state decides),
+        # looked up at an image's stamp on the segment around it or extrapolated from the last
+        # two states by at most max_extrapolation_ms; flange -> camera the rig's hand-eye.
+        self.frames = FrameGraph()
+        self.robot = self.frames.add_timed("world", "flange", TimedPoses(config.robot_history),
+                                           segment_reach(int(config.max_extrapolation_ms * 1e6)))
         # The prediction horizon (ns): the link's cycle, from the latest robot state that
         # carries it (runtime/cycle.py); until then, or from states carrying none, the fallback.
         self.horizon_ns = cell_cycle.FALLBACK_NS
@@ -106,6 +112,8 @@ class PoseFilterCore(Core):
 
     def _build(self, c: PoseFilterConfig) -> None:
         self.flange_T_camera_m = self.rig.hand_eye.flange_T_camera_m()
+        self.frames.add_static("flange", "camera", self.flange_T_camera_m)
+        self.frames.set_lookup("flange", segment_reach(int(c.max_extrapolation_ms * 1e6)))
         # The rig's camera-to-robot time offset (calibration.timing; > 0: an image was taken
         # that long before its stamp): each measurement is placed at its capture time on the
         # robot's clock, where the robot's pose is looked up and the filter updated.
@@ -275,12 +283,11 @@ class PoseFilterCore(Core):
         return self._pose_at_measurement[1]
 
     def _on_measurement(self, t_ns: int, msg: pb.TobMeasurement) -> list[Output]:
-        c = self.config
         if msg.status not in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
             return []
         stamp = msg.header.stamp_ns - self.capture_shift_ns  # the capture, on the robot's clock
-        world_T_flange = self.robot.at(stamp, int(c.max_extrapolation_ms * 1e6))
-        if world_T_flange is None:
+        world_T_camera = self.frames.lookup("world", "camera", stamp)
+        if world_T_camera is None:
             if len(self.robot) == 0:
                 # Start-up: images before the robot's first state (its link is coming up).
                 if self._waiting_said:
@@ -290,7 +297,6 @@ class PoseFilterCore(Core):
                                    "no robot state yet: measurements dropped until the first one")]
             return self._limited(t_ns, pb.SEVERITY_WARNING, "no_robot_pose",
                                  f"no robot state near the image stamp {stamp} ns; measurement dropped")
-        world_T_camera = world_T_flange @ self.flange_T_camera_m
         if self.kf.initialised and stamp < self.kf.t_ns:
             return self._limited(t_ns, pb.SEVERITY_DEBUG, "out_of_order",
                                  f"measurement at {stamp} ns is older than the filter ({self.kf.t_ns} ns)")

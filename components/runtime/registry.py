@@ -26,6 +26,27 @@ COMPONENTS: dict[str, str] = {
     "foxglove_bridge": "humanpt.foxglove_bridge.core:FoxgloveBridgeCore",
 }
 
+# name -> "module:Class" of its config dataclass (the core's ``config_type``; a test checks
+# they agree).  Validating a config file checks every section but imports only these light
+# modules, not the cores: the server's install (requirements/server.txt: no OpenCV, rerun,
+# filterpy, Foxglove SDK) reads a cell.toml that holds the client's sections too.
+CONFIGS: dict[str, str] = {
+    "pinger": "humanpt.runtime.selftest:PingerConfig",
+    "ponger": "humanpt.runtime.selftest:PongerConfig",
+    "perception": "humanpt.perception.config:PerceptionConfig",
+    "pose_filter": "humanpt.pose_filter.config:PoseFilterConfig",
+    "controller": "humanpt.controller.config:ControllerConfig",
+    "robot_gateway": "humanpt.robot_gateway.config:GatewayConfig",
+    "sim_robot": "humanpt.sim_robot.config:SimRobotConfig",
+    "camera": "humanpt.camera.config:CameraConfig",
+    "sim_camera": "humanpt.sim_camera.config:SimCameraConfig",
+    "operator": "humanpt.operator.config:OperatorConfig",
+    "standin_robot": "humanpt.twin.standin:StandInRobotConfig",
+    "viz": "humanpt.viz.config:VizConfig",
+    "scene": "humanpt.scene.config:SceneConfig",
+    "foxglove_bridge": "humanpt.foxglove_bridge.config:FoxgloveBridgeConfig",
+}
+
 # name -> "module:function": builds the live shell's adapters (serial ports...) from the
 # component's config: ``function(config) -> list[Adapter]``.  Components without local I/O
 # are not listed.
@@ -100,8 +121,9 @@ def adapters_for(name: str, config, run_dir=None, rig=None, config_file=None) ->
 
 
 def config_types() -> dict[str, type]:
-    """Component name -> config dataclass, for validating a whole config file."""
-    return {name: core_class(name).config_type for name in COMPONENTS}
+    """Component name -> config dataclass, for validating a whole config file (imports the
+    config modules only, :data:`CONFIGS`)."""
+    return {name: import_path(CONFIGS[name]) for name in COMPONENTS}
 
 
 def class_path(cls: type) -> str:

@@ -23,6 +23,12 @@ parent              child               source
 
 ``camera`` is an optical frame (x right, y down, z along the optical axis), as Foxglove's
 CameraCalibration expects; the name is ``camera_frame`` of the config.
+
+The fixed frames, the latest robot flange and D are held in the cell's frame graph
+(:mod:`humanpt.geometry.frames`, world -> base, world -> flange, flange -> camera ->
+camera_right / camera_left / desired), from which each published ``parent_T_child`` is
+looked up (``base_T_flange = inverse(world_T_base) @ world_T_flange``); the filter's, the
+controller's and the rig's tip frames go out as their messages carry them.
 """
 
 from __future__ import annotations
@@ -56,7 +62,8 @@ from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
 from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from humanpt.geometry import camera_T_desired, invert_transform, make_transform, transform_from_x
+from humanpt.geometry import camera_T_desired, make_transform, transform_from_x
+from humanpt.geometry.frames import NEAREST_HOLD, Backwards, FrameGraph, Repeat, TimedPoses
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.units import to_m
 from humanpt.runtime.core import Core, Output, Port
@@ -156,20 +163,24 @@ class SceneCore(Core):
     def __init__(self, config: SceneConfig, rig: Rig | None = None):
         super().__init__(config, rig=rig if rig is not None else Rig())
         rig = self.rig
-        self.dz_mm = float(config.dz_mm)
-        # Rig-fixed transforms (metres), as messages once.
         params = rig.params()
         self._params = params
-        self._world_T_base = to_m(transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float)))
-        self._base_T_world = invert_transform(self._world_T_base)
-        self._rig_poses: list[tuple[str, str, pb.Pose]] = [
-            (WORLD, BASE, pose(self._world_T_base)),
-            (FLANGE, config.camera_frame, pose(rig.hand_eye.flange_T_camera_m())),
-        ]
+        # The cell's frames (geometry.frames), metres: the module docstring's table down to D.
+        # world -> flange holds the latest robot state; base -> flange is looked up through it.
+        camera = config.camera_frame
+        self.frames = FrameGraph(WORLD)
+        self.frames.add_static(WORLD, BASE, to_m(transform_from_x(np.asarray(config.world_T_base_mm_deg, dtype=float))))
+        self._flange = self.frames.add_timed(
+            WORLD, FLANGE, TimedPoses(1, repeat=Repeat.REPLACE, backwards=Backwards.RESTART), NEAREST_HOLD)
+        self.frames.add_static(FLANGE, camera, rig.hand_eye.flange_T_camera_m())
         for child, cam in ((CAMERA_RIGHT, params.right_camera), (CAMERA_LEFT, params.left_camera)):
-            camera_T_virtual = make_transform(np.asarray(cam.camera_R_virtual, dtype=float),
-                                              np.asarray(cam.centre_mm, dtype=float) * 1e-3)
-            self._rig_poses.append((config.camera_frame, child, pose(camera_T_virtual)))
+            self.frames.add_static(camera, child, make_transform(np.asarray(cam.camera_R_virtual, dtype=float),
+                                                                 np.asarray(cam.centre_mm, dtype=float) * 1e-3))
+        self._set_dz(float(config.dz_mm))
+        # Rig-fixed transforms, as messages once.
+        self._rig_poses: list[tuple[str, str, pb.Pose]] = [
+            (parent, child, pose(self.frames.lookup(parent, child)))
+            for parent, child in ((WORLD, BASE), (FLANGE, camera), (camera, CAMERA_RIGHT), (camera, CAMERA_LEFT))]
         self._tob_T_tip = pose(to_m(rig.tip.tob_T_tip_mm()))
         self._sources_m = np.asarray(rig.target_model().source_positions_mm, dtype=float) * 1e-3  # (3, 3) TOB
         self.measurements = 0
@@ -182,6 +193,11 @@ class SceneCore(Core):
         self.truth_seam: list[tuple[float, float, float]] = []
         self._sent_tf_ns: dict[str, int] = {}  # moving frame source -> stamp last sent
 
+    def _set_dz(self, dz_mm: float) -> None:
+        """The desired point D at ``dz_mm`` on the camera's axis (camera -> desired)."""
+        self.dz_mm = dz_mm
+        self.frames.add_static(self.config.camera_frame, DESIRED, to_m(camera_T_desired(dz_mm)))
+
     def _tf_due(self, source: str, stamp_ns: int) -> bool:
         """Whether ``source``'s frames at ``stamp_ns`` go out (transforms_max_hz, by stamp)."""
         last = self._sent_tf_ns.get(source)
@@ -192,7 +208,7 @@ class SceneCore(Core):
 
     def on_config_changed(self, old: SceneConfig, new: SceneConfig) -> None:
         if new.dz_mm != old.dz_mm:
-            self.dz_mm = float(new.dz_mm)
+            self._set_dz(float(new.dz_mm))
 
     # -- transforms -----------------------------------------------------------------------------
     def _on_robot_state(self, t_ns: int, msg: pb.RobotState) -> list[Output]:
@@ -200,10 +216,11 @@ class SceneCore(Core):
         stamp = msg.header.stamp_ns
         if not self._tf_due("robot", stamp):
             return []
-        base_T_flange = self._base_T_world @ from_pose(msg.world_T_flange)
+        self._flange.add(stamp, from_pose(msg.world_T_flange))
+        frames, camera = self.frames, self.config.camera_frame
         out = [_transform(stamp, parent, child, p) for parent, child, p in self._rig_poses]
-        out.append(_transform(stamp, BASE, FLANGE, pose(base_T_flange)))
-        out.append(_transform(stamp, self.config.camera_frame, DESIRED, pose(to_m(camera_T_desired(self.dz_mm)))))
+        out.append(_transform(stamp, BASE, FLANGE, pose(frames.lookup(BASE, FLANGE, stamp))))
+        out.append(_transform(stamp, camera, DESIRED, pose(frames.lookup(camera, DESIRED))))
         return [(T_TRANSFORMS, FrameTransforms(transforms=out))]
 
     def _on_tob_state(self, t_ns: int, msg: pb.TobState) -> list[Output]:
@@ -368,7 +385,7 @@ class SceneCore(Core):
         if component == "controller" and msg.code == "param_changed":
             m = _DZ_CHANGED.search(msg.text)
             if m:
-                self.dz_mm = float(m.group(1))
+                self._set_dz(float(m.group(1)))
         text = f"{msg.code}: {msg.text}" if msg.code else msg.text
         return [(T_LOG, Log(timestamp=timestamp(msg.header.stamp_ns), level=_LEVEL.get(msg.severity, Log.UNKNOWN),
                             message=text, name=component))]

@@ -44,7 +44,7 @@ from scipy.spatial.transform import Rotation
 from humanpt.geometry.transforms import rotation_from_ypr_deg, slerp
 from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
-from humanpt.seam.sanitise import comment, comment_line, identifier
+from humanpt.seam.sanitise import comment, comment_line, identifier, shown
 
 __all__ = ["FORMATS", "SUFFIXES", "ExportError", "ExportOptions", "Move", "moves", "pose_at", "export",
            "to_val", "to_krl", "to_rapid", "to_urscript", "to_json", "program_name", "check"]
@@ -84,7 +84,9 @@ class ExportOptions:
     through must lie in the workspace box ``envelope_min_mm``..``envelope_max_mm``
     (world, mm; default the gateway's, :mod:`humanpt.seam.limits`), or :func:`export`
     refuses (:func:`check`).  ``name`` and ``source`` reach the program only through
-    :mod:`humanpt.seam.sanitise`."""
+    :mod:`humanpt.seam.sanitise`.  ``arc``: switch the welding arc on at the seam's start and
+    off at its end (:func:`arc_switch`; "" leaves the arc to the cell), checked against the
+    format when the program is written."""
 
     speed_mm_s: float = 20.0
     zone_mm: float = 1.0
@@ -101,6 +103,7 @@ class ExportOptions:
     max_speed_mm_s: float = limits.MAX_SPEED_MM_S
     envelope_min_mm: tuple[float, float, float] = limits.ENVELOPE_MIN_MM
     envelope_max_mm: tuple[float, float, float] = limits.ENVELOPE_MAX_MM
+    arc: str = ""
 
     def __post_init__(self):
         def within(k, lo, hi, lo_open=True):
@@ -131,6 +134,8 @@ class ExportOptions:
         if not (np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6) and np.linalg.det(T[:3, :3]) > 0
                 and np.allclose(T[3], [0, 0, 0, 1])):
             raise ExportError("flange_T_tool_mm's rotation is not a rotation")
+        if not isinstance(self.arc, str) or len(self.arc) > 80:
+            raise ExportError(f"arc must be a short text (an output, a signal name or arcware), got {self.arc!r}")
         lo, hi = np.asarray(self.envelope_min_mm, dtype=float), np.asarray(self.envelope_max_mm, dtype=float)
         if (lo.shape != (3,) or hi.shape != (3,) or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)))
                 or np.any(np.abs(np.r_[lo, hi]) > limits.MAX_ABS_MM) or np.any(lo >= hi)):
@@ -305,6 +310,68 @@ def _fmt_xyz(p) -> str:
     return "(" + ", ".join(f"{float(v):.6g}" for v in p) + ")"
 
 
+# ---------------------------------------------------------------------------- the arc
+
+# Where each language switches a digital output, and the outputs it has (the vendors' manuals:
+# KSS 8 $OUT[1..4096]; URScript set_standard_digital_out(n, b), n 0..7; RAPID SetDO takes a
+# signal's name, declared in the controller's I/O configuration).
+ARC_OUTPUTS = {"krl": (1, 4096), "urscript": (0, 7)}
+ARCWARE_DEFAULTS = ("seam1", "weld1")  # seamdata, welddata of the RobotWare Arc option
+
+
+@dataclass(frozen=True)
+class ArcSwitch:
+    """How a program switches the arc: ``kind`` ``output`` (``output`` a number, KRL and
+    URScript), ``signal`` (``signal`` a RAPID digital output's name) or ``arcware`` (RAPID's
+    ArcLStart/ArcL/ArcC/ArcLEnd with ``seamdata`` and ``welddata``, which the controller's
+    Arc option must define)."""
+
+    kind: str
+    output: int = 0
+    signal: str = ""
+    seamdata: str = ""
+    welddata: str = ""
+
+
+def _rapid_name(name: str, what: str) -> str:
+    """``name`` when RAPID accepts it as it is (a name on the robot must not be rewritten: a
+    rewritten signal name would switch another output, or none), else ExportError."""
+    if not re.fullmatch(r"[A-Za-z][A-Za-z0-9_]{0,31}", name) or identifier(name, "rapid") != name:
+        raise ExportError(f"--arc: {what} {shown(name)} is not a RAPID name this program may use (a letter, then "
+                          "letters, digits and _, at most 32, not a keyword nor one of the program's own names)")
+    return name
+
+
+def arc_switch(arc: str, fmt: str) -> ArcSwitch | None:
+    """``arc`` (:attr:`ExportOptions.arc`) checked for ``fmt``: None for ""; KRL and URScript
+    an output number within :data:`ARC_OUTPUTS`; RAPID a digital output's name, or
+    ``arcware[:SEAMDATA,WELDDATA]`` (default :data:`ARCWARE_DEFAULTS`); VAL II has no
+    arc switching here (the Puma's welding interface was the cell's own), JSON records the
+    text as given.  ExportError saying what is allowed otherwise."""
+    arc = arc.strip()
+    if not arc:
+        return None
+    if fmt == "val":
+        raise ExportError("--arc: VAL II programs here do not switch the arc (wire it in the cell's own way); "
+                          "krl, rapid, urscript and json do")
+    if fmt == "json":
+        return ArcSwitch("signal", signal=comment(arc))
+    if fmt == "rapid":
+        if arc == "arcware" or arc.startswith("arcware:"):
+            names = arc.partition(":")[2]
+            seam_d, weld_d = names.split(",") if names.count(",") == 1 else (names, "") if names else ARCWARE_DEFAULTS
+            if not (seam_d and weld_d):
+                raise ExportError(f"--arc {shown(arc)}: arcware:SEAMDATA,WELDDATA (default arcware = "
+                                  f"arcware:{','.join(ARCWARE_DEFAULTS)})")
+            return ArcSwitch("arcware", seamdata=_rapid_name(seam_d.strip(), "seamdata"),
+                             welddata=_rapid_name(weld_d.strip(), "welddata"))
+        return ArcSwitch("signal", signal=_rapid_name(arc, "the signal"))
+    lo, hi = ARC_OUTPUTS[fmt]
+    if not re.fullmatch(r"\d{1,5}", arc) or not lo <= int(arc) <= hi:
+        raise ExportError(f"--arc {shown(arc)}: {fmt} switches a digital output by its number, {lo}..{hi}")
+    return ArcSwitch("output", output=int(arc))
+
+
 # ---------------------------------------------------------------------------- formatting
 
 
@@ -364,6 +431,7 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
     circular move: an arc is given as points on it, at most ``val_chord_mm`` chord error
     apart.  SPEED is a percent of the monitor speed; the feed is stated in a comment."""
     prog = program_name(opts.name, "val")
+    arc_switch(opts.arc, "val")  # refused when asked for
     pts: list[np.ndarray] = []
     waits: dict[int, float] = {}  # point index -> dwell s
     for m in _moves(seam, opts):
@@ -413,7 +481,13 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
               f"$VEL.CP = {_f(opts.speed_mm_s / 1000.0, 6)}", "$VEL.ORI1 = 200", "$VEL.ORI2 = 200",
               "$ORI_TYPE = #VAR", "$CIRC_TYPE = #PATH", "$ADVANCE = 3"]
     apo = None
-    for m in _moves(seam, opts):
+    mv = _moves(seam, opts)
+    arc = arc_switch(opts.arc, "krl")
+    if arc:
+        lines.append(f"; the arc: $OUT[{arc.output}] on at the seam's start, off at its end (humanpt path export --arc)")
+    for k, m in enumerate(mv):
+        if arc and k == 1:
+            lines.append(f"$OUT[{arc.output}] = TRUE")
         if m.zone_mm > 0 and m.zone_mm != apo:
             apo = m.zone_mm
             lines.append(f"$APO.CDIS = {_f(apo, 3)}")
@@ -426,6 +500,8 @@ def to_krl(seam: Seam, opts: ExportOptions) -> str:
             lines.append(f"CIRC {_krl_frame(m.via)}, {_krl_frame(m.target)}{cdis}")
         if m.dwell_s > 0:
             lines.append(f"WAIT SEC {_f(m.dwell_s, 3)}")
+    if arc:
+        lines.append(f"$OUT[{arc.output}] = FALSE")
     lines.append("END")
     return "\n".join(lines) + "\n"
 
@@ -473,17 +549,33 @@ def to_rapid(seam: Seam, opts: ExportOptions) -> str:
             these.append(f"p{k}")
             k += 1
         names.append(tuple(these))
+    arc = arc_switch(opts.arc, "rapid")
+    if arc and arc.kind == "arcware":
+        lines.append(f"  ! the arc: RobotWare Arc's ArcLStart/ArcL/ArcC/ArcLEnd with seamdata {arc.seamdata} and "
+                     f"welddata {arc.welddata}, which the controller must define (humanpt path export --arc)")
+    elif arc:
+        lines.append(f"  ! the arc: digital output {arc.signal} on at the seam's start, off at its end "
+                     "(humanpt path export --arc)")
     lines += ["", "  PROC main()", "    ConfJ \\Off;", "    ConfL \\Off;"]
-    for m, ns in zip(mv, names, strict=True):
+    ware = f"{arc.seamdata}, {arc.welddata}, " if arc and arc.kind == "arcware" else ""
+    for k, (m, ns) in enumerate(zip(mv, names, strict=True)):
         z = zones.get(_rapid_zone(m.zone_mm), "fine")
+        end = "End" if ware and k == len(mv) - 1 else ""
         if m.kind == "joint":
             lines.append(f"    MoveJ {ns[0]}, v100, fine, tSeam \\WObj:=wobj0;")
+            if ware:  # the weld starts where ArcLStart ends: at the seam's first point
+                lines.append(f"    ArcLStart {ns[0]}, v100, {ware}fine, tSeam \\WObj:=wobj0;")
+            elif arc:
+                lines.append(f"    SetDO {arc.signal}, 1;")
         elif m.kind == "line":
-            lines.append(f"    MoveL {ns[0]}, vSeam, {z}, tSeam \\WObj:=wobj0;")
+            lines.append(f"    {'ArcL' + end if ware else 'MoveL'} {ns[0]}, vSeam, {ware}{z}, tSeam \\WObj:=wobj0;")
         else:
-            lines.append(f"    MoveC {ns[0]}, {ns[1]}, vSeam, {z}, tSeam \\WObj:=wobj0;")
+            lines.append(f"    {'ArcC' + end if ware else 'MoveC'} {ns[0]}, {ns[1]}, vSeam, {ware}{z}, "
+                         "tSeam \\WObj:=wobj0;")
         if m.dwell_s > 0:
             lines.append(f"    WaitTime \\InPos, {_f(m.dwell_s, 3)};")
+    if arc and not ware:
+        lines.append(f"    SetDO {arc.signal}, 0;")
     lines += ["  ENDPROC", "ENDMODULE"]
     return "\n".join(lines) + "\n"
 
@@ -503,16 +595,24 @@ def to_urscript(seam: Seam, opts: ExportOptions) -> str:
     lines = [f"def {prog}():"] + _header_lines(seam, opts, "urscript", "  ")
     lines += ["  # poses in the base frame = humanpt's world; the TCP = the torch on the flange",
               f"  set_tcp({_ur_pose(_tool_x(opts))})"]
+    arc = arc_switch(opts.arc, "urscript")
+    if arc:
+        lines.append(f"  # the arc: standard digital output {arc.output} on at the seam's start, off at its end "
+                     "(humanpt path export --arc)")
     for m in _moves(seam, opts):
         r = _f(m.zone_mm / 1000.0, 6)
         if m.kind == "joint":
             lines.append(f"  movej({_ur_pose(m.target)}, a=0.5, v=0.25)")
+            if arc:
+                lines.append(f"  set_standard_digital_out({arc.output}, True)")
         elif m.kind == "line":
             lines.append(f"  movel({_ur_pose(m.target)}, a={a}, v={v}, r={r})")
         else:
             lines.append(f"  movec({_ur_pose(m.via)}, {_ur_pose(m.target)}, a={a}, v={v}, r={r}, mode=0)")
         if m.dwell_s > 0:
             lines.append(f"  sleep({_f(m.dwell_s, 3)})")
+    if arc:
+        lines.append(f"  set_standard_digital_out({arc.output}, False)")
     lines.append("end")
     return "\n".join(lines) + "\n"
 
@@ -549,6 +649,8 @@ def to_json(seam: Seam, opts: ExportOptions, timed: list[tuple[float, np.ndarray
                   "quat_wxyz": "[w, x, y, z]", "speed": "mm/s", "zone": "mm"},
         "tool": {"flange_T_tool": _json_pose(_tool_x(opts))},
         "speed_mm_s": opts.speed_mm_s, "zone_mm": opts.zone_mm, "corner_zone_mm": opts.corner_zone_mm,
+        **({"arc": {"signal": arc.signal, "on_after_move": 0, "off_after_move": len(mv) - 1}}
+           if (arc := arc_switch(opts.arc, "json")) else {}),
         "moves": [{"kind": m.kind, "segment": m.segment, "zone_mm": round(m.zone_mm, 4),
                    **({"dwell_s": round(m.dwell_s, 4)} if m.dwell_s > 0 else {}),
                    **({"via": _json_pose(m.via)} if m.via is not None else {}), "target": _json_pose(m.target)}

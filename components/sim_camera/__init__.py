@@ -5,13 +5,12 @@
 """
 
 from .config import PsvsConfig, SimCameraConfig
-from .core import PoseTrack, SimCameraCore
+from .core import SimCameraCore, truth_poses
 from .render import Blobs, Discs, Renderer, coverage, intensity_centroid, occlusion_offset
 
 __all__ = [
     "Blobs",
     "Discs",
-    "PoseTrack",
     "PsvsConfig",
     "Renderer",
     "SimCameraConfig",
@@ -19,4 +18,5 @@ __all__ = [
     "coverage",
     "intensity_centroid",
     "occlusion_offset",
+    "truth_poses",
 ]

@@ -18,13 +18,12 @@ whose truth has not come ``max_truth_wait_ms`` after the exposure ended is dropp
 from __future__ import annotations
 
 import math
-from bisect import bisect_left
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
-from humanpt.geometry.transforms import interpolate_transform, invert_transform
+from humanpt.geometry.frames import SAMPLE_HOLD_REFUSE, Backwards, FrameGraph, Repeat, TimedPoses
 from humanpt.runtime.core import Core, Output, Port, count_decades
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm
@@ -32,65 +31,20 @@ from humanpt.schemas.convert import MessageError, from_pose, image, pose_from_mm
 from .config import SimCameraConfig
 from .render import Renderer
 
-__all__ = ["SimCameraCore", "PoseTrack", "TIMING_STREAM"]
+__all__ = ["SimCameraCore", "truth_poses", "TIMING_STREAM"]
 
 _WAIT_GRACE_NS = 500_000_000  # no flange truth this long after the first tick: say so
 TIMING_STREAM = 1  # frame timing draws: default_rng([seed, frame_index, TIMING_STREAM])
 
 
-class PoseTrack:
-    """Stamped poses of one truth stream (mm), in stamp order, and the true trajectory they
-    define: linear in translation and geodesic in rotation between neighbouring samples
-    (:func:`humanpt.geometry.transforms.interpolate_transform`); before the first sample the
-    first pose holds (the body stood still before its source started); never extrapolated
-    beyond the last sample. Keeps at most ``maxlen`` samples (older ones are pruned by
-    :meth:`forget_before`)."""
-
-    def __init__(self, maxlen: int | None = 4096) -> None:
-        self._stamps: deque[int] = deque(maxlen=maxlen)
-        self._poses: deque[np.ndarray] = deque(maxlen=maxlen)
-
-    def __len__(self) -> int:
-        return len(self._stamps)
-
-    @property
-    def last_ns(self) -> int | None:
-        return self._stamps[-1] if self._stamps else None
-
-    def add(self, stamp_ns: int, a_T_b: np.ndarray) -> None:
-        if self._stamps and stamp_ns <= self._stamps[-1]:
-            if stamp_ns == self._stamps[-1]:
-                self._poses[-1] = a_T_b  # a repeat: the newer value wins
-                return
-            self._stamps.clear()  # time went backwards (a restarted source): start again
-            self._poses.clear()
-        self._stamps.append(int(stamp_ns))
-        self._poses.append(a_T_b)
-
-    def covers(self, t_ns: int) -> bool:
-        """Whether the trajectory is known at ``t_ns`` (a sample at or after it exists)."""
-        return bool(self._stamps) and self._stamps[-1] >= t_ns
-
-    def at(self, t_ns: int, hold: bool = False) -> np.ndarray | None:
-        """The pose (4, 4) at ``t_ns``; None when there is no sample, or when ``t_ns`` is
-        beyond the last one (unless ``hold``: then the last pose)."""
-        stamps, poses = self._stamps, self._poses
-        if not stamps:
-            return None
-        if t_ns >= stamps[-1]:
-            return poses[-1].copy() if t_ns == stamps[-1] or hold else None
-        i = bisect_left(stamps, t_ns)
-        if i == 0 or stamps[i] == t_ns:
-            return poses[i].copy()
-        t0, t1 = stamps[i - 1], stamps[i]
-        return interpolate_transform(poses[i - 1], poses[i], (t_ns - t0) / (t1 - t0), assume_valid=True)
-
-    def forget_before(self, t_ns: int) -> None:
-        """Drop the samples no longer needed for times >= ``t_ns`` (keeps the last one at
-        or before it)."""
-        while len(self._stamps) >= 2 and self._stamps[1] <= t_ns:
-            self._stamps.popleft()
-            self._poses.popleft()
+def truth_poses(maxlen: int | None = 4096) -> TimedPoses:
+    """A truth stream's stamped poses (mm), as the camera keeps them: a repeated stamp
+    replaces the pose (the newer value wins), an earlier one starts the stream again (a
+    restarted source). Looked up with :data:`humanpt.geometry.frames.SAMPLE_HOLD_REFUSE`, it
+    is the true trajectory: linear in translation and geodesic in rotation between
+    neighbouring samples; before the first sample the first pose holds (the body stood still
+    before its source started); never extrapolated beyond the last sample."""
+    return TimedPoses(maxlen, repeat=Repeat.REPLACE, backwards=Backwards.RESTART)
 
 
 @dataclass(frozen=True)
@@ -123,8 +77,12 @@ class SimCameraCore(Core):
         super().__init__(config)
         self.renderer = Renderer(config)
         self.flange_T_camera = config.flange_T_camera
-        self.tob = PoseTrack()
-        self.flange = PoseTrack()
+        # The cell's frames (geometry.frames), mm: world -> flange and world -> tob from the
+        # truths, flange -> camera the configured hand-eye.
+        self.frames = FrameGraph()
+        self.flange = self.frames.add_timed("world", "flange", truth_poses(), SAMPLE_HOLD_REFUSE)
+        self.frames.add_static("flange", "camera", self.flange_T_camera)
+        self.tob = self.frames.add_timed("world", "tob", truth_poses(), SAMPLE_HOLD_REFUSE)
         # The operator's covers: (stamp ns, fractions A B C, angles rad), in stamp order; a
         # cover holds from its truth's stamp until the next truth's (a step, not blended).
         self.covers: deque[tuple[int, tuple[float, ...], tuple[float, ...]]] = deque(maxlen=4096)
@@ -257,16 +215,12 @@ class SimCameraCore(Core):
 
     def _camera_poses(self, t_ns: int) -> tuple[np.ndarray | None, np.ndarray]:
         """(camera_T_tob or None without a target, world_T_camera), mm, at ``t_ns``."""
-        world_T_camera = self.flange.at(t_ns) @ self.flange_T_camera
-        world_T_tob = self.tob.at(t_ns)
-        if world_T_tob is None:
-            return None, world_T_camera
-        return invert_transform(world_T_camera) @ world_T_tob, world_T_camera
+        return self.frames.lookup("camera", "tob", t_ns), self.frames.lookup("world", "camera", t_ns)
 
     def _render(self, cap: _Capture) -> list[Output]:
-        world_T_flange = self.flange.at(cap.t_ns)
-        world_T_tob = self.tob.at(cap.t_ns)
-        world_T_camera = world_T_flange @ self.flange_T_camera
+        frames, t = self.frames, cap.t_ns
+        world_T_flange, world_T_tob = frames.lookup("world", "flange", t), frames.lookup("world", "tob", t)
+        world_T_camera = frames.lookup("world", "camera", t)
         cover = self._cover_at(cap.t_ns)
         # an ordinary stereo pair: each camera's image, side by side (left, right)
         renderers = cap.renderer.stereo_pair() if cap.renderer.config.stereo else (cap.renderer,)
@@ -278,7 +232,7 @@ class SimCameraCore(Core):
             start, end = (self._camera_poses(cap.t_ns + sign * cap.half_exposure_ns) for sign in (-1, 1))
             images = [r.render(*start, cap.frame_index, *end) for r in renderers]
         else:
-            camera_T_tob = None if world_T_tob is None else invert_transform(world_T_camera) @ world_T_tob
+            camera_T_tob = frames.lookup("camera", "tob", t)
             images = [r.render(camera_T_tob, world_T_camera, cap.frame_index) for r in renderers]
         pixels = images[0] if len(images) == 1 else np.hstack(images)
         truth = pb.Truth(header=self.next_header("sim_camera/truth", cap.t_ns, "world"))

@@ -168,17 +168,21 @@ def _speed_and_shifted(src, source: str) -> tuple[float, np.ndarray]:
 
 def run_world(world: World, scenario: str = "arc", seed: int = 0, robot: str = "puma", *,
               source: str | None = None, what: str = "", size: str = "",
-              duration_s: float | None = None, rsi_cycle_ms: float | None = None) -> BudgetRow:
+              duration_s: float | None = None, rsi_cycle_ms: float | None = None,
+              rig_kind: str = "psvs") -> BudgetRow:
     """Run ``scenario`` on ``world`` with the nominal rig, the path recorded from the
     operator's start, and judge it.  Never raises for what the run does: a failure is the
     row's ``status``.  ``duration_s``: twin time (default the scenario's, as the demo).
-    ``rsi_cycle_ms`` (4 or 12): the simulated Puma over the RSI link instead of ALTER."""
+    ``rsi_cycle_ms`` (4 or 12): the simulated Puma over the RSI link instead of ALTER.
+    ``rig_kind`` "stereo": an ordinary stereo pair instead of the PSVS
+    (:func:`humanpt.twin.demo.with_rig_kind`)."""
+    from .demo import with_rig_kind
     from .run import SystemConfig, accuracy, run
 
     row = BudgetRow(source or world.name, what, size)
     t0 = time.perf_counter()
     try:
-        cfg = SystemConfig.for_scenario(scenario, seed, world=world)
+        cfg = with_rig_kind(SystemConfig.for_scenario(scenario, seed, world=world), rig_kind)
         res = run(cfg, robot=robot, duration_s=duration_s, record_from_s=cfg.operator.start_delay_s,
                   rsi_cycle_ms=rsi_cycle_ms)
         acc = accuracy(res.world, cfg.controller, cfg.sim_camera.flange_T_camera)
@@ -212,11 +216,16 @@ def run_world(world: World, scenario: str = "arc", seed: int = 0, robot: str = "
 def run_budget(scenario: str = "arc", seed: int = 0, robot: str = "puma", only: Sequence[str] | None = None,
                duration_s: float | None = None,
                progress: Callable[[int, int, BudgetRow], None] | None = None,
-               rsi_cycle_ms: float | None = None) -> list[BudgetRow]:
+               rsi_cycle_ms: float | None = None, rig_kind: str = "psvs") -> list[BudgetRow]:
     """The whole budget: the ideal world, each planned source alone (:func:`plan`; skipped
     ones as rows that say so), then all the run sources together ("all": with no ``only``
     that is :meth:`World.realistic`, minus sources for another robot).  ``progress(i, n,
-    row)`` after each row."""
+    row)`` after each row.  ``rig_kind``: the camera ("psvs" or "stereo", see
+    :func:`run_world`)."""
+    from .demo import RIG_KINDS
+
+    if rig_kind not in RIG_KINDS:  # before anything runs (a run's failure is its row's status)
+        raise ValueError(f"rig kind {rig_kind!r}: {' or '.join(RIG_KINDS)}")
     todo = plan(robot, only)
     runnable = [s.name for s, skip in todo if not skip]
     together = len(runnable) > 1
@@ -229,20 +238,20 @@ def run_budget(scenario: str = "arc", seed: int = 0, robot: str = "puma", only: 
             progress(len(rows), total, row)
 
     done(run_world(World.ideal(), scenario, seed, robot, what="every error off", size="-", duration_s=duration_s,
-                   rsi_cycle_ms=rsi_cycle_ms))
+                   rsi_cycle_ms=rsi_cycle_ms, rig_kind=rig_kind))
     for s, skip in todo:
         if skip:
             done(BudgetRow(s.name, s.what, s.size, status=skip))
         else:
             done(run_world(World.only(s.name), scenario, seed, robot, source=s.name, what=s.what, size=s.size,
-                           duration_s=duration_s, rsi_cycle_ms=rsi_cycle_ms))
+                           duration_s=duration_s, rsi_cycle_ms=rsi_cycle_ms, rig_kind=rig_kind))
     if together:
         everything = len(runnable) == len(ERROR_SOURCES)
         world = World.realistic() if everything else World("all", tuple(runnable))
         size = "all sources above" + ("" if everything else f" that ran ({len(runnable)})")
         done(run_world(world, scenario, seed, robot, source="all", what="all together (realistic world)"
                        if everything else "all of them together", size=size, duration_s=duration_s,
-                       rsi_cycle_ms=rsi_cycle_ms))
+                       rsi_cycle_ms=rsi_cycle_ms, rig_kind=rig_kind))
     return rows
 
 
@@ -250,10 +259,13 @@ def _f(v: float, width: int = 7) -> str:
     return f"{v:{width}.3f}" if np.isfinite(v) else f"{'-':>{width}s}"
 
 
-def format_table(rows: Sequence[BudgetRow], scenario: str = "arc", seed: int = 0, robot: str = "puma") -> str:
+def format_table(rows: Sequence[BudgetRow], scenario: str = "arc", seed: int = 0, robot: str = "puma",
+                 rig_kind: str = "psvs") -> str:
     """The budget as text: sources and sizes; position ME/RMS/MaxE (mm); angle RMS/MaxE
     (deg) and warnings; issue 16's figures beside ours."""
-    lines = [f"humanpt experiment budget: scenario {scenario}, seed {seed}, robot {robot}; the rig nominal, "
+    camera = ("" if rig_kind == "psvs" else "; camera: an ordinary stereo pair (the world's PSVS's virtual cameras "
+              "apart: a PSVS error source is the pair's)")
+    lines = [f"humanpt experiment budget: scenario {scenario}, seed {seed}, robot {robot}{camera}; the rig nominal, "
              "the world with one error source at a time; the recorded path against ground truth", ""]
     lines.append(tables.render(["source", "size", "what"], [[r.source, r.size, r.what] for r in rows],
                                align="lll", title="sources"))

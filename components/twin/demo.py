@@ -67,16 +67,27 @@ def demo_config(scenario: str, seed: int = 0, overrides: dict[str, dict] | None 
     rig = load_rig(rig_file) if rig_file else None
     cfg = SystemConfig.for_scenario(scenario, seed, overrides or {}, rig=rig, world=World.named(world),
                                     controller=ControllerConfig(law=law))
+    return with_rig_kind(cfg, rig_kind)
+
+
+RIG_KINDS = ("psvs", "stereo")
+
+
+def with_rig_kind(cfg: SystemConfig, rig_kind: str) -> SystemConfig:
+    """``cfg`` as it runs with a camera of ``rig_kind``: "psvs" unchanged; "stereo" an
+    ordinary stereo pair (the world's camera renders the PSVS's virtual cameras apart, so an
+    error source of the world's PSVS becomes the pair's; the pipeline's rig is the pair its
+    rig's PSVS makes, unless the rig is of kind stereo already).  ValueError for another kind."""
     if rig_kind == "stereo":
         import dataclasses
 
         from humanpt.geometry.rig import Stereo
 
         stereo = cfg.rig.stereo if cfg.rig.kind == "stereo" else Stereo.of_psvs(cfg.rig.psvs)
-        cfg = dataclasses.replace(cfg, sim_camera=dataclasses.replace(cfg.sim_camera, stereo=True),
-                                  rig=dataclasses.replace(cfg.rig, kind="stereo", stereo=stereo))
-    elif rig_kind != "psvs":
-        raise ValueError(f"rig kind {rig_kind!r}: psvs or stereo")
+        return dataclasses.replace(cfg, sim_camera=dataclasses.replace(cfg.sim_camera, stereo=True),
+                                   rig=dataclasses.replace(cfg.rig, kind="stereo", stereo=stereo))
+    if rig_kind != "psvs":
+        raise ValueError(f"rig kind {rig_kind!r}: {' or '.join(RIG_KINDS)}")
     return cfg
 
 

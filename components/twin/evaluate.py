@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from humanpt.geometry.frames import SAMPLE_HOLD_HOLD, TimedPoses
 from humanpt.geometry.transforms import rotation_angle_rad, x_from_transform
 from humanpt.geometry.units import to_mm
 from humanpt.runtime import tables
@@ -20,7 +21,7 @@ from humanpt.runtime.lockstep import Delivered
 from humanpt.runtime.recording import iter_entries, read_metadata
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose
-from humanpt.sim_camera.core import PoseTrack
+from humanpt.sim_camera.core import truth_poses
 
 COORDS = ("x", "y", "z", "psi", "theta", "phi")
 
@@ -63,10 +64,10 @@ class RunOutputs:
         return truths_from(self.outputs(topic))
 
 
-def truth_track(src, field: str = "world_T_tob", topic: str = "operator/truth") -> PoseTrack:
+def truth_track(src, field: str = "world_T_tob", topic: str = "operator/truth") -> TimedPoses:
     """A truth stream's true trajectory (the one the camera renders from: linear and
     geodesic between the stamped samples), mm."""
-    track = PoseTrack(maxlen=None)
+    track = truth_poses(maxlen=None)
     for stamp, poses in src.truths(topic):
         if field in poses:
             track.add(stamp, poses[field])
@@ -77,7 +78,7 @@ def truth_at(src, stamps_ns, field: str = "world_T_tob", topic: str = "operator/
     """(N, 4, 4) mm: a truth stream's trajectory at the stamps (interpolated between the
     samples around each stamp, never the nearest sample; held beyond the last one)."""
     track = truth_track(src, field, topic)
-    return np.array([track.at(int(ts), hold=True) for ts in np.asarray(stamps_ns, dtype=np.int64)])
+    return np.array([track.at(int(ts), SAMPLE_HOLD_HOLD) for ts in np.asarray(stamps_ns, dtype=np.int64)])
 
 
 def tracking_errors(src, flange_T_desired_mm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

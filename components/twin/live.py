@@ -187,20 +187,42 @@ def live_sections(cfg: SystemConfig, run_dir: Path, port: int,
 
 
 ROUTER_START_TIMEOUT_S = 120.0  # bounds a hang: a router that never listens
+# The components' start-up wait is adaptive: it ends when no further component has come up
+# for START_STALL_S, or START_STALL_ROUTERS times what the router took to listen (a loaded
+# machine starts every process that much slower), whichever is longer (issue 38 item 3).
+START_STALL_S = 60.0
+START_STALL_ROUTERS = 15.0
 
 
-def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], timeout_s: float, procs) -> bool:
-    deadline = time.monotonic() + timeout_s
+def _wait_alive(cfg: cfgmod.ConfigFile, names: tuple[str, ...], stall_s: float, procs) -> str:
+    """Wait until every component of ``names`` is up (its liveliness token); "" then, else
+    what failed: the processes that exited (name and status), or the components not up when
+    none came up for ``stall_s`` (each one that comes up restarts that wait)."""
+    t0 = last = time.monotonic()
+    seen: set[str] = set()
     with open_tool_session(cfg.runtime, patient=True) as s:
-        while time.monotonic() < deadline:
-            if any(p.poll() is not None for _, p in procs):
-                return False
+        while True:
+            dead = [f"{n} (exit {p.returncode})" for n, p in procs if p.poll() is not None]
+            if dead:
+                return f"{', '.join(dead)} exited before every component was up"
             alive = {str(r.ok.key_expr).rsplit("/", 1)[-1]
                      for r in s.liveliness().get(liveliness_key(cfg.runtime.cell, "*")) if r.ok is not None}
+            now = time.monotonic()
             if set(names) <= alive:
-                return True
+                return ""
+            if alive - seen:
+                seen |= alive
+                last = now
+            if now - last > stall_s:
+                return (f"{', '.join(sorted(set(names) - alive))} not up after {now - t0:.0f} s (running, but "
+                        f"no component came up in the last {stall_s:.0f} s; up: {', '.join(sorted(alive)) or 'none'})")
             time.sleep(0.3)
-    return False
+
+
+def _note(log, line: str) -> None:
+    """A line of the live twin's own in ``processes.log`` (beside its processes' output)."""
+    log.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} live twin: {line}\n")
+    log.flush()
 
 
 def _lower_priority(pid: int) -> None:
@@ -272,7 +294,7 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
              stop: threading.Event | None = None, on_started: Callable[[list[str]], None] | None = None,
              progress: Callable[[float, float], None] | None = None, secure: bool = False,
              control: LiveControl | None = None, link: str = "alter",
-             cycle_ms: float | None = None, screen: bool = True) -> LiveResult:
+             cycle_ms: float | None = None, screen: bool = True, bridge: bool = True) -> LiveResult:
     """Run ``cfg`` live (:func:`live_sections`; ``port``: the router's, a free one by
     default; ``viewer``: viz too) for ``duration_s`` of scenario (default: start delay +
     scenario + 1.5 s) after everything is up, recording the path from a second after
@@ -281,13 +303,17 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
     mTLS with a throwaway PKI in ``run_dir/pki`` (:func:`make_pki`).  ``control``: filled
     with the processes, to stop and start one on purpose (:class:`LiveControl`).  ``link``,
     ``cycle_ms``: the robot link and its cycle (:func:`link_sections`).  ``screen=False``:
-    without the operator's screen (scene, foxglove_bridge: nothing in the loop reads them)."""
+    without the operator's screen (scene, foxglove_bridge: nothing in the loop reads them);
+    ``bridge=False``: without the Foxglove bridge alone (what it costs the loop: ``humanpt bench
+    bridge``)."""
     run_dir = Path(run_dir)
     port = port or free_tcp_port()
     cfg, sections = live_sections(cfg, run_dir, port, overrides, secure=secure, link=link, cycle_ms=cycle_ms)
     comps = list(LIVE_COMPONENTS) + ["foxglove_bridge"] + (["viz"] if viewer else [])  # the operator's screen
     if not screen:
         comps = [c for c in comps if c not in SCREEN_COMPONENTS]
+    if not bridge:
+        comps = [c for c in comps if c != "foxglove_bridge"]
     if secure:
         make_pki(run_dir, sections["runtime"]["cell"], comps + ["operator"])
     cfg_path = run_dir / "humanpt.toml"
@@ -308,11 +334,14 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
             # The components start once the router listens: started beside it on a loaded
             # machine they starved its start-up past their 30 s connect timeout (issue 29
             # item 15: "cannot reach the router" at load 8-12).
+            t_router = time.monotonic()
             why = wait_listening("127.0.0.1", port, ROUTER_START_TIMEOUT_S, alive=lambda: router.poll() is None,
                                  stop=stop)
+            router_s = time.monotonic() - t_router
             if why:
                 failed.append(f"the router did not listen: {why}; see {run_dir / 'processes.log'}")
                 return LiveResult(cfg, run_dir, duration, time.perf_counter() - t0, time.time_ns(), failed)
+            _note(log, f"the router listened after {router_s:.1f} s; starting the components")
             for name in comps + ["operator"]:
                 p = ctl._spawn(name, launcher.argv(name, config=cfg_path, run_dir=run_dir))
                 if name == "operator":
@@ -321,8 +350,12 @@ def run_live(cfg: SystemConfig, run_dir: str | Path, *, port: int | None = None,
                     _lower_priority(p.pid)
             if on_started is not None:
                 on_started(comps)
-            if not _wait_alive(file_cfg, tuple(comps) + ("operator",), 60.0, procs):
-                failed.append("the components did not all come up within 60 s")
+            t_comps = time.monotonic()
+            why = _wait_alive(file_cfg, tuple(comps) + ("operator",),
+                              max(START_STALL_S, START_STALL_ROUTERS * router_s), procs)
+            _note(log, why or f"all {len(comps) + 1} components up after {time.monotonic() - t_comps:.1f} s")
+            if why:
+                failed.append(f"the components did not all come up: {why}")
             else:
                 _drive(file_cfg, duration, ctl, stop, failed, progress)
         finally:

@@ -58,7 +58,6 @@ Entity paths (the blueprint's views are rooted at ``world``, ``image``, ``plots`
 
 from __future__ import annotations
 
-import bisect
 import json
 import logging
 import re
@@ -68,7 +67,14 @@ import numpy as np
 import rerun as rr
 from scipy.spatial.transform import Rotation
 
-from humanpt.geometry import apply_step, camera_T_desired, project, rotation_angle_rad
+from humanpt.geometry import (
+    apply_step,
+    camera_T_desired,
+    invert_transform,
+    project,
+    rotation_angle_rad,
+)
+from humanpt.geometry.frames import NEAREST_HOLD, Backwards, FrameGraph, Repeat, TimedPoses
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.units import to_m, to_mm
 from humanpt.runtime import cycle as cell_cycle
@@ -188,10 +194,13 @@ class RerunLogger:
         self.counts: dict[str, int] = {}
         self.errors: dict[str, int] = {}
         self._virtual: bool | None = None  # decided by the first stamp
-        self._robot: deque[tuple[int, np.ndarray]] = deque(
-            maxlen=256
-        )  # (stamp ns, world_T_flange m)
-        self._robot_stamps: deque[int] = deque(maxlen=256)
+        # The cell's frames (geometry.frames), m: world -> flange from the robot states (the
+        # latest 256; an earlier stamp, a restarted robot, starts them again), answered with
+        # the state nearest an image's stamp; flange -> camera the rig's hand-eye.
+        self.frames = FrameGraph()
+        self._robot = self.frames.add_timed(
+            "world", "flange", TimedPoses(256, repeat=Repeat.KEEP, backwards=Backwards.RESTART), NEAREST_HOLD)
+        self.frames.add_static("flange", "camera", self.flange_T_camera)
         # The link's cycle (ns), from the latest robot state that carries it (runtime/cycle.py).
         self.cycle_period_ns = cell_cycle.FALLBACK_NS
         self._state: pb.TobState | None = None
@@ -336,21 +345,9 @@ class RerunLogger:
         p = self.sources_mm @ camera_T_tob_mm[:3, :3].T + camera_T_tob_mm[:3, 3]
         return project(self.params, p)
 
-    def _flange_at(self, stamp_ns: int) -> np.ndarray | None:
-        """The robot's world_T_flange (m) nearest to ``stamp_ns``."""
-        if not self._robot:
-            return None
-        i = bisect.bisect_left(self._robot_stamps, stamp_ns)
-        if i >= len(self._robot):
-            return self._robot[-1][1]
-        if i > 0 and stamp_ns - self._robot_stamps[i - 1] <= self._robot_stamps[i] - stamp_ns:
-            i -= 1
-        return self._robot[i][1]
-
-    def _camera_T_tob_mm(
-        self, world_T_flange_m: np.ndarray, world_T_tob_m: np.ndarray
-    ) -> np.ndarray:
-        return to_mm(np.linalg.inv(world_T_flange_m @ self.flange_T_camera) @ world_T_tob_m)
+    @staticmethod
+    def _camera_T_tob_mm(world_T_camera_m: np.ndarray, world_T_tob_m: np.ndarray) -> np.ndarray:
+        return to_mm(invert_transform(world_T_camera_m) @ world_T_tob_m)
 
     # -- overlays on the complex image ------------------------------------------------------------
     def _overlay(self, stamp_ns: int, items: list) -> None:
@@ -396,11 +393,11 @@ class RerunLogger:
             (ENTITIES["pairs"], rr.LineStrips2D(strips, colors=colors, labels=labels, radii=0.8)),
         ]
         expected = np.zeros((0, 2))
-        flange = self._flange_at(stamp)
-        if self._state is not None and flange is not None:
+        world_T_camera = self.frames.lookup("world", "camera", stamp)
+        if self._state is not None and world_T_camera is not None:
             world_T_tob = self._state_at(stamp)
             if world_T_tob is not None:
-                uv_r, uv_l = self._project(self._camera_T_tob_mm(flange, world_T_tob))
+                uv_r, uv_l = self._project(self._camera_T_tob_mm(world_T_camera, world_T_tob))
                 expected = np.vstack([uv_r, uv_l])
         items.append((ENTITIES["expected"], rr.Points2D(expected, radii=4.0, colors=FILTERED_RGB)))
         self._overlay(stamp, items)
@@ -446,11 +443,7 @@ class RerunLogger:
     def _robot_state(self, topic, msg: pb.RobotState, t_ns) -> None:
         stamp = msg.header.stamp_ns
         T = from_pose(msg.world_T_flange)
-        if self._robot_stamps and stamp < self._robot_stamps[-1]:
-            self._robot.clear()  # out of order (a restarted robot): start the buffer again
-            self._robot_stamps.clear()
-        self._robot.append((stamp, T))
-        self._robot_stamps.append(stamp)
+        self._robot.add(stamp, T)
         period_ns = cell_cycle.from_state(msg.cycle_period_ns)
         if period_ns is not None:
             self.cycle_period_ns = period_ns
@@ -470,8 +463,9 @@ class RerunLogger:
             # A command is for the NEXT cycle (command ahead) and stamped with it, so its own
             # stamp is no start: the robot state it answers is the latest one seen, and the
             # image it uses is its measurement_stamp_ns (the first command using it counts).
-            if self._robot_stamps and t_ns >= self._robot_stamps[-1]:
-                self.rec.log(ENTITIES["lat_state"], rr.Scalars((int(t_ns) - self._robot_stamps[-1]) * 1e-6))
+            last_state_ns = self._robot.last_ns
+            if last_state_ns is not None and t_ns >= last_state_ns:
+                self.rec.log(ENTITIES["lat_state"], rr.Scalars((int(t_ns) - last_state_ns) * 1e-6))
             captured = msg.measurement_stamp_ns
             if captured and captured != self._last_measurement_ns and t_ns >= captured:
                 self._last_measurement_ns = captured
@@ -584,12 +578,13 @@ class RerunLogger:
         ):
             # At each image's capture: the true servo error and the sources' true pixels.
             world_T_flange, world_T_tob = from_pose(msg.world_T_flange), from_pose(msg.world_T_tob)
-            desired = world_T_flange @ self.flange_T_camera @ to_m(camera_T_desired(self.dz_mm))
+            world_T_camera = world_T_flange @ self.flange_T_camera
+            desired = world_T_camera @ to_m(camera_T_desired(self.dz_mm))
             e_t = np.linalg.norm(world_T_tob[:3, 3] - desired[:3, 3]) * 1e3
             e_r = np.degrees(rotation_angle_rad(world_T_tob[:3, :3] @ desired[:3, :3].T))
             self.rec.log(ENTITIES["true_error_t"], rr.Scalars(e_t))
             self.rec.log(ENTITIES["true_error_r"], rr.Scalars(e_r))
-            uv_r, uv_l = self._project(self._camera_T_tob_mm(world_T_flange, world_T_tob))
+            uv_r, uv_l = self._project(self._camera_T_tob_mm(world_T_camera, world_T_tob))
             self._overlay(
                 stamp,
                 [

@@ -14,6 +14,7 @@ from humanpt.geometry import (
     transform_from_x,
     x_from_transform,
 )
+from humanpt.geometry.frames import SAMPLE_HOLD_HOLD, SAMPLE_HOLD_REFUSE
 from humanpt.geometry.transforms import interpolate_transform
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import (
@@ -23,7 +24,7 @@ from humanpt.schemas.convert import (
     image_stamp_ns,
     pose,
 )
-from humanpt.sim_camera import PoseTrack, Renderer, SimCameraConfig, SimCameraCore
+from humanpt.sim_camera import Renderer, SimCameraConfig, SimCameraCore, truth_poses
 
 
 def _truth(t_ns: int, field: str, a_T_b_mm: np.ndarray) -> pb.Truth:
@@ -41,15 +42,19 @@ def _tick(t_ns: int) -> pb.Tick:
 def test_pose_track_is_linear_and_geodesic_holds_before_and_never_extrapolates():
     a = transform_from_x(np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0]))
     b = transform_from_x(np.array([10.0, -20.0, 30.0, 40.0, 0.0, 0.0]))
-    track = PoseTrack()
+    track = truth_poses()
     track.add(0, a)
     track.add(100, b)
-    mid = track.at(50)
+    mid = track.at(50, SAMPLE_HOLD_REFUSE)
     np.testing.assert_allclose(x_from_transform(mid), [5.0, -10.0, 15.0, 20.0, 0.0, 0.0], atol=1e-9)
-    np.testing.assert_array_equal(track.at(-30), a)  # before the first sample: it stood there
-    np.testing.assert_array_equal(track.at(100), b)
-    assert track.at(101) is None and not track.covers(101) and track.covers(100)
-    np.testing.assert_array_equal(track.at(150, hold=True), b)
+    np.testing.assert_array_equal(track.at(-30, SAMPLE_HOLD_REFUSE), a)  # before the first sample: it stood there
+    np.testing.assert_array_equal(track.at(100, SAMPLE_HOLD_REFUSE), b)
+    assert track.at(101, SAMPLE_HOLD_REFUSE) is None and not track.covers(101) and track.covers(100)
+    np.testing.assert_array_equal(track.at(150, SAMPLE_HOLD_HOLD), b)
+    track.add(100, a)  # a repeat: the newer value wins
+    np.testing.assert_array_equal(track.at(100, SAMPLE_HOLD_REFUSE), a)
+    track.add(40, b)  # an earlier stamp: a restarted source, the stream starts again
+    assert len(track) == 1 and track.last_ns == 40
 
 
 def test_core_renders_at_the_tick_time_from_interpolated_truth():
@@ -156,16 +161,16 @@ def test_pose_track_turns_at_a_constant_rate_between_samples():
         c, s = np.cos(angle_rad), np.sin(angle_rad)
         return np.array([[c, -s, 0, x_mm], [s, c, 0, 0], [0, 0, 1, 500.0], [0, 0, 0, 1.0]])
 
-    track = PoseTrack()
+    track = truth_poses()
     track.add(0, pose_at(0.2, 10.0))
     track.add(100_000_000, pose_at(0.5, 40.0))  # 0.3 rad and 30 mm in 100 ms
     track.add(200_000_000, pose_at(0.5, 40.0))  # then still
     for t_ms, expected in ((-5, (0.2, 10.0)), (0, (0.2, 10.0)), (25, (0.275, 17.5)),
                            (100, (0.5, 40.0)), (150, (0.5, 40.0))):
-        np.testing.assert_allclose(track.at(t_ms * 1_000_000), pose_at(*expected), atol=1e-12)
-    assert track.at(200_000_001) is None
+        np.testing.assert_allclose(track.at(t_ms * 1_000_000, SAMPLE_HOLD_REFUSE), pose_at(*expected), atol=1e-12)
+    assert track.at(200_000_001, SAMPLE_HOLD_REFUSE) is None
     track.forget_before(150_000_000)  # keeps what times >= 150 ms need
-    np.testing.assert_allclose(track.at(150_000_000), pose_at(0.5, 40.0), atol=1e-12)
+    np.testing.assert_allclose(track.at(150_000_000, SAMPLE_HOLD_REFUSE), pose_at(0.5, 40.0), atol=1e-12)
     assert len(track) == 2
 
 

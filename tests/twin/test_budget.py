@@ -12,7 +12,7 @@ import pytest
 from humanpt.controller.config import ControllerConfig
 from humanpt.geometry.psvs import virtual_rotation_from_mirror_tilt_deg
 from humanpt.geometry.rig import Rig
-from humanpt.twin.budget import CSV_COLUMNS, plan, run_world
+from humanpt.twin.budget import CSV_COLUMNS, format_table, plan, run_budget, run_world
 from humanpt.twin.worlds import ERROR_SOURCES, World
 from tests.conftest import in_process_cli
 
@@ -109,4 +109,32 @@ def test_cli_refuses_an_unknown_source_before_running(tmp_path, capsys, cli_main
     out = tmp_path / "b"
     assert cli_main(["experiment", "budget", "--only", "nosuch", "--out", str(out)]) != 0
     assert "nosuch" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_the_budget_of_a_stereo_pair_meets_the_same_hand_figures():
+    # Issue 35: the error budget of an ordinary stereo pair. The pair is the world's PSVS's
+    # two virtual cameras rendered apart, so a focal length 0.3 % long biases the depth by
+    # z x 0.003 and a mirror tilted 0.05 deg pans one camera 0.1 deg: the same disparity error
+    # as above, the same hand figures (1.8 mm, 7.0 mm at 600 mm).
+    focal = run_world(World.only("focal"), "static", 0, "standin", source="focal", rig_kind="stereo")
+    tilt = run_world(World.only("mirror_tilt"), "static", 0, "standin", source="mirror_tilt", rig_kind="stereo")
+    assert focal.status == tilt.status == "ok" and focal.n >= 3 and tilt.n >= 3
+    hand_focal = _depth_mm() * 0.003
+    assert hand_focal / 1.5 <= abs(focal.me[2]) <= hand_focal * 1.5, (focal.me, hand_focal)
+    psvs = Rig().psvs
+    du_px = psvs.a_u * math.tan(math.radians(float(np.linalg.norm(virtual_rotation_from_mirror_tilt_deg(0.05)))))
+    hand_tilt = _depth_mm() ** 2 * du_px / (psvs.baseline_mm * psvs.a_u)
+    assert hand_tilt / 1.5 <= abs(tilt.me[2]) <= hand_tilt * 1.5, (tilt.me, hand_tilt)
+    text = format_table([focal, tilt], "static", 0, "standin", "stereo")
+    assert "an ordinary stereo pair" in text
+
+
+def test_a_rig_kind_is_checked_before_anything_runs(tmp_path, capsys, cli_main):
+    with pytest.raises(ValueError, match="rig kind 'mono'"):
+        run_budget("static", 0, "standin", only=["focal"], rig_kind="mono")
+    # the flag is the budget's: another experiment refuses it by name, nothing written
+    out = tmp_path / "s"
+    with pytest.raises(SystemExit, match="--rig-kind applies to experiment budget"):
+        cli_main(["experiment", "static", "--rig-kind", "stereo", "--out", str(out)])
     assert not out.exists()

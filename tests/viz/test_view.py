@@ -13,6 +13,7 @@ import rerun.chunk as rrc
 from humanpt.cli.main import main
 from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
+from humanpt.geometry import transform_from_x
 from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.core import PerceptionCore
 from humanpt.pose_filter.config import PoseFilterConfig
@@ -311,3 +312,24 @@ def test_view_draws_a_fitted_seam_beside_the_path(twin_run, tmp_path, cli_main):
     ends = np.array(strips[0][0])
     np.testing.assert_allclose(ends[[0, -1]], [[0.1, 0.0, 0.0], [0.1, 0.05, 0.0]], atol=1e-9)  # mm -> m
     assert cli_main(["view", str(run_dir), "--seam", str(tmp_path / "none.json"), "--save", str(out)]) == 2
+
+
+def test_logger_sees_the_camera_from_the_robot_state_nearest_the_image():
+    """The expected overlay's camera: the robot state nearest the capture stamp (the earlier
+    on a tie, the last one after them), times the rig's hand-eye; a robot state stamped
+    before the latest (a restarted robot) starts the states again."""
+    rec = rr.RecordingStream("humanpt_test")
+    rec.memory_recording()
+    lg = RerunLogger(rec, VizConfig())
+    a, b = np.eye(4), transform_from_x(np.array([0.1, 0.0, 0.0, 90.0, 0.0, 0.0]))
+    lg.log("robot_gateway/robot_state", pb.RobotState(header=header(1000), world_T_flange=pose(a)), 1000)
+    lg.log("robot_gateway/robot_state", pb.RobotState(header=header(2000), world_T_flange=pose(b)), 2000)
+    F = lg.flange_T_camera
+    for stamp, flange in ((1400, a), (1500, a), (1600, b), (9000, b), (0, a)):
+        np.testing.assert_allclose(lg.frames.lookup("world", "camera", stamp), flange @ F, atol=1e-12)
+    lg.log("robot_gateway/robot_state", pb.RobotState(header=header(500), world_T_flange=pose(b)), 2100)
+    np.testing.assert_allclose(lg.frames.lookup("world", "camera", 1400), b @ F, atol=1e-12)
+    assert len(lg._robot) == 1 and lg._robot.last_ns == 500
+    # the entities of the moving frames hang as the frames do
+    assert ENTITIES["flange"] == "/".join(lg.frames.path("flange"))
+    assert ENTITIES["camera"] == "/".join(lg.frames.path("camera"))
