@@ -276,7 +276,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             if isinstance(e, Transmit):
                 self._tx += e.data
             elif isinstance(e, CycleReceived):
-                self._on_status(e.state, t_ns, outs)
+                self._on_status(e.state, t_ns, outs, e.age_ns)
             elif isinstance(e, LinkUp):
                 self._new_session()
                 if self._link_down:
@@ -581,7 +581,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             )
 
     # -- robot side ---------------------------------------------------------------------------
-    def _on_status(self, status: CycleState, rx_ns: int, outs: list[Output]) -> None:
+    def _on_status(self, status: CycleState, rx_ns: int, outs: list[Output], age_ns: int = 0) -> None:
         cfg = self.config
         k = status.cycle
         self.counters["statuses"] += 1
@@ -650,7 +650,9 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             )
         self._status = status
         self._status_t_ns = rx_ns
-        self._status_stamp_ns = max(0, rx_ns - round(cfg.status_delay_ms * 1e6))
+        # The state's stamp: when the robot sampled it (its age in a read of several states),
+        # less the configured status delay.
+        self._status_stamp_ns = max(0, rx_ns - age_ns - round(cfg.status_delay_ms * 1e6))
         self._cycle_stamps[k] = self._status_stamp_ns
         if len(self._cycle_stamps) > cfg.stale_cycles + 2:
             del self._cycle_stamps[next(iter(self._cycle_stamps))]
@@ -658,7 +660,7 @@ class GatewayCore(SerialLinkCoreMixin, Core):
         self._prev_fresh = None
         for c in [c for c in self._commands if cycles_after(c, k) < -cfg.stale_cycles]:
             del self._commands[c]
-        outs.append(self._robot_state(status, rx_ns))
+        outs.append(self._robot_state(status, self._status_stamp_ns))
         if k in self._commands or self._must_hold(status) is not None:
             self._answer(k, rx_ns, outs)
         else:
@@ -671,10 +673,10 @@ class GatewayCore(SerialLinkCoreMixin, Core):
             self._status_pose = (status, base_T_flange, self._world_T_base @ base_T_flange)
         return self._status_pose[1:]
 
-    def _robot_state(self, status: CycleState, rx_ns: int) -> Output:
+    def _robot_state(self, status: CycleState, stamp: int) -> Output:
+        """The cycle's robot_state, stamped ``stamp`` (when the robot sampled it: _on_status)."""
         world_T_flange = self._pose(status)[1].copy()
         world_T_flange[:3, 3] /= 1000.0
-        stamp = max(0, rx_ns - round(self.config.status_delay_ms * 1e6))
         return ROBOT_STATE, pb.RobotState(
             header=self.next_header(ROBOT_STATE, stamp, "world"),
             world_T_flange=pose(world_T_flange),

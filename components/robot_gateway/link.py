@@ -34,9 +34,12 @@ class CycleState:
 
 @dataclass(frozen=True, slots=True)
 class CycleReceived:
-    """Link event: the robot's state for a cycle arrived."""
+    """Link event: the robot's state for a cycle arrived.  ``age_ns``: how long before the
+    bytes' arrival the robot sampled it, by the robot's own clock (0: just now, as one state
+    per read gives it; a stream read that holds several states ages the earlier ones)."""
 
     state: CycleState
+    age_ns: int = 0
 
 
 @dataclass(frozen=True)

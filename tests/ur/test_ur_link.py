@@ -211,3 +211,26 @@ def test_corrections_are_off_when_the_program_stops_or_its_heartbeat_stalls():
     assert not state(heartbeat=3, runtime_state=rtde.RUNTIME_STOPPED).corrections_on  # Stop pressed
     st = state(heartbeat=4, safety_mode=rtde.SAFETY_MODE_PROTECTIVE_STOP, robot_mode=5)
     assert st.fault and not st.arm_power
+
+
+def test_states_read_together_keep_the_controllers_own_times():
+    """A TCP read holding several data packages (a stalled stream delivered at once, as at
+    500 Hz on a busy host): each robot state is stamped at the read's time less its age by
+    the controller's timestamps (2 ms apart at 500 Hz), not all at the read's time, which the
+    pose filter took for a clock standing still (35 robot_clock_resets in a live 2 ms demo)."""
+    rig = rigmod.Rig(link="ur")
+    rig.advance(2 * MS)
+    rig.status()  # the session's first state (LinkUp)
+    before = len(rig.states())
+    k = rig.cycle
+    packages = b"".join(chunk for c in (k + 1, k + 2, k + 3)
+                        for chunk in rig.robot.send(c, rig.base_T_flange, rig.bits, rig.t_ns))
+    rig.cycle = k + 3
+    rig.t_ns += 7 * MS  # they arrive together, 1 ms after the newest was sampled
+    rig.from_robot(packages)
+    stamps = [s.header.stamp_ns for s in rig.states()[before:]]
+    delay = round(rig.gw.config.status_delay_ms * 1e6)
+    assert stamps == [rig.t_ns - delay - 4 * MS, rig.t_ns - delay - 2 * MS, rig.t_ns - delay]
+    # one package per read ages nothing (every link's states as before)
+    events = UrLink.from_config(gateway_config("ur")).receive(b"", 0)
+    assert all(getattr(e, "age_ns", 0) == 0 for e in events)

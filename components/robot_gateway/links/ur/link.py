@@ -178,6 +178,7 @@ class UrLink(AbbLink):
             self._running = False
             return events + self._connected()
         events = []
+        stamped: list[tuple[int, float]] = []  # (index in events, controller timestamp) of each state
         packets = self.framer.feed(data)
         for err in self.framer.errors:
             self.counters["malformed"] += 1
@@ -192,7 +193,10 @@ class UrLink(AbbLink):
                     events.append(LinkError(f"RTDE link: the controller says ({source}, level {level}): {text}"))
                 elif p.type == rtde.DATA_PACKAGE:
                     if self._step == "U":
-                        events += self._data(p)
+                        got, ts = self._data(p)
+                        stamped += [(len(events) + i, ts) for i, e in enumerate(got)
+                                    if isinstance(e, CycleReceived)]
+                        events += got
                     else:
                         self.counters["ignored"] += 1  # (the last of a session being paused)
                 else:
@@ -200,9 +204,18 @@ class UrLink(AbbLink):
             except rtde.RtdeProtocolError as e:
                 self.counters["malformed"] += 1
                 events.append(LinkError(f"RTDE link: {e}; packet dropped ({self.counters['malformed']} so far)"))
+        if len(stamped) > 1:
+            # A read of several data packages (TCP coalesces a stalled stream): each state is
+            # aged by the controller's own clock from the newest, which is the read's; they would
+            # otherwise all carry the read's time, and the pose filter would see time stand still.
+            newest = stamped[-1][1]
+            for i, ts in stamped[:-1]:
+                e = events[i]
+                events[i] = CycleReceived(e.state, round((newest - ts) * 1e9))
         return events
 
-    def _data(self, p: rtde.Packet) -> list:
+    def _data(self, p: rtde.Packet) -> tuple[list, float]:
+        """The events of one data package and the controller's timestamp in it (s)."""
         assert self._out is not None
         v = self._out.decode(p.payload)
         ts = float(v["timestamp"])
@@ -216,7 +229,7 @@ class UrLink(AbbLink):
             if ahead == 0 or ahead > MAX_GAP_CYCLES:
                 self.counters["out_of_sequence"] += 1
                 return [LinkError(f"RTDE link: cycle {cycle} (timestamp {ts:.4f} s) not after the last ({self._last})"
-                                  f": dropped, no answer")]
+                                  f": dropped, no answer")], ts
         events: list = []
         self.feedback = base_T_flange
         heartbeat = int(v[self.outputs[5]])
@@ -241,7 +254,7 @@ class UrLink(AbbLink):
             fault=safety not in (rtde.SAFETY_MODE_NORMAL, rtde.SAFETY_MODE_REDUCED),
             correction_missed=False,  # RTDE reports no late answers
         )))
-        return events
+        return events, ts
 
     # -- answers -----------------------------------------------------------------------------------
     def _message(self, cycle: int, t_ns: int) -> UrTarget:
