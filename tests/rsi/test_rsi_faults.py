@@ -91,11 +91,11 @@ def test_late_answers_count_up_to_the_limit_then_rsi_stops_with_a_clear_event():
     robot = _run(_echo((0.1, 0, 0, 0, 0, 0)), delay_s=0.006)  # 6 ms: after the 4 ms cycle
     assert robot.stopped is not None and robot.counters["on_time"] == 0
     assert robot.counters["late"] == LIMIT and robot.delay == LIMIT
-    # Judged from the client's first (late) datagram on; none after the stop. (The first <Rob>
-    # is judged too if the simulator's thread came to its next boundary after the late answer
-    # arrived: a loaded machine.)
+    # Judged from the client's first (late) datagram on; none after the stop. (The cycles
+    # before the client's first datagram arrived are waiting, not late: one or two on a loaded
+    # machine, whose client thread sends its 6 ms answer later still; seen: 2 at load 13.)
     waiting = robot.counters["waiting"]
-    assert waiting in (0, 1) and robot.counters["cycles"] == waiting + LIMIT
+    assert waiting < LIMIT and robot.counters["cycles"] == waiting + LIMIT
     codes = _codes(robot)
     assert codes[:2] == ["client_answered", "late_reply"] and codes[-1] == "rsi_stopped"
     assert f"{LIMIT} late answers in a row" in robot.events[-1].text
