@@ -58,6 +58,7 @@ STAGES: dict[str, tuple[str, str, str]] = {
     "camera": ("cal_camera", "calibrate_camera_on_twin", "camera"),
     "psvs": ("cal_psvs", "calibrate_psvs_on_twin", "psvs"),
     "hand-eye": ("cal_handeye", "calibrate_hand_eye_on_twin", "handeye"),
+    "arm": ("cal_arm", "calibrate_arm_on_twin", "arm"),  # the arm's errors with the hand-eye (32.4)
     "tip": ("cal_tip", "calibrate_tip_on_twin", "tip"),
 }
 
@@ -71,6 +72,7 @@ class StageResult:
     truth: list[str] = field(default_factory=list)
     error: str = ""
     checks: list = field(default_factory=list)  # humanpt.twin.report.Check: its acceptance against the truth
+    skipped: str = ""  # why the stage did not run, when it has nothing to do here (no warning)
 
 
 @dataclass
@@ -135,10 +137,11 @@ def _seam(op) -> np.ndarray:
     return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
 
 
-def _arm(w) -> RobotArm | None:
+def _arm(w, rig: Rig | None = None) -> RobotArm | None:
     """The simulated Puma of the twin ``w`` as a playback plans on it (its kinematics, its
-    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits),
-    None on the stand-in (no kinematics)."""
+    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits;
+    the arm as the rig's ``[arm]`` calibrated it, when it has one), None on the stand-in (no
+    kinematics)."""
     from humanpt.sim_robot.core import SimRobotCore
 
     robot = next((c for c in w.lockstep.cores if isinstance(c, SimRobotCore)), None)
@@ -147,12 +150,16 @@ def _arm(w) -> RobotArm | None:
     gw = next((c for c in w.lockstep.cores if c.name == "robot_gateway"), None)
     limits = {} if gw is None else {"max_speed_mm_s": float(gw.config.max_speed_mm_s),
                                     "max_angular_deg_s": float(gw.config.max_angular_speed_deg_s)}
+    true_arm = rig.arm.true_arm() if rig is not None and rig.arm.model == robot.config.model else None
     return RobotArm(robot.kin, robot.world_T_base.copy(), np.asarray(robot.q_setpoint_rad, dtype=float).copy(),
-                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits)
+                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits, true_arm=true_arm)
 
 
 def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
+    if name == "arm" and robot != "puma":
+        return rig, StageResult(name, False, 0.0, skipped=f"the {robot} robot has no joints (exact kinematics): "
+                                                         "no arm to calibrate")
     t0 = time.perf_counter()
     try:
         fn = getattr(importlib.import_module(f"humanpt.twin.{module}"), entry)
@@ -160,7 +167,7 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
     except (ImportError, AttributeError) as e:
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
-        kw = {"robot": robot} if name == "hand-eye" else {}  # calibrate the arm that will weld
+        kw = {"robot": robot} if name in ("hand-eye", "arm") else {}  # calibrate the arm that will weld
         result, report, truth = fn(world, rig, seed, progress=progress, **kw)
     except Exception as e:  # noqa: BLE001 - a failed stage is a result: the rig keeps what it had
         return rig, StageResult(name, False, time.perf_counter() - t0, error=f"{type(e).__name__}: {e}")
@@ -242,6 +249,11 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         stamps, x_g, x_tip = evaluate.path_points(w)
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
+        arm = _arm(w, cfg.rig)
+        if arm is not None and arm.true_arm is not None and len(taught):
+            # The pipeline placed each point with the flange the robot reported (its nominal
+            # model): move it to where the calibrated arm had the flange (issue 32.4).
+            taught = _corrected(w, arm, taught, stamps)
         taught_p = transform_from_x(np.asarray(taught, dtype=float).reshape(-1, 6))[:, :3, 3]
         taught_mm = distance_to_seam(design, taught_p) if len(taught_p) else np.zeros(0)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
@@ -260,7 +272,6 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
         fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
         fitted_mm = distance_to_seam(design, fitted_p)
-        arm = _arm(w)
         refused = ""
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
             # as the console does: re-timed for the tool, at most the controller's points;
@@ -333,7 +344,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     stats = evaluate.Stats.of(err) if len(err) else None
     taught_p = np.array([transform_from_x(x)[:3, 3] for x in taught]).reshape(-1, 3)
     fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
-    checks = _job_checks(cfg, mount, np.asarray(taught, dtype=float), tool_mm, rig)
+    checks = _job_checks(cfg, mount, np.asarray(taught, dtype=float), tool_mm, rig, mount_joints, view, robot)
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
                        compared, seam_mm=seam, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
@@ -345,20 +356,52 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
 SOURCE_LIMIT_MM = 0.1
 
 
-def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool_mm: np.ndarray, rig: Rig) -> list:
-    """The job's own checks: the Puma's absolute kinematic error along the taught seam (the
-    world's arm against its nominal model, as the job mounts it) against the played-back
-    tolerance; the camera-to-robot time offset the rig says, at the taught speed (the
-    pipeline does not correct it yet) against SOURCE_LIMIT_MM."""
-    from .report import SEAM_TOLERANCES_MM, Check, arm_error_mm
+def _corrected(w, arm: RobotArm, taught: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """The taught points (N, 6) moved by the calibrated arm (humanpt.calibration.arm
+    .correct_path) with the robot states the gateway published (the reported flanges)."""
+    from humanpt.calibration.arm import correct_path
+
+    states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")]
+    rs = np.array([st.header.stamp_ns for st in states], dtype=np.int64)
+    R = np.array([to_mm(from_pose(st.world_T_flange)) for st in states]).reshape(-1, 4, 4)
+    return correct_path(taught, stamps, rs, R, arm.true_arm, arm.world_T_base_mm, arm.kinematics, arm.joints_rad)
+
+
+def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool_mm: np.ndarray, rig: Rig,
+                mount_joints=None, view: np.ndarray | None = None, robot: str = "standin") -> list:
+    """The job's own checks: on the stand-in, the Puma's absolute kinematic error along the
+    taught seam (the world's arm against its nominal model, as the job mounts it: what a
+    cell playing on its arm would meet); on the Puma, the arm's share of the played-back
+    error (the world's arm teaching the seam from where it watches it and playing it, both
+    through the rig's hand-eye and arm model: :func:`humanpt.twin.report.arm_share_mm`),
+    after the arm's calibration when the rig has one (the nominal arm's figure beside it),
+    each against the played-back tolerance; the camera-to-robot time offset the rig says, at
+    the taught speed, against SOURCE_LIMIT_MM."""
+    from .report import SEAM_TOLERANCES_MM, Check, arm_error_mm, arm_share_mm
 
     checks = []
-    if len(taught_x):
+    if len(taught_x) and (robot != "puma" or view is None):
         err = arm_error_mm(cfg.robot_overrides, mount, transform_from_x(taught_x[:: max(1, len(taught_x) // 200)]),
                            tool_mm)
         if len(err):
             checks.append(Check("arm", "the Puma's absolute kinematic error along the seam, RMS",
                                 float(np.sqrt(np.mean(err ** 2))), SEAM_TOLERANCES_MM["played"], "mm"))
+    elif len(taught_x):
+        traj = Trajectory(cfg.operator.design_scenario())
+        along = np.array([traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 60)])
+        watch = np.array([p @ invert_transform(along[0]) @ view for p in along])
+        true_X = cfg.sim_camera.flange_T_camera  # the world's hand-eye (truth, only to report)
+        args = (cfg.robot_overrides, mount, mount_joints, watch, along, tool_mm, rig.hand_eye.flange_T_camera_mm(),
+                true_X)
+        rms = lambda e: float(np.sqrt(np.mean(e ** 2))) if len(e) else float("nan")  # noqa: E731
+        nominal = rms(arm_share_mm(*args))
+        if rig.arm.present:
+            after = rms(arm_share_mm(*args, model_arm=rig.arm.true_arm()))
+            checks.append(Check("arm", f"the arm's share of the played-back error after its calibration, RMS "
+                                f"(the nominal arm's: {nominal:.3f} mm)", after, SEAM_TOLERANCES_MM["played"], "mm"))
+        else:
+            checks.append(Check("arm", "the arm's share of the played-back error (its nominal model; no arm "
+                                "calibrated), RMS", nominal, SEAM_TOLERANCES_MM["played"], "mm"))
     if rig.timing.calibration.method != "nominal":
         # the pose filter places each image at its stamp minus the offset: what is left is
         # the offset's own uncertainty
