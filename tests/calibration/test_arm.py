@@ -28,9 +28,20 @@ from humanpt.calibration.arm import (
     true_world_T_flange,
 )
 from humanpt.calibration.handeye import plan_poses, pose_difference, puma_move_check
-from humanpt.geometry.puma import HOME_JOINTS_DEG, PumaKinematics, TrueArm, follow, perturbed_geometry
+from humanpt.geometry.puma import (
+    HOME_JOINTS_DEG,
+    PumaKinematics,
+    TrueArm,
+    follow,
+    perturbed_geometry,
+)
 from humanpt.geometry.rig import DEFAULT_FLANGE_T_CAMERA_MM, Rig
-from humanpt.geometry.transforms import make_transform, matrix_from_rotvec, transform_from_x, x_from_transform
+from humanpt.geometry.transforms import (
+    make_transform,
+    matrix_from_rotvec,
+    transform_from_x,
+    x_from_transform,
+)
 from humanpt.runtime.rigfile import rig_from_table, rig_to_table, rig_to_toml
 from humanpt.twin.worlds import ERROR_SOURCES
 

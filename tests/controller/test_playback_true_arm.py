@@ -10,7 +10,13 @@ from __future__ import annotations
 import numpy as np
 
 from humanpt.controller.playback import RobotArm, command_poses, plan_on_arm
-from humanpt.geometry.puma import HOME_JOINTS_DEG, PumaKinematics, TrueArm, follow, perturbed_geometry
+from humanpt.geometry.puma import (
+    HOME_JOINTS_DEG,
+    PumaKinematics,
+    TrueArm,
+    follow,
+    perturbed_geometry,
+)
 from humanpt.geometry.transforms import interpolate_transform, transform_from_x, x_from_transform
 
 KIN = PumaKinematics()
