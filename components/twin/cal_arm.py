@@ -34,7 +34,7 @@ from .cal_handeye import collect_on_twin
 from .report import Check, TruthLines
 from .worlds import World
 
-__all__ = ["calibrate_arm_on_twin", "DEFAULT_POSES", "PLAN", "truth_lines"]
+__all__ = ["calibrate_arm_on_twin", "fixture_at_seam_start", "DEFAULT_POSES", "PLAN", "truth_lines"]
 
 DEFAULT_POSES = 16
 # Wider than the hand-eye's plan (10-20 deg of tilt, 15 deg of roll, 60 mm of distance): the
@@ -47,9 +47,14 @@ ACCEPT_SIGMAS = 3.0
 def calibrate_arm_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
                           *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
                           max_twin_s: float = 300.0, world_overrides: dict | None = None, robot: str = "puma",
-                          plan: dict | None = None) -> tuple[ArmResult, list[str], TruthLines]:
+                          plan: dict | None = None, mount: tuple | None = None, scenario="static",
+                          ) -> tuple[ArmResult, list[str], TruthLines]:
     """Calibrate the arm with the hand-eye on the twin (module doc); the arguments as
-    :func:`humanpt.twin.cal_handeye.calibrate_hand_eye_on_twin`'s.  Returns (result, report
+    :func:`humanpt.twin.cal_handeye.calibrate_hand_eye_on_twin`'s; ``mount``: (flange pose,
+    joints deg) the Puma is mounted around, as the job will mount it to teach and weld
+    (:func:`humanpt.twin.teach.mounting`; the twin places the base per job, a cell's arm
+    stays where it is): the poses then move the joints where the job will; ``scenario``:
+    where the TOB is held still (:func:`fixture_at_seam_start`: where the seam starts).  Returns (result, report
     lines, lines against the world's arm with their checks).  Raises
     :class:`ArmCalibrationError` on the stand-in, when too few poses were collected or the
     data do not determine the arm; nothing is written."""
@@ -58,7 +63,8 @@ def calibrate_arm_on_twin(world: World, rig: Rig, seed: int, progress: Callable[
                                   "to calibrate; the stage runs on the simulated Puma")
     try:
         got = collect_on_twin(world, rig, seed, progress, n_poses=n_poses, settings=settings, max_twin_s=max_twin_s,
-                              world_overrides=world_overrides, robot=robot, plan=PLAN if plan is None else plan)
+                              world_overrides=world_overrides, robot=robot, plan=PLAN if plan is None else plan,
+                              mount=mount, scenario=scenario)
     except HandEyeError as e:
         raise ArmCalibrationError(str(e)) from None
     result = solve_arm(got.A, got.B, got.world_T_base_mm, model=got.robot_truth.model,
@@ -68,6 +74,20 @@ def calibrate_arm_on_twin(world: World, rig: Rig, seed: int, progress: Callable[
     report += [f"  {n}" for n in got.notes]
     report += result.summary_lines()
     return result, report, truth_lines(result, got.robot_truth, got.camera_truth.flange_T_camera)
+
+
+def fixture_at_seam_start(operator):
+    """An OperatorConfig holding the TOB still where ``operator``'s seam starts (its design
+    scenario's start pose, driver and path): the arm's calibration target where the job
+    will watch and weld, seen as the job sees it."""
+    import dataclasses
+
+    sc = operator.design_scenario()
+    lines = ["scenario fixture"]
+    if sc.driver_mm is not None:
+        lines.append("driver " + " ".join(f"{v:.6g}" for v in sc.driver_mm))
+    lines += [f"path {sc.path}", "start " + " ".join(f"{v:.6f}" for v in sc.start_x_mm_deg)]
+    return dataclasses.replace(operator, scenario_file="", scenario_text="\n".join(lines) + "\n")
 
 
 def truth_lines(result: ArmResult, robot_truth, true_flange_T_camera_mm: np.ndarray) -> TruthLines:

@@ -77,19 +77,23 @@ class Collected:
 def collect_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
                     *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
                     max_twin_s: float = 240.0, world_overrides: dict | None = None, robot: str = "puma",
-                    plan: dict | None = None) -> Collected:
+                    plan: dict | None = None, mount: tuple | None = None, scenario="static") -> Collected:
     """The robot moves itself through ``n_poses`` poses planned around the TOB on its
     fixture (:func:`plan_poses`, with ``plan``'s extra keywords: wider tilts for the arm's
     calibration) and the (A, B) pairs are collected (module doc); the arguments as
-    :func:`calibrate_hand_eye_on_twin`'s.  Raises :class:`HandEyeError` when the robot faults
+    :func:`calibrate_hand_eye_on_twin`'s; ``mount``: (flange pose (4, 4) mm, joints deg)
+    where the Puma is mounted around (:func:`humanpt.twin.teach.mounting`: as the job
+    mounts it), default around the start pose; ``scenario``: where the TOB is held still
+    (a built-in name or an OperatorConfig; default the paper's static pose, seen from below).  Raises :class:`HandEyeError` when the robot faults
     first or the collection stops."""
     from humanpt.twin.worlds import merge_overrides
 
-    cfg = SystemConfig.for_scenario("static", seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
+    cfg = SystemConfig.for_scenario(scenario, seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
                                     rig=rig, world=world)
     sys_ = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=rig,
                         sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
-                        keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
+                        keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
+                        **({} if mount is None else {"mount_world_T_flange_mm": mount[0], "mount_joints_deg": mount[1]}))
     ls = sys_.lockstep
     t_wall = time.perf_counter()
     world_T_base = start_joints = robot_truth = None

@@ -50,7 +50,7 @@ from .worlds import World
 # Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
 MOUNT_FRACTION = 0.5
 
-__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm"]
+__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm", "mounting", "arm_share"]
 
 # stage -> (module of humanpt.twin, entry point): each returns (result, report, truth) and has
 # an ``apply_to_rig(rig, result, date)`` in humanpt.calibration.<name>.
@@ -155,7 +155,55 @@ def _arm(w, rig: Rig | None = None) -> RobotArm | None:
                     robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits, true_arm=true_arm)
 
 
-def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
+def mounting(cfg: SystemConfig, robot: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Where the job mounts the robot for ``cfg``'s seam: (the flange pose watching the
+    seam's start, the mounting flange pose (4, 4) mm, the Puma's joints there (deg), None
+    on the stand-in).  The Puma is mounted so that both where it watches the seam (the
+    camera d_z from the target) and where its torch welds it (the tool on the seam) are
+    comfortably in reach: around the flange pose half way between the two, over the middle
+    of the seam, in the joint pose there that keeps its wrist farthest from its singularity
+    along both jobs (:func:`humanpt.twin.system.puma_mount_joints`)."""
+    view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
+    seam = _seam(cfg.operator)
+    first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
+    weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+    mount = view.copy()
+    mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
+        seam.mean(axis=0) - first[:3, 3])
+    mount_joints = None
+    if robot == "puma":
+        traj = Trajectory(cfg.operator.design_scenario())
+        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
+        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+        watch = np.array([p @ invert_transform(first) @ view for p in along])
+        welds = np.array([p @ tool_T_flange for p in along])
+        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
+    return view, mount, mount_joints
+
+
+def arm_share(cfg: SystemConfig, rig: Rig, view: np.ndarray, mount: np.ndarray, mount_joints) -> tuple[float, float]:
+    """The arm's (and the hand-eye's) share of the played-back error along ``cfg``'s seam,
+    RMS mm (:func:`humanpt.twin.report.arm_share_mm`, the Puma mounted as :func:`mounting`
+    says): (through the nominal arm and the rig's hand-eye, through the rig's calibrated
+    arm and hand-eye; nan without one)."""
+    from .report import arm_share_mm
+
+    traj = Trajectory(cfg.operator.design_scenario())
+    along = np.array([traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 60)])
+    watch = np.array([p @ invert_transform(along[0]) @ view for p in along])
+    true_X = cfg.sim_camera.flange_T_camera  # the world's hand-eye (truth, only to report)
+    tool = transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float))
+    args = (cfg.robot_overrides, mount, mount_joints, watch, along, tool, rig.hand_eye.flange_T_camera_mm(), true_X)
+
+    def rms(e):
+        return float(np.sqrt(np.mean(e ** 2))) if len(e) else float("nan")
+
+    nominal = rms(arm_share_mm(*args))
+    return nominal, (rms(arm_share_mm(*args, model_arm=rig.arm.true_arm())) if rig.arm.present else float("nan"))
+
+
+def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str,
+               mount: tuple | None = None) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
     if name == "arm" and robot != "puma":
         return rig, StageResult(name, False, 0.0, skipped=f"the {robot} robot has no joints (exact kinematics): "
@@ -168,6 +216,8 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
         kw = {"robot": robot} if name in ("hand-eye", "arm") else {}  # calibrate the arm that will weld
+        if name == "arm" and mount is not None:  # where the job mounts it, the target where the seam starts
+            kw["mount"], kw["scenario"] = mount
         result, report, truth = fn(world, rig, seed, progress=progress, **kw)
     except Exception as e:  # noqa: BLE001 - a failed stage is a result: the rig keeps what it had
         return rig, StageResult(name, False, time.perf_counter() - t0, error=f"{type(e).__name__}: {e}")
@@ -199,9 +249,19 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
-    for name in tuple(STAGES) if stages is None else stages:
+    names = tuple(STAGES) if stages is None else stages
+    mount = None
+    if "arm" in names and robot == "puma":  # the arm stage mounts the Puma as the teach-and-play run will
+        cfg0 = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
+                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+        from .cal_arm import fixture_at_seam_start
+
+        _, m, j = mounting(cfg0, robot)
+        mount = ((m, j), fixture_at_seam_start(cfg0.operator))
+    for name in names:
         rig, res = _run_stage(name, world, rig, seed,
-                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot)
+                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot,
+                              mount)
         results.append(res)
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
@@ -210,24 +270,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     # The Puma is mounted so that both where it watches the seam (the camera d_z from the
     # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
     # around the flange pose half way between the two, over the middle of the seam.
-    view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
     seam = _seam(cfg.operator)
     design = polyline_seam(seam)  # the seam as designed, to compare against
-    first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
-    weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
-    mount = view.copy()
-    mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
-        seam.mean(axis=0) - first[:3, 3])
-    mount_joints = None
-    if robot == "puma":
-        # ... in the joint pose there that keeps its wrist farthest from its singularity
-        # along both jobs: watching the seam (the view carried along it) and welding it.
-        traj = Trajectory(cfg.operator.design_scenario())
-        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
-        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
-        watch = np.array([p @ invert_transform(first) @ view for p in along])
-        welds = np.array([p @ tool_T_flange for p in along])
-        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
+    view, mount, mount_joints = mounting(cfg, robot)
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
@@ -377,7 +422,7 @@ def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool
     after the arm's calibration when the rig has one (the nominal arm's figure beside it),
     each against the played-back tolerance; the camera-to-robot time offset the rig says, at
     the taught speed, against SOURCE_LIMIT_MM."""
-    from .report import SEAM_TOLERANCES_MM, Check, arm_error_mm, arm_share_mm
+    from .report import SEAM_TOLERANCES_MM, Check, arm_error_mm
 
     checks = []
     if len(taught_x) and (robot != "puma" or view is None):
@@ -387,16 +432,8 @@ def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool
             checks.append(Check("arm", "the Puma's absolute kinematic error along the seam, RMS",
                                 float(np.sqrt(np.mean(err ** 2))), SEAM_TOLERANCES_MM["played"], "mm"))
     elif len(taught_x):
-        traj = Trajectory(cfg.operator.design_scenario())
-        along = np.array([traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 60)])
-        watch = np.array([p @ invert_transform(along[0]) @ view for p in along])
-        true_X = cfg.sim_camera.flange_T_camera  # the world's hand-eye (truth, only to report)
-        args = (cfg.robot_overrides, mount, mount_joints, watch, along, tool_mm, rig.hand_eye.flange_T_camera_mm(),
-                true_X)
-        rms = lambda e: float(np.sqrt(np.mean(e ** 2))) if len(e) else float("nan")  # noqa: E731
-        nominal = rms(arm_share_mm(*args))
+        nominal, after = arm_share(cfg, rig, view, mount, mount_joints)
         if rig.arm.present:
-            after = rms(arm_share_mm(*args, model_arm=rig.arm.true_arm()))
             checks.append(Check("arm", f"the arm's share of the played-back error after its calibration, RMS "
                                 f"(the nominal arm's: {nominal:.3f} mm)", after, SEAM_TOLERANCES_MM["played"], "mm"))
         else:
