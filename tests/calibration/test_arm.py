@@ -189,3 +189,33 @@ def test_the_rig_stores_the_arm_with_its_sigma_and_old_rigs_have_none(data):
     assert "arm" not in rig_to_table(old) and not old.arm.present and old.arm.true_arm() is None
     assert rig_from_table(rig_to_table(old)) == old
     assert "arm" in rig_to_table(dataclasses.replace(rig))
+
+
+def test_the_cli_solves_collected_pairs_into_the_rig(data, tmp_path, capsys, cli_main):
+    """`humanpt calibrate arm --pairs FILE --world-T-base ...`: the rig gets [arm] and the
+    hand-eye; a missing mounting or too few pairs: one line, exit 2, the rig untouched."""
+    from humanpt.console.calibration import save_pairs
+    from humanpt.runtime.rigfile import load_rig, write_rig
+
+    _, A, B = data
+    pairs = tmp_path / "pairs.json"
+    save_pairs(pairs, A, B)
+    rig = tmp_path / "rig.toml"
+    write_rig(rig, Rig())
+    before = rig.read_bytes()
+    wtb = ",".join(f"{v:.9f}" for v in x_from_transform(W))
+    assert cli_main(["calibrate", "arm", "--pairs", str(pairs), "--rig", str(rig)]) == 2
+    assert "--pairs needs --world-T-base" in capsys.readouterr().err
+    few = tmp_path / "few.json"
+    save_pairs(few, A[:4], B[:4])
+    assert cli_main(["calibrate", "arm", "--pairs", str(few), "--world-T-base", wtb, "--rig", str(rig)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("humanpt calibrate arm: too few poses: 4; the arm's calibration needs at least 8 (8 arm errors, "
+                   "the hand-eye and the target's pose: 20 unknowns)")
+    assert rig.read_bytes() == before
+    assert cli_main(["calibrate", "arm", "--pairs", str(pairs), "--world-T-base", wtb, "--rig", str(rig)]) == 0
+    out = capsys.readouterr().out
+    assert "wrote [arm] and [hand_eye]" in out and "q1_offset_deg  held at 0" in out
+    arm = load_rig(rig).arm
+    np.testing.assert_allclose(arm.joint_offsets_deg[1:5], OFFSETS_DEG[1:5], atol=1e-5)
+    np.testing.assert_allclose(arm.link_length_errors_mm[:4], LENGTHS_MM[:4], atol=1e-4)
