@@ -298,7 +298,11 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         if arm is not None and arm.true_arm is not None and len(taught):
             # The pipeline placed each point with the flange the robot reported (its nominal
             # model): move it to where the calibrated arm had the flange (issue 32.4).
-            taught = _corrected(w, arm, taught, stamps)
+            moved = _corrected(w, arm, taught, stamps)
+            shift = moved - taught  # ... and its errors against the truth with it
+            shift[:, 3:] = evaluate.wrap_deg(shift[:, 3:])
+            err = err + shift[stamps >= start_ns]
+            taught = moved
         taught_p = transform_from_x(np.asarray(taught, dtype=float).reshape(-1, 6))[:, :3, 3]
         taught_mm = distance_to_seam(design, taught_p) if len(taught_p) else np.zeros(0)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
