@@ -30,7 +30,7 @@ from humanpt.calibration.arm import (
 from humanpt.calibration.handeye import CollectorSettings, HandEyeError, pose_difference
 from humanpt.geometry.rig import Rig
 
-from .cal_handeye import collect_on_twin
+from .cal_handeye import ACCEPT_DEG, ACCEPT_MM, collect_on_twin
 from .report import Check, TruthLines
 from .worlds import World
 
@@ -118,6 +118,8 @@ def truth_lines(result: ArmResult, robot_truth, true_flange_T_camera_mm: np.ndar
         true_flange_T_camera_mm, dtype=float)
     dt, da = pose_difference(result.flange_T_camera_mm, expect)
     lines.append(f"  flange_T_camera with it off the true one (with d6 and joint 6's offset in it) by {dt:.4f} mm, "
-                 f"{da:.4f} deg")
+                 f"{da:.4f} deg (the hand-eye's acceptance: {ACCEPT_MM:g} mm, {ACCEPT_DEG:g} deg)")
+    lines.checks += [Check("arm", "the hand-eye estimated with it, position off the truth", dt, ACCEPT_MM, "mm"),
+                     Check("arm", "the hand-eye estimated with it, rotation off the truth", da, ACCEPT_DEG, "deg")]
     return lines
 

@@ -358,7 +358,14 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # there, as the robot reports its flange (an arm with kinematic errors puts the true
         # torch ~1 mm away from where it believes it is: that is what is measured, after)
         states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")[n_states:]]
-        believed = np.array([(to_mm(from_pose(st.world_T_flange)) @ tool_mm)[:3, 3] for st in states]).reshape(-1, 3)
+        flanges = np.array([to_mm(from_pose(st.world_T_flange)) for st in states]).reshape(-1, 4, 4)
+        if len(flanges) and arm is not None and arm.true_arm is not None:
+            # on a calibrated arm the commands are off the seam by its errors: where the
+            # calibrated arm has the flange, at the joints the robot reports
+            from humanpt.calibration.arm import true_world_T_flange
+
+            flanges = true_world_T_flange(arm.true_arm, flanges, arm.world_T_base_mm, arm.kinematics, arm.joints_rad)
+        believed = (flanges @ tool_mm)[:, :3, 3].reshape(-1, 3)
         at = np.nonzero(np.linalg.norm(believed - first, axis=1) < 0.25)[0]
         stamps_t = np.array([st for st, _ in truths], dtype=np.int64)
         near = (np.nonzero(stamps_t >= states[at[0]].header.stamp_ns)[0] if len(at)
