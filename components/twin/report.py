@@ -184,6 +184,16 @@ def job_report(res, png: Path | None = None) -> JobReport:
                           if shown is None or k in shown) or "-"
         est = _estimate(s.name, rig)
         stage_checks = list(getattr(s, "checks", []))
+        if s.name == "hand-eye" and _arm_replaced_hand_eye(res):
+            # the arm's stage estimated the hand-eye again, with the arm: the rig has that one
+            # (checked there); this stage's own estimate, on the nominal arm, is history
+            old = [c for c in stage_checks if c.stage == "hand-eye"]
+            stage_checks = [c for c in stage_checks if c.stage != "hand-eye"]
+            lines.append(f"    {s.name:10s} superseded by the arm's stage (the rig's hand-eye is the one estimated with "
+                         f"the arm, below); its own on the nominal arm: " + ", ".join(
+                             f"{c.what} {c.value:.4g} {c.unit}" for c in old))
+            checks += stage_checks
+            continue
         checks += stage_checks
         verdict = ("met" if all(c.met for c in stage_checks) else "NOT met") if stage_checks else "no acceptance stated"
         lines.append(f"    {s.name:10s} {est}; 1-sigma {sigma}; acceptance {verdict}")
@@ -230,6 +240,14 @@ def job_report(res, png: Path | None = None) -> JobReport:
     rep.lines += [""] + warn + [("PASS: every figure within its tolerance" if not warn else
                                  f"WARN: {len(warn)} figure{'s' if len(warn) > 1 else ''} beyond tolerance (above)")]
     return rep
+
+
+def _arm_replaced_hand_eye(res) -> bool:
+    """Whether the job's arm stage ran and wrote the rig's hand-eye."""
+    from humanpt.calibration.arm import METHOD
+
+    return (any(s.name == "arm" and s.ok for s in res.stages)
+            and res.rig.hand_eye.calibration.method == METHOD)
 
 
 # The camera and the PSVS stages share the rig's [psvs] table: each shows its own keys.

@@ -46,3 +46,25 @@ def test_the_calibrated_arm_shows_its_estimate_sigma_and_checks():
     rep = job_report(_result(bad, rig, 0.6))
     assert "WARN arm: a2_mm off the truth 4 sigma (beyond 3 sigma)" in rep.warnings
     assert any(w.startswith("WARN arm: the arm's share") for w in rep.warnings) and not rep.passed
+
+
+def test_the_hand_eye_the_arm_stage_replaced_is_history_not_a_warning():
+    """The hand-eye stage on the nominal arm is 1.8 mm off on the realistic world (it takes
+    the arm's errors where it calibrates); the arm's stage estimates the hand-eye again with
+    the arm and the rig keeps that one: its check counts, the old one is shown, not warned."""
+    arm = Arm("puma762", calibration=Calibration("arm+ax=yb"))
+    rig = dataclasses.replace(Rig(), arm=arm, hand_eye=dataclasses.replace(
+        Rig().hand_eye, calibration=Calibration("arm+ax=yb")))
+    he = StageResult("hand-eye", True, 1.0, checks=[Check("hand-eye", "position off the truth", 1.796, 0.2, "mm"),
+                                                    Check("time offset", "off the truth", 0.03, 1.0, "ms")])
+    ok = StageResult("arm", True, 1.0, checks=[Check("arm", "the hand-eye estimated with it, position off the truth",
+                                                     0.15, 0.2, "mm")])
+    res = _result(ok, rig, 0.1)
+    res.stages = [he, ok]
+    rep = job_report(res)
+    assert ("hand-eye   superseded by the arm's stage (the rig's hand-eye is the one estimated with the arm, below); "
+            "its own on the nominal arm: position off the truth 1.796 mm") in rep.text()
+    assert rep.passed, rep.warnings
+    res.stages = [he, StageResult("arm", False, 1.0, error="ArmCalibrationError: too few poses")]
+    rep = job_report(res)
+    assert "WARN hand-eye: position off the truth 1.796 mm (beyond 0.2 mm)" in rep.warnings  # no arm: it counts
