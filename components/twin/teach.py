@@ -446,7 +446,7 @@ def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool
         nominal, after = arm_share(cfg, rig, view, mount, mount_joints)
         if rig.arm.present:
             checks.append(Check("arm", f"the arm's share of the played-back error after its calibration, RMS "
-                                f"(the nominal arm's: {nominal:.3f} mm)", after, SEAM_TOLERANCES_MM["played"], "mm"))
+                                f"(the same hand-eye on the nominal arm: {nominal:.3f} mm)", after, SEAM_TOLERANCES_MM["played"], "mm"))
         else:
             checks.append(Check("arm", "the arm's share of the played-back error (its nominal model; no arm "
                                 "calibrated), RMS", nominal, SEAM_TOLERANCES_MM["played"], "mm"))
