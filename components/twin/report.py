@@ -211,13 +211,17 @@ def job_report(res, png: Path | None = None) -> JobReport:
     figs: list[SeamFigures] = []
     if seam is not None:
         lines += ["", f"  seam (distance to the seam as designed; covered: within {COVER_MM:g} mm of the path)"]
+        frame = getattr(res, "seam_arm_frame_mm", None)  # a calibrated arm's frame (humanpt.twin.teach)
+        if frame is not None:
+            lines.append(f"    ({res.arm_frame_note})")
         rows = [("taught", "taught points (the driver's tip)", getattr(res, "taught_path_mm", None)),
                 ("fitted", "fitted seam (lines and arcs)", getattr(res, "fitted_path_mm", None)),
                 ("played", "played-back torch (true path)", getattr(res, "played_path_mm", None))]
         for key, name, pts in rows:
             if pts is None:
                 continue
-            f = seam_figures(name, pts, seam, SEAM_TOLERANCES_MM[key])
+            f = seam_figures(name, pts, frame if frame is not None and key != "played" else seam,
+                             SEAM_TOLERANCES_MM[key])
             where = (f"worst at ({', '.join(f'{v:.1f}' for v in f.worst_mm)}) mm" if f.worst_mm else "no points")
             judged = math.isfinite(f.tolerance_mm)
             if judged:

@@ -100,6 +100,13 @@ class TeachResult:
     # (mm), the taught tip, the fitted seam and the played-back torch; the job's own checks
     # (the arm's kinematic error, the time offset at the taught speed).
     seam_mm: np.ndarray | None = None
+    # With a calibrated arm: the seam as designed in the frame the arm's own measurements
+    # define (the world turned about the arm's joint-1 axis by its zero offset, which no
+    # camera on the flange can see: humanpt.calibration.arm), what the taught and fitted
+    # seams are judged against; the torch is judged against ``seam_mm`` (teaching and
+    # playing in the same frame, it lands on the seam).  (K, 3) mm, None without one.
+    seam_arm_frame_mm: np.ndarray | None = None
+    arm_frame_note: str = ""
     taught_path_mm: np.ndarray | None = None
     fitted_path_mm: np.ndarray | None = None
     played_path_mm: np.ndarray | None = None
@@ -295,6 +302,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
         arm = _arm(w, cfg.rig)
+        seam_arm, arm_note = None, ""
+        if arm is not None and arm.true_arm is not None:
+            seam_arm, arm_note = _seam_in_arm_frame(seam, arm, cfg)
         if arm is not None and arm.true_arm is not None and len(taught):
             # The pipeline placed each point with the flange the robot reported (its nominal
             # model): move it to where the calibrated arm had the flange (issue 32.4).
@@ -403,13 +413,30 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     checks = _job_checks(cfg, mount, np.asarray(taught, dtype=float), tool_mm, rig, mount_joints, view, robot)
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
-                       compared, seam_mm=seam, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
+                       compared, seam_mm=seam, seam_arm_frame_mm=seam_arm, arm_frame_note=arm_note, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
                        checks=checks, max_joint_step_deg=step_deg, joint_step_limit_deg=limit_deg, refused=refused,
                        played_x=played_x, taught_x=np.asarray(taught, dtype=float).reshape(-1, 6))
 
 
 # A source of error this large or larger is calibrated or warned of (issue 32.4).
 SOURCE_LIMIT_MM = 0.1
+
+
+def _seam_in_arm_frame(seam: np.ndarray, arm: RobotArm, cfg: SystemConfig) -> tuple[np.ndarray, str]:
+    """The seam (K, 3) mm in the frame the calibrated arm defines: the world turned about
+    joint 1's axis by minus the world's joint-1 zero offset (read from the twin's truth,
+    only to judge), and a line saying so."""
+    from humanpt.geometry.transforms import make_transform, matrix_from_rotvec, transform_points
+
+    offsets = (cfg.robot_overrides.get("sim_robot") or {}).get("joint_offsets_deg") or (0.0,) * 6
+    d1 = float(offsets[0])
+    W = np.asarray(arm.world_T_base_mm, dtype=float)
+    G = W @ make_transform(matrix_from_rotvec([0.0, 0.0, -np.radians(d1)]), np.zeros(3)) @ invert_transform(W)
+    shift = float(np.sqrt(np.mean(np.sum((transform_points(G, seam) - seam) ** 2, axis=1))))
+    return transform_points(G, seam), (
+        f"taught and fitted seams against the seam in the calibrated arm's frame: the world turned by the arm's "
+        f"joint-1 zero offset ({d1:+.4f} deg, {shift:.3f} mm RMS here), which no camera on the flange can see; "
+        "taught and played in that frame, the torch is judged in the world's")
 
 
 def _corrected(w, arm: RobotArm, taught: np.ndarray, stamps: np.ndarray) -> np.ndarray:

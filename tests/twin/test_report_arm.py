@@ -68,3 +68,17 @@ def test_the_hand_eye_the_arm_stage_replaced_is_history_not_a_warning():
     res.stages = [he, StageResult("arm", False, 1.0, error="ArmCalibrationError: too few poses")]
     rep = job_report(res)
     assert "WARN hand-eye: position off the truth 1.796 mm (beyond 0.2 mm)" in rep.warnings  # no arm: it counts
+
+
+def test_with_a_calibrated_arm_the_taught_seams_are_judged_in_its_frame():
+    """The fitted seam 0.3 mm beside the seam as designed but on it in the arm's frame (the
+    world turned by the arm's unobservable joint-1 offset): met; the torch is judged in the
+    world's frame."""
+    res = _result(StageResult("arm", True, 1.0), Rig(), 0.1)
+    res.fitted_path_mm = LINE + [0.0, 0.3, 0.0]
+    res.seam_arm_frame_mm = SEAM + [0.0, 0.3 + 0.05, 0.0]
+    res.arm_frame_note = "taught and fitted seams against the seam in the calibrated arm's frame: ..."
+    text = job_report(res).text()
+    assert "    (taught and fitted seams against the seam in the calibrated arm's frame: ...)" in text
+    assert "ok   fitted seam (lines and arcs)       RMS  0.000" in text
+    assert "ok   played-back torch (true path)      RMS  0.050" in text
