@@ -178,12 +178,14 @@ def _scale(name: str) -> float:
 
 def solve_arm(world_T_flange_mm, camera_T_target_mm, world_T_base_mm, *, model: str = "puma762",
               q_ref_rad: np.ndarray | None = None, max_sigma: dict[str, float] | None = None,
-              passes: int = 3) -> ArmResult:
+              passes: int = 3, rotation_weight: float = 1.0) -> ArmResult:
     """The arm's errors, X and Y from the reported flange poses ``world_T_flange_mm`` (N,
     4, 4) (the robot's nominal account, where its gateway says the base is:
     ``world_T_base_mm``) and the target measured in the camera frame at each
     ``camera_T_target_mm`` (N, 4, 4), the target still (module doc).  ``q_ref_rad``: the
-    joints near the first pose (the branch).  Raises :class:`ArmCalibrationError` on too
+    joints near the first pose (the branch).  ``rotation_weight``: the measured rotations'
+    weight against the translations' (each already weighed by its own spread; 0: positions
+    alone).  Raises :class:`ArmCalibrationError` on too
     few poses, bad transforms or degenerate motion; nothing else is written."""
     try:
         A = _stack("world_T_flange", world_T_flange_mm)
@@ -208,7 +210,7 @@ def solve_arm(world_T_flange_mm, camera_T_target_mm, world_T_base_mm, *, model: 
     fixed = dict(UNOBSERVABLE)
     notes: list[str] = []
     while True:
-        p, X, Y, cov, n_free = _fit(model, q, W, A, B, X0, Y0, free, passes)
+        p, X, Y, cov, n_free = _fit(model, q, W, A, B, X0, Y0, free, passes, rotation_weight)
         sigma = np.sqrt(np.clip(np.diag(cov)[:n_free], 0.0, None)) * np.array([_scale(PARAMETERS[i]) for i in free])
         ratio = np.array([s / limits[_unit(PARAMETERS[i])] for s, i in zip(sigma, free, strict=True)])
         if not len(free) or ratio.max() <= 1.0:
@@ -234,7 +236,7 @@ def _forward_all(arm: TrueArm, q: np.ndarray) -> np.ndarray:
     return np.array([arm.forward(qi) for qi in q])
 
 
-def _fit(model, q, W, A, B, X0, Y0, free, passes):
+def _fit(model, q, W, A, B, X0, Y0, free, passes, rotation_weight=1.0):
     """least_squares over (the free arm errors, X's step, Y's step), the residual of each
     camera axis weighted by its spread (re-estimated each pass).  Returns (p (11,), X, Y,
     the covariance of (free, X step, Y step), the number of free errors)."""
@@ -258,7 +260,7 @@ def _fit(model, q, W, A, B, X0, Y0, free, passes):
 
     def f(z):
         et, er = raw(z)
-        return np.concatenate([(et / s_t).ravel(), (er / s_r).ravel()])
+        return np.concatenate([(et / s_t).ravel(), (rotation_weight * er / s_r).ravel()])
 
     for k in range(passes + 1):
         sol = least_squares(f, z, method="lm", x_scale="jac")

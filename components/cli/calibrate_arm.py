@@ -36,7 +36,7 @@ def add_parser(csub) -> None:
     p.add_argument("--scenario", default="trapezium",
                    help="--twin: mount the Puma as `humanpt demo --calibrate` does for this seam and hold the target "
                    "where it starts (default trapezium)")
-    p.add_argument("--poses", type=int, default=None, help="poses to plan (default 16; at least 8)")
+    p.add_argument("--poses", type=int, default=None, help="poses to plan (default 28; at least 8)")
     p.add_argument("--pairs", default=None, help="solve from a JSON file of collected pairs: "
                    "[{\"world_T_flange\": 4x4 mm, \"camera_T_target\": 4x4 mm}, ...] (what `calibrate hand-eye "
                    "--save-pairs` writes)")

@@ -36,7 +36,7 @@ from .worlds import World
 
 __all__ = ["calibrate_arm_on_twin", "fixture_at_seam_start", "DEFAULT_POSES", "PLAN", "truth_lines"]
 
-DEFAULT_POSES = 16
+DEFAULT_POSES = 28
 # Wider than the hand-eye's plan (10-20 deg of tilt, 15 deg of roll, 60 mm of distance): the
 # joints must move for their errors to show.
 PLAN = {"tilt_deg": (12.0, 25.0), "roll_deg": 30.0, "distance_mm": 80.0}

@@ -37,7 +37,8 @@ def calibrated():
     cfg = SystemConfig.for_scenario("trapezium", 0, None, rig=rig, world=WORLD)
     view, mount, joints = mounting(cfg, "puma")  # as the job mounts the Puma for the trapezium
     return rig, cfg, (view, mount, joints), *calibrate_arm_on_twin(WORLD, rig, 0, mount=(mount, joints),
-                                                                   scenario=fixture_at_seam_start(cfg.operator))
+                                                                   scenario=fixture_at_seam_start(cfg.operator),
+                                                                   n_poses=16)
 
 
 def test_the_arm_is_found_within_its_sigma_of_the_worlds(calibrated):
