@@ -3,12 +3,13 @@
 Stages, each observing the twin's world through the same components a real cell uses and
 never reading its truth except to report against it:
 
-1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. driver tip: each writes
-   its part of the rig (a stage whose tool is missing or fails is reported and skipped:
-   the rig keeps what it had);
-5. teach: the operator moves the target along the seam, the servo follows, the path of the
-   driver's tip is recorded with the calibrated rig;
-6. play back: the robot's tool follows the recorded path; the tool's true path (the world's
+1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. the arm's kinematic
+   errors with the hand-eye (on the Puma, mounted as the teach-and-play run mounts it; not
+   run on the stand-in), 5. driver tip: each writes its part of the rig (a stage whose
+   tool is missing or fails is reported and skipped: the rig keeps what it had);
+6. teach: the operator moves the target along the seam, the servo follows, the path of the
+   driver's tip is recorded with the calibrated rig (and moved by the calibrated arm);
+7. play back: the robot's tool follows the recorded path; the tool's true path (the world's
    flange, through the torch) is measured against the seam.
 
 The seam is the scenario as designed (no tremor, the design's path); distances to it are
