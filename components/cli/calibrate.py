@@ -1,4 +1,4 @@
-"""``humanpt calibrate camera|stereo|psvs|mirrors|hand-eye|tip``: each tool has its own module
+"""``humanpt calibrate camera|stereo|psvs|mirrors|hand-eye|arm|tip``: each tool has its own module
 (``calibrate_<tool>.py`` with ``add_parser(subparsers)`` and ``run(args)``); this one
 registers them and dispatches."""
 
@@ -14,6 +14,7 @@ TOOLS = {
     "psvs": "calibrate_psvs",
     "mirrors": "calibrate_psvs",
     "hand-eye": "calibrate_handeye",
+    "arm": "calibrate_arm",
 }
 
 
@@ -33,14 +34,14 @@ def add_world_args(p) -> None:
     p.add_argument("--seed", type=int, default=0, help="with --twin: the twin's seed (poses, noise; default 0)")
 
 
-HELP = "calibrate the cell: camera, stereo, psvs, mirrors, hand-eye, tip"
+HELP = "calibrate the cell: camera, stereo, psvs, mirrors, hand-eye, arm, tip"
 
 
 def add_parsers(sub) -> None:
     p = sub.add_parser("calibrate", help=HELP,
                        description="Calibrate the cell as the paper's HumanPT does: the camera (Zhang's method; "
                        "OpenCV's corner detector or the paper's appendix one), the PSVS and its mirrors' "
-                       "alignment, hand-eye (AX = YB) and the driver tip. Each tool observes a live cell, "
+                       "alignment, hand-eye (AX = YB), the arm's kinematics and the driver tip. Each tool observes a live cell, "
                        "a folder of images or the digital twin (whose truth it never reads) and writes the rig "
                        "(humanpt rig --help).")
     csub = p.add_subparsers(dest="calibrate_verb", metavar="TOOL")

@@ -240,6 +240,13 @@ class RobotArm:
     cycle_s: float = 0.028
     max_speed_mm_s: float = 100.0
     max_angular_deg_s: float = 60.0
+    # The arm as calibrated (issue 32.4): its forward kinematics (``forward(q_rad)`` ->
+    # base_T_flange mm at the encoders' angles, e.g. the rig's ``[arm]``:
+    # ``Rig.arm.true_arm()``), or None: the nominal model is taken as the arm.  With it the
+    # seam's poses are where the torch must truly go, and each is sent as the pose the
+    # controller's nominal model reaches with the joints that put the calibrated arm there
+    # (:func:`command_poses`).
+    true_arm: Any = None
 
 
 @dataclass(frozen=True)
@@ -308,6 +315,39 @@ def _seam_on_arm(base_T_flange: np.ndarray, q0: np.ndarray, dt: np.ndarray, arm:
     return q, f
 
 
+# command_poses: Newton steps until the calibrated arm is this close to the desired pose
+# (mm, and rad for the rotation); a few steps suffice (the errors are a millimetre).
+COMMAND_TOL_MM, COMMAND_TOL_RAD, COMMAND_MAX_STEPS = 1e-6, 1e-9, 20
+
+
+def command_poses(kin, true_arm, base_T_flange_desired: np.ndarray, q_rad: np.ndarray,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """For flange poses (N, 4, 4) mm where the physical arm must be, the joints (N, 6) rad
+    that put the calibrated ``true_arm`` there and the poses (N, 4, 4) the controller's
+    nominal model ``kin`` gives for those joints: what to command.  ``q_rad`` (N, 6): the
+    nominal inverse kinematics of the desired poses (the branch the arm plays on), where
+    Newton's steps (the nominal Jacobian, least squares) start.  Raises UnreachableError
+    when a pose does not converge (a singular wrist)."""
+    from humanpt.geometry.puma import UnreachableError
+
+    T_d = np.asarray(base_T_flange_desired, dtype=float).reshape(-1, 4, 4)
+    q_out = np.array(q_rad, dtype=float).reshape(-1, 6)
+    cmd = np.empty_like(T_d)
+    for i, (Td, q) in enumerate(zip(T_d, q_out, strict=True)):
+        for _ in range(COMMAND_MAX_STEPS):
+            T = true_arm.forward(q)
+            e = np.r_[Td[:3, 3] - T[:3, 3], rotvec_from_matrix(Td[:3, :3] @ T[:3, :3].T, assume_valid=True)]
+            if np.abs(e[:3]).max() < COMMAND_TOL_MM and np.abs(e[3:]).max() < COMMAND_TOL_RAD:
+                break
+            q = q + np.linalg.lstsq(kin.jacobian(q), e, rcond=None)[0]
+        else:
+            raise UnreachableError(f"pose {i} of {len(T_d)}: the calibrated arm does not converge there "
+                                   f"({np.abs(e[:3]).max():.2g} mm off after {COMMAND_MAX_STEPS} steps)")
+        q_out[i] = q
+        cmd[i] = kin.forward(q)
+    return q_out, cmd
+
+
 def _approach(arm: RobotArm, q_from: np.ndarray, q_to: np.ndarray, flange_T_tool_mm: np.ndarray,
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """An approach in joint space from ``q_from`` to ``q_to`` (6,) rad: every joint moves
@@ -354,10 +394,15 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
     * what cannot be played is refused with the reason (:class:`PlaybackError`): a point
       out of reach at this mounting, a seam through the wrist singularity (q5 changing
       sign, or |q5| under 2 deg) or one that would need a joint faster than the most
-      slow-down allows, on every branch.
+      slow-down allows, on every branch;
+    * with ``arm.true_arm`` (the arm as calibrated) the seam's poses are where the torch
+      must truly go: each is commanded as the pose the controller's nominal model reaches
+      with the joints that put the calibrated arm there (:func:`command_poses`), and the
+      plan's ``x`` along the seam are those commands.
 
     Pure: no clock, no I/O."""
     from humanpt.geometry.puma import UnreachableError, follow, wrist_sin
+    from humanpt.geometry.transforms import x_from_transform
 
     x = np.asarray(x_mm_deg, dtype=float).reshape(-1, 6)
     t = np.asarray(t_s, dtype=float).reshape(-1)
@@ -393,7 +438,16 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
         if float(wrist_sin(q0)) * s_now < 0 and abs(s_now) > WRIST_SINGULAR_SIN:
             reasons.append(f"{'/'.join(sol.config)}: the approach would cross the wrist singularity")
             continue
-        got = _seam_on_arm(base_T_flange, q0, dt, arm, x)
+        seam_T, x_seam = base_T_flange, x
+        if arm.true_arm is not None:  # the calibrated arm: command what puts it on the seam
+            try:
+                q_cal, seam_T = command_poses(kin, arm.true_arm, base_T_flange, follow(kin, base_T_flange, q0))
+            except UnreachableError:
+                q_cal = None  # _seam_on_arm names the point
+            if q_cal is not None:
+                x_seam = x_from_transform(arm.world_T_base_mm @ seam_T @ flange_T_tool_mm)
+                q0 = q_cal[0]
+        got = _seam_on_arm(seam_T, q0, dt, arm, x)
         if isinstance(got, str):
             reasons.append(f"{'/'.join(sol.config)}: {got}")
             continue
@@ -410,7 +464,7 @@ def plan_on_arm(x_mm_deg: np.ndarray, t_s: np.ndarray, flange_T_tool_mm: np.ndar
             continue
         stretch = _smooth_stretch(f, max(1, int(round(0.5 / arm.cycle_s))))
         t_seam = np.r_[0.0, np.cumsum(dt * stretch)] if len(dt) else np.zeros(1)
-        x_all = np.vstack([xa[:-1], x])
+        x_all = np.vstack([xa[:-1], x_seam])
         t_all = np.r_[ta[:-1], ta[-1] + t_seam]
         q_all = np.vstack([qa[:-1], q_seam])
         return ArmPlan(x_all, t_all, q_all, len(xa) - 1, float(stretch.max()) if len(stretch) else 1.0,

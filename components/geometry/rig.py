@@ -181,6 +181,46 @@ class Timing:
 
 
 @dataclass(frozen=True)
+class Arm:
+    """``[arm]``: the playing arm's kinematic errors against its nominal ``model``
+    (``"puma762"``; empty: no calibrated arm, the nominal model is taken as the arm):
+    each joint's zero offset (the true DH angle is the encoder's plus the offset) and the
+    DH lengths' errors (d2, a2, a3, d4, d6), what :class:`humanpt.geometry.puma.TrueArm`
+    takes, estimated by :mod:`humanpt.calibration.arm`.  Older rigs have none."""
+
+    model: str = ""
+    joint_offsets_deg: tuple[Annotated[float, Range(-5, 5, "deg")], ...] = (0.0,) * 6
+    link_length_errors_mm: tuple[Annotated[float, Range(-50, 50, "mm")], ...] = (0.0,) * 5
+    calibration: Calibration = field(default_factory=Calibration)
+
+    def __post_init__(self) -> None:
+        for name, n in (("joint_offsets_deg", 6), ("link_length_errors_mm", 5)):
+            v = tuple(float(x) for x in getattr(self, name))
+            if len(v) != n or not all(np.isfinite(v)):
+                raise ValueError(f"{name} needs {n} finite numbers, got {list(getattr(self, name))}")
+            object.__setattr__(self, name, v)
+        if self.model:
+            from .puma import PumaModel
+
+            if self.model not in {m.value for m in PumaModel}:
+                raise ValueError(f"model: {self.model!r} is not a robot model ({', '.join(m.value for m in PumaModel)})")
+
+    @property
+    def present(self) -> bool:
+        """Whether the rig has a calibrated arm (applied only then)."""
+        return bool(self.model)
+
+    def true_arm(self):
+        """The calibrated arm (:class:`humanpt.geometry.puma.TrueArm`), None without one."""
+        if not self.present:
+            return None
+        from .puma import GEOMETRY, PumaModel, TrueArm, perturbed_geometry
+
+        return TrueArm(perturbed_geometry(GEOMETRY[PumaModel(self.model)], self.link_length_errors_mm),
+                       np.radians(np.asarray(self.joint_offsets_deg, dtype=float)))
+
+
+@dataclass(frozen=True)
 class StereoCamera:
     """One camera of an ordinary stereo pair (``[stereo.left]``, ``[stereo.right]``): its
     focal lengths and principal point (px) and OpenCV's distortion (k1, k2, p1, p2, k3)."""
@@ -287,6 +327,7 @@ class Rig:
     tip: Tip = field(default_factory=Tip)
     timing: Timing = field(default_factory=Timing)
     stereo: Stereo = field(default_factory=Stereo)
+    arm: Arm = field(default_factory=Arm)
 
     def __post_init__(self) -> None:
         if self.version != RIG_VERSION:
@@ -311,6 +352,9 @@ class Rig:
         if self.timing.calibration.method != "nominal":  # (a rig before issue 32 had no timing)
             cal = self.timing.calibration
             parts.append(f"timing {cal.method}" + (f" ({cal.date})" if cal.date else ""))
+        if self.arm.present:
+            cal = self.arm.calibration
+            parts.append(f"arm {cal.method}" + (f" ({cal.date})" if cal.date else ""))
         if self.kind == "stereo" or self.stereo.calibration.method != "nominal":
             cal = self.stereo.calibration
             parts.append(f"stereo {cal.method}" + (f" ({cal.date})" if cal.date else ""))

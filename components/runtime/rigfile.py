@@ -22,6 +22,10 @@ Layout (every table optional; a missing table or key takes the nominal design va
     [stereo]                 # an ordinary stereo pair, used when kind = "stereo" (issue 35)
     right_T_left_x = [-100.0, 0.0, 0.0, 0.0, 0.0, 0.0]
     [stereo.left]            # each camera: a_u, a_v, u0, v0, dist_coeffs
+    [arm]                    # the playing arm's kinematic errors (issue 32.4; older rigs: none)
+    model = "puma762"
+    joint_offsets_deg = [0.0, 0.02, -0.03, 0.0, 0.01, 0.0]
+    link_length_errors_mm = [0.0, -0.2, 0.3, -0.2, 0.0]
 
 A missing file, bad TOML, an unknown key, a value outside its physical range or a
 physically impossible value (focal length or baseline <= 0, a hand-eye rotation that is not
@@ -45,6 +49,7 @@ from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.rig import (
     RIG_KINDS,
     RIG_VERSION,
+    Arm,
     Calibration,
     HandEye,
     Rig,
@@ -65,7 +70,7 @@ RIG_METADATA = "rig"
 """The key of the rig (JSON) in a recording's ``humanpt.run`` metadata."""
 
 _PARTS: dict[str, type] = {"psvs": PsvsConfig, "hand_eye": HandEye, "target": TargetGeometry, "tip": Tip,
-                           "timing": Timing, "stereo": Stereo}
+                           "timing": Timing, "stereo": Stereo, "arm": Arm}
 
 
 def _calibration(table: Mapping[str, Any], source: str, section: str) -> Calibration:
@@ -157,6 +162,8 @@ def rig_to_table(rig: Rig) -> dict[str, Any]:
         return v
 
     plain = to_table(rig)
+    if not rig.arm.present:  # no calibrated arm: the file (and a recording's rig) as before issue 32.4
+        plain.pop("arm", None)
     psvs = plain.pop("psvs")
     psvs["calibration"] = plain.pop("psvs_calibration")
     out = {"version": plain.pop("version"), "name": plain.pop("name"), "kind": plain.pop("kind"), "psvs": psvs,

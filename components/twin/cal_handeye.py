@@ -42,7 +42,7 @@ from .run import SystemConfig
 from .system import build_system
 from .worlds import World
 
-__all__ = ["calibrate_hand_eye_on_twin", "DEFAULT_POSES"]
+__all__ = ["calibrate_hand_eye_on_twin", "collect_on_twin", "Collected", "DEFAULT_POSES"]
 
 DEFAULT_POSES = 12
 # The TOB sits on a fixture: no hand holds it (whatever the world's operator does).
@@ -50,32 +50,53 @@ FIXTURE = {"operator": {"tremor_mm": 0.0, "tremor_deg": 0.0}}
 STEP_S = 0.05  # how often the collector is asked for its next command (twin time)
 
 
-def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
-                               *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
-                               max_twin_s: float = 240.0, world_overrides: dict | None = None,
-                               pairs_out: str | None = None, robot: str = "puma"
-                               ) -> tuple[HandEyeResult, list[str], list[str]]:
-    """Calibrate the hand-eye transform on the twin: ``world`` (the truth), ``rig`` (what
-    the pipeline believes; its hand-eye is only the planning guess), ``seed`` (camera
-    noise). ``progress(poses done, poses planned)`` after each pose. ``n_poses``: poses
-    planned (the start pose included). ``world_overrides``: extra {section: {key: value}}
-    of the twin (tests: a robot that cannot reach). ``robot``: ``puma`` (the simulated Puma
-    behind the ALTER gateway, with the world's kinematics) or ``standin`` (exact kinematics,
-    no joints: the robot the teach-and-play run uses). ``pairs_out``: also write the collected
-    pairs there (JSON, what ``humanpt calibrate hand-eye --pairs`` reads).
+@dataclasses.dataclass
+class Collected:
+    """What :func:`collect_on_twin` gathered: the pairs (A = world_T_flange (N, 4, 4) mm as
+    the robot reports it, B = camera_T_target (N, 4, 4) mm), the samples, the poses planned,
+    the notes (what was skipped and why), the run's motion (for the time offset), the
+    twin and wall time; and, of the robot, what a cell knows: its gateway's mounting
+    (``world_T_base_mm``, None on the stand-in), its joints at the start; and the world's
+    truth (only to report against): the camera's config and the sim_robot's config."""
 
-    Returns (result, report lines, truth lines: the estimate against the world's true
-    ``flange_T_camera``). Raises :class:`HandEyeError` when too few poses were collected
-    or the motion is degenerate; nothing is written anywhere."""
+    A: np.ndarray
+    B: np.ndarray
+    samples: list
+    poses: np.ndarray
+    notes: list[str]
+    plan_notes: list[str]
+    motion: _Motion
+    twin_s: float
+    wall_s: float
+    world_T_base_mm: np.ndarray | None
+    start_joints_rad: np.ndarray | None
+    camera_truth: object
+    robot_truth: object
+
+
+def collect_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
+                    *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
+                    max_twin_s: float = 240.0, world_overrides: dict | None = None, robot: str = "puma",
+                    plan: dict | None = None, mount: tuple | None = None, scenario="static") -> Collected:
+    """The robot moves itself through ``n_poses`` poses planned around the TOB on its
+    fixture (:func:`plan_poses`, with ``plan``'s extra keywords: wider tilts for the arm's
+    calibration) and the (A, B) pairs are collected (module doc); the arguments as
+    :func:`calibrate_hand_eye_on_twin`'s; ``mount``: (flange pose (4, 4) mm, joints deg)
+    where the Puma is mounted around (:func:`humanpt.twin.teach.mounting`: as the job
+    mounts it), default around the start pose; ``scenario``: where the TOB is held still
+    (a built-in name or an OperatorConfig; default the paper's static pose, seen from below).  Raises :class:`HandEyeError` when the robot faults
+    first or the collection stops."""
     from humanpt.twin.worlds import merge_overrides
 
-    cfg = SystemConfig.for_scenario("static", seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
+    cfg = SystemConfig.for_scenario(scenario, seed=seed, overrides=merge_overrides(FIXTURE, world_overrides or {}),
                                     rig=rig, world=world)
     sys_ = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=rig,
                         sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
-                        keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides)
+                        keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
+                        **({} if mount is None else {"mount_world_T_flange_mm": mount[0], "mount_joints_deg": mount[1]}))
     ls = sys_.lockstep
     t_wall = time.perf_counter()
+    world_T_base = start_joints = robot_truth = None
     try:
         # Let the servo settle on the target, then plan from where the robot says it is.
         sys_.run_for(1.0)
@@ -93,12 +114,17 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
             gateway = next(c for c in ls.cores if c.name == "robot_gateway").config
             box = (gateway.envelope_min_mm, gateway.envelope_max_mm)
             check = puma_move_check(gateway.world_T_base_mm_deg)
+            world_T_base = transform_from_x(np.asarray(gateway.world_T_base_mm_deg, dtype=float))
+            from humanpt.sim_robot.core import SimRobotCore
+
+            sim = next(c for c in ls.cores if isinstance(c, SimRobotCore))
+            start_joints, robot_truth = np.asarray(sim.q_setpoint_rad, dtype=float).copy(), sim.config
         else:  # the stand-in: no joints; the demo's envelope around the start
             box = (tuple(float(v) for v in start[:3, 3] - 900.0), tuple(float(v) for v in start[:3, 3] + 900.0))
             check = None
         poses, plan_notes = plan_poses(start, rig.hand_eye.flange_T_camera_mm(), cfg.controller.dz_mm,
                                        n_poses=n_poses, envelope_min_mm=box[0], envelope_max_mm=box[1],
-                                       check=check, seed=seed)
+                                       check=check, seed=seed, **(plan or {}))
         collector = PoseCollector(poses, transform_from_x(np.asarray(cfg.controller.flange_T_tool_x)), settings)
         cmd = collector.start(ls.now_ns)
         end_ns = ls.now_ns + round(max_twin_s * 1e9)
@@ -130,12 +156,37 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
     if collector.aborted:
         raise HandEyeError(f"collection stopped: {collector.aborted}; nothing written")
     samples = collector.samples
+    A = np.array([s.world_T_flange_mm for s in samples]).reshape(-1, 4, 4)
+    B = np.array([s.camera_T_target_mm for s in samples]).reshape(-1, 4, 4)
+    return Collected(A, B, samples, poses, notes, plan_notes, motion, twin_s, wall_s, world_T_base, start_joints,
+                     sys_.camera.config, robot_truth)
+
+
+def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, int], None] | None = None,
+                               *, n_poses: int = DEFAULT_POSES, settings: CollectorSettings | None = None,
+                               max_twin_s: float = 240.0, world_overrides: dict | None = None,
+                               pairs_out: str | None = None, robot: str = "puma"
+                               ) -> tuple[HandEyeResult, list[str], list[str]]:
+    """Calibrate the hand-eye transform on the twin: ``world`` (the truth), ``rig`` (what
+    the pipeline believes; its hand-eye is only the planning guess), ``seed`` (camera
+    noise). ``progress(poses done, poses planned)`` after each pose. ``n_poses``: poses
+    planned (the start pose included). ``world_overrides``: extra {section: {key: value}}
+    of the twin (tests: a robot that cannot reach). ``robot``: ``puma`` (the simulated Puma
+    behind the ALTER gateway, with the world's kinematics) or ``standin`` (exact kinematics,
+    no joints: the robot the teach-and-play run uses). ``pairs_out``: also write the collected
+    pairs there (JSON, what ``humanpt calibrate hand-eye --pairs`` reads).
+
+    Returns (result, report lines, truth lines: the estimate against the world's true
+    ``flange_T_camera``). Raises :class:`HandEyeError` when too few poses were collected
+    or the motion is degenerate; nothing is written anywhere."""
+    got = collect_on_twin(world, rig, seed, progress, n_poses=n_poses, settings=settings, max_twin_s=max_twin_s,
+                          world_overrides=world_overrides, robot=robot)
+    samples, poses, notes, plan_notes = got.samples, got.poses, got.notes, got.plan_notes
     if len(samples) < 3:
         why = "; ".join(notes[-3:]) or "no pose measured"
         raise HandEyeError(f"too few poses collected: {len(samples)} of {len(poses)} ({why}); AX = YB needs at least "
                            "3 with rotations about two axes; nothing written")
-    A = np.array([s.world_T_flange_mm for s in samples])
-    B = np.array([s.camera_T_target_mm for s in samples])
+    A, B = got.A, got.B
     if pairs_out:
         from pathlib import Path
 
@@ -145,21 +196,21 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
     # The camera-to-robot time offset, from the robot's moves between the poses while the
     # camera watched the still target (its track must not move with the robot).
     try:
-        offset = estimate_time_offset(*motion.arrays(), result.flange_T_camera_mm)
+        offset = estimate_time_offset(*got.motion.arrays(), result.flange_T_camera_mm)
         result = dataclasses.replace(result, time_offset=offset)
     except TimeOffsetError as e:
         plan_notes = [*plan_notes, f"time offset not estimated: {e}"]
-        notes = plan_notes + collector.notes
+        notes = plan_notes + notes[len(got.plan_notes):]
     report = [f"hand-eye on the twin (world {world.name}, seed {seed}): {len(samples)} of {len(poses)} poses "
-              f"collected in {twin_s:.1f} s of twin time ({wall_s:.1f} s wall)"]
+              f"collected in {got.twin_s:.1f} s of twin time ({got.wall_s:.1f} s wall)"]
     report += [f"  {n}" for n in notes]
     report += ["  pose  measurements  spread mm (camera_T_target about its mean)"]
     report += [f"  {s.index:4d}  {s.measurements:12d}  {s.spread_mm:.4f}" for s in samples]
     report += result.summary_lines()
     if result.time_offset is not None:
         report += result.time_offset.summary_lines()
-    truth = sys_.camera.config.flange_T_camera  # the world's truth: reported, never estimated from
-    return result, report, truth_lines(result, truth, rig, sys_.camera.config.stamp_offset_ms)
+    truth = got.camera_truth.flange_T_camera  # the world's truth: reported, never estimated from
+    return result, report, truth_lines(result, truth, rig, got.camera_truth.stamp_offset_ms)
 
 
 # What the hand-eye estimate must meet (against the twin's truth) and the time offset (1 ms:

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Check", "TruthLines", "SeamFigures", "seam_figures", "JobReport", "job_report", "plot_seam_errors",
-           "SEAM_TOLERANCES_MM", "COVER_MM"]
+           "SEAM_TOLERANCES_MM", "COVER_MM", "arm_error_mm", "arm_share_mm"]
 
 # The issue's acceptance for a job on the realistic world (issue 32): the taught seam within
 # 0.3 mm RMS, the played-back torch within 0.5 mm RMS; a seam point counts as covered when
@@ -169,8 +169,11 @@ def job_report(res, png: Path | None = None) -> JobReport:
     lines.append("  calibration (estimate, 1-sigma from the rig; checks against the twin's truth)")
     rig = res.rig
     parts = {"camera": rig.psvs_calibration, "psvs": rig.psvs_calibration, "hand-eye": rig.hand_eye.calibration,
-             "tip": rig.tip.calibration}
+             "tip": rig.tip.calibration, "arm": rig.arm.calibration}
     for s in res.stages:
+        if getattr(s, "skipped", ""):  # nothing to do here (the arm on the stand-in): said, not warned
+            lines.append(f"    {s.name:10s} not run: {s.skipped}")
+            continue
         if not s.ok:
             lines.append(f"    {s.name:10s} SKIPPED: {s.error}")
             notes.append(f"{s.name}: stage skipped, the rig keeps its previous values ({s.error})")
@@ -181,6 +184,16 @@ def job_report(res, png: Path | None = None) -> JobReport:
                           if shown is None or k in shown) or "-"
         est = _estimate(s.name, rig)
         stage_checks = list(getattr(s, "checks", []))
+        if s.name == "hand-eye" and _arm_replaced_hand_eye(res):
+            # the arm's stage estimated the hand-eye again, with the arm: the rig has that one
+            # (checked there); this stage's own estimate, on the nominal arm, is history
+            old = [c for c in stage_checks if c.stage == "hand-eye"]
+            stage_checks = [c for c in stage_checks if c.stage != "hand-eye"]
+            lines.append(f"    {s.name:10s} superseded by the arm's stage (the rig's hand-eye is the one estimated with "
+                         f"the arm, below); its own on the nominal arm: " + ", ".join(
+                             f"{c.what} {c.value:.4g} {c.unit}" for c in old))
+            checks += stage_checks
+            continue
         checks += stage_checks
         verdict = ("met" if all(c.met for c in stage_checks) else "NOT met") if stage_checks else "no acceptance stated"
         lines.append(f"    {s.name:10s} {est}; 1-sigma {sigma}; acceptance {verdict}")
@@ -198,13 +211,17 @@ def job_report(res, png: Path | None = None) -> JobReport:
     figs: list[SeamFigures] = []
     if seam is not None:
         lines += ["", f"  seam (distance to the seam as designed; covered: within {COVER_MM:g} mm of the path)"]
+        frame = getattr(res, "seam_arm_frame_mm", None)  # a calibrated arm's frame (humanpt.twin.teach)
+        if frame is not None:
+            lines.append(f"    ({res.arm_frame_note})")
         rows = [("taught", "taught points (the driver's tip)", getattr(res, "taught_path_mm", None)),
                 ("fitted", "fitted seam (lines and arcs)", getattr(res, "fitted_path_mm", None)),
                 ("played", "played-back torch (true path)", getattr(res, "played_path_mm", None))]
         for key, name, pts in rows:
             if pts is None:
                 continue
-            f = seam_figures(name, pts, seam, SEAM_TOLERANCES_MM[key])
+            f = seam_figures(name, pts, frame if frame is not None and key != "played" else seam,
+                             SEAM_TOLERANCES_MM[key])
             where = (f"worst at ({', '.join(f'{v:.1f}' for v in f.worst_mm)}) mm" if f.worst_mm else "no points")
             judged = math.isfinite(f.tolerance_mm)
             if judged:
@@ -229,6 +246,14 @@ def job_report(res, png: Path | None = None) -> JobReport:
     return rep
 
 
+def _arm_replaced_hand_eye(res) -> bool:
+    """Whether the job's arm stage ran and wrote the rig's hand-eye."""
+    from humanpt.calibration.arm import METHOD
+
+    return (any(s.name == "arm" and s.ok for s in res.stages)
+            and res.rig.hand_eye.calibration.method == METHOD)
+
+
 # The camera and the PSVS stages share the rig's [psvs] table: each shows its own keys.
 _SIGMA_KEYS = {"camera": ("a_u", "a_v", "u0", "v0", "dist_coeffs"),
                "psvs": ("du0_left_px", "dv0_left_px", "rotvec_left_deg", "baseline_mm")}
@@ -245,6 +270,10 @@ def _estimate(stage: str, rig) -> str:
         return "flange_T_camera [" + ", ".join(f"{v:.3f}" for v in rig.hand_eye.flange_T_camera_x) + "] mm/deg"
     if stage == "tip":
         return "tob_t_tip [" + ", ".join(f"{v:.3f}" for v in rig.tip.tob_t_tip_mm) + "] mm"
+    if stage == "arm":
+        a = rig.arm
+        return (f"{a.model}: joint offsets [" + ", ".join(f"{v:+.4f}" for v in a.joint_offsets_deg) + "] deg, "
+                "d2 a2 a3 d4 d6 errors [" + ", ".join(f"{v:+.3f}" for v in a.link_length_errors_mm) + "] mm")
     return ""
 
 
@@ -276,4 +305,56 @@ def arm_error_mm(robot_overrides: dict | None, mount_world_T_flange_mm: np.ndarr
             continue
         true_tool = world_T_base @ arm.forward(q) @ np.asarray(flange_T_tool_mm, dtype=float)
         out.append(float(np.linalg.norm(true_tool[:3, 3] - T[:3, 3])))
+    return np.array(out)
+
+
+def arm_share_mm(robot_overrides: dict | None, mount_world_T_flange_mm: np.ndarray, mount_joints_deg,
+                 watch_world_T_flange_mm: np.ndarray, seam_world_T_tool_mm: np.ndarray, flange_T_tool_mm: np.ndarray,
+                 rig_flange_T_camera_mm: np.ndarray, true_flange_T_camera_mm: np.ndarray, model_arm=None) -> np.ndarray:
+    """(N,) the arm's share of the played-back error (mm) at each seam pose
+    ``seam_world_T_tool_mm`` (N, 4, 4): the world's Puma (``robot_overrides``' sim_robot
+    errors, mounted as the job mounts it) teaches the seam point watching it from
+    ``watch_world_T_flange_mm`` (N, 4, 4), as the cell believes (the rig's hand-eye and arm
+    model ``model_arm``: a calibrated :class:`humanpt.geometry.puma.TrueArm`, None: the
+    nominal arm), then plays it (commanded through the same model:
+    :func:`humanpt.controller.playback.command_poses`); the distance from the true torch to
+    the true point.  The camera is exact here: what is left is the arm's and the hand-eye's.
+    Poses out of the nominal arm's reach are left out."""
+    from humanpt.controller.playback import command_poses
+    from humanpt.geometry.puma import UnreachableError
+    from humanpt.geometry.transforms import invert_transform, transform_from_x, x_from_transform
+
+    from .system import _with_robot_overrides, puma_cores
+
+    rcfg, _ = puma_cores(transform_from_x(np.asarray(x_from_transform(mount_world_T_flange_mm))),
+                         joints_deg=mount_joints_deg)
+    rcfg = _with_robot_overrides(rcfg, robot_overrides, "sim_robot")
+    kin, true = rcfg.kinematics(), rcfg.true_arm()
+    believed = kin if model_arm is None else model_arm
+    W = transform_from_x(np.asarray(rcfg.world_T_base_mm_deg, dtype=float))
+    Wi = invert_transform(W)
+    tool = np.asarray(flange_T_tool_mm, dtype=float)
+    tool_i = invert_transform(tool)
+    Xr, Xt = np.asarray(rig_flange_T_camera_mm, dtype=float), np.asarray(true_flange_T_camera_mm, dtype=float)
+    q = rcfg.start_joints_rad()
+    out = []
+    for V, S in zip(np.asarray(watch_world_T_flange_mm, dtype=float), np.asarray(seam_world_T_tool_mm, dtype=float),
+                    strict=True):
+        try:
+            q_t = kin.inverse(Wi @ V, q)  # the servo takes the reported (nominal) flange there
+            p = S[:3, 3]
+            cam_true = W @ true.forward(q_t) @ Xt
+            m = invert_transform(cam_true)[:3, :3] @ p + invert_transform(cam_true)[:3, 3]
+            cam_bel = W @ believed.forward(q_t) @ Xr
+            taught = S.copy()
+            taught[:3, 3] = cam_bel[:3, :3] @ m + cam_bel[:3, 3]
+            goal = Wi @ taught @ tool_i
+            q_p = kin.inverse(goal, q_t)
+            if model_arm is not None:
+                q_p = command_poses(kin, model_arm, goal[None], q_p[None])[0][0]
+        except UnreachableError:
+            continue
+        torch = W @ true.forward(q_p) @ tool
+        out.append(float(np.linalg.norm(torch[:3, 3] - p)))
+        q = q_t
     return np.array(out)

@@ -3,12 +3,13 @@
 Stages, each observing the twin's world through the same components a real cell uses and
 never reading its truth except to report against it:
 
-1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. driver tip: each writes
-   its part of the rig (a stage whose tool is missing or fails is reported and skipped:
-   the rig keeps what it had);
-5. teach: the operator moves the target along the seam, the servo follows, the path of the
-   driver's tip is recorded with the calibrated rig;
-6. play back: the robot's tool follows the recorded path; the tool's true path (the world's
+1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. the arm's kinematic
+   errors with the hand-eye (on the Puma, mounted as the teach-and-play run mounts it; not
+   run on the stand-in), 5. driver tip: each writes its part of the rig (a stage whose
+   tool is missing or fails is reported and skipped: the rig keeps what it had);
+6. teach: the operator moves the target along the seam, the servo follows, the path of the
+   driver's tip is recorded with the calibrated rig (and moved by the calibrated arm);
+7. play back: the robot's tool follows the recorded path; the tool's true path (the world's
    flange, through the torch) is measured against the seam.
 
 The seam is the scenario as designed (no tremor, the design's path); distances to it are
@@ -50,7 +51,7 @@ from .worlds import World
 # Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
 MOUNT_FRACTION = 0.5
 
-__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm"]
+__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm", "mounting", "arm_share"]
 
 # stage -> (module of humanpt.twin, entry point): each returns (result, report, truth) and has
 # an ``apply_to_rig(rig, result, date)`` in humanpt.calibration.<name>.
@@ -58,6 +59,7 @@ STAGES: dict[str, tuple[str, str, str]] = {
     "camera": ("cal_camera", "calibrate_camera_on_twin", "camera"),
     "psvs": ("cal_psvs", "calibrate_psvs_on_twin", "psvs"),
     "hand-eye": ("cal_handeye", "calibrate_hand_eye_on_twin", "handeye"),
+    "arm": ("cal_arm", "calibrate_arm_on_twin", "arm"),  # the arm's errors with the hand-eye (32.4)
     "tip": ("cal_tip", "calibrate_tip_on_twin", "tip"),
 }
 
@@ -71,6 +73,7 @@ class StageResult:
     truth: list[str] = field(default_factory=list)
     error: str = ""
     checks: list = field(default_factory=list)  # humanpt.twin.report.Check: its acceptance against the truth
+    skipped: str = ""  # why the stage did not run, when it has nothing to do here (no warning)
 
 
 @dataclass
@@ -98,6 +101,13 @@ class TeachResult:
     # (mm), the taught tip, the fitted seam and the played-back torch; the job's own checks
     # (the arm's kinematic error, the time offset at the taught speed).
     seam_mm: np.ndarray | None = None
+    # With a calibrated arm: the seam as designed in the frame the arm's own measurements
+    # define (the world turned about the arm's joint-1 axis by its zero offset, which no
+    # camera on the flange can see: humanpt.calibration.arm), what the taught and fitted
+    # seams are judged against; the torch is judged against ``seam_mm`` (teaching and
+    # playing in the same frame, it lands on the seam).  (K, 3) mm, None without one.
+    seam_arm_frame_mm: np.ndarray | None = None
+    arm_frame_note: str = ""
     taught_path_mm: np.ndarray | None = None
     fitted_path_mm: np.ndarray | None = None
     played_path_mm: np.ndarray | None = None
@@ -135,10 +145,11 @@ def _seam(op) -> np.ndarray:
     return np.array([traj.path_pose(t)[:3, 3] for t in np.linspace(0.0, traj.duration_s, n)])
 
 
-def _arm(w) -> RobotArm | None:
+def _arm(w, rig: Rig | None = None) -> RobotArm | None:
     """The simulated Puma of the twin ``w`` as a playback plans on it (its kinematics, its
-    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits),
-    None on the stand-in (no kinematics)."""
+    mounting, its joints now, its joint speed limit and cycle; the gateway's flange limits;
+    the arm as the rig's ``[arm]`` calibrated it, when it has one), None on the stand-in (no
+    kinematics)."""
     from humanpt.sim_robot.core import SimRobotCore
 
     robot = next((c for c in w.lockstep.cores if isinstance(c, SimRobotCore)), None)
@@ -147,12 +158,64 @@ def _arm(w) -> RobotArm | None:
     gw = next((c for c in w.lockstep.cores if c.name == "robot_gateway"), None)
     limits = {} if gw is None else {"max_speed_mm_s": float(gw.config.max_speed_mm_s),
                                     "max_angular_deg_s": float(gw.config.max_angular_speed_deg_s)}
+    true_arm = rig.arm.true_arm() if rig is not None and rig.arm.model == robot.config.model else None
     return RobotArm(robot.kin, robot.world_T_base.copy(), np.asarray(robot.q_setpoint_rad, dtype=float).copy(),
-                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits)
+                    robot.config.max_joint_speed_deg_s, robot.config.cycle_ms * 1e-3, **limits, true_arm=true_arm)
 
 
-def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str) -> tuple[Rig, StageResult]:
+def mounting(cfg: SystemConfig, robot: str) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    """Where the job mounts the robot for ``cfg``'s seam: (the flange pose watching the
+    seam's start, the mounting flange pose (4, 4) mm, the Puma's joints there (deg), None
+    on the stand-in).  The Puma is mounted so that both where it watches the seam (the
+    camera d_z from the target) and where its torch welds it (the tool on the seam) are
+    comfortably in reach: around the flange pose half way between the two, over the middle
+    of the seam, in the joint pose there that keeps its wrist farthest from its singularity
+    along both jobs (:func:`humanpt.twin.system.puma_mount_joints`)."""
+    view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
+    seam = _seam(cfg.operator)
+    first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
+    weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+    mount = view.copy()
+    mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
+        seam.mean(axis=0) - first[:3, 3])
+    mount_joints = None
+    if robot == "puma":
+        traj = Trajectory(cfg.operator.design_scenario())
+        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
+        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
+        watch = np.array([p @ invert_transform(first) @ view for p in along])
+        welds = np.array([p @ tool_T_flange for p in along])
+        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
+    return view, mount, mount_joints
+
+
+def arm_share(cfg: SystemConfig, rig: Rig, view: np.ndarray, mount: np.ndarray, mount_joints) -> tuple[float, float]:
+    """The arm's (and the hand-eye's) share of the played-back error along ``cfg``'s seam,
+    RMS mm (:func:`humanpt.twin.report.arm_share_mm`, the Puma mounted as :func:`mounting`
+    says): (through the nominal arm and the rig's hand-eye, through the rig's calibrated
+    arm and hand-eye; nan without one)."""
+    from .report import arm_share_mm
+
+    traj = Trajectory(cfg.operator.design_scenario())
+    along = np.array([traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 60)])
+    watch = np.array([p @ invert_transform(along[0]) @ view for p in along])
+    true_X = cfg.sim_camera.flange_T_camera  # the world's hand-eye (truth, only to report)
+    tool = transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float))
+    args = (cfg.robot_overrides, mount, mount_joints, watch, along, tool, rig.hand_eye.flange_T_camera_mm(), true_X)
+
+    def rms(e):
+        return float(np.sqrt(np.mean(e ** 2))) if len(e) else float("nan")
+
+    nominal = rms(arm_share_mm(*args))
+    return nominal, (rms(arm_share_mm(*args, model_arm=rig.arm.true_arm())) if rig.arm.present else float("nan"))
+
+
+def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: str,
+               mount: tuple | None = None) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
+    if name == "arm" and robot != "puma":
+        return rig, StageResult(name, False, 0.0, skipped=f"the {robot} robot has no joints (exact kinematics): "
+                                                         "no arm to calibrate")
     t0 = time.perf_counter()
     try:
         fn = getattr(importlib.import_module(f"humanpt.twin.{module}"), entry)
@@ -160,7 +223,9 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
     except (ImportError, AttributeError) as e:
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
-        kw = {"robot": robot} if name == "hand-eye" else {}  # calibrate the arm that will weld
+        kw = {"robot": robot} if name in ("hand-eye", "arm") else {}  # calibrate the arm that will weld
+        if name == "arm" and mount is not None:  # where the job mounts it, the target where the seam starts
+            kw["mount"], kw["scenario"] = mount
         result, report, truth = fn(world, rig, seed, progress=progress, **kw)
     except Exception as e:  # noqa: BLE001 - a failed stage is a result: the rig keeps what it had
         return rig, StageResult(name, False, time.perf_counter() - t0, error=f"{type(e).__name__}: {e}")
@@ -192,9 +257,19 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
-    for name in tuple(STAGES) if stages is None else stages:
+    names = tuple(STAGES) if stages is None else stages
+    mount = None
+    if "arm" in names and robot == "puma":  # the arm stage mounts the Puma as the teach-and-play run will
+        cfg0 = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
+                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+        from .cal_arm import fixture_at_seam_start
+
+        _, m, j = mounting(cfg0, robot)
+        mount = ((m, j), fixture_at_seam_start(cfg0.operator))
+    for name in names:
         rig, res = _run_stage(name, world, rig, seed,
-                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot)
+                              (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot,
+                              mount)
         results.append(res)
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
@@ -203,24 +278,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     # The Puma is mounted so that both where it watches the seam (the camera d_z from the
     # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
     # around the flange pose half way between the two, over the middle of the seam.
-    view = start_flange_for(cfg.operator, cfg.controller.dz_mm, cfg.sim_camera.flange_T_camera)
     seam = _seam(cfg.operator)
     design = polyline_seam(seam)  # the seam as designed, to compare against
-    first = Trajectory(cfg.operator.design_scenario()).path_pose(0.0)
-    weld = first @ invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
-    mount = view.copy()
-    mount[:3, 3] = MOUNT_FRACTION * weld[:3, 3] + (1 - MOUNT_FRACTION) * view[:3, 3] + (
-        seam.mean(axis=0) - first[:3, 3])
-    mount_joints = None
-    if robot == "puma":
-        # ... in the joint pose there that keeps its wrist farthest from its singularity
-        # along both jobs: watching the seam (the view carried along it) and welding it.
-        traj = Trajectory(cfg.operator.design_scenario())
-        along = [traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 40)]
-        tool_T_flange = invert_transform(transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float)))
-        watch = np.array([p @ invert_transform(first) @ view for p in along])
-        welds = np.array([p @ tool_T_flange for p in along])
-        mount_joints, _ = puma_mount_joints(mount, [watch, welds])
+    view, mount, mount_joints = mounting(cfg, robot)
     w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
                      sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
@@ -242,6 +302,18 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         stamps, x_g, x_tip = evaluate.path_points(w)
         _, err, _ = evaluate.path_truth_errors(w, after_ns=start_ns)
         taught = x_tip if x_tip is not None else x_g
+        arm = _arm(w, cfg.rig)
+        seam_arm, arm_note = None, ""
+        if arm is not None and arm.true_arm is not None:
+            seam_arm, arm_note = _seam_in_arm_frame(seam, arm, cfg)
+        if arm is not None and arm.true_arm is not None and len(taught):
+            # The pipeline placed each point with the flange the robot reported (its nominal
+            # model): move it to where the calibrated arm had the flange (issue 32.4).
+            moved = _corrected(w, arm, taught, stamps)
+            shift = moved - taught  # ... and its errors against the truth with it
+            shift[:, 3:] = evaluate.wrap_deg(shift[:, 3:])
+            err = err + shift[stamps >= start_ns]
+            taught = moved
         taught_p = transform_from_x(np.asarray(taught, dtype=float).reshape(-1, 6))[:, :3, 3]
         taught_mm = distance_to_seam(design, taught_p) if len(taught_p) else np.zeros(0)
         # -- play back: the tool follows the recorded path; judge the tool's TRUE path
@@ -260,7 +332,6 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                           meta={"point": "tip" if x_tip is not None else "G", "frame": "world"})
         fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
         fitted_mm = distance_to_seam(design, fitted_p)
-        arm = _arm(w)
         refused = ""
         if play == "seam":  # `humanpt path play`: the fitted seam, re-timed, a stop at each corner
             # as the console does: re-timed for the tool, at most the controller's points;
@@ -298,7 +369,14 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         # there, as the robot reports its flange (an arm with kinematic errors puts the true
         # torch ~1 mm away from where it believes it is: that is what is measured, after)
         states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")[n_states:]]
-        believed = np.array([(to_mm(from_pose(st.world_T_flange)) @ tool_mm)[:3, 3] for st in states]).reshape(-1, 3)
+        flanges = np.array([to_mm(from_pose(st.world_T_flange)) for st in states]).reshape(-1, 4, 4)
+        if len(flanges) and arm is not None and arm.true_arm is not None:
+            # on a calibrated arm the commands are off the seam by its errors: where the
+            # calibrated arm has the flange, at the joints the robot reports
+            from humanpt.calibration.arm import true_world_T_flange
+
+            flanges = true_world_T_flange(arm.true_arm, flanges, arm.world_T_base_mm, arm.kinematics, arm.joints_rad)
+        believed = (flanges @ tool_mm)[:, :3, 3].reshape(-1, 3)
         at = np.nonzero(np.linalg.norm(believed - first, axis=1) < 0.25)[0]
         stamps_t = np.array([st for st, _ in truths], dtype=np.int64)
         near = (np.nonzero(stamps_t >= states[at[0]].header.stamp_ns)[0] if len(at)
@@ -333,10 +411,10 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     stats = evaluate.Stats.of(err) if len(err) else None
     taught_p = np.array([transform_from_x(x)[:3, 3] for x in taught]).reshape(-1, 3)
     fitted_p = np.vstack([sample_segment(sg, 0.5) for sg in fitted.segments])
-    checks = _job_checks(cfg, mount, np.asarray(taught, dtype=float), tool_mm, rig)
+    checks = _job_checks(cfg, mount, np.asarray(taught, dtype=float), tool_mm, rig, mount_joints, view, robot)
     return TeachResult(results, rig, taught_mm, smoothed_mm, played_mm, stats, warnings,
                        Path(run_dir) if run_dir else None, time.perf_counter() - t_start, fitted_mm, fitted, play,
-                       compared, seam_mm=seam, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
+                       compared, seam_mm=seam, seam_arm_frame_mm=seam_arm, arm_frame_note=arm_note, taught_path_mm=taught_p, fitted_path_mm=fitted_p, played_path_mm=tips,
                        checks=checks, max_joint_step_deg=step_deg, joint_step_limit_deg=limit_deg, refused=refused,
                        played_x=played_x, taught_x=np.asarray(taught, dtype=float).reshape(-1, 6))
 
@@ -345,20 +423,61 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
 SOURCE_LIMIT_MM = 0.1
 
 
-def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool_mm: np.ndarray, rig: Rig) -> list:
-    """The job's own checks: the Puma's absolute kinematic error along the taught seam (the
-    world's arm against its nominal model, as the job mounts it) against the played-back
-    tolerance; the camera-to-robot time offset the rig says, at the taught speed (the
-    pipeline does not correct it yet) against SOURCE_LIMIT_MM."""
+def _seam_in_arm_frame(seam: np.ndarray, arm: RobotArm, cfg: SystemConfig) -> tuple[np.ndarray, str]:
+    """The seam (K, 3) mm in the frame the calibrated arm defines: the world turned about
+    joint 1's axis by minus the world's joint-1 zero offset (read from the twin's truth,
+    only to judge), and a line saying so."""
+    from humanpt.geometry.transforms import make_transform, matrix_from_rotvec, transform_points
+
+    offsets = (cfg.robot_overrides.get("sim_robot") or {}).get("joint_offsets_deg") or (0.0,) * 6
+    d1 = float(offsets[0])
+    W = np.asarray(arm.world_T_base_mm, dtype=float)
+    G = W @ make_transform(matrix_from_rotvec([0.0, 0.0, -np.radians(d1)]), np.zeros(3)) @ invert_transform(W)
+    shift = float(np.sqrt(np.mean(np.sum((transform_points(G, seam) - seam) ** 2, axis=1))))
+    return transform_points(G, seam), (
+        f"taught and fitted seams against the seam in the calibrated arm's frame: the world turned by the arm's "
+        f"joint-1 zero offset ({d1:+.4f} deg, {shift:.3f} mm RMS here), which no camera on the flange can see; "
+        "taught and played in that frame, the torch is judged in the world's")
+
+
+def _corrected(w, arm: RobotArm, taught: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """The taught points (N, 6) moved by the calibrated arm (humanpt.calibration.arm
+    .correct_path) with the robot states the gateway published (the reported flanges)."""
+    from humanpt.calibration.arm import correct_path
+
+    states = [pb.RobotState.FromString(o.data) for o in w.outputs("robot_gateway/robot_state")]
+    rs = np.array([st.header.stamp_ns for st in states], dtype=np.int64)
+    R = np.array([to_mm(from_pose(st.world_T_flange)) for st in states]).reshape(-1, 4, 4)
+    return correct_path(taught, stamps, rs, R, arm.true_arm, arm.world_T_base_mm, arm.kinematics, arm.joints_rad)
+
+
+def _job_checks(cfg: SystemConfig, mount: np.ndarray, taught_x: np.ndarray, tool_mm: np.ndarray, rig: Rig,
+                mount_joints=None, view: np.ndarray | None = None, robot: str = "standin") -> list:
+    """The job's own checks: on the stand-in, the Puma's absolute kinematic error along the
+    taught seam (the world's arm against its nominal model, as the job mounts it: what a
+    cell playing on its arm would meet); on the Puma, the arm's share of the played-back
+    error (the world's arm teaching the seam from where it watches it and playing it, both
+    through the rig's hand-eye and arm model: :func:`humanpt.twin.report.arm_share_mm`),
+    after the arm's calibration when the rig has one (the nominal arm's figure beside it),
+    each against the played-back tolerance; the camera-to-robot time offset the rig says, at
+    the taught speed, against SOURCE_LIMIT_MM."""
     from .report import SEAM_TOLERANCES_MM, Check, arm_error_mm
 
     checks = []
-    if len(taught_x):
+    if len(taught_x) and (robot != "puma" or view is None):
         err = arm_error_mm(cfg.robot_overrides, mount, transform_from_x(taught_x[:: max(1, len(taught_x) // 200)]),
                            tool_mm)
         if len(err):
             checks.append(Check("arm", "the Puma's absolute kinematic error along the seam, RMS",
                                 float(np.sqrt(np.mean(err ** 2))), SEAM_TOLERANCES_MM["played"], "mm"))
+    elif len(taught_x):
+        nominal, after = arm_share(cfg, rig, view, mount, mount_joints)
+        if rig.arm.present:
+            checks.append(Check("arm", f"the arm's share of the played-back error after its calibration, RMS "
+                                f"(the same hand-eye on the nominal arm: {nominal:.3f} mm)", after, SEAM_TOLERANCES_MM["played"], "mm"))
+        else:
+            checks.append(Check("arm", "the arm's share of the played-back error (its nominal model; no arm "
+                                "calibrated), RMS", nominal, SEAM_TOLERANCES_MM["played"], "mm"))
     if rig.timing.calibration.method != "nominal":
         # the pose filter places each image at its stamp minus the offset: what is left is
         # the offset's own uncertainty
