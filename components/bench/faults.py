@@ -961,13 +961,16 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         failure = str(e)
     finally:
         stop.set()
+        interrupted = False
         while thread.is_alive():
             try:
                 thread.join()
-            except KeyboardInterrupt:  # a second Ctrl-C: the twin is already stopping
-                continue
+            except KeyboardInterrupt:  # Ctrl-C while the twin stops: let it stop, then say so
+                interrupted = True
         if tmp:
             shutil.rmtree(run_dir, ignore_errors=True)
+        if interrupted:  # (a Ctrl-C during the attacks is already on its way up)
+            raise KeyboardInterrupt
     live_fail = _live_failure(result)
     if live_fail and not failure:
         failure = f"the live twin reported: {live_fail}"
