@@ -286,6 +286,10 @@ class PoseFilterCore(Core):
         if msg.status not in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY):
             return []
         stamp = msg.header.stamp_ns - self.capture_shift_ns  # the capture, on the robot's clock
+        if stamp < 0:
+            # Taken before the time base began (an image of the first few ms, moved back by the
+            # rig's camera-to-robot offset): no robot state can place it, and no stamp says it.
+            return []
         world_T_camera = self.frames.lookup("world", "camera", stamp)
         if world_T_camera is None:
             if len(self.robot) == 0:

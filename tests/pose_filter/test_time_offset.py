@@ -56,3 +56,26 @@ def test_late_stamps_put_the_target_off_unless_the_rig_says_so(wait_for_robot_ms
     # the flange looked up 5 ms late is 0.5 mm further along x: the target seems 0.5 mm further
     assert np.median(uncorrected) == pytest.approx(0.5, abs=0.01)
     assert np.max(np.abs(corrected)) < 1e-6
+
+
+def test_an_image_moved_before_the_time_base_by_the_offset_is_dropped():
+    # The job's tip stage on seeds 1 and 2 stopped with "ValueError: Value out of range:
+    # -247768": the first image, stamped 4.02 ms, moved back by the rig's 4.27 ms offset to
+    # -0.25 ms, was placed by extrapolating the robot's first state and its stamp reached a
+    # message's unsigned field.  Such an image is dropped; the ones after it are measured.
+    rig = dataclasses.replace(Rig(), timing=Timing(camera_time_offset_ms=4.27))
+    core = PoseFilterCore(PoseFilterConfig(wait_for_robot_ms=0.0), rig)
+    truth = T_m(TARGET_X)
+    outs = []
+    for t in range(0, 100 * MS, 4 * MS):
+        outs += core.step(t, "robot_gateway/robot_state", pb.RobotState(
+            header=header(t, t // (4 * MS), "world"), world_T_flange=pose(_flange(t)), cycle=t // (4 * MS)))
+        if t % (40 * MS) == 0:  # images stamped 4.02 ms after each 40 ms (the first one before 0 once moved)
+            stamp = t + 4_022_232
+            camera_T_tob = invert_transform(_flange(stamp - 4_270_000) @ core.flange_T_camera_m) @ truth
+            msg = pb.TobMeasurement(header=header(stamp, 0, "camera"), status=pb.TOB_STATUS_FULL)
+            msg.camera_T_tob.CopyFrom(pose(camera_T_tob))
+            outs += core.step(t + 4 * MS, "perception/tob", msg)
+    measured = {m.measurement_stamp_ns for topic, m in outs if topic == "pose_filter/tob_state"
+                and m.HasField("world_T_tob_measured")}
+    assert sorted(measured) == [40 * MS + 4_022_232 - 4_270_000, 80 * MS + 4_022_232 - 4_270_000]
