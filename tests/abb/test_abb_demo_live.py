@@ -15,6 +15,8 @@ from humanpt.robot_gateway.links.abb.runstats import egm_cycles
 from humanpt.runtime.recording import read
 from humanpt.runtime.replay import replay
 
+pytestmark = pytest.mark.cell  # a whole live cell: one at a time (tests/conftest.py)
+
 
 @pytest.mark.timeout(300)
 @pytest.mark.live
@@ -39,7 +41,7 @@ def test_live_demo_over_abb_records_the_arc_and_replays(tmp_path, cli):
     assert stats.cycles > 500  # 4 s and more at 4 ms, counted from the gateway's first answer
     # The servo kept the target: the recorded path follows the paper's arc (radius 246 mm).
     path = pathfile.read(run / "paths" / "path-1.csv")
-    assert len(path) > 5
+    assert len(path) > 5, f"{len(path)} points recorded\n" + (run / "processes.log").read_text()[-3000:]
     radius = np.linalg.norm(path.x_g[:, :2] - [147.5, 1378.5], axis=1)
     assert np.all(np.abs(radius - 246.0) < 1.0)
     for comp in ("robot_gateway", "sim_robot"):  # the EGM cores replay from their recordings

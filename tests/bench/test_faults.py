@@ -34,7 +34,7 @@ from tests.conftest import ROOT, humanpt_cmd
 
 # run_faults starts the twin's processes, a router and a pty; the timeout bounds a hang (the
 # first test to use the module's run waits for all of it)
-pytestmark = [pytest.mark.live, pytest.mark.timeout(600)]
+pytestmark = [pytest.mark.live, pytest.mark.cell, pytest.mark.timeout(600)]
 
 # The rows --quick must print, in order: the attack set of issue 14 without the bus flood.
 QUICK_FAULTS = [

@@ -30,7 +30,7 @@ from tests.bench.faults_rows import (
 )
 from tests.conftest import free_port, write_config
 
-pytestmark = pytest.mark.live  # the bench's twin, routers, UDP sockets
+pytestmark = [pytest.mark.live, pytest.mark.cell]  # the bench's twin, routers, UDP sockets
 
 
 @pytest.fixture(scope="module")

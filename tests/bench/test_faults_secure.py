@@ -14,7 +14,7 @@ from humanpt.runtime.recording import read
 from humanpt.schemas.convert import from_pose
 from tests.bench.faults_rows import COLUMNS, Bench, bench_run, table
 
-pytestmark = pytest.mark.live  # the bench's twin under mTLS, a router
+pytestmark = [pytest.mark.live, pytest.mark.cell]  # the bench's twin under mTLS, a router
 
 SECURE_ROWS = {
     "unauthorised": "unauthorised publisher (certified non-controller)",

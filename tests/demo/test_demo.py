@@ -13,7 +13,7 @@ from humanpt.controller import pathfile
 from humanpt.runtime.replay import replay
 from tests.conftest import free_port, run_cli
 
-pytestmark = pytest.mark.timeout(600)
+pytestmark = [pytest.mark.cell, pytest.mark.timeout(600)]
 
 
 def test_lockstep_demo_records_writes_the_path_and_reports_accuracy(tmp_path, cli):

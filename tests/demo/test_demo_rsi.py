@@ -14,6 +14,8 @@ from humanpt.robot_gateway.links.rsi.runstats import rsi_cycles
 from humanpt.runtime.recording import read
 from humanpt.runtime.replay import replay
 
+pytestmark = pytest.mark.cell  # a whole live cell: one at a time (tests/conftest.py)
+
 
 @pytest.mark.timeout(300)
 @pytest.mark.live

@@ -15,7 +15,7 @@ from humanpt.runtime.registry import core_class
 from humanpt.runtime.runinfo import file_info
 from humanpt.twin.live import LIVE_COMPONENTS
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.cell, pytest.mark.timeout(300)]
 
 
 @pytest.mark.live

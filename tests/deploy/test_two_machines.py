@@ -79,7 +79,7 @@ def _why_not() -> str | None:
 
 
 WHY_NOT = _why_not()
-pytestmark = [pytest.mark.root, pytest.mark.live, pytest.mark.skipif(WHY_NOT is not None, reason=WHY_NOT or "")]
+pytestmark = [pytest.mark.root, pytest.mark.live, pytest.mark.cell, pytest.mark.skipif(WHY_NOT is not None, reason=WHY_NOT or "")]
 
 
 def ip(*args: str) -> None:
