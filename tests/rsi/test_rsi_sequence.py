@@ -139,7 +139,11 @@ def test_live_replays_and_spoofs_from_the_robots_address_neither_fault_nor_resta
         injected.append(n - armed[0])
         return [rob(ipoc + INJECTED[n - armed[0]][1] * CYCLE_MS)]
 
-    cell = LiveCell(procs, router[0], tmp_path)
+    # The gateway restarts its link after 50 silent cycles (600 ms), not the default 3 (36 ms):
+    # the robot is a thread of this test's process, which a loaded machine stalls for longer
+    # than 36 ms (a restart then locks onto whichever <Rob> comes first, a spoof included: the
+    # suite beside pip installs failed here). The injections, not the load, are under test.
+    cell = LiveCell(procs, router[0], tmp_path, status_timeout_cycles=50)
     try:
         cell.start_gateway()
         cell.start_controller()
@@ -154,7 +158,7 @@ def test_live_replays_and_spoofs_from_the_robots_address_neither_fault_nor_resta
     assert injected == sorted(INJECTED)
     assert robot.stopped is None, robot.stopped
     codes = cell.codes()
-    assert "fault" not in codes and "status_lost" not in codes and "link_down" not in codes, codes
+    assert not {"fault", "status_lost", "link_down"} & set(codes), [(e.code, e.text) for e in cell.events if e.code != "deadline_missed"]
     seq = [e.text for e in cell.events if e.code == "link_error"]
     assert len(seq) == len(INJECTED) and all("out of sequence" in t for t in seq), seq
     # No answer ever echoed an injected IPOC to the robot.
