@@ -57,11 +57,14 @@ class FitConfig:
     min_arc_sweep_deg: float = 10.0  # an arc sweeps at least this much (else it is a line)
     min_arc_points: int = 7  # ... over at least this many points (a rounded corner is a corner, not an arc)
     max_arc_radius_mm: float = 5000.0  # flatter arcs are lines
+    # Tighter arcs are corners (a hairpin, a reversal, the torch turning on the spot): at 20 mm/s
+    # an arc of 0.5 mm radius turns the torch at 2300 deg/s, which no playback can follow.
+    min_arc_radius_mm: float = 5.0
     corner_reach_mm: float = 30.0  # two lines meet in a corner at most this far beyond their fitted ends
 
     def __post_init__(self):
         for name in ("tolerance_mm", "corner_deg", "dwell_radius_mm", "outlier_sigma", "min_arc_sweep_deg",
-                     "max_arc_radius_mm"):
+                     "max_arc_radius_mm", "min_arc_radius_mm"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise FitError(f"{name} must be a positive number, got {v!r}")
@@ -69,6 +72,9 @@ class FitConfig:
             raise FitError(f"min_points must be >= 3, got {self.min_points}")
         if not (math.isfinite(self.dwell_min_s) and self.dwell_min_s >= 0):
             raise FitError(f"dwell_min_s must be >= 0, got {self.dwell_min_s!r}")
+        if self.min_arc_radius_mm >= self.max_arc_radius_mm:
+            raise FitError(f"min_arc_radius_mm ({self.min_arc_radius_mm:g}) must be below max_arc_radius_mm "
+                           f"({self.max_arc_radius_mm:g})")
 
 
 # ---------------------------------------------------------------------------- primitives
@@ -352,7 +358,7 @@ def _fit_piece(q: np.ndarray, idx: np.ndarray, cfg: FitConfig, noise: float, for
     arc = None
     if len(idx) >= max(cfg.min_points, cfg.min_arc_points, 4):
         af = arc_fit(pts)
-        if (af is not None and af.radius_mm <= cfg.max_arc_radius_mm
+        if (af is not None and cfg.min_arc_radius_mm <= af.radius_mm <= cfg.max_arc_radius_mm
                 and math.degrees(af.sweep_rad) >= cfg.min_arc_sweep_deg and af.sweep_rad < 2 * math.pi):
             arc = _Piece(idx, "arc", af, float(np.sqrt(np.mean(af.residuals_mm ** 2))), float(af.residuals_mm.max()))
             if arc.rms <= limit_rms and arc.max <= limit_max:
