@@ -156,10 +156,13 @@ class Perception:
         windows = windows_around(uv_px, pad, *self.size_px)
         if not windows:
             return self.measure(gray, (0, 0, 0, 0))
-        mosaic = Mosaic.pack(gray, self.keep, windows, self.gap_px)
-        height, width = mosaic.gray.shape
-        blobs = self._detect_weighted(mosaic.gray, (0, 0, width, height), mosaic.keep, mosaic.tiles,
-                                      mosaic.offset)
+        if len(windows) == 1:  # one window (the six merged): the image's own pixels, no copy
+            blobs = self._detect_weighted(gray, windows[0], self.keep)
+        else:
+            mosaic = Mosaic.pack(gray, self.keep, windows, self.gap_px)
+            height, width = mosaic.gray.shape
+            blobs = self._detect_weighted(mosaic.gray, (0, 0, width, height), mosaic.keep,
+                                          mosaic.tiles, mosaic.offset)
         box = np.array(windows)
         region = (int(box[:, 0].min()), int(box[:, 1].min()), int(box[:, 2].max()), int(box[:, 3].max()))
         return self._finish(blobs, region)
