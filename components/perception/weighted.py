@@ -164,7 +164,7 @@ def detect_weighted(
     inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
     inside = inside and max(x0) + 2 * half < width
     if inside:  # no window reaches out of the region: no clipping, every pixel valid
-        rows, cols = y0, x0  # the windows' corners in a view of every S x S window
+        rows, cols = y0, x0  # the windows' corners: copied by slices
         windows_of = _windows_view
     else:
         ys_c = np.clip(ys, 0, height - 1)

@@ -1,7 +1,8 @@
 """Tracking (issue 37, item 2): the next image is measured only in windows around the blobs
-the last FULL measurement predicts, packed into one mosaic; it finds what a search of the
-whole image finds there (same centres, order, pairs, points), leaves out what lies outside
-the windows, and does not depend on the image's size."""
+the last FULL measurement predicts (one merged window in place on the image, several packed
+into one mosaic); it finds what a search of the whole image finds there (same centres,
+order, pairs, points), leaves out what lies outside the windows, and does not depend on the
+image's size."""
 
 from __future__ import annotations
 
