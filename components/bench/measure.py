@@ -208,6 +208,7 @@ def pin_one_cpu() -> str:
 PERCEPTION_SIZES = ((640, 480), (1920, 1200))
 NAIVE = "naive OpenCV pipeline"
 FLOOR = "memory floor: one read"
+STAGE = "  tracking stage: "  # the tracking step's parts (no ratio: a share of tracking)
 
 
 def naive_blob_centres(gray: np.ndarray, threshold: float = 60.0, count: int = 6) -> list[tuple[float, float]]:
@@ -301,12 +302,15 @@ class PerceptionRow:
     ratio: float | None = None
 
 
-def perception_cases(rig, images, method: str = "weighted", baselines: bool = True) -> dict[str, Callable[[int], object]]:
+def perception_cases(rig, images, method: str = "weighted", baselines: bool = True,
+                     stages: bool = False) -> dict[str, Callable[[int], object]]:
     """The timed cases on one image sequence (played forward, then backward): the
     baselines, the whole-image search, tracking (the windows around the blobs predicted
     from the previous image's measurement) and the core step (decode, checks, tracking or
-    search, message) on a sequence of messages."""
+    search, message) on a sequence of messages; with ``stages`` the tracking step's parts
+    too (where its time goes: windows and detection, correspondence, blob checks)."""
     from humanpt.perception import Perception, PerceptionConfig, PerceptionCore
+    from humanpt.perception.checks import check_sources
     from humanpt.perception.correspondence import FULL
     from humanpt.schemas.convert import image
 
@@ -331,6 +335,13 @@ def perception_cases(rig, images, method: str = "weighted", baselines: bool = Tr
     cases["search: whole image"] = lambda k: p.measure(seq[k % m])
     cases["tracking: windows around the blobs"] = lambda k: p.track(seq[k % m], *anchors[k % m])
     cases["core step (decode ... message)"] = lambda k: core.step(k, "camera/image", messages[k % m])
+    if stages:  # the tracking step's parts, each on the previous part's output of that image
+        found = [p.track_detect(seq[k], *anchors[k])[0] for k in range(m)]
+        matches = [p.match(b) for b in found]
+        cases[f"{STAGE}windows + detection"] = lambda k: p.track_detect(seq[k % m], *anchors[k % m])
+        cases[f"{STAGE}correspondence"] = lambda k: p.match(found[k % m])
+        cases[f"{STAGE}blob checks"] = lambda k: check_sources(found[k % m], matches[k % m], p.params, p.model,
+                                                                p.check_settings)
     return cases
 
 
@@ -341,22 +352,24 @@ def measure_perception(n_images: int, sizes=PERCEPTION_SIZES, paper: bool = True
     ``n_images`` per case, every case of one size interleaved (:func:`interleaved`), rates
     and ratios from the median CPU time per image.
     Ratios: tracking to the whole-image search, every other humanpt case to the naive
-    pipeline; the paper method's (640x480 only) to the same naive pipeline."""
+    pipeline; the paper method's (640x480 only) to the same naive pipeline; the tracking
+    step's stages (the first size only) have none."""
     n = max(1, n_images)
     rows: list[PerceptionRow] = []
     for width, height in sizes:
         rig, images = tracking_sequence(width, height)
-        cases = {("weighted", name): fn for name, fn in perception_cases(rig, images).items()}
-        if paper and (width, height) == tuple(sizes[0]):
+        first = (width, height) == tuple(sizes[0])
+        cases = {("weighted", name): fn for name, fn in perception_cases(rig, images, stages=first).items()}
+        if paper and first:
             cases.update({("paper", name): fn for name, fn in perception_cases(rig, images, "paper", False).items()})
         times = interleaved({f"{m}|{c}": fn for (m, c), fn in cases.items()}, n, rounds)
         med = {key: float(np.median(cpu)) for key, (cpu, _) in times.items()}
         for (method, case), (key, (_, wall)) in zip(cases, times.items(), strict=True):
-            base = None if case in (NAIVE, FLOOR) else (
+            base = None if case in (NAIVE, FLOOR) or case.startswith(STAGE) else (
                 "search: whole image" if case.startswith("tracking") else NAIVE)
             base_key = f"{method}|{base}" if base != NAIVE else f"weighted|{NAIVE}"
             rows.append(PerceptionRow(
-                f"{width}x{height}", "-" if base is None else method, case, 1e9 / med[key], med[key] / 1e6,
+                f"{width}x{height}", "-" if case in (NAIVE, FLOOR) else method, case, 1e9 / med[key], med[key] / 1e6,
                 float(np.percentile(wall, 50)) / 1e6, float(np.percentile(wall, 99)) / 1e6, base,
                 None if base is None else med[base_key] / med[key]))
     return rows

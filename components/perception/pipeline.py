@@ -17,7 +17,7 @@ import numpy as np
 
 from humanpt.geometry.rig import Rig
 
-from .blobs import Blobs, Mosaic, Region, clip_region, full_region, windows_around
+from .blobs import EMPTY, Blobs, Mosaic, Region, clip_region, full_region, windows_around
 from .checks import CheckSettings, SourceCheck, apply_policy, check_sources
 from .config import PerceptionConfig
 from .correspondence import Match, MatchSettings, match_scan_line, match_scored
@@ -144,25 +144,35 @@ class Perception:
         """Measure while tracking: only the windows around the predicted blobs (``uv_px``
         (k, 2) the last FULL measurement's centres, ``size_px`` (k,) their sizes), each
         ``roi_margin_px`` plus the largest blob's size around its blob, overlapping ones
-        merged: the cost follows the blobs, not the image's size. The weighted method
-        measures them in one call on a :class:`~humanpt.perception.blobs.Mosaic` of the
-        windows (same blobs, order and centres as a search of the image finds there); the
-        paper method searches their bounding box (:meth:`roi_around`). The caller searches
-        the whole image (:meth:`measure`) when this is not FULL. ``Result.region``: the
-        windows' bounding box."""
+        merged: the cost follows the blobs, not the image's size (:meth:`track_detect`,
+        then the correspondence and the blob checks as :meth:`measure`). The caller
+        searches the whole image (:meth:`measure`) when this is not FULL.
+        ``Result.region``: the windows' bounding box."""
+        return self._finish(*self.track_detect(gray, uv_px, size_px))
+
+    def track_detect(self, gray: np.ndarray, uv_px: np.ndarray, size_px: np.ndarray) -> tuple[Blobs, Region]:
+        """The detection step of :meth:`track`: (blobs, the windows' bounding box). The
+        weighted method measures the windows in one call: one window (the six merged, as
+        at 450-900 mm and the default margin) on the image's own pixels, several packed
+        into a :class:`~humanpt.perception.blobs.Mosaic` (same blobs, order and centres as
+        a search of the image finds there); the paper method searches their bounding box
+        (:meth:`roi_around`)."""
         if self.config.method == "paper":
-            return self.measure(gray, self.roi_around(uv_px, size_px))
+            region = self.roi_around(uv_px, size_px)
+            return self.detect(gray, region), region
         pad = self.config.roi_margin_px + float(np.max(size_px, initial=0.0))
         windows = windows_around(uv_px, pad, *self.size_px)
         if not windows:
-            return self.measure(gray, (0, 0, 0, 0))
+            return EMPTY, (0, 0, 0, 0)
+        if len(windows) == 1:  # the image's own pixels: no copy
+            return self._detect_weighted(gray, windows[0], self.keep), windows[0]
         mosaic = Mosaic.pack(gray, self.keep, windows, self.gap_px)
         height, width = mosaic.gray.shape
         blobs = self._detect_weighted(mosaic.gray, (0, 0, width, height), mosaic.keep, mosaic.tiles,
                                       mosaic.offset)
         box = np.array(windows)
         region = (int(box[:, 0].min()), int(box[:, 1].min()), int(box[:, 2].max()), int(box[:, 3].max()))
-        return self._finish(blobs, region)
+        return blobs, region
 
     def roi_around(self, uv_px: np.ndarray, blob_size_px: np.ndarray) -> Region:
         """The region of interest around centres (k, 2): their bounding box grown by

@@ -62,6 +62,20 @@ def background_and_noise(sub: np.ndarray, keep: np.ndarray | None = None) -> tup
     return median, max(median - low, 0.5)
 
 
+def _windows_view(image: np.ndarray, size: int, rows: list[int], cols: list[int]) -> np.ndarray:
+    """(m, S, S) copies of the S x S windows of ``image`` at corners (rows[i], cols[i]),
+    every window inside the image (slices copied: no index arrays)."""
+    out = np.empty((len(rows), size, size), image.dtype)
+    for i, (r, c) in enumerate(zip(rows, cols, strict=True)):
+        out[i] = image[r : r + size, c : c + size]
+    return out
+
+
+def _gather(image: np.ndarray, size: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """(m, S, S) pixels of ``image`` at (m, S, 1) rows and (m, 1, S) columns (clipped)."""
+    return image[rows, cols]
+
+
 def detect_weighted(
     gray: np.ndarray,
     region: Region,
@@ -150,12 +164,15 @@ def detect_weighted(
     inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
     inside = inside and max(x0) + 2 * half < width
     if inside:  # no window reaches out of the region: no clipping, every pixel valid
-        rows, cols = ys[:, :, None], xs[:, None, :]
+        rows, cols = y0, x0  # the windows' corners: copied by slices
+        windows_of = _windows_view
     else:
         ys_c = np.clip(ys, 0, height - 1)
         xs_c = np.clip(xs, 0, width - 1)
         rows, cols = ys_c[:, :, None], xs_c[:, None, :]
-    win = sub[rows, cols].astype(np.float64)  # (m, S, S)
+        windows_of = _gather
+    win_dn = windows_of(sub, size_w, rows, cols)  # (m, S, S) uint8
+    win = win_dn.astype(np.float64)
     # Pixels of other shapes (above the level and not this shape's) are left out.
     own = np.zeros(win.shape, bool)
     for i, k in enumerate(cand):
@@ -165,11 +182,11 @@ def detect_weighted(
         sy0, sx0 = max(oy, 0), max(ox, 0)
         sy1, sx1 = min(oy + mask.shape[0], size_w), min(ox + mask.shape[1], size_w)
         own[i, sy0:sy1, sx0:sx1] = mask[sy0 - oy : sy1 - oy, sx0 - ox : sx1 - ox]
-    valid = own | (win <= level)
+    valid = own | (win_dn <= level)
     if not inside:
         valid &= (ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]
     if keep_sub is not None:
-        valid &= keep_sub[rows, cols] > 0
+        valid &= windows_of(keep_sub, size_w, rows, cols) > 0
     grid_x = xs.astype(np.float64)[:, None, :]
     grid_y = ys.astype(np.float64)[:, :, None]
     r2_ap = (r_ap**2)[:, None, None]
@@ -179,11 +196,13 @@ def detect_weighted(
         dx = grid_x - cx[:, None, None]
         dy = grid_y - cy[:, None, None]
         d2 = dx * dx + dy * dy
-        aperture = valid & (d2 <= r2_ap)
+        in_aperture = d2 <= r2_ap
+        aperture = valid & in_aperture
         if ring_outside:  # the aperture lies within r2_ring: the ring is the rest of it
-            ring = (valid & (d2 <= r2_ring)) ^ aperture
+            in_ring = (d2 <= r2_ring) ^ in_aperture
         else:
-            ring = valid & (d2 > r2_ap) & (d2 <= r2_ring)
+            in_ring = (d2 > r2_ap) & (d2 <= r2_ring)
+        ring = valid & in_ring
         n_ring = ring.sum(axis=(1, 2))
         local_bg = np.where(
             n_ring >= 8, (win * ring).sum(axis=(1, 2)) / np.maximum(n_ring, 1), background
@@ -201,7 +220,9 @@ def detect_weighted(
     mxx = (wdx * dx).sum(axis=(1, 2)) / safe
     myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
     mxy = (wdx * dy).sum(axis=(1, 2)) / safe
-    peak = np.where(aperture, win - local_bg[:, None, None], -np.inf).max(axis=(1, 2))
+    # the brightest aperture pixel less the local background (rounding is monotonic: the
+    # same as the largest difference; an empty aperture has no flux and is rejected)
+    peak = (win_dn * aperture).max(axis=(1, 2)) - local_bg
     # Background noise of the flux and of the moments' anisotropy (for the blob checks),
     # over a circular aperture of radius R (~pi R^2 pixels): sigma per aperture pixel plus
     # the local background's error over the whole aperture; the anisotropy's two parts

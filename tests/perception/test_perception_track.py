@@ -1,7 +1,8 @@
 """Tracking (issue 37, item 2): the next image is measured only in windows around the blobs
-the last FULL measurement predicts, packed into one mosaic; it finds what a search of the
-whole image finds there (same centres, order, pairs, points), leaves out what lies outside
-the windows, and does not depend on the image's size."""
+the last FULL measurement predicts (one merged window in place on the image, several packed
+into one mosaic); it finds what a search of the whole image finds there (same centres,
+order, pairs, points), leaves out what lies outside the windows, and does not depend on the
+image's size."""
 
 from __future__ import annotations
 
@@ -47,17 +48,22 @@ def _render(case, width=640, height=480):
     return Renderer(sim).render(case.camera_T_tob, frame_index=case.frame_index), Rig(psvs=sim.psvs)
 
 
-@pytest.mark.parametrize("size", [(640, 480), (1920, 1200)])
-def test_tracking_finds_what_the_whole_image_search_finds(size):
+@pytest.mark.parametrize("size, margin_px", [((640, 480), 40), ((1920, 1200), 40), ((640, 480), 10)])
+def test_tracking_finds_what_the_whole_image_search_finds(size, margin_px):
+    # at the default 40 px margin the six windows merge into one, measured on the image's own
+    # pixels; at 10 px they stay apart and are packed into a mosaic: both paths are checked
     cases = random_cases(12, seed=5) + [c for c in clutter_cases(12, seed=5) if c.name != "lamp"]
     checked = same_count = 0
+    windows = []
     for case in cases:
         gray, rig = _render(case, *size)
-        p = Perception(PerceptionConfig(), rig)
+        p = Perception(PerceptionConfig(roi_margin_px=margin_px), rig)
         whole = p.measure(gray)
         if whole.paired.status != FULL:
             continue
-        tracked = p.track(gray, *_anchor(whole))
+        uv, blob_size = _anchor(whole)
+        windows.append(len(windows_around(uv, margin_px + blob_size.max(), *size)))
+        tracked = p.track(gray, uv, blob_size)
         _same(tracked, whole)
         same_count += len(tracked.blobs) == len(whole.blobs)
         # the region searched is the windows' bounding box, far smaller than the image
@@ -65,6 +71,10 @@ def test_tracking_finds_what_the_whole_image_search_finds(size):
         assert (u1 - u0) * (v1 - v0) < 0.5 * 640 * 480
         checked += 1
     assert checked >= 15 and same_count >= 12
+    if margin_px == 40:
+        assert sum(n == 1 for n in windows) >= 0.8 * len(windows)
+    else:
+        assert sum(n > 1 for n in windows) >= 0.8 * len(windows)
 
 
 def test_a_lamp_between_the_blobs_but_outside_every_window_is_not_measured():
@@ -96,6 +106,26 @@ def test_a_lamp_between_the_blobs_but_outside_every_window_is_not_measured():
     assert len(tracked.blobs) == 6 and tracked.match.status == FULL
     assert np.abs(tracked.blobs.uv_px - [u, v]).max(axis=1).min() > pad
     _same(tracked, whole)
+
+
+def test_one_merged_window_measures_only_its_own_pixels():
+    # at the default margin the six windows merge into one, which the detector measures in
+    # place on the image: a lamp 20 px outside it (inside the image) is not measured
+    case = random_cases(1, seed=7)[0]
+    gray, rig = _render(case)
+    p = Perception(PerceptionConfig(), rig)
+    whole = p.measure(gray)
+    uv, size = _anchor(whole)
+    (u0, v0, u1, v1), = windows_around(uv, p.config.roi_margin_px + size.max(), 640, 480)
+    u, v = (u1 + 20, (v0 + v1) // 2) if u1 + 25 < 640 else (u0 - 20, (v0 + v1) // 2)
+    lamp = gray.copy()
+    yy, xx = np.mgrid[0:480, 0:640]
+    lamp[(xx - u) ** 2 + (yy - v) ** 2 <= 9] = 200
+    assert len(p.measure(lamp).blobs) == len(whole.blobs) + 1  # the whole image sees it
+    tracked = p.track(lamp, uv, size)
+    assert tracked.region == (u0, v0, u1, v1)
+    _same(tracked, whole)
+    assert len(tracked.blobs) == len(whole.blobs)
 
 
 def test_overlapping_windows_merge_into_their_bounding_box():
