@@ -4,7 +4,7 @@ The pure core (``core``) checks and converts captured frames; the grabbing lives
 live shell's adapter (``capture``). See ``README.md`` in this folder.
 """
 
-import importlib
+from humanpt.runtime.lazy import lazy_exports
 
 # name -> the submodule that defines it, imported on first use (PEP 562): validating a
 # config file imports only ``.config``, so the server's install (no OpenCV) reads the
@@ -19,13 +19,7 @@ _EXPORTS = {
 }
 
 
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_exports(__name__, _EXPORTS)
 
 
 __all__ = [

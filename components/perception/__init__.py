@@ -8,7 +8,7 @@ of a FULL measurement against the measured pose (``checks``: a partly covered or
 source is flagged "degraded" and rebuilt, excluded or kept). See ``README.md``.
 """
 
-import importlib
+from humanpt.runtime.lazy import lazy_exports
 
 # name -> the submodule that defines it, imported on first use (PEP 562): validating a
 # config file imports only ``.config``, so the server's install (no OpenCV) reads the
@@ -48,13 +48,7 @@ _EXPORTS = {
 }
 
 
-def __getattr__(name: str):
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__ = lazy_exports(__name__, _EXPORTS)
 
 
 __all__ = [
