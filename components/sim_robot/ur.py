@@ -429,7 +429,15 @@ class UrSimRobotCore(RsiSimRobotCore):
 class RtdeServer:
     """The simulated controller live: an RTDE server at ``bind`` ("host:port"; port 0: a free
     one, :attr:`address`) and its cycle on a thread (``time.monotonic`` paced: each cycle at
-    start + k x cycle). Client packets are handled at once under the robot's lock."""
+    start + k x cycle). Client packets are handled at once under the robot's lock.
+
+    How a client answers (for ``humanpt bench ur``; the robot's program sees none of it): each
+    data package sent to a session is answered by the client's next input data package, in
+    order (TCP keeps it; the gateway answers every cycle once): ``answers`` counts, over every
+    session, ``packages`` sent, ``answered`` and ``in_time`` (the answer arrived within one
+    cycle of its package's sending: before the program's next cycle read the registers), and
+    ``latency_ns`` keeps each answer's time (package sent -> answer read). ``overruns``:
+    cycles started more than 1 ms after their deadline (the simulator itself late)."""
 
     def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
         from humanpt.robot_gateway.links.rsi.config import parse_address
@@ -450,6 +458,10 @@ class RtdeServer:
         self._stop = threading.Event()
         self._conns: dict[int, socket.socket] = {}
         self._threads: list[threading.Thread] = []
+        self._unanswered: dict[int, deque[int]] = {}  # session -> send times of its packages not answered yet
+        self.answers = dict.fromkeys(("packages", "answered", "in_time"), 0)
+        self.latency_ns: deque[int] = deque(maxlen=1_000_000)
+        self.overruns = 0
 
     def start(self) -> RtdeServer:
         for target, name in ((self._accept_loop, "rtde-accept"), (self._cycle_loop, "rtde-cycle")):
@@ -485,7 +497,12 @@ class RtdeServer:
                 if not data:
                     break
                 with self.lock:
-                    reply = session.feed(data, time.monotonic_ns())
+                    now = time.monotonic_ns()
+                    before = self.robot.counters["input_packages"]
+                    reply = session.feed(data, now)
+                    self._answered(session.sid, self.robot.counters["input_packages"] - before, now)
+                    if not session.started:  # paused (the client sets up again): what it did not answer, never
+                        self._unanswered.pop(session.sid, None)
                     if reply:
                         conn.sendall(reply)
                 if session.closed is not None:
@@ -496,7 +513,21 @@ class RtdeServer:
             with self.lock:
                 self.robot.disconnect(session)
                 self._conns.pop(session.sid, None)
+                self._unanswered.pop(session.sid, None)
             conn.close()
+
+    def _answered(self, sid: int, n: int, now_ns: int) -> None:
+        """``n`` input data packages of session ``sid`` read at ``now_ns``: each answers the
+        oldest package not answered yet."""
+        waiting = self._unanswered.get(sid)
+        period_ns = round(self.robot.cycle_ms * 1e6)
+        for _ in range(n):
+            if not waiting:
+                return  # (an input package before any data package: the client's own, not an answer)
+            lat = now_ns - waiting.popleft()
+            self.answers["answered"] += 1
+            self.answers["in_time"] += lat <= period_ns
+            self.latency_ns.append(lat)
 
     def _cycle_loop(self) -> None:
         period = self.robot.cycle_ms / 1000.0
@@ -507,6 +538,8 @@ class RtdeServer:
             delay = t0 + k * period - time.monotonic()
             if delay > 0:
                 self._stop.wait(delay)
+            elif delay < -1e-3:
+                self.overruns += 1
             with self.lock:
                 out = self.robot.cycle(time.monotonic_ns())
                 for sid, data in out.items():
@@ -516,7 +549,9 @@ class RtdeServer:
                     try:
                         conn.sendall(data)
                     except OSError:
-                        pass
+                        continue
+                    self._unanswered.setdefault(sid, deque(maxlen=100_000)).append(time.monotonic_ns())
+                    self.answers["packages"] += 1
 
     def disconnect_all(self) -> None:
         """Drop every client (a controller reboot's view from the network)."""
