@@ -669,9 +669,10 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
                    "console, reset; the robot link's (issue 29): kill, bigseam, and with --link rsi inject, junk, "
                    "ipoc; with --secure also unauthorised, uncertified, token, aclflood, partition; default all)")
-    q.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
-                   help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms) or "
-                   "ABB EGM over UDP (4 ms: kill and junk); "
+    q.add_argument("--link", choices=["alter", "rsi", "abb", "ur"], default="alter",
+                   help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms), "
+                   "ABB EGM over UDP (4 ms: kill and junk) or UR RTDE over TCP (a CB3's 8 ms: kill, rtde2, rtdejunk, "
+                   "freeze); "
                    "the rows that do not apply to it are skipped, with the reason")
     q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
                    "cores of a small machine); with --secure also issue 19's but the floods and the partition")
