@@ -14,15 +14,19 @@ program with its watchdog running):
   the controller drops each such client; judged: the gateway's session went on (robot states
   after it, no ``link_down``) and the program never stopped the arm.
 - ``freeze`` (late and lost answers): the gateway frozen (SIGSTOP) for 0.5 s while the robot
-  plays a line at 40 mm/s, then let go: no answer for 62 cycles at 8 ms (a loaded PC's worst);
+  plays a line at 40 mm/s, then let go: no answer for 62 cycles at 8 ms (a loaded PC's stall);
   the program's watchdog stops the arm after ``watchdog_cycles``; judged: the arm moved at most
   the lead + 2 cycles at the limit after the freeze, as after a kill; whether the program
   followed again once the answers came (a newer sequence within the lead) is reported.
+- ``lost`` (lost messages): the simulated controller frozen (SIGSTOP) for 0.5 s: 62 data
+  packages never sent; judged: robot states again afterwards and no fault latched (the
+  gateway's silence watchdog may restart the link: reported).
 
-Duplicated, reordered and lost data packages cannot happen between the two ends of one TCP
-connection; the link drops a package whose timestamp does not advance, and a foreign header
-(tests/ur/test_ur_link.py). A stopped program turns corrections off (runtime_state;
-tests/ur/test_ur_link.py): the simulated UR's program is stopped only from the pendant.
+Duplicated and reordered data packages cannot happen between the two ends of one TCP
+connection, and lost ones only as the robot's silence (``lost``); the link drops a package
+whose timestamp does not advance, and a foreign header (tests/ur/test_ur_link.py). A stopped
+program turns corrections off (runtime_state; tests/ur/test_ur_link.py): the simulated UR's
+program is stopped only from its pendant (no row).
 """
 
 from __future__ import annotations
@@ -130,7 +134,7 @@ def attack_rtde_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
     host, port = _rtde_address(ctx)
     junk = [b"junk\r\n", b"\xff\xff\xffUUUU", rtde.pack(ord("Z"), b"\x00" * 16), b"\x00\x03U" * 50,
             bytes(range(256))]
-    t0, wall0 = time.monotonic(), time.time_ns()
+    t0 = time.monotonic()
     n = conns = 0
     while time.monotonic() - t0 < seconds:
         try:
@@ -154,8 +158,7 @@ def attack_rtde_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
                 + ("the gateway's session went on" if going and not downs else
                    f"the gateway's session BROKE ({len(downs)} link_down)")
                 + ("" if not stops else f"; the program STOPPED the arm ({stops[0].code})")
-                + f"; the controller: {len(bad)} bad_rtde events"
-                + f" (robot states since {(wall1 - wall0) / 1e9:.1f} s ago)")
+                + f"; the controller: {len(bad)} bad_rtde events")
 
 
 def attack_freeze(ctx: Ctx, row: FaultRow) -> None:
@@ -210,6 +213,31 @@ def attack_freeze(ctx: Ctx, row: FaultRow) -> None:
         _console(ctx, "controller", "track", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
 
 
+def attack_robot_frozen(ctx: Ctx, row: FaultRow) -> None:
+    """The simulated controller frozen (SIGSTOP) for 0.5 s: its data packages lost meanwhile."""
+    pid = ctx.control.pid("sim_robot") if ctx.control is not None else None
+    if pid is None:
+        row.note = "no handle on the robot's process"
+        return
+    t0 = time.monotonic()
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(FREEZE_S)  # (the fault itself is a duration: the robot silent this long)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    wall1 = time.time_ns()
+    going = _wait(lambda: _state_after(ctx, wall1), LINK_BACK_TIMEOUT_S, ctx)
+    fault = ctx.mon.wait_event(t0, ("fault",), "robot_gateway", timeout_s=0.0)
+    flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
+    seen = sorted({e.code for e in ctx.mon.events_since(t0) if e.source == "robot_gateway"})
+    first = ctx.mon.wait_event(t0, tuple(seen), "robot_gateway", timeout_s=0.0) if seen else None
+    row.reaction_ms = _ms(first and first[0], t0)
+    row.expected = going and fault is None and not flagged
+    row.note = (("robot states again" if going else "NO robot state since")
+                + ("; no fault latched" if fault is None and not flagged else "; a FAULT latched")
+                + (f"; robot_gateway: {', '.join(seen)}" if seen else ""))
+
+
 def ur_attacks():
     from humanpt.bench.faults import Attack
 
@@ -219,5 +247,7 @@ def ur_attacks():
         Attack("rtdejunk", f"junk on the robot's RTDE port ({JUNK_S:g} s)", attack_rtde_junk, keeps_loop=False,
                links=("ur",)),
         Attack("freeze", f"gateway frozen {FREEZE_S:g} s mid-motion (late answers)", attack_freeze,
+               keeps_loop=False, links=("ur",)),
+        Attack("lost", f"robot frozen {FREEZE_S:g} s (its data packages lost)", attack_robot_frozen,
                keeps_loop=False, links=("ur",)),
     )
