@@ -154,17 +154,19 @@ def refuse_for_calibrate(args) -> None:
             raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
     # The job runs on the robot asked for (issue 33.2): the simulated Puma behind the gateway
     # and its ALTER link (default), or the stand-in; never another one.
-    if getattr(args, "link", "alter") != "alter":
+    if getattr(args, "link", "alter") not in ("alter", "ur"):  # (--link ur: the UR5e, as --robot ur)
         raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
     if getattr(args, "rig_kind", "psvs") != "psvs":
         raise SystemExit("humanpt demo --calibrate: the job calibrates the PSVS; a stereo pair is calibrated by "
                          "`humanpt calibrate stereo` (--rig-kind stereo runs the plain demo on the pair)")
-    if getattr(args, "robot", None) not in (None, "puma", "standin"):
+    if getattr(args, "robot", None) not in (None, "puma", "standin", "ur"):
         raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
-                         "Puma over ALTER (--robot puma, the default) or on the stand-in (--robot standin)")
+                         "Puma over ALTER (--robot puma, the default), on the simulated UR5e over RTDE (--robot ur) "
+                         "or on the stand-in (--robot standin)")
 
 
-ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in"}
+ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in",
+               "ur": "the simulated UR5e (robot_gateway + RTDE at 2 ms + sim_robot)"}
 
 
 def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
@@ -174,6 +176,8 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
 
     world = World.named(args.world)
     rig = load_rig(args.rig) if args.rig else None
+    if getattr(args, "link", "alter") == "ur":  # --robot ur (= --link ur): the job on the UR5e
+        args.robot = "ur"
     told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
     print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
           f"{ROBOT_NAMES.get(args.robot, args.robot)}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "

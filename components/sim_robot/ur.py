@@ -521,9 +521,10 @@ class RtdeServer:
                     now = time.monotonic_ns()
                     before = self.robot.counters["input_packages"]
                     reply = session.feed(data, now)
-                    self._answered(session.sid, self.robot.counters["input_packages"] - before, now)
-                    if not session.started:  # paused (the client sets up again): what it did not answer, never
-                        self._unanswered.pop(session.sid, None)
+                    if session.started:
+                        self._answered(session.sid, self.robot.counters["input_packages"] - before, now)
+                    else:  # paused (the client sets up again): what it did not answer, never; what it
+                        self._unanswered.pop(session.sid, None)  # sends meanwhile answers none of the next
                     if reply:
                         conn.sendall(reply)
                 if session.closed is not None:

@@ -214,8 +214,9 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
                mount: tuple | None = None) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
     if name == "arm" and robot != "puma":
-        return rig, StageResult(name, False, 0.0, skipped=f"the {robot} robot has no joints (exact kinematics): "
-                                                         "no arm to calibrate")
+        why = ("the UR5e's kinematics are exact on the twin (the arm stage calibrates the Puma's)" if robot == "ur"
+               else f"the {robot} robot has no joints (exact kinematics)")
+        return rig, StageResult(name, False, 0.0, skipped=f"{why}: no arm to calibrate")
     t0 = time.perf_counter()
     try:
         fn = getattr(importlib.import_module(f"humanpt.twin.{module}"), entry)
@@ -223,7 +224,8 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
     except (ImportError, AttributeError) as e:
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
-        kw = {"robot": robot} if name in ("hand-eye", "arm") else {}  # calibrate the arm that will weld
+        # calibrate the arm that will weld (the UR5e's hand-eye on the stand-in: a camera on a flange, exact)
+        kw = {"robot": "standin" if robot == "ur" else robot} if name in ("hand-eye", "arm") else {}
         if name == "arm" and mount is not None:  # where the job mounts it, the target where the seam starts
             kw["mount"], kw["scenario"] = mount
         result, report, truth = fn(world, rig, seed, progress=progress, **kw)
@@ -232,6 +234,9 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
     date = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     return apply(rig, result, date), StageResult(name, True, time.perf_counter() - t0, list(report), list(truth),
                                                  checks=list(getattr(truth, "checks", [])))
+
+
+UR_CYCLE_MS = 2.0  # the job on the UR5e: the e-Series' RTDE cycle
 
 
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
@@ -243,7 +248,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
     done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
-    ``standin`` (default) or ``puma``: the simulated Puma behind the gateway and its ALTER
+    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at 2 ms,
+    mounted as the Puma is; its hand-eye calibrated on the stand-in, no arm stage: its
+    kinematics are exact on the twin) or ``puma``: the simulated Puma behind the gateway and its ALTER
     line, mounted in the joint pose that keeps its wrist farthest from its singularity
     while it watches and welds the seam (:func:`humanpt.twin.system.puma_mount_joints`),
     the seam planned on it (:func:`humanpt.controller.playback.plan_on_arm`: a joint-space
@@ -281,10 +288,13 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     seam = _seam(cfg.operator)
     design = polyline_seam(seam)  # the seam as designed, to compare against
     view, mount, mount_joints = mounting(cfg, robot)
-    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
-                     sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
+    # ``ur``: the simulated UR5e behind the gateway's RTDE link at the e-Series' 2 ms (build_system's
+    # arm behind a link, mounted as the Puma is, in its own comfortable joint pose there).
+    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma" if robot == "ur" else robot,
+                     rig=cfg.rig, sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
-                     mount_world_T_flange_mm=mount if robot == "puma" else None, mount_joints_deg=mount_joints)
+                     mount_world_T_flange_mm=mount if robot in ("puma", "ur") else None, mount_joints_deg=mount_joints,
+                     ur_cycle_ms=UR_CYCLE_MS if robot == "ur" else None)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
