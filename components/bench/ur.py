@@ -7,10 +7,11 @@ data package every cycle to the gateway's RTDE client (the link's ``TcpClientAda
 own thread); the gateway core runs on this thread in the loop ``bench rsi`` runs
 (:func:`humanpt.bench.rsi.serve_gateway`), and a scripted command-ahead controller answers
 each robot state at once. A cycle is *answered in time* when the gateway's answer to its data
-package (the input package with the next sequence and target) reached the robot within one
-cycle of the package's sending: before the program's next cycle read the registers. The run
-lasts ``seconds`` from the gateway's first answer; the cycles counted are every data package
-of the gateway's session (those sent in the last cycle, still unanswered, excepted).
+package (an input package with the next sequence and target) was read by the robot before its
+next data package went out: before the program's next cycle read the registers, as the
+program sees it (:class:`~humanpt.sim_robot.ur.RtdeServer`). The run lasts ``seconds`` from the
+gateway's first answer; every data package of the gateway's session is counted (the last,
+whose cycle had not ended, excepted).
 Reported: cycles, answered in time, late (answered later, or never), the answer time
 (package sent -> answer read by the robot) p50/p99 and its histogram, the gateway's
 per-cycle work, the program's watchdog stops. No Zenoh: what the link and the gateway
@@ -72,10 +73,7 @@ def _run_robot(cycle_ms: float, seconds: float, tell_address, stop: threading.Ev
         if answered:
             stop.wait(seconds)
         with server.lock:
-            now = time.monotonic_ns()
-            period_ns = round(cycle_ms * 1e6)
-            in_flight = sum(1 for q in server._unanswered.values() for t in q if now - t <= period_ns)
-            side = _RobotSide(server.answers["packages"] - in_flight, server.answers["in_time"],
+            side = _RobotSide(server.answers["packages"], server.answers["answered"],
                               list(server.latency_ns), server.overruns, robot.counters["watchdog_stops"],
                               list(robot.events), robot.base_T_flange_mm[:3, 3] - start_mm, answered)
     finally:
@@ -154,7 +152,7 @@ def run_ur(cycle_ms: float = E_SERIES_CYCLE_MS, seconds: float = 60.0, *, robot_
     run.on_time = side.in_time
     run.late = side.packages - side.in_time
     run.latency_ms = [ns / 1e6 for ns in side.latency_ns]
-    run.histogram = latency_histogram([ns for ns in side.latency_ns if ns <= cycle_ms * 1e6], run.late)
+    run.histogram = latency_histogram(side.latency_ns, run.late)
     run.gateway = dict(core.counters)
     run.robot_events = side.events
     run.overruns = side.overruns

@@ -197,8 +197,8 @@ def bench_ur(args) -> int:
     print("")
     print(link_table(runs))
     print("\nlatency = the robot sends a cycle's data package -> the gateway's answer (the next sequence and "
-          "target) is read by the robot (p50/p99 of every answer); on time = within one cycle (before the program's "
-          "next cycle reads the registers); late = answered later, or never. work = the gateway's serial_rx step "
+          "target) is read by the robot (p50/p99 of the cycles answered); on time = read before the robot's next data "
+          "package (the program's next cycle reads the registers); late = not. work = the gateway's serial_rx step "
           "(decode, safety rules, encode) and the command step, wall time. robot overruns = robot cycles started "
           "> 1 ms after their deadline (the simulator itself late). stopped: the program's watchdog (no new "
           "sequence for watchdog_cycles) stopping the arm.")

@@ -452,13 +452,13 @@ class RtdeServer:
     one, :attr:`address`) and its cycle on a thread (``time.monotonic`` paced: each cycle at
     start + k x cycle). Client packets are handled at once under the robot's lock.
 
-    How a client answers (for ``humanpt bench ur``; the robot's program sees none of it): each
-    data package sent to a session is answered by the client's next input data package, in
-    order (TCP keeps it; the gateway answers every cycle once): ``answers`` counts, over every
-    session, ``packages`` sent, ``answered`` and ``in_time`` (the answer arrived within one
-    cycle of its package's sending: before the program's next cycle read the registers), and
-    ``latency_ns`` keeps each answer's time (package sent -> answer read). ``overruns``:
-    cycles started more than 1 ms after their deadline (the simulator itself late)."""
+    How a client answers (for ``humanpt bench ur``; the robot's program sees none of it): a
+    session's data package is *answered* when the client's next input data package is read
+    before the session's next data package goes out (before the program's next cycle reads the
+    registers, as the program sees it: a new target for its next cycle). ``answers`` counts,
+    over every session, the ``packages`` judged (those whose next one went out) and the
+    ``answered`` ones, and ``latency_ns`` keeps each answer's time (package sent -> the first
+    input package read after it). ``overruns``: cycles started more than 1 ms after their deadline (the simulator itself late)."""
 
     def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
         from humanpt.robot_gateway.links.rsi.config import parse_address
@@ -479,8 +479,8 @@ class RtdeServer:
         self._stop = threading.Event()
         self._conns: dict[int, socket.socket] = {}
         self._threads: list[threading.Thread] = []
-        self._unanswered: dict[int, deque[int]] = {}  # session -> send times of its packages not answered yet
-        self.answers = dict.fromkeys(("packages", "answered", "in_time"), 0)
+        self._sent: dict[int, list] = {}  # session -> [send time of its last data package, answered yet]
+        self.answers = dict.fromkeys(("packages", "answered"), 0)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
         self.overruns = 0
 
@@ -521,10 +521,8 @@ class RtdeServer:
                     now = time.monotonic_ns()
                     before = self.robot.counters["input_packages"]
                     reply = session.feed(data, now)
-                    if session.started:
-                        self._answered(session.sid, self.robot.counters["input_packages"] - before, now)
-                    else:  # paused (the client sets up again): what it did not answer, never; what it
-                        self._unanswered.pop(session.sid, None)  # sends meanwhile answers none of the next
+                    if self.robot.counters["input_packages"] > before:
+                        self._answered(session.sid, now)
                     if reply:
                         conn.sendall(reply)
                 if session.closed is not None:
@@ -535,21 +533,16 @@ class RtdeServer:
             with self.lock:
                 self.robot.disconnect(session)
                 self._conns.pop(session.sid, None)
-                self._unanswered.pop(session.sid, None)
+                self._sent.pop(session.sid, None)
             conn.close()
 
-    def _answered(self, sid: int, n: int, now_ns: int) -> None:
-        """``n`` input data packages of session ``sid`` read at ``now_ns``: each answers the
-        oldest package not answered yet."""
-        waiting = self._unanswered.get(sid)
-        period_ns = round(self.robot.cycle_ms * 1e6)
-        for _ in range(n):
-            if not waiting:
-                return  # (an input package before any data package: the client's own, not an answer)
-            lat = now_ns - waiting.popleft()
-            self.answers["answered"] += 1
-            self.answers["in_time"] += lat <= period_ns
-            self.latency_ns.append(lat)
+    def _answered(self, sid: int, now_ns: int) -> None:
+        """An input data package of session ``sid`` read at ``now_ns``: the first since its last
+        data package answers it."""
+        last = self._sent.get(sid)
+        if last is not None and not last[1]:
+            last[1] = True
+            self.latency_ns.append(now_ns - last[0])
 
     def _cycle_loop(self) -> None:
         period = self.robot.cycle_ms / 1000.0
@@ -572,8 +565,11 @@ class RtdeServer:
                         conn.sendall(data)
                     except OSError:
                         continue
-                    self._unanswered.setdefault(sid, deque(maxlen=100_000)).append(time.monotonic_ns())
-                    self.answers["packages"] += 1
+                    last = self._sent.get(sid)
+                    if last is not None:  # the last package's window closes: judged
+                        self.answers["packages"] += 1
+                        self.answers["answered"] += last[1]
+                    self._sent[sid] = [time.monotonic_ns(), False]
 
     def disconnect_all(self) -> None:
         """Drop every client (a controller reboot's view from the network)."""

@@ -1,7 +1,7 @@
 """``humanpt bench ur`` (issue 34): the gateway <-> the simulated UR controller (its own process,
 a real TCP connection on loopback) at the CB3's 8 ms for 2 s. Its counts are reported, not
-judged against a rate: each cycle is answered in time or late, the histogram holds the answers
-in time, every answer the robot read is one the gateway sent, and the scripted controller's
+judged against a rate: each cycle is answered in time or late, the histogram holds the answer
+times, every answer the robot read is one the gateway sent, and the scripted controller's
 circle reached the arm. The table the verb prints carries the run's counts."""
 
 from __future__ import annotations
@@ -29,10 +29,9 @@ def run():
 def test_every_cycle_is_answered_in_time_or_late_and_every_answer_was_the_gateways(run):
     assert run.cycles >= 1 and run.on_time + run.late == run.cycles
     buckets = [run.histogram[f"<={e:g} ms"] for e in LATENCY_EDGES_MS]
-    assert sum(buckets) == run.on_time and run.histogram["late"] == run.late  # in time: within the 8 ms cycle
-    answered = len(run.latency_ms)
-    assert run.on_time <= answered <= run.cycles + 1  # (+1: one sent in the last cycle, answered)
-    assert sum(ms <= 8.0 for ms in run.latency_ms) == run.on_time
+    assert sum(buckets) == sum(ms <= 12.0 for ms in run.latency_ms) and run.histogram["late"] == run.late
+    answered = len(run.latency_ms)  # one per cycle answered (+1: the last cycle's, not judged)
+    assert run.on_time <= answered <= run.on_time + 1
     gw = run.gateway
     sent = gw["fresh"] + gw["reused"] + gw["zero"]
     assert answered <= sent <= gw["statuses"]  # the robot read only what the gateway sent, one per cycle
