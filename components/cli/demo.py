@@ -149,7 +149,13 @@ _NOT_FOR_CALIBRATE = {"viewer": "the job runs lock-step, without a viewer proces
 
 def refuse_for_calibrate(args) -> None:
     """End the command, naming the option, when ``args`` give one the job does not take."""
+    ur = getattr(args, "robot", None) == "ur" or getattr(args, "link", "alter") == "ur"
     for name, why in _NOT_FOR_CALIBRATE.items():
+        if name == "cycle_ms" and ur:  # the UR5e's: RTDE's 2 ms (e-Series) or 8 ms (CB3)
+            if getattr(args, name, None) not in (None, 2.0, 8.0):
+                raise SystemExit(f"humanpt demo --calibrate: --cycle-ms {args.cycle_ms:g}: UR RTDE runs at 2 ms "
+                                 "(e-Series) or 8 ms (CB3)")
+            continue
         if getattr(args, name, None) not in (None, False):
             raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
     # The job runs on the robot asked for (issue 33.2): the simulated Puma behind the gateway
@@ -166,7 +172,7 @@ def refuse_for_calibrate(args) -> None:
 
 
 ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in",
-               "ur": "the simulated UR5e (robot_gateway + RTDE at 2 ms + sim_robot)"}
+               "ur": "the simulated UR5e (robot_gateway + RTDE + sim_robot)"}
 
 
 def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
@@ -184,8 +190,9 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
           f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
+        ur = {"ur_cycle_ms": float(getattr(args, "cycle_ms", None) or 2.0)} if args.robot == "ur" else {}
         res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
-                                   robot=args.robot, overrides=overrides, law=args.law)
+                                   robot=args.robot, overrides=overrides, law=args.law, **ur)
     finally:
         bar.close()
     from humanpt.twin.report import job_report

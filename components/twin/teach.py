@@ -236,7 +236,7 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
                                                  checks=list(getattr(truth, "checks", [])))
 
 
-UR_CYCLE_MS = 2.0  # the job on the UR5e: the e-Series' RTDE cycle
+UR_CYCLE_MS = 2.0  # the job on the UR5e: the e-Series' RTDE cycle (default)
 
 
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
@@ -244,11 +244,12 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
                          robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None,
-                         overrides: dict[str, dict] | None = None, law: str = "thetau") -> TeachResult:
+                         overrides: dict[str, dict] | None = None, law: str = "thetau",
+                         ur_cycle_ms: float = UR_CYCLE_MS) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
     done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
-    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at 2 ms,
+    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at ``ur_cycle_ms``, 2 or 8,
     mounted as the Puma is; its hand-eye calibrated on the stand-in, no arm stage: its
     kinematics are exact on the twin) or ``puma``: the simulated Puma behind the gateway and its ALTER
     line, mounted in the joint pose that keeps its wrist farthest from its singularity
@@ -294,7 +295,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                      rig=cfg.rig, sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
                      mount_world_T_flange_mm=mount if robot in ("puma", "ur") else None, mount_joints_deg=mount_joints,
-                     ur_cycle_ms=UR_CYCLE_MS if robot == "ur" else None)
+                     ur_cycle_ms=ur_cycle_ms if robot == "ur" else None)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))
