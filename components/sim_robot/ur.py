@@ -458,7 +458,8 @@ class RtdeServer:
     registers, as the program sees it: a new target for its next cycle). ``answers`` counts,
     over every session, the ``packages`` judged (those whose next one went out) and the
     ``answered`` ones, and ``latency_ns`` keeps each answer's time (package sent -> the first
-    input package read after it). ``overruns``: cycles started more than 1 ms after their deadline (the simulator itself late)."""
+    input package read after it). ``overruns``: cycles started more than 1 ms after their
+    deadline (the simulator itself late)."""
 
     def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
         from humanpt.robot_gateway.links.rsi.config import parse_address

@@ -46,7 +46,7 @@ from . import evaluate
 from .run import SystemConfig
 from .system import build_system, nominal_rig, operator_config, puma_mount_joints
 from .world import start_flange_for
-from .worlds import World
+from .worlds import ERROR_SOURCES, World
 
 # Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
 MOUNT_FRACTION = 0.5
@@ -249,10 +249,11 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
     done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
-    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at ``ur_cycle_ms``, 2 or 8,
-    mounted as the Puma is; its hand-eye calibrated on the stand-in, no arm stage: its
-    kinematics are exact on the twin) or ``puma``: the simulated Puma behind the gateway and its ALTER
-    line, mounted in the joint pose that keeps its wrist farthest from its singularity
+    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at
+    ``ur_cycle_ms``, 2 or 8, mounted as the Puma is; its hand-eye calibrated on the
+    stand-in, no arm stage: its kinematics are exact on the twin, the world's errors of the
+    Puma's kinematics left out) or ``puma``: the simulated Puma behind the gateway and its
+    ALTER line, mounted in the joint pose that keeps its wrist farthest from its singularity
     while it watches and welds the seam (:func:`humanpt.twin.system.puma_mount_joints`),
     the seam planned on it (:func:`humanpt.controller.playback.plan_on_arm`: a joint-space
     approach, the seam slowed where a joint would be too fast) or refused before any
@@ -262,6 +263,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``)."""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
+    if robot == "ur":  # the world's errors of the Puma's kinematics (issue 32.4) are not the UR5e's
+        puma_only = {s.name for s in ERROR_SOURCES if s.robot == "puma"}
+        world = World(world.name, tuple(s for s in world.sources if s not in puma_only), world.extra)
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
