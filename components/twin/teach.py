@@ -237,6 +237,7 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
 
 
 UR_CYCLE_MS = 2.0  # the job on the UR5e: the e-Series' RTDE cycle (default)
+PUMA_CYCLE_MS = 28.0  # ALTER's: the recording delay's cycles are counted in it
 
 
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
@@ -263,9 +264,16 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``)."""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
+    ctl_kw: dict = {}
     if robot == "ur":  # the world's errors of the Puma's kinematics (issue 32.4) are not the UR5e's
         puma_only = {s.name for s in ERROR_SOURCES if s.robot == "puma"}
         world = World(world.name, tuple(s for s in world.sources if s not in puma_only), world.extra)
+        if "recording_delay_cycles" not in ((overrides or {}).get("controller") or {}):
+            # A path point as often as on the Puma (every 10 of its 28 ms cycles), not every 10 of
+            # the UR's 2 ms: a point every 20 ms put 1485 on the trapezium (the Puma's 178), which
+            # `path fit` made 61 pieces (an arc of 0.57 mm radius) and the playback refused.
+            ctl_kw["recording_delay_cycles"] = max(1, round(
+                ControllerConfig().recording_delay_cycles * PUMA_CYCLE_MS / ur_cycle_ms))
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
@@ -273,7 +281,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     mount = None
     if "arm" in names and robot == "puma":  # the arm stage mounts the Puma as the teach-and-play run will
         cfg0 = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
-                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law,
+                                                                     **ctl_kw))
         from .cal_arm import fixture_at_seam_start
 
         _, m, j = mounting(cfg0, robot)
@@ -285,7 +294,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         results.append(res)
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
-                                    controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+                                    controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law,
+                                                                **ctl_kw))
     playback_speed_mm_s = cfg.controller.playback_speed_mm_s
     # The Puma is mounted so that both where it watches the seam (the camera d_z from the
     # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
