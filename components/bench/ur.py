@@ -66,10 +66,9 @@ def _run_robot(cycle_ms: float, seconds: float, tell_address, stop: threading.Ev
     try:
         tell_address("{}:{}".format(*server.address))
         deadline = time.monotonic() + START_TIMEOUT_S
-        while not server.answers["answered"] and time.monotonic() < deadline:
-            if stop.wait(0.01):  # (the gateway's first answer: polled, at most every 10 ms)
-                break
-        answered = bool(server.answers["answered"])
+        while not server.answering.wait(0.1) and not stop.is_set() and time.monotonic() < deadline:
+            pass  # (the gateway's first answer; a stop from the bench ends the wait)
+        answered = server.answering.is_set()
         if answered:
             stop.wait(seconds)
         with server.lock:

@@ -484,6 +484,7 @@ class RtdeServer:
         self.answers = dict.fromkeys(("packages", "answered"), 0)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
         self.overruns = 0
+        self.answering = threading.Event()  # set at a client's first answer
 
     def start(self) -> RtdeServer:
         for target, name in ((self._accept_loop, "rtde-accept"), (self._cycle_loop, "rtde-cycle")):
@@ -544,6 +545,7 @@ class RtdeServer:
         if last is not None and not last[1]:
             last[1] = True
             self.latency_ns.append(now_ns - last[0])
+            self.answering.set()
 
     def _cycle_loop(self) -> None:
         period = self.robot.cycle_ms / 1000.0
