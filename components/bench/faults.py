@@ -879,7 +879,8 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     (:func:`humanpt.twin.live.run_live`), the bench's session an operator's, each
     injection of issue 14 from the session of the key's publisher (an insider); without
     it the attacks of :data:`SECURE_ATTACKS` give skipped rows.  ``link``: the robot link,
-    ``alter`` (the Puma's serial line, a pty, 28 ms) or ``rsi`` (UDP on loopback, 12 ms); an
+    ``alter`` (the Puma's serial line, a pty, 28 ms), ``rsi`` (UDP on loopback, 12 ms), ``abb``
+    (EGM, 4 ms) or ``ur`` (RTDE over TCP at a CB3's 8 ms: :mod:`humanpt.bench.ur_faults`); an
     attack that does not apply to it gives a skipped row."""
     from humanpt.bench.ur_faults import UR_FAULTS_CYCLE_MS
     from humanpt.runtime import config as cfgmod
