@@ -684,8 +684,9 @@ def all_attacks() -> tuple[Attack, ...]:
     """Every attack: issue 14's (:data:`ATTACKS`), then issue 29's on the robot link
     (:data:`humanpt.bench.link_faults.LINK_ATTACKS`), then those that need mTLS."""
     from humanpt.bench.link_faults import LINK_ATTACKS
+    from humanpt.bench.ur_faults import ur_attacks
 
-    return ATTACKS + LINK_ATTACKS + SECURE_ATTACKS
+    return ATTACKS + LINK_ATTACKS + ur_attacks() + SECURE_ATTACKS
 
 
 # -- the loop's health ----------------------------------------------------------------------
@@ -878,14 +879,16 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
     (:func:`humanpt.twin.live.run_live`), the bench's session an operator's, each
     injection of issue 14 from the session of the key's publisher (an insider); without
     it the attacks of :data:`SECURE_ATTACKS` give skipped rows.  ``link``: the robot link,
-    ``alter`` (the Puma's serial line, a pty, 28 ms) or ``rsi`` (UDP on loopback, 12 ms); an
+    ``alter`` (the Puma's serial line, a pty, 28 ms), ``rsi`` (UDP on loopback, 12 ms), ``abb``
+    (EGM, 4 ms) or ``ur`` (RTDE over TCP at a CB3's 8 ms: :mod:`humanpt.bench.ur_faults`); an
     attack that does not apply to it gives a skipped row."""
+    from humanpt.bench.ur_faults import UR_FAULTS_CYCLE_MS
     from humanpt.runtime import config as cfgmod
     from humanpt.twin.live import LiveControl, run_live
     from humanpt.twin.run import SystemConfig
 
-    if link not in ("alter", "rsi", "abb"):
-        raise ValueError(f"unknown robot link {link!r}: alter, rsi or abb")
+    if link not in ("alter", "rsi", "abb", "ur"):
+        raise ValueError(f"unknown robot link {link!r}: alter, rsi, abb or ur")
     every = all_attacks()
     unknown = set(only or ()) - {a.key for a in every}
     if unknown:
@@ -912,7 +915,8 @@ def run_faults(only: tuple[str, ...] | None = None, scenario: str = "static",
         try:
             result["live"] = run_live(SystemConfig.for_scenario(scenario, 0), run_dir, duration_s=3600.0,
                                       stop=stop, on_started=lambda _c: started.set(), secure=secure,
-                                      control=control, link=link, screen=False)
+                                      control=control, link=link, screen=False,
+                                      cycle_ms=UR_FAULTS_CYCLE_MS if link == "ur" else None)
         except BaseException as e:  # noqa: BLE001 -- reported by the caller
             result["error"] = e
         finally:
@@ -1001,6 +1005,10 @@ def gateway_config(file_cfg, link: str):
         from humanpt.robot_gateway.links.abb.config import AbbConfig
 
         return file_cfg.component("robot_gateway", AbbConfig)
+    if link == "ur":
+        from humanpt.robot_gateway.links.ur.config import UrConfig
+
+        return file_cfg.component("robot_gateway", UrConfig)
     from humanpt.robot_gateway.links.alter.config import AlterConfig
 
     return file_cfg.component("robot_gateway", AlterConfig)

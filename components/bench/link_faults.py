@@ -150,6 +150,17 @@ def _line(x0: np.ndarray, sign: float, length_mm: float, n: int, out_and_back: b
     return pts
 
 
+def fast_or_along(ctx: Ctx, p_start: np.ndarray | None) -> bool:
+    """Whether the robot playing a line from ``p_start`` is where an attack mid-motion strikes:
+    at the playback's speed; when the robot lags its carrot and goes slower (a loaded machine;
+    the ALTER link's longer cycle), while it moves, a quarter of the way along the line, at the
+    speed it has. Both are events of the robot's own motion, not times: a slow machine only
+    takes longer to get there."""
+    now = _truth_now(ctx)
+    along = p_start is not None and now is not None and float(np.linalg.norm(now - p_start)) >= KILL_AT_MM
+    return _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S or (along and _speed_mm_s(ctx) >= MOVING_MM_S)
+
+
 def _events(ctx: Ctx, t0: float, source: str, codes: tuple[str, ...]) -> list[pb.Event]:
     return [ev for ev in ctx.mon.events_since(t0) if ev.source == source and ev.code in codes]
 
@@ -249,18 +260,10 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
             "; ".join(e.text for e in _events(ctx, t0, "controller", ("bad_command",))) or "no answer")
         return
     bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm
-    if ctx.link == "abb":  # EGM goes on to the last target: at most the lead ahead of the fed-back pose
+    if ctx.link in ("abb", "ur"):  # EGM and UR's program go on to the last target: at most the lead ahead
         bound += ctx.gw.max_lead_mm
     try:
-        # Killed at the playback's speed; when the robot lags its carrot and goes slower (a
-        # loaded machine; the ALTER link's longer cycle), killed while it moves, a quarter
-        # of the way along the line, at the speed it has (in the note). Both are events of
-        # the robot's own motion, not times: a slow machine only takes longer to get there.
-        def fast_or_along() -> bool:
-            now = _truth_now(ctx)
-            along = p_start is not None and now is not None and float(np.linalg.norm(now - p_start)) >= KILL_AT_MM
-            return _speed_mm_s(ctx) >= 0.8 * KILL_SPEED_MM_S or (along and _speed_mm_s(ctx) >= MOVING_MM_S)
-        if not _wait(fast_or_along, ANSWER_TIMEOUT_S, ctx):
+        if not _wait(lambda: fast_or_along(ctx, p_start), ANSWER_TIMEOUT_S, ctx):
             row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
             return
         speed = _speed_mm_s(ctx)
@@ -285,10 +288,11 @@ def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
         row.max_step_mm, row.limit_mm = moved, bound
         row.held = moved <= bound
         row.expected = bool(row.held)
-        seen = _first(ctx, t_kill, ("late_reply", "rsi_stopped", "egm_stopped", "fault", "robot_missed", "link_down"))
+        seen = _first(ctx, t_kill, ("late_reply", "rsi_stopped", "egm_stopped", "fault", "robot_missed", "link_down",
+                                    "watchdog_stop"))
         row.reaction_ms = _ms(seen and seen[0], t_kill)
         cycles = (tr[-1][0] - wall_kill) / (1e6 * ctx.gw.cycle_period_ms) if tr else 0.0
-        lead = f" + the lead {ctx.gw.max_lead_mm:g} mm" if ctx.link == "abb" else ""
+        lead = f" + the lead {ctx.gw.max_lead_mm:g} mm" if ctx.link in ("abb", "ur") else ""
         row.note = (f"killed at {speed:.1f} mm/s; the robot moved {moved:.2f} mm after the kill (bound "
                     f"{KILL_BOUND_CYCLES} cycles x {ctx.gw.max_step_mm:.2f} mm{lead} = {bound:.2f} mm) in "
                     f"{cycles:.0f} cycles"
@@ -425,7 +429,7 @@ def attack_big_seam(ctx: Ctx, row: FaultRow) -> None:
 
 LINK_ATTACKS: tuple[Attack, ...] = (
     Attack("kill", "gateway killed mid-motion (40 mm/s)", attack_gateway_killed, keeps_loop=False,
-           links=("alter", "rsi", "abb")),
+           links=("alter", "rsi", "abb", "ur")),
     Attack("inject", "<Rob> injection from another UDP port (80)", attack_inject, keeps_loop=False, links=("rsi",)),
     Attack("junk", f"junk UDP flood from another port ({JUNK_S:g} s)", attack_junk, keeps_loop=False,
            links=("rsi", "abb")),

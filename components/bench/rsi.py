@@ -79,6 +79,7 @@ class RsiRun:
     overruns: int = 0  # robot cycles that started > 1 ms after their deadline
     stopped: str | None = None
     moved_mm: np.ndarray | None = None  # (3,) where the flange went, base frame
+    latency_ms: list[float] = field(default_factory=list)  # robot sends -> the answer arrives, answered cycles
 
     @property
     def on_time_pct(self) -> float:
@@ -86,6 +87,9 @@ class RsiRun:
 
     def work_pct(self, q: float) -> float:
         return float(np.percentile(self.work_us, q)) if self.work_us else float("nan")
+
+    def latency_pct(self, q: float) -> float:
+        return float(np.percentile(self.latency_ms, q)) if self.latency_ms else float("nan")
 
 
 @dataclass
@@ -99,6 +103,7 @@ class _RobotSide:
     overruns: int
     stopped: str | None
     moved_mm: np.ndarray
+    latency_ns: list[int] = field(default_factory=list)
 
 
 def _run_robot(robot_cfg: SimRobotConfig, gateway: str, cycles: int,
@@ -115,7 +120,7 @@ def _run_robot(robot_cfg: SimRobotConfig, gateway: str, cycles: int,
         server.stop()
         server.join(2.0)
     return _RobotSide(dict(sim.counters), sim.latency_histogram(), list(sim.events), server.overruns,
-                      sim.stopped, sim.base_T_flange_mm[:3, 3] - start_mm)
+                      sim.stopped, sim.base_T_flange_mm[:3, 3] - start_mm, list(sim.latency_ns))
 
 
 def _robot_process(conn, robot_cfg: SimRobotConfig, gateway: str, cycles: int) -> None:
@@ -126,6 +131,45 @@ def _robot_process(conn, robot_cfg: SimRobotConfig, gateway: str, cycles: int) -
     tune_process()
     conn.send(_run_robot(robot_cfg, gateway, cycles))
     conn.close()
+
+
+def serve_gateway(core: GatewayCore, adapter, inbox: queue.SimpleQueue, controller: CommandAhead, run: RsiRun,
+                  *, running: Callable[[], bool], poll: Callable[[], None] = lambda: None) -> None:
+    """The gateway on this thread, as a link bench runs it (``bench rsi``, ``bench ur``): what
+    the link's adapter read (``inbox``: (topic, msg) put by its thread) and the gateway's timer
+    ticks go through ``core``; its link's bytes go out through ``adapter``, each robot state is
+    answered at once by the scripted ``controller``, its events are kept in ``run``, and the
+    wall time of each step of what the adapter read (decode, safety rules, encode, the
+    command) in ``run.work_us``. Until ``running()`` is False and the inbox is empty;
+    ``poll()`` is called between ticks."""
+    tx_topic = core.link.tx_topic
+    tick_ns = core.config.tick_period_ns
+
+    def handle(t_ns: int, topic: str, msg) -> None:
+        for out_topic, out in core.step(t_ns, topic, msg):
+            if out_topic == tx_topic:
+                adapter.write(out_topic, out)
+            elif out_topic == ROBOT_STATE:
+                handle(time.time_ns(), "controller/command", controller.answer(out))
+            elif out_topic.endswith("/events"):
+                run.gateway_events.append(out)
+
+    next_tick = time.time_ns()
+    while running() or not inbox.empty():
+        try:
+            topic, msg = inbox.get(timeout=max(0.0, (next_tick - time.time_ns()) / 1e9))
+        except queue.Empty:
+            pass
+        else:
+            t0 = time.perf_counter_ns()
+            handle(time.time_ns(), topic, msg)
+            run.work_us.append((time.perf_counter_ns() - t0) / 1e3)
+            continue
+        now = time.time_ns()
+        if now >= next_tick:
+            handle(now, "tick", pb.Tick(header=header(now), period_ns=tick_ns))
+            next_tick += tick_ns * max(1, (now - next_tick) // tick_ns + 1)
+        poll()
 
 
 def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig | None = None,
@@ -150,7 +194,6 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     robot_cfg = robot or SimRobotConfig(protocol="rsi", cycle_period_ns=gw_cfg.cycle_period_ns)  # the link's cycle
     controller = CommandAhead(cycle_ms, step)
     run = RsiRun(cycle_ms)
-    tick_ns = gw_cfg.tick_period_ns
     result: list[_RobotSide] = []
     stop = threading.Event()
     if robot_process:
@@ -163,34 +206,14 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
         worker = threading.Thread(
             target=lambda: result.append(_run_robot(robot_cfg, address, cycles, lose, stop)), daemon=True)
 
-    def handle(t_ns: int, topic: str, msg) -> None:
-        for out_topic, out in core.step(t_ns, topic, msg):
-            if out_topic == "udp_tx":
-                adapter.write(out_topic, out)
-            elif out_topic == ROBOT_STATE:
-                handle(time.time_ns(), "controller/command", controller.answer(out))
-            elif out_topic.endswith("/events"):
-                run.gateway_events.append(out)
+    def poll() -> None:
+        if robot_process and parent.poll():
+            result.append(parent.recv())
 
     try:
         worker.start()
-        next_tick = time.time_ns()
-        while worker.is_alive() or not inbox.empty():
-            try:
-                topic, msg = inbox.get(timeout=max(0.0, (next_tick - time.time_ns()) / 1e9))
-            except queue.Empty:
-                pass
-            else:
-                t0 = time.perf_counter_ns()
-                handle(time.time_ns(), topic, msg)
-                run.work_us.append((time.perf_counter_ns() - t0) / 1e3)
-                continue
-            now = time.time_ns()
-            if now >= next_tick:
-                handle(now, "tick", pb.Tick(header=header(now), period_ns=tick_ns))
-                next_tick += tick_ns * max(1, (now - next_tick) // tick_ns + 1)
-            if robot_process and parent.poll():
-                result.append(parent.recv())
+        serve_gateway(core, adapter, inbox, controller, run, running=worker.is_alive,
+                      poll=poll)
     finally:
         stop.set()
         worker.join(5.0)
@@ -212,4 +235,5 @@ def run_rsi(cycle_ms: float = 4.0, cycles: int = 500, *, robot: SimRobotConfig |
     run.overruns = side.overruns
     run.stopped = side.stopped
     run.moved_mm = side.moved_mm
+    run.latency_ms = [ns / 1e6 for ns in side.latency_ns]
     return run

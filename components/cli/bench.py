@@ -1,4 +1,4 @@
-"""``humanpt bench [runtime|alter|render|perception|faults]``: print the tables of what
+"""``humanpt bench [runtime|alter|rsi|ur|render|perception|faults]``: print the tables of what
 ``humanpt.bench`` measures.  Nothing here is asserted."""
 
 from __future__ import annotations
@@ -125,7 +125,6 @@ def bench_alter(args) -> int:
 def bench_rsi(args) -> int:
     """The gateway <-> the simulated RSI controller over UDP (see ``humanpt.bench.rsi``)."""
     from humanpt.bench.rsi import run_rsi
-    from humanpt.sim_robot.rsi import LATENCY_EDGES_MS
 
     try:
         cycle_times = [float(c) for c in args.cycles.split(",") if c.strip()]
@@ -140,22 +139,69 @@ def bench_rsi(args) -> int:
     where = "a thread of this process" if args.same_process else "a process of its own"
     print(f"humanpt bench rsi (gateway <-> simulated RSI controller ({where}) over UDP on loopback; scripted "
           "command-ahead controller; no Zenoh)", flush=True)
-    rows = []
+    runs = []
     for c in cycle_times:
         n = max(1, round(args.duration * 1000.0 / c))
         r = run_rsi(c, n, robot_process=not args.same_process)
         print(f"  {c:g} ms: {r.on_time}/{r.cycles} cycles on time", flush=True)
-        h = r.histogram
-        rows.append([f"{c:g} ms", r.cycles, r.on_time, f"{r.on_time_pct:.2f} %", r.late,
-                     *(h[f"<={e:g} ms"] for e in LATENCY_EDGES_MS),
-                     f"{r.work_pct(50):.0f}", f"{r.work_pct(99):.0f}", r.overruns, r.stopped or ""])
+        runs.append(r)
     print("")
-    print(tables.render(["cycle", "cycles", "on time", "%", "late",
-                         *(f"<={e:g} ms" for e in LATENCY_EDGES_MS), "work p50 us", "work p99 us",
-                         "robot overruns", "stopped"], rows, align="r" * 14 + "l"))
-    print("\nlatency = robot sends <Rob> -> a valid <Sen> arrives; late = none before the next cycle boundary. "
-          "work = the gateway's udp_rx step (decode, safety rules, encode) and the command step, wall time. "
-          "robot overruns = robot cycles started > 1 ms after their deadline (the simulator itself late).")
+    print(link_table(runs))
+    print("\nlatency = robot sends <Rob> -> a valid <Sen> arrives (p50/p99 of the answers in time); late = none "
+          "before the next cycle boundary. work = the gateway's udp_rx step (decode, safety rules, encode) and the "
+          "command step, wall time. robot overruns = robot cycles started > 1 ms after their deadline (the simulator "
+          "itself late).")
+    return 0
+
+
+def link_table(runs) -> str:
+    """The table of a link bench's runs (``bench rsi``, ``bench ur``: :class:`humanpt.bench.rsi.RsiRun`)."""
+    from humanpt.sim_robot.rsi import LATENCY_EDGES_MS
+
+    def ms(v: float) -> str:
+        return "-" if v != v else f"{v:.2f}"  # (nan: no answer)
+
+    rows = []
+    for r in runs:
+        h = r.histogram
+        rows.append([f"{r.cycle_ms:g} ms", r.cycles, r.on_time, f"{r.on_time_pct:.2f} %", r.late,
+                     ms(r.latency_pct(50)), ms(r.latency_pct(99)), *(h[f"<={e:g} ms"] for e in LATENCY_EDGES_MS),
+                     f"{r.work_pct(50):.0f}", f"{r.work_pct(99):.0f}", r.overruns, r.stopped or ""])
+    return tables.render(["cycle", "cycles", "on time", "%", "late", "latency p50 ms", "latency p99 ms",
+                          *(f"<={e:g} ms" for e in LATENCY_EDGES_MS), "work p50 us", "work p99 us",
+                          "robot overruns", "stopped"], rows, align="r" * 16 + "l")
+
+
+def bench_ur(args) -> int:
+    """The gateway <-> the simulated UR controller over RTDE (see ``humanpt.bench.ur``)."""
+    from humanpt.bench.ur import CYCLES_MS, run_ur
+
+    try:
+        cycle_times = [float(c) for c in args.cycles.split(",") if c.strip()]
+    except ValueError:
+        print(f"humanpt bench ur: --cycles must be numbers (8, 2), got {args.cycles!r}", file=sys.stderr)
+        return 2
+    bad = [c for c in cycle_times if c not in CYCLES_MS]
+    if bad or not cycle_times or not args.seconds > 0:
+        print(f"humanpt bench ur: --cycles takes 8 (CB3, 125 Hz) and/or 2 (e-Series, 500 Hz), --seconds > 0; got "
+              f"{args.cycles!r}, {args.seconds:g}", file=sys.stderr)
+        return 2
+    where = "a thread of this process" if args.same_process else "a process of its own"
+    print(f"humanpt bench ur (gateway <-> simulated UR5e controller ({where}) over RTDE, TCP on loopback; scripted "
+          f"command-ahead controller; no Zenoh; {args.seconds:g} s per cycle time)", flush=True)
+    runs = []
+    for c in cycle_times:
+        r = run_ur(c, args.seconds, robot_process=not args.same_process)
+        print(f"  {c:g} ms: {r.on_time}/{r.cycles} cycles answered in time", flush=True)
+        runs.append(r)
+    print("")
+    print(link_table(runs))
+    print("\nlatency = the robot sends a cycle's data package -> the gateway's answer (the next sequence and "
+          "target) is read by the robot (p50/p99 of the cycles answered); on time = read before the robot's next data "
+          "package (the program's next cycle reads the registers); late = not. work = the gateway's serial_rx step "
+          "(decode, safety rules, encode) and the command step, wall time. robot overruns = robot cycles started "
+          "> 1 ms after their deadline (the simulator itself late). stopped: the program's watchdog (no new "
+          "sequence for watchdog_cycles) stopping the arm.")
     return 0
 
 

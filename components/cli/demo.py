@@ -149,22 +149,30 @@ _NOT_FOR_CALIBRATE = {"viewer": "the job runs lock-step, without a viewer proces
 
 def refuse_for_calibrate(args) -> None:
     """End the command, naming the option, when ``args`` give one the job does not take."""
+    ur = getattr(args, "robot", None) == "ur" or getattr(args, "link", "alter") == "ur"
     for name, why in _NOT_FOR_CALIBRATE.items():
+        if name == "cycle_ms" and ur:  # the UR5e's: RTDE's 2 ms (e-Series) or 8 ms (CB3)
+            if getattr(args, name, None) not in (None, 2.0, 8.0):
+                raise SystemExit(f"humanpt demo --calibrate: --cycle-ms {args.cycle_ms:g}: UR RTDE runs at 2 ms "
+                                 "(e-Series) or 8 ms (CB3)")
+            continue
         if getattr(args, name, None) not in (None, False):
             raise SystemExit(f"humanpt demo --calibrate: --{name.replace('_', '-')} is not taken: {why}")
     # The job runs on the robot asked for (issue 33.2): the simulated Puma behind the gateway
     # and its ALTER link (default), or the stand-in; never another one.
-    if getattr(args, "link", "alter") != "alter":
+    if getattr(args, "link", "alter") not in ("alter", "ur"):  # (--link ur: the UR5e, as --robot ur)
         raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
     if getattr(args, "rig_kind", "psvs") != "psvs":
         raise SystemExit("humanpt demo --calibrate: the job calibrates the PSVS; a stereo pair is calibrated by "
                          "`humanpt calibrate stereo` (--rig-kind stereo runs the plain demo on the pair)")
-    if getattr(args, "robot", None) not in (None, "puma", "standin"):
+    if getattr(args, "robot", None) not in (None, "puma", "standin", "ur"):
         raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
-                         "Puma over ALTER (--robot puma, the default) or on the stand-in (--robot standin)")
+                         "Puma over ALTER (--robot puma, the default), on the simulated UR5e over RTDE (--robot ur) "
+                         "or on the stand-in (--robot standin)")
 
 
-ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in"}
+ROBOT_NAMES = {"puma": "the simulated Puma (robot_gateway + ALTER + sim_robot)", "standin": "the stand-in",
+               "ur": "the simulated UR5e (robot_gateway + RTDE + sim_robot)"}
 
 
 def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None) -> int:
@@ -174,14 +182,17 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
 
     world = World.named(args.world)
     rig = load_rig(args.rig) if args.rig else None
+    if getattr(args, "link", "alter") == "ur":  # --robot ur (= --link ur): the job on the UR5e
+        args.robot = "ur"
     told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
     print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
           f"{ROBOT_NAMES.get(args.robot, args.robot)}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
           f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
+        ur = {"ur_cycle_ms": float(getattr(args, "cycle_ms", None) or 2.0)} if args.robot == "ur" else {}
         res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
-                                   robot=args.robot, overrides=overrides, law=args.law)
+                                   robot=args.robot, overrides=overrides, law=args.law, **ur)
     finally:
         bar.close()
     from humanpt.twin.report import job_report

@@ -32,6 +32,7 @@ examples:
   humanpt bench runtime                           latency and recording throughput
   humanpt bench alter                             ALTER link cycles on time, shortest cycle
   humanpt bench rsi                               RSI link (UDP): cycles on time, late replies, gateway us
+  humanpt bench ur                                UR link (RTDE over TCP): cycles answered in time, 125 and 500 Hz
   humanpt bench perception                        perception images/s and accuracy
   humanpt bench render                            frames per second of the simulated camera
   humanpt bench faults                            the attacks of issue 14 against a live twin
@@ -620,6 +621,18 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--cycles", default="12,4", help="RSI cycle times to run, ms: 4 and/or 12 (default 12,4)")
     q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
                    "process (sharing its GIL) instead of a process of its own")
+    q = bsub.add_parser("ur", help="UR link (RTDE over TCP): cycles answered in time, answer time, gateway work",
+                        description="The gateway (its RTDE client on a thread) <-> the simulated UR5e controller "
+                        "(humanpt's URScript program running; its own clock, its own process) over TCP on loopback, "
+                        "with a scripted command-ahead controller, at each of --cycles for --seconds: cycles "
+                        "answered in time (the answer read by the robot within one cycle of its data package), "
+                        "late, the answer time p50/p99 and its histogram, the gateway's per-cycle work p50/p99 "
+                        "in microseconds, the program's watchdog stops.")
+    q.add_argument("--seconds", type=_duration, default=60.0, help="seconds per cycle time (default 60)")
+    q.add_argument("--cycles", default="8,2", help="RTDE cycle times to run, ms: 8 (CB3, 125 Hz) and/or 2 "
+                   "(e-Series, 500 Hz) (default 8,2)")
+    q.add_argument("--same-process", action="store_true", help="the simulated controller on a thread of this "
+                   "process (sharing its GIL) instead of a process of its own")
     q = bsub.add_parser("bridge", help="what the Foxglove bridge costs the live loop's latency",
                         description="The live demo run (--scenario) without and with the Foxglove bridge, "
                         "alternated --rounds times: image-to-command latency p50 and p99 of each, and their "
@@ -656,9 +669,10 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--only", metavar="A,B", help="attacks to run (param, forged, nan, absurd, strt, flood, "
                    "console, reset; the robot link's (issue 29): kill, bigseam, and with --link rsi inject, junk, "
                    "ipoc; with --secure also unauthorised, uncertified, token, aclflood, partition; default all)")
-    q.add_argument("--link", choices=["alter", "rsi", "abb"], default="alter",
-                   help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms) or "
-                   "ABB EGM over UDP (4 ms: kill and junk); "
+    q.add_argument("--link", choices=["alter", "rsi", "abb", "ur"], default="alter",
+                   help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms), "
+                   "ABB EGM over UDP (4 ms: kill and junk) or UR RTDE over TCP (a CB3's 8 ms: kill, rtde2, rtdejunk, "
+                   "freeze); "
                    "the rows that do not apply to it are skipped, with the reason")
     q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
                    "cores of a small machine); with --secure also issue 19's but the floods and the partition")
@@ -812,6 +826,9 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
         if args.bench_verb == "rsi":
             from humanpt.cli.bench import bench_rsi
             return bench_rsi(args)
+        if args.bench_verb == "ur":
+            from humanpt.cli.bench import bench_ur
+            return bench_ur(args)
         if args.bench_verb == "render":
             from humanpt.cli.bench import bench_render
             return bench_render(args)

@@ -126,12 +126,15 @@ class PtyAdapter:
 
 
 class TcpServerAdapter:
-    """The simulated UR's RTDE server: listens at ``bind`` ("host:port") and serves one
-    client at a time (the gateway; the next is accepted once it has gone: the gateway
-    reconnects after closing). Each accepted connection is first marked by an EMPTY ``serial_rx``
-    chunk (the core starts a fresh RTDE session: TCP never delivers an empty read as data),
-    then every read is a ``serial_rx`` chunk; ``serial_tx`` goes to the client (lost while
-    there is none)."""
+    """The simulated UR's RTDE server: listens at ``bind`` ("host:port") and serves every
+    client at once, as a UR controller does (the gateway, and any other: a second client is
+    refused the gateway's registers by the controller, IN_USE). Each accepted connection is
+    first marked by an EMPTY ``serial_rx`` chunk (frame_id = the client's "host:port": the
+    core starts a fresh RTDE session for it; TCP never delivers an empty read as data), then
+    every read is a ``serial_rx`` chunk with that frame_id, and its end an empty chunk from
+    "<host:port> closed" (:data:`humanpt.sim_robot.ur.CLOSED`). ``serial_tx`` goes to the client
+    its frame_id names (an empty one: the latest client's; lost while there is none); an empty
+    ``serial_tx`` chunk closes that client's connection (the controller drops it)."""
 
     topics_out = ("serial_tx",)
 
@@ -149,13 +152,15 @@ class TcpServerAdapter:
         except OSError as e:
             self._listen.close()
             raise OSError(f"sim_robot: cannot listen for RTDE at {bind}: {e.strerror or e}") from None
-        self._listen.listen(2)
+        self._listen.listen(8)
         self._listen.settimeout(poll_s)
         self.address = self._listen.getsockname()[:2]  # (port 0: the one the system chose)
-        self._conn = None
+        self._conns: dict = {}  # client "host:port" -> its socket
+        self._latest = ""
         self._wlock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._readers: list[threading.Thread] = []
         self.connections = 0
         self.bytes_in = 0
         self.bytes_out = 0
@@ -182,43 +187,60 @@ class TcpServerAdapter:
             frame_id = "{}:{}".format(*peer[:2])
             log.info("sim_robot: RTDE client %s (connection %d)", frame_id, self.connections)
             with self._wlock:
-                self._conn = conn
+                self._conns[frame_id] = conn
+                self._latest = frame_id
             put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=b""))
-            try:
-                while not self._stop.is_set():
-                    try:
-                        data = conn.recv(65536)
-                    except TimeoutError:
-                        continue
-                    if not data:
-                        break
-                    self.bytes_in += len(data)
-                    put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=data))
-            except OSError as e:
-                log.warning("sim_robot: RTDE client %s: %s", frame_id, e)
-            finally:
-                with self._wlock:
-                    if self._conn is conn:
-                        self._conn = None
-                conn.close()
+            reader = threading.Thread(target=self._read, args=(conn, frame_id, put), name="rtde-client", daemon=True)
+            reader.start()
+            self._readers = [t for t in self._readers if t.is_alive()] + [reader]
+
+    def _read(self, conn, frame_id: str, put) -> None:
+        from humanpt.sim_robot.ur import CLOSED
+
+        try:
+            while not self._stop.is_set():
+                try:
+                    data = conn.recv(65536)
+                except TimeoutError:
+                    continue
+                if not data:
+                    break
+                self.bytes_in += len(data)
+                put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=data))
+        except OSError as e:
+            log.info("sim_robot: RTDE client %s: %s", frame_id, e)
+        finally:
+            with self._wlock:
+                if self._conns.get(frame_id) is conn:
+                    del self._conns[frame_id]
+            conn.close()
+            if not self._stop.is_set():
+                put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id + CLOSED), data=b""))
 
     def write(self, topic: str, msg: pb.SerialChunk) -> None:
+        import socket
+
         with self._wlock:
-            conn = self._conn
-            if conn is None:
-                self.bytes_dropped += len(msg.data)
+            conn = self._conns.get(msg.header.frame_id or self._latest)
+        if conn is None:
+            self.bytes_dropped += len(msg.data)
+            return
+        try:
+            if not msg.data:  # the controller drops this client
+                conn.shutdown(socket.SHUT_RDWR)
                 return
-            try:
-                conn.sendall(msg.data)
-                self.bytes_out += len(msg.data)
-            except OSError:
-                self.bytes_dropped += len(msg.data)
+            conn.sendall(msg.data)
+            self.bytes_out += len(msg.data)
+        except OSError:
+            self.bytes_dropped += len(msg.data)
 
     def close(self) -> None:
         self._stop.set()
         self._listen.close()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+        for t in self._readers:
+            t.join(timeout=2.0)
 
 
 def adapters(config: SimRobotConfig) -> list:

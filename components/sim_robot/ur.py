@@ -376,17 +376,23 @@ class UrRobot:
         self.events.append(SimEvent(t_ns, "info", "program_stopped", "the program was stopped"))
 
 
+CLOSED = " closed"  # a serial_rx chunk's frame_id "<peer> closed" (no data): that client has gone
+
+
 class UrSimRobotCore(RsiSimRobotCore):
-    """sim_robot over RTDE (pure): :class:`UrRobot` (:meth:`UrRobot.from_config`) with one
-    client session, the gateway's, on the component's ``tick`` (every cycle of the link,
-    2 or 8 ms). Inputs ``tick``, ``serial_rx`` (the gateway's RTDE bytes, a TCP stream as a
-    byte stream); outputs ``serial_tx`` (the session's answers and each cycle's data
-    package), ``sim_robot/truth`` and ``sim_robot/events``, as over RSI and EGM. Built by
+    """sim_robot over RTDE (pure): :class:`UrRobot` (:meth:`UrRobot.from_config`) with a
+    session per client, on the component's ``tick`` (every cycle of the link, 2 or 8 ms).
+    Inputs ``tick``, ``serial_rx`` (the clients' RTDE bytes, a TCP stream as a byte stream;
+    the chunk's frame_id names the client, "" the one of the lock-step twin); outputs
+    ``serial_tx`` (each session's answers and each cycle's data package, frame_id = its
+    client), ``sim_robot/truth`` and ``sim_robot/events``, as over RSI and EGM. Built by
     ``SimRobotCore.create`` for ``protocol = "rtde"``; the lock-step twin wires it to the
     gateway as a fast serial line (:meth:`humanpt.runtime.lockstep.LockStep.connect_serial`);
     live, the shell's TCP server (``humanpt.sim_robot.shell.TcpServerAdapter`` at
-    ``rtde_bind``) carries it and marks each new connection with an empty chunk: the
-    session starts afresh."""
+    ``rtde_bind``) carries it, serving every client as a UR does: it marks each new connection
+    with an empty chunk (that client's session starts afresh) and each closed one with an
+    empty chunk from "<peer> closed" (its session ends, its input registers freed); an empty
+    ``serial_tx`` chunk to a client is the controller dropping it (bytes that are not RTDE)."""
 
     ports = (
         Port("tick", pb.Tick, "_on_cycle"),
@@ -398,28 +404,43 @@ class UrSimRobotCore(RsiSimRobotCore):
 
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
-        self.session = self.robot.connect()
+        self.session = self.robot.connect()  # the lock-step twin's client (frame_id "")
+        self.clients: dict[str, RtdeSession] = {"": self.session}  # frame_id -> its session
 
     def make_robot(self, config: SimRobotConfig) -> UrRobot:
         return UrRobot.from_config(config)
 
-    def _send(self, t_ns: int, data: bytes, outs: list[Output]) -> None:
-        if data:
-            outs.append(("serial_tx", pb.SerialChunk(header=self.next_header("serial_tx", t_ns), data=data)))
+    def _send(self, t_ns: int, data: bytes, outs: list[Output], client: str = "", close: bool = False) -> None:
+        if data or close:
+            outs.append(("serial_tx", pb.SerialChunk(header=self.next_header("serial_tx", t_ns, client), data=data)))
 
     def _on_rtde(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
         outs: list[Output] = []
-        if not msg.data:  # the live server's mark of a new connection: a fresh session
-            self.robot.disconnect(self.session)
-            self.session = self.robot.connect()
+        client = msg.header.frame_id
+        if not msg.data:  # the live server's mark of a new connection (a fresh session), or of a closed one
+            gone = client.endswith(CLOSED)
+            client = client.removesuffix(CLOSED)
+            old = self.clients.pop(client, None)
+            if old is not None:
+                self.robot.disconnect(old)
+            if not gone:
+                self.session = self.clients[client] = self.robot.connect()  # (the latest client's)
             return outs
-        self._send(t_ns, self.session.feed(bytes(msg.data), t_ns), outs)
+        session = self.clients.get(client)
+        if session is None:  # (bytes from a client never marked: a session of its own)
+            session = self.clients[client] = self.robot.connect()
+        self._send(t_ns, session.feed(bytes(msg.data), t_ns), outs, client)
+        if session.closed is not None:  # out of step: the controller drops the client
+            self.robot.disconnect(self.clients.pop(client))
+            self._send(t_ns, b"", outs, client, close=True)
         self._flush_events(outs)
         return outs
 
     def _on_cycle(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         outs: list[Output] = []
-        self._send(t_ns, self.robot.cycle(t_ns).get(self.session.sid, b""), outs)
+        packages = self.robot.cycle(t_ns)
+        for client, session in self.clients.items():
+            self._send(t_ns, packages.get(session.sid, b""), outs, client)
         self._flush_events(outs)
         outs.append((TRUTH, pb.Truth(header=self.next_header(TRUTH, t_ns, "world"),
                                      world_T_flange=pose(self.robot.arm.true_world_T_flange_m()))))
@@ -429,7 +450,16 @@ class UrSimRobotCore(RsiSimRobotCore):
 class RtdeServer:
     """The simulated controller live: an RTDE server at ``bind`` ("host:port"; port 0: a free
     one, :attr:`address`) and its cycle on a thread (``time.monotonic`` paced: each cycle at
-    start + k x cycle). Client packets are handled at once under the robot's lock."""
+    start + k x cycle). Client packets are handled at once under the robot's lock.
+
+    How a client answers (for ``humanpt bench ur``; the robot's program sees none of it): a
+    session's data package is *answered* when the client's next input data package is read
+    before the session's next data package goes out (before the program's next cycle reads the
+    registers, as the program sees it: a new target for its next cycle). ``answers`` counts,
+    over every session, the ``packages`` judged (those whose next one went out) and the
+    ``answered`` ones, and ``latency_ns`` keeps each answer's time (package sent -> the first
+    input package read after it). ``overruns``: cycles started more than 1 ms after their
+    deadline (the simulator itself late)."""
 
     def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
         from humanpt.robot_gateway.links.rsi.config import parse_address
@@ -450,6 +480,11 @@ class RtdeServer:
         self._stop = threading.Event()
         self._conns: dict[int, socket.socket] = {}
         self._threads: list[threading.Thread] = []
+        self._sent: dict[int, list] = {}  # session -> [send time of its last data package, answered yet]
+        self.answers = dict.fromkeys(("packages", "answered"), 0)
+        self.latency_ns: deque[int] = deque(maxlen=1_000_000)
+        self.overruns = 0
+        self.answering = threading.Event()  # set at a client's first answer
 
     def start(self) -> RtdeServer:
         for target, name in ((self._accept_loop, "rtde-accept"), (self._cycle_loop, "rtde-cycle")):
@@ -485,7 +520,11 @@ class RtdeServer:
                 if not data:
                     break
                 with self.lock:
-                    reply = session.feed(data, time.monotonic_ns())
+                    now = time.monotonic_ns()
+                    before = self.robot.counters["input_packages"]
+                    reply = session.feed(data, now)
+                    if self.robot.counters["input_packages"] > before:
+                        self._answered(session.sid, now)
                     if reply:
                         conn.sendall(reply)
                 if session.closed is not None:
@@ -496,7 +535,17 @@ class RtdeServer:
             with self.lock:
                 self.robot.disconnect(session)
                 self._conns.pop(session.sid, None)
+                self._sent.pop(session.sid, None)
             conn.close()
+
+    def _answered(self, sid: int, now_ns: int) -> None:
+        """An input data package of session ``sid`` read at ``now_ns``: the first since its last
+        data package answers it."""
+        last = self._sent.get(sid)
+        if last is not None and not last[1]:
+            last[1] = True
+            self.latency_ns.append(now_ns - last[0])
+            self.answering.set()
 
     def _cycle_loop(self) -> None:
         period = self.robot.cycle_ms / 1000.0
@@ -507,6 +556,8 @@ class RtdeServer:
             delay = t0 + k * period - time.monotonic()
             if delay > 0:
                 self._stop.wait(delay)
+            elif delay < -1e-3:
+                self.overruns += 1
             with self.lock:
                 out = self.robot.cycle(time.monotonic_ns())
                 for sid, data in out.items():
@@ -516,7 +567,12 @@ class RtdeServer:
                     try:
                         conn.sendall(data)
                     except OSError:
-                        pass
+                        continue
+                    last = self._sent.get(sid)
+                    if last is not None:  # the last package's window closes: judged
+                        self.answers["packages"] += 1
+                        self.answers["answered"] += last[1]
+                    self._sent[sid] = [time.monotonic_ns(), False]
 
     def disconnect_all(self) -> None:
         """Drop every client (a controller reboot's view from the network)."""

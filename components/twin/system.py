@@ -198,7 +198,8 @@ def ur_link(robot, gateway, cycle_ms: float = 2.0, rtde_address: str = "127.0.0.
     corrections in; the controller's RTDE server at ``rtde_address``."""
     from humanpt.robot_gateway.links.ur.config import UrConfig
 
-    ur_gateway = UrConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS}, cycle_period_ms=cycle_ms,
+    # (not ALTER's stale_cycles: over UR the bound is stale_ms, time, whatever the cycle)
+    ur_gateway = UrConfig(**{k: getattr(gateway, k) for k in SAFETY_KEYS if k != "stale_cycles"}, cycle_period_ms=cycle_ms,
                           rtde_address=rtde_address, correction_frame="tool" if robot.alter_mode == "tool" else "base")
     return dataclasses.replace(robot, protocol="rtde", cycle_period_ns=ur_gateway.cycle_period_ns), ur_gateway
 

@@ -46,7 +46,7 @@ from . import evaluate
 from .run import SystemConfig
 from .system import build_system, nominal_rig, operator_config, puma_mount_joints
 from .world import start_flange_for
-from .worlds import World
+from .worlds import ERROR_SOURCES, World
 
 # Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
 MOUNT_FRACTION = 0.5
@@ -214,8 +214,9 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
                mount: tuple | None = None) -> tuple[Rig, StageResult]:
     module, entry, lib = STAGES[name]
     if name == "arm" and robot != "puma":
-        return rig, StageResult(name, False, 0.0, skipped=f"the {robot} robot has no joints (exact kinematics): "
-                                                         "no arm to calibrate")
+        why = ("the UR5e's kinematics are exact on the twin (the arm stage calibrates the Puma's)" if robot == "ur"
+               else f"the {robot} robot has no joints (exact kinematics)")
+        return rig, StageResult(name, False, 0.0, skipped=f"{why}: no arm to calibrate")
     t0 = time.perf_counter()
     try:
         fn = getattr(importlib.import_module(f"humanpt.twin.{module}"), entry)
@@ -223,7 +224,8 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
     except (ImportError, AttributeError) as e:
         return rig, StageResult(name, False, 0.0, error=f"not available in this build ({e})")
     try:
-        kw = {"robot": robot} if name in ("hand-eye", "arm") else {}  # calibrate the arm that will weld
+        # calibrate the arm that will weld (the UR5e's hand-eye on the stand-in: a camera on a flange, exact)
+        kw = {"robot": "standin" if robot == "ur" else robot} if name in ("hand-eye", "arm") else {}
         if name == "arm" and mount is not None:  # where the job mounts it, the target where the seam starts
             kw["mount"], kw["scenario"] = mount
         result, report, truth = fn(world, rig, seed, progress=progress, **kw)
@@ -234,17 +236,25 @@ def _run_stage(name: str, world: World, rig: Rig, seed: int, progress, robot: st
                                                  checks=list(getattr(truth, "checks", [])))
 
 
+UR_CYCLE_MS = 2.0  # the job on the UR5e: the e-Series' RTDE cycle (default)
+PUMA_CYCLE_MS = 28.0  # ALTER's: the recording delay's cycles are counted in it
+
+
 def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None, seed: int = 0, *,
                          stages: tuple[str, ...] | None = None, rig: Rig | None = None,
                          run_dir: str | Path | None = None, playback_speed_mm_s: float = 20.0,
                          robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None,
-                         overrides: dict[str, dict] | None = None, law: str = "thetau") -> TeachResult:
+                         overrides: dict[str, dict] | None = None, law: str = "thetau",
+                         ur_cycle_ms: float = UR_CYCLE_MS) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
     done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
-    ``standin`` (default) or ``puma``: the simulated Puma behind the gateway and its ALTER
-    line, mounted in the joint pose that keeps its wrist farthest from its singularity
+    ``standin`` (default), ``ur`` (the simulated UR5e behind the gateway's RTDE link at
+    ``ur_cycle_ms``, 2 or 8, mounted as the Puma is; its hand-eye calibrated on the
+    stand-in, no arm stage: its kinematics are exact on the twin, the world's errors of the
+    Puma's kinematics left out) or ``puma``: the simulated Puma behind the gateway and its
+    ALTER line, mounted in the joint pose that keeps its wrist farthest from its singularity
     while it watches and welds the seam (:func:`humanpt.twin.system.puma_mount_joints`),
     the seam planned on it (:func:`humanpt.controller.playback.plan_on_arm`: a joint-space
     approach, the seam slowed where a joint would be too fast) or refused before any
@@ -254,6 +264,16 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``)."""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
+    ctl_kw: dict = {}
+    if robot == "ur":  # the world's errors of the Puma's kinematics (issue 32.4) are not the UR5e's
+        puma_only = {s.name for s in ERROR_SOURCES if s.robot == "puma"}
+        world = World(world.name, tuple(s for s in world.sources if s not in puma_only), world.extra)
+        if "recording_delay_cycles" not in ((overrides or {}).get("controller") or {}):
+            # A path point as often as on the Puma (every 10 of its 28 ms cycles), not every 10 of
+            # the UR's 2 ms: a point every 20 ms put 1485 on the trapezium (the Puma's 178), which
+            # `path fit` made 61 pieces (an arc of 0.57 mm radius) and the playback refused.
+            ctl_kw["recording_delay_cycles"] = max(1, round(
+                ControllerConfig().recording_delay_cycles * PUMA_CYCLE_MS / ur_cycle_ms))
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
     results = []
@@ -261,7 +281,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     mount = None
     if "arm" in names and robot == "puma":  # the arm stage mounts the Puma as the teach-and-play run will
         cfg0 = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
-                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+                                         controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law,
+                                                                     **ctl_kw))
         from .cal_arm import fixture_at_seam_start
 
         _, m, j = mounting(cfg0, robot)
@@ -273,7 +294,8 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         results.append(res)
     # -- teach
     cfg = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
-                                    controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law))
+                                    controller=ControllerConfig(playback_speed_mm_s=playback_speed_mm_s, law=law,
+                                                                **ctl_kw))
     playback_speed_mm_s = cfg.controller.playback_speed_mm_s
     # The Puma is mounted so that both where it watches the seam (the camera d_z from the
     # target) and where its torch welds it (the tool on the seam) are comfortably in reach:
@@ -281,10 +303,13 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     seam = _seam(cfg.operator)
     design = polyline_seam(seam)  # the seam as designed, to compare against
     view, mount, mount_joints = mounting(cfg, robot)
-    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot=robot, rig=cfg.rig,
-                     sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
+    # ``ur``: the simulated UR5e behind the gateway's RTDE link at the e-Series' 2 ms (build_system's
+    # arm behind a link, mounted as the Puma is, in its own comfortable joint pose there).
+    w = build_system(cfg.operator, seed=seed, controller=cfg.controller, robot="puma" if robot == "ur" else robot,
+                     rig=cfg.rig, sim_camera=cfg.sim_camera, perception=cfg.perception, pose_filter=cfg.pose_filter,
                      run_dir=run_dir, keep_outputs=True, digest=False, robot_overrides=cfg.robot_overrides,
-                     mount_world_T_flange_mm=mount if robot == "puma" else None, mount_joints_deg=mount_joints)
+                     mount_world_T_flange_mm=mount if robot in ("puma", "ur") else None, mount_joints_deg=mount_joints,
+                     ur_cycle_ms=ur_cycle_ms if robot == "ur" else None)
     teach_s = cfg.default_duration_s()
     try:
         w.run_until(round(cfg.operator.start_delay_s * 1e9))

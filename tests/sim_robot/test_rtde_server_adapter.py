@@ -1,6 +1,6 @@
 """The simulated UR's live RTDE server (sim_robot/shell.py TcpServerAdapter, ``[sim_robot]
 protocol = "rtde"``) over a real loopback TCP socket: each connection is marked by an empty
-chunk, bytes cross both ways, the next client is served once the first has gone; the core starts a fresh RTDE
+chunk (its end by one from "<peer> closed"), bytes cross both ways; the core starts a fresh RTDE
 session on the mark (the old one's input registers freed)."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from humanpt.robot_gateway.links.ur import protocol as rtde
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.shell import TcpServerAdapter, adapters
-from humanpt.sim_robot.ur import UrSimRobotCore
+from humanpt.sim_robot.ur import CLOSED, UrSimRobotCore
 
 
 def _get(q: queue.Queue) -> bytes:
@@ -29,6 +29,7 @@ def test_connections_are_marked_and_bytes_cross():
     server.start(lambda topic, msg: q.put((topic, msg)))
     try:
         a = socket.create_connection(server.address, timeout=10)
+        a_name = a.getsockname()[:2]
         assert _get(q) == b""  # the new connection's mark
         a.sendall(b"abc")
         got = b""
@@ -37,7 +38,9 @@ def test_connections_are_marked_and_bytes_cross():
         assert got == b"abc"
         server.write("serial_tx", pb.SerialChunk(data=b"xyz"))
         assert a.recv(16) == b"xyz"
-        a.close()  # the gateway goes; it reconnects: a fresh connection, marked again
+        a.close()  # the gateway goes (its end marked); it reconnects: a fresh connection, marked again
+        _, gone = q.get(timeout=10)
+        assert gone.data == b"" and gone.header.frame_id == "{}:{}".format(*a_name) + CLOSED
         b = socket.create_connection(server.address, timeout=10)
         assert _get(q) == b""
         server.write("serial_tx", pb.SerialChunk(data=b"to b"))

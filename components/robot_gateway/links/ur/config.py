@@ -9,13 +9,14 @@ from typing import Annotated, Literal
 
 from humanpt.robot_gateway.config import GatewayConfig
 from humanpt.robot_gateway.links.rsi.config import parse_address
-from humanpt.runtime.config import Range
+from humanpt.runtime.config import Range, live
 
 # RTDE's output frequencies: 500 Hz on an e-Series, 125 Hz on a CB3; a divisor of either.
 E_SERIES_CYCLE_MS = 2.0
 CB3_CYCLE_MS = 8.0
 REGISTER_RANGE = (24, 47)  # UR's general-purpose registers (0..23: the fieldbus adapters')
 INPUT_DOUBLES = 6  # the target pose: x, y, z (m), rx, ry, rz (rotation vector, rad)
+STALE_MS = 24.0  # the staleness bound's default (README: "The staleness bound")
 
 
 @dataclass(frozen=True)
@@ -45,11 +46,31 @@ class UrConfig(GatewayConfig):
     correction_frame: Literal["base", "tool"] = "base"
     max_lead_mm: Annotated[float, Range(0.01, 100, "mm")] = 5.0
     max_lead_deg: Annotated[float, Range(0.01, 30, "deg")] = 2.0
+    # The staleness bound in time (README: "The staleness bound"): with no command for a cycle,
+    # the gateway answers with the freshest one at most this old (velocity hold), then holds;
+    # a command arriving later than this after its cycle is dropped. At most the program's
+    # watchdog (watchdog_cycles x cycle): the gateway never runs on longer than the robot would.
+    stale_ms: Annotated[float, Range(0, 2000, "ms")] = STALE_MS
+    # Over UR the bound in cycles is floor(stale_ms / cycle_period_ms) unless given (as on
+    # every link; ``humanpt param`` may only lower it).
+    stale_cycles: Annotated[int, Range(0, 100, "cycles")] | None = live(
+        None, "cycles a command may be reused before it is stale (over UR: from stale_ms)", stricter="lower")
     link: str = "ur"
 
     def __post_init__(self) -> None:
         if self.reply_deadline_ms is None:
             object.__setattr__(self, "reply_deadline_ms", min(1.0, self.cycle_period_ms / 4.0))
+        v = self.stale_ms
+        if isinstance(v, bool) or not isinstance(v, int | float) or not (math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"stale_ms must be a finite number of ms >= 0, got {v!r}")
+        watchdog_ms = self.watchdog_cycles * self.cycle_period_ms if isinstance(self.watchdog_cycles, int) else None
+        if watchdog_ms is not None and v > watchdog_ms:
+            raise ValueError(f"stale_ms = {v:g} is longer than the robot program's watchdog (watchdog_cycles x "
+                             f"cycle_period_ms = {watchdog_ms:g} ms): the gateway would run the arm on without "
+                             "the controller longer than the robot runs it on without the gateway")
+        if self.stale_cycles is None:
+            n = self.cycle_period_ms
+            object.__setattr__(self, "stale_cycles", int(math.floor(v / n + 1e-9)) if n > 0 else 0)
         super().__post_init__()
         n = self.cycle_period_ms / E_SERIES_CYCLE_MS
         if not (math.isfinite(n) and n >= 1 and abs(n - round(n)) < 1e-9):

@@ -1,0 +1,253 @@
+"""The UR RTDE link's rows of ``humanpt bench faults --link ur`` (issue 34 item 5), against the
+live twin over RTDE (the simulated UR's server and the gateway's client on loopback TCP, the
+program with its watchdog running):
+
+- ``kill`` (:mod:`humanpt.bench.link_faults`): the gateway killed mid-motion; the program goes
+  on to the last target (at most ``max_lead_mm`` ahead) and its watchdog stops the arm.
+- ``rtde2`` (a sender that is not the robot's client): a second RTDE client of the robot's
+  host sets up humanpt's input registers and writes a target 50 mm away. Over TCP the gateway
+  reads only its own connection; the controller refuses the registers (IN_USE, as UR's does)
+  and the package for a recipe the client has not set up. Judged: refused, the arm did not
+  follow (no step over the gateway's limit), the gateway's session went on.
+- ``rtdejunk`` (malformed messages): 3 s of junk on new connections to the robot's RTDE port
+  (bytes that are not RTDE packets, a header with a size beyond RTDE's, a bogus packet type):
+  the controller drops each such client; judged: the gateway's session went on (robot states
+  after it, no ``link_down``) and the program never stopped the arm.
+- ``freeze`` (late and lost answers): the gateway frozen (SIGSTOP) for 0.5 s while the robot
+  plays a line at 40 mm/s, then let go: no answer for 62 cycles at 8 ms (a loaded PC's stall);
+  the program's watchdog stops the arm after ``watchdog_cycles``; judged: the arm moved at most
+  the lead + 2 cycles at the limit after the freeze, as after a kill; whether the program
+  followed again once the answers came (a newer sequence within the lead) is reported.
+- ``lost`` (lost messages): the simulated controller frozen (SIGSTOP) for 0.5 s: 62 data
+  packages never sent; judged: robot states again afterwards and no fault latched (the
+  gateway's silence watchdog may restart the link: reported).
+
+Duplicated and reordered data packages cannot happen between the two ends of one TCP
+connection, and lost ones only as the robot's silence (``lost``); the link drops a package
+whose timestamp does not advance, and a foreign header (tests/ur/test_ur_link.py). A stopped
+program turns corrections off (runtime_state; tests/ur/test_ur_link.py): the simulated UR's
+program is stopped only from its pendant (no row).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import socket
+import time
+
+import numpy as np
+
+from humanpt.bench.faults import Ctx, FaultRow, _console, _ms
+from humanpt.bench.link_faults import (
+    ANSWER_TIMEOUT_S,
+    KILL_BOUND_CYCLES,
+    KILL_LINE_MM,
+    KILL_SPEED_MM_S,
+    LINK_BACK_TIMEOUT_S,
+    _events,
+    _line,
+    _speed_mm_s,
+    _state_after,
+    _tool_now_mm_deg,
+    _truth_after,
+    _truth_at,
+    _truth_now,
+    _wait,
+    fast_or_along,
+)
+from humanpt.robot_gateway.links.rsi.config import parse_address
+from humanpt.robot_gateway.links.ur import protocol as rtde
+from humanpt.robot_gateway.links.ur.link import input_names
+
+FOREIGN_TARGET_MM = 50.0  # rtde2: the second client's target, this far from the arm
+JUNK_S = 3.0              # rtdejunk: its length
+FREEZE_S = 0.5            # freeze: the gateway stopped this long
+UR_FAULTS_CYCLE_MS = 8.0  # the twin's UR at the CB3's 125 Hz (7 processes at 500 Hz: not on a small machine)
+
+
+def _rtde_address(ctx: Ctx) -> tuple[str, int]:
+    return parse_address(ctx.gw.rtde_address)
+
+
+def _read_packet(sock: socket.socket, framer: rtde.Framer, pending: list, deadline: float) -> rtde.Packet | None:
+    """The next whole packet from ``sock`` (``pending``: those read before, not taken yet);
+    None: closed, or nothing by ``deadline``."""
+    while not pending:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            return None
+        sock.settimeout(left)
+        try:
+            data = sock.recv(65536)
+        except OSError:  # (a timeout too)
+            return None
+        if not data:
+            return None
+        pending += framer.feed(data)
+    return pending.pop(0)
+
+
+def attack_second_client(ctx: Ctx, row: FaultRow) -> None:
+    """A second RTDE client writes humanpt's target registers (a target 50 mm away)."""
+    host, port = _rtde_address(ctx)
+    names = input_names(ctx.gw.register_base)
+    p0 = _truth_now(ctx)
+    t0 = time.monotonic()
+    answers: list[str] = []
+    with socket.create_connection((host, port), timeout=10.0) as s:
+        framer, pending = rtde.Framer(), []
+        s.sendall(rtde.encode_version_request())
+        v = _read_packet(s, framer, pending, time.monotonic() + ANSWER_TIMEOUT_S)
+        answers.append("version " + ("accepted" if v is not None and v.payload[:1] == b"\x01" else "?"))
+        s.sendall(rtde.encode_setup_inputs(names))
+        setup = _read_packet(s, framer, pending, time.monotonic() + ANSWER_TIMEOUT_S)
+        rid, types = rtde.decode_setup_reply(setup.payload, "input setup") if setup is not None else (None, ())
+        refused = rid == 0 and "IN_USE" in types
+        answers.append(f"input setup: recipe {rid}, {sorted(set(types))}")
+        # A data package for the recipe humanpt's gateway has (id 1 on its own session), with a
+        # target 50 mm from the arm: not this client's recipe.
+        if p0 is not None:
+            T = np.eye(4)
+            T[:3, 3] = p0 + (FOREIGN_TARGET_MM, 0.0, 0.0)
+            pose = rtde.ur_pose_from_transform(T)
+            recipe = rtde.Recipe(1, names, ("INT32",) + ("DOUBLE",) * 6)
+            s.sendall(recipe.encode({names[0]: 1 << 30, **dict(zip(names[1:], pose, strict=True))}))
+            text = _read_packet(s, framer, pending, time.monotonic() + 2.0)
+            answers.append("data package: " + (rtde.decode_text(text.payload)[0][:60]
+                                               if text is not None and text.type == rtde.TEXT_MESSAGE else "no answer"))
+    wall1 = time.time_ns()
+    going = _wait(lambda: _state_after(ctx, wall1), LINK_BACK_TIMEOUT_S, ctx)
+    p1 = _truth_now(ctx)
+    jumped = p0 is not None and p1 is not None and float(np.linalg.norm(p1 - p0)) > FOREIGN_TARGET_MM / 2
+    downs = _events(ctx, t0, "robot_gateway", ("link_down",))
+    row.expected = refused and going and not jumped and not downs
+    row.reaction_ms = None
+    row.note = ("refused (IN_USE)" if refused else "NOT refused") + "; " + "; ".join(answers) + \
+        ("; the arm did not follow" if not jumped else "; the ARM FOLLOWED the foreign target") + \
+        ("; the gateway's session went on" if going and not downs else "; the gateway's session broke")
+
+
+def attack_rtde_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
+    """Junk on new connections to the robot's RTDE port for ``seconds``."""
+    host, port = _rtde_address(ctx)
+    junk = [b"junk\r\n", b"\xff\xff\xffUUUU", rtde.pack(ord("Z"), b"\x00" * 16), b"\x00\x03U" * 50,
+            bytes(range(256))]
+    t0 = time.monotonic()
+    n = conns = 0
+    while time.monotonic() - t0 < seconds:
+        try:
+            with socket.create_connection((host, port), timeout=2.0) as s:
+                conns += 1
+                for j in junk:
+                    s.sendall(j)
+                    n += len(j)
+        except OSError:  # the controller dropped us mid-write: what it should do
+            pass
+    t1 = time.monotonic()
+    wall1 = time.time_ns()
+    going = _wait(lambda: _state_after(ctx, wall1), LINK_BACK_TIMEOUT_S, ctx)
+    stops = _events(ctx, t0, "sim_robot", ("watchdog_stop", "protective_stop"))
+    downs = _events(ctx, t0, "robot_gateway", ("link_down",))
+    bad = _events(ctx, t0, "sim_robot", ("bad_rtde",))
+    row.expected = going and not stops and not downs
+    first = ctx.mon.wait_event(t0, ("bad_rtde",), "sim_robot", timeout_s=0.0)
+    row.reaction_ms = _ms(first and first[0], t0)
+    row.note = (f"{conns} connections, {n / max(t1 - t0, 1e-9) / 1e3:.0f} kB/s for {t1 - t0:.1f} s; "
+                + ("the gateway's session went on" if going and not downs else
+                   f"the gateway's session BROKE ({len(downs)} link_down)")
+                + ("" if not stops else f"; the program STOPPED the arm ({stops[0].code})")
+                + f"; the controller: {len(bad)} bad_rtde events")
+
+
+def attack_freeze(ctx: Ctx, row: FaultRow) -> None:
+    """The gateway frozen (SIGSTOP) for 0.5 s while the robot plays a line at 40 mm/s."""
+    pid = ctx.control.pid("robot_gateway") if ctx.control is not None else None
+    start = _tool_now_mm_deg(ctx)
+    if pid is None or start is None:
+        row.note = "no handle on the gateway's process" if pid is None else "no robot state"
+        return
+    x0, sign = start
+    t0 = time.monotonic()
+    pts = _line(x0, sign, KILL_LINE_MM, 31, out_and_back=False)
+    p_start = _truth_now(ctx)
+    got = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(), "speed_mm_s": KILL_SPEED_MM_S},
+                   ("playback_started", "bad_command"), timeout_s=ANSWER_TIMEOUT_S)
+    if got is None or not _events(ctx, t0, "controller", ("playback_started",)):
+        row.note = "the controller did not start the playback"
+        return
+    bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm + ctx.gw.max_lead_mm
+    try:
+        if not _wait(lambda: fast_or_along(ctx, p_start), ANSWER_TIMEOUT_S, ctx):
+            row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
+            return
+        speed = _speed_mm_s(ctx)
+        t_freeze, wall_freeze = time.monotonic(), time.time_ns()
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            time.sleep(FREEZE_S)  # (the fault itself is a duration: the gateway stopped this long)
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        wall_cont = time.time_ns()
+        p_freeze = _truth_at(ctx, wall_freeze)
+        _wait(lambda: _state_after(ctx, wall_cont), LINK_BACK_TIMEOUT_S, ctx)
+        tr = [p for t, p in _truth_after(ctx, wall_freeze) if t <= wall_cont]
+        moved = max((float(np.linalg.norm(p - p_freeze)) for p in tr), default=0.0) \
+            if p_freeze is not None else math.nan
+        stop = next(iter(_events(ctx, t_freeze, "sim_robot", ("watchdog_stop",))), None)
+        follows = ctx.mon.wait_event(t_freeze, ("following",), "sim_robot",
+                                     timeout_s=5.0 if stop is not None else 0.0)
+        row.max_step_mm, row.limit_mm = moved, bound
+        row.held = moved <= bound
+        row.expected = bool(row.held)
+        first = ctx.mon.wait_event(t_freeze, ("watchdog_stop",), "sim_robot", timeout_s=0.0)
+        row.reaction_ms = _ms(first and first[0], t_freeze)
+        row.note = (f"frozen {FREEZE_S:g} s at {speed:.1f} mm/s; the robot moved {moved:.2f} mm meanwhile (bound "
+                    f"{KILL_BOUND_CYCLES} cycles x {ctx.gw.max_step_mm:.2f} mm + the lead {ctx.gw.max_lead_mm:g} mm "
+                    f"= {bound:.2f} mm); "
+                    + ("the program's watchdog stopped the arm" if stop else "no watchdog stop")
+                    + ("; it followed again" if follows else ""))
+    finally:
+        _console(ctx, "controller", "stop", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+        _console(ctx, "controller", "track", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+
+
+def attack_robot_frozen(ctx: Ctx, row: FaultRow) -> None:
+    """The simulated controller frozen (SIGSTOP) for 0.5 s: its data packages lost meanwhile."""
+    pid = ctx.control.pid("sim_robot") if ctx.control is not None else None
+    if pid is None:
+        row.note = "no handle on the robot's process"
+        return
+    t0 = time.monotonic()
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(FREEZE_S)  # (the fault itself is a duration: the robot silent this long)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    wall1 = time.time_ns()
+    going = _wait(lambda: _state_after(ctx, wall1), LINK_BACK_TIMEOUT_S, ctx)
+    fault = ctx.mon.wait_event(t0, ("fault",), "robot_gateway", timeout_s=0.0)
+    flagged = any(m.status.fault for _, m in ctx.mon.since("robot_gateway/robot_state", t0))
+    seen = sorted({e.code for e in ctx.mon.events_since(t0) if e.source == "robot_gateway"})
+    first = ctx.mon.wait_event(t0, tuple(seen), "robot_gateway", timeout_s=0.0) if seen else None
+    row.reaction_ms = _ms(first and first[0], t0)
+    row.expected = going and fault is None and not flagged
+    row.note = (("robot states again" if going else "NO robot state since")
+                + ("; no fault latched" if fault is None and not flagged else "; a FAULT latched")
+                + (f"; robot_gateway: {', '.join(seen)}" if seen else ""))
+
+
+def ur_attacks():
+    from humanpt.bench.faults import Attack
+
+    return (
+        Attack("rtde2", "second RTDE client writes the target registers", attack_second_client, keeps_loop=False,
+               links=("ur",)),
+        Attack("rtdejunk", f"junk on the robot's RTDE port ({JUNK_S:g} s)", attack_rtde_junk, keeps_loop=False,
+               links=("ur",)),
+        Attack("freeze", f"gateway frozen {FREEZE_S:g} s mid-motion (late answers)", attack_freeze,
+               keeps_loop=False, links=("ur",)),
+        Attack("lost", f"robot frozen {FREEZE_S:g} s (its data packages lost)", attack_robot_frozen,
+               keeps_loop=False, links=("ur",)),
+    )
