@@ -116,8 +116,9 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     The cycle period goes to the gateway's section only: the cell's one cycle, which the
     launcher gives the simulated controller and the robot states carry to the controller,
     the pose filter and viz (runtime/cycle.py); the gateway's safety fields (speeds, envelope,
-    stale commands, world_T_base) carry over from the ALTER gateway's, the rest are RSI's
-    defaults (humanpt.robot_gateway.links.rsi.config, .abb.config)."""
+    stale commands, world_T_base) carry over from the ALTER gateway's (over UR not the stale
+    commands: its bound is ``stale_ms``, a time), the rest are the link's defaults
+    (humanpt.robot_gateway.links.rsi.config, .abb.config, .ur.config)."""
     cycle_ms = link_cycle_ms(link, cycle_ms)
     if link == "alter":
         return
