@@ -156,9 +156,8 @@ def refuse_for_calibrate(args) -> None:
     # and its ALTER link (default), or the stand-in; never another one.
     if getattr(args, "link", "alter") != "alter":
         raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
-    if getattr(args, "rig_kind", "psvs") != "psvs":
-        raise SystemExit("humanpt demo --calibrate: the job calibrates the PSVS; a stereo pair is calibrated by "
-                         "`humanpt calibrate stereo` (--rig-kind stereo runs the plain demo on the pair)")
+    if getattr(args, "rig_kind", "psvs") not in ("psvs", "stereo"):
+        raise SystemExit(f"humanpt demo --calibrate: --rig-kind {args.rig_kind}: psvs or stereo")
     if getattr(args, "robot", None) not in (None, "puma", "standin"):
         raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
                          "Puma over ALTER (--robot puma, the default) or on the stand-in (--robot standin)")
@@ -175,13 +174,17 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
     world = World.named(args.world)
     rig = load_rig(args.rig) if args.rig else None
     told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
-    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
+    kind = getattr(args, "rig_kind", "psvs")
+    if kind == "psvs" and rig is not None and rig.kind == "stereo":
+        kind = "stereo"  # a rig file of a pair: the job on the pair
+    camera = "the PSVS" if kind == "psvs" else "an ordinary stereo pair (the stereo stage in place of camera and psvs)"
+    print(f"humanpt demo --calibrate: camera {camera}; scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
           f"{ROBOT_NAMES.get(args.robot, args.robot)}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
           f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
         res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
-                                   robot=args.robot, overrides=overrides, law=args.law)
+                                   robot=args.robot, overrides=overrides, law=args.law, rig_kind=kind)
     finally:
         bar.close()
     from humanpt.twin.report import job_report
