@@ -20,7 +20,7 @@ from collections.abc import Callable
 import numpy as np
 
 from humanpt.calibration.board import Chessboard
-from humanpt.calibration.camera import CameraSettings
+from humanpt.calibration.camera import CalibrationError, CameraSettings
 from humanpt.calibration.handeye import pose_difference
 from humanpt.calibration.stereo import StereoCalibration, calibrate_stereo, stereo_report_lines
 from humanpt.geometry.rig import Rig, Stereo, StereoCamera
@@ -89,7 +89,7 @@ def plan_pair_poses(stereo: Stereo, board: Chessboard, n_pairs: int, seed: int,
     at least ``margin_px`` inside both images: depth 500-850 mm, tilted 15-35 deg
     (alternating directions, as :func:`humanpt.twin.cal_camera.plan_board_poses`), turned up to
     +-10 deg about the optical axis, the board's centre swept 3 x 3 over the region both
-    cameras see at that depth."""
+    cameras see at that depth. :class:`CalibrationError` when they cannot be found."""
     rng = np.random.default_rng([int(seed), 1703])
     w, h = stereo.image_width_px, stereo.image_height_px
     right, left = stereo.right, stereo.left
@@ -103,7 +103,8 @@ def plan_pair_poses(stereo: Stereo, board: Chessboard, n_pairs: int, seed: int,
     while len(poses) < n_pairs:
         tries += 1
         if tries > 400 * n_pairs:
-            raise RuntimeError("could not plan board poses that both cameras see whole")
+            raise CalibrationError(f"could not plan {n_pairs} board poses that both cameras of the rig's pair see whole "
+                                   f"at 500-850 mm (baseline {stereo.baseline_mm():.0f} mm)")
         ang = 2 * math.pi * (k % 8) / 8 + rng.uniform(-0.3, 0.3)
         tilt = math.radians(rng.uniform(15.0, 35.0))
         rot = matrix_from_rotvec(np.array([tilt * math.cos(ang), tilt * math.sin(ang),
