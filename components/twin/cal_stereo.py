@@ -22,7 +22,12 @@ import numpy as np
 from humanpt.calibration.board import Chessboard
 from humanpt.calibration.camera import CalibrationError, CameraSettings
 from humanpt.calibration.handeye import pose_difference
-from humanpt.calibration.stereo import StereoCalibration, calibrate_stereo, stereo_report_lines
+from humanpt.calibration.stereo import (
+    StereoCalibration,
+    apply_stereo_to_rig,
+    calibrate_stereo,
+    stereo_report_lines,
+)
 from humanpt.geometry.rig import Rig, Stereo, StereoCamera
 from humanpt.geometry.transforms import (
     invert_transform,
@@ -38,7 +43,7 @@ from .report import Check, TruthLines
 from .worlds import World
 
 __all__ = ["calibrate_stereo_on_twin", "plan_pair_poses", "render_pairs", "world_pair", "true_flange_T_camera",
-           "ACCEPT_SIGMAS", "DEFAULT_PAIRS"]
+           "point_errors_mm", "truth_lines", "ACCEPT_SIGMAS", "DEFAULT_PAIRS"]
 
 DEFAULT_PAIRS = 16
 # How far (in its own jackknife 1-sigma) a focal length or the baseline may be from the truth.
@@ -80,6 +85,31 @@ def _project(cam: StereoCamera, cam_T_board: np.ndarray, points_mm: np.ndarray) 
     uv, _ = cv2.projectPoints(p.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.camera_matrix(),
                               np.asarray(cam.dist_coeffs, dtype=float))
     return uv.reshape(-1, 2)
+
+
+def point_errors_mm(believed: Stereo, true: Stereo, depths_mm=(450.0, 600.0, 800.0),
+                    field_mm: float = 50.0) -> np.ndarray:
+    """(len(depths), 3) error (mm) of points triangulated with the pair ``believed`` from
+    their exact images through the pair ``true`` (each camera's distortion undone, then
+    ``cv2.triangulatePoints``, as perception triangulates): for each depth the worst
+    |error| over a 5 x 5 grid within ``field_mm`` of the right camera's axis, of x, y, z
+    (the right camera's frame; as :func:`humanpt.twin.cal_psvs.depth_errors_mm` for the PSVS)."""
+    import cv2
+
+    def normalised(cam: StereoCamera, uv: np.ndarray) -> np.ndarray:
+        return cv2.undistortPoints(uv.reshape(-1, 1, 2), cam.camera_matrix(),
+                                   np.asarray(cam.dist_coeffs, dtype=float)).reshape(-1, 2)
+
+    g = np.linspace(-field_mm, field_mm, 5)
+    out = []
+    for z in depths_mm:
+        pts = np.array([(x, y, z) for x in g for y in g])
+        uv_r = _project(true.right, np.eye(4), pts)
+        uv_l = _project(true.left, invert_transform(true.right_T_left_mm()), pts)
+        x = cv2.triangulatePoints(invert_transform(believed.right_T_left_mm())[:3, :], np.eye(4)[:3, :],
+                                  normalised(believed.left, uv_l).T, normalised(believed.right, uv_r).T)
+        out.append(np.max(np.abs((x[:3] / x[3]).T - pts), axis=0))
+    return np.array(out)
 
 
 def plan_pair_poses(stereo: Stereo, board: Chessboard, n_pairs: int, seed: int,
@@ -175,12 +205,14 @@ def calibrate_stereo_on_twin(world: World, rig: Rig, seed: int, progress: Progre
     report = [f"stereo pair calibration on the twin (world {world.name}, seed {seed}): board {board.cols} x "
               f"{board.rows} inner corners, {board.square_mm:g} mm squares, {n_pairs} pairs seen by both cameras"]
     report += stereo_report_lines(result)
-    return result, report, truth_lines(result, truth)
+    return result, report, truth_lines(result, truth, believed)
 
 
-def truth_lines(result: StereoCalibration, truth: Stereo) -> TruthLines:
+def truth_lines(result: StereoCalibration, truth: Stereo, before: Stereo | None = None) -> TruthLines:
     """The estimate against the world's true pair, with the checks: each camera's focal
-    lengths and the baseline within :data:`ACCEPT_SIGMAS` of their own 1-sigma."""
+    lengths and the baseline within :data:`ACCEPT_SIGMAS` of their own 1-sigma; what the
+    pair ``before`` and the calibrated one get wrong in triangulated points
+    (:func:`point_errors_mm`)."""
     lines = TruthLines(["against the twin's truth (the world's cameras):"])
     for cal, cam in ((result.left, truth.left), (result.right, truth.right)):
         s = cal.sigma
@@ -201,4 +233,12 @@ def truth_lines(result: StereoCalibration, truth: Stereo) -> TruthLines:
                  f"{db / sd_b:+.1f} sigma); right_T_left off by {dt:.3f} mm, {da:.4f} deg (acceptance: focal "
                  f"lengths and baseline within {ACCEPT_SIGMAS:g} sigma)")
     lines.checks.append(Check("stereo", "baseline off the truth", abs(db) / sd_b, ACCEPT_SIGMAS, "sigma"))
+    after = apply_stereo_to_rig(Rig(), result, "").stereo  # the calibrated pair (its right camera's frame)
+    for name, pair in (("before", before), ("after", after)):
+        if pair is None:
+            continue
+        err = point_errors_mm(pair, truth)
+        lines.append(f"  worst point error with the pair {name:6s} (x, y, z mm, within 50 mm of the axis): "
+                     + "; ".join(f"{z:.0f} mm: {e[0]:.3f} {e[1]:.3f} {e[2]:.3f}"
+                                 for z, e in zip((450, 600, 800), err, strict=True)))
     return lines

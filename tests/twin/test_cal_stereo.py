@@ -50,6 +50,21 @@ def test_the_pairs_focal_lengths_and_baseline_are_the_worlds_within_their_sigma(
                                              "baseline off the truth"]
     assert all(c.met for c in truth.checks), [c.line() for c in truth.checks]
     assert any(line.startswith("baseline ") for line in report)
+    (after,) = [line for line in truth if "worst point error with the pair after" in line]
+    assert "600 mm: " in after
+
+
+def test_a_pair_with_a_longer_baseline_triangulates_points_that_much_farther():
+    """By hand: a pair believed 1 % wider than it is puts every point 1 % farther along its
+    ray (the depth f B / d scales with B): at 450, 600 and 800 mm, 4.5, 6 and 8 mm deep and,
+    50 mm off the axis, 0.5 mm aside; the true pair itself, exactly."""
+    from humanpt.twin.cal_stereo import point_errors_mm
+
+    true = Stereo.of_psvs(Rig().psvs)
+    wide = dataclasses.replace(true, right_T_left_x=(1.01 * true.right_T_left_x[0], *true.right_T_left_x[1:]))
+    np.testing.assert_allclose(point_errors_mm(true, true), 0.0, atol=1e-9)
+    np.testing.assert_allclose(point_errors_mm(wide, true), [[0.5, 0.5, 4.5], [0.5, 0.5, 6.0], [0.5, 0.5, 8.0]],
+                               atol=0.01)
 
 
 def test_the_hand_eyes_truth_is_the_rigs_camera_frame():
