@@ -37,8 +37,8 @@ from .camera import (
     detect_views,
 )
 
-__all__ = ["StereoCalibration", "calibrate_stereo", "apply_stereo_to_rig", "stereo_report_lines", "read_pairs",
-           "PAIR_SUFFIXES"]
+__all__ = ["StereoCalibration", "calibrate_stereo", "apply_stereo_to_rig", "apply_to_rig", "stereo_report_lines",
+           "read_pairs", "PAIR_SUFFIXES"]
 
 PAIR_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm")
 
@@ -206,7 +206,10 @@ def _camera(cal: ViewCalibration) -> StereoCamera:
 
 def apply_stereo_to_rig(rig: Rig, result: StereoCalibration, date: str) -> Rig:
     """The rig of kind ``"stereo"`` with ``[stereo]`` from ``result``; its calibration's
-    sigma: the baseline's (``right_T_left_x``, mm), the note every number's."""
+    sigma: the baseline's (``right_T_left_x``, mm), the note every number's. The rig's
+    ``camera_T_right_x`` is kept: where the rig's camera frame (the hand-eye's) sits on the
+    right camera, which a calibration of the pair does not move (a fresh rig's: the right
+    camera's own frame)."""
     note = (f"pairs {len(result.pairs)}, stereoCalibrate RMS {result.rms_px:.3f} px, baseline "
             f"{result.baseline_mm:.2f} +- {result.sigma_baseline_mm:.2g} mm; right_T_left 1-sigma "
             + ", ".join(f"{k} {v:.2g}" for k, v in result.sigma_x.items())
@@ -217,11 +220,16 @@ def apply_stereo_to_rig(rig: Rig, result: StereoCalibration, date: str) -> Rig:
                         image_height_px=int(result.left.image_size_px[1]),
                         left=_camera(result.left), right=_camera(result.right),
                         right_T_left_x=tuple(float(v) for v in x_from_transform(result.right_T_left_mm)),
+                        camera_T_right_x=rig.stereo.camera_T_right_x,
                         calibration=Calibration(method="stereo-zhang", date=date, note=note,
                                                 sigma={"right_T_left_x": float(result.sigma_baseline_mm)}))
     except ValueError as e:
         raise CalibrationError(f"the calibrated pair is not a valid rig: {e}") from None
     return dataclasses.replace(rig, kind="stereo", stereo=stereo)
+
+
+# The name the job's stages apply their result by (humanpt.twin.teach.STAGES).
+apply_to_rig = apply_stereo_to_rig
 
 
 def stereo_report_lines(result: StereoCalibration) -> list[str]:

@@ -162,9 +162,8 @@ def refuse_for_calibrate(args) -> None:
     # and its ALTER link (default), or the stand-in; never another one.
     if getattr(args, "link", "alter") not in ("alter", "ur"):  # (--link ur: the UR5e, as --robot ur)
         raise SystemExit(f"humanpt demo --calibrate: the job runs over the ALTER link, not --link {args.link}")
-    if getattr(args, "rig_kind", "psvs") != "psvs":
-        raise SystemExit("humanpt demo --calibrate: the job calibrates the PSVS; a stereo pair is calibrated by "
-                         "`humanpt calibrate stereo` (--rig-kind stereo runs the plain demo on the pair)")
+    if getattr(args, "rig_kind", "psvs") not in ("psvs", "stereo"):
+        raise SystemExit(f"humanpt demo --calibrate: --rig-kind {args.rig_kind}: psvs or stereo")
     if getattr(args, "robot", None) not in (None, "puma", "standin", "ur"):
         raise SystemExit(f"humanpt demo --calibrate: --robot {args.robot} is not taken: the job runs on the simulated "
                          "Puma over ALTER (--robot puma, the default), on the simulated UR5e over RTDE (--robot ur) "
@@ -185,14 +184,18 @@ def run_calibrate(args, run_dir: Path, overrides: dict[str, dict] | None = None)
     if getattr(args, "link", "alter") == "ur":  # --robot ur (= --link ur): the job on the UR5e
         args.robot = "ur"
     told = "".join(f" --set {sec}.{k}={v}" for sec, t in (overrides or {}).items() for k, v in t.items())
-    print(f"humanpt demo --calibrate: scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
+    kind = getattr(args, "rig_kind", "psvs")
+    if kind == "psvs" and rig is not None and rig.kind == "stereo":
+        kind = "stereo"  # a rig file of a pair: the job on the pair
+    camera = "the PSVS" if kind == "psvs" else "an ordinary stereo pair (the stereo stage in place of camera and psvs)"
+    print(f"humanpt demo --calibrate: camera {camera}; scenario {args.scenario}, world {world.name}, seed {args.seed}, robot "
           f"{ROBOT_NAMES.get(args.robot, args.robot)}, law {args.law}{';' + told if told else ''}; recording the teach-and-play run to "
           f"{run_dir}/", flush=True)
     bar = Bars("s")
     try:
         ur = {"ur_cycle_ms": float(getattr(args, "cycle_ms", None) or 2.0)} if args.robot == "ur" else {}
         res = calibrate_then_teach(args.scenario, world, args.seed, rig=rig, run_dir=run_dir, progress=bar,
-                                   robot=args.robot, overrides=overrides, law=args.law, **ur)
+                                   robot=args.robot, overrides=overrides, law=args.law, rig_kind=kind, **ur)
     finally:
         bar.close()
     from humanpt.twin.report import job_report

@@ -151,10 +151,12 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     p.add_argument("--rig-kind", choices=("psvs", "stereo"), default="psvs",
                    help="psvs (default: one camera, four mirrors, the complex image) or stereo: an ordinary "
                    "stereo pair, the PSVS's two virtual cameras rendered apart and side by side, the "
-                   "pipeline's rig the same pair (perception on pairs)")
+                   "pipeline's rig the same pair (perception on pairs); with --calibrate the job on the pair "
+                   "(its stereo stage in place of the camera and mirror stages)")
     p.add_argument("--calibrate", action="store_true",
-                   help="the welder's whole job, lock-step: calibrate the camera, the PSVS and mirrors, hand-eye "
-                   "and the tip against the twin (its truth hidden), teach the seam, play the path back on the "
+                   help="the welder's whole job, lock-step: calibrate the camera, the PSVS and mirrors (with "
+                   "--rig-kind stereo: the stereo pair), hand-eye, the arm and the tip against the twin (its truth "
+                   "hidden), teach the seam, play the path back on the "
                    "robot; prints each calibrated value against the twin's truth, the taught path and the "
                    "played-back tool path against the seam (default scenario trapezium, world realistic)")
     p.add_argument("--set", action="append", metavar="SECTION.KEY=VALUE",

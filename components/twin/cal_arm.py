@@ -31,6 +31,7 @@ from humanpt.calibration.handeye import CollectorSettings, HandEyeError, pose_di
 from humanpt.geometry.rig import Rig
 
 from .cal_handeye import ACCEPT_DEG, ACCEPT_MM, collect_on_twin
+from .cal_stereo import true_flange_T_camera
 from .report import Check, TruthLines
 from .worlds import World
 
@@ -73,7 +74,7 @@ def calibrate_arm_on_twin(world: World, rig: Rig, seed: int, progress: Callable[
               f"collected in {got.twin_s:.1f} s of twin time ({got.wall_s:.1f} s wall)"]
     report += [f"  {n}" for n in got.notes]
     report += result.summary_lines()
-    return result, report, truth_lines(result, got.robot_truth, got.camera_truth.flange_T_camera)
+    return result, report, truth_lines(result, got.robot_truth, true_flange_T_camera(got.camera_truth, rig))
 
 
 def fixture_at_seam_start(operator):

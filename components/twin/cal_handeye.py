@@ -37,6 +37,7 @@ from humanpt.geometry.units import to_mm
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import from_pose, header
 
+from .cal_stereo import true_flange_T_camera
 from .report import Check, TruthLines
 from .run import SystemConfig
 from .system import build_system
@@ -209,7 +210,8 @@ def calibrate_hand_eye_on_twin(world: World, rig: Rig, seed: int, progress: Call
     report += result.summary_lines()
     if result.time_offset is not None:
         report += result.time_offset.summary_lines()
-    truth = got.camera_truth.flange_T_camera  # the world's truth: reported, never estimated from
+    # the world's truth (of the rig's camera frame): reported, never estimated from
+    truth = true_flange_T_camera(got.camera_truth, rig)
     return result, report, truth_lines(result, truth, rig, got.camera_truth.stamp_offset_ms)
 
 

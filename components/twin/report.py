@@ -169,7 +169,7 @@ def job_report(res, png: Path | None = None) -> JobReport:
     lines.append("  calibration (estimate, 1-sigma from the rig; checks against the twin's truth)")
     rig = res.rig
     parts = {"camera": rig.psvs_calibration, "psvs": rig.psvs_calibration, "hand-eye": rig.hand_eye.calibration,
-             "tip": rig.tip.calibration, "arm": rig.arm.calibration}
+             "tip": rig.tip.calibration, "arm": rig.arm.calibration, "stereo": rig.stereo.calibration}
     for s in res.stages:
         if getattr(s, "skipped", ""):  # nothing to do here (the arm on the stand-in): said, not warned
             lines.append(f"    {s.name:10s} not run: {s.skipped}")
@@ -266,6 +266,10 @@ def _estimate(stage: str, rig) -> str:
     if stage == "psvs":
         p = rig.psvs
         return f"baseline {getattr(p, 'baseline_mm', float('nan')):.3f} mm ({rig.psvs_calibration.method})"
+    if stage == "stereo":
+        st = rig.stereo
+        return (f"baseline {st.baseline_mm():.3f} mm, a_u left {st.left.a_u:.2f} px, right {st.right.a_u:.2f} px "
+                f"({st.calibration.method})")
     if stage == "hand-eye":
         return "flange_T_camera [" + ", ".join(f"{v:.3f}" for v in rig.hand_eye.flange_T_camera_x) + "] mm/deg"
     if stage == "tip":

@@ -6,7 +6,9 @@ never reading its truth except to report against it:
 1. camera (Zhang), 2. PSVS and mirrors, 3. hand-eye (AX = YB), 4. the arm's kinematic
    errors with the hand-eye (on the Puma, mounted as the teach-and-play run mounts it; not
    run on the stand-in), 5. driver tip: each writes its part of the rig (a stage whose
-   tool is missing or fails is reported and skipped: the rig keeps what it had);
+   tool is missing or fails is reported and skipped: the rig keeps what it had); on an
+   ordinary stereo pair (``rig_kind="stereo"``, issue 35) one stage, the pair's
+   (:mod:`humanpt.twin.cal_stereo`: both cameras and their pose), in place of 1 and 2;
 6. teach: the operator moves the target along the seam, the servo follows, the path of the
    driver's tip is recorded with the calibrated rig (and moved by the calibrated arm);
 7. play back: the robot's tool follows the recorded path; the tool's true path (the world's
@@ -51,17 +53,40 @@ from .worlds import ERROR_SOURCES, World
 # Where between watching (0) and welding (1) the seam the Puma's comfortable pose is.
 MOUNT_FRACTION = 0.5
 
-__all__ = ["STAGES", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm", "mounting", "arm_share"]
+__all__ = ["STAGES", "NOT_FOR_KIND", "stereo_job", "StageResult", "TeachResult", "calibrate_then_teach", "seam_distances_mm", "mounting", "arm_share"]
 
 # stage -> (module of humanpt.twin, entry point): each returns (result, report, truth) and has
 # an ``apply_to_rig(rig, result, date)`` in humanpt.calibration.<name>.
 STAGES: dict[str, tuple[str, str, str]] = {
     "camera": ("cal_camera", "calibrate_camera_on_twin", "camera"),
     "psvs": ("cal_psvs", "calibrate_psvs_on_twin", "psvs"),
+    "stereo": ("cal_stereo", "calibrate_stereo_on_twin", "stereo"),  # an ordinary pair's, in their place (issue 35)
     "hand-eye": ("cal_handeye", "calibrate_hand_eye_on_twin", "handeye"),
     "arm": ("cal_arm", "calibrate_arm_on_twin", "arm"),  # the arm's errors with the hand-eye (32.4)
     "tip": ("cal_tip", "calibrate_tip_on_twin", "tip"),
 }
+
+
+# The stages that do not run on a rig of each kind: the PSVS's camera and mirrors are an
+# ordinary stereo pair's one stage (its cameras and their pose), and the other way round.
+NOT_FOR_KIND: dict[str, tuple[str, ...]] = {"psvs": ("stereo",), "stereo": ("camera", "psvs")}
+
+
+def stereo_job(world: World, rig: Rig) -> tuple[World, Rig]:
+    """``world`` and ``rig`` for the job on an ordinary stereo pair: the world's camera
+    renders its PSVS's two virtual cameras apart (``[sim_camera] stereo``: an error source
+    of the world's PSVS becomes the pair's), the rig a pair (the pair its PSVS makes,
+    :meth:`humanpt.geometry.rig.Stereo.of_psvs`, unless it is one already)."""
+    import dataclasses
+
+    from humanpt.geometry.rig import Stereo
+
+    from .worlds import merge_overrides
+
+    world = dataclasses.replace(world, extra=merge_overrides(world.extra, {"sim_camera": {"stereo": True}}))
+    if rig.kind != "stereo":
+        rig = dataclasses.replace(rig, kind="stereo", stereo=Stereo.of_psvs(rig.psvs))
+    return world, rig
 
 
 @dataclass
@@ -199,7 +224,9 @@ def arm_share(cfg: SystemConfig, rig: Rig, view: np.ndarray, mount: np.ndarray, 
     traj = Trajectory(cfg.operator.design_scenario())
     along = np.array([traj.path_pose(t) for t in np.linspace(0.0, traj.duration_s, 60)])
     watch = np.array([p @ invert_transform(along[0]) @ view for p in along])
-    true_X = cfg.sim_camera.flange_T_camera  # the world's hand-eye (truth, only to report)
+    from .cal_stereo import true_flange_T_camera
+
+    true_X = true_flange_T_camera(cfg.sim_camera, rig)  # the world's hand-eye (truth, only to report)
     tool = transform_from_x(np.asarray(cfg.controller.flange_T_tool_x, dtype=float))
     args = (cfg.robot_overrides, mount, mount_joints, watch, along, tool, rig.hand_eye.flange_T_camera_mm(), true_X)
 
@@ -246,7 +273,7 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                          robot: str = "standin", smooth_path: bool = True, play: str = "seam",
                          progress: Callable[[str, float, float], None] | None = None,
                          overrides: dict[str, dict] | None = None, law: str = "thetau",
-                         ur_cycle_ms: float = UR_CYCLE_MS) -> TeachResult:
+                         ur_cycle_ms: float = UR_CYCLE_MS, rig_kind: str | None = None) -> TeachResult:
     """Run the job (module docstring) on ``world`` (default realistic) from ``rig`` (default
     the nominal one); ``stages`` default every one of :data:`STAGES`.  ``progress(stage,
     done, total)`` is called as each stage goes.  ``robot`` teaches and plays back:
@@ -261,7 +288,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
     motion (``TeachResult.refused``).  ``overrides`` ({section: {key: value}}, as
     ``humanpt demo --set``) and the servo ``law`` configure the teach-and-play run (the
     operator's speed is ``operator.speed_mm_s``, the playback's
-    ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``)."""
+    ``controller.playback_speed_mm_s``, else ``playback_speed_mm_s``).  ``rig_kind``
+    (default the rig's kind): "stereo" runs the job on an ordinary stereo pair
+    (:func:`stereo_job`), its stereo stage in place of the camera and mirror stages."""
     t_start = time.perf_counter()
     world = World.realistic() if world is None else world
     ctl_kw: dict = {}
@@ -276,8 +305,13 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
                 ControllerConfig().recording_delay_cycles * PUMA_CYCLE_MS / ur_cycle_ms))
     op = operator_config(scenario, seed)
     rig = nominal_rig(op) if rig is None else rig
+    kind = rig.kind if rig_kind is None else rig_kind
+    if kind not in NOT_FOR_KIND:
+        raise ValueError(f"rig kind {kind!r}: {' or '.join(NOT_FOR_KIND)}")
+    if kind == "stereo":
+        world, rig = stereo_job(world, rig)
     results = []
-    names = tuple(STAGES) if stages is None else stages
+    names = tuple(n for n in STAGES if n not in NOT_FOR_KIND[kind]) if stages is None else stages
     mount = None
     if "arm" in names and robot == "puma":  # the arm stage mounts the Puma as the teach-and-play run will
         cfg0 = SystemConfig.for_scenario(scenario, seed, overrides, rig=rig, world=world,
@@ -288,6 +322,9 @@ def calibrate_then_teach(scenario: str = "trapezium", world: World | None = None
         _, m, j = mounting(cfg0, robot)
         mount = ((m, j), fixture_at_seam_start(cfg0.operator))
     for name in names:
+        if name in NOT_FOR_KIND[kind]:
+            results.append(StageResult(name, False, 0.0, skipped=f"not a stage of a {kind} rig"))
+            continue
         rig, res = _run_stage(name, world, rig, seed,
                               (lambda done, total, _n=name: progress(_n, done, total)) if progress else None, robot,
                               mount)
