@@ -17,8 +17,12 @@ specification's figures (base to axis 2 486.5 mm, axis 1 to axis 2 150 mm, upper
 axis 3 to the wrist centre 600, wrist centre to flange 65), the same as the DH table
 published with Corke's toolbox models of it (alpha -90, 0, -90, 90, -90, 0; theta offsets
 0, -90, 0, 0, 0, 180 deg: ABB's calibration pose, upper arm up and forearm level, is all
-axes 0). Axis ranges of the product specification (IRB 1600, 1.45 m variant): axis 1
-+-180, axis 2 -63..+136, axis 3 -235..+55, axis 4 +-200, axis 5 +-115, axis 6 +-400 deg.
+axes 0). Axis ranges: axis 1 +-180, axis 2 -90..+120, axis 3 -245..+65, axis 4 +-200, axis
+5 +-115, axis 6 +-400 deg, as ROS-Industrial's model of the 1.45 m arm gives them
+(ros-industrial/abb_experimental, abb_irb1600_support/urdf/irb1600_8_145_macro.xacro, "from
+ABB's data sheets"; its dimensions are the ones above: 486.5, 150, 700, 300 + 300, 65 mm).
+The ranges first written here (axis 2 -63..+136, axis 3 -235..+55) were from memory of the
+product specification, not checked against a copy; no copy of it is reachable here.
 """
 
 from __future__ import annotations
@@ -85,7 +89,7 @@ IRB1600 = ArmModel(
     (DhLink(-_H, 150.0, 486.5), DhLink(0.0, 700.0, 0.0), DhLink(-_H, 0.0, 0.0),
      DhLink(_H, 0.0, 600.0), DhLink(-_H, 0.0, 0.0), DhLink(0.0, 0.0, 65.0)),
     (0.0, -90.0, 0.0, 0.0, 0.0, 180.0),
-    ((-180.0, 180.0), (-63.0, 136.0), (-235.0, 55.0), (-200.0, 200.0), (-115.0, 115.0), (-400.0, 400.0)),
+    ((-180.0, 180.0), (-90.0, 120.0), (-245.0, 65.0), (-200.0, 200.0), (-115.0, 115.0), (-400.0, 400.0)),
     # Flange straight down in front of the robot (axis 5 at 60 deg, away from its singularity).
     (0.0, 20.0, 10.0, 0.0, 60.0, 0.0),
     "spherical",

@@ -146,7 +146,7 @@ def test_limits_respected_and_out_of_reach():
     # axis 5 at 125 deg (beyond +-115): the same pose on the other wrist has axis 5 at
     # -125 deg, also beyond: the other solutions move axes 1-3 far; each returned one
     # is within limits.
-    wide = IRB1600.kinematics(((-180, 180), (-63, 136), (-235, 55), (-200, 200), (-130, 130), (-400, 400)))
+    wide = IRB1600.kinematics(((-180, 180), (-90, 120), (-245, 65), (-200, 200), (-130, 130), (-400, 400)))
     q = np.radians([0.0, 20.0, 10.0, 0.0, 125.0, 0.0])
     T = wide.forward(q)
     for s in kin.solutions(T, q):
