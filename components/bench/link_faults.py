@@ -239,25 +239,35 @@ class Attacker:
 
 
 # -- the attacks ------------------------------------------------------------------------------
-def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
-    """Item 1: the gateway SIGKILLed while the robot plays a line at 40 mm/s."""
-    if ctx.control is None:
-        row.note = "no handle on the twin's processes: cannot kill the gateway"
-        return
+def start_line_playback(ctx: Ctx, row: FaultRow) -> tuple[bool, np.ndarray | None]:
+    """Play a line of KILL_LINE_MM at KILL_SPEED_MM_S from where the tool is (the kill and
+    freeze rows' motion): (started, the truth's position at the start); not started: why, in
+    ``row.note``."""
     start = _tool_now_mm_deg(ctx)
     if start is None:
         row.note = "no robot state"
-        return
+        return False, None
     x0, sign = start
     t0 = time.monotonic()
     pts = _line(x0, sign, KILL_LINE_MM, 31, out_and_back=False)
     p_start = _truth_now(ctx)
     got = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(), "speed_mm_s": KILL_SPEED_MM_S},
                    ("playback_started", "bad_command"), timeout_s=ANSWER_TIMEOUT_S)
-    started = [e for e in ctx.mon.events_since(t0) if e.source == "controller" and e.code == "playback_started"]
-    if got is None or not started:
+    if got is None or not _events(ctx, t0, "controller", ("playback_started",)):
         row.note = "the controller did not start the playback: " + (
             "; ".join(e.text for e in _events(ctx, t0, "controller", ("bad_command",))) or "no answer")
+        return False, None
+    return True, p_start
+
+
+def attack_gateway_killed(ctx: Ctx, row: FaultRow) -> None:
+    """Item 1: the gateway SIGKILLed while the robot plays a line at 40 mm/s."""
+    if ctx.control is None:
+        row.note = "no handle on the twin's processes: cannot kill the gateway"
+        return
+    t0 = time.monotonic()
+    started, p_start = start_line_playback(ctx, row)
+    if not started:
         return
     bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm
     if ctx.link in ("abb", "ur"):  # EGM and UR's program go on to the last target: at most the lead ahead

@@ -43,19 +43,16 @@ from humanpt.bench.faults import Ctx, FaultRow, _console, _ms
 from humanpt.bench.link_faults import (
     ANSWER_TIMEOUT_S,
     KILL_BOUND_CYCLES,
-    KILL_LINE_MM,
-    KILL_SPEED_MM_S,
     LINK_BACK_TIMEOUT_S,
     _events,
-    _line,
     _speed_mm_s,
     _state_after,
-    _tool_now_mm_deg,
     _truth_after,
     _truth_at,
     _truth_now,
     _wait,
     fast_or_along,
+    start_line_playback,
 )
 from humanpt.robot_gateway.links.rsi.config import parse_address
 from humanpt.robot_gateway.links.ur import protocol as rtde
@@ -161,21 +158,24 @@ def attack_rtde_junk(ctx: Ctx, row: FaultRow, seconds: float = JUNK_S) -> None:
                 + f"; the controller: {len(bad)} bad_rtde events")
 
 
+def _freeze(pid: int) -> None:
+    """Stop process ``pid`` (SIGSTOP) for FREEZE_S, then let it go on (the fault itself is a
+    duration: the process silent this long)."""
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        time.sleep(FREEZE_S)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+
+
 def attack_freeze(ctx: Ctx, row: FaultRow) -> None:
     """The gateway frozen (SIGSTOP) for 0.5 s while the robot plays a line at 40 mm/s."""
     pid = ctx.control.pid("robot_gateway") if ctx.control is not None else None
-    start = _tool_now_mm_deg(ctx)
-    if pid is None or start is None:
-        row.note = "no handle on the gateway's process" if pid is None else "no robot state"
+    if pid is None:
+        row.note = "no handle on the gateway's process"
         return
-    x0, sign = start
-    t0 = time.monotonic()
-    pts = _line(x0, sign, KILL_LINE_MM, 31, out_and_back=False)
-    p_start = _truth_now(ctx)
-    got = _console(ctx, "controller", "playback", {"points": pts.round(4).tolist(), "speed_mm_s": KILL_SPEED_MM_S},
-                   ("playback_started", "bad_command"), timeout_s=ANSWER_TIMEOUT_S)
-    if got is None or not _events(ctx, t0, "controller", ("playback_started",)):
-        row.note = "the controller did not start the playback"
+    started, p_start = start_line_playback(ctx, row)
+    if not started:
         return
     bound = KILL_BOUND_CYCLES * ctx.gw.max_step_mm + ctx.gw.max_lead_mm
     try:
@@ -184,11 +184,7 @@ def attack_freeze(ctx: Ctx, row: FaultRow) -> None:
             return
         speed = _speed_mm_s(ctx)
         t_freeze, wall_freeze = time.monotonic(), time.time_ns()
-        os.kill(pid, signal.SIGSTOP)
-        try:
-            time.sleep(FREEZE_S)  # (the fault itself is a duration: the gateway stopped this long)
-        finally:
-            os.kill(pid, signal.SIGCONT)
+        _freeze(pid)
         wall_cont = time.time_ns()
         p_freeze = _truth_at(ctx, wall_freeze)
         _wait(lambda: _state_after(ctx, wall_cont), LINK_BACK_TIMEOUT_S, ctx)
@@ -220,11 +216,7 @@ def attack_robot_frozen(ctx: Ctx, row: FaultRow) -> None:
         row.note = "no handle on the robot's process"
         return
     t0 = time.monotonic()
-    os.kill(pid, signal.SIGSTOP)
-    try:
-        time.sleep(FREEZE_S)  # (the fault itself is a duration: the robot silent this long)
-    finally:
-        os.kill(pid, signal.SIGCONT)
+    _freeze(pid)
     wall1 = time.time_ns()
     going = _wait(lambda: _state_after(ctx, wall1), LINK_BACK_TIMEOUT_S, ctx)
     fault = ctx.mon.wait_event(t0, ("fault",), "robot_gateway", timeout_s=0.0)
