@@ -122,19 +122,29 @@ def bench_alter(args) -> int:
     return 0
 
 
+def link_cycles(verb: str, text: str, allowed, what: str, length_flag: str, length_s: float) -> list[float] | None:
+    """A link bench's ``--cycles`` (comma-separated ms, each one of ``allowed``) and its run
+    length: the cycle times, or None after a one-line error on stderr."""
+    try:
+        cycle_times = [float(c) for c in text.split(",") if c.strip()]
+    except ValueError:
+        print(f"humanpt bench {verb}: --cycles must be numbers ({', '.join(f'{c:g}' for c in allowed)}), "
+              f"got {text!r}", file=sys.stderr)
+        return None
+    if not cycle_times or any(c not in allowed for c in cycle_times) or not length_s > 0:
+        print(f"humanpt bench {verb}: --cycles takes {what}, {length_flag} > 0; got {text!r}, {length_s:g}",
+              file=sys.stderr)
+        return None
+    return cycle_times
+
+
 def bench_rsi(args) -> int:
     """The gateway <-> the simulated RSI controller over UDP (see ``humanpt.bench.rsi``)."""
     from humanpt.bench.rsi import run_rsi
 
-    try:
-        cycle_times = [float(c) for c in args.cycles.split(",") if c.strip()]
-    except ValueError:
-        print(f"humanpt bench rsi: --cycles must be numbers (4, 12), got {args.cycles!r}", file=sys.stderr)
-        return 2
-    bad = [c for c in cycle_times if c not in (4.0, 12.0)]
-    if bad or not cycle_times or not args.duration > 0:
-        print(f"humanpt bench rsi: --cycles takes 4 and/or 12 (RSI's cycle times), --duration > 0; got "
-              f"{args.cycles!r}, {args.duration:g}", file=sys.stderr)
+    cycle_times = link_cycles("rsi", args.cycles, (4.0, 12.0), "4 and/or 12 (RSI's cycle times)",
+                              "--duration", args.duration)
+    if cycle_times is None:
         return 2
     where = "a thread of this process" if args.same_process else "a process of its own"
     print(f"humanpt bench rsi (gateway <-> simulated RSI controller ({where}) over UDP on loopback; scripted "
@@ -176,15 +186,9 @@ def bench_ur(args) -> int:
     """The gateway <-> the simulated UR controller over RTDE (see ``humanpt.bench.ur``)."""
     from humanpt.bench.ur import CYCLES_MS, run_ur
 
-    try:
-        cycle_times = [float(c) for c in args.cycles.split(",") if c.strip()]
-    except ValueError:
-        print(f"humanpt bench ur: --cycles must be numbers (8, 2), got {args.cycles!r}", file=sys.stderr)
-        return 2
-    bad = [c for c in cycle_times if c not in CYCLES_MS]
-    if bad or not cycle_times or not args.seconds > 0:
-        print(f"humanpt bench ur: --cycles takes 8 (CB3, 125 Hz) and/or 2 (e-Series, 500 Hz), --seconds > 0; got "
-              f"{args.cycles!r}, {args.seconds:g}", file=sys.stderr)
+    cycle_times = link_cycles("ur", args.cycles, CYCLES_MS, "8 (CB3, 125 Hz) and/or 2 (e-Series, 500 Hz)",
+                              "--seconds", args.seconds)
+    if cycle_times is None:
         return 2
     where = "a thread of this process" if args.same_process else "a process of its own"
     print(f"humanpt bench ur (gateway <-> simulated UR5e controller ({where}) over RTDE, TCP on loopback; scripted "
