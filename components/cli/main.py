@@ -816,35 +816,10 @@ def _dispatch(ap: argparse.ArgumentParser, args) -> int:
             return path_export(args)
         ap.parse_args(["path", "--help"])
     if args.verb == "bench":
-        if args.bench_verb == "runtime":
-            from humanpt.cli.bench import bench_runtime
-            return bench_runtime(args)
-        if args.bench_verb == "bridge":
-            from humanpt.cli.bench import bench_bridge
-            return bench_bridge(args)
-        if args.bench_verb == "alter":
-            from humanpt.cli.bench import bench_alter
-            return bench_alter(args)
-        if args.bench_verb == "rsi":
-            from humanpt.cli.bench import bench_rsi
-            return bench_rsi(args)
-        if args.bench_verb == "ur":
-            from humanpt.cli.bench import bench_ur
-            return bench_ur(args)
-        if args.bench_verb == "render":
-            from humanpt.cli.bench import bench_render
-            return bench_render(args)
-        if args.bench_verb == "perception":
-            from humanpt.cli.bench import bench_perception
-            return bench_perception(args)
-        if args.bench_verb == "faults":
-            from humanpt.cli.bench import bench_faults
-            return bench_faults(args)
-        if args.bench_verb is None:
-            from humanpt.cli.bench import bench_all
+        from humanpt.cli import bench as bench_cli
 
-            return bench_all(args)
-        ap.parse_args(["bench", "--help"])
+        # every sub-bench is cli/bench.py's bench_<verb> (bench_all without one)
+        return getattr(bench_cli, f"bench_{args.bench_verb or 'all'}")(args)
     ap.print_help()
     return 2
 

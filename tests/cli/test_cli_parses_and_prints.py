@@ -185,3 +185,20 @@ def test_every_import_of_the_cli_resolves():
                        timeout=300)
     assert r.returncode == 0, r.stderr
     assert json.loads(r.stdout.strip().splitlines()[-1]) == []
+
+
+def test_every_bench_the_parser_offers_has_its_function():
+    """`humanpt bench WHAT` dispatches to cli/bench.py's ``bench_<WHAT>`` (``bench_all``
+    without WHAT): a sub-bench added to the parser without its function fails here, not at a
+    user's prompt."""
+    import argparse
+
+    from humanpt.cli import bench as bench_cli
+    from humanpt.cli.main import build_parser
+
+    bench = next(a for a in build_parser()._subparsers._group_actions[0].choices["bench"]._actions
+                 if isinstance(a, argparse._SubParsersAction))
+    verbs = sorted(bench.choices)
+    assert {"faults", "perception", "rsi", "ur", "alter"} <= set(verbs), verbs
+    missing = [v for v in [*verbs, "all"] if not callable(getattr(bench_cli, f"bench_{v}", None))]
+    assert missing == [], missing
