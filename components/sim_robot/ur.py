@@ -20,11 +20,17 @@ controller cycle (2 ms e-Series, 8 ms CB3) :meth:`UrRobot.cycle`:
 Outputs and inputs are those of UR's RTDE guide (:data:`OUTPUT_TYPES`, :data:`INPUT_TYPES`);
 a name it does not know is NOT_FOUND, an input another session holds is IN_USE (as on a
 real controller). What it does not simulate reads as 0. Humanpt's assumptions (no controller
-here to check them): the arm follows servoj's target with a first-order lag; stopl stops at
-once.
+here to check them): the arm follows servoj's target with a first-order lag; the watchdog's
+stopl stops at once; a program stopped (the pendant's Stop, the Dashboard server's ``stop``:
+:meth:`UrRobot.stop_program`) no longer runs and the arm brakes along its last cycle's motion
+at :data:`STOP_DECELERATION_MM_S2` (runtime_state STOPPING, then STOPPED); Play starts the
+program from its start (:meth:`UrRobot.play_program`). The Dashboard server's commands:
+:mod:`humanpt.sim_robot.ur_dashboard` (its clients come to :class:`UrSimRobotCore` on
+``serial_rx`` with frame_id ``dashboard <peer>``).
 
 :class:`RtdeServer` is the live shell: a TCP server on a configurable address (30004 on a
-real controller), a thread accepting clients and a thread running the cycle.
+real controller; with ``dashboard``, the Dashboard server too, 29999 on a real one), one
+accept loop (:class:`humanpt.sim_robot.tcp.TcpServers`) and a thread running the cycle.
 """
 
 from __future__ import annotations
