@@ -22,11 +22,19 @@ program with its watchdog running):
   packages never sent; judged: robot states again afterwards and no fault latched (the
   gateway's silence watchdog may restart the link: reported).
 
+- ``pstop`` (the robot program stopped): while the robot plays a line at 40 mm/s, Stop
+  through the robot's Dashboard server (port 29999 on a UR: what the pendant's Stop does),
+  then, after the robot states of :data:`PSTOP_STILL_STATES` cycles, Play. Judged: the
+  Dashboard answered as UR documents ("Stopped", "Starting program"); the arm braked within
+  the program's stop (v^2 / 2a at the controller's deceleration, + one cycle at v) and then
+  did not move while stopped although the gateway went on answering; the gateway read the
+  stop from RTDE (``link_down`` naming the stopped program, no fault latched) and, after
+  Play, came back up (``link_up``) with no jump: the arm's largest step a cycle over the
+  robot states of :data:`PSTOP_AFTER_STATES` cycles after it within the gateway's limit.
+
 Duplicated and reordered data packages cannot happen between the two ends of one TCP
 connection, and lost ones only as the robot's silence (``lost``); the link drops a package
-whose timestamp does not advance, and a foreign header (tests/ur/test_ur_link.py). A stopped
-program turns corrections off (runtime_state; tests/ur/test_ur_link.py): the simulated UR's
-program is stopped only from its pendant (no row).
+whose timestamp does not advance, and a foreign header (tests/ur/test_ur_link.py).
 """
 
 from __future__ import annotations
@@ -62,6 +70,8 @@ FOREIGN_TARGET_MM = 50.0  # rtde2: the second client's target, this far from the
 JUNK_S = 3.0              # rtdejunk: its length
 FREEZE_S = 0.5            # freeze: the gateway stopped this long
 UR_FAULTS_CYCLE_MS = 8.0  # the twin's UR at the CB3's 125 Hz (7 processes at 500 Hz: not on a small machine)
+PSTOP_STILL_STATES = 50   # pstop: robot states while the program is stopped (0.4 s at 8 ms)
+PSTOP_AFTER_STATES = 50   # pstop: robot states after Play judged for a jump
 
 
 def _rtde_address(ctx: Ctx) -> tuple[str, int]:
@@ -230,6 +240,127 @@ def attack_robot_frozen(ctx: Ctx, row: FaultRow) -> None:
                 + (f"; robot_gateway: {', '.join(seen)}" if seen else ""))
 
 
+class _Dashboard:
+    """A Dashboard client of the robot's (one command line, one reply line)."""
+
+    def __init__(self, address: tuple[str, int]):
+        self.sock = socket.create_connection(address, timeout=ANSWER_TIMEOUT_S)
+        self._buf = b""
+        self.greeting = self.line()
+
+    def line(self) -> str:
+        while b"\n" not in self._buf:
+            data = self.sock.recv(4096)
+            if not data:
+                raise OSError("the Dashboard server closed the connection")
+            self._buf += data
+        line, self._buf = self._buf.split(b"\n", 1)
+        return line.decode(errors="replace").strip()
+
+    def __call__(self, command: str) -> str:
+        self.sock.sendall(command.encode() + b"\n")
+        return self.line()
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _states(ctx: Ctx) -> int:
+    with ctx.mon.lock:
+        return len(ctx.mon.msgs["robot_gateway/robot_state"])
+
+
+def _max_step_per_cycle(track: list[tuple[int, np.ndarray]], cycle_ns: float) -> float:
+    """The largest distance the flange went in one cycle between truth samples (a sample the
+    bench missed: the distance over the cycles between, per cycle)."""
+    worst = 0.0
+    for (t0, p0), (t1, p1) in zip(track, track[1:], strict=False):
+        cycles = max(1, round((t1 - t0) / cycle_ns))
+        worst = max(worst, float(np.linalg.norm(p1 - p0)) / cycles)
+    return worst
+
+
+def attack_program_stop(ctx: Ctx, row: FaultRow) -> None:
+    """Stop and Play through the robot's Dashboard server while the robot plays a line."""
+    from humanpt.sim_robot.config import SimRobotConfig
+    from humanpt.sim_robot.ur import STOP_DECELERATION_MM_S2
+
+    sim = ctx.file_cfg.component("sim_robot", SimRobotConfig) if ctx.file_cfg is not None else None
+    if sim is None:
+        row.note = "no run config: the robot's Dashboard address unknown"
+        return
+    address = parse_address(sim.dashboard_address)
+    cycle_ns = ctx.gw.cycle_period_ms * 1e6
+    started, p_start = start_line_playback(ctx, row)
+    if not started:
+        return
+    dash: _Dashboard | None = None
+    answers: dict[str, str] = {}
+    try:
+        if not _wait(lambda: fast_or_along(ctx, p_start), ANSWER_TIMEOUT_S, ctx):
+            row.note = f"the robot never moved (at {_speed_mm_s(ctx):.1f} mm/s)"
+            return
+        dash = _Dashboard(address)
+        t_stop = time.monotonic()
+        answers["stop"] = dash("stop")
+        stopped = ctx.mon.wait_event(t_stop, ("program_stopped",), "sim_robot", timeout_s=ANSWER_TIMEOUT_S)
+        rest = ctx.mon.wait_event(t_stop, ("arm_at_rest",), "sim_robot", timeout_s=ANSWER_TIMEOUT_S)
+        down = ctx.mon.wait_event(t_stop, ("link_down",), "robot_gateway", timeout_s=ANSWER_TIMEOUT_S)
+        n = _states(ctx)
+        _wait(lambda: _states(ctx) >= n + PSTOP_STILL_STATES, LINK_BACK_TIMEOUT_S, ctx)
+        answers["programState"] = dash("programState")
+        t_play, wall_play = time.monotonic(), time.time_ns()
+        answers["play"] = dash("play")
+        up = ctx.mon.wait_event(t_play, ("link_up",), "robot_gateway", timeout_s=ANSWER_TIMEOUT_S)
+        n = _states(ctx)
+        _wait(lambda: _states(ctx) >= n + PSTOP_AFTER_STATES, LINK_BACK_TIMEOUT_S, ctx)
+        answers["after"] = dash("programState")
+        if stopped is None or rest is None:
+            row.note = "the robot never reported the stop (program_stopped, arm_at_rest)"
+            return
+        wall_stop, wall_rest = stopped[1].header.stamp_ns, rest[1].header.stamp_ns
+        # braking: from the last truth before the stop took effect, at the speed of the cycle before it
+        before = [(t, p) for t, p in _truth_after(ctx, wall_stop - 10 * cycle_ns) if t <= wall_stop]
+        speed = 1e9 * _max_step_per_cycle(before, cycle_ns) / cycle_ns
+        braked = [p for t, p in _truth_after(ctx, wall_stop) if t <= wall_rest]
+        p_stop = before[-1][1] if before else None
+        brake_mm = max((float(np.linalg.norm(p - p_stop)) for p in braked), default=0.0) if p_stop is not None \
+            else math.nan
+        brake_bound = speed ** 2 / (2.0 * STOP_DECELERATION_MM_S2) + speed * cycle_ns * 1e-9
+        still = [p for t, p in _truth_after(ctx, wall_rest) if t <= wall_play]
+        still_mm = max((float(np.linalg.norm(p - still[0])) for p in still), default=0.0)
+        after = [(t, p) for t, p in _truth_after(ctx, wall_play)]
+        jump = _max_step_per_cycle(after, cycle_ns)
+        moved_after = float(np.linalg.norm(after[-1][1] - after[0][1])) if after else 0.0
+        faults = _events(ctx, t_stop, "robot_gateway", ("fault", "robot_fault"))
+        row.max_step_mm, row.limit_mm = jump, ctx.gw.max_step_mm
+        row.held = brake_mm <= brake_bound and still_mm <= 1e-3 and jump <= ctx.gw.max_step_mm + 1e-6
+        told = down is not None and "program stopped" in down[1].text
+        row.expected = (answers["stop"] == "Stopped" and answers["play"] == "Starting program" and told
+                        and up is not None and not faults and answers["programState"].startswith("STOPPED"))
+        row.reaction_ms = _ms(down and down[0], t_stop)
+        row.recovered = up is not None and answers["after"].startswith("PLAYING")
+        row.note = (f"Dashboard: {answers['stop']!r}, {answers['programState']!r}, {answers['play']!r}; braked "
+                    f"{brake_mm:.2f} mm from {speed:.1f} mm/s (bound v^2/2a + v dt = {brake_bound:.2f} mm), then "
+                    f"{still_mm:.3f} mm in {PSTOP_STILL_STATES} cycles stopped; the gateway: "
+                    + ("link_down (program stopped)" if told else "NO link_down naming the stop")
+                    + (", link_up after Play" if up is not None else ", NO link_up after Play")
+                    + (f", {len(faults)} FAULT(s)" if faults else "")
+                    + f"; after Play {moved_after:.1f} mm in {PSTOP_AFTER_STATES} cycles, at most "
+                    f"{jump:.2f} mm a cycle (limit {ctx.gw.max_step_mm:.2f})")
+    finally:
+        if dash is not None:
+            try:
+                if not dash("programState").startswith("PLAYING"):
+                    dash("play")
+                dash("quit")
+            except OSError:
+                pass
+            dash.close()
+        _console(ctx, "controller", "stop", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+        _console(ctx, "controller", "track", {}, ("command",), timeout_s=ANSWER_TIMEOUT_S)
+
+
 def ur_attacks():
     from humanpt.bench.faults import Attack
 
@@ -241,5 +372,7 @@ def ur_attacks():
         Attack("freeze", f"gateway frozen {FREEZE_S:g} s mid-motion (late answers)", attack_freeze,
                keeps_loop=False, links=("ur",)),
         Attack("lost", f"robot frozen {FREEZE_S:g} s (its data packages lost)", attack_robot_frozen,
+               keeps_loop=False, links=("ur",)),
+        Attack("pstop", "robot program stopped, then played (Dashboard)", attack_program_stop,
                keeps_loop=False, links=("ur",)),
     )

@@ -674,7 +674,7 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q.add_argument("--link", choices=["alter", "rsi", "abb", "ur"], default="alter",
                    help="the twin's robot link: the Puma's serial ALTER line (default), RSI over UDP (12 ms), "
                    "ABB EGM over UDP (4 ms: kill and junk) or UR RTDE over TCP (a CB3's 8 ms: kill, rtde2, rtdejunk, "
-                   "freeze); "
+                   "freeze, lost, pstop); "
                    "the rows that do not apply to it are skipped, with the reason")
     q.add_argument("--quick", action="store_true", help="issue 14's attacks but the bus flood (which takes both "
                    "cores of a small machine); with --secure also issue 19's but the floods and the partition")

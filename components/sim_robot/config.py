@@ -88,6 +88,9 @@ class SimRobotConfig:
     # RTDE: where the simulated UR's RTDE server listens (a real controller: port 30004); the
     # gateway's rtde_address (live; the lock-step twin wires the stream itself).
     rtde_bind: str = "127.0.0.1:30004"
+    # RTDE: where its Dashboard server listens (a real controller: port 29999); "": the RTDE
+    # port less 5 on the same host (29999 beside 30004; port 0: a free one).
+    dashboard_bind: str = ""
     # EGM: where the gateway listens (the controller's UDPUC RemoteAddress:RemotePortNumber).
     egm_gateway: str = "127.0.0.1:6510"
     # EGM: no EgmSensor for this long stops EGM (EGMRunPose \CommTimeout), counted from the
@@ -158,12 +161,27 @@ class SimRobotConfig:
         from humanpt.robot_gateway.links.rsi.config import parse_address
 
         parse_address(self.rtde_bind)  # (ValueError naming it)
+        try:
+            parse_address(self.dashboard_address)
+        except ValueError as e:
+            raise ValueError(f"dashboard_bind: {e}") from None
         if not self.rsi_late_limit >= 1:
             raise ValueError(f"rsi_late_limit must be >= 1, got {self.rsi_late_limit}")
         for name in ("rsi_max_correction_mm", "rsi_max_correction_deg"):
             if not (math.isfinite(getattr(self, name)) and getattr(self, name) > 0):
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         self.start_joints_rad()  # raises ValueError when the start is not reachable
+
+    @property
+    def dashboard_address(self) -> str:
+        """The simulated UR's Dashboard server, "host:port": ``dashboard_bind``, or the RTDE
+        port less 5 (29999 beside 30004, as on a UR; port 0: a free one)."""
+        if self.dashboard_bind:
+            return self.dashboard_bind
+        from humanpt.robot_gateway.links.rsi.config import parse_address
+
+        host, port = parse_address(self.rtde_bind)
+        return f"{host}:{port - 5 if port > 5 else 0}"
 
     @property
     def cycle_ms(self) -> float:

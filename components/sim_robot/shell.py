@@ -126,108 +126,86 @@ class PtyAdapter:
 
 
 class TcpServerAdapter:
-    """The simulated UR's RTDE server: listens at ``bind`` ("host:port") and serves every
-    client at once, as a UR controller does (the gateway, and any other: a second client is
-    refused the gateway's registers by the controller, IN_USE). Each accepted connection is
-    first marked by an EMPTY ``serial_rx`` chunk (frame_id = the client's "host:port": the
-    core starts a fresh RTDE session for it; TCP never delivers an empty read as data), then
-    every read is a ``serial_rx`` chunk with that frame_id, and its end an empty chunk from
-    "<host:port> closed" (:data:`humanpt.sim_robot.ur.CLOSED`). ``serial_tx`` goes to the client
-    its frame_id names (an empty one: the latest client's; lost while there is none); an empty
-    ``serial_tx`` chunk closes that client's connection (the controller drops it)."""
+    """The simulated UR's TCP servers: RTDE at ``bind`` ("host:port") and, with
+    ``dashboard``, the Dashboard server there, on one accept loop
+    (:class:`humanpt.sim_robot.tcp.TcpServers`); every client of each at once, as a UR
+    controller serves them (the gateway, and any other: a second client is refused the
+    gateway's registers by the controller, IN_USE). Each accepted connection is first marked
+    by an EMPTY ``serial_rx`` chunk (frame_id = the client's "host:port", a Dashboard client's
+    "dashboard host:port" (:data:`humanpt.sim_robot.ur.DASHBOARD`): the core starts a fresh
+    session for it; TCP never delivers an empty read as data), then every read is a
+    ``serial_rx`` chunk with that frame_id, and its end an empty chunk from "<frame_id> closed"
+    (:data:`humanpt.sim_robot.ur.CLOSED`). ``serial_tx`` goes to the client its frame_id names
+    (an empty one: the latest RTDE client's; lost while there is none); an empty ``serial_tx``
+    chunk closes that client's connection (the controller drops it)."""
 
     topics_out = ("serial_tx",)
 
-    def __init__(self, bind: str, *, poll_s: float = 0.2):
-        import socket
+    def __init__(self, bind: str, *, dashboard: str | None = None, poll_s: float = 0.2):
+        from humanpt.sim_robot.tcp import TcpServers
 
-        from humanpt.robot_gateway.links.rsi.config import parse_address
-
-        self.address = parse_address(bind)
-        self.poll_s = poll_s
-        self._listen = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._listen.bind(self.address)
-        except OSError as e:
-            self._listen.close()
-            raise OSError(f"sim_robot: cannot listen for RTDE at {bind}: {e.strerror or e}") from None
-        self._listen.listen(8)
-        self._listen.settimeout(poll_s)
-        self.address = self._listen.getsockname()[:2]  # (port 0: the one the system chose)
-        self._conns: dict = {}  # client "host:port" -> its socket
+        binds = {"RTDE": bind} if dashboard is None else {"RTDE": bind, "Dashboard": dashboard}
+        self.tcp = TcpServers(binds, self, poll_s=poll_s)
+        self.address = self.tcp.addresses["RTDE"]
+        self.dashboard_address = self.tcp.addresses.get("Dashboard")
+        self._put: Callable[[str, object], None] | None = None
         self._latest = ""
-        self._wlock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread: threading.Thread | None = None
-        self._readers: list[threading.Thread] = []
-        self.connections = 0
         self.bytes_in = 0
         self.bytes_out = 0
         self.bytes_dropped = 0
         log.info("sim_robot: RTDE server at %s:%d", *self.address)
+        if self.dashboard_address is not None:
+            log.info("sim_robot: Dashboard server at %s:%d", *self.dashboard_address)
+
+    @property
+    def connections(self) -> int:
+        return self.tcp.connections
 
     def start(self, put: Callable[[str, object], None]) -> None:
-        self._thread = threading.Thread(target=self._loop, args=(put,), name="rtde-server", daemon=True)
-        self._thread.start()
+        self._put = put
+        self.tcp.start()
 
-    def _loop(self, put) -> None:
-        import socket
+    @staticmethod
+    def _frame_id(service: str, peer: str) -> str:
+        from humanpt.sim_robot.ur import DASHBOARD
 
-        while not self._stop.is_set():
-            try:
-                conn, peer = self._listen.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn.settimeout(self.poll_s)
-            self.connections += 1
-            frame_id = "{}:{}".format(*peer[:2])
-            log.info("sim_robot: RTDE client %s (connection %d)", frame_id, self.connections)
-            with self._wlock:
-                self._conns[frame_id] = conn
-                self._latest = frame_id
-            put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=b""))
-            reader = threading.Thread(target=self._read, args=(conn, frame_id, put), name="rtde-client", daemon=True)
-            reader.start()
-            self._readers = [t for t in self._readers if t.is_alive()] + [reader]
+        return peer if service == "RTDE" else DASHBOARD + peer
 
-    def _read(self, conn, frame_id: str, put) -> None:
+    def _chunk(self, frame_id: str, data: bytes) -> None:
+        assert self._put is not None
+        self._put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=data))
+
+    # -- the connections (humanpt.sim_robot.tcp.Handler) ------------------------------------------
+    def opened(self, service: str, peer: str, conn) -> None:
+        log.info("sim_robot: %s client %s (connection %d)", service, peer, self.tcp.connections)
+        if service == "RTDE":
+            self._latest = peer
+        self._chunk(self._frame_id(service, peer), b"")
+
+    def received(self, service: str, peer: str, conn, data: bytes) -> bool:
+        self.bytes_in += len(data)
+        self._chunk(self._frame_id(service, peer), data)
+        return True
+
+    def closed(self, service: str, peer: str, conn) -> None:
         from humanpt.sim_robot.ur import CLOSED
 
-        try:
-            while not self._stop.is_set():
-                try:
-                    data = conn.recv(65536)
-                except TimeoutError:
-                    continue
-                if not data:
-                    break
-                self.bytes_in += len(data)
-                put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id), data=data))
-        except OSError as e:
-            log.info("sim_robot: RTDE client %s: %s", frame_id, e)
-        finally:
-            with self._wlock:
-                if self._conns.get(frame_id) is conn:
-                    del self._conns[frame_id]
-            conn.close()
-            if not self._stop.is_set():
-                put("serial_rx", pb.SerialChunk(header=header(time.time_ns(), frame_id=frame_id + CLOSED), data=b""))
+        if not self.tcp.stopping:
+            self._chunk(self._frame_id(service, peer) + CLOSED, b"")
 
     def write(self, topic: str, msg: pb.SerialChunk) -> None:
-        import socket
+        from humanpt.sim_robot.ur import DASHBOARD
 
-        with self._wlock:
-            conn = self._conns.get(msg.header.frame_id or self._latest)
+        frame_id = msg.header.frame_id or self._latest
+        service, peer = ("Dashboard", frame_id.removeprefix(DASHBOARD)) if frame_id.startswith(DASHBOARD) \
+            else ("RTDE", frame_id)
+        conn = self.tcp.connection(service, peer)
         if conn is None:
             self.bytes_dropped += len(msg.data)
             return
         try:
             if not msg.data:  # the controller drops this client
-                conn.shutdown(socket.SHUT_RDWR)
+                self.tcp.drop(conn)
                 return
             conn.sendall(msg.data)
             self.bytes_out += len(msg.data)
@@ -235,19 +213,15 @@ class TcpServerAdapter:
             self.bytes_dropped += len(msg.data)
 
     def close(self) -> None:
-        self._stop.set()
-        self._listen.close()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        for t in self._readers:
-            t.join(timeout=2.0)
+        self.tcp.close()
 
 
 def adapters(config: SimRobotConfig) -> list:
     """The live shell's adapters (registry ADAPTERS): the pty, linked at ``pty_link``; over
     RSI (``protocol = "rsi"``) a UDP socket on an ephemeral loopback port that sends each
     ``<Rob>`` to ``rsi_gateway`` and takes answers only from there; over EGM the same to
-    ``egm_gateway``; over RTDE a TCP server at ``rtde_bind`` (:class:`TcpServerAdapter`)."""
+    ``egm_gateway``; over RTDE TCP servers at ``rtde_bind`` and ``dashboard_bind``
+    (:class:`TcpServerAdapter`)."""
     if config.protocol == "rsi":
         from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
@@ -256,6 +230,6 @@ def adapters(config: SimRobotConfig) -> list:
         from humanpt.robot_gateway.links.rsi.shell import UdpAdapter
 
         return [UdpAdapter("127.0.0.1:0", robot=config.egm_gateway, peer=config.egm_gateway)]
-    if config.protocol == "rtde":  # the UR's RTDE server; the gateway connects to it
-        return [TcpServerAdapter(config.rtde_bind)]
+    if config.protocol == "rtde":  # the UR's RTDE and Dashboard servers; the gateway connects to RTDE
+        return [TcpServerAdapter(config.rtde_bind, dashboard=config.dashboard_address)]
     return [PtyAdapter(config.pty_link)]

@@ -20,11 +20,17 @@ controller cycle (2 ms e-Series, 8 ms CB3) :meth:`UrRobot.cycle`:
 Outputs and inputs are those of UR's RTDE guide (:data:`OUTPUT_TYPES`, :data:`INPUT_TYPES`);
 a name it does not know is NOT_FOUND, an input another session holds is IN_USE (as on a
 real controller). What it does not simulate reads as 0. Humanpt's assumptions (no controller
-here to check them): the arm follows servoj's target with a first-order lag; stopl stops at
-once.
+here to check them): the arm follows servoj's target with a first-order lag; the watchdog's
+stopl stops at once; a program stopped (the pendant's Stop, the Dashboard server's ``stop``:
+:meth:`UrRobot.stop_program`) no longer runs and the arm brakes along its last cycle's motion
+at :data:`STOP_DECELERATION_MM_S2` (runtime_state STOPPING, then STOPPED); Play starts the
+program from its start (:meth:`UrRobot.play_program`). The Dashboard server's commands:
+:mod:`humanpt.sim_robot.ur_dashboard` (its clients come to :class:`UrSimRobotCore` on
+``serial_rx`` with frame_id ``dashboard <peer>``).
 
 :class:`RtdeServer` is the live shell: a TCP server on a configurable address (30004 on a
-real controller), a thread accepting clients and a thread running the cycle.
+real controller; with ``dashboard``, the Dashboard server too, 29999 on a real one), one
+accept loop (:class:`humanpt.sim_robot.tcp.TcpServers`) and a thread running the cycle.
 """
 
 from __future__ import annotations
@@ -48,6 +54,7 @@ from humanpt.sim_robot.arm import JointStepError, SimArm, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import TRUTH
 from humanpt.sim_robot.rsi import RsiSimRobotCore, SimEvent
+from humanpt.sim_robot.ur_dashboard import DashboardSession
 
 _V6 = "VECTOR6D"
 _V3 = "VECTOR3D"
@@ -86,6 +93,12 @@ INPUT_TYPES: dict[str, str] = {
     "input_bit_registers0_to_31": "UINT32", "input_bit_registers32_to_63": "UINT32",
     "external_force_torque": _V6,
 }
+# humanpt's assumption (UR documents no figure for a program stop): the arm brakes along its
+# path as ``stopl(1)`` does, 1 m/s^2 (the program's own watchdog stop is stopl(1) too).
+STOP_DECELERATION_MM_S2 = 1000.0
+PROTECTIVE_UNLOCK_MS = 5000.0  # UR: a protective stop may be unlocked 5 s after it
+PROGRAM_URP = "humanpt_ur.urp"  # the program the simulated UR has loaded (humanpt_ur.script in it)
+RUNTIME_VERBS = {rtde.RUNTIME_STOPPED: "stopped", rtde.RUNTIME_PAUSED: "paused"}
 _REGISTER = re.compile(r"(input|output)_(bit|int|double)_register_(\d+)$")
 _REGISTER_TYPES = {"bit": "BOOL", "int": "INT32", "double": "DOUBLE"}
 _ZERO = {"BOOL": False, "UINT8": 0, "UINT32": 0, "UINT64": 0, "INT32": 0, "DOUBLE": 0.0, "VECTOR3D": (0.0,) * 3,
@@ -203,7 +216,7 @@ class UrRobot:
     def __init__(self, config: SimRobotConfig, *, cycle_ms: float = 2.0, register_base: int = 24,
                  watchdog_cycles: int = 25, max_lead_mm: float = 5.0, max_lead_deg: float = 2.0,
                  time_constant_s: float = 0.02, controller_version: tuple[int, int, int, int] | None = None,
-                 trace_cycles: int = 0):
+                 trace_cycles: int = 0, stop_deceleration_mm_s2: float = STOP_DECELERATION_MM_S2):
         if cycle_ms not in (2.0, 8.0):
             raise ValueError(f"a UR controller's cycle is 2 ms (e-Series) or 8 ms (CB3), got {cycle_ms}")
         self.config = config
@@ -222,20 +235,21 @@ class UrRobot:
         self.sessions: dict[int, RtdeSession] = {}
         self._sid = 0
         # the program
-        self.program_running = True
+        self.runtime_state = rtde.RUNTIME_PLAYING
         self.safety_mode = rtde.SAFETY_MODE_NORMAL
-        self.heartbeat = 0
-        self.followed_seq = 0
-        self._last_seq = self._seq()
-        self._stale = 0
-        self.stopped = True  # until a new sequence near the arm
-        self.target: np.ndarray | None = None
+        self.protective_stop_cycle = 0  # the cycle of the last protective stop
+        self.stop_deceleration_mm_s2 = stop_deceleration_mm_s2
+        self.program_name = PROGRAM_URP  # the program loaded (the Dashboard server's "load")
+        self._last_step: tuple[np.ndarray, np.ndarray] | None = None  # the flange's last cycle: (dp mm, dR)
+        self._brake: list | None = None  # stopping: [speed mm/s at the stop, the step then (dp, dR), fraction]
+        self.start_program()
         self.events: list[SimEvent] = []
         self.targets: list[tuple[int, np.ndarray]] = []
         # (timestamp s, base_T_flange_mm) of the last ``trace_cycles`` cycles: the truth, for tests
         self.trace: deque = deque(maxlen=trace_cycles)
         self.counters = dict.fromkeys(("cycles", "packages", "input_packages", "malformed", "watchdog_stops",
-                                       "refused_resumes", "moved", "new_sequence"), 0)
+                                       "refused_resumes", "moved", "new_sequence", "program_stops",
+                                       "program_starts"), 0)
 
     @classmethod
     def from_config(cls, config: SimRobotConfig) -> UrRobot:
@@ -269,6 +283,110 @@ class UrRobot:
     def disconnect(self, session: RtdeSession) -> None:
         session.close()
         self.sessions.pop(session.sid, None)
+
+    # -- the program's state (the pendant's Play, Pause and Stop; the Dashboard server's) ---------
+    @property
+    def program_running(self) -> bool:
+        """The program runs (runtime_state PLAYING): it reads the registers every cycle."""
+        return self.runtime_state == rtde.RUNTIME_PLAYING
+
+    def start_program(self) -> None:
+        """humanpt's program from its start (the script's first lines): the heartbeat and the
+        followed sequence 0, the sequence already in the register an old session's (never
+        followed), stopped until a newer sequence near the arm."""
+        self.heartbeat = 0
+        self.followed_seq = 0
+        self._last_seq = self._seq()
+        self._stale = 0
+        self.stopped = True  # until a new sequence near the arm
+        self.target: np.ndarray | None = None
+
+    def stop_program(self, t_ns: int, why: str = "Stop") -> None:
+        """Stop (the pendant's, or the Dashboard server's ``stop``): the program no longer
+        runs (it reads no register); a moving arm decelerates along its path at
+        ``stop_deceleration_mm_s2`` (runtime_state STOPPING), then STOPPED."""
+        self._halt(t_ns, why, rtde.RUNTIME_STOPPING, rtde.RUNTIME_STOPPED)
+
+    def pause_program(self, t_ns: int, why: str = "Pause") -> bool:
+        """Pause: as a stop (PAUSING, then PAUSED), but Play resumes the program where it was.
+        False: no program playing."""
+        if self.runtime_state != rtde.RUNTIME_PLAYING:
+            return False
+        self._halt(t_ns, why, rtde.RUNTIME_PAUSING, rtde.RUNTIME_PAUSED)
+        return True
+
+    def _halt(self, t_ns: int, why: str, halting: int, halted: int) -> None:
+        if self.runtime_state in (rtde.RUNTIME_STOPPED, rtde.RUNTIME_STOPPING) or self.runtime_state == halted:
+            return
+        if halted == rtde.RUNTIME_STOPPED:
+            self.counters["program_stops"] += 1
+        step = self._last_step if self.runtime_state == rtde.RUNTIME_PLAYING else None
+        speed = 0.0 if step is None else float(np.linalg.norm(step[0])) * 1000.0 / self.cycle_ms
+        if self._brake is not None:  # (stopped while pausing: goes on braking)
+            self.runtime_state = halting
+            return
+        if speed > 1e-6:
+            self._brake = [speed, step, 1.0, halted]
+            self.runtime_state = halting
+            text = (f"{why}: the program {RUNTIME_VERBS[halted]}; the arm decelerates from {speed:.1f} mm/s at "
+                    f"{self.stop_deceleration_mm_s2:g} mm/s^2")
+        else:
+            self.runtime_state = halted
+            text = f"{why}: the program {RUNTIME_VERBS[halted]}; the arm at rest"
+        self.events.append(SimEvent(t_ns, "info", "program_" + RUNTIME_VERBS[halted], text))
+        if self.runtime_state == halted:
+            self._at_rest(t_ns, halted)
+
+    def _at_rest(self, t_ns: int, halted: int) -> None:
+        self.events.append(SimEvent(t_ns, "info", "arm_at_rest", f"the arm at rest; runtime_state "
+                                    f"{rtde.RUNTIME_NAMES[halted]}"))
+
+    def _decelerate(self, t_ns: int) -> None:
+        """One cycle of a stop: the last step before it, scaled down by the deceleration."""
+        speed0, (dp, dR), fraction, halted = self._brake
+        fraction -= self.stop_deceleration_mm_s2 * self.cycle_ms / 1000.0 / speed0
+        if fraction > 1e-9:
+            self._brake[2] = fraction
+            T = self.arm.forward()
+            ahead = np.eye(4)
+            ahead[:3, :3] = dR @ T[:3, :3]
+            ahead[:3, 3] = T[:3, 3] + dp
+            try:
+                self.arm.servo(ahead, fraction)
+                return
+            except (UnreachableError, JointStepError):
+                pass  # (cannot go on along it: stops here)
+        self._brake = None
+        self.runtime_state = halted if self.runtime_state != rtde.RUNTIME_STOPPING else rtde.RUNTIME_STOPPED
+        self._at_rest(t_ns, self.runtime_state)
+
+    def play_program(self, t_ns: int, why: str = "Play") -> bool:
+        """Play: a stopped program starts from its start (:meth:`start_program`: it follows
+        no old target), a paused one goes on. False (not started): a protective stop not
+        unlocked, the arm still braking."""
+        if self.safety_mode != rtde.SAFETY_MODE_NORMAL or self._brake is not None:
+            return False
+        if self.runtime_state == rtde.RUNTIME_PLAYING:
+            return True
+        if self.runtime_state == rtde.RUNTIME_STOPPED:
+            self.start_program()
+            self.counters["program_starts"] += 1
+            text = f"{why}: the program starts from its beginning (no old target followed)"
+        else:
+            text = f"{why}: the program goes on where it was paused"
+        self.runtime_state = rtde.RUNTIME_PLAYING
+        self.events.append(SimEvent(t_ns, "info", "program_playing", text))
+        return True
+
+    def unlock_protective_stop(self, t_ns: int) -> bool:
+        """The protective stop released (as UR allows: 5 s after it); False: too early."""
+        if self.safety_mode != rtde.SAFETY_MODE_PROTECTIVE_STOP:
+            return True
+        if (self.cycles - self.protective_stop_cycle) * self.cycle_ms < PROTECTIVE_UNLOCK_MS:
+            return False
+        self.safety_mode = rtde.SAFETY_MODE_NORMAL
+        self.events.append(SimEvent(t_ns, "info", "protective_stop_unlocked", "the protective stop released"))
+        return True
 
     # -- the program -----------------------------------------------------------------------------
     def _seq(self) -> int:
@@ -317,7 +435,8 @@ class UrRobot:
             moved = self.arm.servo(self.target, self.alpha)
         except (UnreachableError, JointStepError) as e:
             self.safety_mode = rtde.SAFETY_MODE_PROTECTIVE_STOP
-            self.program_running = False
+            self.protective_stop_cycle = self.cycles
+            self.runtime_state = rtde.RUNTIME_STOPPED
             self.stopped = True
             self.events.append(SimEvent(t_ns, "error", "protective_stop", f"protective stop: the target {e}"))
             return
@@ -335,7 +454,9 @@ class UrRobot:
             "robot_mode": rtde.ROBOT_MODE_RUNNING,
             "safety_mode": self.safety_mode,
             "safety_status": self.safety_mode,
-            "runtime_state": rtde.RUNTIME_PLAYING if self.program_running else rtde.RUNTIME_STOPPED,
+            "runtime_state": self.runtime_state,
+            "robot_status_bits": rtde.STATUS_BIT_POWER_ON | (rtde.STATUS_BIT_PROGRAM_RUNNING
+                                                             if self.program_running else 0),
             "speed_scaling": 1.0,
             "target_speed_fraction": 1.0,
             f"output_int_register_{self.b}": self.heartbeat,
@@ -353,8 +474,13 @@ class UrRobot:
         package (session id -> bytes)."""
         self.cycles += 1
         self.counters["cycles"] += 1
+        before = self.arm.forward()
         if self.program_running:
             self._program(t_ns)
+        elif self._brake is not None:
+            self._decelerate(t_ns)
+        after = self.arm.forward()
+        self._last_step = (after[:3, 3] - before[:3, 3], after[:3, :3] @ before[:3, :3].T)
         if self.trace.maxlen:
             self.trace.append((self.timestamp_s, self.base_T_flange_mm))
         out: dict[int, bytes] = {}
@@ -370,13 +496,9 @@ class UrRobot:
             self.counters["packages"] += 1
         return out
 
-    def stop_program(self, t_ns: int) -> None:
-        """The operator pressed Stop: runtime_state STOPPED, the arm stays."""
-        self.program_running = False
-        self.events.append(SimEvent(t_ns, "info", "program_stopped", "the program was stopped"))
-
 
 CLOSED = " closed"  # a serial_rx chunk's frame_id "<peer> closed" (no data): that client has gone
+DASHBOARD = "dashboard "  # a serial_rx chunk's frame_id "dashboard <peer>": a Dashboard server's client
 
 
 class UrSimRobotCore(RsiSimRobotCore):
@@ -400,12 +522,13 @@ class UrSimRobotCore(RsiSimRobotCore):
     )
     # Snapshots: the targets taken and the trace are kept for tests only.
     not_frozen = frozenset({"robot.targets", "robot.trace"})
-    state_types = (SimEvent, rtde.Recipe)
+    state_types = (SimEvent, rtde.Recipe, DashboardSession, RtdeSession)
 
     def __init__(self, config: SimRobotConfig):
         super().__init__(config)
         self.session = self.robot.connect()  # the lock-step twin's client (frame_id "")
         self.clients: dict[str, RtdeSession] = {"": self.session}  # frame_id -> its session
+        self.dashboards: dict[str, DashboardSession] = {}  # frame_id "dashboard <peer>" -> its session
 
     def make_robot(self, config: SimRobotConfig) -> UrRobot:
         return UrRobot.from_config(config)
@@ -417,6 +540,10 @@ class UrSimRobotCore(RsiSimRobotCore):
     def _on_rtde(self, t_ns: int, msg: pb.SerialChunk) -> list[Output]:
         outs: list[Output] = []
         client = msg.header.frame_id
+        if client.startswith(DASHBOARD):
+            self._on_dashboard(t_ns, client, bytes(msg.data), outs)
+            self._flush_events(outs)
+            return outs
         if not msg.data:  # the live server's mark of a new connection (a fresh session), or of a closed one
             gone = client.endswith(CLOSED)
             client = client.removesuffix(CLOSED)
@@ -436,6 +563,24 @@ class UrSimRobotCore(RsiSimRobotCore):
         self._flush_events(outs)
         return outs
 
+    def _on_dashboard(self, t_ns: int, client: str, data: bytes, outs: list[Output]) -> None:
+        """A Dashboard client's bytes (``dashboard <peer>``; empty: the server's mark of its
+        connection, greeted, or of its end)."""
+        if not data:
+            if client.endswith(CLOSED):
+                self.dashboards.pop(client.removesuffix(CLOSED), None)
+            else:
+                self.dashboards[client] = DashboardSession(self.robot, client.removeprefix(DASHBOARD))
+                self._send(t_ns, DashboardSession.greeting(), outs, client)
+            return
+        session = self.dashboards.get(client)
+        if session is None:  # (bytes from a client never marked: greeted now)
+            session = self.dashboards[client] = DashboardSession(self.robot, client.removeprefix(DASHBOARD))
+        self._send(t_ns, session.feed(data, t_ns), outs, client)
+        if session.closed is not None:  # quit, or not a Dashboard client: the server closes it
+            del self.dashboards[client]
+            self._send(t_ns, b"", outs, client, close=True)
+
     def _on_cycle(self, t_ns: int, msg: pb.Tick) -> list[Output]:
         outs: list[Output] = []
         packages = self.robot.cycle(t_ns)
@@ -449,8 +594,11 @@ class UrSimRobotCore(RsiSimRobotCore):
 
 class RtdeServer:
     """The simulated controller live: an RTDE server at ``bind`` ("host:port"; port 0: a free
-    one, :attr:`address`) and its cycle on a thread (``time.monotonic`` paced: each cycle at
-    start + k x cycle). Client packets are handled at once under the robot's lock.
+    one, :attr:`address`), with ``dashboard`` ("host:port") its Dashboard server too
+    (:mod:`humanpt.sim_robot.ur_dashboard`, :attr:`dashboard_address`), on the shared accept
+    loop (:class:`humanpt.sim_robot.tcp.TcpServers`), and its cycle on a thread
+    (``time.monotonic`` paced: each cycle at start + k x cycle). Client packets and Dashboard
+    commands are handled at once under the robot's lock.
 
     How a client answers (for ``humanpt bench ur``; the robot's program sees none of it): a
     session's data package is *answered* when the client's next input data package is read
@@ -461,25 +609,19 @@ class RtdeServer:
     input package read after it). ``overruns``: cycles started more than 1 ms after their
     deadline (the simulator itself late)."""
 
-    def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0"):
-        from humanpt.robot_gateway.links.rsi.config import parse_address
+    def __init__(self, robot: UrRobot, bind: str = "127.0.0.1:0", *, dashboard: str | None = None):
+        from humanpt.sim_robot.tcp import TcpServers
 
         self.robot = robot
-        host, port = parse_address(bind)
-        self._listen = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        self._listen.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            self._listen.bind((host, port))
-        except OSError as e:
-            self._listen.close()
-            raise OSError(f"cannot bind TCP {bind}: {e.strerror or e}") from None
-        self._listen.listen(4)
-        self._listen.settimeout(0.2)
-        self.address: tuple[str, int] = self._listen.getsockname()
+        binds = {"RTDE": bind} if dashboard is None else {"RTDE": bind, "Dashboard": dashboard}
+        self.tcp = TcpServers(binds, self)
+        self.address: tuple[str, int] = self.tcp.addresses["RTDE"]
+        self.dashboard_address: tuple[str, int] | None = self.tcp.addresses.get("Dashboard")
         self.lock = threading.Lock()
         self._stop = threading.Event()
-        self._conns: dict[int, socket.socket] = {}
-        self._threads: list[threading.Thread] = []
+        self._conns: dict[int, socket.socket] = {}  # RTDE session id -> its connection
+        self._sessions: dict[str, RtdeSession | DashboardSession] = {}  # "<service> <peer>" -> its session
+        self._thread: threading.Thread | None = None
         self._sent: dict[int, list] = {}  # session -> [send time of its last data package, answered yet]
         self.answers = dict.fromkeys(("packages", "answered"), 0)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
@@ -487,56 +629,42 @@ class RtdeServer:
         self.answering = threading.Event()  # set at a client's first answer
 
     def start(self) -> RtdeServer:
-        for target, name in ((self._accept_loop, "rtde-accept"), (self._cycle_loop, "rtde-cycle")):
-            t = threading.Thread(target=target, name=name, daemon=True)
-            t.start()
-            self._threads.append(t)
+        self.tcp.start()
+        self._thread = threading.Thread(target=self._cycle_loop, name="rtde-cycle", daemon=True)
+        self._thread.start()
         return self
 
-    def _accept_loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                conn, _ = self._listen.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            with self.lock:
-                session = self.robot.connect()
+    # -- the connections (humanpt.sim_robot.tcp.Handler, from the server's threads) --------------
+    def opened(self, service: str, peer: str, conn: socket.socket) -> None:
+        with self.lock:
+            if service == "RTDE":
+                session = self._sessions[f"{service} {peer}"] = self.robot.connect()
                 self._conns[session.sid] = conn
-            t = threading.Thread(target=self._client_loop, args=(conn, session), name="rtde-client", daemon=True)
-            t.start()
-            self._threads.append(t)
+                return
+            self._sessions[f"{service} {peer}"] = DashboardSession(self.robot, peer)
+            conn.sendall(DashboardSession.greeting())
 
-    def _client_loop(self, conn: socket.socket, session: RtdeSession) -> None:
-        conn.settimeout(0.2)
-        try:
-            while not self._stop.is_set():
-                try:
-                    data = conn.recv(65536)
-                except TimeoutError:
-                    continue
-                if not data:
-                    break
-                with self.lock:
-                    now = time.monotonic_ns()
-                    before = self.robot.counters["input_packages"]
-                    reply = session.feed(data, now)
-                    if self.robot.counters["input_packages"] > before:
-                        self._answered(session.sid, now)
-                    if reply:
-                        conn.sendall(reply)
-                if session.closed is not None:
-                    break
-        except OSError:
-            pass
-        finally:
-            with self.lock:
+    def received(self, service: str, peer: str, conn: socket.socket, data: bytes) -> bool:
+        with self.lock:
+            session = self._sessions.get(f"{service} {peer}")
+            if session is None:
+                return False
+            now = time.monotonic_ns()
+            before = self.robot.counters["input_packages"]
+            reply = session.feed(data, now)
+            if isinstance(session, RtdeSession) and self.robot.counters["input_packages"] > before:
+                self._answered(session.sid, now)
+            if reply:
+                conn.sendall(reply)
+            return session.closed is None
+
+    def closed(self, service: str, peer: str, conn: socket.socket) -> None:
+        with self.lock:
+            session = self._sessions.pop(f"{service} {peer}", None)
+            if isinstance(session, RtdeSession):
                 self.robot.disconnect(session)
                 self._conns.pop(session.sid, None)
                 self._sent.pop(session.sid, None)
-            conn.close()
 
     def _answered(self, sid: int, now_ns: int) -> None:
         """An input data package of session ``sid`` read at ``now_ns``: the first since its last
@@ -576,16 +704,10 @@ class RtdeServer:
 
     def disconnect_all(self) -> None:
         """Drop every client (a controller reboot's view from the network)."""
-        with self.lock:
-            for conn in self._conns.values():
-                try:
-                    conn.shutdown(socket.SHUT_RDWR)
-                except OSError:
-                    pass
+        self.tcp.drop_all()
 
     def close(self) -> None:
         self._stop.set()
-        self._listen.close()
-        self.disconnect_all()
-        for t in self._threads:
-            t.join(timeout=2.0)
+        self.tcp.close()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)

@@ -130,7 +130,7 @@ def link_sections(sections: dict[str, dict], link: str, cycle_ms: float | None) 
     if link == "ur":  # the simulated UR's RTDE server on a free loopback port; the gateway connects
         rtde = f"127.0.0.1:{free_tcp_port()}"
         robot, gateway = ur_link(robot, gateway, cycle_ms, rtde)
-        robot = dataclasses.replace(robot, rtde_bind=rtde)
+        robot = dataclasses.replace(robot, rtde_bind=rtde, dashboard_bind=f"127.0.0.1:{free_tcp_port()}")
     else:
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.bind(("127.0.0.1", 0))

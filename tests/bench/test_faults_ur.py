@@ -5,8 +5,9 @@ this process for the file: the gateway killed and frozen mid-motion (the program
 the last guard: the arm within the lead + 2 cycles at the limit), a second RTDE client
 writing humanpt's target registers (refused IN_USE, the arm does not follow), junk on the
 robot's RTDE port (the controller drops those clients, the gateway's session goes on), the
-robot silent for 0.5 s (no fault latched, robot states again). Asserted: the verdicts and
-what each row says, never rates or times."""
+robot silent for 0.5 s (no fault latched, robot states again), the robot's program stopped
+and played again through its Dashboard server (the arm braked, held, the gateway's link down
+and up, no jump). Asserted: the verdicts and what each row says, never rates or times."""
 
 from __future__ import annotations
 
@@ -24,13 +25,14 @@ ROWS = {
     "rtdejunk": "junk on the robot's RTDE port (3 s)",
     "freeze": "gateway frozen 0.5 s mid-motion (late answers)",
     "lost": "robot frozen 0.5 s (its data packages lost)",
+    "pstop": "robot program stopped, then played (Dashboard)",
 }
 HELD = re.compile(r"yes \(([\d.]+) / ([\d.]+) mm\)")
 
 
 @pytest.fixture(scope="module")
 def ur_bench(tmp_path_factory) -> Bench:
-    """``humanpt bench faults --link ur --only kill,rtde2,rtdejunk,freeze,lost``, in this process."""
+    """``humanpt bench faults --link ur --only kill,rtde2,rtdejunk,freeze,lost,pstop``, in this process."""
     return bench_run(tmp_path_factory.mktemp("faults-ur") / "run", tuple(ROWS), link="ur")
 
 
@@ -57,6 +59,7 @@ def test_ur_link_rows(ur_bench):
         "freeze": lambda: (_within_lead_and_two_cycles(rows[ROWS["freeze"]]),
                            _assert("the program's watchdog stopped the arm" in rows[ROWS["freeze"]]["note"])),
         "lost": lambda: _assert(rows[ROWS["lost"]]["note"].startswith("robot states again; no fault latched")),
+        "pstop": lambda: _program_stopped_and_played(rows[ROWS["pstop"]]),
     }
     failed = []
     for key, check in checks.items():
@@ -73,9 +76,27 @@ def _assert(ok) -> None:
     assert ok
 
 
+def _program_stopped_and_played(row: dict[str, str]) -> None:
+    """Stop and Play on the robot's Dashboard: UR's answers, the arm braked and held still, the
+    gateway's link_down and link_up, after Play at most one cycle at the limit (100 mm/s x 8 ms)
+    a cycle."""
+    held = HELD.fullmatch(row["robot held"])
+    assert held and float(held[2]) == pytest.approx(100.0 * 0.008), row
+    assert float(held[1]) <= float(held[2]), row
+    note = row["note"]
+    assert note.startswith("Dashboard: 'Stopped', 'STOPPED humanpt_ur.urp', 'Starting program'"), row
+    assert "the gateway: link_down (program stopped), link_up after Play;" in note, row
+    braked = re.search(r"braked ([\d.]+) mm from ([\d.]+) mm/s \(bound v\^2/2a \+ v dt = ([\d.]+) mm\), then "
+                       r"([\d.]+) mm in", note)
+    assert braked, row
+    v = float(braked[2])
+    assert float(braked[3]) == pytest.approx(v * v / 2000.0 + v * 0.008, abs=0.01)  # 1 m/s^2, one cycle at v
+    assert float(braked[1]) <= float(braked[3]) and float(braked[4]) <= 0.001, row
+
+
 def test_the_ur_rows_are_skipped_over_another_link_and_start_no_twin(tmp_path, cli_main, capsys):
-    assert cli_main(["bench", "faults", "--only", "rtde2,rtdejunk,freeze,lost", "--run-dir",
+    assert cli_main(["bench", "faults", "--only", "rtde2,rtdejunk,freeze,lost,pstop", "--run-dir",
                      str(tmp_path / "run")]) == 0
     out = capsys.readouterr().out
-    assert out.count("not over ALTER (--link ur)") == 4
+    assert out.count("not over ALTER (--link ur)") == 5
     assert not (tmp_path / "run" / "humanpt.toml").exists()

@@ -14,7 +14,7 @@ from humanpt.robot_gateway.links.ur import protocol as rtde
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.shell import TcpServerAdapter, adapters
-from humanpt.sim_robot.ur import CLOSED, UrSimRobotCore
+from humanpt.sim_robot.ur import CLOSED, DASHBOARD, UrSimRobotCore
 
 
 def _get(q: queue.Queue) -> bytes:
@@ -73,3 +73,42 @@ def test_a_new_connection_starts_a_fresh_session():
     assert core._on_rtde(1, pb.SerialChunk(data=b"")) == []  # the server's mark: a new connection
     assert core.session is not first and core.session.sid == first.sid + 1
     assert core.robot.input_owner == {} and list(core.robot.sessions) == [core.session.sid]
+
+
+def test_the_dashboard_port_is_served_by_the_same_adapter_and_marked_as_such():
+    """The Dashboard server beside RTDE on one accept loop: its connections come as
+    "dashboard <peer>" (marked, bytes, end), serial_tx to that frame_id reaches that client
+    only; the config's default puts it at the RTDE port less 5 (29999 beside 30004)."""
+    server = TcpServerAdapter("127.0.0.1:0", dashboard="127.0.0.1:0")
+    q: queue.Queue = queue.Queue()
+    server.start(lambda topic, msg: q.put((topic, msg)))
+    try:
+        rtde_client = socket.create_connection(server.address, timeout=10)
+        _, mark = q.get(timeout=10)
+        assert mark.header.frame_id == "{}:{}".format(*rtde_client.getsockname()[:2])
+        dash = socket.create_connection(server.dashboard_address, timeout=10)
+        who = DASHBOARD + "{}:{}".format(*dash.getsockname()[:2])
+        _, mark = q.get(timeout=10)
+        assert (mark.header.frame_id, mark.data) == (who, b"")
+        dash.sendall(b"running\n")
+        _, got = q.get(timeout=10)
+        assert (got.header.frame_id, got.data) == (who, b"running\n")
+        server.write("serial_tx", pb.SerialChunk(header=pb.Header(frame_id=who), data=b"Program running: true\n"))
+        assert dash.recv(64) == b"Program running: true\n"
+        server.write("serial_tx", pb.SerialChunk(data=b"rtde"))  # (no frame_id: the latest RTDE client's)
+        assert rtde_client.recv(16) == b"rtde"
+        server.write("serial_tx", pb.SerialChunk(header=pb.Header(frame_id=who)))  # the server drops it
+        assert dash.recv(16) == b""
+        _, gone = q.get(timeout=10)
+        assert (gone.header.frame_id, gone.data) == (who + CLOSED, b"")
+        dash.close()
+        rtde_client.close()
+        with pytest.raises(OSError, match=r"^sim_robot: cannot listen for Dashboard at 127\.0\.0\.1:\d+: "):
+            TcpServerAdapter("127.0.0.1:0", dashboard="{}:{}".format(*server.dashboard_address))
+    finally:
+        server.close()
+    assert SimRobotConfig(protocol="rtde", cycle_period_ns=2_000_000).dashboard_address == "127.0.0.1:29999"
+    assert SimRobotConfig(protocol="rtde", cycle_period_ns=2_000_000, rtde_bind="127.0.0.1:0",
+                          dashboard_bind="127.0.0.1:1234").dashboard_address == "127.0.0.1:1234"
+    with pytest.raises(ValueError, match=r"^dashboard_bind: an address must be host:port"):
+        SimRobotConfig(protocol="rtde", cycle_period_ns=2_000_000, dashboard_bind="nowhere")

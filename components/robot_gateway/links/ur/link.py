@@ -75,7 +75,7 @@ class UrLink(AbbLink):
     name = "RTDE"
     rx_topic = "serial_rx"
     tx_topic = "serial_tx"
-    up_text = "RTDE link up (session set up, the controller's first data package)"
+    SESSION_UP = "RTDE link up (session set up, the controller's first data package)"
 
     def __init__(self, correction_frame: str = "base", max_lead_mm: float = 5.0, max_lead_deg: float = 2.0, *,
                  cycle_period_ms: float = 2.0, register_base: int = 24, heartbeat_cycles: int = 25):
@@ -92,7 +92,15 @@ class UrLink(AbbLink):
         self.controller_version: tuple[int, int, int, int] | None = None
         self._heartbeat: int | None = None
         self._heartbeat_cycle = 0
-        self.counters.update(dict.fromkeys(("connections", "refused", "text_messages", "packets", "ignored"), 0))
+        self._playing: bool | None = None  # the program's runtime_state PLAYING at the last state
+        self._up_text = self.SESSION_UP
+        self.counters.update(dict.fromkeys(("connections", "refused", "text_messages", "packets", "ignored",
+                                            "program_stops"), 0))
+
+    @property
+    def up_text(self) -> str:
+        """The link_up event's text (a session set up, or the program playing again)."""
+        return self._up_text
 
     @classmethod
     def from_config(cls, config: UrConfig) -> UrLink:
@@ -233,14 +241,37 @@ class UrLink(AbbLink):
         events: list = []
         self.feedback = base_T_flange
         heartbeat = int(v[self.outputs[5]])
+        runtime = int(v["runtime_state"])
+        playing = runtime == rtde.RUNTIME_PLAYING
         if new:
             self._running = True
             self.target = self.feedback.copy()
             self.counters["sessions"] += 1
             self._heartbeat, self._heartbeat_cycle = heartbeat, cycle
+            self._playing = playing
+            self._up_text = self.SESSION_UP
             events.append(LinkUp())
         elif heartbeat != self._heartbeat:
             self._heartbeat, self._heartbeat_cycle = heartbeat, cycle
+        if not new and playing != self._playing:
+            # The program stopped (Stop on the pendant or the Dashboard, a protective stop) or
+            # plays again: read from RTDE's runtime_state, whoever stopped it. Stopped, the
+            # link is down for the gateway (its link_down event; it holds); the target is the
+            # arm (no old target waits in the registers); playing again, a new session from
+            # where the arm is (link_up).
+            self._playing = playing
+            self.target = self.feedback.copy()
+            name = rtde.RUNTIME_NAMES.get(runtime, str(runtime))
+            if not playing:
+                self.counters["program_stops"] += 1
+                events.append(LinkDown(f"the robot's program stopped (runtime_state {name} at cycle {cycle}); "
+                                       "the targets stay at the arm until it plays again"))
+            else:
+                self.counters["sessions"] += 1
+                self._heartbeat, self._heartbeat_cycle = heartbeat, cycle
+                self._up_text = (f"RTDE link up: the robot's program plays again (cycle {cycle}); the target "
+                                 "starts at the arm")
+                events.append(LinkUp())
         self._last = cycle
         alive = (cycle - self._heartbeat_cycle) % _MOD < self.heartbeat_cycles
         safety = int(v["safety_mode"])
@@ -257,6 +288,13 @@ class UrLink(AbbLink):
         return events, ts
 
     # -- answers -----------------------------------------------------------------------------------
+    def correction(self, cycle: int, dp_mm, rv_rad, max_step_mm: float, max_step_deg: float) -> UrTarget:
+        """As over EGM; while the program is stopped a hold at the arm (the program reads no
+        register: a step would wait there as an old target)."""
+        if self._playing is False:
+            return self.hold(cycle, True)
+        return super().correction(cycle, dp_mm, rv_rad, max_step_mm, max_step_deg)
+
     def _message(self, cycle: int, t_ns: int) -> UrTarget:
         assert self.target is not None
         self._seq = self._seq % SEQ_MAX + 1
