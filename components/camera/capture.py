@@ -210,6 +210,7 @@ class CaptureAdapter:
         self.frames = 0
         self.errors = 0
         self.finished = threading.Event()  # a file played to its end (no loop)
+        self.capture = None  # the open source (the capture thread's; None while closed)
 
     def start(self, put: Callable[[str, object], None]) -> None:
         self._thread = threading.Thread(
@@ -233,7 +234,7 @@ class CaptureAdapter:
         while not self._stop.is_set():
             if cap is None:
                 try:
-                    cap = open_capture(cfg, self._stop)
+                    cap = self.capture = open_capture(cfg, self._stop)
                 except OSError as e:
                     self.errors += 1
                     log.error("%s; retrying in %.1f s", e, cfg.reopen_s)
@@ -248,11 +249,13 @@ class CaptureAdapter:
             ok, frame = cap.read()
             stamp = self.clock()
             if not ok:
+                if self._stop.is_set():  # closing (a source that waits gives up then)
+                    break
                 if is_file and cfg.loop and self.frames:
                     cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
                     continue
                 cap.release()
-                cap = None
+                cap = self.capture = None
                 if is_file and not cfg.loop:
                     log.info("video file %s: end after %d frames", cfg.source, self.frames)
                     self.finished.set()
@@ -267,6 +270,7 @@ class CaptureAdapter:
                 next_due += period
                 self._stop.wait(max(0.0, next_due - time.monotonic()))
         if cap is not None:
+            self.capture = None
             cap.release()
 
 
