@@ -29,6 +29,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from humanpt.runtime.clock import CLOCK
+
 from .config import GENICAM_PIXEL_FORMATS, CameraConfig
 
 __all__ = ["DeviceClockMap", "GenICamCapture", "device_time_ns", "frame_from_buffer", "request_genicam_settings",
@@ -136,12 +138,12 @@ def _snap(node, wanted: float) -> float:
     steps of 8 or 16, say): what the camera can take nearest to it."""
     lo, hi = float(node.min), float(node.max)
     value = min(max(float(wanted), lo), hi)
-    try:
-        step = float(node.inc) if node.has_inc() else 0.0
+    try:  # an IFloat says whether it has an increment; an IInteger always has one
+        step = 0.0 if hasattr(node, "has_inc") and not node.has_inc() else float(node.inc)
     except Exception:
         step = 0.0
-    if step > 0:
-        value = min(lo + round((value - lo) / step) * step, hi)
+    if step > 0:  # the nearest step, the top one at most
+        value = lo + min(round((value - lo) / step), (hi - lo) // step) * step
     return value
 
 
@@ -263,6 +265,7 @@ class GenICamCapture:
         self.label = f"genicam {device or '(first)'}"
         self.stop = stop or threading.Event()
         self.clock_map = DeviceClockMap()
+        self._epoch = CLOCK.epoch  # the wall clock's steps when the map began
         self._device_ns: int | None = None
         self.acquirer = None
         self.notes: list[str] = []
@@ -322,9 +325,13 @@ class GenICamCapture:
     def shared_stamp_ns(self, host_ns: int) -> int:
         """The last frame's capture stamp in the shared time base: the camera's timestamp
         mapped by :class:`DeviceClockMap` when the buffer had one, else ``host_ns`` (the
-        shared time base when the fetch returned)."""
+        shared time base when the fetch returned). A step of the wall clock accepted by the
+        live shell (runtime/clock.py) starts the map again: its offsets are of the old base."""
         if self._device_ns is None:
             return host_ns
+        if CLOCK.epoch != self._epoch:
+            self._epoch = CLOCK.epoch
+            self.clock_map = DeviceClockMap(self.clock_map.window_ns)
         return self.clock_map.to_shared(self._device_ns, host_ns)
 
     def get(self, prop: int) -> float:

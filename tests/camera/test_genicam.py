@@ -88,6 +88,19 @@ def test_a_cameras_clock_is_mapped_by_its_quickest_transfer_and_follows_a_reset(
     assert device_time_ns(TicksOnly()) == 2_000_000_000
 
 
+def test_a_setting_is_asked_as_the_nearest_value_the_camera_can_take():
+    from types import SimpleNamespace
+
+    from humanpt.camera.genicam import _snap
+
+    width = SimpleNamespace(min=16, max=1928, inc=16)  # an IInteger: steps of 16 from 16
+    assert _snap(width, 1003) == 1008  # 16 + 62 x 16 (61.7 steps)
+    assert _snap(width, 5000) == 1920  # the top step, not 1928 (off the steps)
+    assert _snap(width, 4) == 16
+    rate = SimpleNamespace(min=1.0, max=200.0, inc=0.0, has_inc=lambda: False)  # an IFloat without steps
+    assert _snap(rate, 37.3) == 37.3 and _snap(rate, 500.0) == 200.0
+
+
 # --- against viky.cti ---
 
 
@@ -106,18 +119,19 @@ def test_a_genicam_camera_gives_mono8_frames_with_increasing_stamps():
 
 
 def test_settings_are_asked_through_the_node_map_and_read_back():
-    cfg = CameraConfig(source=_source("1"), width_px=322, height_px=240, fps=500.0, exposure=1000.0, gain=2.0,
+    cfg = CameraConfig(source=_source("1"), width_px=322, height_px=50, fps=500.0, exposure=1000.0, gain=2.0,
                        pixel_format="Mono8")
     cap = open_capture(cfg)
     try:
         node_map = cap.acquirer.remote_device.node_map
-        assert (node_map.Width.value, node_map.Height.value, node_map.PixelFormat.value) == (322, 240, "Mono8")
+        assert (node_map.Width.value, node_map.Height.value, node_map.PixelFormat.value) == (322, 100, "Mono8")
         assert node_map.AcquisitionFrameRate.value == 200.0  # viky's maximum
-        assert cap.notes == ["fps 500 asked, the camera gives 200",
+        assert cap.notes == ["height_px 50 asked, the camera gives 100",  # viky's minimum
+                             "fps 500 asked, the camera gives 200",
                              "exposure 1000: the camera has no ExposureTime node (not set)",
                              "gain 2: the camera has no Gain node (not set)"]
         ok, frame = cap.read()
-        assert ok and frame.shape == (240, 322) and frame.dtype == np.uint8
+        assert ok and frame.shape == (100, 322) and frame.dtype == np.uint8
         assert cap.shared_stamp_ns(123) == 123  # no timestamp in viky's buffers: the fetch's return
     finally:
         cap.release()
