@@ -219,6 +219,18 @@ class _Producer:
             producer.users += 1
             return producer
 
+    def open(self, device: str):
+        """(an ImageAcquirer of the device named, its id): one at a time, a stereo pair's
+        two capture threads opening together."""
+        with self._lock:
+            infos = self.harvester.device_info_list
+            index = _pick_device(infos, device, self.cti)
+            label = f"genicam {infos[index].id_}"
+            try:
+                return self.harvester.create(index), label
+            except Exception as e:
+                raise OSError(f"{label}: does not open ({_reason(e)}): in use by another program?") from None
+
     def release(self) -> None:
         with self._lock:
             self.users -= 1
@@ -271,12 +283,7 @@ class GenICamCapture:
         self.notes: list[str] = []
         self.producer = _Producer.acquire(cti)
         try:
-            index = _pick_device(self.producer.harvester.device_info_list, device, cti)
-            self.label = f"genicam {self.producer.harvester.device_info_list[index].id_}"
-            try:
-                self.acquirer = self.producer.harvester.create(index)
-            except Exception as e:
-                raise OSError(f"{self.label}: does not open ({_reason(e)}): in use by another program?") from None
+            self.acquirer, self.label = self.producer.open(device)
             node_map = self.acquirer.remote_device.node_map
             self.notes = request_genicam_settings(node_map, config)
             for note in self.notes:

@@ -137,6 +137,32 @@ def test_settings_are_asked_through_the_node_map_and_read_back():
         cap.release()
 
 
+def test_two_cameras_of_one_producer_stream_together():
+    """A stereo pair on one producer (source and source_right): the producer is loaded once
+    in the process (a second load of viky.cti sees no camera) and shared; released with the
+    last camera and loaded again for the next."""
+    left = open_capture(CameraConfig(source=_source("VikyTL_DEV_red")))
+    try:
+        right = open_capture(CameraConfig(source=_source("VikyTL_DEV_blue")))
+        try:
+            assert left.producer is right.producer and left.producer.users == 2
+            for cap in (left, right, left, right):
+                ok, frame = cap.read()
+                assert ok and frame.shape == (400, 400, 3)
+        finally:
+            right.release()
+        with pytest.raises(OSError, match="genicam VikyTL_DEV_red: does not open .*already in use"):
+            open_capture(CameraConfig(source=_source("VikyTL_DEV_red")))  # one program per camera
+        assert left.read()[0] and left.producer.users == 1
+    finally:
+        left.release()
+    again = open_capture(CameraConfig(source=_source("VikyTL_DEV_red")))
+    try:
+        assert again.read()[0] and again.producer.users == 1
+    finally:
+        again.release()
+
+
 def test_a_missing_producer_library_or_camera_is_a_clear_error_and_a_camera_not_found_is_retried(
         tmp_path, monkeypatch):
     with pytest.raises(OSError, match="no GenTL producer file .*nope.cti"):
