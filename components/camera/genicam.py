@@ -243,7 +243,8 @@ def _pick_device(infos: list, device: str, cti: str) -> int:
     """The index of the device named by ``device`` (its id, else its serial number, else
     an index), the first when ""; OSError listing what the producer sees."""
     if not infos:
-        raise OSError(f"GenTL producer {cti}: no camera found (connected, powered, on this host's network?)")
+        raise OSError(f"GenTL producer {cti}: no camera found (connected, powered, on this host's network? "
+                      "a file that is no GenTL producer finds none either)")
 
     def attr(info, name):
         try:
@@ -281,8 +282,9 @@ class GenICamCapture:
         self._device_ns: int | None = None
         self.acquirer = None
         self.notes: list[str] = []
-        self.producer = _Producer.acquire(cti)
+        self.producer = None
         try:
+            self.producer = _Producer.acquire(cti)
             self.acquirer, self.label = self.producer.open(device)
             node_map = self.acquirer.remote_device.node_map
             self.notes = request_genicam_settings(node_map, config)
@@ -293,9 +295,12 @@ class GenICamCapture:
                                         f"{node_map.PixelFormat.value!r}; the pipeline reads "
                                         f"{', '.join(GENICAM_PIXEL_FORMATS)} (set camera.pixel_format)")
             self.acquirer.start()
-        except BaseException:
+        except OSError:
             self.release()
             raise
+        except Exception as e:  # genicam's own exceptions (a producer that fails to load, a node...)
+            self.release()
+            raise OSError(f"camera.source {config.source!r}: {self.label}: {_reason(e)}") from None
 
     def isOpened(self) -> bool:  # noqa: N802 (cv2.VideoCapture's name)
         return self.acquirer is not None
@@ -325,7 +330,10 @@ class GenICamCapture:
                 log.error("camera %s: frame skipped: %s", self.label, _reason(e))
                 continue
             finally:
-                buffer.queue()
+                try:
+                    buffer.queue()
+                except Exception as e:  # (the device went away meanwhile: the reopen tells)
+                    log.debug("camera %s: %s", self.label, e)
             return True, frame
         return False, None
 

@@ -173,6 +173,9 @@ def test_a_missing_producer_library_or_camera_is_a_clear_error_and_a_camera_not_
         CameraConfig(source="0", pixel_format="Mono8")
     with pytest.raises(ValueError, match="'Bayer8' is not one of Mono8"):
         CameraConfig(source=_source(), pixel_format="Bayer8")
+    (tmp_path / "bad.cti").write_bytes(b"not a GenTL producer")
+    with pytest.raises(OSError, match="bad.cti: no camera found"):
+        open_capture(CameraConfig(source=f"genicam:{tmp_path / 'bad.cti'}"))
     with pytest.raises(OSError, match="no camera 'VikyTL_DEV_pink'.*it sees: VikyTL_DEV_red \\(serial 0\\), "
                                       "VikyTL_DEV_green \\(serial 1\\), VikyTL_DEV_blue \\(serial 2\\)"):
         open_capture(CameraConfig(source=_source("VikyTL_DEV_pink")))
