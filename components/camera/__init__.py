@@ -1,4 +1,5 @@
-"""The real camera: OpenCV VideoCapture (device or video file) -> ``camera/image``.
+"""The real camera: OpenCV VideoCapture (device or video file), an image folder or a GenICam
+camera (harvesters, ``genicam.py``) -> ``camera/image``.
 
 The pure core (``core``) checks and converts captured frames; the grabbing lives in the
 live shell's adapter (``capture``). See ``README.md`` in this folder.

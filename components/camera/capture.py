@@ -1,10 +1,13 @@
 """Shell side of the real camera: OpenCV VideoCapture from a device index or a video file,
-or a folder of images (:class:`ImageFolder`, replayed at ``camera.fps``).
+a folder of images (:class:`ImageFolder`, replayed at ``camera.fps``), or a source named
+``<scheme>:<address>`` opened by the module :data:`SOURCES` registers for its scheme
+(``genicam:``: :mod:`humanpt.camera.genicam`, a GenICam camera through harvesters).
 
 :class:`CaptureAdapter` is a live-shell adapter (``humanpt.runtime.live``): a thread grabs
-frames, stamps each with the wall clock when the grab returns, and hands it to the core as
-a ``capture`` input (foxglove.RawImage, bgr8 or mono8). :func:`read_frames` is the same
-grabbing as a plain generator, for offline use and tests.
+frames, stamps each (the shared time base when the grab returns, or the source's own
+capture stamp: ``shared_stamp_ns``) and hands it to the core as a ``capture`` input
+(foxglove.RawImage, bgr8 or mono8). :func:`read_frames` is the same grabbing as a plain
+generator, for offline use and tests.
 """
 
 from __future__ import annotations
@@ -20,12 +23,13 @@ import cv2
 import numpy as np
 
 from humanpt.runtime.clock import CLOCK
+from humanpt.runtime.registry import import_path
 from humanpt.schemas.convert import image
 
-from .config import CameraConfig
+from .config import GENICAM_SCHEME, CameraConfig
 
-__all__ = ["IMAGE_SUFFIXES", "CaptureAdapter", "ImageFolder", "capture_adapters", "capture_message",
-           "open_capture", "read_frames", "request_settings"]
+__all__ = ["IMAGE_SUFFIXES", "SOURCES", "CaptureAdapter", "ImageFolder", "capture_adapters", "capture_message",
+           "open_capture", "read_frames", "request_settings", "setting_note"]
 
 log = logging.getLogger("humanpt.camera")
 
@@ -94,9 +98,26 @@ class ImageFolder:
         pass
 
 
-def open_capture(config: CameraConfig) -> cv2.VideoCapture | ImageFolder:
-    """Open the configured source (a device, a video file or an image folder); raises
-    OSError naming it when it does not open."""
+# scheme -> "module:class" of the source a ``<scheme>:<address>`` source opens; the class
+# takes (config, stop event) and gives VideoCapture's read/get/set/release (and, when it
+# knows the capture time better than the grab's return, ``shared_stamp_ns(host_ns)``).
+SOURCES: dict[str, str] = {
+    GENICAM_SCHEME: "humanpt.camera.genicam:GenICamCapture",
+}
+
+
+def _scheme(config: CameraConfig) -> str | None:
+    head, sep, _ = config.source.strip().partition(":")
+    return head if sep and head in SOURCES else None
+
+
+def open_capture(config: CameraConfig, stop: threading.Event | None = None):
+    """Open the configured source (a device, a video file, an image folder, or a source of
+    :data:`SOURCES`); raises OSError naming it when it does not open. ``stop``: set when the
+    caller closes (a source that waits for frames gives up then)."""
+    scheme = _scheme(config)
+    if scheme is not None:
+        return import_path(SOURCES[scheme])(config, stop)
     index = config.device_index
     if index is None and Path(config.source).is_dir():
         if not config.fps:
@@ -132,12 +153,28 @@ def request_settings(cap, config: CameraConfig) -> list[str]:
         if key == "exposure" and not cap.set(cv2.CAP_PROP_AUTO_EXPOSURE, 1):
             notes.append("the driver did not turn auto exposure off")
         accepted = cap.set(prop, wanted)
-        got = cap.get(prop)
-        if not accepted:
-            notes.append(f"{key} {wanted:g} refused by the driver (it gives {got:g})")
-        elif abs(got - wanted) > tolerance * max(1.0, abs(wanted)):
-            notes.append(f"{key} {wanted:g} asked, the driver gives {got:g}")
+        note = setting_note(key, wanted, accepted, cap.get(prop), tolerance)
+        if note:
+            notes.append(note)
     return notes
+
+
+def setting_note(key: str, wanted: float, accepted: bool, got: float, tolerance: float,
+                 who: str = "the driver", why: str = "") -> str | None:
+    """The note on one setting asked of a camera (None: it took it): refused (``why``, when
+    known), or another value read back than asked (beyond ``tolerance``, relative)."""
+    if not accepted:
+        return f"{key} {wanted:g} refused by {who} ({why + '; ' if why else ''}it gives {got:g})"
+    if abs(got - wanted) > tolerance * max(1.0, abs(wanted)):
+        return f"{key} {wanted:g} asked, {who} gives {got:g}"
+    return None
+
+
+def _stamp(cap, host_ns: int) -> int:
+    """The frame's capture stamp: the source's own (a camera's hardware clock mapped to the
+    shared time base) when it has one, else ``host_ns``, the grab's return."""
+    own = getattr(cap, "shared_stamp_ns", None)
+    return own(host_ns) if own is not None else host_ns
 
 
 def read_frames(
@@ -154,7 +191,7 @@ def read_frames(
             if not ok:
                 return
             n += 1
-            yield stamp, frame
+            yield _stamp(cap, stamp), frame
     finally:
         cap.release()
 
@@ -173,6 +210,7 @@ class CaptureAdapter:
         self.frames = 0
         self.errors = 0
         self.finished = threading.Event()  # a file played to its end (no loop)
+        self.capture = None  # the open source (the capture thread's; None while closed)
 
     def start(self, put: Callable[[str, object], None]) -> None:
         self._thread = threading.Thread(
@@ -196,7 +234,7 @@ class CaptureAdapter:
         while not self._stop.is_set():
             if cap is None:
                 try:
-                    cap = open_capture(cfg)
+                    cap = self.capture = open_capture(cfg, self._stop)
                 except OSError as e:
                     self.errors += 1
                     log.error("%s; retrying in %.1f s", e, cfg.reopen_s)
@@ -211,11 +249,13 @@ class CaptureAdapter:
             ok, frame = cap.read()
             stamp = self.clock()
             if not ok:
+                if self._stop.is_set():  # closing (a source that waits gives up then)
+                    break
                 if is_file and cfg.loop and self.frames:
                     cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
                     continue
                 cap.release()
-                cap = None
+                cap = self.capture = None
                 if is_file and not cfg.loop:
                     log.info("video file %s: end after %d frames", cfg.source, self.frames)
                     self.finished.set()
@@ -225,24 +265,33 @@ class CaptureAdapter:
                 self._stop.wait(cfg.reopen_s)
                 continue
             self.frames += 1
-            put(self.topic, capture_message(frame, stamp))
+            put(self.topic, capture_message(frame, _stamp(cap, stamp)))
             if is_file and cfg.pace and period:
                 next_due += period
                 self._stop.wait(max(0.0, next_due - time.monotonic()))
         if cap is not None:
+            self.capture = None
             cap.release()
 
 
 def capture_adapters(config: CameraConfig) -> list[CaptureAdapter]:
     """The registry's adapter factory for the ``camera`` component. A source that is a path
-    must exist; a folder must hold images and come with ``camera.fps`` (OSError naming it:
-    the component stops at start; a device index that does not open is retried, a camera
+    must exist; a folder must hold images and come with ``camera.fps``; a GenICam source
+    needs its extra installed and its producer file (OSError naming it: the component stops
+    at start; a device that does not open, a GenICam camera not found, is retried: a camera
     may be plugged in later)."""
     cameras = [(config, "capture", "source")]
     if config.source_right.strip():  # a stereo pair: the right camera, same settings
         cameras.append((config.right(), "capture_right", "source_right"))
     for cam, _, key in cameras:
-        if not cam.is_device:
+        if cam.genicam is not None:  # the library and the producer file must be there; the camera may come later
+            from .genicam import require_library
+
+            require_library()
+            if not Path(cam.genicam[0]).is_file():
+                raise OSError(f"camera.{key} {cam.source!r}: no GenTL producer file {cam.genicam[0]!r} (a .cti: "
+                              "the camera vendor's SDK installs one)")
+        elif not cam.is_device:
             path = Path(cam.source)
             if path.is_dir():
                 open_capture(cam)  # refuses an empty folder or a missing frame rate now

@@ -8,6 +8,13 @@ from typing import Annotated
 
 from humanpt.runtime.config import Range
 
+# A source named ``<scheme>:<address>`` is opened by the source registered for its scheme
+# (capture.SOURCES); anything else is OpenCV's (a device, a video file) or an image folder.
+GENICAM_SCHEME = "genicam"
+# The pixel formats a GenICam camera may deliver (PFNC names): grey, or colour turned to
+# mono8 as the core does; anything else (Bayer, 10/12-bit packed) is refused, naming it.
+GENICAM_PIXEL_FORMATS = ("Mono8", "RGB8", "BGR8", "RGBa8", "BGRa8")
+
 
 @dataclass(frozen=True)
 class CameraConfig:
@@ -26,7 +33,12 @@ class CameraConfig:
     camera, this its right, same settings): the two cameras' frames are paired by stamp
     (within ``pair_tolerance_ms``) and published side by side (left then right), what a
     rig of kind "stereo" reads; a frame without its other half is dropped and counted.
-    A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
+    ``source = "genicam:<producer.cti>[#<device>]"``: a GenICam machine-vision camera through
+    harvesters and the camera vendor's GenTL producer (the ``[genicam]`` extra); ``<device>``
+    its id, serial number or index in the producer's list (default: the first). Its
+    ``width_px``/``height_px``/``fps``/``exposure`` (us)/``gain`` (dB) and ``pixel_format``
+    (one of :data:`GENICAM_PIXEL_FORMATS`; "" keeps the camera's) are asked through its node
+    map. A source that fails is reopened every ``reopen_s``. ``mono``: colour frames are turned
     to mono8 (the PSVS processing works on grey levels). Frames are stamped when the grab
     returns (the capture time, minus the driver's latency).
     """
@@ -44,6 +56,7 @@ class CameraConfig:
     stall_s: Annotated[float, Range(0.05, 60, "s")] = 0.5
     source_right: str = ""
     pair_tolerance_ms: Annotated[float, Range(0.01, 1000, "ms")] = 5.0
+    pixel_format: str = ""
 
     def __post_init__(self) -> None:
         if not self.source.strip():
@@ -57,6 +70,18 @@ class CameraConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"camera.{name} must be within {lo} and {hi}, got {value}")
+        for key in ("source", "source_right"):
+            text = getattr(self, key).strip()
+            if text.startswith(f"{GENICAM_SCHEME}:") and not text[len(GENICAM_SCHEME) + 1:].split("#")[0].strip():
+                raise ValueError(f"camera.{key} {text!r} names no GenTL producer: "
+                                 f"{GENICAM_SCHEME}:/path/to/producer.cti[#device id, serial or index]")
+        if self.pixel_format:
+            if self.pixel_format not in GENICAM_PIXEL_FORMATS:
+                raise ValueError(f"camera.pixel_format {self.pixel_format!r} is not one of "
+                                 f"{', '.join(GENICAM_PIXEL_FORMATS)} (or \"\": the camera's own)")
+            if self.genicam is None:
+                raise ValueError("camera.pixel_format is asked of a GenICam camera only "
+                                 f"(source = \"{GENICAM_SCHEME}:...\"), not of {self.source!r}")
 
     def right(self) -> CameraConfig:
         """The second camera's config: this one with ``source_right`` as its source."""
@@ -66,8 +91,19 @@ class CameraConfig:
 
     @property
     def is_device(self) -> bool:
-        """A camera (an index or a /dev/ path), not a file or a folder."""
-        return self.device_index is not None or self.source.strip().startswith("/dev/")
+        """A camera (an index, a /dev/ path or a GenICam camera), not a file or a folder."""
+        return (self.device_index is not None or self.source.strip().startswith("/dev/")
+                or self.genicam is not None)
+
+    @property
+    def genicam(self) -> tuple[str, str] | None:
+        """(producer .cti path, device: id, serial, index or "" for the first) when
+        ``source`` is ``genicam:<cti>[#<device>]``, else None."""
+        text = self.source.strip()
+        if not text.startswith(f"{GENICAM_SCHEME}:"):
+            return None
+        cti, _, device = text[len(GENICAM_SCHEME) + 1:].partition("#")
+        return cti.strip(), device.strip()
 
     @property
     def device_index(self) -> int | None:
