@@ -140,3 +140,46 @@ class SimArm:
             return False
         self.q_rad = self.corrected(T, delta, "world", self.q_rad)
         return True
+
+
+class ArmViews:
+    """The arm's state as properties of the simulated controller that owns ``self.arm`` (a
+    :class:`SimArm`): one set of views for every simulated controller (ALTER, RSI, EGM, RTDE)."""
+
+    arm: SimArm
+
+    @property
+    def kin(self):
+        return self.arm.kin
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        """(6,) the joints (encoders), rad."""
+        return self.arm.q_rad
+
+    @q_rad.setter
+    def q_rad(self, value: np.ndarray) -> None:
+        self.arm.q_rad = value
+
+    @property
+    def world_T_base(self) -> np.ndarray:
+        return self.arm.world_T_base
+
+    @property
+    def true_arm(self):
+        return self.arm.true_arm
+
+    @property
+    def base_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) the flange in the robot base frame as the controller believes it, mm (a copy)."""
+        return self.arm.base_T_flange_mm
+
+    @property
+    def world_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) the flange in the world as the controller believes it (nominal), mm."""
+        return self.arm.world_T_flange_mm
+
+    @property
+    def true_world_T_flange_mm(self) -> np.ndarray:
+        """(4, 4) where the flange really is (the world's arm), mm."""
+        return self.arm.true_world_T_flange_mm

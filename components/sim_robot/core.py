@@ -51,7 +51,7 @@ from humanpt.runtime.core import Core, Output, Port, command_operator
 from humanpt.runtime.limiter import EventLimiter, SerialLinkCoreMixin
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
-from humanpt.sim_robot.arm import JointStepError, SimArm, corrected_joints, lag_gain
+from humanpt.sim_robot.arm import ArmViews, JointStepError, SimArm, corrected_joints, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
 
 __all__ = ["TRUTH", "JointStepError", "SimRobotCore", "corrected_joints"]
@@ -71,7 +71,7 @@ _ARM_POWER, _CUMULATIVE, _ALTER_ACTIVE, _TOOL_MODE, _FAULT, _CORRECTION_MISSED =
 )
 
 
-class SimRobotCore(SerialLinkCoreMixin, Core):
+class SimRobotCore(ArmViews, SerialLinkCoreMixin, Core):
     name = "sim_robot"
     realtime = True  # a robot link's cycle: see runtime.tuning.tune_realtime
     config_type = SimRobotConfig
@@ -150,43 +150,7 @@ class SimRobotCore(SerialLinkCoreMixin, Core):
     def tick_period_ns(self) -> int | None:
         return self.config.cycle_period_ns
 
-    # -- state (the arm's: humanpt.sim_robot.arm.SimArm) ------------------------------------
-    @property
-    def kin(self):
-        return self.arm.kin
-
-    @property
-    def q_rad(self) -> np.ndarray:
-        """(6,) the joints (encoders), rad."""
-        return self.arm.q_rad
-
-    @q_rad.setter
-    def q_rad(self, value: np.ndarray) -> None:
-        self.arm.q_rad = value
-
-    @property
-    def world_T_base(self) -> np.ndarray:
-        return self.arm.world_T_base
-
-    @property
-    def true_arm(self):
-        return self.arm.true_arm
-
-    @property
-    def base_T_flange_mm(self) -> np.ndarray:
-        """(4, 4) the flange in the robot base frame, mm (forward kinematics of q)."""
-        return self.arm.base_T_flange_mm
-
-    @property
-    def world_T_flange_mm(self) -> np.ndarray:
-        """(4, 4) the flange in the world as the controller believes it (nominal), mm."""
-        return self.arm.world_T_flange_mm
-
-    @property
-    def true_world_T_flange_mm(self) -> np.ndarray:
-        """(4, 4) where the flange really is (the world's arm), mm."""
-        return self.arm.true_world_T_flange_mm
-
+    # -- state: the arm's (humanpt.sim_robot.arm.SimArm), through ArmViews ---------------------
     def _base_T_flange(self) -> np.ndarray:
         """Forward kinematics of q, once per joint position. Shared: do not modify."""
         return self.arm.forward()

@@ -40,12 +40,12 @@ from humanpt.robot_gateway.links.abb.protocol import (
     encode_robot,
     pos_quat,
 )
-from humanpt.sim_robot.arm import JointStepError, SimArm, lag_gain
+from humanpt.sim_robot.arm import ArmViews, JointStepError, SimArm, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.rsi import RsiSimRobotCore, SimEvent, latency_histogram
 
 
-class EgmRobot:
+class EgmRobot(ArmViews):
     """The simulated EGM controller (pure). ``events``, ``counters`` and ``targets`` (the
     targets taken) are for tests and benches."""
 
@@ -82,18 +82,6 @@ class EgmRobot:
         ``egm_time_constant_ms``; the timeout from the sensor's first answer."""
         return cls(config, cycle_ms=config.cycle_ms, comm_timeout_s=config.egm_comm_timeout_s,
                    time_constant_s=config.egm_time_constant_ms / 1000.0, wait_for_sensor=True)
-
-    @property
-    def kin(self):
-        return self.arm.kin
-
-    @property
-    def q_rad(self) -> np.ndarray:
-        return self.arm.q_rad
-
-    @property
-    def base_T_flange_mm(self) -> np.ndarray:
-        return self.arm.base_T_flange_mm
 
     def _stop(self, t_ns: int, code: str, text: str) -> None:
         self.stopped = text

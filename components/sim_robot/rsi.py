@@ -49,7 +49,7 @@ from humanpt.robot_gateway.links.rsi.protocol import (
 from humanpt.runtime.core import Core, Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
-from humanpt.sim_robot.arm import JointStepError, SimArm
+from humanpt.sim_robot.arm import ArmViews, JointStepError, SimArm
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import TRUTH
 
@@ -81,7 +81,7 @@ class SimEvent:
     text: str
 
 
-class RsiRobot:
+class RsiRobot(ArmViews):
     """The simulated RSI controller (pure). ``events``, ``counters``, ``applied``
     (IPOC, RsiCorrection) and ``latency_ns`` (per answered cycle) are for tests and benches."""
 
@@ -105,20 +105,7 @@ class RsiRobot:
         self.applied: deque[tuple[int, RsiCorrection]] = deque(maxlen=100_000)
         self.latency_ns: deque[int] = deque(maxlen=1_000_000)
 
-    # -- state (the arm's) --------------------------------------------------------------------
-    @property
-    def kin(self):
-        return self.arm.kin
-
-    @property
-    def q_rad(self) -> np.ndarray:
-        return self.arm.q_rad
-
-    @property
-    def base_T_flange_mm(self) -> np.ndarray:
-        """(4, 4) the flange in the base frame (nominal forward kinematics), mm."""
-        return self.arm.base_T_flange_mm
-
+    # -- events -------------------------------------------------------------------------------
     def _event(self, t_ns: int, severity: str, code: str, text: str) -> None:
         self.events.append(SimEvent(t_ns, severity, code, text))
 

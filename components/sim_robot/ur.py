@@ -50,7 +50,7 @@ from humanpt.robot_gateway.links.ur import protocol as rtde
 from humanpt.runtime.core import Output, Port
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import pose
-from humanpt.sim_robot.arm import JointStepError, SimArm, lag_gain
+from humanpt.sim_robot.arm import ArmViews, JointStepError, SimArm, lag_gain
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.core import TRUTH
 from humanpt.sim_robot.rsi import RsiSimRobotCore, SimEvent
@@ -209,7 +209,7 @@ class RtdeSession:
                 del self.robot.input_owner[n]
 
 
-class UrRobot:
+class UrRobot(ArmViews):
     """The simulated UR controller with humanpt's program running (pure). ``events``,
     ``counters``, ``targets`` (the sequences followed, with their targets) for tests."""
 
@@ -257,18 +257,6 @@ class UrRobot:
         cycle (2 ms e-Series, 8 ms CB3), the program's defaults (registers from 24, the
         watchdog 25 cycles: ``[robot_gateway]``'s UR defaults)."""
         return cls(config, cycle_ms=config.cycle_ms)
-
-    @property
-    def kin(self):
-        return self.arm.kin
-
-    @property
-    def q_rad(self) -> np.ndarray:
-        return self.arm.q_rad
-
-    @property
-    def base_T_flange_mm(self) -> np.ndarray:
-        return self.arm.base_T_flange_mm
 
     @property
     def timestamp_s(self) -> float:
