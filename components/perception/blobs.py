@@ -7,7 +7,6 @@ does not say which, so the correspondence step decides. Coordinates are observed
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import cv2
@@ -161,10 +160,11 @@ def windows_around(uv_px: np.ndarray, half_px: float, width: int, height: int) -
     """Square windows of half size ``half_px`` around centres (k, 2), clipped to the image,
     overlapping ones merged into their bounding box until no two overlap (a shape is then
     whole in at most one window)."""
-    boxes = []
-    for u, v in np.asarray(uv_px, dtype=float).reshape(-1, 2).tolist():
-        boxes.append(clip_region((math.floor(u - half_px), math.floor(v - half_px),
-                                  math.ceil(u + half_px) + 1, math.ceil(v + half_px) + 1), width, height))
+    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
+    # every window at once: (u0, v0, u1, v1) clipped to the image
+    box = np.concatenate((np.maximum(np.floor(uv - half_px), 0.0),
+                          np.minimum(np.ceil(uv + half_px) + 1.0, (width, height))), axis=1)
+    boxes = [tuple(b) for b in box.astype(int).tolist()]
     merged = True
     while merged:
         merged = False

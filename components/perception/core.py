@@ -98,7 +98,7 @@ def measurement_message(
         m.degraded = bool(check.degraded)
         m.degraded_sources.extend(check.degraded)
         m.degraded_reason = check.reason
-        m.source_brightness.extend(float(b) for b in check.brightness)
+        m.source_brightness.extend(np.asarray(check.brightness, dtype=float).tolist())
     if match.camera_T_tob is not None:
         t = np.array(match.camera_T_tob, dtype=float)
         t[:3, 3] /= 1000.0
