@@ -42,7 +42,9 @@ class Blobs:
     (intensity-weighted by the weighted method, of the binary shape by the paper method).
     ``noise`` (n, 2): the background noise's SD of the flux (DN) and of the moments'
     anisotropy (px^2), the weighted method only. All three feed the blob checks
-    (:mod:`humanpt.perception.checks`).
+    (:mod:`humanpt.perception.checks`). ``saturated_px`` (n,) int: the blob's aperture
+    pixels at full scale (255: its centre is biased when there are more than a few), the
+    weighted method only.
     """
 
     uv_px: np.ndarray
@@ -54,6 +56,7 @@ class Blobs:
     flux_dn: np.ndarray | None = None
     moments_px2: np.ndarray | None = None
     noise: np.ndarray | None = None
+    saturated_px: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.uv_px.shape[0])
@@ -70,12 +73,13 @@ class Blobs:
             None if self.flux_dn is None else self.flux_dn[index],
             None if self.moments_px2 is None else self.moments_px2[index],
             None if self.noise is None else self.noise[index],
+            None if self.saturated_px is None else self.saturated_px[index],
         )
 
 
 EMPTY = Blobs(
     np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 0, np.zeros(0),
-    np.zeros((0, 3)), np.zeros((0, 2)),
+    np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0, int),
 )
 
 

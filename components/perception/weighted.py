@@ -18,7 +18,9 @@ shape checks.
    the result. Pixels of other components and masked pixels are left out. All blobs are
    refined together in one (n, S, S) stack of windows.
 4. Shape checks on the weighted moments: positive flux, peak at least ``min_contrast_dn``
-   above the local background, major/minor axis ratio at most ``max_elongation``.
+   above the local background, major/minor axis ratio at most ``max_elongation``. Each
+   blob's aperture pixels at full scale (255) are counted (``Blobs.saturated_px``): a
+   clipped peak biases the centre, the core reports it.
 
 Why weights and not the binary mean: the mean of thresholded pixel positions moves in
 steps as pixels cross T (pixel locking, ~0.05-0.1 px for 8 px shapes); the weighted
@@ -248,6 +250,7 @@ def detect_weighted(
     # the brightest aperture pixel less the local background (an empty aperture has no
     # flux and is rejected)
     peak = masked[0, 1].max(axis=1) - local_bg
+    full_scale = np.count_nonzero(masked[0, 1] >= 255.0, axis=1)  # saturated aperture pixels
     # Background noise of the flux and of the moments' anisotropy (for the blob checks),
     # over a circular aperture of radius R (~pi R^2 pixels): sigma per aperture pixel plus
     # the local background's error over the whole aperture; the anisotropy's two parts
@@ -276,7 +279,7 @@ def detect_weighted(
     # back to the image: each shape's window's offset
     shift = offset[np.array(tile_of)[cand]] if len(offset) > 1 else offset[0]
     fields = (centre.T + shift, shapes.area[cand].astype(float), size, elongation, peak, flux,
-              np.array((mxx, myy, mxy)).T, np.array((flux_sd, aniso_sd)).T)
+              np.array((mxx, myy, mxy)).T, np.array((flux_sd, aniso_sd)).T, full_scale)
     if n_ok < m:
         fields = tuple(f[ok] for f in fields)
     blobs = Blobs(*fields[:5], rejected, *fields[5:])
