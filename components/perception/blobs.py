@@ -7,7 +7,6 @@ does not say which, so the correspondence step decides. Coordinates are observed
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import cv2
@@ -43,7 +42,9 @@ class Blobs:
     (intensity-weighted by the weighted method, of the binary shape by the paper method).
     ``noise`` (n, 2): the background noise's SD of the flux (DN) and of the moments'
     anisotropy (px^2), the weighted method only. All three feed the blob checks
-    (:mod:`humanpt.perception.checks`).
+    (:mod:`humanpt.perception.checks`). ``saturated_px`` (n,) int: the blob's aperture
+    pixels at full scale (255: its centre is biased when there are more than a few), the
+    weighted method only.
     """
 
     uv_px: np.ndarray
@@ -55,6 +56,7 @@ class Blobs:
     flux_dn: np.ndarray | None = None
     moments_px2: np.ndarray | None = None
     noise: np.ndarray | None = None
+    saturated_px: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.uv_px.shape[0])
@@ -71,12 +73,13 @@ class Blobs:
             None if self.flux_dn is None else self.flux_dn[index],
             None if self.moments_px2 is None else self.moments_px2[index],
             None if self.noise is None else self.noise[index],
+            None if self.saturated_px is None else self.saturated_px[index],
         )
 
 
 EMPTY = Blobs(
     np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), 0, np.zeros(0),
-    np.zeros((0, 3)), np.zeros((0, 2)),
+    np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0, int),
 )
 
 
@@ -161,10 +164,11 @@ def windows_around(uv_px: np.ndarray, half_px: float, width: int, height: int) -
     """Square windows of half size ``half_px`` around centres (k, 2), clipped to the image,
     overlapping ones merged into their bounding box until no two overlap (a shape is then
     whole in at most one window)."""
-    boxes = []
-    for u, v in np.asarray(uv_px, dtype=float).reshape(-1, 2).tolist():
-        boxes.append(clip_region((math.floor(u - half_px), math.floor(v - half_px),
-                                  math.ceil(u + half_px) + 1, math.ceil(v + half_px) + 1), width, height))
+    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
+    # every window at once: (u0, v0, u1, v1) clipped to the image
+    box = np.concatenate((np.maximum(np.floor(uv - half_px), 0.0),
+                          np.minimum(np.ceil(uv + half_px) + 1.0, (width, height))), axis=1)
+    boxes = [tuple(b) for b in box.astype(int).tolist()]
     merged = True
     while merged:
         merged = False

@@ -90,6 +90,12 @@ class CheckSettings:
     noise_k: float = 5.0
     tol_factor: float = 1.0  # every limit times this (the paper method's paper_factor)
 
+    def __post_init__(self) -> None:
+        # (3 checks, 1): the squared tolerances, computed once
+        tol2 = np.array([[self.flux_tol], [self.view_tol], [self.shape_tol]]) ** 2
+        tol2.setflags(write=False)
+        object.__setattr__(self, "tol2", tol2)
+
 
 @dataclass(frozen=True)
 class SourceCheck:
@@ -122,10 +128,9 @@ def _disc_jacobians(params: PsvsParams, match: Match, radius_mm: float) -> np.nd
     source's disc ((s, t) in radii along the TOB's u and v axes, camera frame), px. The
     lens distortion is left out (it scales neighbouring blobs alike)."""
     axes = match.camera_T_tob[:3, :2] * radius_mm  # (3, 2): the disc's in-plane axes, mm
-    out = np.empty((3, 2, 2, 2))
-    for view, cam in enumerate((params.right_camera, params.left_camera)):
-        out[:, view] = projection_jacobian(cam, match.camera_p_mm) @ axes
-    return out
+    views = np.array([projection_jacobian(cam, match.camera_p_mm)
+                      for cam in (params.right_camera, params.left_camera)])  # (2, 3, 2, 3)
+    return (views @ axes).swapaxes(0, 1)
 
 
 def check_sources(
@@ -147,42 +152,40 @@ def check_sources(
         view_log_ratio = views - _median3(views)
         # the second moments left after the predicted disc's: what the optics add + damage
         m = blobs.moments_px2[idx]  # (3, 2, 3)
-        disc = np.einsum("...ij,...kj->...ik", jac, jac) / 4.0  # (3, 2, 2, 2)
-        rest = m - disc.reshape(3, 2, 4)[..., _UU_VV_UV]
+        disc = (jac @ jac.swapaxes(-1, -2)).reshape(3, 2, 4)[..., _UU_VV_UV] / 4.0  # J J^T / 4
+        rest = m - disc
         # what all six blobs share (the blur, blooming along the columns, motion blur) is
         # not damage: the median blob's rest is taken off
         six = np.sort(rest.reshape(6, 3), axis=0)
         rest = rest - 0.5 * (six[2] + six[3])  # (the median of 6)
         d_uu, d_vv, d_uv = rest[..., 0], rest[..., 1], rest[..., 2]
-        aniso = np.hypot(0.5 * (d_uu - d_vv), d_uv) / (det / 4.0)
-        anisotropy = aniso.max(axis=1)
+        disc_var = det / 4.0
+        anisotropy = (np.hypot(0.5 * (d_uu - d_vv), d_uv) / disc_var).max(axis=1)
         if blobs.noise is not None:
             # SDs from the background noise: of log q per blob, of log brightness (each view
             # against its median, the two views averaged) and of the anisotropy
-            rel_var = (blobs.noise[idx, 0] / flux) ** 2  # (3, 2)
-            var = rel_var + rel_var.sum(axis=0) / 2.0  # (the mean of the two views)
-            brightness_sd = 0.5 * np.sqrt(var.sum(axis=1))
-            view_sd = np.sqrt(var.sum(axis=1))
-            aniso_sd = (blobs.noise[idx, 1] / (det / 4.0)).max(axis=1)
+            noise = blobs.noise[idx]  # (3, 2, 2)
+            rel_var = (noise[..., 0] / flux) ** 2  # (3, 2)
+            var = (rel_var + rel_var.sum(axis=0) / 2.0).sum(axis=1)  # (the mean of the two views)
+            view_sd = np.sqrt(var)
+            sd = np.array([0.5 * view_sd, view_sd, (noise[..., 1] / disc_var).max(axis=1)])
         else:
-            brightness_sd = view_sd = aniso_sd = np.zeros(3)
-    sd = np.stack([brightness_sd, view_sd, aniso_sd])
-    limits = np.sqrt(np.array([s.flux_tol, s.view_tol, s.shape_tol])[:, None] ** 2
-                     + (s.noise_k * sd) ** 2) * s.tol_factor  # (3 checks, 3 sources)
+            sd = np.zeros((3, 3))
+    limits = np.sqrt(s.tol2 + (s.noise_k * sd) ** 2) * s.tol_factor  # (3 checks, 3 sources)
     reasons = []
     degraded = []
-    for k in range(3):
+    for k, (b, v, a, (lim_b, lim_v, lim_a)) in enumerate(zip(
+            brightness.tolist(), view_log_ratio.tolist(), anisotropy.tolist(), limits.T.tolist(), strict=True)):
         why = []
-        b, v, a = float(brightness[k]), float(view_log_ratio[k]), float(anisotropy[k])
-        if not abs(b - 1.0) <= limits[0, k]:  # (NaN fails too)
+        if not abs(b - 1.0) <= lim_b:  # (NaN fails too)
             more = " (merged?)" if b > 1.0 else ""
             why.append(f"{100.0 * b:.0f} % of its expected brightness{more} "
-                       f"(±{100.0 * limits[0, k]:.0f} % allowed)")
-        if not abs(v) <= limits[1, k]:
+                       f"(±{100.0 * lim_b:.0f} % allowed)")
+        if not abs(v) <= lim_v:
             why.append(f"its two views differ by {100.0 * (math.exp(v) - 1.0):+.0f} % "
-                       f"(log ratio {v:+.2f}, {limits[1, k]:.2f} allowed)")
-        if not a <= limits[2, k]:
-            why.append(f"shape off its ellipse by {a:.2f} ({limits[2, k]:.2f} allowed)")
+                       f"(log ratio {v:+.2f}, {lim_v:.2f} allowed)")
+        if not a <= lim_a:
+            why.append(f"shape off its ellipse by {a:.2f} ({lim_a:.2f} allowed)")
         if why:
             degraded.append(k)
             reasons.append(f"{SOURCE_NAMES[k]}: " + ", ".join(why))

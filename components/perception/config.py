@@ -98,6 +98,8 @@ class PerceptionConfig:
     degraded_clear_frames: Annotated[int, Range(1, 100000, "measurements")] = 5
     # bad images
     max_saturated_fraction: Annotated[float, Range(0, 1, "")] = 0.25
+    # a paired blob with more aperture pixels at full scale (255) than this: saturated
+    saturated_blob_px: Annotated[int, Range(0, 1000000, "px")] = 3
     # mirror drift watch: the running median of v_L - v_R of FULL measurements (rig model)
     drift_warn_px: Annotated[float, Range(0.01, 1000, "px")] = 0.5
     drift_window: Annotated[int, Range(1, 100000, "measurements")] = 30
@@ -176,6 +178,7 @@ class PerceptionConfig:
             raise ValueError(f"{own}.degraded_paper_factor must be >= 1, got {self.degraded_paper_factor}")
         _check(own, "degraded_clear_frames", self.degraded_clear_frames, positive=True, integer=True)
         _check(own, "max_saturated_fraction", self.max_saturated_fraction, positive=True)
+        _check(own, "saturated_blob_px", self.saturated_blob_px, nonneg=True, integer=True)
         _check(own, "drift_warn_px", self.drift_warn_px, positive=True)
         _check(own, "drift_window", self.drift_window, positive=True, integer=True)
         if self.max_saturated_fraction > 1:

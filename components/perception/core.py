@@ -98,7 +98,7 @@ def measurement_message(
         m.degraded = bool(check.degraded)
         m.degraded_sources.extend(check.degraded)
         m.degraded_reason = check.reason
-        m.source_brightness.extend(float(b) for b in check.brightness)
+        m.source_brightness.extend(np.asarray(check.brightness, dtype=float).tolist())
     if match.camera_T_tob is not None:
         t = np.array(match.camera_T_tob, dtype=float)
         t[:3, 3] /= 1000.0
@@ -129,12 +129,14 @@ class PerceptionCore(Core):
         self._drift_warned_px: float | None = None  # |median| at the last mirror_drift warning
         self._degraded: tuple[int, ...] = ()  # sources reported degraded (source_degraded)
         self._clean = 0  # checked measurements without a degraded source since then
+        self._saturated = False  # a blob_saturated warning stands (no blob_saturated_ok since)
         self.counters = {
             "images": 0,
             "bad_images": 0,
             "roi_hits": 0,
             "full_searches": 0,
             "errors": 0,
+            "saturated_blobs": 0,  # paired blobs with more than saturated_blob_px pixels at 255
         }
 
     def on_config_changed(self, old: PerceptionConfig, new: PerceptionConfig) -> None:
@@ -210,6 +212,7 @@ class PerceptionCore(Core):
             return outputs + self._publish(t_ns, stamp, np.zeros((0, 2)), lost())
         outputs += self._watch_drift(t_ns, result)
         outputs += self._watch_degraded(t_ns, result)
+        outputs += self._watch_saturated(t_ns, result)
         return outputs + self._publish(t_ns, stamp, result.blobs.uv_px, result.match, result.check)
 
     def _watch_degraded(self, t_ns: int, result: Result) -> list[Output]:
@@ -246,6 +249,33 @@ class PerceptionCore(Core):
         return [self.event(t_ns, pb.SEVERITY_INFO, "source_ok",
                            f"perception: source(s) {names} seen whole again "
                            f"({c.degraded_clear_frames} checked measurements)")]
+
+    def _watch_saturated(self, t_ns: int, result: Result) -> list[Output]:
+        """Paired blobs with more than ``saturated_blob_px`` aperture pixels at full scale
+        (their centres are biased: the peak is clipped) are counted
+        (``counters["saturated_blobs"]``); a ``blob_saturated`` warning on the first
+        measurement with one, a ``blob_saturated_ok`` info on the first one with paired
+        blobs and none after it. Measurements without pairs, or from a detector that does
+        not count (the paper method), change nothing."""
+        full_scale = result.blobs.saturated_px
+        pairs = result.paired.pairs
+        if full_scale is None or not len(pairs):
+            return []
+        c = self.perception.config
+        paired = full_scale[pairs.ravel()]
+        count = int(np.count_nonzero(paired > c.saturated_blob_px))
+        self.counters["saturated_blobs"] += count
+        if count and not self._saturated:
+            self._saturated = True
+            return [self.event(t_ns, pb.SEVERITY_WARNING, "blob_saturated",
+                               f"perception: {count} of {len(paired)} paired blobs have more than "
+                               f"{c.saturated_blob_px} pixels at full scale (most: {int(paired.max())}): "
+                               "their centres are biased; lower the exposure, the gain or the sources' current")]
+        if not count and self._saturated:
+            self._saturated = False
+            return [self.event(t_ns, pb.SEVERITY_INFO, "blob_saturated_ok",
+                               "perception: no paired blob saturated any more")]
+        return []
 
     def _watch_drift(self, t_ns: int, result: Result) -> list[Output]:
         """The mirror drift watch (module docstring, step 5)."""

@@ -93,6 +93,21 @@ class MatchSettings:
     size_ratio_range: tuple[float, float] = (0.5, 1.8)
     triangulation: str = "eq4"
 
+    def __post_init__(self) -> None:
+        # What follows from the settings alone, computed once (not per image): the
+        # disparity range, the model's sides (as given and sorted), the gates' limits.
+        derived = {
+            "disparity_px": disparity_range_px(self.params, self.min_depth_mm, self.max_depth_mm),
+            "model_sides_mm": self.model.sides_mm,
+            "sorted_sides_mm": np.sort(self.model.sides_mm),
+            "log_max_area_ratio": math.log(self.max_area_ratio),
+            "v_gate_px": 3 * self.epipolar_tol_px + 5,
+        }
+        for name, value in derived.items():
+            if isinstance(value, np.ndarray):
+                value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
 
 @dataclass(frozen=True)
 class Match:
@@ -191,9 +206,9 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     eq. (4) points, and its chi-square terms (epipolar + area + brightness)."""
     n = len(blobs)
     ii, jj = _ordered_pairs(n)
-    d_lo, d_hi = disparity_range_px(s.params, s.min_depth_mm, s.max_depth_mm)
+    d_lo, d_hi = s.disparity_px
     duv = uv[jj] - uv[ii]  # (disparity u_L - u_R, v_L - v_R)
-    keep = (duv[:, 0] >= d_lo) & (duv[:, 0] <= d_hi) & (np.abs(duv[:, 1]) <= 3 * s.epipolar_tol_px + 5)
+    keep = (duv[:, 0] >= d_lo) & (duv[:, 0] <= d_hi) & (np.abs(duv[:, 1]) <= s.v_gate_px)
     ii, jj = ii[keep], jj[keep]
     uv_r, uv_l = uv[ii], uv[jj]
     p = eq4_points_mm(s.params, uv_r, uv_l)
@@ -209,7 +224,7 @@ def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
     with np.errstate(invalid="ignore"):
         keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm) & (np.abs(res) <= s.epipolar_tol_px)
         keep &= (ratio_r >= lo) & (ratio_r <= hi) & (ratio_l >= lo) & (ratio_l <= hi)
-        keep &= np.abs(log_area) <= math.log(s.max_area_ratio)
+        keep &= np.abs(log_area) <= s.log_max_area_ratio
     ii, jj, p, res, log_area = ii[keep], jj[keep], p[keep], res[keep], log_area[keep]
     peak = np.maximum(blobs.peak_dn, 1e-6)
     dim = np.log(peak.max() / peak)
@@ -253,7 +268,7 @@ def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
     n_pairs = len(ii)
     if n_pairs == 0:
         return lost()
-    model_sides = np.sort(s.model.sides_mm)
+    model_sides = s.sorted_sides_mm
     tol = s.model.side_tolerance_mm
     if n_pairs >= 3:
         combos = _combinations(n_pairs, 3)
@@ -315,7 +330,7 @@ def _finish(
             signed = res
         res = np.abs(res)
     chi2 = float(np.dot(res, res)) / s.epipolar_sigma_px**2
-    pairs = np.stack((right, left), axis=1)
+    pairs = np.array((right, left)).T
     if len(p) == 3:
         try:
             lab = label_sources(s.model, p)
@@ -323,14 +338,14 @@ def _finish(
         except GeometryError:
             return None
         order = list(lab.order)
-        e = (lab.sides_mm - s.model.sides_mm) / s.side_sigma_mm
+        e = (lab.sides_mm - s.model_sides_mm) / s.side_sigma_mm
         chi2 += float(np.dot(e, e))
         return Match(pairs[order], res[order], lab.camera_p_abc_mm, frame, FULL, _p_value(chi2, 6),
                      lab.side_error_mm, None if signed is None else signed[order])
     side_error = math.nan
     n_terms = len(p)
     if len(p) == 2:
-        side_error = float(np.min(np.abs(np.linalg.norm(p[0] - p[1]) - s.model.sides_mm)))
+        side_error = float(np.min(np.abs(np.linalg.norm(p[0] - p[1]) - s.model_sides_mm)))
         chi2 += (side_error / s.side_sigma_mm) ** 2
         n_terms += 1
     return Match(pairs, res, p, None, POSITION_ONLY, len(p) / 3.0 * _p_value(chi2, n_terms), side_error,

@@ -18,7 +18,9 @@ shape checks.
    the result. Pixels of other components and masked pixels are left out. All blobs are
    refined together in one (n, S, S) stack of windows.
 4. Shape checks on the weighted moments: positive flux, peak at least ``min_contrast_dn``
-   above the local background, major/minor axis ratio at most ``max_elongation``.
+   above the local background, major/minor axis ratio at most ``max_elongation``. Each
+   blob's aperture pixels at full scale (255) are counted (``Blobs.saturated_px``): a
+   clipped peak biases the centre, the core reports it.
 
 Why weights and not the binary mean: the mean of thresholded pixel positions moves in
 steps as pixels cross T (pixel locking, ~0.05-0.1 px for 8 px shapes); the weighted
@@ -60,6 +62,23 @@ def background_and_noise(sub: np.ndarray, keep: np.ndarray | None = None) -> tup
     median = float(np.searchsorted(cdf, 0.5 * total))
     low = float(np.searchsorted(cdf, 0.1587 * total))
     return median, max(median - low, 0.5)
+
+
+_BASES: dict[int, np.ndarray] = {}
+
+
+def _moment_basis(half: int) -> np.ndarray:
+    """(S*S, 6), S = 2 half + 1: per pixel of an S x S window (rows first) 1, x, y, x^2,
+    x y, y^2, the pixel's offsets (x, y) from the window's centre pixel (integers)."""
+    basis = _BASES.get(half)
+    if basis is None:
+        gy, gx = np.mgrid[-half : half + 1, -half : half + 1].astype(np.float64)
+        gx, gy = gx.ravel(), gy.ravel()
+        basis = np.stack((np.ones_like(gx), gx, gy, gx * gx, gx * gy, gy * gy), axis=1)
+        basis.setflags(write=False)
+        if half <= 256:
+            _BASES[half] = basis
+    return basis
 
 
 def _windows_view(image: np.ndarray, size: int, rows: list[int], cols: list[int]) -> np.ndarray:
@@ -148,34 +167,31 @@ def detect_weighted(
         order = np.argsort(-shapes.area[cand], kind="stable")[:max_blobs]
         rejected += len(cand) - max_blobs
         cand = np.sort(cand[order]).tolist()
+    cand_l, cand = cand, np.array(cand)
     centroid = shapes.centroid[cand]  # (m, 2)
-    cx = centroid[:, 0].copy()
-    cy = centroid[:, 1].copy()
-    r_ap_l = [0.5 * max(w[i], h[i]) + aperture_pad_px for i in cand]
+    r_ap_l = [0.5 * max(w[i], h[i]) + aperture_pad_px for i in cand_l]
     r_ap = np.array(r_ap_l)  # (m,)
     half = int(math.ceil(max(r_ap_l) + _RING_PX + 1.0))
     size_w = 2 * half + 1
     # window corners: the rounded centre - half (np.rint and round both round half to even)
-    y0 = [round(v) - half for v in cy.tolist()]
-    x0 = [round(u) - half for u in cx.tolist()]
-    offsets = np.arange(size_w)
-    ys = np.array(y0)[:, None] + offsets  # (m, S)
-    xs = np.array(x0)[:, None] + offsets
+    y0 = [round(v) - half for v in centroid[:, 1].tolist()]
+    x0 = [round(u) - half for u in centroid[:, 0].tolist()]
     inside = min(y0) >= 0 and min(x0) >= 0 and max(y0) + 2 * half < height
     inside = inside and max(x0) + 2 * half < width
     if inside:  # no window reaches out of the region: no clipping, every pixel valid
         rows, cols = y0, x0  # the windows' corners: copied by slices
         windows_of = _windows_view
     else:
+        ys = np.array(y0)[:, None] + np.arange(size_w)  # (m, S)
+        xs = np.array(x0)[:, None] + np.arange(size_w)
         ys_c = np.clip(ys, 0, height - 1)
         xs_c = np.clip(xs, 0, width - 1)
         rows, cols = ys_c[:, :, None], xs_c[:, None, :]
         windows_of = _gather
     win_dn = windows_of(sub, size_w, rows, cols)  # (m, S, S) uint8
-    win = win_dn.astype(np.float64)
     # Pixels of other shapes (above the level and not this shape's) are left out.
-    own = np.zeros(win.shape, bool)
-    for i, k in enumerate(cand):
+    own = np.zeros(win_dn.shape, bool)
+    for i, k in enumerate(cand_l):
         oy = y[k] - y0[i]
         ox = x[k] - x0[i]
         mask = shapes.masks[k]
@@ -187,42 +203,54 @@ def detect_weighted(
         valid &= (ys == ys_c)[:, :, None] & (xs == xs_c)[:, None, :]
     if keep_sub is not None:
         valid &= windows_of(keep_sub, size_w, rows, cols) > 0
-    grid_x = xs.astype(np.float64)[:, None, :]
-    grid_y = ys.astype(np.float64)[:, :, None]
-    r2_ap = (r_ap**2)[:, None, None]
-    r2_ring = ((r_ap + _RING_PX) ** 2)[:, None, None]
-    ring_outside = min(r_ap_l) >= 0.0
+    m = len(cand)
+    # (the valid pixels' count and grey levels, (2, m, S*S): every sum below is a product
+    # of these with a 0/1 mask and the window's moment basis, one matrix product for all
+    # blobs; the grey levels and pixel offsets are integers, so every such sum is exact)
+    counted = np.empty((2, m, size_w * size_w))
+    flat_valid = valid.reshape(m, -1)
+    np.copyto(counted[0], flat_valid)
+    np.multiply(win_dn.reshape(m, -1), flat_valid, out=counted[1])
+    basis = _moment_basis(half)  # (S*S, 6): 1, x, y, x^2, xy, y^2 about the window's centre
+    grid_x, grid_y = basis[:, 1], basis[:, 2]
+    # the centres relative to their window's centre pixel (exact: an integer near them,
+    # so the distances below are the region's to the last bit)
+    xc, yc = np.array(x0) + half, np.array(y0) + half
+    cx = centroid[:, 0] - xc
+    cy = centroid[:, 1] - yc
+    r2 = np.empty((2, m, 1))
+    r2[0, :, 0] = r_ap * r_ap  # the aperture; the aperture and its ring (r_ap >= 0)
+    r2[1, :, 0] = (r_ap + _RING_PX) ** 2
+    inside_r = np.empty((2, m, size_w * size_w))
+    masked = np.empty((2, 2, m, size_w * size_w))
     for _ in range(_ITERATIONS):
-        dx = grid_x - cx[:, None, None]
-        dy = grid_y - cy[:, None, None]
-        d2 = dx * dx + dy * dy
-        in_aperture = d2 <= r2_ap
-        aperture = valid & in_aperture
-        if ring_outside:  # the aperture lies within r2_ring: the ring is the rest of it
-            in_ring = (d2 <= r2_ring) ^ in_aperture
-        else:
-            in_ring = (d2 > r2_ap) & (d2 <= r2_ring)
-        ring = valid & in_ring
-        n_ring = ring.sum(axis=(1, 2))
+        dx = grid_x - cx[:, None]  # (m, S*S)
+        dy = grid_y - cy[:, None]
+        d2 = dx * dx
+        d2 += dy * dy
+        np.less_equal(d2, r2, out=inside_r)  # 1.0 within (the aperture, its outer ring's edge)
+        # masked[a, g]: (aperture, aperture + ring)[a] x (count, grey level)[g]
+        np.multiply(inside_r[:, None], counted[None], out=masked)
+        sums = (masked.reshape(4 * m, -1) @ basis).reshape(2, 2, m, 6)
+        n_ap, n_ring = sums[0, 0, :, 0], sums[1, 0, :, 0] - sums[0, 0, :, 0]
         local_bg = np.where(
-            n_ring >= 8, (win * ring).sum(axis=(1, 2)) / np.maximum(n_ring, 1), background
+            n_ring >= 8, (sums[1, 1, :, 0] - sums[0, 1, :, 0]) / np.maximum(n_ring, 1), background
         )
-        weight = (win - local_bg[:, None, None]) * aperture
-        flux = weight.sum(axis=(1, 2))
+        # sums of (I - b) over the aperture: flux, first and second moments (m, 6)
+        moment = sums[0, 1] - local_bg[:, None] * sums[0, 0]
+        flux = moment[:, 0]
         good = flux > 0
         safe = np.where(good, flux, 1.0)
-        cx = np.where(good, (weight * grid_x).sum(axis=(1, 2)) / safe, cx)
-        cy = np.where(good, (weight * grid_y).sum(axis=(1, 2)) / safe, cy)
-    dx = grid_x - cx[:, None, None]
-    dy = grid_y - cy[:, None, None]
-    safe = np.where(flux > 0, flux, 1.0)
-    wdx = weight * dx
-    mxx = (wdx * dx).sum(axis=(1, 2)) / safe
-    myy = (weight * dy * dy).sum(axis=(1, 2)) / safe
-    mxy = (wdx * dy).sum(axis=(1, 2)) / safe
-    # the brightest aperture pixel less the local background (rounding is monotonic: the
-    # same as the largest difference; an empty aperture has no flux and is rejected)
-    peak = (win_dn * aperture).max(axis=(1, 2)) - local_bg
+        cx = np.where(good, moment[:, 1] / safe, cx)
+        cy = np.where(good, moment[:, 2] / safe, cy)
+    # central second moments of the last weights about the result
+    mxx = moment[:, 3] / safe - cx * cx
+    myy = moment[:, 5] / safe - cy * cy
+    mxy = moment[:, 4] / safe - cx * cy
+    # the brightest aperture pixel less the local background (an empty aperture has no
+    # flux and is rejected)
+    peak = masked[0, 1].max(axis=1) - local_bg
+    full_scale = np.count_nonzero(masked[0, 1] >= 255.0, axis=1)  # saturated aperture pixels
     # Background noise of the flux and of the moments' anisotropy (for the blob checks),
     # over a circular aperture of radius R (~pi R^2 pixels): sigma per aperture pixel plus
     # the local background's error over the whole aperture; the anisotropy's two parts
@@ -232,69 +260,34 @@ def detect_weighted(
     n_ap = np.pi * r_ap**2
     flux_sd = sigma * np.sqrt(n_ap + n_ap**2 / np.maximum(n_ring, 1))
     aniso_sd = sigma * np.sqrt(np.pi / 12.0) * r_ap**3 / safe
-    # Shape checks per blob, the array formulas' operations on plain floats.
-    uv, areas, sizes, elongations, peaks, fluxes, moments, noise = [], [], [], [], [], [], [], []
-    firsts = []
-    c0 = centroid.tolist()
-    offset_l = offset.tolist()
-    first = shapes.first.tolist()
-    shift = [offset_l[t] for t in tile_of]  # per shape: its window's mosaic -> image pixels
-    for i, (fl, pk, a, b, c, u, v, fsd, asd) in enumerate(
-        zip(
-            flux.tolist(),
-            peak.tolist(),
-            mxx.tolist(),
-            myy.tolist(),
-            mxy.tolist(),
-            cx.tolist(),
-            cy.tolist(),
-            flux_sd.tolist(),
-            aniso_sd.tolist(),
-            strict=True,
-        )
-    ):
-        mean = 0.5 * (a + b)
-        spread = math.sqrt(0.25 * ((a - b) * (a - b)) + c * c)
-        lam_major = mean + spread
-        lam_minor = mean - spread
-        elongation = math.sqrt(lam_major / max(lam_minor, 1e-12)) if lam_minor > 0 else math.inf
-        # A uniform disc of radius R has a variance R^2/4 per axis; the pixel adds 1/12.
-        size = 4.0 * math.sqrt(max(lam_major - 1.0 / 12.0, 0.0))
-        if (
-            fl > 0
-            and pk >= min_contrast_dn
-            and elongation <= max_elongation
-            and abs(u - c0[i][0]) <= r_ap_l[i]
-            and abs(v - c0[i][1]) <= r_ap_l[i]
-        ):
-            du, dv = shift[cand[i]]
-            uv.append((u + du, v + dv))
-            fu, fv = first[cand[i]]
-            firsts.append((fu + du, fv + dv))
-            areas.append(float(area[cand[i]]))
-            sizes.append(size)
-            elongations.append(elongation)
-            peaks.append(pk)
-            fluxes.append(fl)
-            moments.append((a, b, c))
-            noise.append((fsd, asd))
-        else:
-            rejected += 1
-    if not uv:
+    # Shape checks, all blobs at once.
+    mean = 0.5 * (mxx + myy)
+    spread = np.sqrt(0.25 * ((mxx - myy) * (mxx - myy)) + mxy * mxy)
+    lam_major = mean + spread
+    lam_minor = mean - spread
+    # (lam_major >= lam_minor > 0 where it is used: the abs only keeps sqrt quiet elsewhere)
+    elongation = np.where(lam_minor > 0, np.sqrt(np.abs(lam_major / np.maximum(lam_minor, 1e-12))), np.inf)
+    # A uniform disc of radius R has a variance R^2/4 per axis; the pixel adds 1/12.
+    size = 4.0 * np.sqrt(np.maximum(lam_major - 1.0 / 12.0, 0.0))
+    centre = np.array((cx + xc, cy + yc))  # (2, m) in the region
+    ok = good & (peak >= min_contrast_dn) & (elongation <= max_elongation)
+    ok &= (np.abs(centre - centroid.T) <= r_ap).all(axis=0)
+    n_ok = int(np.count_nonzero(ok))
+    rejected += m - n_ok
+    if n_ok == 0:
         return dataclasses.replace(EMPTY, rejected=rejected)
-    blobs = Blobs(
-        np.array(uv),
-        np.array(areas),
-        np.array(sizes),
-        np.array(elongations),
-        np.array(peaks),
-        rejected,
-        np.array(fluxes),
-        np.array(moments).reshape(-1, 3),
-        np.array(noise).reshape(-1, 2),
-    )
+    # back to the image: each shape's window's offset
+    shift = offset[np.array(tile_of)[cand]] if len(offset) > 1 else offset[0]
+    fields = (centre.T + shift, shapes.area[cand].astype(float), size, elongation, peak, flux,
+              np.array((mxx, myy, mxy)).T, np.array((flux_sd, aniso_sd)).T, full_scale)
+    if n_ok < m:
+        fields = tuple(f[ok] for f in fields)
+    blobs = Blobs(*fields[:5], rejected, *fields[5:])
     if len(tiles) > 1:  # the whole image's order: descending (v, u) of the first pixel
-        order = sorted(range(len(firsts)), key=lambda i: (firsts[i][1], firsts[i][0]), reverse=True)
-        if order != list(range(len(firsts))):
-            blobs = blobs.take(np.array(order))
+        first = shapes.first[cand] + shift
+        if n_ok < m:
+            first = first[ok]
+        order = np.lexsort((first[:, 0], first[:, 1]))[::-1]
+        if np.any(order != np.arange(len(order))):
+            blobs = blobs.take(order)
     return blobs

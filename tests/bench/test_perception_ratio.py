@@ -3,10 +3,11 @@ ratios to baselines timed in the same run, interleaved (``humanpt.bench.measure`
 as an absolute time: a loaded machine slows the baselines as much as humanpt.
 
 Each figure is the median thread CPU time per image over 150 images per case, 10 rounds
-(what `humanpt bench perception` prints as images/s). The limits are about half of what
-this build measures (README, "Speed"): core step 1.9x the naive OpenCV pipeline, tracking
-1.1x the whole-image search at 640x480 and 2.0x at 1920x1200, the 1920x1200 tracking rate
-1.0x the 640x480 one."""
+(what `humanpt bench perception` prints as images/s). The limits lie 35-45 % below what
+this build measures at load average 6-10 (README, "Speed": core step 1.7-1.8x the naive
+OpenCV pipeline, tracking 1.05-1.1x the whole-image search at 640x480 and 1.85-1.95x at
+1920x1200, the 1920x1200 tracking rate 1.0-1.1x the 640x480 one), so that only a gross
+regression fails."""
 
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ def test_perception_against_its_in_run_baselines(one_cv2_thread):
         "tracking rate 1920x1200 / 640x480": cpu[f"640 {TRACK}"] / cpu[f"1920 {TRACK}"],
     }
     limits = {
-        "core step / naive pipeline (640x480)": 0.9,
+        "core step / naive pipeline (640x480)": 1.0,
         "tracking / whole image (640x480)": 0.6,
         "tracking / whole image (1920x1200)": 1.2,
         "tracking rate 1920x1200 / 640x480": 0.6,

@@ -282,3 +282,35 @@ def test_random_pictures_never_raise(seed, method, level):
         (m,) = _tobs(core.step(k, "camera/image", image(img, k)))
         assert m.status in (pb.TOB_STATUS_FULL, pb.TOB_STATUS_POSITION_ONLY, pb.TOB_STATUS_LOST)
         assert 0.0 <= m.quality <= 1.0 and m.visible == len(m.pairs) == len(m.points_camera_m)
+
+
+def test_saturated_blobs_are_counted_and_reported_once_per_episode():
+    """Sources drawn 3x brighter than full scale clip at 255 over their cores: each blob's
+    count of full-scale aperture pixels equals the image's own count of 255-pixels around
+    the blob's drawn centre (numpy on the image, independent of the detector); the core
+    warns once (``blob_saturated``), counts every such paired blob, and says
+    ``blob_saturated_ok`` on the first unsaturated measurement. The unsaturated image of
+    the other tests has no such pixel, no event."""
+    bright, uv_r, uv_l = scene(T, seed=11, amplitude_dn=(600.0, 560.0))
+    core = PerceptionCore(PerceptionConfig())
+    blobs = core.perception.measure(bright).blobs
+    v, u = np.nonzero(bright == 255)
+    for centre in np.vstack([uv_r, uv_l]):
+        (k,) = np.flatnonzero(np.hypot(*(blobs.uv_px - centre).T) < 0.5)  # this blob
+        expected = int(np.count_nonzero(np.hypot(u - centre[0], v - centre[1]) < 8.0))
+        assert expected > 3 and blobs.saturated_px[k] == expected
+    assert not core.perception.measure(IMG).blobs.saturated_px.any()
+
+    codes = []
+    for k, img in enumerate((bright, bright, IMG, IMG)):
+        outs = core.step(k * 1000, "camera/image", image(img, k + 1))
+        assert _tobs(outs)[0].status == pb.TOB_STATUS_FULL
+        codes.append([e.code for e in _events(outs) if e.code.startswith("blob_saturated")])
+    assert codes == [["blob_saturated"], [], ["blob_saturated_ok"], []]
+    assert core.counters["saturated_blobs"] == 12  # six paired blobs in each bright image
+    # the limit: more than saturated_blob_px pixels at 255
+    high = PerceptionCore(PerceptionConfig(saturated_blob_px=int(blobs.saturated_px.max())))
+    assert not any(e.code == "blob_saturated" for e in _events(high.step(0, "camera/image", image(bright, 1))))
+    assert high.counters["saturated_blobs"] == 0
+    with pytest.raises(ValueError, match="saturated_blob_px"):
+        PerceptionConfig(saturated_blob_px=-1)
