@@ -67,13 +67,16 @@ def test_a_fresh_state_in_the_snapshots_place_diverges(alter_run, component):
     """Could fail: every core's outputs after the snapshot depend on the state it thaws (its
     filters, its link, its sequence numbers), so replaying from a fresh core's state there
     does not reproduce them.  The first snapshot, at 10 s: the arc is still being followed (the
-    scene's state, its truth seam, stops mattering once the target rests)."""
+    scene's state, its truth seam, stops mattering once the target rests).  Replayed to the
+    next snapshot, at 20 s: the 10 s the fresh state runs on (the 40 s after them add
+    nothing to what is shown, and cost most of the module's replay time)."""
     rec = read(alter_run / f"{component}.mcap")
     snap = rec.snapshots[0]
     inputs = json.loads(snap.data)["inputs"]
     forged = SnapshotEntry(snap.at, snap.t_ns, snapshot_bytes(build_core(rec), snap.t_ns, inputs))
-    recorded, replayed = replay_recording(read(alter_run / f"{component}.mcap"), snapshot=forged)
-    assert recorded and recorded != replayed
+    rec.entries = rec.entries[:rec.snapshots[1].at]  # (build_core has read its config: the same recording)
+    recorded, replayed = replay_recording(rec, snapshot=forged)
+    assert len(recorded) >= 100 and recorded != replayed
 
 
 @pytest.mark.parametrize(("robot", "rsi_cycle_ms"), [("puma", 12.0), ("standin", None)])
