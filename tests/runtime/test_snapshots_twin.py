@@ -9,6 +9,7 @@ import json
 
 import pytest
 
+from humanpt.runtime.config import RecordConfig
 from humanpt.runtime.recording import SnapshotEntry, read
 from humanpt.runtime.replay import build_core, replay, replay_recording
 from humanpt.runtime.snapshot import dumps, snapshot_bytes
@@ -81,18 +82,21 @@ def test_a_fresh_state_in_the_snapshots_place_diverges(alter_run, component):
 
 @pytest.mark.parametrize(("robot", "rsi_cycle_ms"), [("puma", 12.0), ("standin", None)])
 def test_rsi_and_the_stand_in_replay_from_a_snapshot(tmp_path, robot, rsi_cycle_ms):
-    """The RSI link's gateway and simulated robot, and the stand-in robot: 13 s, the last 2 s
-    replayed from the snapshot at 10 s, and each core thaws what it froze."""
-    run(SystemConfig.for_scenario("arc"), robot=robot, duration_s=13.0, run_dir=tmp_path, keep_outputs=False,
-        rsi_cycle_ms=rsi_cycle_ms)
+    """The RSI link's gateway and simulated robot, and the stand-in robot: 5.5 s with a
+    snapshot every 3 s ([record] snapshot_period_s; the 60 s run above has the default 10 s),
+    the last 2 s replayed from the snapshot at 3 s (the arc under way since 2 s), and each core
+    thaws what it froze."""
+    run(SystemConfig.for_scenario("arc"), robot=robot, duration_s=5.5, run_dir=tmp_path, keep_outputs=False,
+        rsi_cycle_ms=rsi_cycle_ms, record=RecordConfig(snapshot_period_s=3.0))
     names = {f.stem for f in tmp_path.glob("*.mcap")}
     assert names == (set(LOOP) if robot == "puma" else set(LOOP) - {"sim_robot", "robot_gateway"} | {"standin_robot"})
     for name in sorted(names):
         f = tmp_path / f"{name}.mcap"
         rec = read(f)
-        assert len(rec.snapshots) == 1
+        assert len(rec.snapshots) == 1 and 3_000_000_000 <= rec.snapshots[0].t_ns < 3_100_000_000
         res = replay(f, last_s=2.0)
         assert res.match and f"from the snapshot at t_ns={rec.snapshots[0].t_ns}" in res.report(), res.report()
+        assert res.compared == res.recorded_outputs > 0, res.report()
         core = build_core(rec)
         frozen = json.loads(rec.snapshots[0].data)["core"]
         core.thaw(frozen)
