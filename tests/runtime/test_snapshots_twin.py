@@ -29,10 +29,23 @@ def alter_run(tmp_path_factory):
     return d
 
 
+@pytest.fixture(scope="module")
+def recordings(alter_run):
+    """Each component's recording of the run, read once for the tests that only read it."""
+    cache = {}
+
+    def get(component: str):
+        if component not in cache:
+            cache[component] = read(alter_run / f"{component}.mcap")
+        return cache[component]
+
+    return get
+
+
 @pytest.mark.parametrize("component", LOOP)
-def test_the_last_5_s_of_a_60_s_run_replay_from_a_snapshot_and_match(alter_run, component):
+def test_the_last_5_s_of_a_60_s_run_replay_from_a_snapshot_and_match(alter_run, recordings, component):
     f = alter_run / f"{component}.mcap"
-    rec = read(f)
+    rec = recordings(component)
     first_in, last_in = rec.inputs[0].t_ns, rec.inputs[-1].t_ns
     assert last_in > 59_900_000_000
     # A snapshot after the first input past each 10 s of input time: 5 in 60 s (6 when the
@@ -52,10 +65,10 @@ def test_the_last_5_s_of_a_60_s_run_replay_from_a_snapshot_and_match(alter_run, 
 
 
 @pytest.mark.parametrize("component", LOOP)
-def test_each_core_thaws_what_it_froze(alter_run, component):
+def test_each_core_thaws_what_it_froze(recordings, component):
     """Round trip per core: freeze (recorded), thaw into a fresh core, freeze again: the
     same state, byte for byte; and the same outputs on the same inputs (the replay above)."""
-    rec = read(alter_run / f"{component}.mcap")
+    rec = recordings(component)
     for snap in rec.snapshots:
         frozen = json.loads(snap.data)["core"]
         core = build_core(rec)
@@ -71,7 +84,7 @@ def test_a_fresh_state_in_the_snapshots_place_diverges(alter_run, component):
     scene's state, its truth seam, stops mattering once the target rests).  Replayed to the
     next snapshot, at 20 s: the 10 s the fresh state runs on (the 40 s after them add
     nothing to what is shown, and cost most of the module's replay time)."""
-    rec = read(alter_run / f"{component}.mcap")
+    rec = read(alter_run / f"{component}.mcap")  # its own: cut and replayed below
     snap = rec.snapshots[0]
     inputs = json.loads(snap.data)["inputs"]
     forged = SnapshotEntry(snap.at, snap.t_ns, snapshot_bytes(build_core(rec), snap.t_ns, inputs))
