@@ -19,7 +19,7 @@ from humanpt.geometry.rig import Rig, flange_T_desired
 from humanpt.operator import OperatorConfig
 from humanpt.perception.config import PerceptionConfig
 from humanpt.pose_filter.config import PoseFilterConfig
-from humanpt.runtime.config import ConfigError, build, to_table
+from humanpt.runtime.config import ConfigError, RecordConfig, build, to_table
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 from humanpt.sim_camera import SimCameraConfig
@@ -169,7 +169,7 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
         record_from_s: float | None = None, run_dir: str | Path | None = None, keep_outputs: bool = True,
         digest: bool = False, progress: Callable[[float, float], None] | None = None,
         rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None,
-        ur_cycle_ms: float | None = None) -> RunResult:
+        ur_cycle_ms: float | None = None, record: RecordConfig | None = None) -> RunResult:
     """Build the closed loop (:func:`humanpt.twin.system.build_system`) and run it for
     ``duration_s`` of twin time (default :meth:`SystemConfig.default_duration_s`).
 
@@ -178,14 +178,15 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
     MCAP there. ``progress(now_s, duration_s)`` is called about 20 times during the run.
     ``rsi_cycle_ms`` (4 or 12): the simulated Puma behind the RSI link instead of ALTER
     (``build_system``); ``abb_cycle_ms`` (4 or a multiple): the simulated ABB IRB 1600 behind
-    the EGM link; ``ur_cycle_ms`` (2 or 8): the simulated UR5e behind the RTDE link. The
-    world is closed on return."""
+    the EGM link; ``ur_cycle_ms`` (2 or 8): the simulated UR5e behind the RTDE link.
+    ``record``: how the recordings in ``run_dir`` are made (``[record]``, e.g. its
+    ``snapshot_period_s``; default its defaults). The world is closed on return."""
     duration_s = config.default_duration_s() if duration_s is None else float(duration_s)
     world = build_system(config.operator, seed=config.seed, controller=config.controller, robot=robot, rig=config.rig,
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
                          pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest,
                          robot_overrides=config.robot_overrides, rsi_cycle_ms=rsi_cycle_ms,
-                         abb_cycle_ms=abb_cycle_ms, ur_cycle_ms=ur_cycle_ms)
+                         abb_cycle_ms=abb_cycle_ms, ur_cycle_ms=ur_cycle_ms, record=record)
     t0 = time.perf_counter()
     try:
         if record_from_s is not None:

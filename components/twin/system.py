@@ -17,6 +17,7 @@ from humanpt.perception.config import PerceptionConfig
 from humanpt.perception.core import PerceptionCore
 from humanpt.pose_filter.config import PoseFilterConfig
 from humanpt.pose_filter.core import PoseFilterCore
+from humanpt.runtime.config import RecordConfig
 from humanpt.scene.config import SceneConfig
 from humanpt.scene.core import SceneCore
 from humanpt.schemas import humanpt_pb2 as pb
@@ -230,7 +231,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
                  robot_overrides: dict[str, dict] | None = None,
                  mount_world_T_flange_mm: np.ndarray | None = None,
                  rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None,
-                 mount_joints_deg: tuple[float, ...] | None = None, ur_cycle_ms: float | None = None) -> TwinWorld:
+                 mount_joints_deg: tuple[float, ...] | None = None, ur_cycle_ms: float | None = None,
+                 record: RecordConfig | None = None) -> TwinWorld:
     """The closed loop on the twin.  The robot starts viewing the scenario's first pose
     (the desired point D on G), moved by ``start_offset_mm_deg`` (X, applied in the world
     frame), so the servo has something to converge from.  With a driver in the scenario the
@@ -247,7 +249,8 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     ``puma`` only): the simulated ABB IRB 1600 behind the EGM link instead, the same way;
     ``ur_cycle_ms`` (2 or 8): the simulated UR5e behind the RTDE link (its TCP stream as a
     fast byte stream, :data:`RTDE_STREAM_BAUD`). Each arm is mounted by the same rule
-    (:func:`arm_cores`)."""
+    (:func:`arm_cores`).  ``record``: how ``run_dir``'s recordings are made (``[record]``;
+    default its defaults)."""
     if sum(c is not None for c in (rsi_cycle_ms, abb_cycle_ms, ur_cycle_ms)) > 1:
         raise ValueError("one robot link: rsi_cycle_ms, abb_cycle_ms or ur_cycle_ms, not more")
     op = operator_config(scenario, seed)
@@ -299,7 +302,7 @@ def build_system(scenario: str | OperatorConfig = "static", *, seed: int = 0,
     cores.append(SceneCore(SceneConfig(dz_mm=ctl.dz_mm, world_T_base_mm_deg=tuple(
         robot_cores[1].config.world_T_base_mm_deg) if wire else (0.0,) * 6), rig))
     world = build_world(op, seed=seed, sim_camera=cam, robot=standin, robot_cores=robot_cores, extra_cores=cores,
-                        dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest)
+                        dz_mm=ctl.dz_mm, run_dir=run_dir, keep_outputs=keep_outputs, digest=digest, record=record)
     if wire and (rsi_cycle_ms is not None or abb_cycle_ms is not None):
         world.lockstep.connect_udp("sim_robot", "robot_gateway")
     elif wire and ur_cycle_ms is not None:

@@ -10,6 +10,7 @@ import numpy as np
 
 from humanpt.geometry import DEFAULT_DZ_MM, x_from_transform
 from humanpt.operator import BUILTIN_SCENARIOS, OperatorConfig, OperatorCore
+from humanpt.runtime.config import RecordConfig
 from humanpt.runtime.core import Core
 from humanpt.runtime.lockstep import Delivered, Lockstep
 from humanpt.schemas.convert import from_image, image_stamp_ns
@@ -126,6 +127,7 @@ def build_world(
     start_ns: int = 0,
     latency_ns: int = 0,
     digest: bool = True,
+    record: RecordConfig | None = None,
 ) -> TwinWorld:
     """Assemble operator, stand-in robot and sim_camera (and ``extra_cores``, e.g. a
     perception or a controller) into a :class:`Lockstep`.
@@ -134,7 +136,8 @@ def build_world(
     ``seed`` goes into the operator's and the camera's configs (same seed, same bytes).
     Without ``robot``, the flange starts where the camera sees the scenario's first pose
     on its optical axis at ``dz_mm`` (:func:`start_flange_for`). With ``run_dir`` every core
-    is recorded there (``humanpt replay`` replays each). ``robot_cores`` replaces the
+    is recorded there (``humanpt replay`` replays each), as ``record`` says (default
+    ``[record]``'s defaults: a snapshot of each core every 10 s). ``robot_cores`` replaces the
     stand-in robot by other cores (e.g. ``sim_robot`` and ``robot_gateway``, wired with
     ``world.lockstep.connect_serial``); one of them must publish ``sim_robot/truth``.
     """
@@ -163,5 +166,6 @@ def build_world(
         run_dir=run_dir,
         keep_outputs=keep_outputs,
         digest=digest,
+        record=record,
     )
     return TwinWorld(ls, operator, robot_core, camera, extra)

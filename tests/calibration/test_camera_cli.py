@@ -4,6 +4,8 @@ written (issue 17)."""
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 import pytest
@@ -115,9 +117,11 @@ def test_bad_input_is_refused_with_its_reason(board_images, tmp_path, rig_file, 
     _refused(calibrate, capsys, rig_file, match="no source")
 
 
+@functools.lru_cache(maxsize=2)
 def _sized_views(w: int, h: int, seed: int = 4):
     """The twin's board through the right view of a nominal camera of ``w`` x ``h`` px (a_u
-    1000, centre at the image's centre, no distortion), and that camera's rig."""
+    1000, centre at the image's centre, no distortion), and that camera's rig. Rendered once
+    for the module (two tests use the 640 x 512 views; neither changes them)."""
     import dataclasses
 
     rig = Rig()

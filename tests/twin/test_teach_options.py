@@ -9,7 +9,7 @@ import pytest
 
 from humanpt.twin import teach
 from humanpt.twin.worlds import World
-from tests.conftest import run_cli
+from tests.conftest import run_cli_here
 
 
 @pytest.mark.parametrize("extra, names", [
@@ -20,8 +20,10 @@ from tests.conftest import run_cli
     (["--speed", "2000"], "speed_mm_s"),
 ])
 def test_an_option_the_job_does_not_take_is_refused_before_anything_runs(tmp_path, extra, names):
+    # (the verb in this process: what is checked is its status, its message and that nothing
+    # ran, not its process)
     run_dir = tmp_path / "job"
-    r = run_cli("demo", "--calibrate", "--run-dir", str(run_dir), *extra, timeout=120)
+    r = run_cli_here("demo", "--calibrate", "--run-dir", str(run_dir), *extra)
     assert r.returncode != 0, r.stdout
     assert names in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert not run_dir.exists() or not any(run_dir.iterdir())  # nothing ran, nothing written
