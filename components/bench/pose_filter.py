@@ -136,7 +136,8 @@ def main(argv: list[str] | None = None) -> int:
             scen = name if name in BUILTIN_SCENARIOS else open(name).read()
             if scen is not name:
                 scen = scen.replace("$SPEED", f"{speed:g}")
-            w = run_scenario(scen, speed, seed=args.seed, pose_filter=cfg, robot=args.robot, world=args.world)
+            # a file's speed is its $SPEED, substituted above (a built-in's is the operator's)
+            w = run_scenario(scen, speed if scen is name else 0.0, seed=args.seed, pose_filter=cfg, robot=args.robot, world=args.world)
             fe = filter_errors(w)
             print(f"{name:10s} {speed:4.0f} mm/s: {fe.row()}  ({time.perf_counter() - t0:.0f} s)", flush=True)
     return 0

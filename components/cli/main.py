@@ -113,7 +113,8 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
                    "trapezium)")
     p.add_argument("--speed", type=float, metavar="MM_S",
                    help="the operator's speed along a built-in scenario, mm/s (default: the scenario's, 20; "
-                   "issue 18's hard cases are meant for 20 and 60)")
+                   "issue 18's hard cases are meant for 20 and 60); refused with a scenario file, which sets its "
+                   "own ('speed' lines; --set operator.speed_scale=K scales its pace)")
     p.add_argument("--lockstep", action="store_true", help="one process on virtual time (fast, deterministic)")
     p.add_argument("--viewer", action="store_true", help="also run the rerun viewer component (live only)")
     p.add_argument("--duration", type=_duration, help="seconds of twin time (default: the scenario's length + 3.5 s)")

@@ -31,7 +31,8 @@ class OperatorConfig:
     set, names a scenario file instead (format: ``README.md``). The file is read once, when
     the config is built, into ``scenario_text`` - so a recording carries the scenario itself
     and replays without the file. ``scenario_text`` may also be given inline.
-    ``speed_mm_s`` > 0 replaces a built-in's default speed; ``speed_scale`` (live) scales
+    ``speed_mm_s`` > 0 replaces a built-in's default speed (refused with a scenario
+    file or text, which sets its own); ``speed_scale`` (live) scales
     the pace of any scenario (tremor stays at human frequencies). The target holds its start
     pose for ``start_delay_s`` (so the servo can settle), then moves. Truth is published at
     ``rate_hz``. ``seed`` shapes the freehand seam and its tremor.
@@ -78,6 +79,12 @@ class OperatorConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"operator.{name} must be within {lo} and {hi}, got {value}")
+        if self.speed_mm_s > 0 and self.scenario_text:
+            # A file sets its own speeds (its ``speed`` lines, per segment): a built-in's speed
+            # would be silently ignored (a "60 mm/s" run at the file's 20).
+            raise ValueError(f"operator.speed_mm_s (demo --speed) {self.speed_mm_s:g} mm/s sets a built-in scenario's speed; "
+                             f"the scenario {self.scenario_file or 'text'} sets its own (its 'speed' lines): edit "
+                             "them, or scale its pace with operator.speed_scale")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             raise ValueError(f"operator.seed must be an integer >= 0, got {self.seed!r}")
         try:

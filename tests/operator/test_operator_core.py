@@ -131,3 +131,21 @@ def test_hand_tremor_adds_to_a_scenario_tremor_without_repeating_it():
     a = np.array([own.offset(t)[0] for t in ts])
     b = np.array([hand.offset(t)[0] for t in ts])
     assert abs(np.corrcoef(a[:, 0], b[:, 0])[0, 1]) < 0.2  # independent waveforms
+
+
+def test_a_built_in_speed_with_a_scenario_file_is_refused_not_ignored(tmp_path, cli_main):
+    """A scenario file sets its own speeds: ``--speed 60`` beside one was announced and then
+    ignored (a "60 mm/s" job ran the file's 20 mm/s and gave the 20 mm/s figures to the
+    digit). Refused before any work, with what to do; a built-in still takes it."""
+    scn = tmp_path / "line.scn"
+    scn.write_text("scenario line\nstart 100 1200 0 0 0 180\nspeed 20\nline 140 1200 0\n")
+    with pytest.raises(ValueError, match=r"speed_mm_s .*60 mm/s sets a built-in scenario's speed; the scenario "
+                                         r".*line\.scn sets its own .*operator\.speed_scale"):
+        OperatorConfig(scenario_file=str(scn), speed_mm_s=60.0)
+    assert OperatorConfig(scenario_file=str(scn), speed_scale=3.0).build_scenario() is not None
+    slow, fast = (OperatorConfig(scenario="trapezium", speed_mm_s=v).build_scenario() for v in (20.0, 60.0))
+    assert slow.segments[1].speed_mm_s == 20.0 and fast.segments[1].speed_mm_s == 60.0
+    run_dir = tmp_path / "run"
+    with pytest.raises(SystemExit, match="humanpt: .*sets its own"):  # main prints it, exits 1
+        cli_main(["demo", "--lockstep", "--scenario", str(scn), "--speed", "60", "--run-dir", str(run_dir)])
+    assert not run_dir.exists()
