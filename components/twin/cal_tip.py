@@ -26,6 +26,7 @@ from humanpt.operator.scenario import NEEDLE_MM
 from humanpt.schemas import humanpt_pb2 as pb
 from humanpt.schemas.convert import header
 
+from .evaluate import truths_from
 from .report import Check, TruthLines
 from .run import SystemConfig
 from .system import build_system
@@ -100,24 +101,25 @@ ACCEPT_MM = 0.2
 # The paper's procedure (P' measured, then eq. 12-13): issue 33.4's acceptance.
 ACCEPT_PAPER_MM = 0.3
 
-def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0) -> str:
+def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0, tilt_deg: float = 20.0) -> str:
     """The scenario text of a pivot: the operator holds the needle's tip (``driver_mm``, TOB
-    frame) on a point of the table and turns the target about it, +-20 deg about two axes,
+    frame) on a point of the table and turns the target about it, +-``tilt_deg`` about two axes,
     slowly, as a welder would. At 5 deg/s (the default) the fit gets 300 poses 0.5 deg apart
     and the hand's tremor averages out (80 poses 1.5 deg apart: 0.2-0.45 mm off the true tip
     with 0.2 mm / 0.2 deg of tremor; 300: 0.08 mm)."""
     x, y, z = driver_mm
+    a = float(tilt_deg)
     return f"""scenario pivot
 driver {x:g} {y:g} {z:g}
 path tip
 start 236 1249 0 0 0 180
 angular_speed {angular_speed_deg_s:g}
 dwell 1.5
-line 236 1249 0 20 0 180
-line 236 1249 0 20 20 180
-line 236 1249 0 -20 20 160
-line 236 1249 0 -20 -20 200
-line 236 1249 0 20 -20 160
+line 236 1249 0 {a:g} 0 180
+line 236 1249 0 {a:g} {a:g} 180
+line 236 1249 0 {-a:g} {a:g} {180 - a:g}
+line 236 1249 0 {-a:g} {-a:g} {180 + a:g}
+line 236 1249 0 {a:g} {-a:g} {180 - a:g}
 line 236 1249 0 0 0 180
 """
 
@@ -173,6 +175,10 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
                 elif ev.code == "calibration_failed":
                     failed = ev
         ctl = next(c for c in w.extra if isinstance(c, ControllerCore))
+        # The twin's truth, for the report only: where the true tip was (it stays on the
+        # pivot point but for the hand's tremor).
+        tips = [p["world_T_tip"][:3, 3] for _, p in truths_from(w.outputs("operator/truth")) if "world_T_tip" in p]
+        world_p_true_mm = np.mean(tips, axis=0) if tips else np.asarray(PIVOT_X[:3], dtype=float)
     finally:
         w.close()
     if failed is not None or done is None:
@@ -197,4 +203,13 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
         truth.append(f"P': {p_off:.3f} mm off the true pivot point")
     truth.checks.append(Check("tip", "off the truth", float(np.linalg.norm(err)),
                               ACCEPT_PAPER_MM if method == "paper" else ACCEPT_MM, "mm"))
+    if method == "pivot":
+        # What a taught point gets: the calibrated tip carried by the measured poses lands on
+        # the fitted pivot point on average; a bias of the measured TOB frame that is the same
+        # at every pose moves the tip vector but not this point (it cancels while teaching).
+        p_err = np.asarray(res.world_p_pivot_mm) - world_p_true_mm
+        truth.append(f"tip: the calibrated tip on the measured poses lands {np.linalg.norm(p_err):.3f} mm off the true "
+                     f"tip (({', '.join(f'{v:+.3f}' for v in p_err)}) mm, the fitted pivot point against the true one: "
+                     f"what a taught point gets from this stage)")
+        truth.checks.append(Check("tip", "tip point in the world off the truth", float(np.linalg.norm(p_err)), ACCEPT_MM, "mm"))
     return res, report, truth

@@ -1,0 +1,123 @@
+"""The pivot fit's tip and its 1-sigma held to the twin's truth (issue 32.4).
+
+On the realistic world the tip stage reported a 1-sigma of 0.066-0.074 mm while its tip was
+0.17-0.43 mm off the truth.  Most of that was a bias of the measured TOB frame that the tip
+takes up and that cancels while teaching (the same camera-to-target pose), but the rest
+(0.14-0.24 mm where the tip lands in the world) came from pose errors that are alike for
+neighbouring samples: the residuals' formula counts 300 filtered poses as 300 independent
+ones.  The fit's sigma is now also taken by a delete-a-block jackknife over the samples in
+their order (:func:`humanpt.geometry.calibration.pivot_block_jackknife_sigma`).
+
+The first two tests are pure (the operator's own pivot path, errors drawn here); the last
+runs the tip stage on the twin once per seed (module-scoped) on a world with every noise
+source of ``realistic`` and the needle off its design, but none of the rig's model errors
+(those make a bias of the measured frame that no sigma of the fit can see and that the
+pipeline's own calibrations remove first)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from humanpt.geometry.calibration import calibrate_tip_pivot, pivot_block_jackknife_sigma
+from humanpt.geometry.rig import Rig
+from humanpt.geometry.transforms import matrix_from_rotvec
+from humanpt.operator import OperatorConfig
+from humanpt.operator.scenario import NEEDLE_MM, Trajectory
+from humanpt.twin.cal_tip import calibrate_tip_on_twin, pivot_scenario
+from humanpt.twin.worlds import World
+
+TRUE_TIP = np.asarray(NEEDLE_MM, dtype=float) + [0.3, -0.2, 0.4]  # the world source "tip"
+# realistic's sources that add noise, not a model error of the rig (no hand-eye, optics,
+# stamp offset: calibrated before the tip; no kinematics: the stage pivots on the stand-in).
+NOISE_WORLD = ("ideal+ghost+blooming+sensor_noise+fixed_pattern+falloff+motion_blur+stamp_jitter+frame_drops"
+               "+robot_lag+tip+tremor")
+
+
+def _pivot_poses(n: int = 300) -> np.ndarray:
+    """(n, 4, 4) mm: the twin operator's pivot (cal_tip.pivot_scenario), evenly in time."""
+    traj = Trajectory(OperatorConfig(scenario_text=pivot_scenario(TRUE_TIP)).build_scenario())
+    ts = np.linspace(1.5, traj.duration_s, n)  # after the dwell
+    return np.array([traj.pose(t)[0] for t in ts])
+
+
+def _ar1(rng, n: int, rho: float, sd: float) -> np.ndarray:
+    """(n, 3) errors, each coordinate first-order autoregressive: correlation rho between
+    neighbours, standard deviation sd."""
+    e = np.zeros((n, 3))
+    e[0] = rng.normal(0.0, sd, 3)
+    for i in range(1, n):
+        e[i] = rho * e[i - 1] + np.sqrt(1.0 - rho**2) * rng.normal(0.0, sd, 3)
+    return e
+
+
+def _draws(rho: float, repeats: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Over ``repeats`` draws of errors with neighbour correlation ``rho`` (0.25 deg about the
+    lateral axes, 0.3 mm) on the operator's pivot: the tip's errors (repeats, 3) mm, the
+    sigmas the residuals' formula alone gives (what the fit reported before) and the fit's
+    sigmas."""
+    poses = _pivot_poses()
+    n = len(poses)
+    rng = np.random.default_rng(7)
+    errs, ols, fit = [], [], []
+    for _ in range(repeats):
+        noisy = poses.copy()
+        rot = np.radians(_ar1(rng, n, rho, 0.25)) * [1.0, 1.0, 0.3]
+        noisy[:, :3, 3] += _ar1(rng, n, rho, 0.3)
+        noisy[:, :3, :3] = noisy[:, :3, :3] @ np.array([matrix_from_rotvec(r) for r in rot])
+        cal = calibrate_tip_pivot(noisy)
+        errs.append(cal.tob_t_tip_mm - TRUE_TIP)
+        a = np.zeros((n, 3, 6))  # s^2 (A^T A)^-1 of [R_i  -I]
+        a[:, :, :3] = noisy[:, :3, :3]
+        a[:, :, 3:] = -np.eye(3)
+        a = a.reshape(3 * n, 6)
+        s2 = np.sum(cal.residuals_mm**2) / (3 * n - 6)
+        ols.append(np.sqrt(np.diag(s2 * np.linalg.inv(a.T @ a)))[:3])
+        fit.append(cal.tob_t_tip_sigma_mm)
+    return np.array(errs), np.array(ols), np.array(fit)
+
+
+def test_correlated_errors_the_sigma_covers_the_tip():
+    """Neighbouring samples' errors alike (rho 0.9, as the filtered poses' are): the tip
+    within 2 sigmas about 95 % of the time is what a sigma promises; with the residuals'
+    formula it is about 30 % (0.28-0.37 over 200 draws; its sigma 3-5x too small), with the
+    fit's jackknife sigma 0.78-0.92 (a block jackknife has 9 degrees of freedom, and blocks of
+    30 samples only just hold the errors' correlation: its RMS 0.72-0.89 of the true scatter)."""
+    errs, ols, fit = _draws(0.9, 60)
+    assert np.all(np.mean(np.abs(errs) < 2.0 * ols, axis=0) < 0.6), ols
+    assert np.all(np.mean(np.abs(errs) < 2.0 * fit, axis=0) >= 0.75), fit
+    spread = np.std(errs, axis=0)
+    assert np.all(np.sqrt(np.mean(ols**2, axis=0)) < 0.5 * spread)
+    assert np.all(np.sqrt(np.mean(fit**2, axis=0)) > 0.65 * spread), (fit, spread)  # 0.72-0.89
+
+
+def test_independent_errors_the_sigma_stays_near_the_residuals_one():
+    """Independent errors: the fit's sigma is not inflated for nothing: its RMS over the
+    draws within 0.85-1.4 of the tips' true scatter (measured 1.00-1.15: the block jackknife
+    is a little conservative where blocks differ in leverage; the residuals' formula 0.82-1.05)."""
+    errs, ols, fit = _draws(0.0, 60)
+    spread = np.std(errs, axis=0)
+    r_ols = np.sqrt(np.mean(ols**2, axis=0)) / spread
+    r_fit = np.sqrt(np.mean(fit**2, axis=0)) / spread
+    assert np.all((r_ols > 0.75) & (r_ols < 1.25)), (r_ols, r_fit)
+    assert np.all((r_fit > 0.85) & (r_fit < 1.4)), r_fit
+    assert np.all(fit >= ols * (1.0 - 1e-9))  # never below the residuals' formula
+    noisy = _pivot_poses(59)
+    assert pivot_block_jackknife_sigma(noisy) is None  # fewer than 6 per block: the residuals' only
+
+
+@pytest.fixture(scope="module", params=[0, 1], ids=["seed0", "seed1"])
+def tip_stage(request):
+    """The tip stage on the twin (the nominal rig, the noise world), once per seed."""
+    return calibrate_tip_on_twin(World.named(NOISE_WORLD), Rig(), seed=request.param)
+
+
+@pytest.mark.twin
+def test_the_tip_on_the_twin_is_within_its_sigma(tip_stage):
+    result, report, truth = tip_stage
+    err = np.asarray(result.tob_t_tip_mm) - TRUE_TIP
+    assert np.all(np.abs(err) <= 3.0 * result.sigma_mm), (err, result.sigma_mm, report, list(truth))
+    assert result.sigma_mm < 0.2, result  # and the tip is still worth having (its acceptance)
+    checks = {c.what: c for c in truth.checks}
+    assert checks["tip point in the world off the truth"].met, list(truth)
+    assert any("lands" in line and "off the true tip" in line for line in truth)
