@@ -21,18 +21,19 @@ from humanpt.controller.config import ControllerConfig
 from humanpt.controller.core import ControllerCore
 from humanpt.geometry.rig import Rig, viewing_world_T_flange
 from humanpt.geometry.transforms import invert_transform, matrix_from_rotvec, transform_from_x
+from humanpt.geometry.units import to_mm
 from humanpt.operator import OperatorConfig
 from humanpt.operator.scenario import NEEDLE_MM
 from humanpt.schemas import humanpt_pb2 as pb
-from humanpt.schemas.convert import header
+from humanpt.schemas.convert import from_pose, header
 
-from .evaluate import truths_from
+from .evaluate import truth_at, truths_from
 from .report import Check, TruthLines
 from .run import SystemConfig
 from .system import build_system
 from .worlds import World
 
-__all__ = ["pivot_scenario", "calibrate_tip_on_twin", "PrintedCircle", "measure_pivot_point_on_twin",
+__all__ = ["pivot_scenario", "calibrate_tip_on_twin", "PIVOT_TILT_DEG", "PIVOT_SPREAD_DEG", "PIVOT_SAMPLES", "PrintedCircle", "measure_pivot_point_on_twin",
            "PIVOT_X", "METHODS"]
 
 METHODS = ("pivot", "paper")
@@ -101,6 +102,18 @@ ACCEPT_MM = 0.2
 # The paper's procedure (P' measured, then eq. 12-13): issue 33.4's acceptance.
 ACCEPT_PAPER_MM = 0.3
 
+# The twin operator's pivot for the tip stage: +-30 deg (a +-20 deg pivot determined the
+# tip's component along the needle 2-3x worse: a pose error that changes with the tilt
+# moves it by its size over the cone's depth), poses at least 1.5 deg apart (with 0.5 deg
+# the hand's tremor alone made them: 300 poses were taken in the first 70 % of the pivot,
+# neighbours' errors alike), and 160 of them (about 82 % of the pivot's ~195 on the
+# realistic world, ~180 without tremor: the controller ends when it has them).  Figures:
+# docs/results.md, "The tip's bias and its sigma".
+PIVOT_TILT_DEG = 30.0
+PIVOT_SPREAD_DEG = 1.5
+PIVOT_SAMPLES = 160
+
+
 def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0, tilt_deg: float = 20.0) -> str:
     """The scenario text of a pivot: the operator holds the needle's tip (``driver_mm``, TOB
     frame) on a point of the table and turns the target about it, +-``tilt_deg`` about two axes,
@@ -124,21 +137,41 @@ line 236 1249 0 0 0 180
 """
 
 
+def _keep_truth(w, ctl: ControllerCore, keep: dict) -> None:
+    """The controller's fitted poses and the twin's truth at their stamps (the filter's
+    state each one was taken from), into ``keep``."""
+    fitted = np.array([to_mm(a) for a, _ in ctl.cal_samples])
+    states = [s for s in (pb.TobState.FromString(o.data) for o in w.outputs("pose_filter/tob_state"))
+              if s.after_measurement]
+    poses = np.array([to_mm(from_pose(s.world_T_tob_at_measurement))[:3, 3] for s in states])
+    stamps = np.array([s.measurement_stamp_ns for s in states], dtype=np.int64)
+    pick = [int(np.argmin(np.linalg.norm(poses - f[:3, 3], axis=1))) for f in fitted]
+    keep.update(fitted=fitted, true_tob=truth_at(w, stamps[pick]),
+                true_tip_world=truth_at(w, stamps[pick], field="world_T_tip")[:, :3, 3],
+                span_s=float((stamps[pick[-1]] - stamps[pick[0]]) * 1e-9))
+
+
 class TipCalibrationError(RuntimeError):
     """The pivot calibration did not finish (target lost, too little rotation...)."""
 
 
-def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 300,
+def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = PIVOT_SAMPLES,
                           progress: Callable[[float, float], None] | None = None,
                           driver_mm=NEEDLE_MM, method: str = "pivot",
-                          pattern_poses: int = 10) -> tuple[TipResult, list[str], list[str]]:
+                          pattern_poses: int = 10, *, min_spread_deg: float = PIVOT_SPREAD_DEG,
+                          tilt_deg: float = PIVOT_TILT_DEG,
+                          keep: dict | None = None) -> tuple[TipResult, list[str], list[str]]:
     """Pivot the twin's target (design driver ``driver_mm``, the world's true one may
     differ) and find its tip with the pipeline on ``rig``: ``method`` ``pivot`` (the
     least-squares pivot fit) or ``paper`` (Section 4.1 as written: P' measured first as the
     centre of a printed circle through the PSVS over ``pattern_poses`` robot poses, eq.
     10-11, then eq. 12-13 on the poses collected while the target pivots on P'). Returns
     (result, report lines, lines against the twin's truth). Raises TipCalibrationError
-    when it does not finish."""
+    when it does not finish. ``min_spread_deg``: the least rotation between two fitted
+    poses; ``tilt_deg``: the pivot's (:func:`pivot_scenario`). ``keep`` (a dict, for a
+    diagnosis against the truth, :mod:`humanpt.twin.tip_bias`): filled with the fitted poses
+    (``fitted`` (N, 4, 4) mm, in their order) and the true TOB and tip at their stamps
+    (``true_tob`` (N, 4, 4), ``true_tip_world`` (N, 3) mm)."""
     if method not in METHODS:
         raise ValueError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     report: list[str] = []
@@ -146,11 +179,11 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
     if method == "paper":
         pivot_mm, report, p_off = measure_pivot_point_on_twin(world, rig, seed, pattern_poses)
         cal_args["pivot_mm"] = [round(float(v), 4) for v in pivot_mm]
-    text = pivot_scenario(driver_mm)
+    text = pivot_scenario(driver_mm, tilt_deg=tilt_deg)
     cfg = SystemConfig.for_scenario(OperatorConfig(scenario_text=text, start_delay_s=1.0), seed, rig=rig, world=world,
                                     controller=ControllerConfig(has_driver=False, calibration_samples=samples,
-                                                                           calibration_min_spread_deg=0.5))
-    # The stand-in robot carries the camera: while the target pivots +-20 deg the servo turns
+                                                                calibration_min_spread_deg=min_spread_deg))
+    # The stand-in robot carries the camera: while the target pivots +-30 deg the servo turns
     # the flange with it, which takes the simulated Puma's wrist to its joint limits at this
     # mounting (a welder would pivot within the arm's reach; the tip's fit does not depend on
     # the arm).
@@ -179,6 +212,8 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
         # pivot point but for the hand's tremor).
         tips = [p["world_T_tip"][:3, 3] for _, p in truths_from(w.outputs("operator/truth")) if "world_T_tip" in p]
         world_p_true_mm = np.mean(tips, axis=0) if tips else np.asarray(PIVOT_X[:3], dtype=float)
+        if keep is not None and done is not None:
+            _keep_truth(w, ctl, keep)
     finally:
         w.close()
     if failed is not None or done is None:
@@ -195,6 +230,8 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
     report = report + [f"tip: tob_t_tip = ({', '.join(f'{v:.3f}' for v in res.tob_t_tip_mm)}) mm +- "
                        f"{res.sigma_mm:.3f} mm ({how}, {res.samples} poses, residual RMS {res.residual_rms_mm:.3f} mm)"]
     true_tip = np.asarray(cfg.operator.build_scenario().driver_mm, dtype=float)
+    if keep is not None:
+        keep["true_tip"] = true_tip
     err = np.asarray(res.tob_t_tip_mm) - true_tip
     truth = TruthLines([f"tip: true ({', '.join(f'{v:.3f}' for v in true_tip)}) mm; calibrated off by "
                         f"{np.linalg.norm(err):.3f} mm (acceptance {ACCEPT_PAPER_MM if method == 'paper' else ACCEPT_MM:g} mm; the design value was off by "

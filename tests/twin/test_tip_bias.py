@@ -24,7 +24,8 @@ from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import matrix_from_rotvec
 from humanpt.operator import OperatorConfig
 from humanpt.operator.scenario import NEEDLE_MM, Trajectory
-from humanpt.twin.cal_tip import calibrate_tip_on_twin, pivot_scenario
+from humanpt.twin.cal_tip import ACCEPT_MM, pivot_scenario
+from humanpt.twin.tip_bias import diagnose, pivot_run
 from humanpt.twin.worlds import World
 
 TRUE_TIP = np.asarray(NEEDLE_MM, dtype=float) + [0.3, -0.2, 0.4]  # the world source "tip"
@@ -108,16 +109,28 @@ def test_independent_errors_the_sigma_stays_near_the_residuals_one():
 
 @pytest.fixture(scope="module", params=[0, 1], ids=["seed0", "seed1"])
 def tip_stage(request):
-    """The tip stage on the twin (the nominal rig, the noise world), once per seed."""
-    return calibrate_tip_on_twin(World.named(NOISE_WORLD), Rig(), seed=request.param)
+    """The tip stage on the twin (the nominal rig, the noise world), once per seed, with the
+    fitted poses and the truth at their stamps (humanpt.twin.tip_bias)."""
+    run = pivot_run(World.named(NOISE_WORLD), Rig(), seed=request.param)
+    return run, diagnose(run)
 
 
 @pytest.mark.twin
 def test_the_tip_on_the_twin_is_within_its_sigma(tip_stage):
-    result, report, truth = tip_stage
-    err = np.asarray(result.tob_t_tip_mm) - TRUE_TIP
-    assert np.all(np.abs(err) <= 3.0 * result.sigma_mm), (err, result.sigma_mm, report, list(truth))
-    assert result.sigma_mm < 0.2, result  # and the tip is still worth having (its acceptance)
+    """The fit's own error (the tip against the true tip in the measured TOB frame, whose
+    mean bias against the truth the tip takes up: 0.16-0.22 mm along the TOB's z on this
+    world, seeds 0-1) within 3 reported sigmas; where the tip lands in the world within the
+    stage's acceptance, and the stage's truth lines say so."""
+    run, d = tip_stage
+    res, truth = run["result"], run["truth"]
+    np.testing.assert_allclose(res.tob_t_tip_mm, d["tip"], atol=1e-3)  # the controller's fit is the one diagnosed
+    own = np.abs(d["off_measured_frame_tip"])
+    assert np.all(own <= 3.0 * d["sigma_after"]), (own, d["sigma_after"])
+    np.testing.assert_allclose(res.sigma_mm, np.max(d["sigma_after"]), rtol=1e-3)  # the rig gets this sigma
+    assert res.sigma_mm < ACCEPT_MM, res  # and the tip is still worth having
+    assert np.linalg.norm(d["tip_point_mm"]) <= ACCEPT_MM, d["tip_point_mm"]
     checks = {c.what: c for c in truth.checks}
     assert checks["tip point in the world off the truth"].met, list(truth)
-    assert any("lands" in line and "off the true tip" in line for line in truth)
+    np.testing.assert_allclose(checks["tip point in the world off the truth"].value,
+                               np.linalg.norm(d["tip_point_mm"]), atol=0.02)  # the mean over the run vs at the poses
+    assert d["n"] == 300 and np.all(np.isfinite(d["frame_bias_mm"]))
