@@ -102,13 +102,12 @@ ACCEPT_MM = 0.2
 # The paper's procedure (P' measured, then eq. 12-13): issue 33.4's acceptance.
 ACCEPT_PAPER_MM = 0.3
 
-# The twin operator's pivot for the tip stage: +-30 deg (a +-20 deg pivot determined the
-# tip's component along the needle 2-3x worse: a pose error that changes with the tilt
-# moves it by its size over the cone's depth), poses at least 1.5 deg apart (with 0.5 deg
-# the hand's tremor alone made them: 300 poses were taken in the first 70 % of the pivot,
-# neighbours' errors alike), and 160 of them (about 82 % of the pivot's ~195 on the
-# realistic world, ~180 without tremor: the controller ends when it has them).  Figures:
-# docs/results.md, "The tip's bias and its sigma".
+# The twin operator's pivot for the tip stage: +-30 deg (a +-20 deg pivot found the tip's
+# component along the needle from a cone 3.6 mm deep: a pose error that follows the tilt
+# moved it by its size over that depth), poses at least 1.5 deg apart (at 0.5 deg the 300
+# poses were all taken in the first 70 % of the pivot, ten a second, neighbours' errors
+# alike), and 160 of them (about 82 % of the ~195 the pivot gives: the controller ends when
+# it has them).  Figures: docs/results.md, "The tip's bias and its sigma".
 PIVOT_TILT_DEG = 30.0
 PIVOT_SPREAD_DEG = 1.5
 PIVOT_SAMPLES = 160
@@ -245,7 +244,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
         # What a taught point gets, and the pivot fit's check: the calibrated tip carried by
         # the measured poses lands on the fitted pivot point on average.  A bias of the
         # measured TOB frame that is the same at every pose (perception's, at the servo's
-        # camera-to-target pose: 0.14-0.26 mm along the TOB's z on the realistic world after
+        # camera-to-target pose: 0.14-0.28 mm along the TOB's z on the realistic world after
         # calibration) moves the tip vector off the true one by as much but not this point:
         # the tip takes it up and it cancels while teaching at the same pose.
         p_err = np.asarray(res.world_p_pivot_mm) - world_p_true_mm

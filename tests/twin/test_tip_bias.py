@@ -24,7 +24,7 @@ from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import matrix_from_rotvec
 from humanpt.operator import OperatorConfig
 from humanpt.operator.scenario import NEEDLE_MM, Trajectory
-from humanpt.twin.cal_tip import ACCEPT_MM, pivot_scenario
+from humanpt.twin.cal_tip import ACCEPT_MM, PIVOT_SAMPLES, pivot_scenario
 from humanpt.twin.tip_bias import diagnose, pivot_run
 from humanpt.twin.worlds import World
 
@@ -133,4 +133,4 @@ def test_the_tip_on_the_twin_is_within_its_sigma(tip_stage):
     assert checks["tip point in the world off the truth"].met, list(truth)
     np.testing.assert_allclose(checks["tip point in the world off the truth"].value,
                                np.linalg.norm(d["tip_point_mm"]), atol=0.02)  # the mean over the run vs at the poses
-    assert d["n"] == 300 and np.all(np.isfinite(d["frame_bias_mm"]))
+    assert d["n"] == PIVOT_SAMPLES and np.all(np.isfinite(d["frame_bias_mm"]))
