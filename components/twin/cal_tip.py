@@ -106,11 +106,13 @@ ACCEPT_PAPER_MM = 0.3
 # component along the needle from a cone 3.6 mm deep: a pose error that follows the tilt
 # moved it by its size over that depth), poses at least 1.5 deg apart (at 0.5 deg the 300
 # poses were all taken in the first 70 % of the pivot, ten a second, neighbours' errors
-# alike), and 160 of them (about 82 % of the ~195 the pivot gives: the controller ends when
-# it has them).  Figures: docs/results.md, "The tip's bias and its sigma".
+# alike), and 160 of them (about 80 % of the ~200 the pivot gives: the controller ends when
+# it has them), at 7.5 deg/s (at 5 deg/s the stage took 50 s of twin time instead of 35 for
+# no better tip).  Figures: docs/results.md, "The tip's bias and its sigma".
 PIVOT_TILT_DEG = 30.0
 PIVOT_SPREAD_DEG = 1.5
 PIVOT_SAMPLES = 160
+PIVOT_SPEED_DEG_S = 7.5
 
 
 def pivot_scenario(driver_mm=NEEDLE_MM, angular_speed_deg_s: float = 5.0, tilt_deg: float = 20.0) -> str:
@@ -158,7 +160,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
                           progress: Callable[[float, float], None] | None = None,
                           driver_mm=NEEDLE_MM, method: str = "pivot",
                           pattern_poses: int = 10, *, min_spread_deg: float = PIVOT_SPREAD_DEG,
-                          tilt_deg: float = PIVOT_TILT_DEG,
+                          tilt_deg: float = PIVOT_TILT_DEG, angular_speed_deg_s: float = PIVOT_SPEED_DEG_S,
                           keep: dict | None = None) -> tuple[TipResult, list[str], list[str]]:
     """Pivot the twin's target (design driver ``driver_mm``, the world's true one may
     differ) and find its tip with the pipeline on ``rig``: ``method`` ``pivot`` (the
@@ -167,7 +169,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
     10-11, then eq. 12-13 on the poses collected while the target pivots on P'). Returns
     (result, report lines, lines against the twin's truth). Raises TipCalibrationError
     when it does not finish. ``min_spread_deg``: the least rotation between two fitted
-    poses; ``tilt_deg``: the pivot's (:func:`pivot_scenario`). ``keep`` (a dict, for a
+    poses; ``tilt_deg``, ``angular_speed_deg_s``: the pivot's (:func:`pivot_scenario`). ``keep`` (a dict, for a
     diagnosis against the truth, :mod:`humanpt.twin.tip_bias`): filled with the fitted poses
     (``fitted`` (N, 4, 4) mm, in their order) and the true TOB and tip at their stamps
     (``true_tob`` (N, 4, 4), ``true_tip_world`` (N, 3) mm)."""
@@ -178,7 +180,7 @@ def calibrate_tip_on_twin(world: World, rig: Rig, seed: int = 0, samples: int = 
     if method == "paper":
         pivot_mm, report, p_off = measure_pivot_point_on_twin(world, rig, seed, pattern_poses)
         cal_args["pivot_mm"] = [round(float(v), 4) for v in pivot_mm]
-    text = pivot_scenario(driver_mm, tilt_deg=tilt_deg)
+    text = pivot_scenario(driver_mm, angular_speed_deg_s, tilt_deg=tilt_deg)
     cfg = SystemConfig.for_scenario(OperatorConfig(scenario_text=text, start_delay_s=1.0), seed, rig=rig, world=world,
                                     controller=ControllerConfig(has_driver=False, calibration_samples=samples,
                                                                 calibration_min_spread_deg=min_spread_deg))

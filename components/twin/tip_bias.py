@@ -29,21 +29,29 @@ from humanpt.geometry.calibration import calibrate_tip_pivot
 from humanpt.geometry.rig import Rig
 from humanpt.geometry.transforms import invert_transform, matrix_from_rotvec, rotvec_from_matrix
 
-from .cal_tip import PIVOT_SAMPLES, PIVOT_SPREAD_DEG, PIVOT_TILT_DEG, calibrate_tip_on_twin
+from .cal_tip import (
+    PIVOT_SAMPLES,
+    PIVOT_SPEED_DEG_S,
+    PIVOT_SPREAD_DEG,
+    PIVOT_TILT_DEG,
+    calibrate_tip_on_twin,
+)
 from .worlds import World
 
 __all__ = ["pivot_run", "diagnose"]
 
 
 def pivot_run(world: World, rig: Rig | None, seed: int, samples: int = PIVOT_SAMPLES,
-              spread_deg: float = PIVOT_SPREAD_DEG, tilt_deg: float = PIVOT_TILT_DEG) -> dict:
+              spread_deg: float = PIVOT_SPREAD_DEG, tilt_deg: float = PIVOT_TILT_DEG,
+              speed_deg_s: float = PIVOT_SPEED_DEG_S) -> dict:
     """The tip stage (:func:`humanpt.twin.cal_tip.calibrate_tip_on_twin`, ``rig`` None: the
     nominal one) keeping what the diagnosis needs: the fitted poses (N, 4, 4) mm in their
     order, the true TOB and tip at their stamps, the true tip (3,), the stage's result and
     truth lines."""
     keep: dict = {}
     res, report, truth = calibrate_tip_on_twin(world, Rig() if rig is None else rig, seed, samples,
-                                               min_spread_deg=spread_deg, tilt_deg=tilt_deg, keep=keep)
+                                               min_spread_deg=spread_deg, tilt_deg=tilt_deg,
+                                               angular_speed_deg_s=speed_deg_s, keep=keep)
     return {**keep, "result": res, "report": report, "truth": truth}
 
 
@@ -108,6 +116,7 @@ def main(argv=None) -> int:
     ap.add_argument("--samples", type=int, default=PIVOT_SAMPLES)
     ap.add_argument("--spread", type=float, default=PIVOT_SPREAD_DEG, help="min. rotation between fitted poses (deg)")
     ap.add_argument("--tilt", type=float, default=PIVOT_TILT_DEG, help="the pivot's +- tilt (deg)")
+    ap.add_argument("--speed", type=float, default=PIVOT_SPEED_DEG_S, help="the pivot's angular speed (deg/s)")
     args = ap.parse_args(argv)
     from humanpt.runtime.rigfile import load_rig
 
@@ -118,7 +127,7 @@ def main(argv=None) -> int:
           "| the tip point in the world off the truth | poses, over s, neighbour corr. |")
     print("|---|---|---|---|---|---|---|---|---|")
     for seed in _seeds(args.seeds):
-        d = diagnose(pivot_run(World.named(args.world), rig, seed, args.samples, args.spread, args.tilt))
+        d = diagnose(pivot_run(World.named(args.world), rig, seed, args.samples, args.spread, args.tilt, args.speed))
         e, sb, sa = d["off_truth"], d["sigma_before"], d["sigma_after"]
         print(f"| {seed} | {f3(e)} ({np.linalg.norm(e):.3f}) | {sb.max():.3f} / {sa.max():.3f} | "
               f"{np.max(np.abs(e) / sb):.1f} / {np.max(np.abs(e) / sa):.1f} | {f3(d['frame_bias_mm'])} mm, "
