@@ -23,7 +23,7 @@ def add_parser(csub) -> None:
                         "controller fits the tip (least-squares pivot) and this writes it into the rig's [tip]. "
                         "Live (--config: the running controller) or on the digital twin (--twin).")
     add_rig_args(q)
-    q.add_argument("--samples", type=int, help="distinct poses to fit (>= 6; default: 300 on the twin, the "
+    q.add_argument("--samples", type=int, help="distinct poses to fit (>= 6; default: 160 on the twin, the "
                    "controller's calibration_samples live)")
     q.add_argument("--method", choices=("pivot", "paper"), default="pivot",
                    help="pivot (default): the least-squares pivot fit; paper: Section 4.1 as written - P' measured "
@@ -52,12 +52,12 @@ def run(args) -> int:
     rig_path = Path(args.rig)
     rig = _read_rig(rig_path)  # a bad rig fails before anything moves
     if args.twin:
-        from humanpt.twin.cal_tip import TipCalibrationError, calibrate_tip_on_twin
+        from humanpt.twin.cal_tip import PIVOT_SAMPLES, TipCalibrationError, calibrate_tip_on_twin
         from humanpt.twin.worlds import World
 
         try:
             result, report, truth = calibrate_tip_on_twin(
-                World.named(args.world), rig, args.seed, args.samples or 300,
+                World.named(args.world), rig, args.seed, args.samples or PIVOT_SAMPLES,
                 progress=lambda now, end: print(f"\r  twin {now:4.0f} / {end:.0f} s", end="", file=sys.stderr),
                 method=args.method, pattern_poses=args.pattern_poses)
         except TipCalibrationError as e:

@@ -29,6 +29,7 @@ __all__ = [
     "world_point_from_samples",
     "calibrate_tip_paper",
     "calibrate_tip_pivot",
+    "pivot_block_jackknife_sigma",
 ]
 
 
@@ -132,12 +133,50 @@ def calibrate_tip_paper(
     return _finish("paper", tip, pivot, world_T_tob, sigma, np.zeros(3))
 
 
+# The pivot fit's delete-a-block jackknife: this many contiguous blocks of the samples (in
+# the order they were taken), when every block has at least JACKKNIFE_MIN_BLOCK samples.
+JACKKNIFE_BLOCKS = 10
+JACKKNIFE_MIN_BLOCK = 6
+
+
+def _pivot_solve(w_T_t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(A (3N, 6), b (3N,), solution (6,)) of ``[R_i  -I] [tob_t_tip; world_p_pivot] = -t_i``."""
+    n = w_T_t.shape[0]
+    a_mat = np.zeros((n, 3, 6))
+    a_mat[:, :, :3] = w_T_t[:, :3, :3]
+    a_mat[:, :, 3:] = -np.eye(3)
+    a_mat = a_mat.reshape(3 * n, 6)
+    b_vec = -w_T_t[:, :3, 3].reshape(3 * n)
+    solution, *_ = np.linalg.lstsq(a_mat, b_vec, rcond=None)
+    return a_mat, b_vec, solution
+
+
+def pivot_block_jackknife_sigma(world_T_tob: np.ndarray, blocks: int = JACKKNIFE_BLOCKS) -> np.ndarray | None:
+    """The pivot fit's standard deviations (6,: tip, pivot point, mm) by a delete-a-block
+    jackknife over ``blocks`` contiguous blocks of the samples, in the order they were taken:
+    ``sqrt((g - 1) / g * sum_j (x_(j) - mean x_(.))^2)``.  Unlike the residuals' formula it
+    holds when the errors of neighbouring samples are alike (a filtered pose, the hand's slow
+    tremor, an error that changes with the pose along a smooth motion).  None when a block
+    would have fewer than :data:`JACKKNIFE_MIN_BLOCK` samples."""
+    w_T_t = np.asarray(world_T_tob, dtype=float)
+    n = w_T_t.shape[0]
+    if blocks < 2 or n < blocks * JACKKNIFE_MIN_BLOCK:
+        return None
+    parts = np.array_split(np.arange(n), blocks)
+    est = np.array([_pivot_solve(np.delete(w_T_t, part, axis=0))[2] for part in parts])
+    return np.sqrt((blocks - 1) / blocks * np.sum((est - est.mean(axis=0)) ** 2, axis=0))
+
+
 def calibrate_tip_pivot(world_T_tob: np.ndarray, min_condition: float = 1e-6) -> TipCalibration:
     """Least-squares pivot calibration: the tip offset and the fixed point together.
 
-    ``world_T_tob`` (N, 4, 4), N >= 3 poses of the TOB while its tip rests on one point.
-    Solves ``[R_i  -I] [tob_t_tip; world_p_pivot] = -t_i`` for all i. The predicted sigmas
-    are ``sqrt(diag(s^2 (A^T A)^-1))`` with ``s^2 = RSS / (3N - 6)``.
+    ``world_T_tob`` (N, 4, 4), N >= 3 poses of the TOB while its tip rests on one point, in
+    the order they were taken. Solves ``[R_i  -I] [tob_t_tip; world_p_pivot] = -t_i`` for all
+    i. The predicted sigmas are the larger, per coordinate, of ``sqrt(diag(s^2 (A^T A)^-1))``
+    with ``s^2 = RSS / (3N - 6)`` (right for independent errors) and a delete-a-block
+    jackknife over the samples in their order (:func:`pivot_block_jackknife_sigma`: right
+    when neighbouring samples' errors are alike, which the residuals' formula takes for
+    independent information and so understates; N >= 60).
 
     Raises :class:`GeometryError` when the rotations do not determine the solution
     (fewer than 3 poses, or rotation about a single axis: smallest/largest singular value
@@ -145,22 +184,20 @@ def calibrate_tip_pivot(world_T_tob: np.ndarray, min_condition: float = 1e-6) ->
     """
     w_T_t = _stack("world_T_tob", world_T_tob, min_count=3)
     n = w_T_t.shape[0]
-    a_mat = np.zeros((n, 3, 6))
-    a_mat[:, :, :3] = w_T_t[:, :3, :3]
-    a_mat[:, :, 3:] = -np.eye(3)
-    a_mat = a_mat.reshape(3 * n, 6)
-    b_vec = -w_T_t[:, :3, 3].reshape(3 * n)
+    a_mat, b_vec, solution = _pivot_solve(w_T_t)
     sv = np.linalg.svd(a_mat, compute_uv=False)
     if sv[-1] < min_condition * sv[0]:
         raise GeometryError(
             "pivot calibration is ill-posed: the TOB poses must rotate about at least two "
             f"different axes (singular value ratio {sv[-1] / sv[0]:.3g})"
         )
-    solution, *_ = np.linalg.lstsq(a_mat, b_vec, rcond=None)
     tip, pivot = solution[:3], solution[3:]
     resid = a_mat @ solution - b_vec
     dof = 3 * n - 6
     s2 = float(resid @ resid) / dof
     cov = s2 * np.linalg.inv(a_mat.T @ a_mat)
     sigma = np.sqrt(np.diag(cov))
+    jack = pivot_block_jackknife_sigma(w_T_t)
+    if jack is not None:
+        sigma = np.maximum(sigma, jack)
     return _finish("pivot", tip, pivot, w_T_t, sigma[:3], sigma[3:])
