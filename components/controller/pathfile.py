@@ -318,6 +318,8 @@ def to_val2(x: np.ndarray, name: str = "path", speed_percent: float = 20.0) -> s
     """
     from scipy.spatial.transform import Rotation
 
+    from humanpt.geometry.transforms import oat_deg_from_rotation
+
     x = np.asarray(x, dtype=float)
     if x.ndim != 2 or x.shape[1] != 6 or not np.all(np.isfinite(x)):
         raise PathFileError("a VAL II program needs (N, 6) finite points")
@@ -335,7 +337,7 @@ def to_val2(x: np.ndarray, name: str = "path", speed_percent: float = 20.0) -> s
     lines = [f".PROGRAM {prog}()", f"  ; {len(x)} points recorded by humanpt (teaching by showing)",
              f"  SPEED {speed_percent:g} ALWAYS"]
     for i, p in enumerate(x):
-        o, a, t = Rotation.from_euler("ZYX", p[3:6], degrees=True).as_euler("ZYZ", degrees=True)
+        o, a, t = oat_deg_from_rotation(Rotation.from_euler("ZYX", p[3:6], degrees=True))
         lines.append(f"  SET p{i} = TRANS({p[0]:.2f}, {p[1]:.2f}, {p[2]:.2f}, {o:.3f}, {a:.3f}, {t:.3f})")
     lines += [f"  MOVES p{i}" for i in range(len(x))]
     lines.append(".END")

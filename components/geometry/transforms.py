@@ -153,6 +153,17 @@ def ypr_deg_from_rotation(rotation: np.ndarray, assume_valid: bool = False) -> n
     return ypr.reshape(rotation.shape[:-2] + (3,))
 
 
+def oat_deg_from_rotation(rotation: Rotation) -> np.ndarray:
+    """VAL II's O, A, T of a rotation (Euler Z-Y-Z, deg).  At A = 0 (or 180) only O + T
+    (O - T) is defined; scipy then sets T = 0 and warns: the rotation is still exact, so the
+    warning is not passed on."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        return rotation.as_euler("ZYZ", degrees=True)
+
+
 def x_from_transform(a_T_b: np.ndarray) -> np.ndarray:
     """Section 4, steps 9-10: the six-vector ``X = (x, y, z, psi, theta, phi)`` (..., 6)
     of frame ``b`` in frame ``a``, in mm and degrees (Z-Y-X yaw, pitch, roll)."""

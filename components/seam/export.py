@@ -35,13 +35,12 @@ from __future__ import annotations
 import json
 import math
 import re
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from humanpt.geometry.transforms import rotation_from_ypr_deg, slerp
+from humanpt.geometry.transforms import oat_deg_from_rotation, rotation_from_ypr_deg, slerp
 from humanpt.seam import limits
 from humanpt.seam.fit import Seam, Segment
 from humanpt.seam.sanitise import comment, comment_line, identifier, shown
@@ -380,14 +379,6 @@ def _f(v: float, nd: int) -> str:
     return f"{round(float(v), nd) + 0.0:.{nd}f}"
 
 
-def _zyz_deg(r: Rotation) -> np.ndarray:
-    """VAL II's O, A, T (Euler Z-Y-Z, deg).  At A = 0 (or 180) only O + T (O - T) is
-    defined; scipy then sets T = 0 and warns: the rotation is still exact."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)
-        return r.as_euler("ZYZ", degrees=True)
-
-
 def _plural(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
@@ -446,13 +437,13 @@ def to_val(seam: Seam, opts: ExportOptions) -> str:
         if m.dwell_s > 0:
             waits[len(pts) - 1] = m.dwell_s
     tool = _tool_x(opts)
-    o, a, t = _zyz_deg(Rotation.from_euler("ZYX", tool[3:], degrees=True))
+    o, a, t = oat_deg_from_rotation(Rotation.from_euler("ZYX", tool[3:], degrees=True))
     lines = [f".PROGRAM {prog}()"] + _header_lines(seam, opts, "val", "  ")
     lines += [f"  ; SPEED {opts.val_speed_percent:g} (percent of the monitor speed): set it for "
               f"{opts.speed_mm_s:g} mm/s", f"  TOOL TRANS({_f(tool[0], 3)}, {_f(tool[1], 3)}, {_f(tool[2], 3)}, "
               f"{_f(o, 4)}, {_f(a, 4)}, {_f(t, 4)})", f"  SPEED {opts.val_speed_percent:g} ALWAYS"]
     for i, p in enumerate(pts):
-        o, a, t = _zyz_deg(_rot(p))
+        o, a, t = oat_deg_from_rotation(_rot(p))
         lines.append(f"  SET p{i} = TRANS({_f(p[0], 3)}, {_f(p[1], 3)}, {_f(p[2], 3)}, {_f(o, 4)}, {_f(a, 4)}, "
                      f"{_f(t, 4)})")
     for i in range(len(pts)):

@@ -149,3 +149,23 @@ def test_check_rigid_rejects_bad_matrices():
         check_rigid(np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match=r"\(\.\.\., 4, 4\)"):
         invert_transform(np.eye(3))
+
+
+@pytest.mark.parametrize("a_deg", [0.0, 180.0, 37.0])
+def test_val_oat_is_exact_and_quiet_at_the_gimbal_lock(a_deg, recwarn):
+    """VAL II's O, A, T (Z-Y-Z): at A = 0 or 180 only O + T (O - T) is defined and scipy
+    warns of a gimbal lock; the angles still give the same rotation (checked against scipy's
+    own matrices), so a path written as a VAL II program at a flat torch warns no one."""
+    from scipy.spatial.transform import Rotation
+
+    from humanpt.controller.pathfile import to_val2
+    from humanpt.geometry.transforms import oat_deg_from_rotation
+
+    r = Rotation.from_euler("ZYZ", [30.0, a_deg, 50.0], degrees=True)
+    o, a, t = oat_deg_from_rotation(r)
+    assert np.allclose(Rotation.from_euler("ZYZ", [o, a, t], degrees=True).as_matrix(), r.as_matrix(), atol=1e-12)
+    assert a == pytest.approx(a_deg, abs=1e-9)
+    ypr = r.as_euler("ZYX", degrees=True)
+    program = to_val2(np.array([[400.0, 1200.0, 0.0, *ypr]]), "flat")
+    assert "TRANS(400.00, 1200.00, 0.00" in program
+    assert not [w for w in recwarn if "Gimbal" in str(w.message)], [str(w.message) for w in recwarn]
