@@ -15,22 +15,21 @@ import os
 import sys
 import threading
 
+import genicam  # (the producer ships in its wheel)
+import harvesters.core  # noqa: F401  (the [genicam] extra is in [test]: a broken install fails, not skips)
 import numpy as np
 import pytest
+from foxglove_schemas_protobuf.RawImage_pb2 import RawImage
 
-pytest.importorskip("harvesters.core", reason='the [genicam] extra: pip install -e ".[genicam]"')
-import genicam  # noqa: E402  (the producer ships in its wheel)
-from foxglove_schemas_protobuf.RawImage_pb2 import RawImage  # noqa: E402
-
-from humanpt.camera import CameraConfig, CameraCore, CaptureAdapter  # noqa: E402
-from humanpt.camera.capture import capture_adapters, capture_message, open_capture, read_frames  # noqa: E402
-from humanpt.camera.genicam import DeviceClockMap, device_time_ns, frame_from_buffer  # noqa: E402
-from humanpt.runtime.config import RuntimeConfig  # noqa: E402
-from humanpt.runtime.live import LiveShell  # noqa: E402
-from humanpt.runtime.recording import read  # noqa: E402
-from humanpt.runtime.replay import replay  # noqa: E402
-from humanpt.schemas.convert import from_image, image_stamp_ns  # noqa: E402
-from tests.conftest import wait_for, write_config, zenoh_client  # noqa: E402
+from humanpt.camera import CameraConfig, CameraCore, CaptureAdapter
+from humanpt.camera.capture import capture_adapters, capture_message, open_capture, read_frames
+from humanpt.camera.genicam import DeviceClockMap, device_time_ns, frame_from_buffer
+from humanpt.runtime.config import RuntimeConfig
+from humanpt.runtime.live import LiveShell
+from humanpt.runtime.recording import read
+from humanpt.runtime.replay import replay
+from humanpt.schemas.convert import from_image, image_stamp_ns
+from tests.conftest import wait_for, write_config, zenoh_client
 
 VIKY = os.path.join(os.path.dirname(genicam.__file__), "viky.cti")
 

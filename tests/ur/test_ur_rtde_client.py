@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 import pytest
+import rtde_receive  # noqa: F401  (ur_rtde is in [test]: a broken install fails, not skips)
 
 from humanpt.geometry.arms import arm_kinematics
 from humanpt.geometry.transforms import matrix_from_rotvec
@@ -24,8 +25,6 @@ from humanpt.robot_gateway.links.ur.link import UrLink
 from humanpt.sim_robot.config import SimRobotConfig
 from humanpt.sim_robot.ur import RtdeServer, UrRobot
 from tests.ur.test_ur_link import _session
-
-pytest.importorskip("rtde_receive")
 
 REGISTER_BASE = 36  # ur-rtde reads output_int_register_36..43 with use_upper_range_registers
 CLIENT = r"""
