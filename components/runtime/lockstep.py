@@ -116,6 +116,7 @@ class Lockstep:
         self.outputs: list[Delivered] = []
         # SHA-256 of every output (~0.25 ms per 640x480 image): off for runs nobody compares.
         self._digest = hashlib.sha256() if digest else None
+        self._account: dict[str, float] | None = None  # see account()
         self._heap: list[tuple[int, int, int, str, bytes]] = []
         self._order = 0
         self._subs: dict[str, list[int]] = {}  # bus topic -> indices of the cores with a port on it
@@ -226,12 +227,30 @@ class Lockstep:
             pb.ParamSet(header=header(t_ns), component=component, key=key, value_json=value_json),
         )
 
+    def account(self) -> dict[str, float]:
+        """From now on, count where the scheduler's thread spends its time (seconds of
+        ``time.thread_time``, the CPU this thread used): each core's step under its name,
+        and ``decode``, ``encode``, ``record`` (the recorders' writes and snapshots) and
+        ``schedule`` (the rest of the loop: the event queue, the lines).  Returns the dict,
+        updated by every later :meth:`run_until` (for the lock-step bench's shares)."""
+        if self._account is None:
+            self._account = {}
+        return self._account
+
     def run_until(self, end_ns: int) -> None:
         """Process every input scheduled at or before ``end_ns``."""
+        acc = self._account
+        clock = time.thread_time
+        if acc is not None:
+            t_start = clock()
+            acc_core = {c.name: 0.0 for c in self.cores}
+            acc_part = {"decode": 0.0, "encode": 0.0, "record": 0.0}
         while self._heap and self._heap[0][0] <= end_ns:
             t_ns, _, idx, topic, data = heapq.heappop(self._heap)
             self.now_ns = t_ns
             core = self.cores[idx]
+            if acc is not None:
+                t0 = clock()
             if topic == "tick":
                 period = core.tick_period_ns()
                 msg = pb.Tick(header=header(t_ns), period_ns=period or 0)
@@ -242,12 +261,32 @@ class Lockstep:
                 msg = core.port(topic).type()
                 msg.ParseFromString(data)
             rec = self.recorders.get(core.name)
+            if acc is not None:
+                t1 = clock()
+                acc_part["decode"] += t1 - t0
             if rec:
                 rec.write(IN, t_ns, topic, msg, data)
-            for out_topic, out in core.step(t_ns, topic, msg):
-                payload = out.SerializeToString()
-                if rec:
-                    rec.write(OUT, t_ns, out_topic, out, payload)
+            if acc is not None:
+                t2 = clock()
+                acc_part["record"] += t2 - t1
+                outputs = core.step(t_ns, topic, msg)
+                t3 = clock()
+                acc_core[core.name] += t3 - t2
+            else:
+                outputs = core.step(t_ns, topic, msg)
+            for out_topic, out in outputs:
+                if acc is not None:
+                    t4 = clock()
+                    payload = out.SerializeToString()
+                    t5 = clock()
+                    acc_part["encode"] += t5 - t4
+                    if rec:
+                        rec.write(OUT, t_ns, out_topic, out, payload)
+                        acc_part["record"] += clock() - t5
+                else:
+                    payload = out.SerializeToString()
+                    if rec:
+                        rec.write(OUT, t_ns, out_topic, out, payload)
                 if self._digest is not None:
                     self._digest.update(f"{t_ns}|{core.name}|{out_topic}|".encode())
                     self._digest.update(payload)
@@ -260,8 +299,18 @@ class Lockstep:
                 elif out_topic == "udp_tx" and idx in self._udp:
                     self._send_udp(t_ns, idx, out)
             if rec:
-                self._snapshot(core, rec, t_ns)
+                if acc is not None:
+                    t6 = clock()
+                    self._snapshot(core, rec, t_ns)
+                    acc_part["record"] += clock() - t6
+                else:
+                    self._snapshot(core, rec, t_ns)
         self.now_ns = max(self.now_ns, end_ns)
+        if acc is not None:
+            total = clock() - t_start
+            for k, v in (*acc_core.items(), *acc_part.items()):
+                acc[k] = acc.get(k, 0.0) + v
+            acc["schedule"] = acc.get("schedule", 0.0) + total - sum(acc_core.values()) - sum(acc_part.values())
 
     def _snapshot(self, core: Core, rec: Recorder, t_ns: int) -> None:
         """The core's state into its recording when one is due (after the input's outputs)."""

@@ -139,6 +139,7 @@ class RunResult:
     wall_s: float  # wall time of the run, from the first step to the last (not the build)
     twin_s: float  # virtual time run
     close_s: float  # wall time of closing the world (the recordings' last writes)
+    cpu_s: dict[str, float] | None = None  # where the CPU went (run(..., account=True)), seconds
 
     @property
     def speed(self) -> float:
@@ -169,7 +170,7 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
         record_from_s: float | None = None, run_dir: str | Path | None = None, keep_outputs: bool = True,
         digest: bool = False, progress: Callable[[float, float], None] | None = None,
         rsi_cycle_ms: float | None = None, abb_cycle_ms: float | None = None,
-        ur_cycle_ms: float | None = None, record: RecordConfig | None = None) -> RunResult:
+        ur_cycle_ms: float | None = None, record: RecordConfig | None = None, account: bool = False) -> RunResult:
     """Build the closed loop (:func:`humanpt.twin.system.build_system`) and run it for
     ``duration_s`` of twin time (default :meth:`SystemConfig.default_duration_s`).
 
@@ -180,14 +181,18 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
     (``build_system``); ``abb_cycle_ms`` (4 or a multiple): the simulated ABB IRB 1600 behind
     the EGM link; ``ur_cycle_ms`` (2 or 8): the simulated UR5e behind the RTDE link.
     ``record``: how the recordings in ``run_dir`` are made (``[record]``, e.g. its
-    ``snapshot_period_s``; default its defaults). The world is closed on return."""
+    ``snapshot_period_s``; default its defaults). ``account``: count where the CPU went
+    (``RunResult.cpu_s``: :meth:`humanpt.runtime.lockstep.Lockstep.account`'s parts, and
+    ``other threads``, the process's CPU beyond the loop's thread: the recorders' writers
+    compressing, closing included). The world is closed on return."""
     duration_s = config.default_duration_s() if duration_s is None else float(duration_s)
     world = build_system(config.operator, seed=config.seed, controller=config.controller, robot=robot, rig=config.rig,
                          run_dir=run_dir, sim_camera=config.sim_camera, perception=config.perception,
                          pose_filter=config.pose_filter, keep_outputs=keep_outputs, digest=digest,
                          robot_overrides=config.robot_overrides, rsi_cycle_ms=rsi_cycle_ms,
                          abb_cycle_ms=abb_cycle_ms, ur_cycle_ms=ur_cycle_ms, record=record)
-    t0 = time.perf_counter()
+    cpu_s = world.lockstep.account() if account else None
+    t0, cpu0, thread0 = time.perf_counter(), time.process_time(), time.thread_time()
     try:
         if record_from_s is not None:
             world.run_until(round(record_from_s * 1e9))
@@ -205,8 +210,10 @@ def run(config: SystemConfig, *, robot: str = "puma", duration_s: float | None =
     finally:
         t1 = time.perf_counter()
         world.close()  # also on an error: the recordings end readable
+    if cpu_s is not None:
+        cpu_s["other threads"] = max(0.0, (time.process_time() - cpu0) - (time.thread_time() - thread0))
     return RunResult(world, config, Path(run_dir) if run_dir is not None else None, t1 - t0, duration_s,
-                     time.perf_counter() - t1)
+                     time.perf_counter() - t1, cpu_s)
 
 
 @dataclass

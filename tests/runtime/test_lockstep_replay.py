@@ -118,3 +118,38 @@ def test_a_run_without_digest_says_so_and_runs_the_same():
     assert [o.data for o in plain.outputs] == [o.data for o in hashed.outputs] and plain.outputs
     with pytest.raises(RuntimeError, match="digest=False"):
         plain.digest()
+
+
+class _Costly(PongerCore):
+    """A ponger that uses 2 ms of its thread's CPU on every input (a spin on thread_time)."""
+
+    def step(self, t_ns, topic, msg):
+        import time
+
+        end = time.thread_time() + 0.002
+        while time.thread_time() < end:
+            pass
+        return super().step(t_ns, topic, msg)
+
+
+def test_the_loops_cpu_is_accounted_to_each_core_and_the_outputs_do_not_change(tmp_path):
+    """Issue 37.4 (the lock-step loop's shares): with accounting on, the core that spends 2 ms
+    of CPU per input is charged at least that per input it took (by construction), the rest
+    of the loop's parts are named, and the outputs are the same bytes as without it."""
+    def run(account, run_dir=None):
+        ls = Lockstep([PingerCore(PingerConfig(period_ms=20)), _Costly(PongerConfig())], run_dir=run_dir)
+        acc = ls.account() if account else None
+        ls.run_until(1_000_000_000)
+        ls.close()
+        return ls, acc
+
+    plain, _ = run(False)
+    counted, acc = run(True, tmp_path)
+    assert counted.digest() == plain.digest()
+    pings = sum(1 for o in counted.outputs if o.topic == "pinger/ping")
+    assert pings >= 40  # 1 s at 20 ms
+    assert acc["ponger"] >= 0.002 * pings
+    assert acc["pinger"] < acc["ponger"]
+    assert {"decode", "encode", "record", "schedule", "pinger", "ponger"} <= set(acc)
+    assert acc["record"] > 0.0  # a run directory: every input and output written
+    assert all(v >= 0.0 for k, v in acc.items() if k != "schedule")

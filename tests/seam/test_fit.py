@@ -256,3 +256,41 @@ def test_path_fit_marks_and_warns_of_a_doubted_seam(tmp_path):
     write(dense, Path6(np.arange(len(x)), t, x))
     r = run_cli_here("path", "fit", str(dense), "--no-plot")
     assert r.returncode == 0 and "WARNING" not in r.stderr, r.stdout + r.stderr
+
+
+@pytest.mark.parametrize(("seed", "spike_mm"), [(0, 1.5), (1, 2.0), (2, 4.0)])
+def test_a_spike_on_an_arc_is_an_outlier_and_the_arc_stays_whole(seed, spike_mm):
+    """Issue 32 (the realistic job at 60 mm/s, seed 4): the recorder's points lay 4-6 mm
+    apart and a spike on an 80 mm arc broke it: the spike test only knew straight stretches
+    (on the arc the neighbours leave the chords that skip the spike by ~0.4 mm, over its
+    0.2 mm), so a 1.5 mm spike made two lines of the arc (residual 0.33-0.55 mm, doubted),
+    and one point missing left "points up to 11.6 mm apart ... (record denser)": the gap
+    across it (11.6^2 / 640 = 0.21 mm of sagitta, by hand), not the recording's spacing
+    (5.8^2 / 640 = 0.05 mm).  Now the spike is an outlier, the arcs stay whole, no doubt."""
+    x, t = two_arcs_recorded(5.8, seed)
+    on_arc = [80.0 * math.sin(math.radians(35)), 80.0 - 80.0 * math.cos(math.radians(35)), 0.0]  # 35 deg into it
+    k = int(np.argmin(np.linalg.norm(x[:, :3] - on_arc, axis=1)))
+    x[k, 2] += spike_mm  # off the seam's plane: a reflection taken for a source, say
+    seam = fit_path(x, t)
+    assert k in seam.outliers
+    assert [g.kind for g in seam.segments] == ["line", "arc", "line", "arc"]
+    assert [round(g.radius_mm) for g in seam.segments if g.kind == "arc"] == [80, 80]
+    assert seam.doubts == [] and seam.corners == ()
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_an_arc_recorded_sparsely_all_along_is_doubted_for_its_spacing(seed):
+    """12 mm apart on an 80 mm arc the chords leave it by 12^2 / 640 = 0.225 mm (by hand),
+    beyond the 0.2 mm tolerance: the fit says so (the median spacing, "record denser")."""
+    seam = fit_path(*two_arcs_recorded(12.0, seed, sweep_deg=90.0))
+    assert any("mm apart (median)" in d and "record denser" in d for d in seam.doubts), seam.doubts
+
+
+def test_a_sharp_corner_point_is_no_spike():
+    """The curve test of the spikes turns down a corner: the vertex of a 90 deg corner
+    sampled every 5.6 mm stays (it is the corner, found where the lines meet)."""
+    rng = np.random.default_rng(3)
+    x, t = sample_polyline([(0, 0, 0), (60, 0, 0), (60, 60, 0)], rng, dwell_s=0)
+    seam = fit_path(x, t)
+    assert seam.outliers == () and len(seam.corners) == 1
+    np.testing.assert_allclose(seam.corners[0].point_mm, (60, 0, 0), atol=0.3)
