@@ -1,0 +1,464 @@
+"""The perception core's compiled kernels (numba): pure functions on arrays, compiled on
+first use and cached on disk (``cache=True``: a later process loads the machine code
+instead of compiling). Imported only by the detectors when they first run, so importing
+humanpt (or a core that never measures) does not import numba.
+
+* :func:`histogram_level`: the grey-level histogram of windows of an image, subsampled on a
+  regular grid, and its median and one-sided robust sigma
+  (:func:`humanpt.perception.weighted.background_and_noise`).
+* :func:`label_runs`: the 8-connected shapes of the pixels above a level in windows of an
+  image, from runs of pixels joined by union-find, with their pixel counts, boxes, pixel
+  sums and first pixels; only the outermost shapes (a shape in the hole of another is
+  not one: ``cv2.findContours``' ``RETR_EXTERNAL``), at most 256 (the largest boxes).
+* :func:`detect_windows`: the weighted method's detector in one call - the level from
+  the histogram, the shapes, the candidate limits and the aperture refinement of each
+  candidate with its local background ring, moments, peak, saturated count and noise
+  (:func:`humanpt.perception.weighted.detect_weighted` describes the steps).
+
+Windows are ``(u0, v0, u1, v1)`` rows of an int64 (t, 4) array, disjoint, inside the
+image; coordinates are the image's pixels (centres at integers).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+_RING_PX = 2.0
+_ITERATIONS = 2
+MAX_SHAPES = 256
+
+
+@njit(cache=True, nogil=True)
+def histogram_level(gray, keep, has_keep, windows, phase_u, step):
+    """(median, sigma) DN of the pixels of ``windows`` of ``gray`` on the grid of every
+    ``step``-th row (from each window's first) and every column whose ``phase_u[w] + (u -
+    u0)`` is a multiple of ``step``, masked ones (``keep`` 0) left out: the median and
+    ``median - P15.87`` (at least 0.5), as ``np.searchsorted`` on the float32 cumulative
+    histogram (``cv2.calcHist``'s). (0, 0.5) when no pixel is counted."""
+    hist = np.zeros(256, np.int64)
+    for w in range(windows.shape[0]):
+        u0, v0, u1, v1 = windows[w, 0], windows[w, 1], windows[w, 2], windows[w, 3]
+        first = u0 + (-phase_u[w]) % step
+        for v in range(v0, v1, step):
+            for u in range(first, u1, step):
+                if has_keep and keep[v, u] == 0:
+                    continue
+                hist[gray[v, u]] += 1
+    total = 0
+    for k in range(256):
+        total += hist[k]
+    if total == 0:
+        return 0.0, 0.5
+    half = np.float32(total) * np.float32(0.5)
+    low = np.float32(total) * np.float32(0.1587)
+    median = -1
+    lowest = -1
+    cdf = 0
+    for k in range(256):
+        cdf += hist[k]
+        if lowest < 0 and np.float32(cdf) >= low:
+            lowest = k
+        if median < 0 and np.float32(cdf) >= half:
+            median = k
+            break
+    return float(median), max(float(median - lowest), 0.5)
+
+
+@njit(cache=True, nogil=True)
+def _find(parent, i):
+    root = i
+    while parent[root] != root:
+        root = parent[root]
+    while parent[i] != root:  # path compression
+        nxt = parent[i]
+        parent[i] = root
+        i = nxt
+    return root
+
+
+@njit(cache=True, nogil=True)
+def _nested(run_v, run_s, run_e, comp, outer, box, inner_u, inner_v):
+    """True when the pixel (inner_u, inner_v) (not one of shape ``outer``'s) lies in a hole
+    of shape ``outer``: a 4-connected flood of its box (grown by one pixel) from the box's
+    edge, through every pixel that is not ``outer``'s, does not reach it."""
+    u0, v0 = box[outer, 0] - 1, box[outer, 1] - 1
+    w, h = box[outer, 2] - u0 + 2, box[outer, 3] - v0 + 2
+    cell = np.zeros((h, w), np.uint8)
+    for r in range(run_v.shape[0]):
+        if comp[r] == outer:
+            for u in range(run_s[r], run_e[r]):
+                cell[run_v[r] - v0, u - u0] = 1
+    stack = np.empty((h * w, 2), np.int64)
+    stack[0, 0], stack[0, 1] = 0, 0
+    cell[0, 0] = 2
+    n = 1
+    while n > 0:
+        n -= 1
+        y, x = stack[n, 0], stack[n, 1]
+        for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+            yy, xx = y + dy, x + dx
+            if 0 <= yy < h and 0 <= xx < w and cell[yy, xx] == 0:
+                cell[yy, xx] = 2
+                stack[n, 0], stack[n, 1] = yy, xx
+                n += 1
+    return cell[inner_v - v0, inner_u - u0] != 2
+
+
+@njit(cache=True, nogil=True)
+def label_runs(gray, level_dn, windows):
+    """The 8-connected shapes of the pixels of ``gray`` above ``level_dn`` (an integer)
+    in each window (a shape never crosses a window's edge).
+
+    Returns ``run_v, run_s, run_e`` (r,) the runs (row, first column, one past the last),
+    ``comp`` (r,) each run's shape (-1: a shape left out), ``box`` (m, 4) each shape's
+    (u_min, v_min, u_max, v_max) (inclusive), ``area`` (m,), ``sums`` (m, 2) the sums of
+    its pixels' u and v, ``first`` (m, 2) its first pixel in raster order (u, v),
+    ``window`` (m,) the window it lies in. Only the outermost shapes, at most
+    :data:`MAX_SHAPES` (the largest boxes). Shapes are numbered in ascending raster order
+    of their first pixel within each window."""
+    cap = 64
+    run_v = np.empty(cap, np.int64)
+    run_s = np.empty(cap, np.int64)
+    run_e = np.empty(cap, np.int64)
+    n = 0
+    parent = np.empty(cap, np.int64)
+    for w in range(windows.shape[0]):
+        u0, v0, u1, v1 = windows[w, 0], windows[w, 1], windows[w, 2], windows[w, 3]
+        prev_a, prev_b = n, n  # the previous row's runs
+        for v in range(v0, v1):
+            row = gray[v]
+            top = 0
+            for u in range(u0, u1):  # (a maximum first: most rows hold no shape)
+                x = row[u]
+                if x > top:
+                    top = x
+            if top <= level_dn:
+                prev_a, prev_b = n, n
+                continue
+            cur_a = n
+            u = u0
+            while u < u1:
+                if row[u] > level_dn:
+                    s = u
+                    while u < u1 and row[u] > level_dn:
+                        u += 1
+                    if n == cap:
+                        cap *= 2
+                        run_v = _grow(run_v, cap)
+                        run_s = _grow(run_s, cap)
+                        run_e = _grow(run_e, cap)
+                        parent = _grow(parent, cap)
+                    run_v[n], run_s[n], run_e[n] = v, s, u
+                    parent[n] = n
+                    n += 1
+                else:
+                    u += 1
+            # join with the previous row's runs that touch (8-connected): [s, e) and
+            # [s2, e2) touch when s <= e2 and s2 <= e
+            p = prev_a
+            for r in range(cur_a, n):
+                while p < prev_b and run_e[p] < run_s[r]:
+                    p += 1
+                q = p
+                while q < prev_b and run_s[q] <= run_e[r]:
+                    a, b = _find(parent, r), _find(parent, q)
+                    if a != b:
+                        if a < b:
+                            parent[b] = a
+                        else:
+                            parent[a] = b
+                    q += 1
+            prev_a, prev_b = cur_a, n
+    # shapes: numbered by their first run (the root is the shape's smallest run index)
+    comp = np.empty(n, np.int64)
+    m = 0
+    for r in range(n):
+        root = _find(parent, r)
+        if root == r:
+            comp[r] = m
+            m += 1
+        else:
+            comp[r] = comp[root]
+    box = np.empty((m, 4), np.int64)
+    area = np.zeros(m, np.int64)
+    sums = np.zeros((m, 2), np.int64)
+    first = np.empty((m, 2), np.int64)
+    window = np.empty(m, np.int64)
+    seen = np.zeros(m, np.bool_)
+    w = 0
+    for r in range(n):
+        c = comp[r]
+        s, e, v = run_s[r], run_e[r], run_v[r]
+        length = e - s
+        if not seen[c]:
+            seen[c] = True
+            box[c, 0], box[c, 1], box[c, 2], box[c, 3] = s, v, e - 1, v
+            first[c, 0], first[c, 1] = s, v
+            while not (windows[w, 0] <= s < windows[w, 2] and windows[w, 1] <= v < windows[w, 3]):
+                w = (w + 1) % windows.shape[0]
+            window[c] = w
+        else:
+            box[c, 0] = min(box[c, 0], s)
+            box[c, 2] = max(box[c, 2], e - 1)
+            box[c, 3] = v
+        area[c] += length
+        sums[c, 0] += (s + e - 1) * length // 2
+        sums[c, 1] += v * length
+    # only the outermost shapes: one inside another's box may lie in a hole of it
+    outer = np.ones(m, np.bool_)
+    for c in range(m):
+        for b in range(m):
+            if (b != c and window[b] == window[c] and box[b, 0] < box[c, 0] and box[b, 1] < box[c, 1]
+                    and box[b, 2] > box[c, 2] and box[b, 3] > box[c, 3]):
+                if _nested(run_v[:n], run_s[:n], run_e[:n], comp, b, box, first[c, 0], first[c, 1]):
+                    outer[c] = False
+                    break
+    found = 0
+    for c in range(m):
+        if outer[c]:
+            found += 1
+    if found > MAX_SHAPES:  # the largest boxes, ties in descending raster order
+        order = _descending_raster(first, outer, windows)
+        size = np.empty(order.shape[0], np.int64)
+        for k in range(order.shape[0]):
+            c = order[k]
+            size[k] = -(box[c, 2] - box[c, 0] + 1) * (box[c, 3] - box[c, 1] + 1)
+        drop = np.argsort(size, kind="mergesort")[MAX_SHAPES:]
+        for k in drop:
+            outer[order[k]] = False
+    # renumber the kept shapes
+    new = np.full(m, -1, np.int64)
+    k = 0
+    for c in range(m):
+        if outer[c]:
+            new[c] = k
+            box[k] = box[c]
+            area[k] = area[c]
+            sums[k] = sums[c]
+            first[k] = first[c]
+            window[k] = window[c]
+            k += 1
+    for r in range(n):
+        comp[r] = new[comp[r]]
+    return run_v[:n], run_s[:n], run_e[:n], comp, box[:k], area[:k], sums[:k], first[:k], window[:k]
+
+
+@njit(cache=True, nogil=True)
+def _grow(a, cap):
+    out = np.empty(cap, a.dtype)
+    out[: a.shape[0]] = a
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _descending_raster(first, use, windows):
+    """The shapes with ``use`` in descending raster order (v, then u) of their first pixel."""
+    count = 0
+    for c in range(first.shape[0]):
+        if use[c]:
+            count += 1
+    idx = np.empty(count, np.int64)
+    key = np.empty(count, np.int64)
+    k = 0
+    span = 1
+    for w in range(windows.shape[0]):
+        span = max(span, windows[w, 2] + 1)
+    for c in range(first.shape[0]):
+        if use[c]:
+            idx[k] = c
+            key[k] = -(first[c, 1] * span + first[c, 0])
+            k += 1
+    return idx[np.argsort(key, kind="mergesort")]
+
+
+@njit(cache=True, nogil=True)
+def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, noise_k, aperture_pad_px,
+                   min_area_px, max_area_px, max_radius_px, max_elongation, min_contrast_dn, max_blobs):
+    """The weighted detector on ``windows`` of ``gray`` (module docstring; the steps:
+    :func:`humanpt.perception.weighted.detect_weighted`). Returns ``(uv, fields, moments,
+    noise, saturated, rejected)`` of the n accepted blobs in descending raster order of
+    each shape's first pixel: ``uv`` (n, 2) centres, ``fields`` (5, n) area, size,
+    elongation, peak, flux, ``moments`` (n, 3) m_uu, m_vv, m_uv, ``noise`` (n, 2) the flux's
+    and the anisotropy's SD, ``saturated`` (n,) aperture pixels at 255; ``rejected`` the
+    shapes left out."""
+    background, sigma = histogram_level(gray, keep, has_keep, windows, phase_u, step)
+    level = max(threshold, background + noise_k * sigma)
+    if level >= 255.0:
+        return np.zeros((0, 2)), np.zeros((5, 0)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0, np.int64), 0
+    level_dn = int(math.floor(level))
+    run_v, run_s, run_e, comp, box, area, sums, first, window = label_runs(gray, level_dn, windows)
+    m = box.shape[0]
+    nothing = (np.zeros((0, 2)), np.zeros((5, 0)), np.zeros((0, 3)), np.zeros((0, 2)), np.zeros(0, np.int64))
+    # candidates: area limits, not touching their window's edge, not larger than a source
+    cand = np.zeros(m, np.bool_)
+    for c in range(m):
+        wd = windows[window[c]]
+        w = box[c, 2] - box[c, 0] + 1
+        h = box[c, 3] - box[c, 1] + 1
+        cand[c] = (min_area_px <= area[c] <= max_area_px and box[c, 0] > wd[0] and box[c, 1] > wd[1]
+                   and box[c, 2] + 1 < wd[2] and box[c, 3] + 1 < wd[3] and max(w, h) <= 2.0 * max_radius_px)
+    order = _descending_raster(first, cand, windows)
+    rejected = m - order.shape[0]
+    if order.shape[0] > max_blobs:  # the largest, ties in that order
+        neg = np.empty(order.shape[0], np.int64)
+        for k in range(order.shape[0]):
+            neg[k] = -area[order[k]]
+        best = np.sort(np.argsort(neg, kind="mergesort")[:max_blobs])
+        rejected += order.shape[0] - max_blobs
+        order = order[best]
+    n = order.shape[0]
+    if n == 0:
+        return nothing[0], nothing[1], nothing[2], nothing[3], nothing[4], rejected
+    # every candidate's window: S x S about its rounded centroid, S = 2 half + 1
+    r_ap = np.empty(n)
+    cu = np.empty(n)
+    cv = np.empty(n)
+    largest = 0.0
+    for i in range(n):
+        c = order[i]
+        r_ap[i] = 0.5 * max(box[c, 2] - box[c, 0] + 1, box[c, 3] - box[c, 1] + 1) + aperture_pad_px
+        largest = max(largest, r_ap[i])
+        cu[i] = sums[c, 0] / area[c]
+        cv[i] = sums[c, 1] / area[c]
+    half = int(math.ceil(largest + _RING_PX + 1.0))
+    size_w = 2 * half + 1
+    out = np.zeros((n, 13))
+    saturated = np.zeros(n, np.int64)
+    ok = np.zeros(n, np.bool_)
+    value = np.empty((size_w, size_w))  # grey level of a usable pixel, -1 otherwise
+    for i in range(n):
+        c = order[i]
+        wd = windows[window[c]]
+        xc = int(np.rint(cu[i]))
+        yc = int(np.rint(cv[i]))
+        x0, y0 = xc - half, yc - half
+        # usable pixels: in the shape's window, not masked, and not another shape's (above
+        # the level and not this shape's)
+        for j in range(size_w):
+            y = y0 + j
+            for k in range(size_w):
+                x = x0 + k
+                if wd[0] <= x < wd[2] and wd[1] <= y < wd[3] and not (has_keep and keep[y, x] == 0):
+                    g = gray[y, x]
+                    value[j, k] = g if g <= level_dn else -1.0
+                else:
+                    value[j, k] = -1.0
+        for r in range(run_v.shape[0]):
+            j = run_v[r] - y0
+            if comp[r] == c and 0 <= j < size_w:
+                y = run_v[r]
+                for x in range(max(run_s[r], x0), min(run_e[r], x0 + size_w)):
+                    if not (has_keep and keep[y, x] == 0):
+                        value[j, x - x0] = gray[y, x]
+        # the aperture and its ring about the estimate (relative to the window's centre
+        # pixel: the distances are exact), re-centred _ITERATIONS times
+        ra = r_ap[i]
+        r2a = ra * ra
+        rr = ra + _RING_PX
+        r2r = rr * rr
+        cx = cu[i] - xc
+        cy = cv[i] - yc
+        local_bg = background
+        n_ring = 0.0
+        flux = 0.0
+        safe = 1.0
+        good = False
+        mom = np.zeros(6)
+        top = 0.0
+        full = 0
+        for _ in range(_ITERATIONS):
+            # integer sums (exact): count and grey level times 1, x, y, x^2, xy, y^2
+            s0 = np.zeros(6)
+            s1 = np.zeros(6)
+            n_all = 0.0
+            i_all = 0.0
+            top = 0.0
+            full = 0
+            for j in range(size_w):
+                gy = float(j - half)
+                dy = gy - cy
+                for k in range(size_w):
+                    g = value[j, k]
+                    if g < 0.0:
+                        continue
+                    gx = float(k - half)
+                    dx = gx - cx
+                    d2 = dx * dx
+                    d2 += dy * dy
+                    if d2 <= r2r:
+                        n_all += 1.0
+                        i_all += g
+                        if d2 <= r2a:
+                            s0[0] += 1.0
+                            s0[1] += gx
+                            s0[2] += gy
+                            s0[3] += gx * gx
+                            s0[4] += gx * gy
+                            s0[5] += gy * gy
+                            s1[0] += g
+                            s1[1] += g * gx
+                            s1[2] += g * gy
+                            s1[3] += g * gx * gx
+                            s1[4] += g * gx * gy
+                            s1[5] += g * gy * gy
+                            if g > top:
+                                top = g
+                            if g >= 255.0:
+                                full += 1
+            n_ring = n_all - s0[0]
+            local_bg = (i_all - s1[0]) / max(n_ring, 1.0) if n_ring >= 8 else background
+            for q in range(6):
+                mom[q] = s1[q] - local_bg * s0[q]
+            flux = mom[0]
+            good = flux > 0
+            safe = flux if good else 1.0
+            if good:
+                cx = mom[1] / safe
+                cy = mom[2] / safe
+        mxx = mom[3] / safe - cx * cx
+        myy = mom[5] / safe - cy * cy
+        mxy = mom[4] / safe - cx * cy
+        peak = top - local_bg
+        # the background noise of the flux and of the moments' anisotropy
+        n_ap = math.pi * (ra * ra)
+        flux_sd = sigma * math.sqrt(n_ap + n_ap * n_ap / max(n_ring, 1.0))
+        aniso_sd = sigma * math.sqrt(math.pi / 12.0) * ra**3.0 / safe
+        mean = 0.5 * (mxx + myy)
+        spread = math.sqrt(0.25 * ((mxx - myy) * (mxx - myy)) + mxy * mxy)
+        lam_major = mean + spread
+        lam_minor = mean - spread
+        elongation = math.sqrt(abs(lam_major / max(lam_minor, 1e-12))) if lam_minor > 0 else math.inf
+        size = 4.0 * math.sqrt(max(lam_major - 1.0 / 12.0, 0.0))
+        u = cx + xc
+        v = cy + yc
+        ok[i] = (good and peak >= min_contrast_dn and elongation <= max_elongation
+                 and abs(u - cu[i]) <= ra and abs(v - cv[i]) <= ra)
+        row = out[i]
+        row[0], row[1], row[2], row[3], row[4], row[5], row[6] = u, v, area[c], size, elongation, peak, flux
+        row[7], row[8], row[9], row[10], row[11] = mxx, myy, mxy, flux_sd, aniso_sd
+        saturated[i] = full
+    n_ok = 0
+    for i in range(n):
+        if ok[i]:
+            n_ok += 1
+    rejected += n - n_ok
+    uv = np.empty((n_ok, 2))
+    fields = np.empty((5, n_ok))  # area, size, elongation, peak, flux
+    moments = np.empty((n_ok, 3))
+    noise = np.empty((n_ok, 2))
+    full_scale = np.empty(n_ok, np.int64)
+    k = 0
+    for i in range(n):
+        if ok[i]:
+            row = out[i]
+            uv[k, 0], uv[k, 1] = row[0], row[1]
+            for q in range(5):
+                fields[q, k] = row[2 + q]
+            moments[k, 0], moments[k, 1], moments[k, 2] = row[7], row[8], row[9]
+            noise[k, 0], noise[k, 1] = row[10], row[11]
+            full_scale[k] = saturated[i]
+            k += 1
+    return uv, fields, moments, noise, full_scale, rejected
