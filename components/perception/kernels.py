@@ -119,59 +119,16 @@ def label_runs(gray, level_dn, windows):
     ``window`` (m,) the window it lies in. Only the outermost shapes, at most
     :data:`MAX_SHAPES` (the largest boxes). Shapes are numbered in ascending raster order
     of their first pixel within each window."""
-    cap = 64
-    run_v = np.empty(cap, np.int64)
-    run_s = np.empty(cap, np.int64)
-    run_e = np.empty(cap, np.int64)
-    n = 0
-    parent = np.empty(cap, np.int64)
-    for w in range(windows.shape[0]):
-        u0, v0, u1, v1 = windows[w, 0], windows[w, 1], windows[w, 2], windows[w, 3]
-        prev_a, prev_b = n, n  # the previous row's runs
-        for v in range(v0, v1):
-            row = gray[v]
-            top = 0
-            for u in range(u0, u1):  # (a maximum first: most rows hold no shape)
-                x = row[u]
-                if x > top:
-                    top = x
-            if top <= level_dn:
-                prev_a, prev_b = n, n
-                continue
-            cur_a = n
-            u = u0
-            while u < u1:
-                if row[u] > level_dn:
-                    s = u
-                    while u < u1 and row[u] > level_dn:
-                        u += 1
-                    if n == cap:
-                        cap *= 2
-                        run_v = _grow(run_v, cap)
-                        run_s = _grow(run_s, cap)
-                        run_e = _grow(run_e, cap)
-                        parent = _grow(parent, cap)
-                    run_v[n], run_s[n], run_e[n] = v, s, u
-                    parent[n] = n
-                    n += 1
-                else:
-                    u += 1
-            # join with the previous row's runs that touch (8-connected): [s, e) and
-            # [s2, e2) touch when s <= e2 and s2 <= e
-            p = prev_a
-            for r in range(cur_a, n):
-                while p < prev_b and run_e[p] < run_s[r]:
-                    p += 1
-                q = p
-                while q < prev_b and run_s[q] <= run_e[r]:
-                    a, b = _find(parent, r), _find(parent, q)
-                    if a != b:
-                        if a < b:
-                            parent[b] = a
-                        else:
-                            parent[a] = b
-                    q += 1
-            prev_a, prev_b = cur_a, n
+    cap = 256
+    while True:  # (the runs' arrays are never reassigned in the scan: that would slow it down)
+        run_v = np.empty(cap, np.int64)
+        run_s = np.empty(cap, np.int64)
+        run_e = np.empty(cap, np.int64)
+        parent = np.empty(cap, np.int64)
+        n = _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent)
+        if n >= 0:
+            break
+        cap *= 4
     # shapes: numbered by their first run (the root is the shape's smallest run index)
     comp = np.empty(n, np.int64)
     m = 0
@@ -247,10 +204,56 @@ def label_runs(gray, level_dn, windows):
 
 
 @njit(cache=True, nogil=True)
-def _grow(a, cap):
-    out = np.empty(cap, a.dtype)
-    out[: a.shape[0]] = a
-    return out
+def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent):
+    """The runs of pixels above ``level_dn`` of each window's rows, in raster order, joined
+    by union-find (``parent``) with the previous row's runs they touch (8-connected); their
+    count, or -1 when the arrays are too short."""
+    cap = run_v.shape[0]
+    level = np.uint8(level_dn)
+    n = 0
+    for w in range(windows.shape[0]):
+        u0, v0, u1, v1 = windows[w, 0], windows[w, 1], windows[w, 2], windows[w, 3]
+        prev_a, prev_b = n, n  # the previous row's runs
+        for v in range(v0, v1):
+            row = gray[v, u0:u1]
+            top = np.uint8(0)
+            for x in row:  # (a maximum first, vectorised: most rows hold no shape)
+                top = max(top, x)
+            if top <= level:
+                prev_a, prev_b = n, n
+                continue
+            cur_a = n
+            u = 0
+            width = u1 - u0
+            while u < width:
+                if row[u] > level:
+                    s = u
+                    while u < width and row[u] > level:
+                        u += 1
+                    if n == cap:
+                        return -1
+                    run_v[n], run_s[n], run_e[n] = v, u0 + s, u0 + u
+                    parent[n] = n
+                    n += 1
+                else:
+                    u += 1
+            # join with the previous row's runs that touch (8-connected): [s, e) and
+            # [s2, e2) touch when s <= e2 and s2 <= e
+            p = prev_a
+            for r in range(cur_a, n):
+                while p < prev_b and run_e[p] < run_s[r]:
+                    p += 1
+                q = p
+                while q < prev_b and run_s[q] <= run_e[r]:
+                    a, b = _find(parent, r), _find(parent, q)
+                    if a != b:
+                        if a < b:
+                            parent[b] = a
+                        else:
+                            parent[a] = b
+                    q += 1
+            prev_a, prev_b = cur_a, n
+    return n
 
 
 @njit(cache=True, nogil=True)
