@@ -465,3 +465,118 @@ def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, nois
             full_scale[k] = saturated[i]
             k += 1
     return uv, fields, moments, noise, full_scale, rejected
+
+
+@njit(cache=True, nogil=True)
+def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, max_candidates):
+    """The scored correspondence's search (:func:`humanpt.perception.correspondence
+    .match_scored`) on every ordered pair (``ii`` right, ``jj`` left) of n blobs with their
+    eq. (4) points ``p`` (P, 3) and signed epipolar residuals ``res`` (P,): the gates, each
+    candidate's chi-square, the ``max_candidates`` best, then the best set of three
+    disjoint pairs whose triangle fits the model, the best two whose distance is one of its
+    sides, and the best one.
+
+    ``gates``: disparity low, high, |dv| limit, a_u * source diameter, b/2, size ratio low,
+    high, depth low, high, epipolar tolerance, epipolar sigma, log area ratio limit, area
+    sigma, peak sigma, side tolerance, side sigma. Returns the candidates' indices into the
+    P pairs (c,), their chi-squares (c,), and the best three, two and one as indices into
+    the candidates (-1: none)."""
+    d_lo, d_hi, v_gate, a_diam, half_b = gates[0], gates[1], gates[2], gates[3], gates[4]
+    lo, hi, z_lo, z_hi, tol_px, sigma_px = gates[5], gates[6], gates[7], gates[8], gates[9], gates[10]
+    log_area_max, area_sigma, peak_sigma, side_tol, side_sigma = gates[11], gates[12], gates[13], gates[14], gates[15]
+    n = uv.shape[0]
+    top = 1e-6
+    for i in range(n):
+        top = max(top, max(peak[i], 1e-6))
+    dim = np.empty(n)
+    for i in range(n):
+        dim[i] = math.log(top / max(peak[i], 1e-6))
+    count = ii.shape[0]
+    index = np.empty(count, np.int64)
+    chi2 = np.empty(count)
+    c = 0
+    for k in range(count):
+        i, j = ii[k], jj[k]
+        du = uv[j, 0] - uv[i, 0]
+        dv = uv[j, 1] - uv[i, 1]
+        if not (du >= d_lo and du <= d_hi and abs(dv) <= v_gate):
+            continue
+        z = p[k, 2]
+        expected = a_diam / (z + half_b)
+        ratio_r, ratio_l = size[i] / expected, size[j] / expected
+        log_area = math.log(area[i] / area[j])
+        if not (z >= z_lo and z <= z_hi and abs(res[k]) <= tol_px and ratio_r >= lo and ratio_r <= hi
+                and ratio_l >= lo and ratio_l <= hi and abs(log_area) <= log_area_max):
+            continue
+        e, a = res[k] / sigma_px, log_area / area_sigma
+        index[c] = k
+        chi2[c] = e * e + a * a + (dim[i] * dim[i] + dim[j] * dim[j]) / (peak_sigma * peak_sigma)
+        c += 1
+    index, chi2 = index[:c], chi2[:c]
+    if c > max_candidates:  # the best, in their order
+        best = np.sort(np.argsort(chi2, kind="mergesort")[:max_candidates])
+        index, chi2 = index[best], chi2[best]
+        c = max_candidates
+    three = np.full(3, -1, np.int64)
+    two = np.full(2, -1, np.int64)
+    one = -1
+    if c == 0:
+        return index, chi2, three, two, one
+    one = int(np.argmin(chi2))
+    side = np.empty(3)
+    best_total = math.inf
+    for a in range(c):
+        ka = index[a]
+        for b in range(a + 1, c):
+            kb = index[b]
+            if ii[ka] == ii[kb] or ii[ka] == jj[kb] or jj[ka] == ii[kb] or jj[ka] == jj[kb]:
+                continue
+            for d in range(b + 1, c):
+                kd = index[d]
+                if (ii[kd] == ii[ka] or ii[kd] == jj[ka] or jj[kd] == ii[ka] or jj[kd] == jj[ka]
+                        or ii[kd] == ii[kb] or ii[kd] == jj[kb] or jj[kd] == ii[kb] or jj[kd] == jj[kb]):
+                    continue
+                side[0] = _distance(p, ka, kb)
+                side[1] = _distance(p, kb, kd)
+                side[2] = _distance(p, kd, ka)
+                side.sort()
+                fits = True
+                for q in range(3):
+                    if not abs(side[q] - sorted_sides_mm[q]) <= side_tol:
+                        fits = False
+                if not fits:
+                    continue
+                e0 = (side[0] - sorted_sides_mm[0]) / side_sigma
+                e1 = (side[1] - sorted_sides_mm[1]) / side_sigma
+                e2 = (side[2] - sorted_sides_mm[2]) / side_sigma
+                total = (chi2[a] + chi2[b] + chi2[d]) + (e0 * e0 + e1 * e1 + e2 * e2)
+                if total < best_total:
+                    best_total = total
+                    three[0], three[1], three[2] = a, b, d
+    best_total = math.inf
+    for a in range(c):
+        ka = index[a]
+        for b in range(a + 1, c):
+            kb = index[b]
+            if ii[ka] == ii[kb] or ii[ka] == jj[kb] or jj[ka] == ii[kb] or jj[ka] == jj[kb]:
+                continue
+            dist = _distance(p, ka, kb)
+            err = math.inf
+            for q in range(3):
+                err = min(err, abs(dist - sorted_sides_mm[q]))
+            if not err <= side_tol:
+                continue
+            e = err / side_sigma
+            total = chi2[a] + chi2[b] + e * e
+            if total < best_total:
+                best_total = total
+                two[0], two[1] = a, b
+    return index, chi2, three, two, one
+
+
+@njit(cache=True, nogil=True)
+def _distance(p, a, b):
+    dx = p[a, 0] - p[b, 0]
+    dy = p[a, 1] - p[b, 1]
+    dz = p[a, 2] - p[b, 2]
+    return math.sqrt(dx * dx + dy * dy + dz * dz)
