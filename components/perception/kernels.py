@@ -1,6 +1,7 @@
 """The perception core's compiled kernels (numba): pure functions on arrays, compiled on
 first use and cached on disk (``cache=True``: a later process loads the machine code
-instead of compiling). Imported only by the detectors when they first run, so importing
+instead of compiling); ``error_model="numpy"``: a division by zero gives inf or NaN, as
+the numpy code they replace, not an exception. Imported only by the detectors when they first run, so importing
 humanpt (or a core that never measures) does not import numba.
 
 * :func:`histogram_level`: the grey-level histogram of windows of an image, subsampled on a
@@ -31,7 +32,7 @@ _ITERATIONS = 2
 MAX_SHAPES = 256
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def histogram_level(gray, keep, has_keep, windows, phase_u, step):
     """(median, sigma) DN of the pixels of ``windows`` of ``gray`` on the grid of every
     ``step``-th row (from each window's first) and every column whose ``phase_u[w] + (u -
@@ -67,7 +68,7 @@ def histogram_level(gray, keep, has_keep, windows, phase_u, step):
     return float(median), max(float(median - lowest), 0.5)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _find(parent, i):
     root = i
     while parent[root] != root:
@@ -79,7 +80,7 @@ def _find(parent, i):
     return root
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _nested(run_v, run_s, run_e, comp, outer, box, inner_u, inner_v):
     """True when the pixel (inner_u, inner_v) (not one of shape ``outer``'s) lies in a hole
     of shape ``outer``: a 4-connected flood of its box (grown by one pixel) from the box's
@@ -107,7 +108,7 @@ def _nested(run_v, run_s, run_e, comp, outer, box, inner_u, inner_v):
     return cell[inner_v - v0, inner_u - u0] != 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def label_runs(gray, level_dn, windows):
     """The 8-connected shapes of the pixels of ``gray`` above ``level_dn`` (an integer)
     in each window (a shape never crosses a window's edge).
@@ -203,7 +204,7 @@ def label_runs(gray, level_dn, windows):
     return run_v[:n], run_s[:n], run_e[:n], comp, box[:k], area[:k], sums[:k], first[:k], window[:k]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent):
     """The runs of pixels above ``level_dn`` of each window's rows, in raster order, joined
     by union-find (``parent``) with the previous row's runs they touch (8-connected); their
@@ -256,7 +257,7 @@ def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent):
     return n
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _descending_raster(first, use, windows):
     """The shapes with ``use`` in descending raster order (v, then u) of their first pixel."""
     count = 0
@@ -277,7 +278,7 @@ def _descending_raster(first, use, windows):
     return idx[np.argsort(key, kind="mergesort")]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, noise_k, aperture_pad_px,
                    min_area_px, max_area_px, max_radius_px, max_elongation, min_contrast_dn, max_blobs):
     """The weighted detector on ``windows`` of ``gray`` (module docstring; the steps:
@@ -467,7 +468,7 @@ def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, nois
     return uv, fields, moments, noise, full_scale, rejected
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, max_candidates):
     """The scored correspondence's search (:func:`humanpt.perception.correspondence
     .match_scored`) on every ordered pair (``ii`` right, ``jj`` left) of n blobs with their
@@ -574,9 +575,92 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
     return index, chi2, three, two, one
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, error_model="numpy")
 def _distance(p, a, b):
     dx = p[a, 0] - p[b, 0]
     dy = p[a, 1] - p[b, 1]
     dz = p[a, 2] - p[b, 2]
     return math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _max_nan(a, b):
+    """The larger, NaN when either is (as ``np.max``)."""
+    if a != a or b != b:
+        return math.nan
+    return max(a, b)
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _median3(a, b, c):
+    """The median of three as sum - max - min (NaN when any is)."""
+    return (a + b + c) - _max_nan(a, _max_nan(b, c)) - min(a, min(b, c))
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def source_figures(jac, flux, moments, noise, has_noise, tol2, noise_k, tol_factor):
+    """The blob checks' figures (:func:`humanpt.perception.checks.check_sources`) of the
+    three sources A, B, C from ``jac`` (3, 2, 2, 2) each view's d(u, v)/d(s, t) of the
+    source's disc, ``flux`` (3, 2), ``moments`` (3, 2, 3) (m_uu, m_vv, m_uv) and ``noise``
+    (3, 2, 2) of their right and left blobs. Returns brightness, view log ratio,
+    anisotropy (3,), their background noise SDs (3 checks, 3) and limits (3 checks, 3)."""
+    det = np.empty((3, 2))
+    q = np.empty((3, 2))
+    disc_var = np.empty((3, 2))
+    rest = np.empty((3, 2, 3))
+    for k in range(3):
+        for v in range(2):
+            j00, j01, j10, j11 = jac[k, v, 0, 0], jac[k, v, 0, 1], jac[k, v, 1, 0], jac[k, v, 1, 1]
+            det[k, v] = abs(j00 * j11 - j01 * j10)
+            q[k, v] = flux[k, v] / (math.pi * det[k, v])
+            disc_var[k, v] = det[k, v] / 4.0
+            # the moments left after the predicted disc's (J J^T / 4)
+            rest[k, v, 0] = moments[k, v, 0] - (j00 * j00 + j01 * j01) / 4.0
+            rest[k, v, 1] = moments[k, v, 1] - (j10 * j10 + j11 * j11) / 4.0
+            rest[k, v, 2] = moments[k, v, 2] - (j00 * j10 + j01 * j11) / 4.0
+    brightness = np.empty(3)
+    view_log_ratio = np.empty(3)
+    anisotropy = np.empty(3)
+    med_r = _median3(q[0, 0], q[1, 0], q[2, 0])
+    med_l = _median3(q[0, 1], q[1, 1], q[2, 1])
+    views = np.empty(3)
+    for k in range(3):
+        brightness[k] = math.sqrt((q[k, 0] / med_r) * (q[k, 1] / med_l))
+        views[k] = math.log(q[k, 0] / q[k, 1])
+    med_v = _median3(views[0], views[1], views[2])
+    for k in range(3):
+        view_log_ratio[k] = views[k] - med_v
+    # what all six blobs share is not damage: the median blob's rest is taken off
+    six = np.empty(6)
+    for f in range(3):
+        for k in range(3):
+            six[2 * k], six[2 * k + 1] = rest[k, 0, f], rest[k, 1, f]
+        six.sort()
+        shared = 0.5 * (six[2] + six[3])
+        for k in range(3):
+            rest[k, 0, f] -= shared
+            rest[k, 1, f] -= shared
+    for k in range(3):
+        a0 = math.hypot(0.5 * (rest[k, 0, 0] - rest[k, 0, 1]), rest[k, 0, 2]) / disc_var[k, 0]
+        a1 = math.hypot(0.5 * (rest[k, 1, 0] - rest[k, 1, 1]), rest[k, 1, 2]) / disc_var[k, 1]
+        anisotropy[k] = _max_nan(a0, a1)
+    sd = np.zeros((3, 3))
+    if has_noise:
+        rel = np.empty((3, 2))
+        for k in range(3):
+            for v in range(2):
+                x = noise[k, v, 0] / flux[k, v]
+                rel[k, v] = x * x
+        total_r = rel[0, 0] + rel[1, 0] + rel[2, 0]
+        total_l = rel[0, 1] + rel[1, 1] + rel[2, 1]
+        for k in range(3):
+            view_sd = math.sqrt((rel[k, 0] + total_r / 2.0) + (rel[k, 1] + total_l / 2.0))
+            sd[0, k] = 0.5 * view_sd
+            sd[1, k] = view_sd
+            sd[2, k] = _max_nan(noise[k, 0, 1] / disc_var[k, 0], noise[k, 1, 1] / disc_var[k, 1])
+    limits = np.empty((3, 3))
+    for c in range(3):
+        for k in range(3):
+            x = noise_k * sd[c, k]
+            limits[c, k] = math.sqrt(tol2[c] + x * x) * tol_factor
+    return brightness, view_log_ratio, anisotropy, sd, limits
