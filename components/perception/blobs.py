@@ -125,11 +125,9 @@ def find_shapes(binary: np.ndarray) -> Shapes:
     ``cv2.findContours``' ``RETR_EXTERNAL``), at most 256 (the largest boxes). One compiled
     labelling by runs (:func:`humanpt.perception.kernels.label_runs`, the weighted
     detector's)."""
-    from .weighted import kernels
+    from .weighted import _image_and_mask, kernels
 
-    if binary.dtype != np.uint8 or binary.ndim != 2:
-        raise ValueError(f"perception: a binary image must be (H, W) uint8, got {binary.dtype} {binary.shape}")
-    binary = np.ascontiguousarray(binary)
+    binary, _, _ = _image_and_mask(binary, None)
     height, width = binary.shape
     run_v, run_s, run_e, comp, box, area, sums, first, _ = kernels().label_runs(
         binary, 0, np.array([(0, 0, width, height)], np.int64))
@@ -152,22 +150,7 @@ def windows_around(uv_px: np.ndarray, half_px: float, width: int, height: int) -
     """Square windows of half size ``half_px`` around centres (k, 2), clipped to the image,
     overlapping ones merged into their bounding box until no two overlap (a shape is then
     whole in at most one window)."""
-    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
-    # every window at once: (u0, v0, u1, v1) clipped to the image
-    box = np.concatenate((np.maximum(np.floor(uv - half_px), 0.0),
-                          np.minimum(np.ceil(uv + half_px) + 1.0, (width, height))), axis=1)
-    boxes = [tuple(b) for b in box.astype(int).tolist()]
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(boxes)):
-            for j in range(i + 1, len(boxes)):
-                a, b = boxes[i], boxes[j]
-                if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
-                    boxes[i] = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
-                    del boxes[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return [b for b in boxes if b[2] > b[0] and b[3] > b[1]]
+    from .weighted import kernels
+
+    uv = np.ascontiguousarray(uv_px, dtype=float).reshape(-1, 2)
+    return [tuple(b) for b in kernels().merge_windows(uv, float(half_px), int(width), int(height)).tolist()]

@@ -664,3 +664,39 @@ def source_figures(jac, flux, moments, noise, has_noise, tol2, noise_k, tol_fact
             x = noise_k * sd[c, k]
             limits[c, k] = math.sqrt(tol2[c] + x * x) * tol_factor
     return brightness, view_log_ratio, anisotropy, sd, limits
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def merge_windows(uv, half_px, width, height):
+    """Square windows ``(u0, v0, u1, v1)`` of half size ``half_px`` about centres (k, 2),
+    clipped to the image; the first overlapping pair (i < j, in order) merged into i's
+    place as their bounding box, j removed, until no two overlap; then the empty ones left
+    out (:func:`humanpt.perception.blobs.windows_around`)."""
+    n = uv.shape[0]
+    b = np.empty((n, 4), np.int64)
+    for i in range(n):
+        b[i, 0] = int(max(math.floor(uv[i, 0] - half_px), 0.0))
+        b[i, 1] = int(max(math.floor(uv[i, 1] - half_px), 0.0))
+        b[i, 2] = int(min(math.ceil(uv[i, 0] + half_px) + 1.0, float(width)))
+        b[i, 3] = int(min(math.ceil(uv[i, 1] + half_px) + 1.0, float(height)))
+    merged = True
+    while merged:
+        merged = False
+        for i in range(n):
+            for j in range(i + 1, n):
+                if b[i, 0] < b[j, 2] and b[j, 0] < b[i, 2] and b[i, 1] < b[j, 3] and b[j, 1] < b[i, 3]:
+                    b[i, 0], b[i, 1] = min(b[i, 0], b[j, 0]), min(b[i, 1], b[j, 1])
+                    b[i, 2], b[i, 3] = max(b[i, 2], b[j, 2]), max(b[i, 3], b[j, 3])
+                    for r in range(j, n - 1):
+                        b[r] = b[r + 1]
+                    n -= 1
+                    merged = True
+                    break
+            if merged:
+                break
+    k = 0
+    for i in range(n):
+        if b[i, 2] > b[i, 0] and b[i, 3] > b[i, 1]:
+            b[k] = b[i]
+            k += 1
+    return b[:k]

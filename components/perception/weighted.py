@@ -41,6 +41,7 @@ __all__ = ["background_and_noise", "detect_weighted"]
 
 _HISTOGRAM_PX = 8000.0  # a region's histogram counts about this many pixels (a regular grid)
 _NO_MASK = np.zeros((1, 1), np.uint8)
+_NO_MASK.flags.writeable = False
 _kernels = None
 
 
@@ -57,16 +58,25 @@ def kernels():
 
 def _image_and_mask(gray: np.ndarray, keep: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, bool]:
     """The compiled kernels read pixels unchecked: the image must be (H, W) uint8 and the
-    mask the same size (both made contiguous: one compiled layout)."""
+    mask the same size. Both are passed as contiguous read-only arrays (a decoded message's
+    pixels are read-only): one compiled variant of each kernel."""
     if gray.dtype != np.uint8 or gray.ndim != 2:
         raise ValueError(f"perception: a grey image must be (H, W) uint8, got {gray.dtype} {gray.shape}")
-    gray = np.ascontiguousarray(gray)
+    gray = _read_only(gray)
     if keep is None:
         return gray, _NO_MASK, False
     if keep.dtype != np.uint8 or keep.shape != gray.shape:
         raise ValueError(f"perception: the mask must be uint8 of the image's size {gray.shape}, "
                          f"got {keep.dtype} {keep.shape}")
-    return gray, np.ascontiguousarray(keep), True
+    return gray, _read_only(keep), True
+
+
+def _read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a contiguous read-only array (a view when it is contiguous)."""
+    if a.flags.writeable or not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a).view()
+        a.flags.writeable = False
+    return a
 
 
 def background_and_noise(sub: np.ndarray, keep: np.ndarray | None = None) -> tuple[float, float]:
