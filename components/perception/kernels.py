@@ -68,6 +68,69 @@ def histogram_level(gray, keep, has_keep, windows, phase_u, step):
     return float(median), max(float(median - lowest), 0.5)
 
 
+# (numba's own sorts are large generic code that takes seconds to compile: these are small)
+@njit(cache=True, nogil=True, error_model="numpy")
+def _order(key):
+    """Indices that sort ``key`` (float64) ascending, stable (a bottom-up merge sort)."""
+    n = key.shape[0]
+    idx = np.arange(n)
+    tmp = np.empty(n, np.int64)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid, hi = min(lo + width, n), min(lo + 2 * width, n)
+            i, j, k = lo, mid, lo
+            while i < mid and j < hi:
+                if key[idx[j]] < key[idx[i]]:
+                    tmp[k] = idx[j]
+                    j += 1
+                else:
+                    tmp[k] = idx[i]
+                    i += 1
+                k += 1
+            while i < mid:
+                tmp[k] = idx[i]
+                i += 1
+                k += 1
+            while j < hi:
+                tmp[k] = idx[j]
+                j += 1
+                k += 1
+        for k in range(n):
+            idx[k] = tmp[k]
+        width *= 2
+    return idx
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _smallest(key, count):
+    """The indices of the ``count`` smallest of ``key`` (ties: the earlier), ascending."""
+    chosen = np.zeros(key.shape[0], np.bool_)
+    order = _order(key)
+    m = min(count, key.shape[0])
+    for k in range(m):
+        chosen[order[k]] = True
+    out = np.empty(m, np.int64)
+    k = 0
+    for i in range(key.shape[0]):
+        if chosen[i]:
+            out[k] = i
+            k += 1
+    return out
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _sort_small(a):
+    """``a`` sorted ascending in place (an insertion sort: a handful of values)."""
+    for i in range(1, a.shape[0]):
+        x = a[i]
+        j = i - 1
+        while j >= 0 and a[j] > x:
+            a[j + 1] = a[j]
+            j -= 1
+        a[j + 1] = x
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _find(parent, i):
     root = i
@@ -180,11 +243,11 @@ def label_runs(gray, level_dn, windows):
             found += 1
     if found > MAX_SHAPES:  # the largest boxes, ties in descending raster order
         order = _descending_raster(first, outer, windows)
-        size = np.empty(order.shape[0], np.int64)
+        size = np.empty(order.shape[0])
         for k in range(order.shape[0]):
             c = order[k]
             size[k] = -(box[c, 2] - box[c, 0] + 1) * (box[c, 3] - box[c, 1] + 1)
-        drop = np.argsort(size, kind="mergesort")[MAX_SHAPES:]
+        drop = _order(size)[MAX_SHAPES:]
         for k in drop:
             outer[order[k]] = False
     # renumber the kept shapes
@@ -193,10 +256,11 @@ def label_runs(gray, level_dn, windows):
     for c in range(m):
         if outer[c]:
             new[c] = k
-            box[k] = box[c]
+            for q in range(4):
+                box[k, q] = box[c, q]
             area[k] = area[c]
-            sums[k] = sums[c]
-            first[k] = first[c]
+            sums[k, 0], sums[k, 1] = sums[c, 0], sums[c, 1]
+            first[k, 0], first[k, 1] = first[c, 0], first[c, 1]
             window[k] = window[c]
             k += 1
     for r in range(n):
@@ -265,7 +329,7 @@ def _descending_raster(first, use, windows):
         if use[c]:
             count += 1
     idx = np.empty(count, np.int64)
-    key = np.empty(count, np.int64)
+    key = np.empty(count)
     k = 0
     span = 1
     for w in range(windows.shape[0]):
@@ -273,9 +337,13 @@ def _descending_raster(first, use, windows):
     for c in range(first.shape[0]):
         if use[c]:
             idx[k] = c
-            key[k] = -(first[c, 1] * span + first[c, 0])
+            key[k] = -float(first[c, 1] * span + first[c, 0])
             k += 1
-    return idx[np.argsort(key, kind="mergesort")]
+    order = _order(key)
+    out = np.empty(count, np.int64)
+    for k in range(count):
+        out[k] = idx[order[k]]
+    return out
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -307,12 +375,15 @@ def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, nois
     order = _descending_raster(first, cand, windows)
     rejected = m - order.shape[0]
     if order.shape[0] > max_blobs:  # the largest, ties in that order
-        neg = np.empty(order.shape[0], np.int64)
+        neg = np.empty(order.shape[0])
         for k in range(order.shape[0]):
-            neg[k] = -area[order[k]]
-        best = np.sort(np.argsort(neg, kind="mergesort")[:max_blobs])
+            neg[k] = -float(area[order[k]])
+        best = _smallest(neg, max_blobs)
         rejected += order.shape[0] - max_blobs
-        order = order[best]
+        kept = np.empty(best.shape[0], np.int64)
+        for k in range(best.shape[0]):
+            kept[k] = order[best[k]]
+        order = kept
     n = order.shape[0]
     if n == 0:
         return nothing[0], nothing[1], nothing[2], nothing[3], nothing[4], rejected
@@ -515,15 +586,20 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
         c += 1
     index, chi2 = index[:c], chi2[:c]
     if c > max_candidates:  # the best, in their order
-        best = np.sort(np.argsort(chi2, kind="mergesort")[:max_candidates])
-        index, chi2 = index[best], chi2[best]
+        best = _smallest(chi2, max_candidates)
+        for k in range(best.shape[0]):  # (best is ascending: k <= best[k])
+            index[k], chi2[k] = index[best[k]], chi2[best[k]]
         c = max_candidates
+        index, chi2 = index[:c], chi2[:c]
     three = np.full(3, -1, np.int64)
     two = np.full(2, -1, np.int64)
     one = -1
     if c == 0:
         return index, chi2, three, two, one
-    one = int(np.argmin(chi2))
+    one = 0
+    for a in range(1, c):
+        if chi2[a] < chi2[one]:
+            one = a
     side = np.empty(3)
     best_total = math.inf
     for a in range(c):
@@ -540,7 +616,7 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
                 side[0] = _distance(p, ka, kb)
                 side[1] = _distance(p, kb, kd)
                 side[2] = _distance(p, kd, ka)
-                side.sort()
+                _sort_small(side)
                 fits = True
                 for q in range(3):
                     if not abs(side[q] - sorted_sides_mm[q]) <= side_tol:
@@ -635,7 +711,7 @@ def source_figures(jac, flux, moments, noise, has_noise, tol2, noise_k, tol_fact
     for f in range(3):
         for k in range(3):
             six[2 * k], six[2 * k + 1] = rest[k, 0, f], rest[k, 1, f]
-        six.sort()
+        _sort_small(six)
         shared = 0.5 * (six[2] + six[3])
         for k in range(3):
             rest[k, 0, f] -= shared
@@ -688,7 +764,8 @@ def merge_windows(uv, half_px, width, height):
                     b[i, 0], b[i, 1] = min(b[i, 0], b[j, 0]), min(b[i, 1], b[j, 1])
                     b[i, 2], b[i, 3] = max(b[i, 2], b[j, 2]), max(b[i, 3], b[j, 3])
                     for r in range(j, n - 1):
-                        b[r] = b[r + 1]
+                        for q in range(4):
+                            b[r, q] = b[r + 1, q]
                     n -= 1
                     merged = True
                     break
@@ -697,6 +774,7 @@ def merge_windows(uv, half_px, width, height):
     k = 0
     for i in range(n):
         if b[i, 2] > b[i, 0] and b[i, 3] > b[i, 1]:
-            b[k] = b[i]
+            for q in range(4):
+                b[k, q] = b[i, q]
             k += 1
     return b[:k]
