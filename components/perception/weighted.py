@@ -5,18 +5,20 @@ shape checks.
    the median minus the 15.9th percentile as a one-sided robust sigma: the sources only
    occupy the top of the histogram).
 2. Detection: pixels above ``max(T, background + noise_k * sigma)`` (so a brighter
-   ambient raises the level by itself), 8-connected components
-   (``cv2.connectedComponentsWithStats``). Components outside the area limits, touching the
-   border of the searched region (a cut shape has a biased centre), or too large for a
-   source at the nearest working depth are rejected.
+   ambient raises the level by itself), 8-connected shapes (runs of such pixels joined by
+   union-find; only rows whose maximum exceeds the level are scanned pixel by pixel; only
+   the outermost shapes, as ``cv2.findContours``' ``RETR_EXTERNAL``). Shapes outside the
+   area limits, touching the border of the searched region (a cut shape has a biased
+   centre), or too large for a source at the nearest working depth are rejected.
 3. Centre: in a circular aperture of radius ``max(width, height)/2 + aperture_pad_px``
    around the component - wide enough to take in the blurred edge that lies below the
    threshold - each pixel weighs ``I - b``, with ``b`` the mean of a 2-px ring just outside
    the aperture (local background, so a glow nearby does not pull the centre). The weights
    are not clipped at 0, so background noise averages out instead of adding a positive
    bias; the aperture is re-centred on the estimate twice so that it is symmetric about
-   the result. Pixels of other components and masked pixels are left out. All blobs are
-   refined together in one (n, S, S) stack of windows.
+   the result. Pixels of other shapes and masked pixels are left out. The sums over the
+   aperture (count, grey levels, first and second moments about the window's centre pixel)
+   are of integers, so exact.
 4. Shape checks on the weighted moments: positive flux, peak at least ``min_contrast_dn``
    above the local background, major/minor axis ratio at most ``max_elongation``. Each
    blob's aperture pixels at full scale (255) are counted (``Blobs.saturated_px``): a
@@ -26,6 +28,10 @@ Why weights and not the binary mean: the mean of thresholded pixel positions mov
 steps as pixels cross T (pixel locking, ~0.05-0.1 px for 8 px shapes); the weighted
 centroid of a blurred, pixel-integrated spot has no such steps and its noise is set by the
 photon and read noise only (a few thousandths of a pixel for the default twin).
+
+Steps 1-4 run in one compiled call (:mod:`humanpt.perception.kernels`, numba): no per-shape
+or per-blob Python, and a cost that follows the rows holding a shape and the blobs, not
+the searched region's size.
 """
 
 from __future__ import annotations
