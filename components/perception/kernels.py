@@ -144,10 +144,10 @@ def _find(parent, i):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _nested(run_v, run_s, run_e, comp, outer, box, inner_u, inner_v):
-    """True when the pixel (inner_u, inner_v) (not one of shape ``outer``'s) lies in a hole
-    of shape ``outer``: a 4-connected flood of its box (grown by one pixel) from the box's
-    edge, through every pixel that is not ``outer``'s, does not reach it."""
+def _outside(run_v, run_s, run_e, comp, outer, box):
+    """Shape ``outer``'s box grown by one pixel, its pixels marked 2 where a 4-connected
+    flood from the box's edge through every pixel that is not ``outer``'s reaches (a pixel
+    not reached and not ``outer``'s lies in a hole of it); the box's corner (u0, v0)."""
     u0, v0 = box[outer, 0] - 1, box[outer, 1] - 1
     w, h = box[outer, 2] - u0 + 2, box[outer, 3] - v0 + 2
     cell = np.zeros((h, w), np.uint8)
@@ -168,7 +168,7 @@ def _nested(run_v, run_s, run_e, comp, outer, box, inner_u, inner_v):
                 cell[yy, xx] = 2
                 stack[n, 0], stack[n, 1] = yy, xx
                 n += 1
-    return cell[inner_v - v0, inner_u - u0] != 2
+    return cell, u0, v0
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -229,14 +229,21 @@ def label_runs(gray, level_dn, windows):
         sums[c, 0] += (s + e - 1) * length // 2
         sums[c, 1] += v * length
     # only the outermost shapes: one inside another's box may lie in a hole of it
+    # (one flood of b's box for all the shapes inside it: the first pixel of such a shape c
+    # is not b's, so c lies in a hole of b when the flood does not reach it)
     outer = np.ones(m, np.bool_)
-    for c in range(m):
-        for b in range(m):
-            if (b != c and window[b] == window[c] and box[b, 0] < box[c, 0] and box[b, 1] < box[c, 1]
-                    and box[b, 2] > box[c, 2] and box[b, 3] > box[c, 3]):
-                if _nested(run_v[:n], run_s[:n], run_e[:n], comp, b, box, first[c, 0], first[c, 1]):
+    for b in range(m):
+        flooded = False
+        cell = np.zeros((1, 1), np.uint8)
+        u0, v0 = 0, 0
+        for c in range(m):
+            if (b != c and outer[c] and window[b] == window[c] and box[b, 0] < box[c, 0]
+                    and box[b, 1] < box[c, 1] and box[b, 2] > box[c, 2] and box[b, 3] > box[c, 3]):
+                if not flooded:
+                    cell, u0, v0 = _outside(run_v[:n], run_s[:n], run_e[:n], comp, b, box)
+                    flooded = True
+                if cell[first[c, 1] - v0, first[c, 0] - u0] != 2:
                     outer[c] = False
-                    break
     found = 0
     for c in range(m):
         if outer[c]:

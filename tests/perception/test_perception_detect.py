@@ -112,7 +112,9 @@ def test_find_shapes_agrees_with_opencv_on_random_shapes(seed):
         cv2.circle(binary, (int(rng.integers(0, 160)), int(rng.integers(0, 120))), int(rng.integers(1, 9)), 255, -1)
     cv2.circle(binary, (80, 60), 20, 255, 3)  # a ring ...
     binary[55:65, 75:85] = 0
-    binary[58:62, 78:82] = 255  # ... with a speck in its hole: not an outermost shape
+    binary[58:62, 78:82] = 255  # ... with two specks in its hole: not outermost shapes
+    binary[56, 76] = 255
+    binary[40, 60] = 255  # inside the ring's box, outside the ring: an outermost shape
     shapes = find_shapes(binary)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
     assert len(shapes) == len(contours)
