@@ -144,34 +144,6 @@ def _find(parent, i):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _outside(run_v, run_s, run_e, comp, outer, box):
-    """Shape ``outer``'s box grown by one pixel, its pixels marked 2 where a 4-connected
-    flood from the box's edge through every pixel that is not ``outer``'s reaches (a pixel
-    not reached and not ``outer``'s lies in a hole of it); the box's corner (u0, v0)."""
-    u0, v0 = box[outer, 0] - 1, box[outer, 1] - 1
-    w, h = box[outer, 2] - u0 + 2, box[outer, 3] - v0 + 2
-    cell = np.zeros((h, w), np.uint8)
-    for r in range(run_v.shape[0]):
-        if comp[r] == outer:
-            for u in range(run_s[r], run_e[r]):
-                cell[run_v[r] - v0, u - u0] = 1
-    stack = np.empty((h * w, 2), np.int64)
-    stack[0, 0], stack[0, 1] = 0, 0
-    cell[0, 0] = 2
-    n = 1
-    while n > 0:
-        n -= 1
-        y, x = stack[n, 0], stack[n, 1]
-        for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-            yy, xx = y + dy, x + dx
-            if 0 <= yy < h and 0 <= xx < w and cell[yy, xx] == 0:
-                cell[yy, xx] = 2
-                stack[n, 0], stack[n, 1] = yy, xx
-                n += 1
-    return cell, u0, v0
-
-
-@njit(cache=True, nogil=True, error_model="numpy")
 def label_runs(gray, level_dn, windows):
     """The 8-connected shapes of the pixels of ``gray`` above ``level_dn`` (an integer)
     in each window (a shape never crosses a window's edge).
@@ -189,7 +161,11 @@ def label_runs(gray, level_dn, windows):
         run_s = np.empty(cap, np.int64)
         run_e = np.empty(cap, np.int64)
         parent = np.empty(cap, np.int64)
-        n = _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent)
+        gap = np.empty(cap, np.int64)
+        bg_s = np.empty(cap, np.int64)
+        bg_e = np.empty(cap, np.int64)
+        bg_parent = np.empty(cap, np.int64)
+        n = _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent, gap, bg_s, bg_e, bg_parent)
         if n >= 0:
             break
         cap *= 4
@@ -228,22 +204,12 @@ def label_runs(gray, level_dn, windows):
         area[c] += length
         sums[c, 0] += (s + e - 1) * length // 2
         sums[c, 1] += v * length
-    # only the outermost shapes: one inside another's box may lie in a hole of it
-    # (one flood of b's box for all the shapes inside it: the first pixel of such a shape c
-    # is not b's, so c lies in a hole of b when the flood does not reach it)
+    # only the outermost shapes: a shape whose first pixel's left neighbour is background
+    # not joined to the outside lies in a hole of another
     outer = np.ones(m, np.bool_)
-    for b in range(m):
-        flooded = False
-        cell = np.zeros((1, 1), np.uint8)
-        u0, v0 = 0, 0
-        for c in range(m):
-            if (b != c and outer[c] and window[b] == window[c] and box[b, 0] < box[c, 0]
-                    and box[b, 1] < box[c, 1] and box[b, 2] > box[c, 2] and box[b, 3] > box[c, 3]):
-                if not flooded:
-                    cell, u0, v0 = _outside(run_v[:n], run_s[:n], run_e[:n], comp, b, box)
-                    flooded = True
-                if cell[first[c, 1] - v0, first[c, 0] - u0] != 2:
-                    outer[c] = False
+    for r in range(n):
+        if _find(parent, r) == r and gap[r] >= 0 and _find(bg_parent, gap[r]) != 0:
+            outer[comp[r]] = False
     found = 0
     for c in range(m):
         if outer[c]:
@@ -276,39 +242,64 @@ def label_runs(gray, level_dn, windows):
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent):
+def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent, gap, bg_s, bg_e, bg_parent):
     """The runs of pixels above ``level_dn`` of each window's rows, in raster order, joined
     by union-find (``parent``) with the previous row's runs they touch (8-connected); their
-    count, or -1 when the arrays are too short."""
+    count, or -1 when the arrays are too short.
+
+    The background between them too (the gaps of rows that hold a run; ``bg_s``, ``bg_e``,
+    from index 1), joined 4-connected by union-find (``bg_parent``) with the previous row's
+    gaps, node 0 standing for the background outside the window (a whole row without a run,
+    the window's edges and first and last rows reach it). ``gap[r]``: the gap just left of
+    run r (-1 at the window's left edge): a shape whose first run's gap is not joined to
+    node 0 lies in a hole of another shape."""
     cap = run_v.shape[0]
+    cap_bg = bg_s.shape[0]
     level = np.uint8(level_dn)
     n = 0
+    nb = 1
+    bg_parent[0] = 0
     for w in range(windows.shape[0]):
         u0, v0, u1, v1 = windows[w, 0], windows[w, 1], windows[w, 2], windows[w, 3]
+        width = u1 - u0
         prev_a, prev_b = n, n  # the previous row's runs
+        prev_ga, prev_gb = nb, nb  # and gaps
+        above = True  # the row above is all background (or outside the window)
         for v in range(v0, v1):
             row = gray[v, u0:u1]
             top = np.uint8(0)
             for x in row:  # (a maximum first, vectorised: most rows hold no shape)
                 top = max(top, x)
-            if top <= level:
+            if top <= level:  # all background: the previous row's gaps reach the outside
+                for q in range(prev_ga, prev_gb):
+                    _join(bg_parent, q, 0)
                 prev_a, prev_b = n, n
+                prev_ga, prev_gb = nb, nb
+                above = True
                 continue
-            cur_a = n
+            edge = above or v == v1 - 1
+            above = False
+            cur_a, cur_g = n, nb
             u = 0
-            width = u1 - u0
             while u < width:
+                s = u
                 if row[u] > level:
-                    s = u
                     while u < width and row[u] > level:
                         u += 1
                     if n == cap:
                         return -1
                     run_v[n], run_s[n], run_e[n] = v, u0 + s, u0 + u
                     parent[n] = n
+                    gap[n] = nb - 1 if s > 0 else -1
                     n += 1
                 else:
-                    u += 1
+                    while u < width and row[u] <= level:
+                        u += 1
+                    if nb == cap_bg:
+                        return -1
+                    bg_s[nb], bg_e[nb] = s, u
+                    bg_parent[nb] = 0 if edge or s == 0 or u == width else nb
+                    nb += 1
             # join with the previous row's runs that touch (8-connected): [s, e) and
             # [s2, e2) touch when s <= e2 and s2 <= e
             p = prev_a
@@ -317,15 +308,30 @@ def _scan_runs(gray, level_dn, windows, run_v, run_s, run_e, parent):
                     p += 1
                 q = p
                 while q < prev_b and run_s[q] <= run_e[r]:
-                    a, b = _find(parent, r), _find(parent, q)
-                    if a != b:
-                        if a < b:
-                            parent[b] = a
-                        else:
-                            parent[a] = b
+                    _join(parent, r, q)
+                    q += 1
+            # and the gaps with the previous row's gaps they share a column with (4-connected)
+            p = prev_ga
+            for r in range(cur_g, nb):
+                while p < prev_gb and bg_e[p] <= bg_s[r]:
+                    p += 1
+                q = p
+                while q < prev_gb and bg_s[q] < bg_e[r]:
+                    _join(bg_parent, r, q)
                     q += 1
             prev_a, prev_b = cur_a, n
+            prev_ga, prev_gb = cur_g, nb
     return n
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _join(parent, a, b):
+    """Union of a's and b's sets; the smaller root stays the root."""
+    a, b = _find(parent, a), _find(parent, b)
+    if a < b:
+        parent[b] = a
+    elif b < a:
+        parent[a] = b
 
 
 @njit(cache=True, nogil=True, error_model="numpy")

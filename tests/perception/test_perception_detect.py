@@ -117,7 +117,8 @@ def test_find_shapes_agrees_with_opencv_on_random_shapes(seed):
     binary[40, 60] = 255  # inside the ring's box, outside the ring: an outermost shape
     shapes = find_shapes(binary)
     contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    assert len(shapes) == len(contours)
+    # (a contour starts at its shape's first pixel in raster order)
+    assert sorted(shapes.first.tolist()) == sorted(c[0, 0].tolist() for c in contours)
     _, labels, stats, cents = cv2.connectedComponentsWithStats(binary, connectivity=8)
     assert len(shapes) < len(stats) - 1  # the speck in the ring's hole is a component, not a shape
     firsts = shapes.first.tolist()
@@ -128,6 +129,29 @@ def test_find_shapes_agrees_with_opencv_on_random_shapes(seed):
         np.testing.assert_allclose(shapes.centroid[i], cents[k], rtol=0, atol=1e-12)
         x, y, w, h = stats[k, :4]
         np.testing.assert_array_equal(shapes.masks[i], labels[y : y + h, x : x + w] == k)
+
+
+@pytest.mark.parametrize("density", [0.4, 0.45, 0.5])
+def test_only_the_outermost_shapes_as_opencv_finds_them(density):
+    # nested rings, a bar across the whole image above a U (a hole closed by the bar), and
+    # dense salt noise (shapes in holes of noise shapes): the outermost shapes are
+    # cv2.findContours' RETR_EXTERNAL ones, each starting at its first pixel
+    rng = np.random.default_rng(int(density * 100))
+    binary = np.where(rng.random((90, 130)) < density, 255, 0).astype(np.uint8)
+    for r in (30, 22, 14, 6):
+        cv2.circle(binary, (45, 45), r, 255, 2)
+        cv2.circle(binary, (45, 45), r - 2, 0, 2)
+    binary[60, :] = 255
+    binary[60:80, 95] = 255
+    binary[60:80, 120] = 255
+    binary[80, 95:121] = 255
+    binary[62:78, 97:119] = 0
+    binary[70, 108] = 255  # in the U's hole
+    shapes = find_shapes(binary)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    _, _, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
+    assert len(contours) < len(stats) - 1 <= 256  # some shapes lie in holes of others
+    assert sorted(shapes.first.tolist()) == sorted(c[0, 0].tolist() for c in contours)
 
 
 def test_the_detector_refuses_an_image_it_cannot_read_safely():
