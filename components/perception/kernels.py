@@ -413,6 +413,20 @@ def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, nois
         cv[i] = sums[c, 1] / area[c]
     half = int(math.ceil(largest + _RING_PX + 1.0))
     size_w = 2 * half + 1
+    # each shape's runs (a counting sort of the runs by shape): runs_of[first_run[c] ..
+    # first_run[c + 1]] are shape c's
+    first_run = np.zeros(m + 1, np.int64)
+    for r in range(run_v.shape[0]):
+        if comp[r] >= 0:
+            first_run[comp[r] + 1] += 1
+    for c in range(m):
+        first_run[c + 1] += first_run[c]
+    fill = first_run[:m].copy()
+    runs_of = np.empty(first_run[m], np.int64)
+    for r in range(run_v.shape[0]):
+        if comp[r] >= 0:
+            runs_of[fill[comp[r]]] = r
+            fill[comp[r]] += 1
     out = np.zeros((n, 13))
     saturated = np.zeros(n, np.int64)
     ok = np.zeros(n, np.bool_)
@@ -434,9 +448,10 @@ def detect_windows(gray, keep, has_keep, windows, phase_u, step, threshold, nois
                     value[j, k] = g if g <= level_dn else -1.0
                 else:
                     value[j, k] = -1.0
-        for r in range(run_v.shape[0]):
+        for k in range(first_run[c], first_run[c + 1]):
+            r = runs_of[k]
             j = run_v[r] - y0
-            if comp[r] == c and 0 <= j < size_w:
+            if 0 <= j < size_w:
                 y = run_v[r]
                 for x in range(max(run_s[r], x0), min(run_e[r], x0 + size_w)):
                     if not (has_keep and keep[y, x] == 0):
