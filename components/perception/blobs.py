@@ -9,10 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
-__all__ = ["Blobs", "Region", "Shapes", "Mosaic", "full_region", "clip_region", "find_shapes",
+__all__ = ["Blobs", "Region", "Shapes", "full_region", "clip_region", "find_shapes",
            "windows_around", "EMPTY"]
 
 Region = tuple[int, int, int, int]
@@ -120,98 +119,38 @@ class Shapes:
         )
 
 
-def find_shapes(binary: np.ndarray, max_shapes: int = 256) -> Shapes:
-    """Every 8-connected shape of ``binary`` ((H, W) uint8, 0 / 255), found by its outer
-    contour (``cv2.findContours``, fast on a sparse image) and measured by a connected
-    component labelling of its bounding box only (exact pixel count and mean, holes left
-    out). At most ``max_shapes``, the ones with the largest boxes."""
-    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-    if not contours:
-        return Shapes(*(np.zeros(0, int) for _ in range(5)), np.zeros((0, 2)), (),
-                      np.zeros((0, 2), int))
-    boxes = [cv2.boundingRect(c) for c in contours]
-    if len(contours) > max_shapes:
-        b = np.array(boxes, dtype=int).reshape(-1, 4)
-        keep = np.sort(np.argsort(-(b[:, 2] * b[:, 3]), kind="stable")[:max_shapes])
-        contours = [contours[i] for i in keep]
-        boxes = [boxes[i] for i in keep]
-    area, centroid, masks, first = [], [], [], []
-    for c, (x, y, w, h) in zip(contours, boxes, strict=True):
-        _, labels, stats, cents = cv2.connectedComponentsWithStats(
-            binary[y : y + h, x : x + w], connectivity=8, ltype=cv2.CV_32S
-        )
-        u, v = c[0, 0].tolist()  # the contour starts at the shape's first pixel
-        first.append((u, v))
-        k = labels[v - y, u - x]  # the component of a contour pixel
-        area.append(stats[k, cv2.CC_STAT_AREA])
-        cu, cv = cents[k].tolist()
-        centroid.append((cu + x, cv + y))
-        masks.append(labels == k)
-    b = np.array(boxes, dtype=int).reshape(-1, 4)
-    return Shapes(
-        b[:, 0],
-        b[:, 1],
-        b[:, 2],
-        b[:, 3],
-        np.array(area, dtype=int),
-        np.array(centroid, dtype=float).reshape(-1, 2),
-        tuple(masks),
-        np.array(first, dtype=int).reshape(-1, 2),
-    )
+def find_shapes(binary: np.ndarray) -> Shapes:
+    """Every 8-connected shape of ``binary`` ((H, W) uint8, 0 / 255): its exact pixel count
+    and mean, only the outermost ones (a shape in a hole of another is not one, as
+    ``cv2.findContours``' ``RETR_EXTERNAL``), at most 256 (the largest boxes). One compiled
+    labelling by runs (:func:`humanpt.perception.kernels.label_runs`, the weighted
+    detector's)."""
+    from .weighted import _image_and_mask, kernels
+
+    binary, _, _ = _image_and_mask(binary, None)
+    height, width = binary.shape
+    run_v, run_s, run_e, comp, box, area, sums, first, _ = kernels().label_runs(
+        binary, 0, np.array([(0, 0, width, height)], np.int64))
+    # descending raster order of the first pixel (the shapes come ascending)
+    box, area, sums, first = box[::-1], area[::-1], sums[::-1], first[::-1]
+    m = len(area)
+    x, y = box[:, 0], box[:, 1]
+    w, h = box[:, 2] - x + 1, box[:, 3] - y + 1
+    masks = [np.zeros((hh, ww), bool) for hh, ww in zip(h.tolist(), w.tolist(), strict=True)]
+    xs, ys = x.tolist(), y.tolist()
+    for v, s, e, c in zip(run_v.tolist(), run_s.tolist(), run_e.tolist(), comp.tolist(), strict=True):
+        if c >= 0:
+            k = m - 1 - c
+            masks[k][v - ys[k], s - xs[k] : e - xs[k]] = True
+    centroid = sums / np.maximum(area, 1)[:, None]
+    return Shapes(x, y, w, h, area, centroid, tuple(masks), first)
 
 
 def windows_around(uv_px: np.ndarray, half_px: float, width: int, height: int) -> list[Region]:
     """Square windows of half size ``half_px`` around centres (k, 2), clipped to the image,
     overlapping ones merged into their bounding box until no two overlap (a shape is then
     whole in at most one window)."""
-    uv = np.asarray(uv_px, dtype=float).reshape(-1, 2)
-    # every window at once: (u0, v0, u1, v1) clipped to the image
-    box = np.concatenate((np.maximum(np.floor(uv - half_px), 0.0),
-                          np.minimum(np.ceil(uv + half_px) + 1.0, (width, height))), axis=1)
-    boxes = [tuple(b) for b in box.astype(int).tolist()]
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(boxes)):
-            for j in range(i + 1, len(boxes)):
-                a, b = boxes[i], boxes[j]
-                if a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]:
-                    boxes[i] = (min(a[0], b[0]), min(a[1], b[1]), max(a[2], b[2]), max(a[3], b[3]))
-                    del boxes[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    return [b for b in boxes if b[2] > b[0] and b[3] > b[1]]
+    from .weighted import kernels
 
-
-@dataclass(frozen=True)
-class Mosaic:
-    """Disjoint windows of an image packed side by side into one small image, so that a
-    detector measures them all in one call: ``gray`` (H, W) uint8, ``keep`` (H, W) uint8
-    (255 = an image pixel the detector may use, 0 = a gap or a masked pixel), ``tiles``
-    (t, 4) int each window's (x0, y0, x1, y1) in the mosaic, ``offset`` (t, 2) int what
-    takes a mosaic pixel of that window to the image's (u, v). The windows are ``gap_px``
-    apart: a blob's centroid window (the detector's) never reaches another window."""
-
-    gray: np.ndarray
-    keep: np.ndarray
-    tiles: np.ndarray
-    offset: np.ndarray
-
-    @staticmethod
-    def pack(gray: np.ndarray, keep: np.ndarray | None, windows: list[Region], gap_px: int) -> Mosaic:
-        height = max(v1 - v0 for _, v0, _, v1 in windows)
-        width = sum(u1 - u0 for u0, _, u1, _ in windows) + gap_px * (len(windows) - 1)
-        out = np.zeros((height, width), np.uint8)
-        use = np.zeros((height, width), np.uint8)
-        tiles, offset = [], []
-        x = 0
-        for u0, v0, u1, v1 in windows:
-            w, h = u1 - u0, v1 - v0
-            out[:h, x : x + w] = gray[v0:v1, u0:u1]
-            use[:h, x : x + w] = 255 if keep is None else keep[v0:v1, u0:u1]
-            tiles.append((x, 0, x + w, h))
-            offset.append((u0 - x, v0))
-            x += w + gap_px
-        return Mosaic(out, use, np.array(tiles, dtype=int), np.array(offset, dtype=int))
+    uv = np.ascontiguousarray(uv_px, dtype=float).reshape(-1, 2)
+    return [tuple(b) for b in kernels().merge_windows(uv, float(half_px), int(width), int(height)).tolist()]

@@ -77,7 +77,6 @@ __all__ = ["SOURCE_NAMES", "POLICIES", "CheckSettings", "SourceCheck", "check_so
            "apply_policy", "rebuild_point"]
 
 SOURCE_NAMES = "ABC"
-_UU_VV_UV = [0, 3, 1]  # a flattened 2x2 second-moment matrix's (uu, vv, uv)
 
 
 @dataclass(frozen=True)
@@ -95,6 +94,7 @@ class CheckSettings:
         tol2 = np.array([[self.flux_tol], [self.view_tol], [self.shape_tol]]) ** 2
         tol2.setflags(write=False)
         object.__setattr__(self, "tol2", tol2)
+        object.__setattr__(self, "tol2_flat", np.ascontiguousarray(tol2.ravel()))
 
 
 @dataclass(frozen=True)
@@ -118,9 +118,7 @@ class SourceCheck:
     limits: np.ndarray | None = None
 
 
-def _median3(x: np.ndarray) -> np.ndarray:
-    """The median along the first axis of length 3 (np.median's overhead is ~30 us)."""
-    return x.sum(axis=0) - x.max(axis=0) - x.min(axis=0)
+_NO_NOISE = np.zeros((3, 2, 2))
 
 
 def _disc_jacobians(params: PsvsParams, match: Match, radius_mm: float) -> np.ndarray:
@@ -140,38 +138,17 @@ def check_sources(
     nothing to check (not FULL, or the detector gave no flux and moments)."""
     if match.status != FULL or match.camera_T_tob is None or blobs.flux_dn is None:
         return None
+    from .weighted import kernels
+
     jac = _disc_jacobians(params, match, 0.5 * model.source_diameter_mm)  # (3, 2, 2, 2)
-    det = np.abs(jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0])  # (3, 2)
     idx = match.pairs  # (3, 2) right, left blob of A, B, C
-    flux = blobs.flux_dn[idx]  # (3, 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = flux / (math.pi * det)
-        rel = q / _median3(q)
-        brightness = np.sqrt(rel[:, 0] * rel[:, 1])
-        views = np.log(q[:, 0] / q[:, 1])
-        view_log_ratio = views - _median3(views)
-        # the second moments left after the predicted disc's: what the optics add + damage
-        m = blobs.moments_px2[idx]  # (3, 2, 3)
-        disc = (jac @ jac.swapaxes(-1, -2)).reshape(3, 2, 4)[..., _UU_VV_UV] / 4.0  # J J^T / 4
-        rest = m - disc
-        # what all six blobs share (the blur, blooming along the columns, motion blur) is
-        # not damage: the median blob's rest is taken off
-        six = np.sort(rest.reshape(6, 3), axis=0)
-        rest = rest - 0.5 * (six[2] + six[3])  # (the median of 6)
-        d_uu, d_vv, d_uv = rest[..., 0], rest[..., 1], rest[..., 2]
-        disc_var = det / 4.0
-        anisotropy = (np.hypot(0.5 * (d_uu - d_vv), d_uv) / disc_var).max(axis=1)
-        if blobs.noise is not None:
-            # SDs from the background noise: of log q per blob, of log brightness (each view
-            # against its median, the two views averaged) and of the anisotropy
-            noise = blobs.noise[idx]  # (3, 2, 2)
-            rel_var = (noise[..., 0] / flux) ** 2  # (3, 2)
-            var = (rel_var + rel_var.sum(axis=0) / 2.0).sum(axis=1)  # (the mean of the two views)
-            view_sd = np.sqrt(var)
-            sd = np.array([0.5 * view_sd, view_sd, (noise[..., 1] / disc_var).max(axis=1)])
-        else:
-            sd = np.zeros((3, 3))
-    limits = np.sqrt(s.tol2 + (s.noise_k * sd) ** 2) * s.tol_factor  # (3 checks, 3 sources)
+    noise = blobs.noise
+    # the figures, their SDs and limits in one compiled call (kernels.source_figures)
+    brightness, view_log_ratio, anisotropy, sd, limits = kernels().source_figures(
+        np.ascontiguousarray(jac), np.ascontiguousarray(blobs.flux_dn[idx], dtype=float),
+        np.ascontiguousarray(blobs.moments_px2[idx], dtype=float),
+        _NO_NOISE if noise is None else np.ascontiguousarray(noise[idx], dtype=float), noise is not None,
+        s.tol2_flat, float(s.noise_k), float(s.tol_factor))
     reasons = []
     degraded = []
     for k, (b, v, a, (lim_b, lim_v, lim_a)) in enumerate(zip(

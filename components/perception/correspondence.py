@@ -35,7 +35,6 @@ for a bad fit.
 
 from __future__ import annotations
 
-import itertools
 import math
 from dataclasses import dataclass
 
@@ -50,7 +49,6 @@ from humanpt.geometry import (
     label_sources,
     parallel_pixels,
     tob_frame_from_points,
-    triangle_sides_mm,
     triangulate,
     undistort_pixels,
 )
@@ -103,6 +101,14 @@ class MatchSettings:
             "log_max_area_ratio": math.log(self.max_area_ratio),
             "v_gate_px": 3 * self.epipolar_tol_px + 5,
         }
+        d_lo, d_hi = derived["disparity_px"]
+        lo, hi = self.size_ratio_range
+        # the gates and sigmas in the order kernels.score_pairs reads them
+        derived["gates"] = np.array([
+            d_lo, d_hi, derived["v_gate_px"], self.params.a_u * self.model.source_diameter_mm,
+            self.params.baseline_mm / 2.0, lo, hi, self.min_depth_mm, self.max_depth_mm, self.epipolar_tol_px,
+            self.epipolar_sigma_px, derived["log_max_area_ratio"], _AREA_SIGMA, _PEAK_SIGMA,
+            self.model.side_tolerance_mm, self.side_sigma_mm], dtype=float)
         for name, value in derived.items():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
@@ -188,57 +194,6 @@ def _p_value(chi2: float, n: int) -> float:
     return float(gammaincc(0.5 * n, 0.5 * max(chi2, 0.0)))
 
 
-_COMBOS: dict[tuple[int, int], np.ndarray] = {}
-
-
-def _combinations(n: int, k: int) -> np.ndarray:
-    key = (n, k)
-    c = _COMBOS.get(key)
-    if c is None:
-        c = np.array(list(itertools.combinations(range(n), k)), dtype=int).reshape(-1, k)
-        if n <= 64:
-            _COMBOS[key] = c
-    return c
-
-
-def _candidates(blobs: Blobs, uv: np.ndarray, s: MatchSettings):
-    """Every (right i, left j) pair passing the gates: indices, signed epipolar residual,
-    eq. (4) points, and its chi-square terms (epipolar + area + brightness)."""
-    n = len(blobs)
-    ii, jj = _ordered_pairs(n)
-    d_lo, d_hi = s.disparity_px
-    duv = uv[jj] - uv[ii]  # (disparity u_L - u_R, v_L - v_R)
-    keep = (duv[:, 0] >= d_lo) & (duv[:, 0] <= d_hi) & (np.abs(duv[:, 1]) <= s.v_gate_px)
-    ii, jj = ii[keep], jj[keep]
-    uv_r, uv_l = uv[ii], uv[jj]
-    p = eq4_points_mm(s.params, uv_r, uv_l)
-    z = p[:, 2]
-    res = epipolar_residual_px(s.params, uv_r, uv_l, z)
-    # the size a source of the model's diameter has at that depth (right camera); the
-    # depth gate also drops the NaN and infinite z of pairs without disparity
-    expected = s.params.a_u * s.model.source_diameter_mm / (z + s.params.baseline_mm / 2.0)
-    lo, hi = s.size_ratio_range
-    size = blobs.size_px
-    ratio_r, ratio_l = size[ii] / expected, size[jj] / expected  # right and left views
-    log_area = np.log(blobs.area_px[ii] / blobs.area_px[jj])
-    with np.errstate(invalid="ignore"):
-        keep = (z >= s.min_depth_mm) & (z <= s.max_depth_mm) & (np.abs(res) <= s.epipolar_tol_px)
-        keep &= (ratio_r >= lo) & (ratio_r <= hi) & (ratio_l >= lo) & (ratio_l <= hi)
-        keep &= np.abs(log_area) <= s.log_max_area_ratio
-    ii, jj, p, res, log_area = ii[keep], jj[keep], p[keep], res[keep], log_area[keep]
-    peak = np.maximum(blobs.peak_dn, 1e-6)
-    dim = np.log(peak.max() / peak)
-    chi2 = (
-        (res / s.epipolar_sigma_px) ** 2
-        + (log_area / _AREA_SIGMA) ** 2
-        + ((dim[ii] ** 2 + dim[jj] ** 2) / _PEAK_SIGMA**2)
-    )
-    if len(chi2) > _MAX_CANDIDATES:
-        best = np.sort(np.argsort(chi2, kind="stable")[:_MAX_CANDIDATES])
-        ii, jj, p, res, chi2 = ii[best], jj[best], p[best], res[best], chi2[best]
-    return ii, jj, res, p, chi2
-
-
 _PAIRS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
 
@@ -252,52 +207,33 @@ def _ordered_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return pairs
 
 
-def _disjoint(blob_ids: np.ndarray) -> np.ndarray:
-    """(T, m) blob indices -> (T,) True where no blob is used twice."""
-    s = np.sort(blob_ids, axis=1)
-    return ~np.any(s[:, 1:] == s[:, :-1], axis=1)
-
-
 def match_scored(blobs: Blobs, s: MatchSettings) -> Match:
     """The default method's correspondence (module docstring): the best-scoring set of
-    three disjoint pairs, else two, else one."""
+    three disjoint pairs, else two, else one. Every ordered pair's eq. (4) point and
+    epipolar residual in one call each; the gates, the scores and the search over sets of
+    pairs in one compiled call (:func:`humanpt.perception.kernels.score_pairs`)."""
     if len(blobs) < 2:
         return lost()
+    from .weighted import kernels
+
     uv = ideal_pixels(s.params, blobs.uv_px)
-    ii, jj, res, p, chi2 = _candidates(blobs, uv, s)
-    n_pairs = len(ii)
-    if n_pairs == 0:
+    ii, jj = _ordered_pairs(len(blobs))
+    uv_r, uv_l = uv[ii], uv[jj]
+    p = eq4_points_mm(s.params, uv_r, uv_l)
+    res = epipolar_residual_px(s.params, uv_r, uv_l, p[:, 2])
+    index, _, three, two, one = kernels().score_pairs(
+        *(np.ascontiguousarray(a, dtype=float) for a in (uv, blobs.size_px, blobs.area_px, blobs.peak_dn)),
+        ii, jj, np.ascontiguousarray(p), np.ascontiguousarray(res), s.gates, s.sorted_sides_mm, _MAX_CANDIDATES)
+    if one < 0:
         return lost()
-    model_sides = s.sorted_sides_mm
-    tol = s.model.side_tolerance_mm
-    if n_pairs >= 3:
-        combos = _combinations(n_pairs, 3)
-        ok = _disjoint(np.concatenate([ii[combos], jj[combos]], axis=1))
-        combos = combos[ok]
-        if len(combos):
-            err = np.sort(triangle_sides_mm(p[combos]), axis=1) - model_sides  # (T, 3)
-            ok = np.abs(err).max(axis=1) <= tol
-            combos, err = combos[ok], err[ok]
-            if len(combos):
-                total = chi2[combos].sum(axis=1) + ((err / s.side_sigma_mm) ** 2).sum(axis=1)
-                best = combos[int(np.argmin(total))]
-                result = _finish(blobs, uv, ii[best], jj[best], s, p[best], res[best])
-                if result is not None:
-                    return result
-    if n_pairs >= 2:
-        combos = _combinations(n_pairs, 2)
-        combos = combos[_disjoint(np.concatenate([ii[combos], jj[combos]], axis=1))]
-        if len(combos):
-            dist = np.linalg.norm(p[combos[:, 0]] - p[combos[:, 1]], axis=-1)
-            err = np.min(np.abs(dist[:, None] - model_sides[None, :]), axis=1)
-            ok = err <= tol
-            combos, err = combos[ok], err[ok]
-            if len(combos):
-                total = chi2[combos].sum(axis=1) + (err / s.side_sigma_mm) ** 2
-                best = combos[int(np.argmin(total))]
-                return _finish(blobs, uv, ii[best], jj[best], s, p[best], res[best])
-    best = [int(np.argmin(chi2))]
-    return _finish(blobs, uv, ii[best], jj[best], s, p[best], res[best])
+    for best in (three, two):
+        if best[0] >= 0:
+            k = index[best]
+            result = _finish(blobs, uv, ii[k], jj[k], s, p[k], res[k])
+            if result is not None or len(best) == 2:
+                return result
+    k = index[[one]]
+    return _finish(blobs, uv, ii[k], jj[k], s, p[k], res[k])
 
 
 def _finish(

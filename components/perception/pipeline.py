@@ -17,7 +17,7 @@ import numpy as np
 
 from humanpt.geometry.rig import Rig
 
-from .blobs import EMPTY, Blobs, Mosaic, Region, clip_region, full_region, windows_around
+from .blobs import EMPTY, Blobs, Region, clip_region, full_region, windows_around
 from .checks import CheckSettings, SourceCheck, apply_policy, check_sources
 from .config import PerceptionConfig
 from .correspondence import Match, MatchSettings, match_scan_line, match_scored
@@ -86,8 +86,8 @@ class Perception:
             / (config.min_depth_mm + self.params.baseline_mm / 2.0)
             + 2.0
         )
-        # the windows of a tracking mosaic lie further apart than a blob's centroid window
-        # (weighted.py: 2 ceil(radius + pad + ring + 1) + 1) reaches
+        # the tracking windows' histogram grid: as if packed side by side this far apart
+        # (further than a blob's aperture window, 2 ceil(radius + pad + ring + 1) + 1, reaches)
         self.gap_px = 2 * math.ceil(self.max_radius_px + config.aperture_pad_px + 3.0) + 2
 
     @property
@@ -101,7 +101,7 @@ class Perception:
             return detect_paper(gray, c.threshold, c.paper_cross_px, region)
         return self._detect_weighted(gray, region, self.keep)
 
-    def _detect_weighted(self, gray, region, keep, tiles=None, offset=None) -> Blobs:
+    def _detect_weighted(self, gray, region, keep) -> Blobs:
         c = self.config
         return detect_weighted(
             gray,
@@ -116,8 +116,7 @@ class Perception:
             min_contrast_dn=c.min_contrast_dn,
             max_blobs=c.max_blobs,
             keep=keep,
-            tiles=tiles,
-            offset=offset,
+            gap_px=self.gap_px,
         )
 
     def match(self, blobs: Blobs) -> Match:
@@ -152,11 +151,9 @@ class Perception:
 
     def track_detect(self, gray: np.ndarray, uv_px: np.ndarray, size_px: np.ndarray) -> tuple[Blobs, Region]:
         """The detection step of :meth:`track`: (blobs, the windows' bounding box). The
-        weighted method measures the windows in one call: one window (the six merged, as
-        at 450-900 mm and the default margin) on the image's own pixels, several packed
-        into a :class:`~humanpt.perception.blobs.Mosaic` (same blobs, order and centres as
-        a search of the image finds there); the paper method searches their bounding box
-        (:meth:`roi_around`)."""
+        weighted method measures the windows in one call on the image's own pixels (same
+        blobs, order and centres as a search of the image finds there); the paper method
+        searches their bounding box (:meth:`roi_around`)."""
         if self.config.method == "paper":
             region = self.roi_around(uv_px, size_px)
             return self.detect(gray, region), region
@@ -164,12 +161,9 @@ class Perception:
         windows = windows_around(uv_px, pad, *self.size_px)
         if not windows:
             return EMPTY, (0, 0, 0, 0)
-        if len(windows) == 1:  # the image's own pixels: no copy
-            return self._detect_weighted(gray, windows[0], self.keep), windows[0]
-        mosaic = Mosaic.pack(gray, self.keep, windows, self.gap_px)
-        height, width = mosaic.gray.shape
-        blobs = self._detect_weighted(mosaic.gray, (0, 0, width, height), mosaic.keep, mosaic.tiles,
-                                      mosaic.offset)
+        blobs = self._detect_weighted(gray, windows, self.keep)
+        if len(windows) == 1:
+            return blobs, windows[0]
         box = np.array(windows)
         region = (int(box[:, 0].min()), int(box[:, 1].min()), int(box[:, 2].max()), int(box[:, 3].max()))
         return blobs, region

@@ -3,11 +3,12 @@ ratios to baselines timed in the same run, interleaved (``humanpt.bench.measure`
 as an absolute time: a loaded machine slows the baselines as much as humanpt.
 
 Each figure is the median thread CPU time per image over 150 images per case, 10 rounds
-(what `humanpt bench perception` prints as images/s). The limits lie 35-45 % below what
-this build measures at load average 6-10 (README, "Speed": core step 1.7-1.8x the naive
-OpenCV pipeline, tracking 1.05-1.1x the whole-image search at 640x480 and 1.85-1.95x at
-1920x1200, the 1920x1200 tracking rate 1.0-1.1x the 640x480 one), so that only a gross
-regression fails."""
+(what `humanpt bench perception` prints as images/s). The limits lie about half below what
+this build measures at load average 5-7 (components/perception/README.md, "Speed": core
+step 5.3x the naive OpenCV pipeline, the whole-image search 7.8x, tracking 1.05x the
+whole-image search at 640x480 - the search is as cheap: both run the same compiled
+detector, on the rows that hold a shape - and 2.2x at 1920x1200, the 1920x1200 tracking
+rate 0.9-1.0x the 640x480 one), so that only a gross regression fails."""
 
 from __future__ import annotations
 
@@ -37,12 +38,14 @@ def test_perception_against_its_in_run_baselines(one_cv2_thread):
     cpu = {name: float(np.median(c)) for name, (c, _) in times.items()}
     figures = {
         "core step / naive pipeline (640x480)": cpu[f"640 {NAIVE}"] / cpu[f"640 {CORE}"],
+        "whole image / naive pipeline (640x480)": cpu[f"640 {NAIVE}"] / cpu[f"640 {WHOLE}"],
         "tracking / whole image (640x480)": cpu[f"640 {WHOLE}"] / cpu[f"640 {TRACK}"],
         "tracking / whole image (1920x1200)": cpu[f"1920 {WHOLE}"] / cpu[f"1920 {TRACK}"],
         "tracking rate 1920x1200 / 640x480": cpu[f"640 {TRACK}"] / cpu[f"1920 {TRACK}"],
     }
     limits = {
-        "core step / naive pipeline (640x480)": 1.0,
+        "core step / naive pipeline (640x480)": 2.0,
+        "whole image / naive pipeline (640x480)": 3.0,
         "tracking / whole image (640x480)": 0.6,
         "tracking / whole image (1920x1200)": 1.2,
         "tracking rate 1920x1200 / 640x480": 0.6,

@@ -100,6 +100,67 @@ def test_find_shapes_measures_exact_pixel_counts_and_means():
     assert np.allclose(shapes.centroid[order[0]], (14.5, 12.0))
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_find_shapes_agrees_with_opencv_on_random_shapes(seed):
+    # random specks, bars and discs (touching ones merge, 8-connected): every shape's pixel
+    # count, box and mean as cv2.connectedComponentsWithStats gives them, and the shapes
+    # are cv2.findContours' outermost ones (RETR_EXTERNAL), in descending raster order
+    rng = np.random.default_rng(seed)
+    binary = np.zeros((120, 160), np.uint8)
+    binary[rng.integers(0, 120, 150), rng.integers(0, 160, 150)] = 255
+    for _ in range(12):
+        cv2.circle(binary, (int(rng.integers(0, 160)), int(rng.integers(0, 120))), int(rng.integers(1, 9)), 255, -1)
+    cv2.circle(binary, (80, 60), 20, 255, 3)  # a ring ...
+    binary[55:65, 75:85] = 0
+    binary[58:62, 78:82] = 255  # ... with two specks in its hole: not outermost shapes
+    binary[56, 76] = 255
+    binary[40, 60] = 255  # inside the ring's box, outside the ring: an outermost shape
+    shapes = find_shapes(binary)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    # (a contour starts at its shape's first pixel in raster order)
+    assert sorted(shapes.first.tolist()) == sorted(c[0, 0].tolist() for c in contours)
+    _, labels, stats, cents = cv2.connectedComponentsWithStats(binary, connectivity=8)
+    assert len(shapes) < len(stats) - 1  # the speck in the ring's hole is a component, not a shape
+    firsts = shapes.first.tolist()
+    assert firsts == sorted(firsts, key=lambda uv: (uv[1], uv[0]), reverse=True)
+    for i, (u, v) in enumerate(firsts):
+        k = labels[v, u]
+        assert (shapes.x[i], shapes.y[i], shapes.w[i], shapes.h[i], shapes.area[i]) == tuple(stats[k, :5])
+        np.testing.assert_allclose(shapes.centroid[i], cents[k], rtol=0, atol=1e-12)
+        x, y, w, h = stats[k, :4]
+        np.testing.assert_array_equal(shapes.masks[i], labels[y : y + h, x : x + w] == k)
+
+
+@pytest.mark.parametrize("density", [0.4, 0.45, 0.5])
+def test_only_the_outermost_shapes_as_opencv_finds_them(density):
+    # nested rings, a bar across the whole image above a U (a hole closed by the bar), and
+    # dense salt noise (shapes in holes of noise shapes): the outermost shapes are
+    # cv2.findContours' RETR_EXTERNAL ones, each starting at its first pixel
+    rng = np.random.default_rng(int(density * 100))
+    binary = np.where(rng.random((90, 130)) < density, 255, 0).astype(np.uint8)
+    for r in (30, 22, 14, 6):
+        cv2.circle(binary, (45, 45), r, 255, 2)
+        cv2.circle(binary, (45, 45), r - 2, 0, 2)
+    binary[60, :] = 255
+    binary[60:80, 95] = 255
+    binary[60:80, 120] = 255
+    binary[80, 95:121] = 255
+    binary[62:78, 97:119] = 0
+    binary[70, 108] = 255  # in the U's hole
+    shapes = find_shapes(binary)
+    contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    _, _, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
+    assert len(contours) < len(stats) - 1 <= 256  # some shapes lie in holes of others
+    assert sorted(shapes.first.tolist()) == sorted(c[0, 0].tolist() for c in contours)
+
+
+def test_the_detector_refuses_an_image_it_cannot_read_safely():
+    with pytest.raises(ValueError, match="uint8"):
+        detect_weighted(np.zeros((48, 64), np.float32), FULL, threshold=60)
+    with pytest.raises(ValueError, match="mask"):
+        detect_weighted(np.zeros((48, 64), np.uint8), FULL, threshold=60, keep=np.zeros((48, 63), np.uint8))
+
+
 def test_scan_line_pairing_pairs_neighbours_in_v_and_orders_by_u():
     uv = np.array([[400.0, 100.2], [260.0, 100.0], [300.0, 250.0], [440.0, 250.4], [10.0, 400.0]])
     pairs = pair_by_scan_line(uv, 3.0)

@@ -1,6 +1,6 @@
 """Tracking (issue 37, item 2): the next image is measured only in windows around the blobs
-the last FULL measurement predicts (one merged window in place on the image, several packed
-into one mosaic); it finds what a search of the whole image finds there (same centres,
+the last FULL measurement predicts (one merged window or several, measured in one compiled
+call on the image's own pixels); it finds what a search of the whole image finds there (same centres,
 order, pairs, points), leaves out what lies outside the windows, and does not depend on the
 image's size."""
 
@@ -13,8 +13,9 @@ import pytest
 
 from humanpt.geometry.rig import Rig
 from humanpt.perception import Perception, PerceptionConfig
-from humanpt.perception.blobs import Mosaic, windows_around
+from humanpt.perception.blobs import windows_around
 from humanpt.perception.correspondence import FULL
+from humanpt.perception.weighted import detect_weighted
 from humanpt.sim_camera import Renderer
 from humanpt.testing.perception_eval import clutter_cases, random_cases
 
@@ -51,7 +52,7 @@ def _render(case, width=640, height=480):
 @pytest.mark.parametrize("size, margin_px", [((640, 480), 40), ((1920, 1200), 40), ((640, 480), 10)])
 def test_tracking_finds_what_the_whole_image_search_finds(size, margin_px):
     # at the default 40 px margin the six windows merge into one, measured on the image's own
-    # pixels; at 10 px they stay apart and are packed into a mosaic: both paths are checked
+    # pixels; at 10 px they stay apart: both are checked
     cases = random_cases(12, seed=5) + [c for c in clutter_cases(12, seed=5) if c.name != "lamp"]
     checked = same_count = 0
     windows = []
@@ -135,15 +136,25 @@ def test_overlapping_windows_merge_into_their_bounding_box():
     assert sorted(w) == sorted([(10, 10, 46, 36), (90, 90, 111, 110), (0, 80, 17, 101)])
 
 
-def test_a_mosaic_keeps_its_windows_apart_and_maps_back():
-    gray = np.arange(200 * 300, dtype=np.int64).reshape(200, 300).astype(np.uint8)
-    m = Mosaic.pack(gray, None, [(10, 20, 40, 60), (200, 100, 230, 120)], gap_px=7)
-    assert m.gray.shape == (40, 30 + 7 + 30)
-    np.testing.assert_array_equal(m.tiles, [(0, 0, 30, 40), (37, 0, 67, 20)])
-    for (x0, y0, x1, y1), (du, dv) in zip(m.tiles, m.offset, strict=True):
-        np.testing.assert_array_equal(m.gray[y0:y1, x0:x1], gray[y0 + dv : y1 + dv, x0 + du : x1 + du])
-        assert (m.keep[y0:y1, x0:x1] == 255).all()
-    assert (m.keep[:, 30:37] == 0).all() and (m.keep[20:, 37:] == 0).all()
+def test_several_windows_in_one_call_find_what_each_window_alone_finds():
+    # the level is T (the background is far below it), so the one histogram of all the
+    # windows changes nothing: every window's blobs, in the whole image's order (descending
+    # v, then u, of each shape's first pixel)
+    case = random_cases(1, seed=7)[0]
+    gray, _ = _render(case)
+    whole = detect_weighted(gray, (0, 0, 640, 480), threshold=60)
+    assert len(whole) == 6
+    windows = windows_around(whole.uv_px, 14.0, 640, 480)
+    assert len(windows) >= 4
+    together = detect_weighted(gray, windows, threshold=60, gap_px=30)
+    alone = [detect_weighted(gray, w, threshold=60) for w in windows]
+    assert len(together) == sum(len(b) for b in alone) == 6
+    expected = np.concatenate([b.uv_px for b in alone])
+    np.testing.assert_allclose(together.uv_px, whole.uv_px, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.sort(together.uv_px, axis=0), np.sort(expected, axis=0), rtol=0, atol=1e-9)
+    # windows reaching out of the image are clipped to it
+    out = detect_weighted(gray, [(-50, -50, 700, 530)], threshold=60)
+    np.testing.assert_allclose(out.uv_px, whole.uv_px, rtol=0, atol=0)
 
 
 def test_a_blob_cut_by_its_window_is_rejected_as_one_cut_by_the_region():
