@@ -537,6 +537,14 @@ class _LongestFilesFirst:
 
 def pytest_configure(config):
     config.pluginmanager.register(_LongestFilesFirst(), "humanpt-longest-files-first")
+    if not hasattr(config, "workerinput") and not config.option.collectonly:
+        # Perception's compiled kernels into numba's disk cache once, here, before the
+        # workers start: on a fresh clone each worker (and each live perception process
+        # started before the cache is written) would compile them itself, 10-20 s each.
+        from humanpt.perception import Perception, PerceptionConfig
+
+        Perception(PerceptionConfig()).warm_up()
+        Perception(PerceptionConfig(method="paper")).warm_up()
 
 
 _SECONDS: dict[str, float] = {}

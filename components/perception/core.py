@@ -148,6 +148,12 @@ class PerceptionCore(Core):
         self._anchor = None  # search the whole image with the new settings
 
     # -- input -------------------------------------------------------------------------
+    def warm_up(self) -> None:
+        """A synthetic image of the target measured once (:meth:`Perception.warm_up`): the
+        detector's compiled kernels are loaded (or, on a fresh install, compiled) before the
+        live process says it is up. The core's state is not touched."""
+        self.perception.warm_up()
+
     def _on_image(self, t_ns: int, msg: RawImage) -> list[Output]:
         self.counters["images"] += 1
         outputs: list[Output] = []

@@ -94,6 +94,30 @@ class Perception:
     def full_region(self) -> Region:
         return full_region(*self.size_px)
 
+    def warm_up(self) -> Result:
+        """Search, then track, a synthetic image of the target (each source a blurred spot
+        where the rig's model projects it, the target square to the camera at the
+        geometric mean of the working depths): on a fresh install this compiles the
+        detector's kernels (numba: 10-20 s, once; then its disk cache loads them in ~0.3 s),
+        so a live process does it before it says it is up rather than on its first image.
+        Returns the tracking step's result (FULL on a rig whose model is consistent)."""
+        from humanpt.geometry.psvs import project
+
+        c = self.config
+        depth_mm = math.sqrt(c.min_depth_mm * c.max_depth_mm)
+        p_mm = self.model.source_positions_mm + (0.0, 0.0, depth_mm)
+        uv_r, uv_l = project(self.params, p_mm)
+        sigma_px = max(1.0, 0.25 * self.params.a_u * self.model.source_diameter_mm / depth_mm)
+        width, height = self.size_px
+        v, u = np.mgrid[0:height, 0:width]
+        gray = np.full((height, width), 12.0)
+        for cu, cv in np.vstack((uv_r, uv_l)):
+            gray += 220.0 * np.exp(-((u - cu) ** 2 + (v - cv) ** 2) / (2.0 * sigma_px ** 2))
+        gray = np.clip(np.rint(gray), 0, 255).astype(np.uint8)
+        found = self.measure(gray)
+        used = found.paired.pairs.ravel() if len(found.paired.pairs) else np.arange(len(found.blobs))
+        return self.track(gray, found.blobs.uv_px[used], found.blobs.size_px[used])
+
     def detect(self, gray: np.ndarray, region: Region) -> Blobs:
         """The configured method's detector on ``region`` of a prepared image."""
         c = self.config

@@ -261,6 +261,12 @@ class Core:
         return (f"{cls.__name__} has no input port {topic!r}; its ports: "
                 f"{', '.join(p.topic for p in cls.ports)}")
 
+    def warm_up(self) -> None:
+        """Work to do once before the first input, called by a live shell before the
+        component says it is up (e.g. perception compiles its detector on a fresh install);
+        it must not change what the core does with its inputs (replays never call it).
+        Default: nothing."""
+
     def params(self) -> dict[str, Any]:
         """Current values of the live parameters."""
         table = to_table(self.config)

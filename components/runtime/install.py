@@ -6,7 +6,7 @@ from __future__ import annotations
 
 # Import names of the packages only the full install has: the router's, the gateway's and
 # `humanpt up --profile server`'s imports never reach them (tests/deploy/test_server_install.py).
-FULL_ONLY = ("cv2", "rerun", "filterpy", "foxglove", "matplotlib", "rich")
+FULL_ONLY = ("cv2", "rerun", "filterpy", "foxglove", "matplotlib", "rich", "numba")
 
 
 def needs_full_install(e: ImportError) -> str | None:

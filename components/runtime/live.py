@@ -438,6 +438,14 @@ class LiveShell:
                     self.run_dir, fresh_s=max(10.0, 5 * self.rt.flush_interval_s))))
             log.info("%s: recording to %s", name, self.recorder.path)
         try:
+            t_warm = time.perf_counter()
+            try:
+                self.core.warm_up()
+            except Exception as e:  # only a head start: the first input does the same work
+                log.warning("%s: warm-up failed (%s); the first input will do its work", name, e)
+            if time.perf_counter() - t_warm > 1.0:
+                log.info("%s: warmed up in %.1f s before saying it is up (e.g. kernels compiled on a "
+                         "first run after an install)", name, time.perf_counter() - t_warm)
             with zenoh.open(self.zconf) as session:
                 self._session = session
                 bus_ports = [p.topic for p in self.core.ports if p.on_bus]

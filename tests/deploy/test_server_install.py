@@ -27,7 +27,7 @@ from humanpt.runtime.registry import COMPONENTS, CONFIGS, config_types, core_cla
 from tests.conftest import ROOT, free_port, humanpt_cmd, write_config
 
 # The distributions of FULL_ONLY's import names (what pyproject lists).
-FULL_ONLY_DISTS = {"opencv-python-headless", "rerun-sdk", "filterpy", "foxglove-sdk", "matplotlib", "rich"}
+FULL_ONLY_DISTS = {"opencv-python-headless", "rerun-sdk", "filterpy", "foxglove-sdk", "matplotlib", "rich", "numba"}
 
 REFUSE = f"""
 import importlib.abc, sys
