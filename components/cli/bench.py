@@ -22,8 +22,10 @@ def bench_runtime(args) -> int:
         else:
             rows.append((f"round trip, {t.label}", f"{t.p50_ms:.3f} ms", f"{t.p99_ms:.3f} ms", f"n={t.n}"))
     for w in writes:
-        note = f"file/payload {w.file_over_payload:.2f}" if w.file_over_payload is not None else ""
-        rows.append((f"MCAP write, {w.label}", f"{w.mb_s:.1f} MB/s", f"{w.msg_s:.0f} msg/s", note))
+        notes = [f"file/payload {w.file_over_payload:.2f}"] if w.file_over_payload is not None else []
+        if w.baseline_mb_s:
+            notes.append(f"{w.mb_s / w.baseline_mb_s:.2f}x the raw mcap Writer ({w.baseline_mb_s:.1f} MB/s)")
+        rows.append((f"MCAP write, {w.label}", f"{w.mb_s:.1f} MB/s", f"{w.msg_s:.0f} msg/s", "; ".join(notes)))
     print("\n" + tables.render(["case", "p50 / rate", "p99 / msgs", "note"], rows, align="lrrl"))
     return 0
 

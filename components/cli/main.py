@@ -601,9 +601,11 @@ def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     q = bsub.add_parser("runtime", help="round-trip latency through the router; MCAP write throughput",
                         description="Round-trip latency p50/p99 through a loopback router for a 200-byte "
                         "message and a 640x480 mono8 image, and MCAP write throughput with the default "
-                        "compression.")
+                        "compression beside its baseline, mcap's own Writer on the same messages (each the "
+                        "best of two interleaved runs).")
     q.add_argument("--n", type=int, default=300, help="round trips per payload (default 300)")
-    q.add_argument("--seconds", type=float, default=3.0, help="seconds of MCAP writing per case (default 3)")
+    q.add_argument("--seconds", type=float, default=3.0,
+                   help="seconds of MCAP writing per case and run (default 3)")
     q = bsub.add_parser("alter", help="ALTER link: cycles on time at 28 ms; shortest cycle without a miss",
                         description="robot_gateway <-> sim_robot over a real pty in real time, with a scripted "
                         "controller: cycles served on time (the controller's own command, applied within its "
