@@ -634,12 +634,11 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
         ka = index[a]
         for b in range(a + 1, c):
             kb = index[b]
-            if ii[ka] == ii[kb] or ii[ka] == jj[kb] or jj[ka] == ii[kb] or jj[ka] == jj[kb]:
+            if _share_a_blob(ii, jj, ka, kb):
                 continue
             for d in range(b + 1, c):
                 kd = index[d]
-                if (ii[kd] == ii[ka] or ii[kd] == jj[ka] or jj[kd] == ii[ka] or jj[kd] == jj[ka]
-                        or ii[kd] == ii[kb] or ii[kd] == jj[kb] or jj[kd] == ii[kb] or jj[kd] == jj[kb]):
+                if _share_a_blob(ii, jj, kd, ka) or _share_a_blob(ii, jj, kd, kb):
                     continue
                 side[0] = _distance(p, ka, kb)
                 side[1] = _distance(p, kb, kd)
@@ -663,7 +662,7 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
         ka = index[a]
         for b in range(a + 1, c):
             kb = index[b]
-            if ii[ka] == ii[kb] or ii[ka] == jj[kb] or jj[ka] == ii[kb] or jj[ka] == jj[kb]:
+            if _share_a_blob(ii, jj, ka, kb):
                 continue
             dist = _distance(p, ka, kb)
             err = math.inf
@@ -677,6 +676,12 @@ def score_pairs(uv, size, area, peak, ii, jj, p, res, gates, sorted_sides_mm, ma
                 best_total = total
                 two[0], two[1] = a, b
     return index, chi2, three, two, one
+
+
+@njit(cache=True, nogil=True, error_model="numpy")
+def _share_a_blob(ii, jj, a, b):
+    """Do pairs a and b (blob indices ii, jj) have a blob in common?"""
+    return ii[a] == ii[b] or ii[a] == jj[b] or jj[a] == ii[b] or jj[a] == jj[b]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
