@@ -430,6 +430,7 @@ class PoseFilterCore(Core):
     def _update_position(self, t_ns: int, stamp: int, world_p_m: np.ndarray) -> list[Output]:
         if not self.kf.initialised:
             return []  # a position alone cannot start an orientation
+        self.kf.hold_orientation()  # not measured: held, not turned on (kalman.hold_orientation)
         self.kf.predict_to(stamp)
         moved = self._check_still_moved(t_ns, stamp, None)
         T_pred = self.kf.predicted_pose(stamp)

@@ -59,8 +59,15 @@ def test_the_path_goes_on_with_flagged_orientation_while_a_source_is_hidden(hidd
         truth = np.array([T[:3, 3] for T in evaluate.truth_at(w, stamps[moving], field=field)])
         err = np.abs(x[moving, :3] - truth).max()
         assert err < 0.5, (field, err)
+        if field == "world_T_tip":
+            # While the orientation is not measured the filter holds it (pose_filter
+            # kalman.hold_orientation): the tip, 60 mm from G, stays within 0.2 mm of the
+            # truth over the 2 s (0.06-0.09 mm on seeds 3-5). Before, it turned on at the
+            # angular rate it had estimated from noise (0.35 deg/s here): 0.24-0.75 mm.
+            held_err = np.abs(x[moving & held, :3] - truth[held[moving]]).max()
+            assert held_err < 0.2, held_err
     # Held orientations, interpolated as playback and the VAL export take them, are close to
-    # the truth (the seam keeps its orientation); the recorded ones drift with the filter.
+    # the truth (the seam keeps its orientation).
     filled = pathfile.fill_held_orientation(xg, held, stamps)
     truth = np.array([x_from_transform(T) for T in evaluate.truth_at(w, stamps)])
     assert np.abs(evaluate.wrap_deg(filled[held, 3:] - truth[held, 3:])).max() < 0.2

@@ -326,3 +326,29 @@ def test_a_measurement_waits_for_the_robot_state_after_it(wait_ms):
         assert not [e for e in w.events if e.code == "no_robot_pose"]
     else:
         assert err_mm > 0.5, err_mm  # the check above can fail: the robot does need it
+
+
+def test_an_orientation_not_measured_is_held_and_its_uncertainty_still_grows():
+    """Issue 32 (a source hidden for 2 s): hold_orientation sets the angular velocity's
+    estimate to zero in every model, so a prediction keeps the orientation (by hand: with
+    w = 0 the constant-velocity transition leaves r unchanged) while the position goes on at
+    its velocity, and the orientation's variance still grows with the prediction."""
+    import numpy as np
+
+    from humanpt.pose_filter.kalman import PoseIMM, PoseKalman
+
+    for kf in (PoseKalman(1.0, 1.0), PoseIMM(((0.5, 0.5), (5.0, 5.0)), 2.0, 0.5)):
+        kf.reset(0, np.eye(4))
+        for f in kf._filters():
+            f.x[6:9] = [0.01, 0.0, 0.0]  # 10 mm/s along x
+            f.x[9:12] = [0.0, 0.0, 0.1]  # 0.1 rad/s about z
+        turned = kf.predicted_pose(1_000_000_000)
+        assert np.degrees(np.arccos(np.clip((np.trace(turned[:3, :3]) - 1) / 2, -1, 1))) > 5.0  # 0.1 rad/s for 1 s
+        var_before = np.diag(kf.P)[3:6].copy() if isinstance(kf, PoseKalman) else None
+        kf.hold_orientation()
+        held = kf.predicted_pose(1_000_000_000)
+        np.testing.assert_allclose(held[:3, :3], np.eye(3), atol=1e-12)
+        np.testing.assert_allclose(held[:3, 3], [0.01, 0.0, 0.0], atol=1e-12)  # the position goes on
+        if var_before is not None:
+            kf.predict_to(1_000_000_000)
+            assert (np.diag(kf.P)[3:6] > var_before).all()
