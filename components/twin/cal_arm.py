@@ -74,7 +74,12 @@ def calibrate_arm_on_twin(world: World, rig: Rig, seed: int, progress: Callable[
               f"collected in {got.twin_s:.1f} s of twin time ({got.wall_s:.1f} s wall)"]
     report += [f"  {n}" for n in got.notes]
     report += result.summary_lines()
-    return result, report, truth_lines(result, got.robot_truth, true_flange_T_camera(got.camera_truth, rig))
+    truth = truth_lines(result, got.robot_truth, true_flange_T_camera(got.camera_truth, rig))
+    ended = next((n for n in got.notes if "collection ended" in n), "")
+    if ended:  # the robot faulted on the way: the rest of the plan was never seen (no truth needed)
+        truth.checks.append(Check("arm", f"poses not collected ({ended})", len(got.poses) - len(got.samples), 0,
+                                  "poses"))
+    return result, report, truth
 
 
 def fixture_at_seam_start(operator):
