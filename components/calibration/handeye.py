@@ -466,57 +466,30 @@ def plan_poses(world_T_flange_start_mm: np.ndarray, flange_T_camera_mm: np.ndarr
 
 
 def puma_move_check(world_T_base_mm_deg, model: str = "puma762", min_wrist_deg: float = 8.0,
-                    max_step_deg: float = 3.0, samples: int = 40,
-                    start_joints_deg=None, flange_T_tool_mm=None,
-                    limit_margin_deg: float = 30.0) -> Callable[[np.ndarray, np.ndarray], str | None]:
+                    max_step_deg: float = 3.0, samples: int = 40) -> Callable[[np.ndarray, np.ndarray], str | None]:
     """The robot's own test of a planned move (the nominal Puma model,
     :mod:`humanpt.geometry.puma`, where the gateway believes the base is, as a real cell's
     planner would use its robot's model): the straight move from one flange pose to the next
     (world, mm) must stay reachable, keep the wrist (q5) ``min_wrist_deg`` from its
     singularity and never jump more than ``max_step_deg`` in a joint between ``samples``
-    points (a branch flip, or a joint at its limit: the nearest solution within the limits
-    is then another branch).
-
-    The joints are followed as the robot follows them: the first move starts from the
-    branch nearest ``start_joints_deg`` (the robot's joints where the plan starts; None:
-    the Puma's home joints, :data:`humanpt.geometry.puma.HOME_JOINTS_DEG`), and a move that
-    starts where the last move it passed ended (``plan_poses`` keeps exactly those) starts
-    from that move's end joints. The move is the tool's (``flange_T_tool_mm``; None: the
-    flange's): the controller's ``playback`` interpolates the tool's pose and the flange
-    follows it; the wrist's rolls (joints 4 and 6) must stay ``limit_margin_deg`` inside
-    their limits all along, since the servo's own path strays from the straight one (on the way to a pose planned
-    at q6 = -240 deg, 26 deg inside its limit, the robot's wrist went to -265.7 deg and
-    flipped). (Each move from the home branch, the flange's, missed a wrist that had
-    wound to its limit on the way: q6 at -266 deg, the next pose a 180 deg flip, the robot
-    faulted and the arm stage had 8 poses of 28; issue 32.4.)"""
+    points (a branch flip). The first pose's branch is the one nearest the Puma's home
+    joints (:data:`humanpt.geometry.puma.HOME_JOINTS_DEG`)."""
     kin = PumaKinematics(RobotModelConfig(model=model))
     base_T_world = invert_transform(transform_from_x(np.asarray(world_T_base_mm_deg, dtype=float)))
-    q_home = np.radians(np.asarray(HOME_JOINTS_DEG if start_joints_deg is None else start_joints_deg, dtype=float))
-    last: dict = {"pose": None, "q": None}  # where the last move passed ended, and its joints
-    tool = np.eye(4) if flange_T_tool_mm is None else np.asarray(flange_T_tool_mm, dtype=float)
-    tool_inv = invert_transform(tool)
-    # the margin on the wrist's rolls (joints 4 and 6), which wind up along a servo's path
-    margin = np.radians([0.0, 0.0, 0.0, limit_margin_deg, 0.0, limit_margin_deg])
-    lo, hi = kin.config.joint_limits_rad[:, 0] + margin, kin.config.joint_limits_rad[:, 1] - margin
+    q_home = np.radians(np.asarray(HOME_JOINTS_DEG, dtype=float))
 
     def check(a: np.ndarray, b: np.ndarray) -> str | None:
-        a = np.asarray(a, dtype=float)
-        chained = last["pose"] is not None and np.allclose(a, last["pose"], rtol=0.0, atol=1e-6)
         try:
-            q = kin.inverse(base_T_world @ a, last["q"] if chained else q_home)
+            q = kin.inverse(base_T_world @ a, q_home)
             for s in np.linspace(0.0, 1.0, samples)[1:]:
-                qn = kin.inverse(base_T_world @ interpolate_transform(a @ tool, b @ tool, s) @ tool_inv, q)
+                qn = kin.inverse(base_T_world @ interpolate_transform(a, b, s), q)
                 if np.degrees(np.abs(qn - q)).max() > max_step_deg:
-                    return "the move flips a joint (a singularity or a joint limit on the way)"
+                    return "the move flips a joint (a singularity on the way)"
                 if abs(np.degrees(qn[4])) < min_wrist_deg:
                     return f"the move passes within {min_wrist_deg:g} deg of the wrist singularity"
-                near = np.flatnonzero((qn < lo) | (qn > hi))
-                if len(near):
-                    return f"the move passes within {limit_margin_deg:g} deg of joint {near[0] + 1}'s limit"
                 q = qn
         except UnreachableError as e:
             return f"unreachable ({e})"
-        last["pose"], last["q"] = np.asarray(b, dtype=float).copy(), q
         return None
 
     return check

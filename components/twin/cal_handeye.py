@@ -114,14 +114,12 @@ def collect_on_twin(world: World, rig: Rig, seed: int, progress: Callable[[int, 
         if robot == "puma":
             gateway = next(c for c in ls.cores if c.name == "robot_gateway").config
             box = (gateway.envelope_min_mm, gateway.envelope_max_mm)
+            check = puma_move_check(gateway.world_T_base_mm_deg)
             world_T_base = transform_from_x(np.asarray(gateway.world_T_base_mm_deg, dtype=float))
             from humanpt.sim_robot.core import SimRobotCore
 
             sim = next(c for c in ls.cores if isinstance(c, SimRobotCore))
             start_joints, robot_truth = np.asarray(sim.q_setpoint_rad, dtype=float).copy(), sim.config
-            # the moves followed from the joints the robot reports now (a cell's controller says them)
-            check = puma_move_check(gateway.world_T_base_mm_deg, start_joints_deg=np.degrees(start_joints),
-                                    flange_T_tool_mm=transform_from_x(np.asarray(cfg.controller.flange_T_tool_x)))
         else:  # the stand-in: no joints; the demo's envelope around the start
             box = (tuple(float(v) for v in start[:3, 3] - 900.0), tuple(float(v) for v in start[:3, 3] + 900.0))
             check = None
