@@ -45,7 +45,7 @@ import numpy as np
 
 from humanpt.geometry.config import PsvsConfig
 from humanpt.geometry.psvs import project, triangulate
-from humanpt.geometry.rig import Calibration, Rig
+from humanpt.geometry.rig import DEFAULT_DZ_MM, Calibration, Rig
 from humanpt.geometry.target import tob_frame_from_points
 from humanpt.geometry.transforms import matrix_from_rotvec, rotvec_from_matrix
 
@@ -56,6 +56,8 @@ __all__ = [
     "MIN_VIEWS",
     "MIN_DEPTH_SPAN_MM",
     "estimate_psvs",
+    "depth_sigma_mm",
+    "depth_sigma_text",
     "apply_to_rig",
     "report_lines",
     "views_from_measurements",
@@ -124,6 +126,9 @@ class PsvsEstimate:
     fit_baseline: bool = True
     fit_l: bool = False
     iterations: int = 0
+    # the fitted parameters' covariance (in the order of ``sigma``'s keys: mm, deg), for
+    # what it makes of a depth (:func:`depth_sigma_mm`); empty when not known
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def n_views(self) -> int:
@@ -310,7 +315,36 @@ def estimate_psvs(rig: Rig, views: StereoViews, *, fit_baseline: bool = True, fi
         fit_baseline=fit_baseline,
         fit_l=fit_l,
         iterations=it,
+        covariance=np.array(cov, dtype=float),
     )
+
+
+def depth_sigma_mm(rig: Rig, result: PsvsEstimate, dz_mm: float = DEFAULT_DZ_MM) -> dict[str, float]:
+    """1-sigma (mm) of the depth of a point on the camera's axis at ``dz_mm`` (the servo's
+    distance: where every taught point is measured) triangulated with ``rig`` after
+    ``result`` (:func:`apply_to_rig`): ``"psvs"`` the fit's own (its covariance of the
+    baseline, the left view's rotation and l carried through eq. (4) by central
+    differences, the pixels held), ``"a_u"`` the camera calibration's focal length (the
+    rig's ``psvs_calibration`` sigma of a_u; 0 without one): a focal length off by a
+    fraction e scales every depth by 1 + e (the target's known size and the disparity both
+    give depth over focal length, so no view of the target tells it: only the board's),
+    ``dz_mm e``; ``"total"`` the two combined (independent)."""
+    problem = _Problem(rig, np.zeros((0, 3, 2)), np.zeros((0, 3, 2)), result.fit_baseline, result.fit_l)
+    g = problem.global0()
+    point = np.array([0.0, 0.0, float(dz_mm)])
+    uv_r, uv_l = project(problem.config(g).params(), point, distort=False)
+    jac = np.empty(len(g))
+    for k, h in enumerate(problem.h_global):
+        d = np.zeros_like(g)
+        d[k] = h
+        z = [triangulate(problem.config(gg).params(), uv_r, uv_l, undistort=False)[2] for gg in (g + d, g - d)]
+        jac[k] = (z[0] - z[1]) / (2 * h)
+    cov = np.asarray(result.covariance, dtype=float)
+    psvs = float(np.sqrt(max(jac @ cov @ jac, 0.0))) if cov.shape == (len(g), len(g)) else float("nan")
+    s_au = float(rig.psvs_calibration.sigma.get("a_u", 0.0) or 0.0)
+    a_u = float(rig.params().a_u)
+    focal = float(dz_mm) * s_au / a_u
+    return {"psvs": psvs, "a_u": focal, "total": float(np.hypot(psvs, focal))}
 
 
 def apply_to_rig(rig: Rig, result: PsvsEstimate, date: str, note: str = "") -> Rig:
@@ -318,16 +352,7 @@ def apply_to_rig(rig: Rig, result: PsvsEstimate, date: str, note: str = "") -> R
     ``l_mm`` (when fitted); ``psvs_calibration`` keeps what the camera calibration wrote
     (the same table holds the intrinsics) and adds this tool: method ``"<old>+psvs-ba"``
     (``"psvs-ba"`` over a nominal one), its sigma merged in, the note appended."""
-    kw: dict = {"rotvec_left_deg": tuple(result.rotvec_left_deg)}
-    if result.fit_baseline:
-        kw["baseline_mm"] = float(result.baseline_mm)
-    psvs = rig.psvs
-    if result.fit_l:
-        if psvs.splitter_thickness_mm is not None:
-            kw["m_mm"] = psvs.params().m_mm
-            kw["splitter_thickness_mm"] = None
-        kw["l_mm"] = float(result.l_mm)
-    psvs = dataclasses.replace(psvs, **kw)
+    psvs = _after(rig, result).psvs
     old = rig.psvs_calibration
     method = "psvs-ba" if old.method in ("", "nominal") else f"{old.method}+psvs-ba"
     s = result.sigma
@@ -338,9 +363,19 @@ def apply_to_rig(rig: Rig, result: PsvsEstimate, date: str, note: str = "") -> R
     # the rig file keeps one sigma per field: a rotation vector's is its largest component's
     sigma = {"rotvec_left_deg": float(max(rot_sigma))}
     sigma.update({k: float(s[k]) for k in ("baseline_mm", "l_mm") if k in s})
-    cal = Calibration(method=method, date=date, note=f"{old.note}; {text}" if old.note else text,
-                      sigma={**old.sigma, **sigma})
-    return dataclasses.replace(rig, psvs=psvs, psvs_calibration=cal)
+    cal = Calibration(method=method, date=date, note="", sigma={**old.sigma, **sigma})
+    out = dataclasses.replace(rig, psvs=psvs, psvs_calibration=cal)
+    if result.covariance.size:
+        text += "; " + depth_sigma_text(out, result)
+    cal = dataclasses.replace(cal, note=f"{old.note}; {text}" if old.note else text)
+    return dataclasses.replace(out, psvs_calibration=cal)
+
+
+def depth_sigma_text(rig: Rig, result: PsvsEstimate, dz_mm: float = DEFAULT_DZ_MM) -> str:
+    """One line: :func:`depth_sigma_mm` at ``dz_mm``, its parts named."""
+    d = depth_sigma_mm(rig, result, dz_mm)
+    return (f"depth 1-sigma at {dz_mm:g} mm {d['total']:.3f} mm (this fit {d['psvs']:.3f} mm, "
+            f"the focal length's {d['a_u']:.3f} mm)")
 
 
 def report_lines(rig: Rig, result: PsvsEstimate) -> list[str]:
@@ -367,7 +402,23 @@ def report_lines(rig: Rig, result: PsvsEstimate) -> list[str]:
                + ", ".join(f"#{i} ({result.depth_mm[i]:.0f} mm) {rms[i]:.3f} px" for i in worst if np.isfinite(rms[i]))
                + (f"; dropped {int(np.sum(~result.used))}: " + ", ".join(f"#{i}" for i in np.flatnonzero(~result.used))
                   if not np.all(result.used) else ""))
+    if result.covariance.size:
+        out.append("  " + depth_sigma_text(_after(rig, result), result))
     return out
+
+
+def _after(rig: Rig, result: PsvsEstimate) -> Rig:
+    """``rig`` with ``result``'s fields (its calibration table untouched)."""
+    kw: dict = {"rotvec_left_deg": tuple(result.rotvec_left_deg)}
+    if result.fit_baseline:
+        kw["baseline_mm"] = float(result.baseline_mm)
+    psvs = rig.psvs
+    if result.fit_l:
+        if psvs.splitter_thickness_mm is not None:
+            kw["m_mm"] = psvs.params().m_mm
+            kw["splitter_thickness_mm"] = None
+        kw["l_mm"] = float(result.l_mm)
+    return dataclasses.replace(rig, psvs=dataclasses.replace(psvs, **kw))
 
 
 def views_from_measurements(measurements) -> StereoViews:

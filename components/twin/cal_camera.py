@@ -33,7 +33,8 @@ from humanpt.sim_camera.config import SimCameraConfig
 from .run import with_overrides
 from .worlds import World
 
-__all__ = ["plan_board_poses", "render_views", "world_camera", "calibrate_camera_on_twin", "TWIN_BOARD"]
+__all__ = ["plan_board_poses", "render_views", "world_camera", "calibrate_camera_on_twin", "TWIN_BOARD",
+           "JOB_VIEWS", "JOB_TILT_DEG"]
 
 TWIN_BOARD = Chessboard(cols=11, rows=8, square_mm=20.0)
 """The board the twin shows: 11 x 8 inner corners, 20 mm squares (240 x 180 mm of pattern: a printed
@@ -54,8 +55,18 @@ def _view_camera(params: PsvsParams, view: str):
     return params.right_camera if view == "right" else params.left_camera
 
 
+JOB_VIEWS = 40
+JOB_TILT_DEG = (20.0, 45.0)
+"""The job's board views (``humanpt demo --calibrate``: :func:`calibrate_camera_on_twin`'s
+defaults): 40 per view tilted 20-45 deg. The focal length is what the board alone gives
+(no view of the target tells it: :func:`humanpt.calibration.psvs.depth_sigma_mm`) and a
+fraction e of it is e x 600 mm of depth where the servo holds the target: 20 views tilted
+15-35 deg gave a_u to 0.27 px (0.16 mm of depth at 600 mm), these 0.16 px (issue 32.4;
+docs/results.md, "The TOB frame's depth at the servo's pose")."""
+
+
 def plan_board_poses(params: PsvsParams, view: str, board: Chessboard, n_views: int, seed: int,
-                     margin_px: float = 12.0) -> np.ndarray:
+                     margin_px: float = 12.0, tilt_deg: tuple[float, float] = (15.0, 35.0)) -> np.ndarray:
     """(n_views, 4, 4) ``camera_T_board_mm``: poses a user would hold the board at, from the
     seed: depth 450-800 mm from ``view``'s virtual camera, tilted up to +-35 deg about x and
     y (alternating signs, so that every direction is covered) and turned up to +-10 deg
@@ -76,7 +87,7 @@ def plan_board_poses(params: PsvsParams, view: str, board: Chessboard, n_views: 
             raise RuntimeError("could not plan board poses that fit the image")
         # alternate the tilt's direction: +-x, +-y and the diagonals
         ang = 2 * math.pi * (k % 8) / 8 + rng.uniform(-0.3, 0.3)
-        tilt = math.radians(rng.uniform(15.0, 35.0))
+        tilt = math.radians(rng.uniform(*tilt_deg))
         rot = matrix_from_rotvec(np.array([tilt * math.cos(ang), tilt * math.sin(ang),
                                            math.radians(rng.uniform(-10.0, 10.0))]))
         z = rng.uniform(450.0, 800.0)
@@ -126,14 +137,17 @@ def _corner_error_px(dets: list[ViewDetection], truth_uv: list[np.ndarray]) -> f
 
 
 def calibrate_camera_on_twin(world: World, rig: Rig, seed: int, progress: Progress | None = None,
-                             detector: str = "opencv", view: str = "both", n_views: int = 20,
+                             detector: str = "opencv", view: str = "both", n_views: int = JOB_VIEWS,
                              settings: CameraSettings | None = None,
-                             board: Chessboard = TWIN_BOARD) -> tuple[CameraCalibration, list[str], list[str]]:
+                             board: Chessboard = TWIN_BOARD, tilt_deg: tuple[float, float] = JOB_TILT_DEG
+                             ) -> tuple[CameraCalibration, list[str], list[str]]:
     """Calibrate the camera on the twin of ``world`` (seed: poses and noise).
 
     ``view``: 'right', 'left' or 'both' (each virtual camera in turn, the other path
     covered). ``detector``: 'opencv', 'paper' or 'both' (both run on the same images and
-    are compared; the result is OpenCV's). ``progress(done, total)``: images rendered and
+    are compared; the result is OpenCV's). ``n_views`` board poses per view, tilted
+    ``tilt_deg`` (:data:`JOB_VIEWS`, :data:`JOB_TILT_DEG`: the job's; ``humanpt calibrate
+    camera --twin`` passes its ``--views``). ``progress(done, total)``: images rendered and
     read. Returns (result for :func:`humanpt.calibration.camera.apply_to_rig`, report
     lines, lines against the twin's truth). Raises CalibrationError (the reason)."""
     settings = CameraSettings() if settings is None else settings
@@ -159,7 +173,7 @@ def calibrate_camera_on_twin(world: World, rig: Rig, seed: int, progress: Progre
     timing: dict[str, list[float]] = {d: [] for d in detectors}
     corner_err: dict[str, dict] = {d: {} for d in detectors}
     for v in views:
-        poses = plan_board_poses(believed, v, board, n_views, seed + (0 if v == "right" else 1000))
+        poses = plan_board_poses(believed, v, board, n_views, seed + (0 if v == "right" else 1000), tilt_deg=tilt_deg)
         images = render_views(truth_cam, v, poses, board, seed, tick)
         truth_uv = [board_corners_px(truth, v, T, board) for T in poses]  # for the report only
         for d in detectors:
@@ -172,7 +186,8 @@ def calibrate_camera_on_twin(world: World, rig: Rig, seed: int, progress: Progre
     main = "opencv" if "opencv" in detectors else detectors[0]
     result = CameraCalibration(dict(results[main]))
     report = [f"camera calibration on the twin (world {world.name}, seed {seed}): board {board.cols} x {board.rows} "
-              f"inner corners, {board.square_mm:g} mm squares, {n_views} views per virtual camera"]
+              f"inner corners, {board.square_mm:g} mm squares, {n_views} views per virtual camera, tilted "
+              f"{tilt_deg[0]:g}-{tilt_deg[1]:g} deg"]
     report += report_lines(result, detections[main])
     lines = _truth_lines(result, truth, truth_cam)
     if len(detectors) > 1:
