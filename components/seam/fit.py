@@ -369,14 +369,22 @@ def _fit_piece(q: np.ndarray, idx: np.ndarray, cfg: FitConfig, noise: float, for
     arc = None
     if len(idx) >= max(cfg.min_points, cfg.min_arc_points, 4):
         af = arc_fit(pts)
-        if (af is not None and cfg.min_arc_radius_mm <= af.radius_mm <= cfg.max_arc_radius_mm
-                and math.degrees(af.sweep_rad) >= cfg.min_arc_sweep_deg and af.sweep_rad < 2 * math.pi):
+        if _arc_allowed(af, len(idx), cfg):
             arc = _Piece(idx, "arc", af, float(np.sqrt(np.mean(af.residuals_mm ** 2))), float(af.residuals_mm.max()))
             if arc.rms <= limit_rms and arc.max <= limit_max:
                 return arc
     if force:
         return min([p for p in (line, arc) if p is not None], key=lambda p: p.rms)
     return None
+
+
+def _arc_allowed(af, n_points: int, cfg: FitConfig) -> bool:
+    """Whether an arc fit may be a segment: enough points (``min_arc_points``), its radius
+    within [``min_arc_radius_mm``, ``max_arc_radius_mm``] (tighter is a corner, flatter a
+    line) and a sweep of at least ``min_arc_sweep_deg``, less than a full turn."""
+    return (af is not None and n_points >= max(cfg.min_points, cfg.min_arc_points, 4)
+            and cfg.min_arc_radius_mm <= af.radius_mm <= cfg.max_arc_radius_mm
+            and math.degrees(af.sweep_rad) >= cfg.min_arc_sweep_deg and af.sweep_rad < 2 * math.pi)
 
 
 def _chord_split(q: np.ndarray, idx: np.ndarray) -> int:
@@ -523,10 +531,13 @@ def _sse(piece: _Piece) -> float:
     return float(np.sum(piece.fit.residuals_mm ** 2))
 
 
-def _refit(q: np.ndarray, idx: np.ndarray, kind: str) -> _Piece | None:
-    """The points as the given kind (no acceptance test); None if an arc does not fit."""
+def _refit(q: np.ndarray, idx: np.ndarray, kind: str, cfg: FitConfig | None = None) -> _Piece | None:
+    """The points as the given kind (no test of its residual); None if an arc does not fit,
+    or (with ``cfg``) is no arc the fit may make (:func:`_arc_allowed`: a boundary moved
+    onto a short stretch once made a 6-point arc of 0.5 mm radius that the seam file then
+    refused)."""
     f = line_fit(q[idx]) if kind == "line" else arc_fit(q[idx])
-    if f is None:
+    if f is None or (kind == "arc" and cfg is not None and not _arc_allowed(f, len(idx), cfg)):
         return None
     return _Piece(idx, kind, f, float(np.sqrt(np.mean(f.residuals_mm ** 2))), float(f.residuals_mm.max()))
 
@@ -542,7 +553,7 @@ def _refine_boundaries(q: np.ndarray, pieces: list[_Piece], cfg: FitConfig, nois
             if k == shared:
                 continue
             ia, ib = np.arange(lo, k + 1), np.arange(k, hi + 1)
-            pa, pb = _refit(q, ia, a.kind), _refit(q, ib, b.kind)
+            pa, pb = _refit(q, ia, a.kind, cfg), _refit(q, ib, b.kind, cfg)
             if pa is not None and pb is not None and _sse(pa) + _sse(pb) < best[0]:
                 best = (_sse(pa) + _sse(pb), pa, pb)
         pieces[i], pieces[i + 1] = best[1], best[2]

@@ -294,3 +294,19 @@ def test_a_sharp_corner_point_is_no_spike():
     seam = fit_path(x, t)
     assert seam.outliers == () and len(seam.corners) == 1
     np.testing.assert_allclose(seam.corners[0].point_mm, (60, 0, 0), atol=0.3)
+
+
+def test_a_moved_boundary_never_makes_an_arc_the_seam_file_refuses(tmp_path):
+    """Issue 32 (the realistic job, scurve seed 3, a recorded taught path): moving a shared
+    boundary refitted the last 6 points as an arc of radius 0.507 mm (fewer than
+    min_arc_points = 7, tighter than min_arc_radius_mm = 5), and the job stopped writing its
+    seam ("radius_mm must be ... in [1, 10000] mm"). A refit arc obeys the fit's own limits."""
+    data = np.loadtxt(ROOT / "tests/seam/data/scurve_realistic_s3_taught.csv", delimiter=",")
+    t, x = data[:, 0].astype(np.int64), data[:, 1:]
+    seam = fit_path(x, t)
+    cfg = seam.config
+    for g in seam.segments:
+        if g.kind == "arc":
+            assert g.radius_mm >= cfg.min_arc_radius_mm and g.points >= cfg.min_arc_points, g
+    back = seamfile.read(seamfile.write(tmp_path / "scurve.seam.json", seam))  # refused before
+    assert back.segments == seam.segments
