@@ -69,13 +69,14 @@ class LockstepSpeed:
 def lockstep_speed(seconds: float, record: bool) -> LockstepSpeed:
     """The closed loop on the lock-step twin (arc, the simulated Puma), ``seconds`` of twin
     time, every core recorded or not (:func:`humanpt.twin.run.run`), its CPU accounted."""
+    from humanpt.runtime.lockstep import Lockstep
     from humanpt.twin.run import SystemConfig, run
 
     with tempfile.TemporaryDirectory() as d:
         # As humanpt demo --lockstep runs it (no output digest), without keeping outputs.
         res = run(SystemConfig.for_scenario("arc", 0), robot="puma", duration_s=seconds,
                   run_dir=d if record else None, keep_outputs=False, account=True)
-    parts = {"decode", "encode", "record", "schedule", "other threads"}
+    parts = {*Lockstep.PARTS, "other threads"}
     in_cores = sum(v for k, v in res.cpu_s.items() if k not in parts)
     return LockstepSpeed(res.speed, res.twin_s / max(in_cores, 1e-9), dict(res.cpu_s), res.twin_s)
 

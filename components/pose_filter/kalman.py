@@ -154,7 +154,7 @@ class _PoseEstimate:
 
     def _filters(self) -> list:
         """The filterpy filters that hold the state (one, or one per model)."""
-        return [self.kf] if hasattr(self, "kf") else list(self.kfs)
+        raise NotImplementedError
 
     def hold_orientation(self) -> None:
         """While the orientation is not measured (one or two sources seen), hold it: the
@@ -205,6 +205,9 @@ class PoseKalman(_PoseEstimate):
     @property
     def P(self) -> np.ndarray:
         return self.kf.P
+
+    def _filters(self) -> list:
+        return [self.kf]
 
     def reset(self, t_ns: int, world_T_tob: np.ndarray, calm_only: bool = False) -> None:
         """Start again at a measured pose with zero velocity."""
@@ -322,6 +325,9 @@ class PoseIMM(_PoseEstimate):
         self.t_ns: int | None = None
         self.version = 0
         self._cache: tuple[int, np.ndarray, np.ndarray] | None = None
+
+    def _filters(self) -> list:
+        return self.kfs
 
     def _stationary(self) -> np.ndarray:
         """The long-run share of each mode."""

@@ -227,6 +227,9 @@ class Lockstep:
             pb.ParamSet(header=header(t_ns), component=component, key=key, value_json=value_json),
         )
 
+    PARTS = ("decode", "encode", "record", "schedule")
+    """What :meth:`account` counts beside the cores' steps."""
+
     def account(self) -> dict[str, float]:
         """From now on, count where the scheduler's thread spends its time (seconds of
         ``time.thread_time``, the CPU this thread used): each core's step under its name,
@@ -244,7 +247,7 @@ class Lockstep:
         if acc is not None:
             t_start = clock()
             acc_core = {c.name: 0.0 for c in self.cores}
-            acc_part = {"decode": 0.0, "encode": 0.0, "record": 0.0}
+            acc_part = dict.fromkeys(self.PARTS[:3], 0.0)
         while self._heap and self._heap[0][0] <= end_ns:
             t_ns, _, idx, topic, data = heapq.heappop(self._heap)
             self.now_ns = t_ns
@@ -269,24 +272,20 @@ class Lockstep:
             if acc is not None:
                 t2 = clock()
                 acc_part["record"] += t2 - t1
-                outputs = core.step(t_ns, topic, msg)
-                t3 = clock()
-                acc_core[core.name] += t3 - t2
-            else:
-                outputs = core.step(t_ns, topic, msg)
+            outputs = core.step(t_ns, topic, msg)
+            if acc is not None:
+                acc_core[core.name] += clock() - t2
             for out_topic, out in outputs:
                 if acc is not None:
+                    t3 = clock()
+                payload = out.SerializeToString()
+                if acc is not None:
                     t4 = clock()
-                    payload = out.SerializeToString()
-                    t5 = clock()
-                    acc_part["encode"] += t5 - t4
-                    if rec:
-                        rec.write(OUT, t_ns, out_topic, out, payload)
-                        acc_part["record"] += clock() - t5
-                else:
-                    payload = out.SerializeToString()
-                    if rec:
-                        rec.write(OUT, t_ns, out_topic, out, payload)
+                    acc_part["encode"] += t4 - t3
+                if rec:
+                    rec.write(OUT, t_ns, out_topic, out, payload)
+                    if acc is not None:
+                        acc_part["record"] += clock() - t4
                 if self._digest is not None:
                     self._digest.update(f"{t_ns}|{core.name}|{out_topic}|".encode())
                     self._digest.update(payload)
@@ -300,11 +299,10 @@ class Lockstep:
                     self._send_udp(t_ns, idx, out)
             if rec:
                 if acc is not None:
-                    t6 = clock()
-                    self._snapshot(core, rec, t_ns)
-                    acc_part["record"] += clock() - t6
-                else:
-                    self._snapshot(core, rec, t_ns)
+                    t5 = clock()
+                self._snapshot(core, rec, t_ns)
+                if acc is not None:
+                    acc_part["record"] += clock() - t5
         self.now_ns = max(self.now_ns, end_ns)
         if acc is not None:
             total = clock() - t_start
